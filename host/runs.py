@@ -1,0 +1,434 @@
+"""Run folders (format ``tcomp-run/1``, see docs/data-format.md): load, validate, write.
+
+A run is one thermal test: ``meta.json``, ``temperatures.csv``, ``errors.csv`` and
+optionally ``motion.csv`` and ``spindle.csv``. Loading validates everything and
+raises :class:`RunFormatError` listing every problem, each naming file, line and
+column; nothing is silently dropped.
+"""
+import csv
+import json
+import math
+import os
+from dataclasses import dataclass, field
+
+import numpy as np
+
+FORMAT = "tcomp-run/1"
+ROLES = ("nut", "base", "ambient", "bearing", "motor", "structure")
+
+TEMPERATURES = "temperatures.csv"
+ERRORS = "errors.csv"
+MOTION = "motion.csv"
+SPINDLE = "spindle.csv"
+META = "meta.json"
+
+ERROR_COLUMNS = ("time_s", "position_mm", "error_um")
+ERROR_OPTIONAL = ("direction", "channel")
+MOTION_COLUMNS = ("t_start_s", "t_end_s", "from_mm", "to_mm", "feed_mm_min")
+SPINDLE_COLUMNS = ("time_s", "rpm")
+
+
+class RunFormatError(ValueError):
+    """A run folder that does not follow tcomp-run/1. ``problems`` lists every finding."""
+
+    def __init__(self, problems):
+        self.problems = list(problems)
+        super().__init__("\n".join(self.problems))
+
+
+@dataclass
+class Temperatures:
+    time_s: np.ndarray  # (n,)
+    names: list  # sensor names in CSV column order
+    values: np.ndarray  # (n, len(names)) in degC
+
+    def column(self, name):
+        return self.values[:, self.names.index(name)]
+
+    def at(self, t, names=None):
+        """Temperatures linearly interpolated at times ``t`` -> (len(t), len(names))."""
+        names = self.names if names is None else list(names)
+        t = np.atleast_1d(np.asarray(t, dtype=float))
+        out = np.empty((t.size, len(names)))
+        for j, name in enumerate(names):
+            out[:, j] = np.interp(t, self.time_s, self.column(name))
+        return out
+
+
+@dataclass
+class Errors:
+    time_s: np.ndarray
+    position_mm: np.ndarray
+    error_um: np.ndarray
+    direction: np.ndarray = None  # int8 +1/-1, or None when unidirectional
+    channel: np.ndarray = None  # object array of str, or None
+
+    def __len__(self):
+        return self.time_s.size
+
+    def sweeps(self):
+        """Row-index arrays, one per (measurement time, channel, direction) group, in file order."""
+        keys = [self.time_s]
+        if self.channel is not None:
+            keys.append(self.channel.astype(str))
+        if self.direction is not None:
+            keys.append(self.direction)
+        groups = {}
+        for i, key in enumerate(zip(*keys)):
+            groups.setdefault(key, []).append(i)
+        return [np.asarray(v) for v in groups.values()]
+
+    def channels(self):
+        if self.channel is None:
+            return []
+        seen = []
+        for c in self.channel:
+            if c not in seen:
+                seen.append(c)
+        return seen
+
+
+@dataclass
+class Motion:
+    t_start_s: np.ndarray
+    t_end_s: np.ndarray
+    from_mm: np.ndarray
+    to_mm: np.ndarray
+    feed_mm_min: np.ndarray
+
+    def __len__(self):
+        return self.t_start_s.size
+
+
+@dataclass
+class Spindle:
+    time_s: np.ndarray
+    rpm: np.ndarray
+
+
+@dataclass
+class Run:
+    meta: dict
+    temperatures: Temperatures
+    errors: Errors
+    motion: Motion = None
+    spindle: Spindle = None
+    path: str = None
+    name: str = field(default="run")
+
+    @property
+    def sensors(self):
+        return dict(self.meta.get("sensors", {}))
+
+    def sensors_with_role(self, role):
+        return [n for n, s in self.meta.get("sensors", {}).items() if s.get("role") == role]
+
+    @property
+    def stroke_mm(self):
+        return self.meta.get("stroke_mm")
+
+    @property
+    def screw(self):
+        return self.meta.get("screw")
+
+
+# ---------------------------------------------------------------- reading
+
+
+class _Problems:
+    def __init__(self):
+        self.items = []
+
+    def add(self, where, what):
+        self.items.append("%s: %s" % (where, what))
+
+    def __bool__(self):
+        return bool(self.items)
+
+
+def _read_csv(path, required, optional, problems, text_columns=()):
+    """Parse a numeric CSV strictly. Returns {column: list} or None if unreadable."""
+    fname = os.path.basename(path)
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except FileNotFoundError:
+        problems.add(path, "file is missing")
+        return None
+    except (OSError, UnicodeDecodeError) as exc:
+        problems.add(path, "cannot be read (%s)" % exc)
+        return None
+    if not rows:
+        problems.add("%s line 1" % path, "file is empty (expected a header %s)" % ",".join(required))
+        return None
+    header = [h.strip() for h in rows[0]]
+    missing = [c for c in required if c not in header]
+    for c in missing:
+        problems.add("%s line 1" % path, "missing column '%s' (header is %s)" % (c, ",".join(header)))
+    dup = sorted({h for h in header if header.count(h) > 1})
+    for c in dup:
+        problems.add("%s line 1" % path, "column '%s' appears more than once" % c)
+    empty = [i + 1 for i, h in enumerate(header) if not h]
+    for i in empty:
+        problems.add("%s line 1 column %d" % (path, i), "empty column name")
+    if missing or dup or empty:
+        return None
+    if optional is not None:
+        extra = [c for c in header if c not in required and c not in optional]
+        for c in extra:
+            problems.add("%s line 1" % path, "unknown column '%s' (allowed: %s)" % (c, ",".join(tuple(required) + tuple(optional))))
+        if extra:
+            return None
+    data = {h: [] for h in header}
+    for lineno, row in enumerate(rows[1:], start=2):
+        if not row or all(not c.strip() for c in row):
+            problems.add("%s line %d" % (path, lineno), "blank line")
+            continue
+        if len(row) != len(header):
+            problems.add("%s line %d" % (path, lineno), "has %d cells, header has %d" % (len(row), len(header)))
+            continue
+        for col, cell in zip(header, row):
+            cell = cell.strip()
+            if col in text_columns:
+                if not cell:
+                    problems.add("%s line %d column '%s'" % (path, lineno, col), "empty cell")
+                data[col].append(cell)
+                continue
+            try:
+                v = float(cell)
+            except ValueError:
+                problems.add("%s line %d column '%s'" % (path, lineno, col), "not a number: %r" % cell)
+                v = math.nan
+            else:
+                if not math.isfinite(v):
+                    problems.add("%s line %d column '%s'" % (path, lineno, col), "%r is not a finite number" % cell)
+            data[col].append(v)
+    if len(rows) == 1:
+        problems.add(path, "no data rows after the header")
+    del fname
+    return data
+
+
+def _check_increasing(path, col, values, problems, strict=True):
+    for i in range(1, len(values)):
+        a, b = values[i - 1], values[i]
+        if math.isnan(a) or math.isnan(b):
+            continue
+        if (b <= a) if strict else (b < a):
+            problems.add(
+                "%s line %d column '%s'" % (path, i + 2, col),
+                "time goes backwards or repeats (%g after %g)" % (b, a) if strict else "time goes backwards (%g after %g)" % (b, a),
+            )
+
+
+def _check_meta(path, meta, problems):
+    if not isinstance(meta, dict):
+        problems.add(path, "top level must be a JSON object")
+        return
+    if meta.get("format") != FORMAT:
+        problems.add(path, "key 'format' must be %r (found %r)" % (FORMAT, meta.get("format")))
+    sensors = meta.get("sensors")
+    if not isinstance(sensors, dict) or not sensors:
+        problems.add(path, "key 'sensors' must be a non-empty object {name: {role, location}}")
+    else:
+        for name, s in sensors.items():
+            if not isinstance(s, dict):
+                problems.add(path, "sensors.%s must be an object with 'role'" % name)
+                continue
+            if s.get("role") not in ROLES:
+                problems.add(path, "sensors.%s.role is %r; expected one of %s" % (name, s.get("role"), ", ".join(ROLES)))
+    stroke = meta.get("stroke_mm")
+    if stroke is not None and (not isinstance(stroke, (int, float)) or isinstance(stroke, bool) or not stroke > 0):
+        problems.add(path, "key 'stroke_mm' must be a positive number (found %r)" % (stroke,))
+    screw = meta.get("screw")
+    if screw is not None:
+        if not isinstance(screw, dict):
+            problems.add(path, "key 'screw' must be an object")
+        else:
+            for k in ("length_mm", "diameter_mm", "lead_mm"):
+                v = screw.get(k)
+                if not isinstance(v, (int, float)) or isinstance(v, bool) or not v > 0:
+                    problems.add(path, "screw.%s must be a positive number (found %r)" % (k, v))
+            fe = screw.get("fixed_end_mm", 0)
+            if not isinstance(fe, (int, float)) or isinstance(fe, bool):
+                problems.add(path, "screw.fixed_end_mm must be a number (found %r)" % (fe,))
+
+
+def load_meta(folder):
+    path = os.path.join(folder, META)
+    problems = _Problems()
+    try:
+        with open(path, encoding="utf-8") as fh:
+            meta = json.load(fh)
+    except FileNotFoundError:
+        raise RunFormatError(["%s: file is missing" % path])
+    except json.JSONDecodeError as exc:
+        raise RunFormatError(["%s line %d column %d: invalid JSON (%s)" % (path, exc.lineno, exc.colno, exc.msg)])
+    _check_meta(path, meta, problems)
+    if problems:
+        raise RunFormatError(problems.items)
+    return meta
+
+
+def check_run(folder):
+    """Every problem with a run folder, as a list of messages (empty when valid)."""
+    try:
+        load_run(folder)
+    except RunFormatError as exc:
+        return exc.problems
+    return []
+
+
+def load_run(folder):
+    """Load and validate one run folder; raise RunFormatError naming every problem."""
+    folder = os.fspath(folder)
+    problems = _Problems()
+    if not os.path.isdir(folder):
+        raise RunFormatError(["%s: not a folder (a run is a folder with meta.json, temperatures.csv, errors.csv)" % folder])
+    meta = None
+    try:
+        meta = load_meta(folder)
+    except RunFormatError as exc:
+        problems.items.extend(exc.problems)
+
+    # temperatures.csv: time_s + any sensor columns
+    tpath = os.path.join(folder, TEMPERATURES)
+    tdata = _read_csv(tpath, ("time_s",), None, problems)
+    temps = None
+    if tdata is not None:
+        names = [c for c in tdata if c != "time_s"]
+        if not names:
+            problems.add("%s line 1" % tpath, "no temperature columns after time_s")
+        _check_increasing(tpath, "time_s", tdata["time_s"], problems)
+        if meta is not None and isinstance(meta.get("sensors"), dict):
+            for j, n in enumerate(names):
+                if n not in meta["sensors"]:
+                    problems.add("%s line 1 column %d" % (tpath, j + 2), "sensor '%s' is not declared in meta.json 'sensors'" % n)
+        temps = Temperatures(
+            np.asarray(tdata["time_s"], dtype=float),
+            names,
+            np.asarray([tdata[n] for n in names], dtype=float).T.reshape(len(tdata["time_s"]), len(names)),
+        )
+
+    # errors.csv
+    epath = os.path.join(folder, ERRORS)
+    edata = _read_csv(epath, ERROR_COLUMNS, ERROR_OPTIONAL, problems, text_columns=("channel",))
+    errors = None
+    if edata is not None:
+        _check_increasing(epath, "time_s", edata["time_s"], problems, strict=False)
+        stroke = meta.get("stroke_mm") if meta else None
+        if isinstance(stroke, (int, float)) and stroke > 0:
+            for i, p in enumerate(edata["position_mm"]):
+                if not math.isnan(p) and (p < 0 or p > stroke):
+                    problems.add("%s line %d column 'position_mm'" % (epath, i + 2), "position %g mm is outside the stroke 0..%g mm" % (p, stroke))
+        direction = None
+        if "direction" in edata:
+            for i, d in enumerate(edata["direction"]):
+                if d not in (1.0, -1.0) and not math.isnan(d):
+                    problems.add("%s line %d column 'direction'" % (epath, i + 2), "direction must be +1 or -1 (found %g)" % d)
+            direction = np.asarray([0 if math.isnan(d) else int(d) for d in edata["direction"]], dtype=np.int8)
+        channel = np.asarray(edata["channel"], dtype=object) if "channel" in edata else None
+        errors = Errors(
+            np.asarray(edata["time_s"], dtype=float),
+            np.asarray(edata["position_mm"], dtype=float),
+            np.asarray(edata["error_um"], dtype=float),
+            direction,
+            channel,
+        )
+
+    motion = None
+    mpath = os.path.join(folder, MOTION)
+    if os.path.exists(mpath):
+        mdata = _read_csv(mpath, MOTION_COLUMNS, (), problems)
+        if mdata is not None:
+            for i in range(len(mdata["t_start_s"])):
+                a, b = mdata["t_start_s"][i], mdata["t_end_s"][i]
+                if b <= a:
+                    problems.add("%s line %d column 't_end_s'" % (mpath, i + 2), "interval ends (%g) before it starts (%g)" % (b, a))
+                if i and a < mdata["t_end_s"][i - 1]:
+                    problems.add("%s line %d column 't_start_s'" % (mpath, i + 2), "interval overlaps the previous one (starts %g before %g)" % (a, mdata["t_end_s"][i - 1]))
+                if mdata["feed_mm_min"][i] <= 0:
+                    problems.add("%s line %d column 'feed_mm_min'" % (mpath, i + 2), "feed must be positive (found %g)" % mdata["feed_mm_min"][i])
+                stroke = meta.get("stroke_mm") if meta else None
+                if isinstance(stroke, (int, float)):
+                    for col in ("from_mm", "to_mm"):
+                        p = mdata[col][i]
+                        if p < 0 or p > stroke:
+                            problems.add("%s line %d column '%s'" % (mpath, i + 2, col), "position %g mm is outside the stroke 0..%g mm" % (p, stroke))
+            motion = Motion(*(np.asarray(mdata[c], dtype=float) for c in MOTION_COLUMNS))
+
+    spindle = None
+    spath = os.path.join(folder, SPINDLE)
+    if os.path.exists(spath):
+        sdata = _read_csv(spath, SPINDLE_COLUMNS, (), problems)
+        if sdata is not None:
+            _check_increasing(spath, "time_s", sdata["time_s"], problems)
+            spindle = Spindle(np.asarray(sdata["time_s"], dtype=float), np.asarray(sdata["rpm"], dtype=float))
+
+    if problems:
+        raise RunFormatError(problems.items)
+    return Run(meta, temps, errors, motion, spindle, path=folder, name=os.path.basename(os.path.normpath(folder)))
+
+
+def load_runs(folders):
+    return [load_run(f) for f in folders]
+
+
+# ---------------------------------------------------------------- writing
+
+
+def _fmt(v):
+    return repr(float(v)) if not float(v).is_integer() else "%d" % v if abs(v) < 1e15 else repr(float(v))
+
+
+def _write_csv(path, header, columns, formats):
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        fh.write(",".join(header) + "\n")
+        n = len(columns[0]) if columns else 0
+        for i in range(n):
+            fh.write(",".join(f(c[i]) for f, c in zip(formats, columns)) + "\n")
+
+
+def _g(decimals):
+    def f(v):
+        s = "%.*f" % (decimals, v)
+        if "." in s:
+            s = s.rstrip("0").rstrip(".")
+        return "0" if s == "-0" else s
+
+    return f
+
+
+def write_run(run, folder, decimals=4):
+    """Write ``run`` as a tcomp-run/1 folder (created if needed). Returns the folder."""
+    os.makedirs(folder, exist_ok=True)
+    meta = dict(run.meta)
+    meta.setdefault("format", FORMAT)
+    with open(os.path.join(folder, META), "w", encoding="utf-8") as fh:
+        json.dump(meta, fh, indent=2)
+        fh.write("\n")
+    t = run.temperatures
+    _write_csv(
+        os.path.join(folder, TEMPERATURES),
+        ["time_s"] + list(t.names),
+        [t.time_s] + [t.values[:, j] for j in range(len(t.names))],
+        [_g(3)] + [_g(decimals)] * len(t.names),
+    )
+    e = run.errors
+    header, cols, fmts = list(ERROR_COLUMNS), [e.time_s, e.position_mm, e.error_um], [_g(3), _g(decimals), _g(decimals)]
+    if e.direction is not None:
+        header.append("direction")
+        cols.append(e.direction)
+        fmts.append(lambda d: "%+d" % d)
+    if e.channel is not None:
+        header.append("channel")
+        cols.append(e.channel)
+        fmts.append(str)
+    _write_csv(os.path.join(folder, ERRORS), header, cols, fmts)
+    if run.motion is not None and len(run.motion):
+        m = run.motion
+        _write_csv(os.path.join(folder, MOTION), list(MOTION_COLUMNS), [m.t_start_s, m.t_end_s, m.from_mm, m.to_mm, m.feed_mm_min], [_g(3)] * 5)
+    if run.spindle is not None:
+        s = run.spindle
+        _write_csv(os.path.join(folder, SPINDLE), list(SPINDLE_COLUMNS), [s.time_s, s.rpm], [_g(3), _g(3)])
+    return folder
