@@ -1,0 +1,24 @@
+"""tcomp fit --model KIND RUN... --out MODEL.json"""
+HELP = "fit a thermal-error model (mlr, pcr, stepwise: host/empirical; screw: host/screw) and save it"
+
+EMPIRICAL = ("mlr", "pcr", "stepwise")
+
+
+def add_arguments(p):
+    p.add_argument("runs", nargs="+", metavar="RUN", help="run folders to fit on")
+    p.add_argument("--model", required=True, choices=EMPIRICAL + ("screw",))
+    p.add_argument("--out", required=True, help="model document to write (docs/model-format.md)")
+    p.add_argument("--sensors", help="comma-separated sensors to use (default: all, or the method's own selection)")
+    p.add_argument("--channel", help="errors.csv channel to model (multi-channel runs)")
+    p.add_argument("--direct", action="store_true", help="direct model of the error (linear_direct) instead of poly_slope")
+    p.add_argument("--no-intercept", action="store_true", help="direct model without intercept")
+    p.add_argument("--json", help="write the fit report as JSON")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", help="method-specific setting (repeatable)")
+
+
+def run(args):
+    if args.model in EMPIRICAL:
+        from host.empirical.cli import fit_command
+    else:
+        from host.screw.cli import fit_command
+    return fit_command(args)

@@ -1,0 +1,51 @@
+"""tcomp predict MODEL.json RUN --out PRED.csv"""
+HELP = "predict the error at every row of a run's errors.csv with any saved model"
+
+
+def add_arguments(p):
+    p.add_argument("model", help="model document (tcomp-model/1 JSON)")
+    p.add_argument("run", help="run folder")
+    p.add_argument("--out", required=True, help="CSV: time_s,position_mm[,direction][,channel],predicted_um")
+    p.add_argument("--json", help="also write summary statistics (RMSE against the measured errors) as JSON")
+
+
+def run(args):
+    import json
+
+    import numpy as np
+
+    from host.cli import UserError
+    from host.models import ModelFormatError, load_model
+    from host.runs import RunFormatError, load_run
+
+    try:
+        model = load_model(args.model)
+        run_ = load_run(args.run)
+    except (ModelFormatError, RunFormatError) as exc:
+        raise UserError(str(exc))
+    e = run_.errors
+    rows = np.arange(len(e))
+    if getattr(model, "channel", None) and e.channel is not None:
+        rows = np.flatnonzero(e.channel == model.channel)
+    pred = np.asarray(model.predict(run_), dtype=float)
+    if pred.shape != (len(e),):
+        raise UserError("model returned %s predictions for %d rows of %s" % (pred.shape, len(e), args.run))
+    header = ["time_s", "position_mm"] + (["direction"] if e.direction is not None else []) + (["channel"] if e.channel is not None else []) + ["predicted_um"]
+    with open(args.out, "w", encoding="utf-8") as fh:
+        fh.write(",".join(header) + "\n")
+        for i in range(len(e)):
+            cells = ["%.3f" % e.time_s[i], "%.4f" % e.position_mm[i]]
+            if e.direction is not None:
+                cells.append("%+d" % e.direction[i])
+            if e.channel is not None:
+                cells.append(str(e.channel[i]))
+            cells.append("nan" if np.isnan(pred[i]) else "%.4f" % pred[i])
+            fh.write(",".join(cells) + "\n")
+    resid = e.error_um[rows] - pred[rows]
+    resid = resid[np.isfinite(resid)]
+    rmse = float(np.sqrt(np.mean(resid ** 2))) if resid.size else float("nan")
+    print("%s on %s: %d rows, RMSE %.3f um against the measured errors" % (args.model, args.run, len(e), rmse))
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump({"model": args.model, "run": args.run, "rows": int(len(e)), "rmse_um": rmse}, fh, indent=2)
+    return 0

@@ -1,0 +1,73 @@
+"""The model document (docs/model-format.md): save, load by kind, predict.
+
+Each kind's class lives with the code that fits it; this module only maps
+``kind`` to that class so ``tcomp predict`` and ``tcomp export`` work on any model.
+Every class has ``from_document(doc)``, ``to_document()`` and ``predict(run)``
+(one predicted error in µm per row of ``run.errors``, in file order).
+"""
+import hashlib
+import importlib
+import json
+import time
+
+from host import __version__
+
+FORMAT = "tcomp-model/1"
+KINDS = {
+    "poly_slope": "host.empirical.model:PolySlopeModel",
+    "linear_direct": "host.empirical.model:LinearDirectModel",
+    "screw": "host.screw.model:ScrewModel",
+}
+
+
+class ModelFormatError(ValueError):
+    pass
+
+
+def _canonical(doc):
+    body = {k: v for k, v in doc.items() if k != "provenance"}
+    return json.dumps(body, sort_keys=True, separators=(",", ":")).encode()
+
+
+def document_hash(doc):
+    """sha256 hex of the document without its provenance block."""
+    return hashlib.sha256(_canonical(doc)).hexdigest()
+
+
+def save_model(doc, path):
+    doc = dict(doc)
+    doc["format"] = FORMAT
+    doc["provenance"] = {
+        "tcomp_version": __version__,
+        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+        "sha256": document_hash(doc),
+    }
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=2)
+        fh.write("\n")
+    return doc
+
+
+def read_document(path):
+    try:
+        with open(path, encoding="utf-8") as fh:
+            doc = json.load(fh)
+    except FileNotFoundError:
+        raise ModelFormatError("%s: file is missing" % path)
+    except json.JSONDecodeError as exc:
+        raise ModelFormatError("%s line %d column %d: invalid JSON (%s)" % (path, exc.lineno, exc.colno, exc.msg))
+    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+        raise ModelFormatError("%s: not a tcomp model document (key 'format' must be %r)" % (path, FORMAT))
+    if doc.get("kind") not in KINDS:
+        raise ModelFormatError("%s: unknown model kind %r (known: %s)" % (path, doc.get("kind"), ", ".join(KINDS)))
+    return doc
+
+
+def model_class(kind):
+    module, _, name = KINDS[kind].partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+def load_model(path_or_doc):
+    doc = read_document(path_or_doc) if isinstance(path_or_doc, str) else path_or_doc
+    return model_class(doc["kind"]).from_document(doc)
