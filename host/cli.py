@@ -13,7 +13,7 @@ class UserError(Exception):
 
 def _verbs():
     names = sorted(m.name for m in pkgutil.iter_modules(_commands.__path__) if not m.name.startswith("_"))
-    return {name.replace("_", "-"): importlib.import_module("host.commands." + name) for name in names}
+    return {name.rstrip("_").replace("_", "-"): importlib.import_module("host.commands." + name) for name in names}
 
 
 def build_parser():

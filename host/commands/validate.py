@@ -1,0 +1,28 @@
+"""tcomp validate RUN..."""
+HELP = "check run folders against the tcomp-run/1 format and print every problem (exit 1 if any)"
+
+
+def add_arguments(p):
+    p.add_argument("runs", nargs="+", metavar="RUN", help="run folders")
+    p.add_argument("--json", help="write {run: [problems]} as JSON")
+
+
+def run(args):
+    import json
+
+    from host.runs import check_run
+
+    report = {}
+    for folder in args.runs:
+        problems = check_run(folder)
+        report[folder] = problems
+        if problems:
+            print("%s: %d problem%s" % (folder, len(problems), "" if len(problems) == 1 else "s"))
+            for p in problems:
+                print("  " + p)
+        else:
+            print("%s: ok" % folder)
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump({"runs": [{"run": k, "ok": not v, "problems": v} for k, v in report.items()]}, fh, indent=2)
+    return 1 if any(report.values()) else 0

@@ -1,0 +1,169 @@
+"""Plain CSV logs -> run folders (``tcomp import``).
+
+A thermal-test logger usually writes one wide CSV: a time column, temperatures,
+displacement channels, maybe spindle speed. A *mapping* says which column is
+what; every source column must be either mapped or listed in ``ignore``, so a
+misspelt or forgotten column is an error rather than silently lost data.
+
+Mapping (JSON, or built from command-line flags)::
+
+    {
+      "time": "time_s",              # source column with the time
+      "time_scale": 1.0,             # multiply to get seconds (60 for minutes)
+      "temperatures": {"t1_C": {"name": "t1", "role": "structure", "location": "..."}},
+      "errors": {"ch1_um": {"channel": "ch1", "position_mm": 0.0, "scale": 1.0}},
+      "spindle": "spindle_rpm",      # optional
+      "ignore": ["comment"],         # optional: source columns deliberately not imported
+      "meta": {"axis": "Z", "notes": "..."}   # merged into meta.json
+    }
+
+``temperatures`` may also be a list of column names (name = column, role
+``structure``) and ``errors`` a list (channel = column, position 0).
+"""
+import csv
+import math
+import os
+
+import numpy as np
+
+from host.runs import FORMAT, ROLES, Errors, Run, RunFormatError, Spindle, Temperatures, write_run
+
+
+class ImportError_(ValueError):
+    """A mapping or source file problem; the message names file, line and column."""
+
+
+def _normalise_mapping(mapping, where):
+    if not isinstance(mapping, dict):
+        raise ImportError_("%s: mapping must be a JSON object" % where)
+    unknown = set(mapping) - {"time", "time_scale", "temperatures", "errors", "spindle", "ignore", "meta"}
+    if unknown:
+        raise ImportError_("%s: unknown mapping key(s) %s" % (where, ", ".join(sorted(unknown))))
+    if "time" not in mapping:
+        raise ImportError_("%s: mapping needs 'time' (the source column holding the time)" % where)
+    temps = mapping.get("temperatures") or {}
+    if isinstance(temps, list):
+        temps = {c: {} for c in temps}
+    errs = mapping.get("errors") or {}
+    if isinstance(errs, list):
+        errs = {c: {} for c in errs}
+    if not temps:
+        raise ImportError_("%s: mapping needs at least one temperature column" % where)
+    if not errs:
+        raise ImportError_("%s: mapping needs at least one error (displacement) column" % where)
+    t_out = {}
+    for col, spec in temps.items():
+        spec = dict(spec or {})
+        role = spec.get("role", "structure")
+        if role not in ROLES:
+            raise ImportError_("%s: temperature column %r has role %r; expected one of %s" % (where, col, role, ", ".join(ROLES)))
+        t_out[col] = {"name": spec.get("name", col), "role": role, "location": spec.get("location", "")}
+    names = [s["name"] for s in t_out.values()]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if dup:
+        raise ImportError_("%s: sensor name(s) used twice: %s" % (where, ", ".join(dup)))
+    e_out = {}
+    for col, spec in errs.items():
+        spec = dict(spec or {})
+        e_out[col] = {
+            "channel": str(spec.get("channel", col)),
+            "position_mm": float(spec.get("position_mm", 0.0)),
+            "scale": float(spec.get("scale", 1.0)),
+        }
+    return {
+        "time": mapping["time"],
+        "time_scale": float(mapping.get("time_scale", 1.0)),
+        "temperatures": t_out,
+        "errors": e_out,
+        "spindle": mapping.get("spindle"),
+        "ignore": list(mapping.get("ignore") or []),
+        "meta": dict(mapping.get("meta") or {}),
+    }
+
+
+def import_csv(source, mapping, mapping_where="mapping"):
+    """Read ``source`` (CSV path) with ``mapping``; return a Run (not yet written)."""
+    m = _normalise_mapping(mapping, mapping_where)
+    try:
+        with open(source, newline="", encoding="utf-8") as fh:
+            rows = list(csv.reader(fh))
+    except OSError as exc:
+        raise ImportError_("%s: cannot be read (%s)" % (source, exc))
+    if not rows:
+        raise ImportError_("%s line 1: file is empty" % source)
+    header = [h.strip() for h in rows[0]]
+    used = [m["time"]] + list(m["temperatures"]) + list(m["errors"]) + ([m["spindle"]] if m["spindle"] else [])
+    problems = []
+    for col in used + m["ignore"]:
+        if col not in header:
+            problems.append("%s line 1: mapped column %r is not in the header (%s)" % (source, col, ",".join(header)))
+    for col in header:
+        if col not in used and col not in m["ignore"]:
+            problems.append("%s line 1: column %r is neither mapped nor listed in 'ignore'" % (source, col))
+    if problems:
+        raise ImportError_("\n".join(problems))
+    idx = {c: header.index(c) for c in used}
+    data = np.empty((len(rows) - 1, len(used)))
+    for lineno, row in enumerate(rows[1:], start=2):
+        if len(row) != len(header):
+            problems.append("%s line %d: has %d cells, header has %d" % (source, lineno, len(row), len(header)))
+            continue
+        for j, col in enumerate(used):
+            cell = row[idx[col]].strip()
+            try:
+                v = float(cell)
+            except ValueError:
+                problems.append("%s line %d column %r: not a number: %r" % (source, lineno, col, cell))
+                continue
+            if not math.isfinite(v):
+                problems.append("%s line %d column %r: %r is not a finite number" % (source, lineno, col, cell))
+            data[lineno - 2, j] = v
+        if len(problems) > 50:
+            problems.append("... (stopped after 50 problems)")
+            break
+    if problems:
+        raise ImportError_("\n".join(problems))
+    if data.shape[0] == 0:
+        raise ImportError_("%s: no data rows after the header" % source)
+    time_s = data[:, 0] * m["time_scale"]
+    back = np.flatnonzero(np.diff(time_s) <= 0)
+    if back.size:
+        raise ImportError_(
+            "\n".join("%s line %d column %r: time goes backwards or repeats (%g after %g)" % (source, i + 3, m["time"], data[i + 1, 0], data[i, 0]) for i in back[:20])
+        )
+    tcols = list(m["temperatures"])
+    tvals = data[:, [used.index(c) for c in tcols]]
+    temps = Temperatures(time_s, [m["temperatures"][c]["name"] for c in tcols], tvals)
+    n = time_s.size
+    ecols = list(m["errors"])
+    err_time = np.repeat(time_s, len(ecols))
+    err_pos = np.tile([m["errors"][c]["position_mm"] for c in ecols], n)
+    err_val = (data[:, [used.index(c) for c in ecols]] * np.array([m["errors"][c]["scale"] for c in ecols])).reshape(-1)
+    # The channel column is kept even for one channel: it records which probe it was.
+    channel = np.tile(np.array([m["errors"][c]["channel"] for c in ecols], dtype=object), n)
+    errors = Errors(err_time, err_pos, err_val, None, channel)
+    spindle = None
+    if m["spindle"]:
+        spindle = Spindle(time_s, data[:, used.index(m["spindle"])])
+    meta = {"format": FORMAT, "axis": m["meta"].pop("axis", "Z")}
+    meta["sensors"] = {
+        s["name"]: {"role": s["role"], "location": s["location"] or "not documented in the source"} for s in m["temperatures"].values()
+    }
+    meta["channels"] = {s["channel"]: {"source_column": c, "position_mm": s["position_mm"], "scale": s["scale"]} for c, s in m["errors"].items()}
+    meta["import"] = {"source": os.path.basename(source), "rows": int(n), "ignored_columns": m["ignore"]}
+    meta.update(m["meta"])
+    name = os.path.splitext(os.path.basename(source))[0]
+    return Run(meta, temps, errors, None, spindle, name=name)
+
+
+def import_to_folder(source, mapping, out, mapping_where="mapping"):
+    run = import_csv(source, mapping, mapping_where)
+    write_run(run, out, decimals=6)
+    # Round-trip through the loader so a written folder is always a valid run.
+    from host.runs import load_run
+
+    try:
+        load_run(out)
+    except RunFormatError as exc:  # pragma: no cover - would be a bug in write_run
+        raise ImportError_("imported run does not validate:\n%s" % exc)
+    return run
