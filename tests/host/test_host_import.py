@@ -1,0 +1,93 @@
+"""tcomp import: mapping strictness, and the bundled real data equals its source."""
+import csv
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from host.importer import ImportError_, import_csv
+from host.runs import load_run
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+SOURCE = os.path.join(ROOT, "..", "shared", "data", "fl_thermal", "fl_thermal.csv")
+BUNDLED = os.path.join(ROOT, "data", "fl_thermal")
+
+
+def _write(path, rows):
+    with open(path, "w", newline="") as fh:
+        csv.writer(fh).writerows(rows)
+    return str(path)
+
+
+def test_bundled_real_run_is_valid_and_complete():
+    run = load_run(BUNDLED)
+    assert run.temperatures.names == ["t%d" % i for i in range(1, 17)]
+    assert run.errors.channels() == ["ch%d" % i for i in range(1, 6)]
+    assert run.temperatures.time_s.size == 11115
+    assert len(run.errors) == 5 * 11115
+    assert os.path.exists(os.path.join(BUNDLED, "LICENSE"))
+    assert run.meta["source"]["licence"] == "MIT"
+
+
+@pytest.mark.skipif(not os.path.exists(SOURCE), reason="shared/ reference data not beside the repo")
+def test_bundled_real_run_equals_source():
+    with open(SOURCE) as fh:
+        rows = list(csv.reader(fh))
+    head = rows[0]
+    src = np.array(rows[1:], dtype=float)
+    run = load_run(BUNDLED)
+    np.testing.assert_array_equal(run.temperatures.time_s, src[:, head.index("time_s")])
+    for i in range(1, 17):
+        np.testing.assert_allclose(run.temperatures.column("t%d" % i), src[:, head.index("t%d_C" % i)], atol=5e-7)
+    for i in range(1, 6):
+        rows_ = run.errors.channel == "ch%d" % i
+        np.testing.assert_allclose(run.errors.error_um[rows_], src[:, head.index("ch%d_um" % i)], atol=5e-7)
+    np.testing.assert_allclose(run.spindle.rpm, src[:, head.index("spindle_rpm")])
+
+
+def test_unmapped_column_is_an_error(tmp_path):
+    src = _write(tmp_path / "log.csv", [["t", "a", "d", "extra"], [0, 20, 1, 5], [1, 21, 2, 6]])
+    with pytest.raises(ImportError_, match="column 'extra' is neither mapped nor listed in 'ignore'"):
+        import_csv(src, {"time": "t", "temperatures": ["a"], "errors": ["d"]})
+    run = import_csv(src, {"time": "t", "temperatures": ["a"], "errors": ["d"], "ignore": ["extra"]})
+    assert run.meta["import"]["ignored_columns"] == ["extra"]
+
+
+def test_bad_cells_and_time(tmp_path):
+    src = _write(tmp_path / "log.csv", [["t", "a", "d"], [0, 20, 1], [2, "oops", 2], [1, 21, 3]])
+    with pytest.raises(ImportError_) as exc:
+        import_csv(src, {"time": "t", "temperatures": ["a"], "errors": ["d"]})
+    assert "line 3 column 'a': not a number: 'oops'" in str(exc.value)
+    src = _write(tmp_path / "log2.csv", [["t", "a", "d"], [0, 20, 1], [2, 20, 2], [1, 21, 3]])
+    with pytest.raises(ImportError_, match="line 4 column 't': time goes backwards"):
+        import_csv(src, {"time": "t", "temperatures": ["a"], "errors": ["d"]})
+
+
+def test_mapping_errors(tmp_path):
+    src = _write(tmp_path / "log.csv", [["t", "a", "d"], [0, 20, 1]])
+    with pytest.raises(ImportError_, match="mapped column 'b' is not in the header"):
+        import_csv(src, {"time": "t", "temperatures": ["a", "b"], "errors": ["d"]})
+    with pytest.raises(ImportError_, match="role 'hot'"):
+        import_csv(src, {"time": "t", "temperatures": {"a": {"role": "hot"}}, "errors": ["d"]})
+    with pytest.raises(ImportError_, match="unknown mapping key"):
+        import_csv(src, {"time": "t", "temps": ["a"], "errors": ["d"]})
+
+
+def test_import_cli_with_flags(tmp_path):
+    src = _write(tmp_path / "log.csv", [["min", "nut", "air", "probe", "rpm"], [0, 20, 19, 1.5, 0], [1, 21, 19, 2.5, 1000]])
+    out = tmp_path / "run"
+    res = subprocess.run([sys.executable, "-m", "host", "import", src, "--out", str(out), "--time", "min", "--time-scale", "60",
+                          "--temp", "nut=T1:nut", "--temp", "air=T2:ambient", "--error", "probe=Z@12.5", "--spindle", "rpm",
+                          "--json", str(tmp_path / "s.json")], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr
+    run = load_run(str(out))
+    assert run.meta["sensors"]["T1"]["role"] == "nut"
+    np.testing.assert_array_equal(run.temperatures.time_s, [0, 60])
+    assert run.errors.position_mm.tolist() == [12.5, 12.5]
+    assert json.load(open(tmp_path / "s.json"))["channels"] == ["Z"]
+    bad = subprocess.run([sys.executable, "-m", "host", "import", src, "--out", str(out), "--time", "min", "--temp", "nut", "--error", "probe"],
+                         capture_output=True, text=True)
+    assert bad.returncode == 2 and "neither mapped" in bad.stderr
