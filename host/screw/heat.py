@@ -1,0 +1,340 @@
+"""Vectorised physics core of the ball-screw segment model (shared with the digital twin).
+
+The screw is a steel rod of length ``length_mm`` and diameter ``diameter_mm``,
+fixed (axially located) at screw coordinate x = 0, free to grow towards +x.
+Axis positions P map to screw coordinates by ``x = P - fixed_end_mm``.  It is cut
+into M segments (``edges_mm``, M+1 ascending edges, ``edges_mm[0] = 0``).
+
+State: T_i, the temperature rise of segment i over the surrounding air [K].
+Energy balance of segment i (capacity C_i = c·ρ·V_i)::
+
+    C_i dT_i/dt = q·u_i/dt                               friction heat of the nut
+                  - Σ_j G_ij (T_i - T_j)                 axial conduction, G = λ·A/Δx
+                  - g·h·S_i·T_i                          convection, S_i = π·d·L_i
+                  + p_i                                  extra source (bearing, ...)
+
+q [J/mm] is the friction heat released per mm of nut travel; the heat of one nut
+pass over a segment of length L is Q = q·L (so Q depends on the segmentation, q
+does not, which is why q is the stored parameter).  u_i is the travel of the nut
+inside segment i during the step [mm], g the convection multiplier of the step
+(1 = still air, >1 = the ``moving_convection`` effect).
+
+Time integration (``simulate_segments``): exact exponential integrator for a
+zero-order-hold input.  Over a step of length dt with constant power the linear
+system T' = K·T + C⁻¹p is solved exactly::
+
+    T[k+1] = e^{K dt} T[k] + K⁻¹(e^{K dt} - I) C⁻¹ p[k]
+
+computed through the symmetric form C^{-1/2}(G + g·H)C^{-1/2} = U diag(s) Uᵀ (eigh),
+so e^{K dt} = C^{-1/2} U diag(e^{-s dt}) Uᵀ C^{1/2}.  Every eigenvalue factor
+e^{-s dt} lies in (0, 1], so the scheme is unconditionally stable and exact for any
+dt, including the very long steps of a cool-down.  Propagators are cached per
+distinct (dt, g); the per-step loop is one M×M mat-vec, never a loop over segments.
+
+Thermal error (``thermal_error_um``): E_m(P) = α·Σ_i T_i·overlap_i(P), overlap_i(P)
+the length of segment i inside [0, x(P)] (a partial segment counts pro rata;
+E_m = 0 at the fixed end).
+
+Units: mm for lengths in the API, SI inside; α in 1/K; errors in µm.
+"""
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+STEEL = {"density_kg_m3": 7850.0, "c_J_kgK": 460.0, "lambda_W_mK": 46.0, "alpha_per_K": 11.5e-6}
+
+
+@dataclass(frozen=True)
+class ScrewGeometry:
+    """Screw shape and segmentation.
+
+    length_mm: thread length from the fixed end; diameter_mm: (root) diameter;
+    fixed_end_mm: axis position of the fixed end (x = P - fixed_end_mm);
+    segments: M; bore_mm: bore of a hollow (cooled) screw, 0 for solid.
+    """
+
+    length_mm: float
+    diameter_mm: float
+    fixed_end_mm: float = 0.0
+    segments: int = 40
+    bore_mm: float = 0.0
+
+    def __post_init__(self):
+        if not self.length_mm > 0:
+            raise ValueError("screw length_mm must be positive (found %r)" % (self.length_mm,))
+        if not self.diameter_mm > 0:
+            raise ValueError("screw diameter_mm must be positive (found %r)" % (self.diameter_mm,))
+        if not 0 <= self.bore_mm < self.diameter_mm:
+            raise ValueError("screw bore_mm must be in [0, diameter_mm) (found %r)" % (self.bore_mm,))
+        if int(self.segments) != self.segments or self.segments < 1:
+            raise ValueError("segments must be a positive integer (found %r)" % (self.segments,))
+
+    @property
+    def edges_mm(self):
+        return np.linspace(0.0, self.length_mm, int(self.segments) + 1)
+
+    @property
+    def section_m2(self):
+        return np.pi / 4.0 * ((self.diameter_mm * 1e-3) ** 2 - (self.bore_mm * 1e-3) ** 2)
+
+    def with_segments(self, m):
+        return replace(self, segments=int(m))
+
+    @classmethod
+    def from_meta(cls, meta, segments=40):
+        """From a run's meta.json ``screw`` block (length_mm, diameter_mm, fixed_end_mm, bore_mm)."""
+        s = meta.get("screw") if isinstance(meta, dict) else None
+        if not isinstance(s, dict):
+            raise ValueError("meta.json has no 'screw' block (length_mm, diameter_mm, lead_mm, fixed_end_mm)")
+        return cls(float(s["length_mm"]), float(s["diameter_mm"]), float(s.get("fixed_end_mm", 0.0)), int(segments), float(s.get("bore_mm", 0.0)))
+
+
+@dataclass(frozen=True)
+class ScrewParams:
+    """Thermal parameters.
+
+    q_J_per_mm: friction heat per mm of nut travel (Q per pass over a segment of
+    length L is q·L); c_J_kgK specific heat; density_kg_m3; lambda_W_mK axial
+    conductivity; h_W_m2K convection coefficient; alpha_per_K expansion coefficient.
+    """
+
+    q_J_per_mm: float = 0.05
+    c_J_kgK: float = STEEL["c_J_kgK"]
+    density_kg_m3: float = STEEL["density_kg_m3"]
+    lambda_W_mK: float = STEEL["lambda_W_mK"]
+    h_W_m2K: float = 15.0
+    alpha_per_K: float = STEEL["alpha_per_K"]
+
+    def Q_per_pass_J(self, segment_mm):
+        """Heat of one nut pass over a segment of ``segment_mm``."""
+        return self.q_J_per_mm * segment_mm
+
+    @classmethod
+    def from_meta(cls, meta, **overrides):
+        """Material defaults (steel) overridden by optional meta.json ``screw`` keys
+        density_kg_m3, c_J_kgK, lambda_W_mK, h_W_m2K, alpha_per_K (or alpha_um_per_m_K)."""
+        s = (meta or {}).get("screw") or {}
+        kw = {}
+        for k in ("density_kg_m3", "c_J_kgK", "lambda_W_mK", "h_W_m2K", "alpha_per_K", "q_J_per_mm"):
+            if isinstance(s.get(k), (int, float)):
+                kw[k] = float(s[k])
+        if "alpha_per_K" not in kw and isinstance(s.get("alpha_um_per_m_K"), (int, float)):
+            kw["alpha_per_K"] = float(s["alpha_um_per_m_K"]) * 1e-6
+        kw.update(overrides)
+        return cls(**kw)
+
+
+# ------------------------------------------------------------------ geometry helpers
+
+
+def segment_properties(edges_mm, diameter_mm, params, bore_mm=0.0):
+    """(C [J/K] per segment, G [W/K] per interface (M-1), H [W/K] = h·S per segment)."""
+    edges = np.asarray(edges_mm, dtype=float) * 1e-3
+    L = np.diff(edges)
+    d, b = diameter_mm * 1e-3, bore_mm * 1e-3
+    area = np.pi / 4.0 * (d * d - b * b)
+    C = params.c_J_kgK * params.density_kg_m3 * area * L
+    centres = 0.5 * (edges[1:] + edges[:-1])
+    G = params.lambda_W_mK * area / np.diff(centres)
+    H = params.h_W_m2K * np.pi * d * L
+    return C, G, H
+
+
+def overlap_mm(edges_mm, x_mm):
+    """Length of each segment inside [0, x]: shape x.shape + (M,)."""
+    edges = np.asarray(edges_mm, dtype=float)
+    x = np.asarray(x_mm, dtype=float)[..., None]
+    return np.clip(x - edges[:-1], 0.0, np.diff(edges))
+
+
+def thermal_error_um(edges_mm, rises, positions_mm, fixed_end_mm, alpha):
+    """E_m in µm: α·Σ_i T_i·overlap_i(P).
+
+    rises: (..., M) segment rises [K]; positions_mm broadcastable to rises.shape[:-1]
+    (pass rises[:, None, :] and positions[None, :] for a time × position grid).
+    """
+    rises = np.asarray(rises, dtype=float)
+    ov = overlap_mm(edges_mm, np.asarray(positions_mm, dtype=float) - fixed_end_mm)
+    return 1e3 * alpha * np.sum(rises * ov, axis=-1)
+
+
+# ------------------------------------------------------------------ nut travel
+
+
+def _leg_overlap(p0, direction, r, lo, hi):
+    """Overlap of the swept interval [p0, p0 + direction·r] with each [lo, hi]."""
+    a = np.minimum(p0, p0 + direction * r)[..., None]
+    b = np.maximum(p0, p0 + direction * r)[..., None]
+    return np.clip(np.minimum(b, hi) - np.maximum(a, lo), 0.0, None)
+
+
+def _cumulative_travel(s, start, end, lo, hi):
+    """Travel inside each segment [lo, hi] after distance s along a reciprocation start->end->start...
+
+    s: (k,) distances; returns (k, M)."""
+    span = abs(end - start)
+    if span <= 0.0:
+        return np.zeros((s.size, lo.size))
+    full_cov = np.clip(np.minimum(max(start, end), hi) - np.maximum(min(start, end), lo), 0.0, None)
+    legs = np.floor(s / span)
+    r = s - legs * span
+    odd = (legs % 2) == 1
+    direction = np.where(odd, -1.0, 1.0) * np.sign(end - start)
+    p0 = np.where(odd, end, start)
+    return legs[:, None] * full_cov[None, :] + _leg_overlap(p0, direction, r, lo, hi)
+
+
+def nut_travel_per_segment(motion, edges_mm, fixed_end_mm, t_grid):
+    """Travel of the nut inside each segment during each step [mm]: (n_steps, M).
+
+    motion: host.runs.Motion (or any object with t_start_s, t_end_s, from_mm, to_mm,
+    feed_mm_min arrays): during each interval the nut reciprocates from from_mm to
+    to_mm and back at feed_mm_min, starting at from_mm.  t_grid: (n_steps+1,)
+    ascending times.  The loop runs over motion intervals (vectorised over steps
+    and segments)."""
+    t = np.asarray(t_grid, dtype=float)
+    edges = np.asarray(edges_mm, dtype=float) + fixed_end_mm  # axis coordinates
+    lo, hi = edges[:-1], edges[1:]
+    cum = np.zeros((t.size, lo.size))
+    if motion is not None:
+        for ts, te, a, b, f in zip(motion.t_start_s, motion.t_end_s, motion.from_mm, motion.to_mm, motion.feed_mm_min):
+            i0 = np.searchsorted(t, ts, side="right")
+            i1 = np.searchsorted(t, te, side="left")
+            v = f / 60.0
+            if i1 > i0:
+                cum[i0:i1] += _cumulative_travel((t[i0:i1] - ts) * v, a, b, lo, hi)
+            if i1 < t.size:
+                cum[i1:] += _cumulative_travel(np.array([(te - ts) * v]), a, b, lo, hi)
+    return np.diff(cum, axis=0)
+
+
+def friction_heat_J(travel_mm, params):
+    """Friction heat delivered into each segment during each step [J]: q·u."""
+    return params.q_J_per_mm * np.asarray(travel_mm, dtype=float)
+
+
+# ------------------------------------------------------------------ integration
+
+
+class Propagator:
+    """Exact step matrices of the segment system for given properties.
+
+    ``step(dt, g)`` -> (A, Bp): T[k+1] = A·T[k] + Bp·p[k] with p the (constant) power
+    [W] per segment during the step and g the convection multiplier."""
+
+    def __init__(self, C, G, H):
+        self.C = np.asarray(C, dtype=float)
+        self.G = np.asarray(G, dtype=float)
+        self.H = np.asarray(H, dtype=float)
+        self._rs = 1.0 / np.sqrt(self.C)
+        self._s = np.sqrt(self.C)
+        self._cache = {}
+
+    def symmetric(self, g=1.0):
+        M = self.C.size
+        L = np.zeros((M, M))
+        if M > 1:
+            i = np.arange(M - 1)
+            L[i, i + 1] = L[i + 1, i] = -self.G
+            L[np.arange(M), np.arange(M)] = np.r_[self.G, 0.0] + np.r_[0.0, self.G]
+        L[np.diag_indices(M)] += np.asarray(g, dtype=float) * self.H
+        return self._rs[:, None] * L * self._rs[None, :]
+
+    def modes(self, g=1.0):
+        """Decay rates s [1/s] (ascending) and orthonormal modes U of the symmetric system."""
+        key = ("modes", float(g) if np.ndim(g) == 0 else tuple(np.round(np.asarray(g, dtype=float), 12)))
+        if key not in self._cache:
+            s, U = np.linalg.eigh(self.symmetric(g))
+            self._cache[key] = (np.clip(s, 0.0, None), U)
+        return self._cache[key]
+
+    def step(self, dt, g=1.0):
+        gkey = float(g) if np.ndim(g) == 0 else tuple(np.round(np.asarray(g, dtype=float), 12))
+        key = (round(float(dt), 9), gkey)
+        if key not in self._cache:
+            s, U = self.modes(g)
+            e = np.exp(-s * dt)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                phi = np.where(s * dt > 1e-12, -np.expm1(-s * dt) / np.where(s > 0, s, 1.0), dt)
+            A = (self._rs[:, None] * (U * e) @ U.T) * self._s[None, :]
+            Bp = (self._rs[:, None] * (U * phi) @ U.T) * self._rs[None, :]
+            self._cache[key] = (A, Bp)
+        return self._cache[key]
+
+
+def simulate_segments(geometry, params, t_grid, heat_J=None, convection_mult=None, source_W=None, T0=None, edges_mm=None):
+    """Integrate the segment rises over ``t_grid``; returns (n_steps+1, M) in K.
+
+    heat_J: (n_steps, M) heat delivered into each segment during each step [J]
+      (e.g. ``friction_heat_J(nut_travel_per_segment(...), params)``); None = none.
+    convection_mult: None, a scalar, (n_steps,) per step, or (n_steps, M) per step
+      and segment: multiplies h·S (the moving_convection effect).
+    source_W: None, (M,) constant or (n_steps, M) extra power [W] (bearing heat
+      into segment 0, ...).
+    T0: (M,) initial rises (default 0).
+    edges_mm: segment edges (default the geometry's uniform segmentation).
+    Exact for piecewise-constant power and multiplier (see module doc)."""
+    t = np.asarray(t_grid, dtype=float)
+    edges = geometry.edges_mm if edges_mm is None else np.asarray(edges_mm, dtype=float)
+    M = edges.size - 1
+    n = t.size - 1
+    if n < 0:
+        raise ValueError("t_grid is empty")
+    dt = np.diff(t)
+    if np.any(dt <= 0):
+        raise ValueError("t_grid must be strictly ascending")
+    C, G, H = segment_properties(edges, geometry.diameter_mm, params, geometry.bore_mm)
+    power = np.zeros((n, M))
+    if heat_J is not None:
+        heat_J = np.asarray(heat_J, dtype=float)
+        if heat_J.shape != (n, M):
+            raise ValueError("heat_J must have shape (n_steps, M) = (%d, %d), found %s" % (n, M, heat_J.shape))
+        power += heat_J / dt[:, None]
+    if source_W is not None:
+        power += np.broadcast_to(np.asarray(source_W, dtype=float), (n, M))
+    prop = Propagator(C, G, H)
+    # group steps by (dt, g) so each distinct propagator is built once and applied to
+    # its inputs in one matrix product
+    if convection_mult is None:
+        gk = np.ones(n)
+    else:
+        gk = np.asarray(convection_mult, dtype=float)
+        gk = np.broadcast_to(gk, (n,) if gk.ndim <= 1 else (n, M))
+    if gk.ndim == 1:
+        keys = np.stack([np.round(dt, 9), gk], axis=1)
+    else:
+        keys = np.concatenate([np.round(dt, 9)[:, None], gk], axis=1)
+    uniq, inv = np.unique(keys, axis=0, return_inverse=True)
+    inv = inv.reshape(-1)
+    As = np.empty((len(uniq), M, M))
+    drive = np.empty((n, M))
+    for j, row in enumerate(uniq):
+        g = row[1] if gk.ndim == 1 else row[1:]
+        A, Bp = prop.step(row[0], g)
+        As[j] = A
+        idx = np.flatnonzero(inv == j)
+        drive[idx] = power[idx] @ Bp.T
+    out = np.empty((n + 1, M))
+    out[0] = 0.0 if T0 is None else np.asarray(T0, dtype=float)
+    T = out[0].copy()
+    if len(uniq) == 1:
+        A = As[0]
+        for k in range(n):
+            T = A @ T + drive[k]
+            out[k + 1] = T
+    else:
+        for k in range(n):
+            T = As[inv[k]] @ T + drive[k]
+            out[k + 1] = T
+    return out
+
+
+def fin_steady_state(x_mm, power_W, length_mm, diameter_mm, lambda_W_mK, h_W_m2K):
+    """1-D fin with heat ``power_W`` entering at x = 0, adiabatic tip at length_mm:
+    T(x) = P·cosh(m(L-x)) / (λ·A·m·sinh(mL)), m = sqrt(h·π·d/(λ·A))."""
+    d = diameter_mm * 1e-3
+    A = np.pi * d * d / 4.0
+    m = np.sqrt(h_W_m2K * np.pi * d / (lambda_W_mK * A))
+    L = length_mm * 1e-3
+    x = np.asarray(x_mm, dtype=float) * 1e-3
+    return power_W * np.cosh(m * (L - x)) / (lambda_W_mK * A * m * np.sinh(m * L))

@@ -1,0 +1,96 @@
+"""Closed-form checks of the physics core host/screw/heat.py."""
+import numpy as np
+import pytest
+
+from host.runs import Motion
+from host.screw import heat
+
+
+def _motion(rows):
+    cols = np.asarray(rows, dtype=float).T
+    return Motion(*cols)
+
+
+def test_fin_steady_state_within_2_percent():
+    geo = heat.ScrewGeometry(length_mm=800.0, diameter_mm=32.0, segments=200)
+    par = heat.ScrewParams(h_W_m2K=12.0)
+    P = 5.0
+    t = np.array([0.0, 1e6, 2e6, 3e6])
+    src = np.zeros(geo.segments)
+    src[0] = P
+    T = heat.simulate_segments(geo, par, t, source_W=src)[-1]
+    e = geo.edges_mm
+    centres = 0.5 * (e[1:] + e[:-1])
+    ref = heat.fin_steady_state(centres, P, geo.length_mm, geo.diameter_mm, par.lambda_W_mK, par.h_W_m2K)
+    assert np.max(np.abs(T - ref)) < 0.02 * ref.max()
+    # and the heat balance closes: all heat leaves by convection
+    _, _, H = heat.segment_properties(e, geo.diameter_mm, par)
+    assert np.sum(H * T) == pytest.approx(P, rel=1e-6)
+
+
+@pytest.mark.parametrize("dt", [1.0, 60.0, 3600.0])
+def test_uniform_screw_decays_at_hS_over_cm(dt):
+    geo = heat.ScrewGeometry(length_mm=1000.0, diameter_mm=40.0, segments=25)
+    par = heat.ScrewParams(h_W_m2K=20.0)
+    t = np.arange(0.0, 6 * 3600.0 + dt / 2, dt)
+    T = heat.simulate_segments(geo, par, t, T0=np.full(25, 7.0))
+    d = geo.diameter_mm * 1e-3
+    rate = par.h_W_m2K * np.pi * d / (par.c_J_kgK * par.density_kg_m3 * np.pi * d * d / 4)
+    np.testing.assert_allclose(T, 7.0 * np.exp(-rate * t)[:, None] * np.ones((1, 25)), rtol=1e-9, atol=1e-12)
+
+
+def test_stable_for_any_step_and_matches_fine_grid():
+    geo = heat.ScrewGeometry(length_mm=600.0, diameter_mm=25.0, segments=30)
+    par = heat.ScrewParams(q_J_per_mm=0.1, h_W_m2K=10.0)
+    mot = _motion([[0, 3600, 100, 400, 6000]])
+    coarse = np.array([0.0, 900.0, 3600.0, 20000.0])
+    fine = np.linspace(0.0, 20000.0, 20001)
+    Tc = heat.simulate_segments(geo, par, coarse, heat.friction_heat_J(heat.nut_travel_per_segment(mot, geo.edges_mm, 0.0, coarse), par))
+    Tf = heat.simulate_segments(geo, par, fine, heat.friction_heat_J(heat.nut_travel_per_segment(mot, geo.edges_mm, 0.0, fine), par))
+    assert np.all(np.isfinite(Tc)) and Tc.min() >= -1e-12
+    # the coarse step is exact for constant power; the motion's power is constant on [0, 3600]
+    np.testing.assert_allclose(Tc[2], Tf[3600], rtol=1e-3, atol=1e-6)
+    np.testing.assert_allclose(Tc[3], Tf[-1], rtol=1e-3, atol=1e-9)
+
+
+def test_nut_travel_counts_passes():
+    edges = np.array([0.0, 100.0, 200.0, 300.0, 400.0])
+    # 100->300 at 6000 mm/min = 100 mm/s for 10 s: 1000 mm = 5 legs of 200 mm
+    mot = _motion([[0, 10, 100, 300, 6000]])
+    u = heat.nut_travel_per_segment(mot, edges, 0.0, np.array([0.0, 1.0, 3.0, 10.0, 20.0]))
+    np.testing.assert_allclose(u.sum(axis=0), [0, 500, 500, 0])
+    np.testing.assert_allclose(u[0], [0, 100, 0, 0])  # first second: 100->200
+    np.testing.assert_allclose(u[1], [0, 0, 200, 0])  # 200->300, then back 300->200
+    np.testing.assert_allclose(u[3], 0)
+    # fixed end offset shifts the segments in axis coordinates
+    u2 = heat.nut_travel_per_segment(mot, edges, -100.0, np.array([0.0, 10.0]))
+    np.testing.assert_allclose(u2[0], [0, 0, 500, 500])
+
+
+def test_error_zero_when_cold_and_at_fixed_end():
+    edges = np.linspace(0, 500, 11)
+    rises = np.zeros((4, 10))
+    assert np.all(heat.thermal_error_um(edges, rises, np.array([0, 100, 250, 490]), 0.0, 11.5e-6) == 0)
+    warm = np.linspace(1, 3, 10)
+    assert heat.thermal_error_um(edges, warm, 0.0, 0.0, 11.5e-6) == 0.0
+    assert heat.thermal_error_um(edges, warm, -20.0, -20.0, 11.5e-6) == 0.0
+    # pro-rata partial segment: 1.5 segments of 1 K, 50 mm each
+    E = heat.thermal_error_um(edges, np.ones(10), 75.0, 0.0, 1e-5)
+    assert E == pytest.approx(1e3 * 1e-5 * 75.0)
+    grid = heat.thermal_error_um(edges, np.ones((3, 1, 10)), np.array([[0.0, 250.0, 500.0]]), 0.0, 1e-5)
+    assert grid.shape == (3, 3)
+    np.testing.assert_allclose(grid[0], [0, 2.5, 5.0])
+
+
+def test_convection_multiplier_and_bad_shapes():
+    geo = heat.ScrewGeometry(length_mm=400.0, diameter_mm=20.0, segments=8)
+    par = heat.ScrewParams()
+    t = np.arange(0, 3601, 60.0)
+    T1 = heat.simulate_segments(geo, par, t, T0=np.ones(8))
+    g = np.where(t[:-1] < 1800, 2.0, 1.0)
+    T2 = heat.simulate_segments(geo, par, t, T0=np.ones(8), convection_mult=g)
+    assert np.all(T2[1:] < T1[1:])
+    with pytest.raises(ValueError, match="heat_J must have shape"):
+        heat.simulate_segments(geo, par, t, heat_J=np.zeros((3, 8)))
+    with pytest.raises(ValueError, match="diameter_mm"):
+        heat.ScrewGeometry(length_mm=100.0, diameter_mm=0.0)
