@@ -1,0 +1,140 @@
+"""What every selector shares: the result type, the error type, input checking."""
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from host.empirical import EmpiricalDataError
+
+
+class SelectionError(EmpiricalDataError):
+    """Input a selector cannot work with; the message names the sensor, run or parameter."""
+
+
+@dataclass
+class Selection:
+    """The chosen sensors, the method, the numbers behind the choice, and a plot."""
+
+    sensors: list
+    method: str
+    reason: dict
+    _plotter: object = field(default=None, repr=False, compare=False)
+
+    def plot(self, path):
+        """Write a PNG explaining the choice to ``path``; returns ``path``."""
+        if self._plotter is None:
+            raise SelectionError("this %s selection carries no plot data" % self.method)
+        self._plotter(path)
+        return path
+
+    def to_json(self):
+        return {"method": self.method, "sensors": list(self.sensors), "reason": self.reason}
+
+
+def _is_run(obj):
+    return hasattr(obj, "temperatures") and hasattr(obj, "errors")
+
+
+def as_arrays(data, target="slope", channel=None, sensors=None):
+    """Normalise runs or ``(X, y, names)`` tuples to a checked list of tuples plus run labels."""
+    if isinstance(data, tuple) and len(data) == 3 and not _is_run(data[0]) and np.ndim(data[0]) == 2:
+        data = [data]
+    data = list(data)
+    if not data:
+        raise SelectionError("no runs given")
+    if all(_is_run(r) for r in data):
+        from host.empirical.targets import training_arrays
+
+        labels = [getattr(r, "name", None) or "run %d" % (i + 1) for i, r in enumerate(data)]
+        try:
+            arrays = training_arrays(data, target=target, channel=channel, sensors=sensors)
+        except EmpiricalDataError as exc:
+            raise SelectionError(str(exc)) from exc
+    elif any(_is_run(r) for r in data):
+        raise SelectionError("mix of run folders and arrays; give one kind")
+    else:
+        arrays = data
+        labels = ["run %d" % (i + 1) for i in range(len(data))]
+        if sensors is not None:
+            arrays = [_subset(a, sensors, labels[i]) for i, a in enumerate(arrays)]
+    checked = [check_arrays(a, labels[i]) for i, a in enumerate(arrays)]
+    names = checked[0][2]
+    for (_, _, other), label in zip(checked[1:], labels[1:]):
+        if other != names:
+            raise SelectionError("%s has sensors %s but %s has %s; every run needs the same sensors in the same order" % (label, ",".join(other), labels[0], ",".join(names)))
+    return checked, labels
+
+
+def _subset(arr, sensors, label):
+    X, y, names = arr
+    names = list(names)
+    missing = [s for s in sensors if s not in names]
+    if missing:
+        raise SelectionError("%s has no sensor %s (has %s)" % (label, ", ".join(missing), ",".join(names)))
+    idx = [names.index(s) for s in sensors]
+    return np.asarray(X, dtype=float)[:, idx], y, list(sensors)
+
+
+def check_arrays(arr, label="data"):
+    """Return ``(X, y, names)`` as float arrays and a list, or raise naming the problem."""
+    try:
+        X, y, names = arr
+    except (TypeError, ValueError):
+        raise SelectionError("%s: expected (X, y, names), got %r" % (label, type(arr).__name__))
+    X = np.asarray(X, dtype=float)
+    y = np.asarray(y, dtype=float).ravel()
+    names = [str(n) for n in names]
+    if X.ndim != 2:
+        raise SelectionError("%s: temperatures must be a 2-D array (samples x sensors), got shape %s" % (label, X.shape))
+    n, p = X.shape
+    if p != len(names):
+        raise SelectionError("%s: %d sensor names for %d temperature columns" % (label, len(names), p))
+    if len(set(names)) != p:
+        dup = sorted({s for s in names if names.count(s) > 1})
+        raise SelectionError("%s: sensor name(s) %s appear more than once" % (label, ", ".join(dup)))
+    if p == 0:
+        raise SelectionError("%s: no sensors" % label)
+    if y.size != n:
+        raise SelectionError("%s: %d target values for %d temperature samples" % (label, y.size, n))
+    if n < 3:
+        raise SelectionError("%s: %d samples; at least 3 are needed to estimate a correlation or a regression" % (label, n))
+    bad = ~np.isfinite(X)
+    if bad.any():
+        i, j = np.argwhere(bad)[0]
+        raise SelectionError("%s: sensor %s has a non-finite value (%r) at sample %d (%d bad values in all)" % (label, names[j], X[i, j], i + 1, int(bad.sum())))
+    if not np.isfinite(y).all():
+        i = int(np.flatnonzero(~np.isfinite(y))[0])
+        raise SelectionError("%s: the target has a non-finite value (%r) at sample %d" % (label, y[i], i + 1))
+    span = X.max(axis=0) - X.min(axis=0)
+    scale = np.maximum(np.abs(X).max(axis=0), 1.0)
+    const = np.flatnonzero(span <= 1e-12 * scale)
+    if const.size:
+        raise SelectionError("%s: sensor(s) %s are constant (zero variance): they carry no information and make correlations undefined; drop them with sensors=..." % (label, ", ".join(names[j] for j in const)))
+    if np.ptp(y) <= 1e-12 * max(np.abs(y).max(), 1.0):
+        raise SelectionError("%s: the target is constant; there is nothing to explain" % label)
+    return X, y, names
+
+
+def pooled(arrays):
+    """All runs stacked: the sample correlations and the stepwise fit use every sample."""
+    X = np.vstack([a[0] for a in arrays])
+    y = np.concatenate([a[1] for a in arrays])
+    return X, y, list(arrays[0][2])
+
+
+def check_params(method, params, allowed):
+    unknown = sorted(set(params) - set(allowed))
+    if unknown:
+        raise SelectionError("%s: unknown parameter(s) %s (known: %s)" % (method, ", ".join(unknown), ", ".join(sorted(allowed))))
+    out = dict(allowed)
+    out.update(params)
+    return out
+
+
+def data_label(context, n_samples):
+    ctx = context or {}
+    runs = ctx.get("runs") or []
+    what = ctx.get("target") or "target"
+    if ctx.get("channel"):
+        what += " of channel %s" % ctx["channel"]
+    runs_s = ", ".join(runs[:4]) + (" +%d" % (len(runs) - 4) if len(runs) > 4 else "")
+    return "%s; %d samples from %s" % (what, n_samples, runs_s or "the given arrays")
