@@ -1,0 +1,1 @@
+"""Feed-axis digital twin (placeholder docstring, completed below)."""

@@ -1,0 +1,147 @@
+"""Physical parameters of the simulated feed axis (one frozen dataclass).
+
+Defaults describe a mid-size machining-centre X axis: 700 mm stroke, a steel
+ball screw 800 mm x 32 mm with 10 mm lead fixed at axis position 0. Values and
+their sources are listed in docs/twin.md. Any field can be overridden by
+keyword through ``simulate_run(**overrides)``.
+"""
+import dataclasses
+import math
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class AxisParams:
+    axis: str = "X"
+    stroke_mm: float = 700.0
+    # ball screw: occupies screw coordinate x = P - fixed_end_mm in [0, length]
+    screw_length_mm: float = 800.0
+    screw_diameter_mm: float = 32.0
+    lead_mm: float = 10.0
+    fixed_end_mm: float = 0.0
+    segments: int = 80
+    density_kg_m3: float = 7850.0
+    heat_capacity_J_kgK: float = 460.0
+    conductivity_W_mK: float = 45.0
+    h_W_m2K: float = 15.0
+    alpha_um_mK: float = 11.5
+    # nut friction: energy per mm of nut travel (torque * 2*pi / lead), share into the screw
+    friction_J_per_mm: float = 0.09
+    screw_share: float = 0.35
+    feed_ref_mm_min: float = 8000.0
+    # other heat sources feeding the structure nodes (W)
+    motor_idle_W: float = 3.0
+    motor_W_at_ref: float = 18.0
+    bearing_W_at_ref: float = 3.0
+    # cold geometric error: sum_k c_k * (P / stroke)^k, um
+    geometric_um: tuple = (0.0, 6.0, -9.0, 4.0)
+    # time base and measurement
+    dt_s: float = 10.0
+    sweep_every_min: float = 15.0
+    sweep_duration_min: float = 2.0
+    positions_mm: tuple = tuple(float(p) for p in range(0, 701, 50))
+    temp_noise_K: float = 0.01
+    # ambient air: daily cycle plus a seeded slow wander
+    ambient_mean_C: float = 20.0
+    ambient_day_amplitude_K: float = 1.5
+    ambient_peak_hour: float = 15.0
+    ambient_wander_K: float = 0.15
+
+    # ---------------------------------------------------------- derived
+
+    @property
+    def segment_mm(self):
+        return self.screw_length_mm / self.segments
+
+    @property
+    def edges_mm(self):
+        """Segment edges in screw coordinate x (mm from the fixed end)."""
+        L = self.screw_length_mm
+        return [L * i / self.segments for i in range(self.segments + 1)]
+
+    @property
+    def section_m2(self):
+        return math.pi * (self.screw_diameter_mm * 1e-3) ** 2 / 4
+
+    @property
+    def perimeter_m(self):
+        return math.pi * self.screw_diameter_mm * 1e-3
+
+    @property
+    def segment_heat_capacity_J_K(self):
+        return self.density_kg_m3 * self.heat_capacity_J_kgK * self.section_m2 * self.segment_mm * 1e-3
+
+    @property
+    def conductance_W_K(self):
+        """Axial conductance between neighbouring segment centres."""
+        return self.conductivity_W_mK * self.section_m2 / (self.segment_mm * 1e-3)
+
+    @property
+    def convection_W_K(self):
+        """Convective conductance of one segment's mantle to the air, at rest."""
+        return self.h_W_m2K * self.perimeter_m * self.segment_mm * 1e-3
+
+    @property
+    def time_constant_s(self):
+        """Convective time constant of a uniformly warm screw, rho*c*d/(4*h)."""
+        return self.segment_heat_capacity_J_K / self.convection_W_K
+
+    def fin_parameter_per_m(self):
+        """m = sqrt(h*perimeter/(lambda*A)) of the 1-D fin equation."""
+        return math.sqrt(self.h_W_m2K * self.perimeter_m / (self.conductivity_W_mK * self.section_m2))
+
+    def screw_rpm(self, feed_mm_min):
+        return feed_mm_min / self.lead_mm
+
+    def validate(self):
+        problems = []
+        positive = (
+            "stroke_mm", "screw_length_mm", "screw_diameter_mm", "lead_mm", "density_kg_m3",
+            "heat_capacity_J_kgK", "conductivity_W_mK", "h_W_m2K", "alpha_um_mK", "feed_ref_mm_min",
+            "dt_s", "sweep_every_min",
+        )
+        for k in positive:
+            v = getattr(self, k)
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v <= 0:
+                problems.append("%s must be a positive number (found %r)" % (k, v))
+        for k in ("friction_J_per_mm", "motor_idle_W", "motor_W_at_ref", "bearing_W_at_ref", "sweep_duration_min",
+                  "temp_noise_K", "ambient_wander_K"):
+            v = getattr(self, k)
+            if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
+                problems.append("%s must be a number >= 0 (found %r)" % (k, v))
+        if not isinstance(self.segments, int) or isinstance(self.segments, bool) or self.segments < 2:
+            problems.append("segments must be an integer >= 2 (found %r)" % (self.segments,))
+        if not 0 <= self.screw_share <= 1:
+            problems.append("screw_share must be within 0..1 (found %r)" % (self.screw_share,))
+        if not problems:
+            if self.fixed_end_mm > 0 or self.fixed_end_mm + self.screw_length_mm < self.stroke_mm:
+                problems.append(
+                    "the screw (axis positions %g..%g mm from fixed_end_mm=%g, screw_length_mm=%g) must cover the stroke 0..%g mm"
+                    % (self.fixed_end_mm, self.fixed_end_mm + self.screw_length_mm, self.fixed_end_mm,
+                       self.screw_length_mm, self.stroke_mm))
+            if self.sweep_duration_min >= self.sweep_every_min:
+                problems.append("sweep_duration_min (%g) must be shorter than sweep_every_min (%g)"
+                                % (self.sweep_duration_min, self.sweep_every_min))
+            bad = [p for p in self.positions_mm if not 0 <= p <= self.stroke_mm]
+            if not self.positions_mm:
+                problems.append("positions_mm must list at least one target position")
+            elif bad:
+                problems.append("positions_mm %s lie outside the stroke 0..%g mm" % (bad, self.stroke_mm))
+        if problems:
+            raise ValueError("; ".join(problems))
+        return self
+
+
+FIELDS = tuple(f.name for f in dataclasses.fields(AxisParams))
+
+
+def make_params(**overrides):
+    """AxisParams with ``overrides`` applied; unknown names raise ValueError listing the valid ones."""
+    unknown = sorted(k for k in overrides if k not in FIELDS)
+    if unknown:
+        raise ValueError("unknown parameter(s) %s; valid: %s" % (", ".join(unknown), ", ".join(FIELDS)))
+    if "positions_mm" in overrides:
+        overrides["positions_mm"] = tuple(float(p) for p in overrides["positions_mm"])
+    if "geometric_um" in overrides:
+        overrides["geometric_um"] = tuple(float(c) for c in overrides["geometric_um"])
+    return AxisParams(**overrides).validate()

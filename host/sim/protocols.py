@@ -1,0 +1,148 @@
+"""Thermal-test protocols: moving states, measurement sweeps, cool-down.
+
+A protocol is a sequence of phases; a phase either reciprocates the nut between
+two positions at a feed or leaves the axis idle. Every ``sweep_every_min`` the
+axis stops for ``sweep_duration_min`` while the laser interferometer measures a
+sweep of target positions (ISO 230-2 style), whatever the phase; the first sweep
+is the cold state at t = 0, the last one ends the run.
+
+The literature states (e.g. the ball-screw tests that fit on 8000 mm/min over
+210-490 mm and predict the other feeds and ranges) are named
+``v<feed>_r<from>_<to>``: three hours of warm-up then two of cool-down.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Phase:
+    minutes: float
+    feed_mm_min: float = 0.0  # 0 = idle
+    from_mm: float = 0.0
+    to_mm: float = 0.0
+
+
+@dataclass(frozen=True)
+class Protocol:
+    name: str
+    description: str
+    phases: tuple
+    start_hour: float = 9.0  # wall-clock hour of t = 0, sets the ambient's phase of the day
+
+    @property
+    def minutes(self):
+        return sum(p.minutes for p in self.phases)
+
+
+def _state(feed, a, b, start_hour, warm=180.0, cool=120.0):
+    return Protocol(
+        "v%d_r%d_%d" % (feed, a, b),
+        "%d mm/min over %d-%d mm for %g min, then %g min cool-down" % (feed, a, b, warm, cool),
+        (Phase(warm, feed, a, b), Phase(cool)),
+        start_hour,
+    )
+
+
+PROTOCOLS = {
+    p.name: p
+    for p in (
+        _state(8000, 210, 490, 9.0),
+        _state(6500, 210, 490, 11.0),
+        _state(15000, 210, 490, 10.0),
+        _state(8000, 0, 210, 13.0),
+        _state(8000, 0, 700, 14.0),
+        Protocol(
+            "mixed",
+            "changing states: 8000 mm/min 210-490, 15000 mm/min 0-700, idle, 6500 mm/min 0-210, cool-down",
+            (Phase(60, 8000, 210, 490), Phase(60, 15000, 0, 700), Phase(30), Phase(60, 6500, 0, 210), Phase(90)),
+            12.0,
+        ),
+        Protocol(
+            "idle",
+            "no motion for 8 h from 10:00 to 18:00: the ambient's day-to-evening drift alone",
+            (Phase(480),),
+            10.0,
+        ),
+    )
+}
+
+LITERATURE_STATES = ("v8000_r210_490", "v6500_r210_490", "v15000_r210_490", "v8000_r0_210", "v8000_r0_700")
+
+
+def check_protocol(protocol, stroke_mm):
+    problems = []
+    if not protocol.phases:
+        problems.append("protocol %r has no phases" % protocol.name)
+    for i, ph in enumerate(protocol.phases):
+        where = "protocol %r phase %d" % (protocol.name, i + 1)
+        if not ph.minutes > 0:
+            problems.append("%s: minutes must be > 0 (found %g)" % (where, ph.minutes))
+        if ph.feed_mm_min < 0:
+            problems.append("%s: feed must be >= 0 (found %g)" % (where, ph.feed_mm_min))
+        if ph.feed_mm_min > 0:
+            if not (0 <= ph.from_mm <= stroke_mm and 0 <= ph.to_mm <= stroke_mm):
+                problems.append("%s: range %g-%g mm is outside the stroke 0..%g mm" % (where, ph.from_mm, ph.to_mm, stroke_mm))
+            if ph.from_mm == ph.to_mm:
+                problems.append("%s: range %g-%g mm is empty" % (where, ph.from_mm, ph.to_mm))
+    if problems:
+        raise ValueError("; ".join(problems))
+
+
+def schedule(protocol, params):
+    """Sweep times and motion intervals of ``protocol``.
+
+    Returns (sweep_times_s, motion) with motion an (k, 5) array of rows
+    t_start_s, t_end_s, from_mm, to_mm, feed_mm_min: the moving phases with the
+    sweep windows cut out.
+    """
+    check_protocol(protocol, params.stroke_mm)
+    total = protocol.minutes * 60.0
+    every = params.sweep_every_min * 60.0
+    busy = params.sweep_duration_min * 60.0
+    n = int(np.floor(total / every + 1e-9))
+    sweeps = [k * every for k in range(n + 1)]
+    if total - sweeps[-1] > 1e-6:
+        sweeps.append(total)
+    windows = [(s, s + busy) for s in sweeps]
+    rows = []
+    t0 = 0.0
+    for ph in protocol.phases:
+        t1 = t0 + ph.minutes * 60.0
+        if ph.feed_mm_min > 0:
+            cuts = [t0]
+            for a, b in windows:
+                if b <= t0 or a >= t1:
+                    continue
+                cuts.extend([max(a, t0), min(b, t1)])
+            cuts.append(t1)
+            for a, b in zip(cuts[0::2], cuts[1::2]):
+                if b - a > 1e-6:
+                    rows.append((a, b, ph.from_mm, ph.to_mm, ph.feed_mm_min))
+        t0 = t1
+    motion = np.asarray(rows, dtype=float).reshape(-1, 5)
+    return np.asarray(sweeps, dtype=float), motion
+
+
+def resolve_protocols(spec):
+    """Protocol names from 'all', 'literature', a name or a comma-separated list."""
+    if isinstance(spec, Protocol):
+        return [spec]
+    names = []
+    for part in str(spec).split(","):
+        part = part.strip()
+        if part == "all":
+            names.extend(PROTOCOLS)
+        elif part == "literature":
+            names.extend(LITERATURE_STATES)
+        elif part in PROTOCOLS:
+            names.append(part)
+        elif part:
+            raise ValueError("unknown protocol %r; known: %s (or 'all', 'literature')" % (part, ", ".join(PROTOCOLS)))
+    if not names:
+        raise ValueError("no protocol given; known: %s (or 'all', 'literature')" % ", ".join(PROTOCOLS))
+    seen = []
+    for n in names:
+        if n not in seen:
+            seen.append(n)
+    return [PROTOCOLS[n] for n in seen]

@@ -1,0 +1,230 @@
+"""The feed-axis digital twin: protocol + effects + seed -> one simulated run."""
+import dataclasses
+import math
+import os
+import zlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from host import runs as _runs
+from host.sim import screw as _screw
+from host.sim.ambient import ambient_C
+from host.sim.axis import make_params
+from host.sim.effects import resolve_effects
+from host.sim.protocols import PROTOCOLS, Protocol, resolve_protocols, schedule
+from host.sim.structure import NODES, lagged, node_temperatures
+
+DEFAULT_PROTOCOL = "v8000_r210_490"
+DEFAULT_NOISE_UM = 0.5
+GENERATOR = "host.sim/1"
+
+
+@dataclass
+class Simulation:
+    """Everything the twin computed for one run (true values, before the run-folder rounding)."""
+
+    protocol: Protocol
+    params: object
+    effects: dict
+    seed: int
+    noise_um: float
+    t_s: np.ndarray  # (n+1,) step edges = temperature sample times
+    air_C: np.ndarray  # (n+1,)
+    screw_C: np.ndarray  # (n+1, M) segment temperatures
+    nodes_true_C: np.ndarray  # (n+1, len(NODES))
+    sensors_C: np.ndarray  # (n+1, len(NODES)) what the sensors report (lag, noise)
+    power_W: dict  # per-step sources: nut (total friction), screw (into the screw), motor, bearing
+    conv_mult: np.ndarray  # (n,)
+    motion: np.ndarray  # (k, 5)
+    sweep_s: np.ndarray
+    err_time_s: np.ndarray
+    err_position_mm: np.ndarray
+    err_direction: np.ndarray  # int8 or None
+    err_thermal_um: np.ndarray  # screw expansion + ambient_expansion, no noise
+    err_geometric_um: np.ndarray
+    err_um: np.ndarray  # what the interferometer reports
+
+
+def _protocol(protocol):
+    if isinstance(protocol, Protocol):
+        return protocol
+    if protocol not in PROTOCOLS:
+        raise ValueError("unknown protocol %r; known: %s" % (protocol, ", ".join(PROTOCOLS)))
+    return PROTOCOLS[protocol]
+
+
+def _rngs(seed, name):
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+        raise ValueError("seed must be an integer >= 0 (found %r)" % (seed,))
+    # one stream per purpose, so e.g. changing the laser noise leaves the ambient unchanged;
+    # the protocol name enters so each state of a suite has its own day
+    ss = np.random.SeedSequence([int(seed), zlib.crc32(name.encode())])
+    return [np.random.default_rng(s) for s in ss.spawn(3)]
+
+
+def geometric_um(positions_mm, params):
+    u = np.asarray(positions_mm, dtype=float) / params.stroke_mm
+    return sum(c * u**k for k, c in enumerate(params.geometric_um))
+
+
+def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, **overrides):
+    """Run the twin; returns a :class:`Simulation` (see simulate_run for the arguments)."""
+    proto = _protocol(protocol)
+    params = make_params(**overrides)
+    eff = resolve_effects(effects)
+    if not (isinstance(noise_um, (int, float)) and math.isfinite(noise_um) and noise_um >= 0):
+        raise ValueError("noise_um must be a number >= 0 (found %r)" % (noise_um,))
+    rng_air, rng_temp, rng_laser = _rngs(seed, proto.name)
+
+    sweeps, motion = schedule(proto, params)
+    dt = params.dt_s
+    n = int(math.ceil(proto.minutes * 60.0 / dt - 1e-9))
+    t = np.arange(n + 1) * dt
+    air = ambient_C(t, proto.start_hour, params, rng_air)
+    air_step = 0.5 * (air[:-1] + air[1:])
+
+    # ---- heat sources per step
+    feed_ref = params.feed_ref_mm_min
+    M = params.segments
+    if len(motion):
+        feed = motion[:, 4]
+        over = _screw.step_overlaps(t, motion[:, 0], motion[:, 1]) / dt  # duty of each interval per step
+        m_v = eff.get("speed_dependent_heat", 0.0)
+        e_mm = params.friction_J_per_mm * np.clip((1 - m_v) + m_v * feed / feed_ref, 0.0, None)
+        speed = over @ (feed / feed_ref)  # mean screw speed / reference speed
+        nut_W = over @ (e_mm * feed / 60.0)
+        k_c = eff.get("moving_convection", 0.0)
+        conv = 1.0 + k_c * (over @ (feed / feed_ref) ** 0.8)
+        heat = params.screw_share * _screw.nut_travel_per_segment(motion, t, params, weights=e_mm)
+    else:
+        speed = np.zeros(n)
+        nut_W = np.zeros(n)
+        conv = np.ones(n)
+        heat = np.zeros((n, M))
+    bearing_extra = eff.get("bearing_heat", 0.0) * speed
+    if "bearing_heat" in eff:
+        heat[:, 0] += bearing_extra * dt  # segment 0 holds the fixed end (x = 0)
+    power = {
+        "nut": nut_W,
+        "screw": heat.sum(axis=1) / dt,
+        "motor": params.motor_idle_W + params.motor_W_at_ref * speed,
+        "bearing": params.bearing_W_at_ref * speed + bearing_extra,
+    }
+
+    # ---- temperatures
+    T_screw = _screw_core().simulate_segments(np.full(M, air[0]), heat, conv, air_step, dt, params)
+    nut_node = dict(power, nut=(1 - params.screw_share) * nut_W)
+    nodes = node_temperatures(nut_node, air, dt)
+    readings = lagged(nodes, eff.get("sensor_lag", 0.0), dt)
+    if params.temp_noise_K > 0:
+        readings = readings + rng_temp.normal(0.0, params.temp_noise_K, readings.shape)
+
+    # ---- positioning errors at the sweeps
+    pos = np.asarray(params.positions_mm, dtype=float)
+    dirs = (1, -1) if "reversal_error" in eff else (None,)
+    rows_t, rows_p, rows_d = [], [], []
+    for s in sweeps:
+        for d in dirs:
+            p = pos if d != -1 else pos[::-1]
+            rows_t.append(np.full(p.size, s))
+            rows_p.append(p)
+            rows_d.append(np.full(p.size, 1 if d is None else d, dtype=np.int8))
+    et, ep, ed = np.concatenate(rows_t), np.concatenate(rows_p), np.concatenate(rows_d)
+    Ts = np.stack([np.interp(sweeps, t, T_screw[:, i]) for i in range(M)], axis=1)
+    As = np.interp(sweeps, t, air)
+    E_sweep = _screw_core().thermal_error_um(Ts, As, pos, params)  # (n_sweeps, n_pos)
+    # rows are sweep-major in the order built above
+    per_row = []
+    for i in range(len(sweeps)):
+        for d in dirs:
+            per_row.append(E_sweep[i] if d != -1 else E_sweep[i][::-1])
+    thermal = np.concatenate(per_row)
+    if "ambient_expansion" in eff:
+        base = nodes[:, [nd.role for nd in NODES].index("base")]
+        dbase = np.interp(et, t, base) - base[0]
+        thermal = thermal + eff["ambient_expansion"] * params.alpha_um_mK * dbase * ep * 1e-3
+    geo = geometric_um(ep, params)
+    err = thermal + geo
+    if "reversal_error" in eff:
+        err = err + 0.5 * eff["reversal_error"] * ed
+    if noise_um > 0:
+        err = err + rng_laser.normal(0.0, noise_um, err.shape)
+
+    return Simulation(
+        proto, params, eff, int(seed), float(noise_um), t, air, T_screw, nodes, readings, power, conv, motion,
+        sweeps, et, ep, ed if "reversal_error" in eff else None, thermal, geo, err,
+    )
+
+
+def _screw_core():
+    return _screw
+
+
+def _plain(v):
+    if isinstance(v, tuple):
+        return [_plain(x) for x in v]
+    return v
+
+
+def to_run(sim):
+    """The tcomp-run/1 :class:`host.runs.Run` of a :class:`Simulation`."""
+    p = sim.params
+    meta = {
+        "format": _runs.FORMAT,
+        "axis": p.axis,
+        "stroke_mm": p.stroke_mm,
+        "screw": {
+            "length_mm": p.screw_length_mm,
+            "diameter_mm": p.screw_diameter_mm,
+            "lead_mm": p.lead_mm,
+            "fixed_end_mm": p.fixed_end_mm,
+        },
+        "sensors": {nd.name: {"role": nd.role, "location": nd.location} for nd in NODES},
+        "notes": "digital twin (host/sim, docs/twin.md): protocol %s (%s), effects %s, seed %d"
+        % (sim.protocol.name, sim.protocol.description, ",".join(sim.effects) or "none", sim.seed),
+        "simulation": {
+            "generator": GENERATOR,
+            "protocol": sim.protocol.name,
+            "start_hour": sim.protocol.start_hour,
+            "seed": sim.seed,
+            "noise_um": sim.noise_um,
+            "effects": dict(sim.effects),
+            "params": {k: _plain(v) for k, v in dataclasses.asdict(p).items()},
+        },
+    }
+    temps = _runs.Temperatures(sim.t_s.copy(), [nd.name for nd in NODES], sim.sensors_C.copy())
+    errors = _runs.Errors(sim.err_time_s.copy(), sim.err_position_mm.copy(), sim.err_um.copy(),
+                          None if sim.err_direction is None else sim.err_direction.copy())
+    motion = None
+    if len(sim.motion):
+        motion = _runs.Motion(*(sim.motion[:, j].copy() for j in range(5)))
+    return _runs.Run(meta, temps, errors, motion, None, path=None, name=sim.protocol.name)
+
+
+def simulate_run(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, **overrides):
+    """Simulate one thermal test of the feed axis and return it as a :class:`host.runs.Run`.
+
+    protocol: a name from PROTOCOLS (or a Protocol); effects: None, a list of
+    names from EFFECTS (default magnitudes) or {name: magnitude}; seed: integer
+    >= 0, same seed -> same run; noise_um: laser measurement noise (standard
+    deviation, um); overrides: any AxisParams field (e.g. h_W_m2K=20,
+    segments=40, temp_noise_K=0).
+    """
+    return to_run(simulate(protocol, effects, seed, noise_um, **overrides))
+
+
+def write_runs(out, protocols=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, **overrides):
+    """Simulate and write run folders; returns [(protocol name, folder)].
+
+    One protocol writes the run into ``out`` itself; several ('all',
+    'literature', a comma list) write ``out/<protocol>/`` each.
+    """
+    protos = resolve_protocols(protocols)
+    written = []
+    for proto in protos:
+        folder = out if len(protos) == 1 else os.path.join(out, proto.name)
+        run = simulate_run(proto, effects, seed, noise_um, **overrides)
+        _runs.write_run(run, folder)
+        written.append((proto.name, folder))
+    return written
