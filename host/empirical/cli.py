@@ -1,0 +1,83 @@
+"""``tcomp fit --model mlr|pcr|stepwise`` (arguments defined in host/commands/fit.py)."""
+import json
+
+from host.empirical import EmpiricalDataError
+
+# --option KEY=VALUE settings understood by fit_command, with their parsers
+OPTIONS = {
+    "variance_threshold": float,  # PCR
+    "n_components": int,  # PCR
+    "f_enter": float,  # stepwise
+    "f_remove": float,  # stepwise
+    "envelope_margin_K": float,
+    "reference": str,  # run_start | fixed
+    "geometric_max_degree": int,
+    "geometric_criterion": str,  # cv | aic
+    "t_min_s": float,  # training window on target time
+    "t_max_s": float,
+}
+METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": ()}
+
+
+def parse_options(pairs, method):
+    """--option KEY=VALUE list -> dict, rejecting unknown keys and options of other methods."""
+    from host.cli import UserError
+
+    out = {}
+    for item in pairs or []:
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or key not in OPTIONS:
+            raise UserError("--option %r: expected KEY=VALUE with KEY one of %s" % (item, ", ".join(sorted(OPTIONS))))
+        owner = [m for m, keys in METHOD_OPTIONS.items() if key in keys]
+        if owner and method not in owner:
+            raise UserError("--option %s applies to --model %s, not %s" % (key, owner[0], method))
+        try:
+            out[key] = OPTIONS[key](value.strip())
+        except ValueError:
+            raise UserError("--option %s=%r: not a valid %s" % (key, value, OPTIONS[key].__name__))
+    return out
+
+
+def fit_command(args):
+    from host.cli import UserError
+    from host.empirical.fitting import fit_model
+    from host.models import save_model
+    from host.runs import RunFormatError, load_runs
+
+    opts = parse_options(args.option, args.model)
+    try:
+        runs = load_runs(args.runs)
+    except RunFormatError as exc:
+        raise UserError(str(exc))
+    sensors = [s.strip() for s in args.sensors.split(",") if s.strip()] if args.sensors else None
+    lo, hi = opts.pop("t_min_s", None), opts.pop("t_max_s", None)
+    window = (lo, hi) if lo is not None or hi is not None else None
+    target = "direct" if args.direct else "slope"
+    try:
+        model = fit_model(runs, method=args.model, target=target, channel=args.channel, sensors=sensors,
+                          fit_intercept=not args.no_intercept, window=window, **opts)
+    except EmpiricalDataError as exc:
+        raise UserError(str(exc))
+    except TypeError as exc:
+        raise UserError("bad --option for %s: %s" % (args.model, exc))
+    doc = save_model(model.to_document(), args.out)
+    est = model.estimator_
+    print("%s %s model of %s on %d run(s), %d samples: sensors %s" % (
+        args.model, model.kind, args.channel or "the error", len(runs), est.n_samples_, ",".join(model.sensors)))
+    if args.model == "mlr":
+        print(est.summary())
+    elif args.model == "stepwise":
+        for h in est.history_:
+            print("  step %d: %s %s (partial F %.4g, threshold %g)" % (h["step"], h["action"], h["sensor"], h["F"], h["threshold"]))
+        print(est.mlr_.summary())
+    else:
+        print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (
+            est.n_components_, est.eigenvalues_.size, 100 * est.cumulative_variance_ratio_[est.n_components_ - 1], 100 * est.variance_threshold))
+        print("  R2=%.4f adj R2=%.4f F=%.4g (p=%.3g) residual std error=%.4g" % (est.rsquared_, est.rsquared_adj_, est.fvalue_, est.f_pvalue_, est.resid_std_err_))
+    print("wrote %s" % args.out)
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump({"model": args.out, "kind": doc["kind"], "method": args.model, "sensors": model.sensors,
+                       "statistics": doc["statistics"], "training": doc["training"]}, fh, indent=2)
+    return 0

@@ -1,0 +1,114 @@
+"""Fit a model document from runs: targets -> regression -> PolySlopeModel / LinearDirectModel.
+
+Envelope rule (recorded in the document's ``envelope.rule``): for each model
+sensor, the absolute temperatures and the rises seen over the training span
+(first to last target time of each training run), widened by
+``envelope_margin_K`` (default 2 K) on both sides; positions 0..stroke_mm when
+the run declares its stroke, else the measured position range; a direct model
+has its fixed measuring position.
+"""
+import numpy as np
+
+from host.empirical import EmpiricalDataError
+from host.empirical.geometric import fit_geometric
+from host.empirical.model import LinearDirectModel, PolySlopeModel
+from host.empirical.regression import make_estimator
+from host.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
+
+ENVELOPE_MARGIN_K = 2.0
+
+
+def _envelope(runs, arrays, sensors, margin, target, channel):
+    tlo, thi, rlo, rhi = {}, {}, {}, {}
+    for r, a in zip(runs, arrays):
+        temps = r.temperatures
+        keep = (temps.time_s >= a.time_s.min()) & (temps.time_s <= a.time_s.max())
+        if not keep.any():
+            keep = np.ones(temps.time_s.size, bool)
+        for s in sensors:
+            col = temps.column(s)
+            v = col[keep]
+            rise = v - col[0]
+            tlo[s] = min(tlo.get(s, np.inf), float(v.min()))
+            thi[s] = max(thi.get(s, -np.inf), float(v.max()))
+            rlo[s] = min(rlo.get(s, np.inf), float(rise.min()))
+            rhi[s] = max(rhi.get(s, -np.inf), float(rise.max()))
+    pos = []
+    for r in runs:
+        rows = _channel_rows(r, channel)
+        pos.append(r.errors.position_mm[rows])
+    pos = np.concatenate(pos)
+    strokes = [r.stroke_mm for r in runs if r.stroke_mm]
+    if target == "slope" and strokes:
+        prange = [0.0, float(min(strokes))]
+    else:
+        prange = [float(pos.min()), float(pos.max())]
+    return {
+        "temperature_C": {s: [tlo[s] - margin, thi[s] + margin] for s in sensors},
+        "temperature_rise_K": {s: [rlo[s] - margin, rhi[s] + margin] for s in sensors},
+        "position_mm": prange,
+        "margin_K": float(margin),
+        "rule": "training temperatures and rises over the training span widened by margin_K; "
+                + ("positions 0..stroke_mm" if target == "slope" and strokes else "measured position range"),
+    }
+
+
+def select_columns(arrays, sensors):
+    """RunArrays restricted to ``sensors`` (a new list, same runs)."""
+    from host.empirical.targets import RunArrays
+
+    out = []
+    for a in arrays:
+        missing = [s for s in sensors if s not in a.names]
+        if missing:
+            raise EmpiricalDataError("%s: sensor(s) %s not available (have %s)" % (a.run, ", ".join(missing), ", ".join(a.names)))
+        idx = [a.names.index(s) for s in sensors]
+        out.append(RunArrays(a.X[:, idx], a.y, list(sensors), a.time_s, a.run))
+    return out
+
+
+def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
+              reference="run_start", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
+              **options):
+    """Fit ``method`` (mlr|pcr|stepwise) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
+
+    ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
+    """
+    runs = list(runs)
+    if not runs:
+        raise EmpiricalDataError("fit: no training run given")
+    arrays = training_arrays(runs, target=target, channel=channel, sensors=sensors, window=window)
+    names = arrays[0].names
+    X, y = stack(arrays)
+    est = make_estimator(method, fit_intercept=fit_intercept, **options).fit(X, y, names)
+    if method == "stepwise":
+        used = list(est.selected_names_)
+        coefs = est.mlr_.coef_
+    else:
+        used = list(names)
+        coefs = est.coef_
+    start = np.mean([start_temperatures(r, used) for r in runs], axis=0)
+    ref = dict(zip(used, start.tolist()))
+    stats = est.statistics()
+    training = {
+        "runs": [r.path or r.name for r in runs],
+        "target": target,
+        "window_s": list(window) if window is not None else None,
+        "n_samples": int(y.size),
+        "rises": True,
+        "fit_intercept": bool(fit_intercept),
+        "candidate_sensors": list(names),
+        "options": {k: v for k, v in options.items()},
+    }
+    kw = dict(reference=reference, channel=channel, method=method, axis=runs[0].meta.get("axis"),
+              envelope=_envelope(runs, arrays, used, envelope_margin_K, target, channel), statistics=stats, training=training)
+    if target == "direct":
+        model = LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
+    else:
+        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
+        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+        model = PolySlopeModel(used, coefs, est.intercept_, ref, geometric_coef=geo.coef_, **kw)
+        model.geometric_ = geo
+    model.estimator_ = est
+    model.arrays_ = arrays
+    return model

@@ -1,0 +1,178 @@
+"""The empirical model documents ``poly_slope`` and ``linear_direct`` (docs/model-format.md).
+
+Both are plain linear functions of temperature rises ``T_s − ref_s``:
+
+* ``poly_slope``: δ(P, T) = Σ_j g_j·P^j + s(T)·P, s(T) = b0 + Σ_s b_s·(T_s − ref_s) (µm/mm);
+* ``linear_direct``: δ(T) = b0 + Σ_s b_s·(T_s − ref_s) (µm), one channel at a fixed point.
+
+The rise reference is declared in ``thermal.reference``: ``"run_start"`` (the
+default for models fitted on rises: ref_s is the run's first temperature
+sample, i.e. the controller latches the temperatures at the cold start) or
+``"fixed"`` (ref_s = ``reference_C``). ``reference_C`` always holds the mean
+cold-start temperature of the training runs, so a consumer that only supports a
+fixed reference still gets the training runs' typical start state.
+
+``predict(run)`` returns one value per row of ``run.errors`` in file order;
+rows of other channels than the model's are NaN.
+"""
+import numpy as np
+
+from host.empirical import EmpiricalDataError
+from host.empirical.targets import _channel_rows
+
+REFERENCES = ("run_start", "fixed")
+
+
+class _Base:
+    kind = None
+
+    def __init__(self, sensors, coefficients, intercept, reference_C, reference="run_start", channel=None, method="mlr", axis=None,
+                 envelope=None, statistics=None, training=None):
+        self.sensors = list(sensors)
+        self.coefficients = np.asarray(coefficients, dtype=float)
+        if self.coefficients.shape != (len(self.sensors),):
+            raise EmpiricalDataError("%d coefficients for %d sensors" % (self.coefficients.size, len(self.sensors)))
+        self.intercept = float(intercept)
+        self.reference_C = {s: float(reference_C[s]) for s in self.sensors}
+        if reference not in REFERENCES:
+            raise EmpiricalDataError("thermal.reference must be one of %s, got %r" % (", ".join(REFERENCES), reference))
+        self.reference = reference
+        self.channel = channel
+        self.method = method
+        self.axis = axis
+        self.envelope = envelope or {}
+        self.statistics = statistics or {}
+        self.training = training or {}
+
+    # ------------------------------------------------------------ inputs
+    def rises(self, run, times):
+        """(len(times), n_sensors) temperature rises at ``times`` under this model's reference."""
+        temps = run.temperatures
+        missing = [s for s in self.sensors if s not in temps.names]
+        if missing:
+            raise EmpiricalDataError("%s: the model needs sensor(s) %s, not in temperatures.csv" % (run.name, ", ".join(missing)))
+        T = temps.at(times, self.sensors)
+        if self.reference == "run_start":
+            ref = np.array([temps.column(s)[0] for s in self.sensors])
+        else:
+            ref = np.array([self.reference_C[s] for s in self.sensors])
+        return T - ref
+
+    def _rows(self, run):
+        if self.channel is None and run.errors.channel is not None and len(run.errors.channels()) > 1:
+            raise EmpiricalDataError("%s: errors.csv has channels %s but the model names none" % (run.name, ", ".join(run.errors.channels())))
+        if self.channel is not None and run.errors.channel is None:
+            return np.arange(len(run.errors))  # single-channel run: the model applies to all rows
+        return _channel_rows(run, self.channel)
+
+    def _common_doc(self):
+        return {
+            "format": "tcomp-model/1",
+            "kind": self.kind,
+            "method": self.method,
+            "axis": self.axis,
+            "channel": self.channel,
+            "sensors": list(self.sensors),
+            "reference_C": dict(self.reference_C),
+            "envelope": self.envelope,
+            "statistics": self.statistics,
+            "training": self.training,
+        }
+
+    @staticmethod
+    def _common_args(doc):
+        try:
+            thermal = doc["thermal"]
+            sensors = list(doc["sensors"])
+            ref = doc["reference_C"]
+        except (KeyError, TypeError) as exc:
+            raise EmpiricalDataError("model document lacks %s" % exc)
+        missing = [s for s in sensors if s not in ref]
+        if missing:
+            raise EmpiricalDataError("model document: reference_C has no entry for %s" % ", ".join(missing))
+        return thermal, sensors, ref, dict(
+            reference=thermal.get("reference", "fixed"), channel=doc.get("channel"), method=doc.get("method", "mlr"), axis=doc.get("axis"),
+            envelope=doc.get("envelope"), statistics=doc.get("statistics"), training=doc.get("training"),
+        )
+
+
+class LinearDirectModel(_Base):
+    """δ(T) = intercept + Σ coefficients·(T − ref), µm, for one channel at a fixed point."""
+
+    kind = "linear_direct"
+
+    def predict_rises(self, R):
+        return self.intercept + np.asarray(R, dtype=float) @ self.coefficients
+
+    def predict(self, run):
+        e = run.errors
+        out = np.full(len(e), np.nan)
+        rows = self._rows(run)
+        out[rows] = self.predict_rises(self.rises(run, e.time_s[rows]))
+        return out
+
+    def to_document(self):
+        doc = self._common_doc()
+        doc["geometric"] = None
+        doc["thermal"] = {
+            "intercept_um": self.intercept,
+            "coefficients_um_per_K": {s: float(c) for s, c in zip(self.sensors, self.coefficients)},
+            "reference": self.reference,
+        }
+        return doc
+
+    @classmethod
+    def from_document(cls, doc):
+        thermal, sensors, ref, kw = cls._common_args(doc)
+        try:
+            coefs = [thermal["coefficients_um_per_K"][s] for s in sensors]
+            b0 = thermal.get("intercept_um", 0.0)
+        except (KeyError, TypeError) as exc:
+            raise EmpiricalDataError("linear_direct document: thermal.coefficients_um_per_K lacks %s" % exc)
+        return cls(sensors, coefs, b0, ref, **kw)
+
+
+class PolySlopeModel(_Base):
+    """δ(P, T) = geometric(P) + (intercept + Σ coefficients·(T − ref))·P, µm."""
+
+    kind = "poly_slope"
+
+    def __init__(self, sensors, coefficients, intercept, reference_C, geometric_coef=(0.0,), **kw):
+        super().__init__(sensors, coefficients, intercept, reference_C, **kw)
+        self.geometric_coef = np.asarray(geometric_coef, dtype=float)
+
+    def slope(self, R):
+        """Thermal slope s(T) in µm/mm for rises R (n, p)."""
+        return self.intercept + np.asarray(R, dtype=float) @ self.coefficients
+
+    def geometric(self, P):
+        return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
+
+    def predict(self, run):
+        e = run.errors
+        out = np.full(len(e), np.nan)
+        rows = self._rows(run)
+        P = e.position_mm[rows]
+        out[rows] = self.geometric(P) + self.slope(self.rises(run, e.time_s[rows])) * P
+        return out
+
+    def to_document(self):
+        doc = self._common_doc()
+        doc["geometric"] = {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]}
+        doc["thermal"] = {
+            "intercept_um_per_mm": self.intercept,
+            "coefficients_um_per_mm_per_K": {s: float(c) for s, c in zip(self.sensors, self.coefficients)},
+            "reference": self.reference,
+        }
+        return doc
+
+    @classmethod
+    def from_document(cls, doc):
+        thermal, sensors, ref, kw = cls._common_args(doc)
+        try:
+            coefs = [thermal["coefficients_um_per_mm_per_K"][s] for s in sensors]
+            b0 = thermal.get("intercept_um_per_mm", 0.0)
+        except (KeyError, TypeError) as exc:
+            raise EmpiricalDataError("poly_slope document: thermal.coefficients_um_per_mm_per_K lacks %s" % exc)
+        geo = doc.get("geometric") or {"coefficients_um": [0.0]}
+        return cls(sensors, coefs, b0, ref, geometric_coef=geo.get("coefficients_um", [0.0]), **kw)
