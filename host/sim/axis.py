@@ -26,7 +26,7 @@ class AxisParams:
     h_W_m2K: float = 15.0
     alpha_um_mK: float = 11.5
     # nut friction: energy per mm of nut travel (torque * 2*pi / lead), share into the screw
-    friction_J_per_mm: float = 0.09
+    friction_J_per_mm: float = 0.12
     screw_share: float = 0.35
     feed_ref_mm_min: float = 8000.0
     # other heat sources feeding the structure nodes (W)

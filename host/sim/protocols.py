@@ -59,6 +59,13 @@ PROTOCOLS = {
             12.0,
         ),
         Protocol(
+            "day24h",
+            "24 h from 06:00: two shifts of changing states with breaks, then evening and night at rest (soak tests)",
+            (Phase(60), Phase(120, 8000, 0, 700), Phase(30), Phase(60, 15000, 210, 490), Phase(120, 6500, 0, 210),
+             Phase(60), Phase(180, 8000, 210, 490), Phase(60, 15000, 0, 700), Phase(750)),
+            6.0,
+        ),
+        Protocol(
             "idle",
             "no motion for 8 h from 10:00 to 18:00: the ambient's day-to-evening drift alone",
             (Phase(480),),

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from host import runs as _runs
-from host.sim import screw as _screw
+from host.screw import heat as _heat
 from host.sim.ambient import ambient_C
 from host.sim.axis import make_params
 from host.sim.effects import resolve_effects
@@ -31,7 +31,7 @@ class Simulation:
     noise_um: float
     t_s: np.ndarray  # (n+1,) step edges = temperature sample times
     air_C: np.ndarray  # (n+1,)
-    screw_C: np.ndarray  # (n+1, M) segment temperatures
+    screw_C: np.ndarray  # (n+1, M) segment temperatures (air + rise)
     nodes_true_C: np.ndarray  # (n+1, len(NODES))
     sensors_C: np.ndarray  # (n+1, len(NODES)) what the sensors report (lag, noise)
     power_W: dict  # per-step sources: nut (total friction), screw (into the screw), motor, bearing
@@ -87,33 +87,48 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
     # ---- heat sources per step
     feed_ref = params.feed_ref_mm_min
     M = params.segments
+    geometry = _heat.ScrewGeometry(params.screw_length_mm, params.screw_diameter_mm, params.fixed_end_mm, M)
+    material = _heat.ScrewParams(
+        q_J_per_mm=params.screw_share * params.friction_J_per_mm,
+        c_J_kgK=params.heat_capacity_J_kgK,
+        density_kg_m3=params.density_kg_m3,
+        lambda_W_mK=params.conductivity_W_mK,
+        h_W_m2K=params.h_W_m2K,
+        alpha_per_K=params.alpha_um_mK * 1e-6,
+    )
+    heat = np.zeros((n, M))
     if len(motion):
         feed = motion[:, 4]
-        over = _screw.step_overlaps(t, motion[:, 0], motion[:, 1]) / dt  # duty of each interval per step
+        duty = _step_overlaps(t, motion[:, 0], motion[:, 1]) / dt  # share of each step spent in each interval
         m_v = eff.get("speed_dependent_heat", 0.0)
         e_mm = params.friction_J_per_mm * np.clip((1 - m_v) + m_v * feed / feed_ref, 0.0, None)
-        speed = over @ (feed / feed_ref)  # mean screw speed / reference speed
-        nut_W = over @ (e_mm * feed / 60.0)
-        k_c = eff.get("moving_convection", 0.0)
-        conv = 1.0 + k_c * (over @ (feed / feed_ref) ** 0.8)
-        heat = params.screw_share * _screw.nut_travel_per_segment(motion, t, params, weights=e_mm)
+        speed = duty @ (feed / feed_ref)  # mean screw speed over the step / reference speed
+        nut_W = duty @ (e_mm * feed / 60.0)
+        conv = 1.0 + eff.get("moving_convection", 0.0) * (duty @ (feed / feed_ref) ** 0.8)
+        # intervals of one feed share one friction energy per mm: one travel pass per feed
+        for f in np.unique(feed):
+            rows = motion[feed == f]
+            travel = _heat.nut_travel_per_segment(_Intervals(rows), geometry.edges_mm, params.fixed_end_mm, t)
+            heat += params.screw_share * e_mm[feed == f][0] * travel
     else:
         speed = np.zeros(n)
         nut_W = np.zeros(n)
         conv = np.ones(n)
-        heat = np.zeros((n, M))
     bearing_extra = eff.get("bearing_heat", 0.0) * speed
+    source = None
     if "bearing_heat" in eff:
-        heat[:, 0] += bearing_extra * dt  # segment 0 holds the fixed end (x = 0)
+        source = np.zeros((n, M))
+        source[:, 0] = bearing_extra  # segment 0 holds the fixed end (x = 0)
     power = {
         "nut": nut_W,
-        "screw": heat.sum(axis=1) / dt,
+        "screw": heat.sum(axis=1) / dt + bearing_extra,
         "motor": params.motor_idle_W + params.motor_W_at_ref * speed,
         "bearing": params.bearing_W_at_ref * speed + bearing_extra,
     }
 
-    # ---- temperatures
-    T_screw = _screw_core().simulate_segments(np.full(M, air[0]), heat, conv, air_step, dt, params)
+    # ---- temperatures: the screw as rises over the air (host/screw/heat.py, shared with the screw model)
+    rises = _heat.simulate_segments(geometry, material, t, heat_J=heat, convection_mult=conv, source_W=source)
+    T_screw = air[:, None] + rises
     nut_node = dict(power, nut=(1 - params.screw_share) * nut_W)
     nodes = node_temperatures(nut_node, air, dt)
     readings = lagged(nodes, eff.get("sensor_lag", 0.0), dt)
@@ -131,9 +146,9 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
             rows_p.append(p)
             rows_d.append(np.full(p.size, 1 if d is None else d, dtype=np.int8))
     et, ep, ed = np.concatenate(rows_t), np.concatenate(rows_p), np.concatenate(rows_d)
-    Ts = np.stack([np.interp(sweeps, t, T_screw[:, i]) for i in range(M)], axis=1)
-    As = np.interp(sweeps, t, air)
-    E_sweep = _screw_core().thermal_error_um(Ts, As, pos, params)  # (n_sweeps, n_pos)
+    Rs = np.stack([np.interp(sweeps, t, rises[:, i]) for i in range(M)], axis=1)
+    E_sweep = _heat.thermal_error_um(geometry.edges_mm, Rs[:, None, :], pos[None, :], params.fixed_end_mm,
+                                     material.alpha_per_K)  # (n_sweeps, n_pos)
     # rows are sweep-major in the order built above
     per_row = []
     for i in range(len(sweeps)):
@@ -157,8 +172,18 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
     )
 
 
-def _screw_core():
-    return _screw
+class _Intervals:
+    """motion rows (k, 5) seen as the attribute arrays host.screw.heat expects."""
+
+    def __init__(self, rows):
+        self.t_start_s, self.t_end_s, self.from_mm, self.to_mm, self.feed_mm_min = (rows[:, j] for j in range(5))
+
+
+def _step_overlaps(t_edges, t_start, t_end):
+    """Seconds of each interval (columns) inside each step (rows)."""
+    a = np.maximum(t_edges[:-1, None], t_start[None, :])
+    b = np.minimum(t_edges[1:, None], t_end[None, :])
+    return np.clip(b - a, 0.0, None)
 
 
 def _plain(v):
