@@ -1,0 +1,106 @@
+"""tcomp select --method maxtree|stepwise|hclust-ga RUN... --json OUT  |  tcomp select --method maxtree --corr CORR.csv --json OUT"""
+HELP = "choose temperature sensors (maximal-tree fuzzy clustering, stepwise partial F, hierarchical clustering + GA)"
+
+METHODS = ("maxtree", "stepwise", "hclust-ga")
+
+
+def add_arguments(p):
+    p.add_argument("runs", nargs="*", metavar="RUN", help="run folders (not with --corr)")
+    p.add_argument("--method", required=True, choices=METHODS)
+    p.add_argument("--json", required=True, metavar="OUT", help="write the selection (sensors, method, reason) as JSON")
+    p.add_argument("--plot", metavar="PNG", help="also draw the plot explaining the choice")
+    p.add_argument("--channel", help="errors.csv channel to model (multi-channel runs)")
+    p.add_argument("--target", choices=("slope", "direct"), default="slope", help="slope of each sweep (default) or the error itself")
+    p.add_argument("--sensors", help="comma-separated candidate sensors (default: all common to the runs)")
+    p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", help="method parameter, e.g. seed=3, f_enter=50, alpha=0.01 (repeatable)")
+    p.add_argument("--corr", metavar="CORR.csv", help="maxtree on a precomputed correlation matrix (header of names, square matrix)")
+    p.add_argument("--target-corr", metavar="TCORR.csv", help="with --corr: sensor,r rows (optional header line) for the representatives")
+
+
+def _options(items):
+    import json
+
+    from host.cli import UserError
+
+    out = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip():
+            raise UserError("--option %r: expected KEY=VALUE" % item)
+        value = value.strip()
+        try:
+            out[key.strip()] = json.loads(value)
+        except ValueError:
+            out[key.strip()] = value  # plain words such as disturbance=offset
+    return out
+
+
+def run(args):
+    import json
+
+    from host.cli import UserError
+    from host.empirical import EmpiricalDataError
+
+    try:
+        if args.corr:
+            doc = _run_corr(args)
+        else:
+            doc = _run_data(args)
+    except EmpiricalDataError as exc:
+        raise UserError(str(exc))
+    with open(args.json, "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=2)
+        fh.write("\n")
+    return 0
+
+
+def _run_corr(args):
+    from host.cli import UserError
+    from host.empirical.selectors import maximal_tree
+    from host.empirical.selectors.corrcsv import read_corr_csv, read_target_corr_csv
+
+    if args.method != "maxtree":
+        raise UserError("--corr works with --method maxtree only (the other methods need the data)")
+    if args.runs:
+        raise UserError("give either --corr or run folders, not both")
+    for flag in ("channel", "sensors"):
+        if getattr(args, flag):
+            raise UserError("--%s has no meaning with --corr" % flag)
+    if args.option:
+        raise UserError("--option has no meaning with --corr (the partition choice needs the data)")
+    C, names = read_corr_csv(args.corr)
+    tc = read_target_corr_csv(args.target_corr, names) if args.target_corr else None
+    tree = maximal_tree(C, names, target_corr=tc)
+    doc = {"method": "maxtree", "source": args.corr}
+    doc.update(tree.to_json())
+    if args.plot:
+        tree.plot(args.plot, title="Maximal tree of the correlation matrix %s (%d sensors)" % (args.corr, len(names)))
+    print("maxtree on %s: %d sensors, %d tree edges, %d distinct partitions" % (args.corr, len(names), len(tree.edges), len(tree.partitions)))
+    for part in tree.partitions:
+        print("  lambda in %s%.4g, %.4g]: %d clusters, representatives %s"
+              % ("[" if part is tree.partitions[0] else "(", part.lambda_low, part.lambda_high, len(part.clusters), ",".join(part.representatives)))
+    return doc
+
+
+def _run_data(args):
+    from host.cli import UserError
+    from host.empirical.selectors import select
+    from host.runs import RunFormatError, load_runs
+
+    if args.target_corr:
+        raise UserError("--target-corr goes with --corr")
+    if not args.runs:
+        raise UserError("give run folders (or --corr CORR.csv for maxtree on a matrix)")
+    try:
+        runs = load_runs(args.runs)
+    except RunFormatError as exc:
+        raise UserError(str(exc))
+    sensors = [s.strip() for s in args.sensors.split(",") if s.strip()] if args.sensors else None
+    params = _options(args.option)
+    sel = select(args.method, runs, target=args.target, channel=args.channel, sensors=sensors, **params)
+    doc = sel.to_json()
+    doc.update({"target": args.target, "channel": args.channel, "runs": list(args.runs)})
+    if args.plot:
+        sel.plot(args.plot)
+    print("%s on %d run(s): %s" % (args.method, len(runs), ", ".join(sel.sensors)))
+    return doc
