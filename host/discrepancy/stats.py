@@ -65,13 +65,21 @@ def long_run_variance(groups, lag=None):
     return max(lrv, gamma[0] * 1e-12)
 
 
-def dm_test(loss_base, loss_cand, lag=None):
+def dm_test(loss_base, loss_cand, lag=None, log=False):
     """One-sided Diebold-Mariano test that the candidate's held-out loss is lower.
 
     ``loss_base``/``loss_cand``: lists (one per run) of per-sweep losses in time
-    order. Returns dict(statistic, p_value, n_sweeps, mean_diff, lag).
+    order. ``log``: use the differential of log losses (the per-sweep log MSE
+    ratio), which weighs every sweep alike instead of letting the few largest
+    warm-up sweeps dominate mean and variance. Returns dict(statistic, p_value,
+    n_sweeps, mean_diff, lag).
     """
-    d = [np.asarray(b, dtype=float) - np.asarray(c, dtype=float) for b, c in zip(loss_base, loss_cand)]
+    if log:
+        floor = 1e-12 * max([float(np.max(b)) for b in loss_base if np.size(b)] + [1e-300])
+        f = lambda v: np.log(np.maximum(np.asarray(v, dtype=float), floor))  # noqa: E731
+        d = [f(b) - f(c) for b, c in zip(loss_base, loss_cand)]
+    else:
+        d = [np.asarray(b, dtype=float) - np.asarray(c, dtype=float) for b, c in zip(loss_base, loss_cand)]
     if any(a.shape != b.shape for a, b in zip(loss_base, loss_cand)):
         raise ValueError("base and candidate losses cover different sweeps")
     allv = np.concatenate(d) if d else np.zeros(0)

@@ -26,6 +26,7 @@ from host.discrepancy.localize import localize
 # and the smallest held-out relative RMSE reduction worth naming an effect for.
 ALPHA = 0.01
 MIN_GAIN = 0.10
+LOG_LOSS = True  # test the per-sweep log MSE ratio (see stats.dm_test)
 
 
 class Family:
@@ -272,7 +273,7 @@ def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_
                 held[c.name] = ho
                 c.rmse_um = ho.rmse()
                 c.score = 1.0 - c.rmse_um / current.rmse() if current.rmse() > 0 else 0.0
-                t = stats.dm_test(loss0, _losses(runs, ho.residuals))
+                t = stats.dm_test(loss0, _losses(runs, ho.residuals), log=LOG_LOSS)
                 c.p_raw, c.statistic = t["p_value"], t["statistic"]
             tested = [c for c in todo if c.name in held]
             if tested:
