@@ -15,6 +15,7 @@ combinations exceeds ``max_combinations``, the largest clusters are trimmed to
 their members most correlated with the target until it fits; the reason records it.
 """
 import math
+import zlib
 
 import numpy as np
 
@@ -69,11 +70,13 @@ class RobustnessProblem:
         self.y = ytr
         p = Xtr.shape[1]
         self.fitter = SubsetFitter(Xtr, ytr)
-        noise_rng = np.random.default_rng([int(seed), 7919])
         self.tests = []
-        for X, y, _ in tests:
+        for r, (X, y, _) in enumerate(tests):
             if disturbance == "uniform":
-                noise = noise_rng.uniform(-disturbance_C, disturbance_C, size=X.shape)
+                # one stream per (run, sensor name): the draw does not depend on column order
+                noise = np.column_stack(
+                    [np.random.default_rng([int(seed), r, zlib.crc32(s.encode())]).uniform(-disturbance_C, disturbance_C, X.shape[0]) for s in names]
+                )
             elif disturbance == "offset":
                 noise = np.full(X.shape, float(disturbance_C))
             else:
