@@ -27,7 +27,7 @@ class Node:
 
 NODES = (
     Node("T1", "nut", "ball-screw nut housing", 20.0, (("nut", 1.1),)),
-    Node("T2", "base", "machine bed under the fixed-end bearing block", 150.0, (("motor", 0.06), ("bearing", 0.25))),
+    Node("T2", "base", "machine bed under the fixed-end bearing block", 150.0, (("motor", 0.03), ("bearing", 0.15))),
     Node("T3", "ambient", "air 0.5 m beside the axis", 0.0),
     Node("T4", "bearing", "fixed-end support bearing housing", 25.0, (("bearing", 1.6), ("motor", 0.2))),
     Node("T5", "motor", "servo motor flange", 35.0, (("motor", 0.6),)),
