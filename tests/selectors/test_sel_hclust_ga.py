@@ -1,0 +1,138 @@
+"""Hierarchical clustering on the combined distance, the binary GA, and the hclust-ga selector."""
+import itertools
+
+import numpy as np
+import pytest
+from scipy.cluster.hierarchy import is_valid_linkage
+
+from host.empirical.selectors import SelectionError, select
+from host.empirical.selectors.ga import binary_ga, decode_uint
+from host.empirical.selectors.hclust import agglomerate
+
+SMALL_GA = {"population": 8, "generations": 4}
+
+
+def _two_groups(n=60, seed=0):
+    rng = np.random.default_rng(seed)
+    t = np.linspace(0, 1, n)
+    a = 1 - np.exp(-3 * t)
+    b = np.sin(4 * t)
+    X = np.column_stack([a, a * 2 + 5, a + 0.01 * rng.normal(size=n), b, b + 10, b * 0.5])
+    return X
+
+
+def test_correlation_only_groups_by_shape_and_euclid_only_by_level():
+    X = _two_groups()
+    shape = agglomerate(X, 0.0).partition(2)
+    assert shape == [[0, 1, 2], [3, 4, 5]]
+    level = agglomerate(X, 1.0)
+    # sensors 1 and 4 sit 5-10 K above the rest: by Euclidean distance they form their own group
+    assert level.partition(2) == [[0, 2, 3, 5], [1, 4]]
+
+
+def test_agglomeration_structure():
+    X = _two_groups()
+    agg = agglomerate(X, 0.4)
+    assert len(agg.merges) == X.shape[1] - 1
+    for k in range(1, 7):
+        part = agg.partition(k)
+        assert len(part) == k
+        assert sorted(itertools.chain(*part)) == list(range(6))
+    assert is_valid_linkage(agg.linkage())
+    with pytest.raises(ValueError):
+        agg.partition(0)
+
+
+def test_merged_cluster_distance_uses_mean_series():
+    X = _two_groups()
+    agg = agglomerate(X, 1.0)
+    # recompute the last merge distance from the two clusters' mean series by hand
+    a, b, d = agg.merges[-1]
+    De = np.sqrt(((X[:, :, None] - X[:, None, :]) ** 2).sum(axis=0))
+    off = De[~np.eye(6, dtype=bool)]
+    ma, mb = X[:, list(a)].mean(axis=1), X[:, list(b)].mean(axis=1)
+    expect = (np.linalg.norm(ma - mb) - off.min()) / (off.max() - off.min())
+    assert d == pytest.approx(expect)
+
+
+def test_ga_finds_onemax_and_is_reproducible():
+    cost = lambda g: -sum(g)  # noqa: E731
+    r1 = binary_ga(cost, 12, population=20, generations=40, mutation=0.05, seed=4)
+    r2 = binary_ga(cost, 12, population=20, generations=40, mutation=0.05, seed=4)
+    assert r1.best_genome == r2.best_genome and r1.history == r2.history
+    assert r1.best_cost == -12
+    best = [h["best"] for h in r1.history]
+    assert all(b2 <= b1 for b1, b2 in zip(best, best[1:]))  # elitism
+    assert r1.evaluations <= r1.calls == 20 * 41
+    assert decode_uint((1, 0, 1)) == 5
+
+
+def test_ga_rejects_bad_settings():
+    with pytest.raises(ValueError):
+        binary_ga(lambda g: 0.0, 4, population=7)
+    with pytest.raises(ValueError):
+        binary_ga(lambda g: 0.0, 4, crossover=1.5)
+
+
+def test_hclust_ga_reproducible_and_seed_matters(arrays3):
+    a = select("hclust-ga", arrays3, seed=1)
+    b = select("hclust-ga", arrays3, seed=1)
+    assert a.sensors == b.sensors and a.reason == b.reason
+    others = [select("hclust-ga", arrays3, seed=s, **SMALL_GA).reason["ga"]["genome"] for s in (2, 3, 4)]
+    assert len(set(others + [a.reason["ga"]["genome"]])) > 1
+
+
+def test_hclust_ga_returns_the_best_combination_of_its_partition(arrays3):
+    sel = select("hclust-ga", arrays3, seed=0)
+    r = sel.reason
+    names = arrays3[0][2]
+    clusters = [[names.index(s) for s in c] for c in r["clusters"]]
+    assert sorted(sel.sensors) == sorted(r["model"]["sensors"])
+    assert all(sum(names.index(s) in c for s in sel.sensors) == 1 for c in clusters)
+    assert r["combinations_in_partition"] == np.prod([len(c) for c in clusters])
+    Xtr, ytr, _ = arrays3[0]
+    # independent re-evaluation: per-combination lstsq, same disturbance (the clean run + the
+    # reported disturbed RMSE identify it), every combination no better than the chosen one
+    best = None
+    for combo in itertools.product(*clusters):
+        A = np.column_stack([np.ones(len(ytr)), Xtr[:, combo]])
+        coef = np.linalg.lstsq(A, ytr, rcond=None)[0]
+        clean = np.mean([np.sqrt(np.mean((coef[0] + X[:, combo] @ coef[1:] - y) ** 2)) for X, y, _ in arrays3[1:]])
+        if sorted(names[j] for j in combo) == sorted(sel.sensors):
+            best = clean
+            np.testing.assert_allclose(coef[1:], r["model"]["coefficients"], rtol=1e-6)
+    assert best == pytest.approx(np.mean(list(r["rmse_clean"].values())))
+    assert r["fitness_rmse"] == pytest.approx(np.mean(list(r["rmse_disturbed"].values())))
+    assert r["ga"]["model_evaluations"] >= r["combinations_in_partition"]
+    assert "fallback" not in r
+
+
+def test_offset_disturbance_penalises_coefficient_sum(arrays3):
+    sel = select("hclust-ga", arrays3, disturbance="offset", disturbance_C=0.5, seed=0, **SMALL_GA)
+    r = sel.reason
+    # a constant offset d on every input shifts each prediction by d * sum(b)
+    X, y, names = arrays3[1]
+    idx = [names.index(s) for s in r["model"]["sensors"]]
+    pred = r["model"]["intercept"] + (X[:, idx] + 0.5) @ np.asarray(r["model"]["coefficients"])
+    assert r["rmse_disturbed"]["run 2"] == pytest.approx(np.sqrt(np.mean((pred - y) ** 2)))
+
+
+def test_two_runs_fall_back_and_one_run_is_an_error(arrays3):
+    sel = select("hclust-ga", arrays3[:2], seed=0, **SMALL_GA)
+    assert "fallback" in sel.reason and sel.reason["test_runs"] == ["run 2"]
+    with pytest.raises(SelectionError, match="got 1 run"):
+        select("hclust-ga", arrays3[:1])
+    with pytest.raises(SelectionError, match="train_run"):
+        select("hclust-ga", arrays3, train_run=5)
+    with pytest.raises(SelectionError, match="population must be even"):
+        select("hclust-ga", arrays3, population=7)
+    with pytest.raises(SelectionError, match="disturbance"):
+        select("hclust-ga", arrays3, disturbance="gaussian")
+
+
+def test_train_run_choice_and_plot(arrays3, tmp_path):
+    sel = select("hclust-ga", arrays3, train_run=2, seed=0, **SMALL_GA)
+    assert sel.reason["train_run"] == "run 3" and sel.reason["test_runs"] == ["run 1", "run 2"]
+    path = sel.plot(str(tmp_path / "hg.png"))
+    with open(path, "rb") as fh:
+        assert fh.read(4) == b"\x89PNG"
