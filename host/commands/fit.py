@@ -1,7 +1,7 @@
 """tcomp fit --model KIND RUN... --out MODEL.json"""
 HELP = "fit a thermal-error model (mlr, pcr, stepwise: host/empirical; screw: host/screw) and save it"
 
-EMPIRICAL = ("mlr", "pcr", "stepwise")
+EMPIRICAL = ("mlr", "pcr", "stepwise", "cv-subset")
 
 
 def add_arguments(p):

@@ -15,8 +15,10 @@ OPTIONS = {
     "geometric_criterion": str,  # cv | aic
     "t_min_s": float,  # training window on target time
     "t_max_s": float,
+    "max_sensors": int,  # cv-subset
+    "cv_blocks": int,  # cv-subset on one run
 }
-METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": ()}
+METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",)}
 
 
 def parse_options(pairs, method):
@@ -70,6 +72,11 @@ def fit_command(args):
     elif args.model == "stepwise":
         for h in est.history_:
             print("  step %d: %s %s (partial F %.4g, threshold %g)" % (h["step"], h["action"], h["sensor"], h["F"], h["threshold"]))
+        print(est.mlr_.summary())
+    elif args.model == "cv-subset":
+        print("  %s; cross-validation over %d groups" % (est.search_, est.n_groups_))
+        for k, v in sorted(est.cv_rmse_.items()):
+            print("  best %d-sensor subset %s: CV RMSE %.4g" % (k, ",".join(v["sensors"]), v["cv_rmse"]))
         print(est.mlr_.summary())
     else:
         print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (

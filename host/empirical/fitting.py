@@ -13,6 +13,7 @@ from host.empirical import EmpiricalDataError
 from host.empirical.geometric import fit_geometric
 from host.empirical.model import LinearDirectModel, PolySlopeModel
 from host.empirical.regression import make_estimator
+from host.empirical.schedule import block_labels, cycles
 from host.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
 
 ENVELOPE_MARGIN_K = 2.0
@@ -67,12 +68,39 @@ def select_columns(arrays, sensors):
     return out
 
 
+def cv_groups(runs, arrays, cv_blocks=None):
+    """Cross-validation group of every stacked sample.
+
+    Several runs: the run. One run: ``cv_blocks`` equal-length contiguous time
+    blocks if given, else the run's spindle cycles (host/empirical/schedule.py).
+    """
+    if len(arrays) >= 2:
+        if cv_blocks is not None:
+            raise EmpiricalDataError("cv_blocks applies to a single training run; with %d runs the runs are the groups" % len(arrays))
+        return np.concatenate([np.full(a.y.size, i) for i, a in enumerate(arrays)])
+    t = np.concatenate([a.time_s for a in arrays])
+    if cv_blocks is not None:
+        k = int(cv_blocks)
+        if k < 2:
+            raise EmpiricalDataError("cv_blocks must be >= 2, got %d" % k)
+        edges = np.linspace(t.min(), t.max(), k + 1)[1:-1]
+        return block_labels(t, edges)
+    if runs[0].spindle is None:
+        raise EmpiricalDataError("cv-subset on one run needs its spindle schedule or cv_blocks=N (time blocks) for cross-validation")
+    edges = [c["t_start_s"] for c in cycles(runs[0])[1:]]
+    g = block_labels(t, edges)
+    if np.unique(g).size < 2:
+        raise EmpiricalDataError("cv-subset: the training span covers a single spindle cycle; give cv_blocks=N")
+    return g
+
+
 def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
               reference="run_start", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
-              **options):
+              cv_blocks=None, **options):
     """Fit ``method`` (mlr|pcr|stepwise) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
+    ``cv_blocks``: cross-validation groups of ``cv-subset`` (see :func:`cv_groups`).
     """
     runs = list(runs)
     if not runs:
@@ -80,8 +108,13 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     arrays = training_arrays(runs, target=target, channel=channel, sensors=sensors, window=window)
     names = arrays[0].names
     X, y = stack(arrays)
-    est = make_estimator(method, fit_intercept=fit_intercept, **options).fit(X, y, names)
-    if method == "stepwise":
+    est = make_estimator(method, fit_intercept=fit_intercept, **options)
+    if method == "cv-subset":
+        groups = cv_groups(runs, arrays, cv_blocks)
+        est.fit(X, y, names, groups=groups)
+    else:
+        est.fit(X, y, names)
+    if hasattr(est, "selected_names_"):
         used = list(est.selected_names_)
         coefs = est.mlr_.coef_
     else:

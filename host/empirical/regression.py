@@ -471,3 +471,115 @@ def make_estimator(method, fit_intercept=True, **options):
     if method not in ESTIMATORS:
         raise EmpiricalDataError("unknown regression method %r (known: %s)" % (method, ", ".join(ESTIMATORS)))
     return ESTIMATORS[method](fit_intercept=fit_intercept, **options)
+
+
+class BestSubsetCV(_Linear):
+    """Exhaustive best subset of at most ``max_sensors`` sensors by blocked cross-validation.
+
+    Not a published method: our answer to "which few sensors predict *other*
+    conditions". Every subset of 1..max_sensors sensors is scored by
+    leave-one-group-out CV RMSE of an OLS fit (groups: the training runs, or
+    contiguous time blocks of one run, e.g. its speed steps); the subset with
+    the lowest CV RMSE wins, then MLR is refitted on all training data. Scoring
+    is batched: per-group Gram matrices, one batched solve per subset size, no
+    Python loop over subsets. Falls back to greedy forward search when the
+    number of subsets exceeds ``max_combinations`` (``search_`` says which).
+    Needs ``groups`` with at least 2 distinct values.
+
+    Learned: ``selected_names_``, ``selected_``, ``cv_rmse_`` (best per size),
+    ``search_``, ``mlr_``, ``coef_`` (all inputs, 0 if unused), ``intercept_``.
+    """
+
+    method = "cv-subset"
+
+    def __init__(self, max_sensors=5, fit_intercept=True, max_combinations=200000):
+        self.max_sensors = max_sensors
+        self.fit_intercept = fit_intercept
+        self.max_combinations = max_combinations
+
+    def fit(self, X, y, names=None, groups=None):
+        import itertools
+        from math import comb
+
+        X, y, names = check_xy(X, y, names, 1 + int(self.fit_intercept), "cv-subset")
+        n, p = X.shape
+        if groups is None:
+            raise EmpiricalDataError("cv-subset: needs groups (runs or time blocks) for cross-validation")
+        groups = np.asarray(groups)
+        if groups.shape != (n,):
+            raise EmpiricalDataError("cv-subset: groups has %s entries for %d samples" % (groups.shape, n))
+        labels = np.unique(groups)
+        if labels.size < 2:
+            raise EmpiricalDataError("cv-subset: cross-validation needs at least 2 groups (runs or time blocks), got %d" % labels.size)
+        kmax = min(int(self.max_sensors), p)
+        o = int(self.fit_intercept)
+        A = np.column_stack([np.ones(n), X]) if o else X
+        G = [(A[groups == g].T @ A[groups == g], A[groups == g].T @ y[groups == g], float(y[groups == g] @ y[groups == g]), int((groups == g).sum())) for g in labels]
+        Gall = sum(g[0] for g in G)
+        call = sum(g[1] for g in G)
+
+        def score(combos):
+            c = np.asarray(combos, dtype=int) + o
+            idx = np.column_stack([np.zeros(len(c), int), c]) if o else c
+            tot = np.zeros(len(c))
+            ok = np.ones(len(c), bool)
+            for Gv, cv, yy, nv in G:
+                Gt, ct = Gall - Gv, call - cv
+                M = Gt[idx[:, :, None], idx[:, None, :]]
+                # singular training Gram (collinear subset) -> excluded, never silently solved
+                det_ok = np.linalg.cond(M) < 1e12
+                ok &= det_ok
+                M = np.where(det_ok[:, None, None], M, np.eye(M.shape[1]))
+                beta = np.linalg.solve(M, ct[idx][..., None])[..., 0]
+                Mv = Gv[idx[:, :, None], idx[:, None, :]]
+                sse = yy - 2 * np.einsum("ij,ij->i", beta, cv[idx]) + np.einsum("ij,ijk,ik->i", beta, Mv, beta)
+                tot += np.maximum(sse, 0.0) / nv
+            out = np.sqrt(tot / len(G))
+            out[~ok] = np.inf
+            return out
+
+        total = sum(comb(p, k) for k in range(1, kmax + 1))
+        best_by_k = {}
+        if total <= self.max_combinations:
+            self.search_ = "exhaustive (%d subsets)" % total
+            for k in range(1, kmax + 1):
+                combos = list(itertools.combinations(range(p), k))
+                s = score(combos)
+                i = int(np.argmin(s))
+                best_by_k[k] = (float(s[i]), list(combos[i]))
+        else:
+            self.search_ = "greedy forward (%d subsets exceed max_combinations=%d)" % (total, self.max_combinations)
+            cur = []
+            for k in range(1, kmax + 1):
+                cand = [cur + [j] for j in range(p) if j not in cur]
+                s = score(cand)
+                i = int(np.argmin(s))
+                cur = sorted(cand[i])
+                best_by_k[k] = (float(s[i]), list(cur))
+        finite = {k: v for k, v in best_by_k.items() if np.isfinite(v[0])}
+        if not finite:
+            raise EmpiricalDataError("cv-subset: every subset is collinear within a training fold")
+        k = min(finite, key=lambda k: (finite[k][0], k))
+        sel = finite[k][1]
+        self.cv_rmse_ = {int(kk): {"cv_rmse": v[0], "sensors": [names[j] for j in v[1]]} for kk, v in best_by_k.items()}
+        self.selected_ = sel
+        self.selected_names_ = [names[j] for j in sel]
+        self.names_ = names
+        self.n_groups_ = int(labels.size)
+        self.mlr_ = MLR(self.fit_intercept).fit(X[:, sel], y, self.selected_names_)
+        self.coef_ = np.zeros(p)
+        self.coef_[sel] = self.mlr_.coef_
+        self.intercept_ = self.mlr_.intercept_
+        self.n_samples_ = n
+        for a in ("rsquared_", "rsquared_adj_", "fvalue_", "f_pvalue_", "resid_std_err_", "df_resid_", "rmse_"):
+            setattr(self, a, getattr(self.mlr_, a))
+        return self
+
+    def statistics(self):
+        d = self.mlr_.statistics()
+        d.update({"selected": list(self.selected_names_), "max_sensors": int(self.max_sensors), "search": self.search_,
+                  "cv_groups": self.n_groups_, "cv_rmse_by_size": self.cv_rmse_})
+        return d
+
+
+ESTIMATORS["cv-subset"] = BestSubsetCV
