@@ -1,0 +1,64 @@
+"""tcomp discrepancy RUN... [--base screw] --json OUT.json --report DIR"""
+HELP = "find where the screw model and the measurements disagree, name the missing physical effect(s), refit (held-out evidence)"
+
+
+def add_arguments(p):
+    p.add_argument("runs", nargs="+", metavar="RUN", help="run folders (>= 2: leave-one-run-out; 1: two-block time split)")
+    p.add_argument("--base", default="screw", choices=("screw",), help="base model: the screw model with E_m only (default)")
+    p.add_argument("--json", required=True, help="write the findings as JSON (effects, held-out RMSEs, localization, candidates)")
+    p.add_argument("--report", required=True, metavar="DIR", help="folder for report.md, plots and the final model.json")
+    p.add_argument("--candidates", help="comma-separated catalog effects to test (default: the whole catalog)")
+    p.add_argument("--alpha", type=float, default=None, help="family-wise significance level per round (default %(default)s = workflow.ALPHA)")
+    p.add_argument("--min-gain", type=float, default=None, help="smallest held-out relative RMSE reduction to accept (default workflow.MIN_GAIN)")
+    p.add_argument("--max-effects", type=int, default=None, help="stop after naming this many effects")
+    p.add_argument("--jobs", type=int, default=None, help="worker processes for candidate fits (default: up to 2)")
+
+
+def run(args):
+    from host.cli import UserError
+    from host.discrepancy import workflow
+    from host.discrepancy.report import write_report
+    from host.discrepancy.screw_family import ScrewFamily
+    from host.runs import RunFormatError, load_run
+
+    runs = []
+    for folder in args.runs:
+        try:
+            runs.append(load_run(folder))
+        except RunFormatError as exc:
+            raise UserError("%s is not a valid run folder:\n%s" % (folder, exc))
+    names = [r.name for r in runs]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    for i, r in enumerate(runs):
+        if r.name in dup:
+            r.name = "%s#%d" % (r.name, i + 1)
+    family = ScrewFamily()
+    candidates = None
+    if args.candidates:
+        candidates = [c.strip() for c in args.candidates.split(",") if c.strip()]
+        unknown = [c for c in candidates if c not in family.catalog]
+        if unknown:
+            raise UserError("unknown effect(s) %s; the catalog has %s" % (", ".join(unknown), ", ".join(family.catalog)))
+    alpha = workflow.ALPHA if args.alpha is None else args.alpha
+    min_gain = workflow.MIN_GAIN if args.min_gain is None else args.min_gain
+    if not 0 < alpha < 1:
+        raise UserError("--alpha must be between 0 and 1 (found %g)" % alpha)
+    for r in runs:
+        if r.screw is None:
+            raise UserError("%s: meta.json has no 'screw' block; the screw model needs the screw geometry" % (r.path or r.name))
+        if r.motion is None or not len(r.motion):
+            raise UserError("%s: no motion.csv; the screw model is driven by the axis motion" % (r.path or r.name))
+        if r.errors.channel is not None and len(r.errors.channels()) > 1:
+            raise UserError("%s: errors.csv has several channels (%s); the screw model describes one positioning error"
+                            % (r.path or r.name, ", ".join(r.errors.channels())))
+    try:
+        result = workflow.discover(runs, family, candidates=candidates, alpha=alpha, min_gain=min_gain,
+                                   max_effects=args.max_effects, jobs=args.jobs, log=print)
+    except (ValueError, RuntimeError) as exc:
+        raise UserError(str(exc))
+    js = write_report(result, family, args.report, json_path=args.json)
+    print("named effects: %s" % (", ".join(result.effects) or "none (no catalog effect explains the gap)"))
+    print("held-out RMSE %.3f -> %.3f um; report in %s, JSON in %s" % (result.before.rmse(), result.after.rmse(), args.report, args.json))
+    if js.get("model_error"):
+        print("warning: final model not written: %s" % js["model_error"])
+    return 0

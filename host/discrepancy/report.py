@@ -1,0 +1,169 @@
+"""Outputs of the discrepancy workflow: JSON, the final model document, plots, a Markdown report."""
+import json
+import os
+import warnings
+
+import numpy as np
+
+from host.discrepancy.localize import residual_map
+
+
+def final_model_document(result, runs):
+    """Fit host/screw's ScrewModel with the named effects on all runs; return its model document.
+
+    ``ambient_expansion`` maps to the screw model's own E_e term (base sensor);
+    the other names to host/screw/effects.py implementations of the same name.
+    """
+    from host.screw.effects import EFFECTS as SCREW_EFFECTS
+    from host.screw.effects import make_effect
+    from host.screw.model import ScrewModel
+
+    effects = [make_effect(n) for n in result.effects if n != "ambient_expansion" and n in SCREW_EFFECTS]
+    model = ScrewModel(ambient="ambient_expansion" in result.effects, effects=effects, geometric_degree=3)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        model.fit(runs)
+    doc = model.to_document()
+    doc.setdefault("training", {})
+    doc["training"]["discrepancy"] = {
+        "effects": list(result.effects),
+        "rmse_before_um": result.before.rmse(),
+        "rmse_after_um": result.after.rmse(),
+        "held_out_parameters": result.final_fit.values() if result.final_fit is not None else None,
+    }
+    return doc
+
+
+def write_json(result, path, extra=None):
+    out = result.as_json()
+    if extra:
+        out.update(extra)
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(out, fh, indent=2)
+        fh.write("\n")
+    return out
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_residual_maps(result, path):
+    """Held-out residual over sweep time x position, per run (rows) before/after (columns)."""
+    plt = _plt()
+    runs = result.runs
+    fig, axes = plt.subplots(len(runs), 2, figsize=(10, 2.6 * len(runs) + 0.6), squeeze=False)
+    allr = np.concatenate(result.before.residuals + result.after.residuals)
+    lim = float(np.nanmax(np.abs(allr))) if np.isfinite(allr).any() else 1.0
+    for i, run in enumerate(runs):
+        for j, (label, ho) in enumerate((("before", result.before), ("after: " + (", ".join(result.effects) or "no effect added"), result.after))):
+            ax = axes[i][j]
+            maps = residual_map(run, ho.residuals[i])
+            d = 1 if 1 in maps else sorted(maps)[0]
+            t, p, grid = maps[d]
+            im = ax.pcolormesh(p, t / 3600.0, grid, cmap="RdBu_r", vmin=-lim, vmax=lim, shading="nearest")
+            if run.motion is not None and len(run.motion):
+                ax.axhline(float(np.max(run.motion.t_end_s)) / 3600.0, color="k", lw=0.8, ls="--")
+            ax.set_title("%s, %s%s" % (run.name, label, "" if d == 0 else " (direction %+d)" % d), fontsize=9)
+            ax.set_xlabel("position [mm]")
+            ax.set_ylabel("time [h]")
+    fig.colorbar(im, ax=axes, label="held-out residual [um]", shrink=0.8)
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def plot_error_curves(result, family, path):
+    """Measured error and held-out predictions (base, final) at a few sweeps per run."""
+    plt = _plt()
+    runs = result.runs
+    fig, axes = plt.subplots(1, len(runs), figsize=(4.2 * len(runs), 3.6), squeeze=False)
+    for i, run in enumerate(runs):
+        ax = axes[0][i]
+        e = run.errors
+        times = np.unique(e.time_s)
+        pick = times[np.linspace(0, times.size - 1, min(4, times.size)).round().astype(int)]
+        for k, ts in enumerate(pick):
+            sel = (e.time_s == ts) & ((e.direction == 1) if e.direction is not None else True)
+            o = np.argsort(e.position_mm[sel])
+            P = e.position_mm[sel][o]
+            color = "C%d" % k
+            ax.plot(P, e.error_um[sel][o], "o", ms=3, color=color, label="measured %.1f h" % (ts / 3600))
+            ax.plot(P, (e.error_um - result.before.residuals[i])[sel][o], ":", color=color)
+            ax.plot(P, (e.error_um - result.after.residuals[i])[sel][o], "-", color=color)
+        ax.set_title("%s (dotted: base, solid: final; held-out)" % run.name, fontsize=8)
+        ax.set_xlabel("position [mm]")
+        ax.set_ylabel("error [um]")
+        ax.legend(fontsize=6)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def markdown(result, js, model_path=None, model_error=None):
+    lines = ["# Discrepancy report", ""]
+    lines.append("Runs: %s. Held-out scheme: %s." % (", ".join(r.name for r in result.runs),
+                                                     "leave-one-run-out" if len(result.runs) > 1 else "two-block time split"))
+    lines.append("")
+    lines.append("**Named effects (in the order found):** %s" % (", ".join(result.effects) or "none: no catalog effect explains the gap"))
+    lines.append("")
+    lines.append("Held-out RMSE: %.3f um before, %.3f um after." % (result.before.rmse(), result.after.rmse()))
+    lines.append("")
+    lines.append("| run | RMSE before [um] | RMSE after [um] |")
+    lines.append("|---|---|---|")
+    for r in js["per_run"]:
+        lines.append("| %s | %.3f | %.3f |" % (r["run"], r["rmse_before_um"] or float("nan"), r["rmse_after_um"] or float("nan")))
+    for k, rnd in enumerate(result.rounds, 1):
+        lines.append("")
+        lines.append("## Round %d: base + %s (held-out RMSE %.3f um)" % (k, ", ".join(rnd.base_effects) or "nothing", rnd.rmse_before_um))
+        lines.append("")
+        lines.append("Where the residual concentrates (share of residual variance):")
+        lines.append("")
+        for loc in rnd.localization[:6]:
+            lines.append("- %s: %.0f %%%s" % (loc["factor"], 100 * loc["share"], "" if not loc["worst"] else " (worst: %s)" % loc["worst"]))
+        lines.append("")
+        lines.append("| candidate | held-out RMSE [um] | gain | DM p (Holm) | accepted |")
+        lines.append("|---|---|---|---|---|")
+        for c in rnd.candidates:
+            if c.skipped:
+                lines.append("| %s | skipped: %s | | | |" % (c.name, c.skipped))
+            elif c.error:
+                lines.append("| %s | fit failed: %s | | | |" % (c.name, c.error))
+            else:
+                lines.append("| %s | %.3f | %+.1f %% | %.3g | %s |" % (c.name, c.rmse_um, 100 * c.score, c.p_value, "yes" if c.accepted else ""))
+    lines.append("")
+    if model_path:
+        lines.append("Final model: `%s` (kind screw, docs/model-format.md)." % model_path)
+    if model_error:
+        lines.append("Final model could not be written: %s" % model_error)
+    lines.append("")
+    lines.append("Plots: `residual_map.png` (held-out residual before/after), `error_curves.png`.")
+    return "\n".join(lines) + "\n"
+
+
+def write_report(result, family, folder, json_path=None):
+    """JSON (``json_path``), model.json, plots and report.md in ``folder``; returns the JSON dict."""
+    os.makedirs(folder, exist_ok=True)
+    model_path, model_error = os.path.join(folder, "model.json"), None
+    try:
+        from host.models import save_model
+
+        save_model(final_model_document(result, result.runs), model_path)
+    except Exception as exc:  # the findings stand even when the final document cannot be built
+        model_path, model_error = None, "%s: %s" % (type(exc).__name__, exc)
+    extra = {"model": model_path, "model_error": model_error}
+    js = result.as_json()
+    js.update(extra)
+    if json_path:
+        write_json(result, json_path, extra)
+    with open(os.path.join(folder, "discrepancy.json"), "w", encoding="utf-8") as fh:
+        json.dump(js, fh, indent=2)
+    plot_residual_maps(result, os.path.join(folder, "residual_map.png"))
+    plot_error_curves(result, family, os.path.join(folder, "error_curves.png"))
+    with open(os.path.join(folder, "report.md"), "w", encoding="utf-8") as fh:
+        fh.write(markdown(result, js, model_path, model_error))
+    return js
