@@ -45,10 +45,15 @@ class ScrewModel:
     nut_weight: weight (µm per K) of the nut-temperature residuals in the
     identification (0 = nut sensor only reported); reduced_segments, reduced_dt_s:
     the firmware recurrence; feed_max_mm_min: top feed for the reduced state bound
-    (None = 1.5 × the fastest training feed)."""
+    (None = 1.5 × the fastest training feed); base_sensor: the E_e sensor (None = the
+    first sensor with role 'base'); base_ref: reference of the E_e term, "run_start"
+    (each run's first base reading: every run starts in equilibrium and its cold
+    geometric error is the one measured then) or "fixed" (``base_ref_C_``, the first
+    training run's start, as a firmware with a fixed calibration temperature does)."""
 
     def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient=True,
-                 nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200):
+                 nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200, base_sensor=None,
+                 base_ref="run_start"):
         self.segments = segments
         self.dt_s = dt_s
         self.free = free
@@ -61,6 +66,8 @@ class ScrewModel:
         self.reduced_dt_s = reduced_dt_s
         self.feed_max_mm_min = feed_max_mm_min
         self.max_nfev = max_nfev
+        self.base_sensor = base_sensor
+        self.base_ref = base_ref
 
     # ------------------------------------------------------------ parameters
 
@@ -119,11 +126,16 @@ class ScrewModel:
         if self.base_sensor_ is not None:
             if self.base_sensor_ not in ctx.run.temperatures.names:
                 raise ValueError("%s: the model's base sensor %r is not in temperatures.csv" % (ctx.run_name, self.base_sensor_))
-            E = E + 1e3 * base.alpha_per_K * (ctx.sensor_at_rows(self.base_sensor_) - self.base_ref_C_) * ctx.positions_mm
+            E = E + 1e3 * base.alpha_per_K * (ctx.sensor_at_rows(self.base_sensor_) - self._base_ref(ctx.run)) * ctx.positions_mm
         for e in self.effects:
             if hasattr(e, "error_um"):
                 E = E + e.error_um(ctx, eff[e.name])
         return E
+
+    def _base_ref(self, run):
+        if self.base_ref == "run_start":
+            return float(run.temperatures.column(self.base_sensor_)[0])
+        return self.base_ref_C_
 
     def geometric_um(self, positions_mm):
         P = np.asarray(positions_mm, dtype=float)
@@ -168,6 +180,8 @@ class ScrewModel:
         """Identify the parameters from one or more runs (host.runs.Run)."""
         if not runs:
             raise ValueError("no runs to fit on")
+        if self.base_ref not in ("run_start", "fixed"):
+            raise ValueError("base_ref must be 'run_start' or 'fixed' (got %r)" % (self.base_ref,))
         for e in self.effects:
             if not isinstance(e, Effect):
                 raise ValueError("effects must be Effect instances (got %r)" % (e,))
@@ -185,7 +199,10 @@ class ScrewModel:
         self.axis_ = runs[0].meta.get("axis")
         meta_params = heat.ScrewParams.from_meta(runs[0].meta, **{k: v for k, v in START.items() if k not in (runs[0].meta.get("screw") or {})})
         self.density_ = meta_params.density_kg_m3
-        bases = runs[0].sensors_with_role("base")
+        if self.base_sensor and self.base_sensor not in runs[0].temperatures.names:
+            raise ValueError("%s: base sensor %r is not a column of temperatures.csv (columns: %s)"
+                             % (runs[0].path or runs[0].name, self.base_sensor, ", ".join(runs[0].temperatures.names)))
+        bases = [self.base_sensor] if self.base_sensor else runs[0].sensors_with_role("base")
         self.base_sensor_ = next((b for b in bases if b in runs[0].temperatures.names), None) if self.ambient else None
         if self.base_sensor_ is not None:
             missing = [r.path or r.name for r in runs if self.base_sensor_ not in r.temperatures.names]
@@ -315,7 +332,7 @@ class ScrewModel:
         E = heat.thermal_error_um(ctx.edges_mm, R[:, None, :], P[None, :], self.geometry_.fixed_end_mm, self.params_.alpha_per_K)
         if self.base_sensor_ is not None:
             tb = np.interp(t, run.temperatures.time_s, run.temperatures.column(self.base_sensor_))
-            E = E + 1e3 * self.params_.alpha_per_K * (tb - self.base_ref_C_)[:, None] * P[None, :]
+            E = E + 1e3 * self.params_.alpha_per_K * (tb - self._base_ref(run))[:, None] * P[None, :]
         return t, E + self.geometric_um(P)[None, :]
 
     # ------------------------------------------------------------ document
@@ -332,6 +349,7 @@ class ScrewModel:
             "effects": [{"name": e.name, "settings": e.to_document()} for e in self.effects],
             "base_sensor": self.base_sensor_,
             "base_ref_C": self.base_ref_C_,
+            "base_ref": self.base_ref,
             "nut_sensor": self.nut_sensor_,
             "reduced": self.reduced_,
         }
@@ -355,7 +373,7 @@ class ScrewModel:
         try:
             effects = [EFFECTS[e["name"]].from_document(e.get("settings") or {}) for e in th.get("effects", [])]
             m = cls(segments=int(th["segments"]), dt_s=float(th["dt_s"]), effects=effects, channel=doc.get("channel"),
-                    ambient=th.get("base_sensor") is not None)
+                    ambient=th.get("base_sensor") is not None, base_ref=th.get("base_ref", "fixed"))
             geo = th["geometry"]
             m.geometry_ = heat.ScrewGeometry(float(geo["length_mm"]), float(geo["diameter_mm"]), float(geo.get("fixed_end_mm", 0.0)),
                                              int(th["segments"]), float(geo.get("bore_mm", 0.0)))

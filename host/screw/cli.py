@@ -1,0 +1,103 @@
+"""``tcomp fit --model screw``: option parsing, fitting, the printed/JSON report.
+
+Options (``--option KEY=VALUE``, repeatable): segments, dt_s, free (comma list of
+q,h,lambda,c,alpha), geometric_degree (0..4 or auto), effects (comma list of
+host/screw/effects.py names), nut_weight, reduced_segments, reduced_dt_s,
+feed_max_mm_min, ambient (on/off), base_ref (run_start/fixed), max_nfev.  ``--sensors NAME`` picks the base
+sensor of the E_e term; ``--channel`` the errors.csv channel.
+"""
+import json
+import warnings
+
+from host.screw.effects import make_effect
+from host.screw.identify import IdentifiabilityWarning
+
+OPTIONS = {
+    "segments": int, "dt_s": float, "free": str, "geometric_degree": str, "effects": str, "nut_weight": float,
+    "reduced_segments": int, "reduced_dt_s": float, "feed_max_mm_min": float, "ambient": str, "max_nfev": int, "base_ref": str,
+}
+
+
+def parse_options(items):
+    """['KEY=VALUE', ...] -> ScrewModel keyword arguments; ValueError naming the bad item."""
+    kw = {}
+    for item in items or []:
+        key, sep, value = item.partition("=")
+        key = key.strip()
+        if not sep or key not in OPTIONS:
+            raise ValueError("--option %r: expected KEY=VALUE with KEY one of %s" % (item, ", ".join(OPTIONS)))
+        try:
+            v = OPTIONS[key](value.strip())
+        except ValueError:
+            raise ValueError("--option %s: %r is not a valid %s" % (key, value, OPTIONS[key].__name__))
+        if key == "geometric_degree" and v != "auto":
+            try:
+                v = int(v)
+            except ValueError:
+                raise ValueError("--option geometric_degree: expected 0..4 or auto, got %r" % value)
+        if key == "ambient":
+            if v not in ("on", "off"):
+                raise ValueError("--option ambient: expected on or off, got %r" % value)
+            v = v == "on"
+        if key == "effects":
+            v = [make_effect(n.strip()) for n in v.split(",") if n.strip()]
+        kw[key] = v
+    return kw
+
+
+def format_report(model):
+    st = model.statistics_
+    lines = ["screw model: %d segments, dt %g s, geometric degree %d" % (model.geometry_.segments, model.dt_s, model.geometric_degree_)]
+    for name, p in st["parameters"].items():
+        if p.get("fixed"):
+            lines.append("  %-22s %12.5g %-10s (fixed)" % (name, p["value"], p["unit"]))
+        else:
+            lines.append("  %-22s %12.5g %-10s ± %.3g (%.2f %%)" % (name, p["value"], p["unit"], p["std"], 100 * p["rel_std"]))
+    for r in st["runs"]:
+        lines.append("  run %s: %d rows, RMSE %.3f um, max |residual| %.3f um, nut rise RMSE %.2f K"
+                     % (r["run"], r["rows"], r["rmse_um"], r["max_abs_residual_um"], r["nut_rise_rmse_K"]))
+    red = model.reduced_
+    for run, e in red["reduction_error_um"].items():
+        lines.append("  reduced (%d segments, dt %g s) vs full on %s: RMS %.3f um, max %.3f um"
+                     % (red["segments"], red["dt_s"], run, e["rms_um"], e["max_um"]))
+    lines.append("  reduced state bound %.2f K at feed %g mm/min" % (red["state_max_K"], red["feed_max_mm_min"]))
+    for w in st["warnings"]:
+        lines.append("  WARNING: " + w)
+    return "\n".join(lines)
+
+
+def fit_command(args):
+    from host.cli import UserError
+    from host.models import save_model
+    from host.runs import RunFormatError, load_run
+    from host.screw.model import ScrewModel
+
+    try:
+        kw = parse_options(args.option)
+    except ValueError as exc:
+        raise UserError(str(exc))
+    if getattr(args, "direct", False) or getattr(args, "no_intercept", False):
+        raise UserError("--direct/--no-intercept apply to the empirical models, not to --model screw")
+    if args.sensors:
+        names = [s.strip() for s in args.sensors.split(",") if s.strip()]
+        if len(names) != 1:
+            raise UserError("--model screw takes one --sensors name: the base sensor of the ambient term (got %s)" % args.sensors)
+        kw["base_sensor"] = names[0]
+    try:
+        runs = [load_run(f) for f in args.runs]
+    except RunFormatError as exc:
+        raise UserError(str(exc))
+    model = ScrewModel(channel=args.channel, **kw)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IdentifiabilityWarning)  # they are in the report
+            model.fit(runs)
+    except ValueError as exc:
+        raise UserError(str(exc))
+    doc = save_model(model.to_document(), args.out)
+    print(format_report(model))
+    print("wrote %s" % args.out)
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as fh:
+            json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": model.reduced_["reduction_error_um"]}, fh, indent=2)
+    return 0
