@@ -1,0 +1,72 @@
+"""tcomp compare RUN... --json OUT [--plots DIR]"""
+HELP = "fit MLR, PCR, stepwise and the sensor selectors on one run, predict the others, with a robustness check"
+
+
+def add_arguments(p):
+    p.add_argument("runs", nargs="+", metavar="RUN", help="run folders (fit on one, predict the others), or one run with --split-h")
+    p.add_argument("--json", required=True, metavar="OUT", help="write every result (metrics, sensors, statistics) as JSON")
+    p.add_argument("--plots", metavar="DIR", help="write PNG plots (curves, residuals, scree, selections, summary)")
+    p.add_argument("--channel", help="errors.csv channel to model (multi-channel runs)")
+    p.add_argument("--direct", action="store_true", help="direct model of the error at a fixed point (default: slope of each sweep)")
+    p.add_argument("--sensors", help="comma-separated candidate sensors (default: all common to the runs)")
+    p.add_argument("--methods", default=",".join(("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset")),
+                   help="comma list of methods (default: all)")
+    p.add_argument("--train", default="0", help="index of the training run, a comma list, or 'all' (each in turn); default 0")
+    p.add_argument("--split-h", type=float, metavar="HOURS", help="one run: fit on t < HOURS, predict t >= HOURS")
+    p.add_argument("--noise-C", type=float, default=0.2, help="robustness: temperature noise, standard deviation (default 0.2 °C)")
+    p.add_argument("--offset-C", type=float, default=0.5, help="robustness: per-sensor offset up to ± this after the start (default 0.5 °C)")
+    p.add_argument("--no-intercept", action="store_true", help="fit without intercept")
+
+
+def run(args):
+    import json
+
+    from host.cli import UserError
+    from host.empirical import EmpiricalDataError
+    from host.empirical.compare import METHODS, case_split, cases_runs, findings, public, run_case, table, write_plots
+    from host.runs import RunFormatError, load_runs
+
+    methods = [m.strip() for m in args.methods.split(",") if m.strip()]
+    bad = [m for m in methods if m not in METHODS]
+    if bad:
+        raise UserError("--methods: unknown %s (known: %s)" % (", ".join(bad), ", ".join(METHODS)))
+    try:
+        runs = load_runs(args.runs)
+    except RunFormatError as exc:
+        raise UserError(str(exc))
+    target = "direct" if args.direct else "slope"
+    sensors = [s.strip() for s in args.sensors.split(",") if s.strip()] if args.sensors else None
+    try:
+        if args.split_h is not None:
+            if len(runs) != 1:
+                raise UserError("--split-h takes exactly one run (got %d)" % len(runs))
+            cases = [case_split(runs[0], args.split_h * 3600.0, target, args.channel, sensors)]
+        else:
+            if args.train == "all":
+                idx = list(range(len(runs)))
+            else:
+                try:
+                    idx = [int(v) for v in args.train.split(",")]
+                except ValueError:
+                    raise UserError("--train: expected an index, a comma list or 'all', got %r" % args.train)
+            cases = cases_runs(runs, idx)
+        results = []
+        for case in cases:
+            results += run_case(case, methods, target, args.channel, sensors, not args.no_intercept,
+                                robustness={"noise_C": args.noise_C, "offset_C": args.offset_C}, keep_models=bool(args.plots))
+    except EmpiricalDataError as exc:
+        raise UserError(str(exc))
+    print(table(results))
+    notes = findings(results)
+    for line in notes:
+        print(line)
+    doc = {"target": target, "channel": args.channel, "runs": [r.path for r in runs], "methods": methods,
+           "robustness": {"noise_C": args.noise_C, "offset_C": args.offset_C}, "results": public(results), "findings": notes}
+    if args.plots:
+        doc["plots"] = write_plots(results, cases, args.plots, target, args.channel)
+        print("wrote %d plots to %s" % (len(doc["plots"]), args.plots))
+    with open(args.json, "w", encoding="utf-8") as fh:
+        json.dump(doc, fh, indent=2, default=float)
+        fh.write("\n")
+    print("wrote %s" % args.json)
+    return 0
