@@ -25,3 +25,9 @@ def latent_arrays(seed=0, n_runs=3, n=40, p=6, noise=0.02):
 @pytest.fixture
 def arrays3():
     return latent_arrays(seed=11, n_runs=3, n=40, p=6)
+
+
+@pytest.fixture(scope="session")
+def make_arrays():
+    """The generator itself, for hypothesis tests (function-scoped fixtures do not mix with @given)."""
+    return latent_arrays

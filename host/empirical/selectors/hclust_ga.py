@@ -141,9 +141,7 @@ def select_hclust_ga(arrays, context=None, **params):
     test_names = [r for i, r in enumerate(runs) if i != tr]
     Xtr, ytr, names = train
     n, p = Xtr.shape
-    k_max = min(prm["max_clusters"], p, n - 2)
-    if k_max < 1:
-        raise SelectionError("hclust-ga: training run %s has %d samples; at least 3 are needed to fit one sensor and an intercept with a residual" % (runs[tr], n))
+    k_max = min(prm["max_clusters"], p, n - 2)  # >= 1: check_arrays guarantees n >= 3
     prob = RobustnessProblem(train, tests, float(prm["disturbance_C"]), prm["disturbance"], prm["seed"], prm["max_combinations"])
     k_bits = max(1, math.ceil(math.log2(k_max))) if k_max > 1 else 1
 
