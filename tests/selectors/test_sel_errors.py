@@ -42,9 +42,11 @@ def test_too_few_samples():
         select("maxtree", (X[:2], y[:2], names))
     with pytest.raises(SelectionError, match="run 1: 2 samples"):
         select("hclust-ga", [(X[:2], y[:2], names), (X, y, names)])
-    # 3 samples: maxtree has no partition with a residual degree of freedom and a significant F
-    with pytest.raises(SelectionError, match="no partition"):
-        select("maxtree", (X[:3], y[:3], names))
+    # 4 samples of an unrelated target: only 1-2 sensor partitions leave residual degrees of
+    # freedom, and none is significant
+    noise = np.array([0.3, -1.2, 0.8, 0.1])
+    with pytest.raises(SelectionError, match="no partition's representatives give a regression significant"):
+        select("maxtree", (X[:4], noise, names))
 
 
 def test_too_few_runs_and_mismatched_sensors():
