@@ -49,11 +49,12 @@ class ScrewModel:
     first sensor with role 'base'); base_ref: reference of the E_e term, "run_start"
     (each run's first base reading: every run starts in equilibrium and its cold
     geometric error is the one measured then) or "fixed" (``base_ref_C_``, the first
-    training run's start, as a firmware with a fixed calibration temperature does)."""
+    training run's start, as a firmware with a fixed calibration temperature does);
+    fit_window: (t_lo, t_hi) in s, fit only on error rows in that window (None = all)."""
 
     def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient=True,
                  nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200, base_sensor=None,
-                 base_ref="run_start"):
+                 base_ref="run_start", fit_window=None):
         self.segments = segments
         self.dt_s = dt_s
         self.free = free
@@ -68,6 +69,7 @@ class ScrewModel:
         self.max_nfev = max_nfev
         self.base_sensor = base_sensor
         self.base_ref = base_ref
+        self.fit_window = fit_window
 
     # ------------------------------------------------------------ parameters
 
@@ -144,6 +146,19 @@ class ScrewModel:
     # ------------------------------------------------------------ fitting
 
     def _rows(self, run):
+        rows = self._channel_rows(run)
+        if self.fit_window is None:
+            return rows
+        lo, hi = self.fit_window
+        t = run.errors.time_s
+        keep = (t >= (-np.inf if lo is None else lo)) & (t <= (np.inf if hi is None else hi))
+        if rows is not None:
+            keep &= np.isin(np.arange(t.size), rows)
+        if not keep.any():
+            raise ValueError("%s: no error rows in the fit window %s..%s s" % (run.path or run.name, lo, hi))
+        return np.flatnonzero(keep)
+
+    def _channel_rows(self, run):
         e = run.errors
         if e.channel is None:
             if self.channel:
@@ -296,7 +311,7 @@ class ScrewModel:
         self.statistics_ = stats
         self.training_ = {"runs": [c.run_name for c in ctxs], "free": free, "segments": self.segments, "dt_s": self.dt_s,
                           "geometric_degree": self.geometric_degree, "nut_weight": self.nut_weight, "channel": self.channel,
-                          "effects": [e.name for e in self.effects]}
+                          "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window}
         feeds = np.concatenate([r.motion.feed_mm_min for r in runs])
         P_all = np.concatenate([P] + [np.r_[r.motion.from_mm, r.motion.to_mm] for r in runs])
         self.envelope_ = {"position_mm": [float(P_all.min()), float(P_all.max())],
