@@ -95,14 +95,14 @@ def test_structure_has_collinear_candidates_with_every_role():
     assert t63(base) > 2 * t63(nut)
 
 
-def test_simulating_a_multi_hour_run_is_fast():
-    import time
-
-    t0 = time.perf_counter()
+def test_day24h_covers_a_day_with_the_air_falling_into_the_evening():
+    # speed is measured by tools/bench_sim.py, not asserted here (shared CI machines)
     sim = simulate("day24h", ["bearing_heat", "moving_convection", "sensor_lag"])
-    elapsed = time.perf_counter() - t0
-    assert sim.t_s[-1] == 24 * 3600
-    assert elapsed < 2.0, elapsed
+    assert sim.t_s[-1] == 24 * 3600 and len(sim.sweep_s) == 24 * 4 + 1
+    hour = 6.0 + sim.t_s / 3600.0
+    peak = hour[np.argmax(sim.air_C)]
+    assert 13.0 < peak < 17.0
+    assert sim.air_C[hour >= 22.0].max() < sim.air_C.max() - 1.0
 
 
 def test_bad_parameters_are_named():
