@@ -72,3 +72,15 @@ def slope_run():
 @pytest.fixture
 def direct_run():
     return make_direct_run()
+
+
+@pytest.fixture
+def make_slope():
+    """Factory: make_slope(**kw) -> synthetic slope run (see make_slope_run)."""
+    return make_slope_run
+
+
+@pytest.fixture
+def make_direct():
+    """Factory: make_direct(**kw) -> synthetic multi-channel fixed-point run (see make_direct_run)."""
+    return make_direct_run

@@ -1,0 +1,179 @@
+"""Targets, geometric polynomial, model documents, evaluation and the fit/predict CLI."""
+import json
+
+import numpy as np
+import pytest
+
+from host.empirical import EmpiricalDataError
+from host.empirical.evaluate import disturb_run, evaluate, metrics
+from host.empirical.fitting import fit_model
+from host.empirical.geometric import GeometricPolynomial, fit_geometric
+from host.empirical.model import LinearDirectModel, PolySlopeModel
+from host.empirical.targets import direct_targets, sweep_slopes, temperature_features, training_arrays
+from host.models import load_model, save_model
+from host.runs import load_run, write_run
+
+
+def test_sweep_slopes_recover_the_thermal_slope(make_slope):
+    run = make_slope(coef=(0.004, -0.002), geo=(1.0, 0.01, -2e-5))
+    s = sweep_slopes(run)
+    assert s.time_s.size == 12 and np.all(np.diff(s.time_s) > 0)
+    rises = temperature_features(run, ["T1", "T2"], s.time_s)
+    np.testing.assert_allclose(s.target, rises @ [0.004, -0.002], atol=1e-12)
+    assert s.target[0] == 0.0
+
+
+def test_bidirectional_sweeps_have_a_cold_slope_per_direction(make_slope):
+    run = make_slope(bidirectional=True)
+    s = sweep_slopes(run)
+    assert set(s.k0_um_per_mm) == {1, -1}
+    assert np.sum(s.target == 0) == 2  # each direction's cold sweep
+    X, y, names = training_arrays([run])[0]
+    true = X[:, :2] @ [0.004, -0.002]
+    back = s.direction == -1
+    np.testing.assert_allclose(y[~back], true[~back], atol=1e-12)
+    # the backward cold sweep is 60 s later: its targets are relative to that sweep's slope
+    np.testing.assert_allclose(y[back], true[back] - true[back][0], atol=1e-12)
+
+
+def test_direct_targets_and_channel_errors(make_slope, make_direct):
+    run = make_direct()
+    t, y = direct_targets(run, "ch2")
+    assert t.size == 600 and y.size == 600
+    with pytest.raises(EmpiricalDataError, match="2 channels"):
+        direct_targets(run)
+    with pytest.raises(EmpiricalDataError, match="'ch9' is not in errors.csv"):
+        direct_targets(run, "ch9")
+    with pytest.raises(EmpiricalDataError, match="positions"):
+        direct_targets(make_slope())
+    with pytest.raises(EmpiricalDataError, match="--direct"):
+        sweep_slopes(run, "ch1")
+
+
+def test_temperature_features_rises_and_bounds(make_direct):
+    run = make_direct()
+    X = temperature_features(run, ["t1", "t3"], [0.0, 60.0, 90.0])
+    assert np.all(X[0] == 0)
+    raw = temperature_features(run, ["t1"], [90.0], rise=False)
+    assert raw[0, 0] == pytest.approx(np.mean(run.temperatures.values[1:3, 0]))
+    with pytest.raises(EmpiricalDataError, match="outside the temperature log"):
+        temperature_features(run, ["t1"], [1e9])
+    with pytest.raises(EmpiricalDataError, match="not in temperatures.csv"):
+        temperature_features(run, ["zz"], [0.0])
+
+
+def test_training_arrays_window_and_unpacking(make_direct):
+    run = make_direct()
+    arr = training_arrays([run], "direct", "ch1", window=(3600.0, 7200.0))[0]
+    X, y, names = arr
+    assert arr.time_s.min() >= 3600 and arr.time_s.max() < 7200 and X.shape == (60, 5) and names == ["t1", "t2", "t3", "t4", "t5"]
+
+
+def test_geometric_degree_is_chosen():
+    rng = np.random.default_rng(1)
+    P = np.tile(np.linspace(0, 600, 13), 3)
+    e = 2.0 + 0.02 * P - 5e-5 * P**2 + rng.normal(0, 0.05, P.size)
+    g = GeometricPolynomial().fit(P, e)
+    assert g.degree_ == 2
+    np.testing.assert_allclose(g.coef_, [2.0, 0.02, -5e-5], rtol=0.05, atol=0.05)
+    assert [s["degree"] for s in g.scores_] == [1, 2, 3, 4, 5]
+    assert GeometricPolynomial(criterion="aic").fit(P, e).degree_ == 2
+    with pytest.raises(EmpiricalDataError, match="distinct positions"):
+        GeometricPolynomial().fit([0, 1, 2], [0, 1, 2])
+
+
+def test_geometric_from_cold_sweeps_averages_directions(make_slope):
+    run = make_slope(bidirectional=True, geo=(1.0, 0.01, -2e-5))
+    g = fit_geometric([run])
+    # backward sweep carries +1.5 um reversal offset: the average is +0.75
+    assert g.coef_[0] == pytest.approx(1.75, abs=1e-6)
+
+
+@pytest.mark.parametrize("method", ["mlr", "pcr", "stepwise"])
+def test_poly_slope_model_fits_predicts_and_round_trips(tmp_path, method, make_slope):
+    opts = {"f_enter": 4.0, "f_remove": 2.0} if method == "stepwise" else {}
+    train = make_slope(seed=0, noise_um=0.0)
+    model = fit_model([train], method, **opts)
+    assert isinstance(model, PolySlopeModel)
+    test = make_slope(seed=5)
+    pred = model.predict(test)
+    assert pred.shape == (len(test.errors),) and np.all(np.isfinite(pred))
+    doc = save_model(model.to_document(), str(tmp_path / "m.json"))
+    again = load_model(str(tmp_path / "m.json"))
+    np.testing.assert_allclose(again.predict(test), pred)
+    assert doc["kind"] == "poly_slope" and doc["geometric"]["degree"] >= 1
+    assert doc["envelope"]["position_mm"] == [0.0, 500.0] and set(doc["envelope"]["temperature_C"]) == set(model.sensors)
+    if method == "mlr":
+        # exact data: the slope model reproduces the measured thermal error
+        assert evaluate(model, test)["rmse_um"] < 0.05
+
+
+def test_linear_direct_model_channels_nan_and_no_intercept(tmp_path, make_direct):
+    run = make_direct(intercept=0.0)
+    model = fit_model([run], "mlr", target="direct", channel="ch1", fit_intercept=False, sensors=["t1", "t2"])
+    assert isinstance(model, LinearDirectModel) and model.intercept == 0.0
+    np.testing.assert_allclose(model.coefficients, [-3.0, 1.5], atol=1e-9)
+    pred = model.predict(run)
+    ch1 = run.errors.channel == "ch1"
+    assert np.all(np.isnan(pred[~ch1])) and np.all(np.isfinite(pred[ch1]))
+    np.testing.assert_allclose(pred[ch1], run.errors.error_um[ch1], atol=1e-9)
+    doc = model.to_document()
+    assert doc["geometric"] is None and doc["thermal"]["reference"] == "run_start"
+    back = LinearDirectModel.from_document(json.loads(json.dumps(doc)))
+    np.testing.assert_allclose(back.predict(run), pred, equal_nan=True)
+
+
+def test_fixed_reference_uses_reference_C(make_direct):
+    run = make_direct()
+    m = fit_model([run], "mlr", target="direct", channel="ch1", reference="fixed")
+    shifted = disturb_run(run)  # no disturbance: same temperatures
+    np.testing.assert_allclose(m.predict(shifted), m.predict(run), equal_nan=True)
+    assert m.to_document()["thermal"]["reference"] == "fixed"
+
+
+def test_metrics_definition():
+    m = metrics([3.0, -4.0, 0.0], [1.0, -4.0, 1.0])
+    assert m["rmse_um"] == pytest.approx(np.sqrt(5 / 3))
+    assert m["max_residual_um"] == 2.0 and m["min_residual_um"] == -1.0
+    assert m["accuracy_pct"] == pytest.approx(100 * (1 - np.sqrt(5 / 3) / np.sqrt(25 / 3)))
+
+
+def test_disturb_run_keeps_the_start_sample(make_direct):
+    run = make_direct()
+    d = disturb_run(run, noise_C=0.3, offset_C=0.5, seed=1)
+    np.testing.assert_array_equal(d.temperatures.values[0], run.temperatures.values[0])
+    diff = d.temperatures.values[1:] - run.temperatures.values[1:]
+    assert 0.2 < diff.std() < 0.6
+    assert run.temperatures.values is not d.temperatures.values
+
+
+def test_fit_and_predict_cli(tmp_path, capsys, make_slope):
+    from host.cli import main
+
+    folder = write_run(make_slope(), str(tmp_path / "r1"))
+    other = write_run(make_slope(seed=3), str(tmp_path / "r2"))
+    out = str(tmp_path / "m.json")
+    assert main(["fit", "--model", "pcr", folder, other, "--out", out, "--option", "variance_threshold=0.9", "--json", str(tmp_path / "f.json")]) == 0
+    doc = json.load(open(out))
+    assert doc["method"] == "pcr" and doc["statistics"]["variance_threshold"] == 0.9
+    assert main(["predict", out, other, "--out", str(tmp_path / "p.csv")]) == 0
+    rows = open(tmp_path / "p.csv").read().splitlines()
+    assert rows[0] == "time_s,position_mm,predicted_um" and len(rows) == len(load_run(other).errors) + 1
+    assert main(["fit", "--model", "mlr", folder, "--out", out, "--option", "f_enter=3"]) == 2
+    assert "applies to --model stepwise" in capsys.readouterr().err
+    assert main(["fit", "--model", "mlr", folder, "--out", out, "--sensors", "T1,T9"]) == 2
+    assert "T9" in capsys.readouterr().err
+
+
+def test_fit_cli_direct_on_multichannel_run(tmp_path, capsys, make_direct):
+    from host.cli import main
+
+    run = make_direct()
+    run.meta["stroke_mm"] = None
+    folder = write_run(run, str(tmp_path / "d"))
+    out = str(tmp_path / "d.json")
+    assert main(["fit", "--model", "stepwise", "--direct", "--channel", "ch2", folder, "--out", out]) == 0
+    doc = json.load(open(out))
+    assert doc["kind"] == "linear_direct" and doc["channel"] == "ch2" and sorted(doc["sensors"]) == ["t1", "t2"]
+    assert main(["fit", "--model", "mlr", folder, "--out", out]) == 2
+    assert "channels" in capsys.readouterr().err
