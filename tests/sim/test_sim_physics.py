@@ -118,3 +118,15 @@ def test_bad_parameters_are_named():
         simulate("idle", seed=-1)
     with pytest.raises(ValueError, match="phase 1.*outside the stroke"):
         simulate(Protocol("bad", "", (Phase(10, 8000, 0, 900),)))
+
+
+def test_energy_balance_of_the_screw():
+    # heat put in = heat stored + heat convected to the air (trapezoid over each 10 s step)
+    sim = simulate("mixed", {"bearing_heat": 5.0, "moving_convection": 1.0, "speed_dependent_heat": 0.6}, noise_um=0.0)
+    p, dt = sim.params, sim.params.dt_s
+    rise = sim.screw_C - sim.air_C[:, None]
+    heat_in = np.sum(sim.power_W["screw"]) * dt
+    stored = p.segment_heat_capacity_J_K * rise[-1].sum()
+    lost = np.sum(sim.conv_mult * p.convection_W_K * dt * 0.5 * (rise[:-1] + rise[1:]).sum(axis=1))
+    assert heat_in > 1e4
+    assert abs(heat_in - stored - lost) < 1e-4 * heat_in  # measured 2e-6
