@@ -10,7 +10,7 @@ import numpy as np
 from host import runs as _runs
 from host.screw import heat as _heat
 from host.sim.ambient import ambient_C
-from host.sim.axis import make_params
+from host.sim.axis import AxisParams, make_params
 from host.sim.effects import resolve_effects
 from host.sim.protocols import PROTOCOLS, Protocol, resolve_protocols, schedule
 from host.sim.structure import NODES, lagged, node_temperatures
@@ -25,7 +25,7 @@ class Simulation:
     """Everything the twin computed for one run (true values, before the run-folder rounding)."""
 
     protocol: Protocol
-    params: object
+    params: AxisParams
     effects: dict
     seed: int
     noise_um: float
