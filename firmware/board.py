@@ -43,7 +43,8 @@ container for them):
           "frame_ms": 1000,                    # period of $TC offset frames (stream mode)
           "watchdog_ms": 2000,                 # hardware watchdog timeout (the board creates the WDT)
           "link_timeout_ms": 0,                # no valid controller traffic this long: status LINK (0: off)
-          "reference_um": 0,                   # reference position of the (offset, slope) pair
+          "reference_um": None,                # reference position of the (offset, slope) pair
+                                               #   (None: the table's; the controller may set it)
           "table_dir": "/tables",              # holds slot files table_a.bin, table_b.bin and 'active'
         }
 
@@ -142,7 +143,7 @@ DEFAULTS = {
     "frame_ms": 1000,
     "watchdog_ms": 2000,
     "link_timeout_ms": 0,
-    "reference_um": 0,
+    "reference_um": None,
     "table_dir": "tables",
 }
 CHANNEL_DEFAULTS = {
@@ -255,7 +256,8 @@ def load_config(d):
     cfg.frame_ms = _int("frame_ms", get("frame_ms"), 0, 3600000)
     cfg.watchdog_ms = _int("watchdog_ms", get("watchdog_ms"), 0, 8388)
     cfg.link_timeout_ms = _int("link_timeout_ms", get("link_timeout_ms"), 0, 3600000)
-    cfg.reference_um = _int("reference_um", get("reference_um"), -10000000, 10000000)
+    ref = get("reference_um")
+    cfg.reference_um = None if ref is None else _int("reference_um", ref, -10000000, 10000000)
     td = get("table_dir")
     if not isinstance(td, str) or not td:
         raise ValueError("config table_dir: expected a directory path")

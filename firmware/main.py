@@ -31,5 +31,5 @@ def run(argv):
     app.main(mod.make_board())
 
 
-if __name__ == "__main__" or sys.implementation.name == "micropython":
+if __name__ == "__main__":
     run(getattr(sys, "argv", []))

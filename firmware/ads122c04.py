@@ -1,0 +1,221 @@
+"""ADS122C04 24-bit delta-sigma ADC (I2C) as a ratiometric Pt100 front end.
+
+Names follow the TI datasheet (SBAS751). The chip's two matched excitation
+current sources (IDAC1, IDAC2) drive the RTD and the return current flows
+through the reference resistor between REFP0 and REFN0, so the conversion
+result is the ratio R_RTD / R_REF independent of the current's accuracy and
+drift. Wiring (docs/firmware.md):
+
+- 3-wire: IDAC1 on AIN0 (RTD lead 1), IDAC2 on AIN1 (lead 2), input AIN0-AIN1,
+  lead 3 to REFP0. The two lead drops cancel; V_REF carries both currents, so
+  R_RTD = 2 * R_REF * code / (gain * 2**23).
+- 2-wire and 4-wire: IDAC1 only. 2-wire: IDAC1 on AIN0, input AIN0-AIN1;
+  4-wire: IDAC1 on AIN3 (force), input AIN0-AIN1 (sense);
+  R_RTD = R_REF * code / (gain * 2**23).
+
+Continuous conversion at 20 SPS in normal mode, which the datasheet gives
+simultaneous 50 Hz and 60 Hz rejection, so ``filter_hz`` needs no register.
+
+The bus is a ``machine.I2C`` (``writeto``, ``readfrom_mem_into``,
+``writeto_mem``), created by the board. The hot path allocates nothing.
+"""
+
+try:
+    from micropython import const
+except ImportError:  # CPython
+    def const(x):
+        return x
+
+# commands
+CMD_RESET = const(0x06)
+CMD_START_SYNC = const(0x08)
+CMD_POWERDOWN = const(0x02)
+CMD_RDATA = const(0x10)
+CMD_RREG = const(0x20)  # | reg << 2
+CMD_WREG = const(0x40)  # | reg << 2
+
+# configuration register 0
+REG0_MUX_SHIFT = const(4)  # MUX[3:0]
+MUX_AIN0_AIN1 = const(0x0)
+MUX_SHORTED = const(0xE)  # (AINp, AINn) shorted to (AVDD + AVSS) / 2: offset check
+REG0_GAIN_SHIFT = const(1)  # GAIN[2:0]: gain = 2**GAIN
+REG0_PGA_BYPASS = const(0x01)
+# configuration register 1
+REG1_DR_SHIFT = const(5)  # DR[2:0]: 000 = 20 SPS normal mode
+REG1_MODE_TURBO = const(0x10)
+REG1_CM_CONTINUOUS = const(0x08)
+REG1_VREF_SHIFT = const(1)  # VREF[1:0]
+VREF_INTERNAL = const(0)
+VREF_EXTERNAL = const(1)  # REFP0 / REFN0
+REG1_TS = const(0x01)
+# configuration register 2
+REG2_DRDY = const(0x80)
+REG2_DCNT = const(0x40)
+REG2_CRC_SHIFT = const(4)
+REG2_BCS = const(0x08)  # burn-out current sources
+REG2_IDAC_MASK = const(0x07)
+# configuration register 3
+REG3_I1MUX_SHIFT = const(5)
+REG3_I2MUX_SHIFT = const(2)
+IMUX_OFF = const(0)
+IMUX_AIN0 = const(1)
+IMUX_AIN1 = const(2)
+IMUX_AIN2 = const(3)
+IMUX_AIN3 = const(4)
+
+IDAC_UA = (0, 10, 50, 100, 250, 500, 1000, 1500)  # IDAC[2:0] code -> uA
+_MAX_RATIO_R = const(400000)  # mohm: Pt100 at +850 degC is 390.48 ohm
+
+
+class ADS122C04:
+    """One ADS122C04 measuring one Pt100 ratiometrically (see module docstring).
+
+    ``address`` is the 7-bit I2C address (0x40..0x4F by A0/A1 strapping),
+    ``rref_mohm`` the reference resistor in milliohm, ``idac_ua`` one of
+    10, 50, 100, 250, 500, 1000, 1500. The PGA gain is the largest that keeps a
+    Pt100 at +850 degC below 90 % of full scale. The constructor resets the
+    chip, writes and verifies the four configuration registers and starts
+    continuous conversion.
+    """
+
+    def __init__(self, i2c, address=0x40, rref_mohm=1620000, wires=3, idac_ua=250, filter_hz=50):
+        if not 0x40 <= address <= 0x4F:
+            raise ValueError("ADS122C04 address 0x%02x outside 0x40..0x4F" % address)
+        if wires not in (2, 3, 4):
+            raise ValueError("ADS122C04 wires must be 2, 3 or 4, got %r" % (wires,))
+        if idac_ua not in IDAC_UA[1:]:
+            raise ValueError("ADS122C04 idac_ua %r is not one of 10, 50, 100, 250, 500, 1000, 1500" % (idac_ua,))
+        if filter_hz not in (50, 60):
+            raise ValueError("ADS122C04 filter_hz must be 50 or 60, got %r" % (filter_hz,))
+        if not 100000 <= rref_mohm <= 10000000:
+            raise ValueError("ADS122C04 rref_mohm %r outside 100000..10000000" % (rref_mohm,))
+        self._i2c = i2c
+        self.address = address
+        self._b1 = bytearray(1)
+        self._b3 = bytearray(3)
+        m = 2 if wires == 3 else 1
+        gain = 1
+        while gain < 128 and gain * 2 * _MAX_RATIO_R * 10 < 9 * m * rref_mohm:
+            gain *= 2
+        self.gain = gain
+        # R/R0*1e7 = code * k / 2**23 with k = m * rref_mohm * 100 / gain (R0 = 100 ohm)
+        k = m * rref_mohm * 100 // gain
+        if k >= 1 << 29:
+            raise ValueError("ADS122C04 rref_mohm %r too large for the ratio arithmetic" % (rref_mohm,))
+        self._k1 = k >> 12
+        self._k0 = k & 0xFFF
+        g = 0
+        while (1 << g) < gain:
+            g += 1
+        if wires == 3:
+            i1, i2 = IMUX_AIN0, IMUX_AIN1
+        elif wires == 2:
+            i1, i2 = IMUX_AIN0, IMUX_OFF
+        else:
+            i1, i2 = IMUX_AIN3, IMUX_OFF
+        self._config = (
+            (MUX_AIN0_AIN1 << REG0_MUX_SHIFT) | (g << REG0_GAIN_SHIFT),
+            REG1_CM_CONTINUOUS | (VREF_EXTERNAL << REG1_VREF_SHIFT),
+            IDAC_UA.index(idac_ua),
+            (i1 << REG3_I1MUX_SHIFT) | (i2 << REG3_I2MUX_SHIFT),
+        )
+        self.reset()
+        for reg in range(4):
+            self.write_register(reg, self._config[reg])
+        for reg in range(4):
+            got = self.read_register(reg)
+            if reg == 2:
+                got &= ~REG2_DRDY
+            if got != self._config[reg]:
+                raise OSError(5, "ADS122C04 at 0x%02x: register %d reads 0x%02x after writing 0x%02x"
+                              % (address, reg, got, self._config[reg]))
+        self.start()
+
+    # --- commands and registers ------------------------------------------
+    def _command(self, cmd):
+        b = self._b1
+        b[0] = cmd
+        self._i2c.writeto(self.address, b)
+
+    def reset(self):
+        self._command(CMD_RESET)
+
+    def start(self):
+        """START/SYNC: begin (continuous) conversion."""
+        self._command(CMD_START_SYNC)
+
+    def powerdown(self):
+        self._command(CMD_POWERDOWN)
+
+    def read_register(self, reg):
+        self._i2c.readfrom_mem_into(self.address, CMD_RREG | (reg << 2), self._b1)
+        return self._b1[0]
+
+    def write_register(self, reg, value):
+        b = self._b1
+        b[0] = value
+        self._i2c.writeto_mem(self.address, CMD_WREG | (reg << 2), b)
+
+    # --- datasheet-named settings -----------------------------------------
+    @property
+    def mux(self):
+        return self.read_register(0) >> REG0_MUX_SHIFT
+
+    @property
+    def pga_gain(self):
+        return 1 << ((self.read_register(0) >> REG0_GAIN_SHIFT) & 7)
+
+    @property
+    def continuous(self):
+        return bool(self.read_register(1) & REG1_CM_CONTINUOUS)
+
+    @property
+    def vref(self):
+        return (self.read_register(1) >> REG1_VREF_SHIFT) & 3
+
+    @property
+    def idac_ua(self):
+        return IDAC_UA[self.read_register(2) & REG2_IDAC_MASK]
+
+    @property
+    def burnout_current(self):
+        return bool(self.read_register(2) & REG2_BCS)
+
+    @property
+    def i1mux(self):
+        return self.read_register(3) >> REG3_I1MUX_SHIFT
+
+    @property
+    def i2mux(self):
+        return (self.read_register(3) >> REG3_I2MUX_SHIFT) & 7
+
+    # --- hot path ------------------------------------------------------------
+    @property
+    def data_ready(self):
+        """DRDY: a new conversion result is waiting (cleared by reading it)."""
+        return bool(self.read_register(2) & REG2_DRDY)
+
+    def read_data(self):
+        """Latest conversion result, signed 24-bit (RDATA)."""
+        b = self._b3
+        self._i2c.readfrom_mem_into(self.address, CMD_RDATA, b)
+        v = (b[0] << 16) | (b[1] << 8) | b[2]
+        if v & 0x800000:
+            v -= 0x1000000
+        return v
+
+    def ratio(self, code):
+        """R/R0 * 1e7 of a conversion result for a Pt100 (R0 = 100 ohm); 0 if not positive."""
+        if code <= 0:
+            return 0
+        # code * k >> 23 with code and k split in 12-bit pieces (no product >= 2**30)
+        c1 = code >> 12
+        c0 = code & 0xFFF
+        k1 = self._k1
+        k0 = self._k0
+        return ((c1 * k1) << 1) + ((c1 * k0 + c0 * k1 + ((c0 * k0) >> 12)) >> 11)
+
+    def code_of(self, ratio):
+        """Conversion result of an R/R0*1e7 ratio (tests and start-up use)."""
+        k = (self._k1 << 12) | self._k0
+        return (ratio << 23) // k

@@ -1,0 +1,292 @@
+"""The compensator: read sensors, evaluate the table, limit, report. ``main(board)`` runs it.
+
+One cycle (``App.cycle``) reads every channel, converts and checks it
+(firmware.channels), writes the good temperatures into the evaluator
+(firmware.evaluate, a sensor that went bad keeps its last good value: the
+output is held), advances the screw state on the table's fixed time step,
+evaluates the three outputs at the last reported position, passes them
+through the limiter (firmware.safety), services the serial link (stream or
+Modbus) and feeds the watchdog last. Once started, a cycle allocates nothing
+(tests/firmware/test_fw_heaplock.py runs it under ``micropython.heap_lock()``).
+
+Units inside: temperatures milli-degC, positions um, offsets 0.01 um,
+slopes 0.01 um/m (the evaluator's); the links convert for the wire.
+"""
+
+try:
+    from micropython import const
+except ImportError:  # CPython
+    def const(x):
+        return x
+
+from firmware import status as st
+from firmware.board import load_config
+from firmware.channels import Channels
+from firmware.evaluate import Evaluator
+from firmware.safety import Limiter
+from firmware.slots import TableStore
+from firmware.table import TableError, REASON_SENSORS, KIND_SCREW_REDUCED
+
+VERSION = "0.1.0"
+PROTOCOL_VERSION = const(1)
+_MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is dropped
+_POLL_MS = const(5)  # serial polling period while waiting for the next cycle
+
+
+class Restart(Exception):
+    """Raised by a reset command when the board has no hardware reset."""
+
+
+class App:
+    def __init__(self, board):
+        self.board = board
+        cfg = self.cfg = load_config(board.config)
+        clock = self.clock = board.clock
+        now = clock.ticks_ms()
+        self.channels = Channels(cfg, board, now)
+        self.channels.set_thresholds()
+        self.enabled = True
+        self.slew = cfg.slew_um_per_s
+        self.link_timeout_ms = cfg.link_timeout_ms
+        self.pos = 0
+        self.have_pos = False
+        self.last_rx = now
+        self.fault_active = False
+        self.fault_since = now
+        self.last_t = now
+        self.next_step = now
+        self.cycles = 0
+        self.status = 0
+        self.total = 0  # limited outputs, 0.01 um / 0.01 um/m
+        self.ref_out = 0
+        self.slope_out = 0
+        self.raw_ref = 0
+        self.raw_slope = 0
+        self.ev = None
+        self.table = None
+        self.slot = None
+        self.map = []
+        self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
+        self.store = TableStore(cfg.table_dir, self._accept)
+        t, slot = self.store.load()
+        if t is not None:
+            self.use_table(t, slot)
+        if cfg.serial_mode == "modbus":
+            from firmware.modbus import ModbusLink
+            self.link = ModbusLink(self)
+        else:
+            from firmware.protocol import StreamLink
+            self.link = StreamLink(self)
+        self.link.boot()
+
+    # --- table ---------------------------------------------------------------
+    def _accept(self, table):
+        names = self.channels.names
+        for s in table.sensors:
+            if s not in names:
+                raise TableError(REASON_SENSORS, "table sensor %s has no channel on this board" % s)
+
+    def use_table(self, table, slot):
+        """Switch to ``table`` (already verified); the limiter ramps from the current output."""
+        ev = Evaluator(table)
+        names = self.channels.names
+        self.map = [names.index(s) for s in table.sensors]
+        for j in range(len(self.map)):
+            i = self.map[j]
+            if self.channels.have_good[i]:
+                ev.temps[j] = self.channels.temp[i]
+        ref = self.cfg.reference_um
+        if ref is not None:
+            ev.set_reference(ref)
+        ev.update()
+        self.table = table
+        self.slot = slot
+        self.ev = ev
+        self.tmask = 0
+        for i in self.map:
+            self.tmask |= 1 << i
+        self.screw = table.kind_code == KIND_SCREW_REDUCED
+        self.next_step = self.clock.ticks_ms()
+        self._span()
+
+    def _span(self):
+        t = self.table
+        r = self.ev.pos_ref
+        span = t.pos_hi - r if t.pos_hi - r > r - t.pos_lo else r - t.pos_lo
+        self.limiter.configure(self.slew, self.cfg.max_offset_um, span)
+
+    def set_reference(self, pos_um):
+        if self.ev is None:
+            return None
+        self.ev.set_reference(pos_um)
+        self._span()
+        return self.ev.pos_ref
+
+    def set_slew(self, um_per_s):
+        self.slew = um_per_s
+        if self.ev is not None:
+            self._span()
+        else:
+            self.limiter.configure(um_per_s, self.cfg.max_offset_um, 1000)
+
+    # --- inputs from the controller -------------------------------------------
+    def report_position(self, pos_um):
+        self.pos = pos_um
+        self.have_pos = True
+        if self.ev is not None and self.screw:
+            if self.ev.feed:
+                self.ev.clear_feed()
+            self.ev.advance_position(pos_um)
+
+    def set_feed(self, feed_mm_min, lo_um, hi_um):
+        if self.ev is None or not self.screw:
+            return False
+        if feed_mm_min == 0:
+            self.ev.clear_feed()
+        else:
+            self.ev.set_feed(feed_mm_min, lo_um, hi_um)
+        return True
+
+    def link_alive(self, now):
+        self.last_rx = now
+
+    # --- outputs ---------------------------------------------------------------
+    def _dp_mm(self, pos):
+        t = self.table
+        if pos < t.pos_lo:
+            pos = t.pos_lo
+        elif pos > t.pos_hi:
+            pos = t.pos_hi
+        return (pos - self.ev.pos_ref) // 1000
+
+    def total_at(self, pos):
+        """Limited total offset (0.01 um) at ``pos`` without touching the state (queries)."""
+        ev = self.ev
+        lim = self.limiter
+        if ev is None or lim.recovering:
+            return lim.total
+        fl = ev.flags
+        raw = ev.offset_at(pos)
+        ev.flags = fl
+        v = raw + (lim.ref - self.raw_ref) + ((lim.slope - self.raw_slope) * self._dp_mm(pos)) // 1000
+        m = lim.max
+        return m if v > m else (-m if v < -m else v)
+
+    # --- the cycle ---------------------------------------------------------------
+    def cycle(self):
+        clock = self.clock
+        now = clock.ticks_ms()
+        dt = clock.ticks_diff(now, self.last_t)
+        self.last_t = now
+        self.link.poll(now)
+        ch = self.channels
+        s = ch.read_all(now, clock)
+        usable = self.enabled
+        ev = self.ev
+        raw_total = 0
+        raw_ref = 0
+        raw_slope = 0
+        dp = 0
+        if ev is None:
+            s |= st.NO_TABLE
+            usable = False
+        else:
+            needed = 0
+            never = False
+            temps = ev.temps
+            m = self.map
+            for j in range(len(m)):
+                i = m[j]
+                if ch.good[i]:
+                    temps[j] = ch.temp[i]
+                else:
+                    needed = 1
+                    if not ch.have_good[i]:
+                        never = True
+            if needed:
+                if not self.fault_active:
+                    self.fault_active = True
+                    self.fault_since = now
+                if never or clock.ticks_diff(now, self.fault_since) >= self.cfg.hold_ms:
+                    usable = False
+                else:
+                    s |= st.HELD
+            else:
+                self.fault_active = False
+            ev.update()
+            if self.screw:
+                dtm = self.table.dt_ms
+                k = 0
+                while clock.ticks_diff(now, self.next_step) >= 0:
+                    ev.step()
+                    self.next_step += dtm
+                    k += 1
+                    if k >= _MAX_CATCHUP:
+                        self.next_step = now + dtm
+                        break
+            pos = self.pos if self.have_pos else ev.pos_ref
+            raw_total = ev.offset_at(pos)
+            raw_ref = ev.ref_offset()
+            raw_slope = ev.slope()
+            dp = self._dp_mm(pos)
+            if ev.flags:
+                s |= st.CLAMPED
+        self.raw_ref = raw_ref
+        self.raw_slope = raw_slope
+        lim = self.limiter
+        s |= lim.update(raw_ref, raw_slope, raw_total, dp, usable, dt)
+        self.total = lim.total
+        self.ref_out = lim.ref
+        self.slope_out = lim.slope
+        if not usable:
+            s |= st.FALLBACK
+        if not self.enabled:
+            s |= st.DISABLED
+        if not self.have_pos:
+            s |= st.NO_POSITION
+        if self.link_timeout_ms and clock.ticks_diff(now, self.last_rx) >= self.link_timeout_ms:
+            s |= st.LINK_TIMEOUT
+        if self.store.uploading:
+            s |= st.UPLOADING
+        self.status = s
+        self.cycles += 1
+        self.link.after_cycle(now)
+        wdt = self.board.watchdog
+        if wdt is not None:
+            wdt.feed()
+
+    def wait(self, start):
+        """Service the link until ``cycle_ms`` after ``start``."""
+        clock = self.clock
+        period = self.cfg.cycle_ms
+        while True:
+            now = clock.ticks_ms()
+            left = period - clock.ticks_diff(now, start)
+            if left <= 0:
+                return
+            self.link.poll(now)
+            clock.sleep_ms(_POLL_MS if left > _POLL_MS else left)
+
+    def run(self, max_cycles=None):
+        clock = self.clock
+        while max_cycles is None or self.cycles < max_cycles:
+            start = clock.ticks_ms()
+            self.cycle()
+            self.wait(start)
+
+    def reset(self):
+        self.store.abort()
+        r = self.board.reset
+        if r is not None:
+            r()
+        raise Restart()
+
+
+def main(board, max_cycles=None):
+    """Run the compensator on ``board`` (firmware.board) until reset or ``max_cycles``."""
+    while True:
+        try:
+            App(board).run(max_cycles)
+            return
+        except Restart:
+            continue

@@ -1,0 +1,219 @@
+"""Sensor channels: read every front end, convert to milli-degC, exclude implausible readings.
+
+A reading is excluded (and the channel flagged faulty) when the chip reports a
+fault, the bus raises OSError, the temperature is outside the plausible range,
+it changed faster than ``max_rate_mC_per_s`` allows since the last good
+reading ("faster than physics"), the raw code has not changed for
+``stuck_ms``, or (ADS122C04) no new conversion arrived for a while. A faulty
+channel becomes good again after ``RECOVER_READS`` consecutive readings that
+pass every check and agree with each other; a channel whose chip is faulty is
+re-initialised every ``REINIT_MS`` so that a chip that lost power and came back
+is configured again.
+
+``read_all`` is the hot path: no allocation, integers below 2**30.
+"""
+
+try:
+    from micropython import const
+except ImportError:  # CPython
+    def const(x):
+        return x
+
+from firmware import rtd
+
+DRV_MAX31865 = const(1)
+DRV_ADS122C04 = const(2)
+
+# per-channel fault reasons (``Channels.fault``)
+F_CHIP = const(0x01)  # MAX31865 fault bit (details in ``chip_status``)
+F_RANGE = const(0x02)  # outside the plausible range
+F_RATE = const(0x04)  # jump faster than max_rate_mC_per_s
+F_STUCK = const(0x08)  # identical raw code for stuck_ms
+F_BUS = const(0x10)  # bus error (OSError) or chip absent
+F_STALE = const(0x20)  # ADS122C04 delivered no new conversion
+F_NEVER = const(0x40)  # no good reading since start-up
+FAULT_NAMES = ((F_CHIP, "chip"), (F_RANGE, "range"), (F_RATE, "rate"), (F_STUCK, "stuck"),
+               (F_BUS, "bus"), (F_STALE, "stale"), (F_NEVER, "never"))
+
+RECOVER_READS = const(3)
+REINIT_MS = const(1000)
+STALE_MS = const(1000)
+_NOISE_MC = const(200)  # allowance for conversion noise on top of the physical rate
+_RATE_DT_CAP_MS = const(100000)  # beyond this the last good value says nothing
+
+
+def _make_driver(ch, board):
+    bus = board.buses.get(ch.bus)
+    if bus is None:
+        raise ValueError("config channel %s: bus %r is not one of the board's buses %s"
+                         % (ch.name, ch.bus, ", ".join(sorted(board.buses))))
+    if ch.driver == "max31865":
+        from firmware.max31865 import MAX31865
+        return MAX31865(bus, board.pin(ch.cs), ch.rref_mohm, ch.wires, ch.filter_hz)
+    from firmware.ads122c04 import ADS122C04
+    return ADS122C04(bus, ch.address, ch.rref_mohm, ch.wires, ch.idac_ua, ch.filter_hz)
+
+
+class Channels:
+    """All sensor channels of a validated board config (``firmware.board.Config``)."""
+
+    def __init__(self, cfg, board, now):
+        n = self.n = len(cfg.channels)
+        self.cfg = cfg
+        self.board = board
+        self.names = [c.name for c in cfg.channels]
+        self.kind = [DRV_MAX31865 if c.driver == "max31865" else DRV_ADS122C04 for c in cfg.channels]
+        self.lead = [c.lead_mohm * 100 for c in cfg.channels]  # ratio units (R0 = 100 ohm)
+        self.cal = [c.cal_mC for c in cfg.channels]
+        self.lo = cfg.plausible_lo_mC
+        self.hi = cfg.plausible_hi_mC
+        self.rate = cfg.max_rate_mC_per_s
+        self.stuck_ms = cfg.stuck_ms
+        self.temp = [0] * n  # last good temperature, milli-degC
+        self.reading = [0] * n  # last converted reading, good or not
+        self.good = [False] * n
+        self.have_good = [False] * n
+        self.fault = [F_NEVER] * n
+        self.chip_status = [0] * n
+        self.good_t = [now] * n
+        self.code = [-1] * n
+        self.code_t = [now] * n
+        self.data_t = [now] * n
+        self.streak = [0] * n
+        self.prev = [0] * n
+        self.prev_t = [now] * n
+        self.reinit_t = [now] * n
+        self.drivers = [None] * n
+        for i in range(n):
+            self._init_driver(i)
+            self.reinit_t[i] = now
+
+    def _init_driver(self, i):
+        ch = self.cfg.channels[i]
+        try:
+            if self.drivers[i] is None:
+                self.drivers[i] = _make_driver(ch, self.board)
+            else:
+                self.drivers[i].__init__(*self._driver_args(i))
+            return True
+        except OSError:
+            self.drivers[i] = None
+            return False
+
+    def _driver_args(self, i):
+        ch = self.cfg.channels[i]
+        bus = self.board.buses[ch.bus]
+        if self.kind[i] == DRV_MAX31865:
+            return (bus, self.board.pin(ch.cs) if self.drivers[i] is None else self.drivers[i]._cs,
+                    ch.rref_mohm, ch.wires, ch.filter_hz)
+        return (bus, ch.address, ch.rref_mohm, ch.wires, ch.idac_ua, ch.filter_hz)
+
+    def set_thresholds(self):
+        """MAX31865 high/low fault thresholds from the plausible range."""
+        lo = rtd.ratio_of(self.lo)
+        hi = rtd.ratio_of(self.hi)
+        for i in range(self.n):
+            d = self.drivers[i]
+            if self.kind[i] == DRV_MAX31865 and d is not None:
+                try:
+                    d.set_thresholds_ratio(lo + self.lead[i], hi + self.lead[i])
+                except OSError:
+                    pass
+
+    def faulty_mask(self):
+        m = 0
+        for i in range(self.n):
+            if not self.good[i]:
+                m |= 1 << i
+        return m
+
+    def read_all(self, now, clock):
+        """Read and check every channel; returns the mask of faulty channels."""
+        m = 0
+        for i in range(self.n):
+            f = self._read(i, now, clock)
+            if f < 0:  # no new data this cycle (ADS122C04 between conversions)
+                if not self.good[i]:
+                    m |= 1 << i
+                continue
+            self._judge(i, f, now, clock)
+            if not self.good[i]:
+                m |= 1 << i
+        return m
+
+    def _read(self, i, now, clock):
+        """Raw read of channel i into ``reading``; returns fault bits, or -1 for no new data."""
+        d = self.drivers[i]
+        if d is None or (self.fault[i] & (F_CHIP | F_BUS | F_STALE | F_RANGE)
+                         and clock.ticks_diff(now, self.reinit_t[i]) >= REINIT_MS):
+            self.reinit_t[i] = now
+            if not self._init_driver(i):
+                return F_BUS
+            d = self.drivers[i]
+        try:
+            if self.kind[i] == DRV_MAX31865:
+                raw = d.read_rtd()
+                if raw & 1:
+                    self.chip_status[i] = d.fault_status
+                    d.clear_fault()
+                    return F_CHIP
+                code = raw >> 1
+            else:
+                if not d.data_ready:
+                    if clock.ticks_diff(now, self.data_t[i]) >= STALE_MS:
+                        return F_STALE
+                    return -1
+                code = d.read_data()
+            r = d.ratio(code)
+        except OSError:
+            return F_BUS
+        self.data_t[i] = now
+        f = 0
+        if self.stuck_ms:
+            if code != self.code[i]:
+                self.code[i] = code
+                self.code_t[i] = now
+            elif clock.ticks_diff(now, self.code_t[i]) >= self.stuck_ms:
+                f = F_STUCK
+        r -= self.lead[i]
+        t = rtd.temperature_mC(r) + self.cal[i]
+        self.reading[i] = t
+        if t < self.lo or t > self.hi:
+            f |= F_RANGE
+        return f
+
+    def _allowed(self, dt_ms):
+        if dt_ms > _RATE_DT_CAP_MS or dt_ms < 0:
+            return -1
+        return (self.rate * dt_ms) // 1000 + _NOISE_MC
+
+    def _judge(self, i, f, now, clock):
+        t = self.reading[i]
+        if f == 0 and self.have_good[i]:
+            a = self._allowed(clock.ticks_diff(now, self.good_t[i]))
+            if a >= 0 and (t - self.temp[i] > a or self.temp[i] - t > a):
+                f = F_RATE
+        if f:
+            self.fault[i] = f
+            self.good[i] = False
+            self.streak[i] = 0
+            return
+        if self.good[i]:
+            self.temp[i] = t
+            self.good_t[i] = now
+            return
+        # recovering: consecutive agreeing readings before the channel counts again
+        if self.streak[i]:
+            a = self._allowed(clock.ticks_diff(now, self.prev_t[i]))
+            if a < 0 or t - self.prev[i] > a or self.prev[i] - t > a:
+                self.streak[i] = 0
+        self.streak[i] += 1
+        self.prev[i] = t
+        self.prev_t[i] = now
+        if self.streak[i] >= RECOVER_READS:
+            self.good[i] = True
+            self.have_good[i] = True
+            self.fault[i] = 0
+            self.chip_status[i] = 0
+            self.temp[i] = t
+            self.good_t[i] = now

@@ -1,0 +1,481 @@
+"""Integer evaluation of a coefficient table (poly_slope, linear_direct, screw_reduced).
+
+This is the evaluation order the exporter certifies (models_export/certify.py
+mirrors it operation by operation): change one, change the other. Only integer
+operations appear; with a certified table every intermediate stays inside
+|x| < 2**30, the small-int range of a 32-bit MicroPython port, so evaluation
+never allocates and gives the same bits on every port and on CPython.
+
+Units: temperatures in milli-degC, positions in um (axis coordinates); offsets
+in 0.01 um, slopes in 0.01 um/m. Steady-state calls (update, offset_at,
+ref_offset, slope, advance_position, step) allocate nothing: all state lives in
+lists created by the constructor.
+
+Checking mode (``Evaluator(table, check=True)``, for tests; off in production)
+asserts every intermediate against +-2**30 and records per-slot minima and
+maxima in ``lo``/``hi`` (slot numbers are the SLOT_* constants), which the
+tests compare with the exporter's interval bounds.
+"""
+try:
+    from micropython import const
+except ImportError:  # CPython
+    def const(x):
+        return x
+
+from firmware.table import KIND_LINEAR_DIRECT, KIND_SCREW_REDUCED
+
+MAXV = const(0x3FFFFFFF)  # |intermediate| must stay <= 2**30 - 1
+
+# Bits of Evaluator.flags: bit i (i < 24) = sensor i was clamped to its envelope.
+SENSOR_BITS = const(0xFFFFFF)
+CLAMP_POSITION = const(0x1000000)  # the last position given was outside the envelope
+CLAMP_TRAVEL = const(0x2000000)  # nut travel or feed beyond the table's bound (screw)
+CLAMP_STATE = const(0x4000000)  # a segment state hit 0 or its bound (screw)
+
+# Check-mode slots: a _mul call site uses slot s for its limb products and s+1
+# for its shifted terms and partial sums.
+SLOT_D = const(0)
+SLOT_SMUL = const(1)
+SLOT_S = const(3)
+SLOT_P = const(4)
+SLOT_THMUL = const(5)
+SLOT_GEOMUL = const(7)
+SLOT_GEO = const(9)
+SLOT_ACC = const(10)
+SLOT_OUT = const(11)
+SLOT_KMUL = const(12)
+SLOT_SLOPE = const(14)
+SLOT_ROWMUL = const(15)
+SLOT_ROW = const(16)
+SLOT_LIMB = const(17)
+SLOT_BMUL = const(18)
+SLOT_STATE = const(20)
+SLOT_CUMMUL = const(21)
+SLOT_CUM = const(23)
+SLOT_HMUL = const(24)
+SLOT_SEGMUL = const(26)
+SLOT_XL = const(28)
+SLOT_TRAVEL = const(29)
+SLOT_FEEDMUL = const(30)
+SLOT_CMUL = const(32)
+SLOT_DE = const(34)
+N_SLOTS = const(35)
+
+FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
+FEED_LIMB = const(10)
+
+
+class Evaluator:
+    """Evaluate ``table`` (a firmware.table.Table).
+
+    Write temperatures (milli-degC, channel order) into ``temps`` or with
+    ``set_temperature``, call ``update()``, then ``offset_at(pos_um)``,
+    ``ref_offset()`` and ``slope()`` as often as needed. Screw tables also need
+    ``advance_position(pos_um)`` on every position report (or ``set_feed``) and
+    ``step()`` once per ``table.dt_ms``.
+    """
+
+    def __init__(self, table, check=False):
+        t = self.table = table
+        self.kind = table.kind_code
+        self.check = check
+        n = table.n_sensors
+        self.temps = [0] * n
+        for i in range(n):
+            lo, hi = table.env_lo[i], table.env_hi[i]
+            self.temps[i] = 0 if lo <= 0 <= hi else lo
+        self.flags = 0
+        self.S = t.S0
+        self.pos_ref = t.pos_ref
+        self.lo = [MAXV] * N_SLOTS
+        self.hi = [-MAXV] * N_SLOTS
+        if self.kind == KIND_SCREW_REDUCED:
+            m = t.M
+            self.T = [0] * m
+            self.Tn = [0] * m
+            self.u = [0] * m
+            self.w = [0] * m
+            self.limbs = [0] * (m * t.ns)
+            self.cum = [0] * (m + 1)
+            self.segslope = [0] * m
+            self.feed = False
+            self.F = 0
+            self.have_x = False
+            self.x = 0
+        self.update()
+        if self.kind == KIND_SCREW_REDUCED:
+            self._refresh()
+
+    # -- checking mode ------------------------------------------------------
+    def _note(self, slot, v):
+        if v > MAXV or v < -MAXV:
+            raise OverflowError("slot %d: %d outside +-2**30" % (slot, v))
+        if v < self.lo[slot]:
+            self.lo[slot] = v
+        if v > self.hi[slot]:
+            self.hi[slot] = v
+
+    def _mul(self, slot, c, x, L, n, sh):
+        """floor-ish c*x/2**sh with x split into n limbs of L bits (top limb signed).
+
+        Each limb product c*limb stays small when |c| * 2**L < 2**30; every
+        limb whose shift is positive rounds down, so the result is within
+        (-k, 0] of the exact value for k such limbs (the exporter adds biases).
+        """
+        m = (1 << L) - 1
+        r = 0
+        chk = self.check
+        while n > 1:
+            p = c * (x & m)
+            if chk:
+                self._note(slot, p)
+            if sh > 0:
+                p >>= sh
+            else:
+                p <<= -sh
+            r += p
+            if chk:
+                self._note(slot + 1, p)
+                self._note(slot + 1, r)
+            x >>= L
+            sh -= L
+            n -= 1
+        p = c * x
+        if chk:
+            self._note(slot, p)
+        if sh > 0:
+            p >>= sh
+        else:
+            p <<= -sh
+        r += p
+        if chk:
+            self._note(slot + 1, p)
+            self._note(slot + 1, r)
+        return r
+
+    # -- temperature-dependent part -------------------------------------------
+    def set_temperature(self, i, milli_c):
+        self.temps[i] = milli_c
+
+    def update(self):
+        """Recompute the temperature-dependent terms from ``temps``; flag clamped sensors."""
+        t = self.table
+        chk = self.check
+        temps = self.temps
+        lo = t.env_lo
+        hi = t.env_hi
+        ref = t.ref
+        b = t.b
+        shb = t.shb
+        Lt = t.Lt
+        nt = t.nt
+        fl = 0
+        s = t.S0
+        for i in range(t.n_sensors):
+            v = temps[i]
+            if v < lo[i]:
+                v = lo[i]
+                fl |= 1 << i
+            elif v > hi[i]:
+                v = hi[i]
+                fl |= 1 << i
+            d = v - ref[i]
+            if chk:
+                self._note(SLOT_D, d)
+            s += self._mul(SLOT_SMUL, b[i], d, Lt, nt, shb[i])
+            if chk:
+                self._note(SLOT_S, s)
+        self.S = s
+        self.flags = (self.flags & ~SENSOR_BITS) | fl
+
+    # -- outputs --------------------------------------------------------------
+    def _clamp_pos(self, pos):
+        t = self.table
+        if pos < t.pos_lo:
+            self.flags |= CLAMP_POSITION
+            return t.pos_lo
+        if pos > t.pos_hi:
+            self.flags |= CLAMP_POSITION
+            return t.pos_hi
+        self.flags &= ~CLAMP_POSITION
+        return pos
+
+    def offset_at(self, pos_um):
+        """Total model offset (geometric + thermal) at ``pos_um``, in 0.01 um."""
+        t = self.table
+        chk = self.check
+        if self.kind == KIND_LINEAR_DIRECT:
+            v = (self.S + t.rL) >> t.fo
+            if chk:
+                self._note(SLOT_ACC, self.S + t.rL)
+                self._note(SLOT_OUT, v)
+            return v
+        p = self._clamp_pos(pos_um)
+        if chk:
+            self._note(SLOT_P, p)
+        G = t.G
+        shg = t.shg
+        Lg = t.Lg
+        ng = t.ng
+        h = G[t.degree]
+        for j in range(t.degree - 1, -1, -1):
+            h = self._mul(SLOT_GEOMUL, p, h, Lg, ng, shg[j]) + G[j]
+            if chk:
+                self._note(SLOT_GEO, h)
+        acc = h + self._mul(SLOT_THMUL, p, self.S, t.Lw, t.nw, t.shw)
+        if chk:
+            self._note(SLOT_ACC, acc)
+        if self.kind == KIND_SCREW_REDUCED:
+            acc += self._seg(p)
+            if chk:
+                self._note(SLOT_ACC, acc)
+        acc += t.rO
+        if chk:
+            self._note(SLOT_ACC, acc)
+        v = acc >> t.fo
+        if chk:
+            self._note(SLOT_OUT, v)
+        return v
+
+    def set_reference(self, pos_um):
+        """Reference position of the offset/slope pair (clamped to the envelope)."""
+        self.pos_ref = self._clamp_pos(pos_um)
+
+    def ref_offset(self):
+        """Thermal offset (no geometric part) at the reference position, in 0.01 um.
+
+        With ``slope()`` this is the Siemens/Beckhoff-style pair: thermal(P) is
+        ref_offset + slope * (P - P_ref), exact for poly_slope and
+        linear_direct; for screw tables the slope is the chord over the envelope.
+        """
+        t = self.table
+        chk = self.check
+        if self.kind == KIND_LINEAR_DIRECT:
+            return self.offset_at(0)
+        p = self.pos_ref
+        acc = self._mul(SLOT_THMUL, p, self.S, t.Lw, t.nw, t.shw)
+        if self.kind == KIND_SCREW_REDUCED:
+            acc += self._seg(p)
+        acc += t.rT
+        if chk:
+            self._note(SLOT_ACC, acc)
+        v = acc >> t.fo
+        if chk:
+            self._note(SLOT_OUT, v)
+        return v
+
+    def slope(self):
+        """Thermal slope d(offset)/dP in 0.01 um/m (0 for linear_direct)."""
+        t = self.table
+        chk = self.check
+        if self.kind == KIND_LINEAR_DIRECT:
+            return 0
+        acc = self._mul(SLOT_KMUL, t.KS, self.S, t.Lw, t.nw, t.shK)
+        if self.kind == KIND_SCREW_REDUCED:
+            de = self._seg(t.pos_hi) - self._seg(t.pos_lo)
+            if chk:
+                self._note(SLOT_DE, de)
+            acc += self._mul(SLOT_CMUL, t.KC, de, t.Lc, t.nc, t.shC)
+        acc += t.rK
+        if chk:
+            self._note(SLOT_SLOPE, acc)
+        v = acc >> t.fK
+        if chk:
+            self._note(SLOT_OUT, v)
+        return v
+
+    # -- screw_reduced ----------------------------------------------------------
+    def _seg(self, p):
+        """Segment elongation alpha * sum T_i * overlap_i(p), at output scale 2**-fo."""
+        t = self.table
+        x = p - t.fixed_end
+        if x <= 0:
+            return 0
+        e = t.edges
+        m = t.M
+        if x >= e[m]:
+            return self.cum[m]
+        k = 0
+        while e[k + 1] <= x:
+            k += 1
+        xl = x - e[k]
+        if self.check:
+            self._note(SLOT_XL, xl)
+        v = self.cum[k] + self._mul(SLOT_SEGMUL, xl, self.segslope[k], t.Lx, t.nx, t.shX)
+        if self.check:
+            self._note(SLOT_CUM, v)
+        return v
+
+    def advance_position(self, pos_um):
+        """Accumulate nut travel per segment from a position report (screw tables)."""
+        t = self.table
+        p = self._clamp_pos(pos_um)
+        x = p - t.fixed_end
+        if not self.have_x:
+            self.have_x = True
+            self.x = x
+            return
+        a = self.x
+        b = x
+        self.x = x
+        if a > b:
+            a, b = b, a
+        if a == b:
+            return
+        e = t.edges
+        u = self.u
+        umax = t.umax
+        for i in range(t.M):
+            lo = e[i] if e[i] > a else a
+            hi = e[i + 1] if e[i + 1] < b else b
+            if hi > lo:
+                v = u[i] + (hi - lo)
+                if self.check:
+                    self._note(SLOT_TRAVEL, v)
+                if v > umax:
+                    v = umax
+                    self.flags |= CLAMP_TRAVEL
+                u[i] = v
+
+    def set_feed(self, feed_mm_min, lo_um, hi_um):
+        """Fallback without position reports: ``feed`` spread over [lo, hi] every step."""
+        t = self.table
+        f = feed_mm_min if feed_mm_min >= 0 else -feed_mm_min
+        if f > t.fmax:
+            f = t.fmax
+            self.flags |= CLAMP_TRAVEL
+        self.F = (f * t.dt_ms) // 60
+        e = t.edges
+        m = t.M
+        a = self._clamp_pos(lo_um) - t.fixed_end
+        b = self._clamp_pos(hi_um) - t.fixed_end
+        if a > b:
+            a, b = b, a
+        if a < 0:
+            a = 0
+        if b > e[m]:
+            b = e[m]
+        w = self.w
+        r = b - a
+        for i in range(m):
+            w[i] = 0
+            lo = e[i] if e[i] > a else a
+            hi = e[i + 1] if e[i + 1] < b else b
+            if r <= 0:
+                if e[i] <= a < e[i + 1] or (i == m - 1 and a == e[m]):
+                    w[i] = 1 << FEED_W_BITS
+            elif hi > lo:
+                # floor((hi - lo) * 2**19 / r) by long division: no product beyond 2**23
+                q = 0
+                rem = hi - lo
+                if rem >= r:
+                    q = 1
+                    rem -= r
+                for _ in range(FEED_W_BITS):
+                    rem <<= 1
+                    q <<= 1
+                    if rem >= r:
+                        rem -= r
+                        q += 1
+                w[i] = q
+        self.feed = True
+
+    def clear_feed(self):
+        self.feed = False
+
+    def step(self):
+        """One time step of the segment recurrence T <- T + C*T + B*u (then u = 0)."""
+        t = self.table
+        chk = self.check
+        m = t.M
+        T = self.T
+        Tn = self.Tn
+        u = self.u
+        umax = t.umax
+        if self.feed:
+            w = self.w
+            F = self.F
+            for i in range(m):
+                v = u[i] + self._mul(SLOT_FEEDMUL, w[i], F, FEED_LIMB, 3, FEED_W_BITS)
+                if chk:
+                    self._note(SLOT_TRAVEL, v)
+                if v > umax:
+                    v = umax
+                    self.flags |= CLAMP_TRAVEL
+                u[i] = v
+        ns = t.ns
+        Ls = t.Ls
+        mask = (1 << Ls) - 1
+        limbs = self.limbs
+        for j in range(m):
+            x = T[j]
+            for k in range(ns - 1):
+                limbs[k * m + j] = x & mask
+                x >>= Ls
+            limbs[(ns - 1) * m + j] = x
+            if chk:
+                self._note(SLOT_LIMB, x)
+        C = t.C
+        B = t.B
+        shB = t.shB
+        rS = t.rS
+        fc = t.fc
+        Tmax = t.Tmax
+        fl = 0
+        for i in range(m):
+            acc = 0
+            sh = fc
+            base = i * m
+            for k in range(ns):
+                r = 0
+                lb = k * m
+                for j in range(m):
+                    r += C[base + j] * limbs[lb + j]
+                    if chk:
+                        self._note(SLOT_ROWMUL, C[base + j] * limbs[lb + j])
+                        self._note(SLOT_ROWMUL, r)
+                if sh > 0:
+                    acc += r >> sh
+                else:
+                    acc += r << -sh
+                if chk:
+                    self._note(SLOT_ROW, acc)
+                sh -= Ls
+            acc += self._mul(SLOT_BMUL, B[i], u[i], t.Lu, t.nu, shB[i])
+            if chk:
+                self._note(SLOT_ROW, acc)
+            v = T[i] + acc + rS[i]
+            if chk:
+                self._note(SLOT_STATE, v)
+            if v < 0:
+                v = 0
+                fl = CLAMP_STATE
+            elif v > Tmax:
+                v = Tmax
+                fl = CLAMP_STATE
+            Tn[i] = v
+        for i in range(m):
+            T[i] = Tn[i]
+            u[i] = 0
+        self.flags = (self.flags & ~CLAMP_STATE) | fl
+        self._refresh()
+
+    def _refresh(self):
+        """Per-step precomputation of the piecewise-linear elongation profile."""
+        t = self.table
+        chk = self.check
+        T = self.T
+        cum = self.cum
+        seg = self.segslope
+        G2 = t.G2
+        shG2 = t.shG2
+        Ls = t.Ls
+        ns = t.ns
+        c = 0
+        for i in range(t.M):
+            cum[i] = c
+            c += self._mul(SLOT_CUMMUL, G2[i], T[i], Ls, ns, shG2[i])
+            if chk:
+                self._note(SLOT_CUM, c)
+            seg[i] = self._mul(SLOT_HMUL, t.H, T[i], Ls, ns, t.shH)
+        cum[t.M] = c

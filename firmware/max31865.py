@@ -1,0 +1,280 @@
+"""MAX31865 RTD-to-digital converter (SPI), one chip per sensor with its own chip-select.
+
+Register and bit names follow the Maxim datasheet (19-6478). The bus is a
+``machine.SPI`` in mode 1 or 3 (the driver uses ``write`` and
+``write_readinto`` only) and ``cs`` an output pin with ``value()``; both are
+created by the board. Every transfer is one call with chip-select held low, so
+a Linux spidev node that drives chip-select itself works as well.
+
+The hot path (``read_rtd``, ``fault_status``, ``clear_fault``, ``ratio``)
+allocates nothing and keeps every integer below 2**30.
+"""
+
+try:
+    from micropython import const
+except ImportError:  # CPython
+    def const(x):
+        return x
+
+# register read addresses; write address = read address | 0x80
+REG_CONFIG = const(0x00)
+REG_RTD_MSB = const(0x01)
+REG_RTD_LSB = const(0x02)
+REG_HIGH_FAULT_MSB = const(0x03)
+REG_HIGH_FAULT_LSB = const(0x04)
+REG_LOW_FAULT_MSB = const(0x05)
+REG_LOW_FAULT_LSB = const(0x06)
+REG_FAULT_STATUS = const(0x07)
+_WRITE = const(0x80)
+
+# configuration register bits
+CONFIG_VBIAS = const(0x80)  # D7: V_BIAS on
+CONFIG_AUTO = const(0x40)  # D6: conversion mode auto (1) / normally off (0)
+CONFIG_1SHOT = const(0x20)  # D5: one-shot (self-clearing)
+CONFIG_3WIRE = const(0x10)  # D4: 3-wire (1) / 2- or 4-wire (0)
+CONFIG_FAULT_CYCLE = const(0x0C)  # D3:D2: fault-detection cycle control
+CONFIG_FAULT_CLEAR = const(0x02)  # D1: fault status clear (self-clearing)
+CONFIG_FILTER_50HZ = const(0x01)  # D0: 50 Hz (1) / 60 Hz (0) notch
+FAULT_CYCLE_NONE = const(0x00)
+FAULT_CYCLE_AUTO = const(0x04)  # automatic fault detection with delay
+FAULT_CYCLE_MANUAL_1 = const(0x08)
+FAULT_CYCLE_MANUAL_2 = const(0x0C)
+
+# fault status register bits
+FAULT_HIGH_THRESHOLD = const(0x80)  # D7: RTD high threshold
+FAULT_LOW_THRESHOLD = const(0x40)  # D6: RTD low threshold
+FAULT_REFIN_HIGH = const(0x20)  # D5: REFIN- > 0.85 x V_BIAS
+FAULT_REFIN_LOW_OPEN = const(0x10)  # D4: REFIN- < 0.85 x V_BIAS (FORCE- open)
+FAULT_RTDIN_LOW_OPEN = const(0x08)  # D3: RTDIN- < 0.85 x V_BIAS (FORCE- open)
+FAULT_OVUV = const(0x04)  # D2: overvoltage / undervoltage
+FAULT_NAMES = (
+    (FAULT_HIGH_THRESHOLD, "rtd_high_threshold"),
+    (FAULT_LOW_THRESHOLD, "rtd_low_threshold"),
+    (FAULT_REFIN_HIGH, "refin_high"),
+    (FAULT_REFIN_LOW_OPEN, "refin_low_force_open"),
+    (FAULT_RTDIN_LOW_OPEN, "rtdin_low_force_open"),
+    (FAULT_OVUV, "over_under_voltage"),
+)
+
+_FAULT_CYCLE_POLLS = const(100)
+
+
+def decode_faults(status):
+    """Names of the faults set in a fault status byte (allocates: not for the cycle)."""
+    return [name for bit, name in FAULT_NAMES if status & bit]
+
+
+class MAX31865:
+    """One MAX31865 on a shared SPI bus.
+
+    ``rref_mohm`` is the reference resistor in milliohm (430 ohm on the usual
+    Pt100 breakouts, 400 ohm in the datasheet), ``wires`` 2, 3 or 4,
+    ``filter_hz`` 50 or 60. The constructor leaves the chip converting
+    continuously (V_BIAS on, auto mode) after one automatic fault-detection
+    cycle.
+    """
+
+    def __init__(self, spi, cs, rref_mohm=430000, wires=3, filter_hz=50):
+        if wires not in (2, 3, 4):
+            raise ValueError("MAX31865 wires must be 2, 3 or 4, got %r" % (wires,))
+        if filter_hz not in (50, 60):
+            raise ValueError("MAX31865 filter_hz must be 50 or 60, got %r" % (filter_hz,))
+        if not 100000 <= rref_mohm <= 10000000:
+            raise ValueError("MAX31865 rref_mohm %r outside 100000..10000000" % (rref_mohm,))
+        self._spi = spi
+        self._cs = cs
+        self._tx = bytearray(3)
+        self._rx = bytearray(3)
+        self._t2 = bytearray(2)
+        self._r2 = bytearray(2)
+        self.rref_mohm = rref_mohm
+        # R/R0*1e7 = code * rref_mohm * 100 / 2**15 (R0 = 100 ohm), split so
+        # that no product reaches 2**30
+        k = rref_mohm * 100
+        self._kh = k >> 15
+        self._kl = k & 0x7FFF
+        self._base = CONFIG_VBIAS | (CONFIG_3WIRE if wires == 3 else 0) | (
+            CONFIG_FILTER_50HZ if filter_hz == 50 else 0)
+        cs.value(1)
+        # the filter may only change while not converting automatically
+        self.configuration = self._base
+        self.last_fault_cycle_status = self.run_fault_detection()
+        self.clear_fault()
+        self.configuration = self._base | CONFIG_AUTO
+
+    # --- register access -------------------------------------------------
+    def read_register(self, reg):
+        """One register's value (reg is the read address 0x00..0x07)."""
+        self._t2[0] = reg
+        self._t2[1] = 0
+        cs = self._cs
+        cs.value(0)
+        try:
+            self._spi.write_readinto(self._t2, self._r2)
+        finally:
+            cs.value(1)
+        return self._r2[1]
+
+    def write_register(self, reg, value):
+        tx = self._t2
+        tx[0] = reg | _WRITE
+        tx[1] = value
+        cs = self._cs
+        cs.value(0)
+        try:
+            self._spi.write(tx)
+        finally:
+            cs.value(1)
+
+    # --- configuration (datasheet names) ---------------------------------
+    @property
+    def configuration(self):
+        return self.read_register(REG_CONFIG)
+
+    @configuration.setter
+    def configuration(self, value):
+        self.write_register(REG_CONFIG, value)
+
+    def _bit(self, mask):
+        return bool(self.configuration & mask)
+
+    def _set_bit(self, mask, on):
+        c = self.configuration & ~(CONFIG_1SHOT | CONFIG_FAULT_CLEAR | CONFIG_FAULT_CYCLE)
+        self.configuration = (c | mask) if on else (c & ~mask)
+
+    @property
+    def bias(self):
+        """V_BIAS on (D7)."""
+        return self._bit(CONFIG_VBIAS)
+
+    @bias.setter
+    def bias(self, on):
+        self._set_bit(CONFIG_VBIAS, on)
+
+    @property
+    def auto_convert(self):
+        """Conversion mode auto (D6); False is normally-off, use ``one_shot``."""
+        return self._bit(CONFIG_AUTO)
+
+    @auto_convert.setter
+    def auto_convert(self, on):
+        self._set_bit(CONFIG_AUTO, on)
+
+    @property
+    def three_wire(self):
+        """3-wire (D4); False for 2- and 4-wire sensors."""
+        return self._bit(CONFIG_3WIRE)
+
+    @three_wire.setter
+    def three_wire(self, on):
+        self._set_bit(CONFIG_3WIRE, on)
+
+    @property
+    def filter_50hz(self):
+        """50 Hz notch (D0); False is 60 Hz."""
+        return self._bit(CONFIG_FILTER_50HZ)
+
+    @filter_50hz.setter
+    def filter_50hz(self, on):
+        self._set_bit(CONFIG_FILTER_50HZ, on)
+
+    @property
+    def fault_detection(self):
+        """Fault-detection cycle control bits D3:D2 (FAULT_CYCLE_*); 0 when idle."""
+        return self.configuration & CONFIG_FAULT_CYCLE
+
+    def one_shot(self):
+        """Start a single conversion (D5) with V_BIAS already on."""
+        c = self.configuration & ~(CONFIG_FAULT_CLEAR | CONFIG_FAULT_CYCLE)
+        self.configuration = c | CONFIG_1SHOT
+
+    def clear_fault(self):
+        """Clear the fault status (D1), writing D5, D3 and D2 as 0 as the datasheet requires."""
+        c = self.read_register(REG_CONFIG)
+        self.write_register(REG_CONFIG, (c & ~(CONFIG_1SHOT | CONFIG_FAULT_CYCLE)) | CONFIG_FAULT_CLEAR)
+
+    def run_fault_detection(self):
+        """Automatic fault-detection cycle (D3:D2 = 01); returns the fault status byte.
+
+        The chip must not convert automatically meanwhile; the previous
+        configuration is restored afterwards. OSError if the cycle never ends.
+        """
+        saved = self.configuration & ~(CONFIG_1SHOT | CONFIG_FAULT_CLEAR | CONFIG_FAULT_CYCLE)
+        c = (saved & ~(CONFIG_AUTO | CONFIG_1SHOT)) | CONFIG_VBIAS
+        self.configuration = c | FAULT_CYCLE_AUTO
+        for _ in range(_FAULT_CYCLE_POLLS):
+            if self.configuration & CONFIG_FAULT_CYCLE == 0:
+                break
+        else:
+            raise OSError(110, "MAX31865 fault-detection cycle did not finish")
+        status = self.fault_status
+        self.configuration = saved
+        return status
+
+    # --- thresholds --------------------------------------------------------
+    def _read15(self, reg):
+        return ((self.read_register(reg) << 8) | self.read_register(reg + 1)) >> 1
+
+    def _write15(self, reg, code):
+        if not 0 <= code <= 0x7FFF:
+            raise ValueError("MAX31865 threshold code %r outside 0..32767" % (code,))
+        self.write_register(reg, (code >> 7) & 0xFF)
+        self.write_register(reg + 1, (code << 1) & 0xFF)
+
+    @property
+    def high_threshold(self):
+        """High fault threshold as a 15-bit RTD code."""
+        return self._read15(REG_HIGH_FAULT_MSB)
+
+    @high_threshold.setter
+    def high_threshold(self, code):
+        self._write15(REG_HIGH_FAULT_MSB, code)
+
+    @property
+    def low_threshold(self):
+        """Low fault threshold as a 15-bit RTD code."""
+        return self._read15(REG_LOW_FAULT_MSB)
+
+    @low_threshold.setter
+    def low_threshold(self, code):
+        self._write15(REG_LOW_FAULT_MSB, code)
+
+    def code_of(self, ratio):
+        """15-bit RTD code of an R/R0*1e7 ratio (start-up use: thresholds)."""
+        code = (ratio * 32768 + self.rref_mohm * 50) // (self.rref_mohm * 100)
+        return 0 if code < 0 else (0x7FFF if code > 0x7FFF else code)
+
+    def set_thresholds_ratio(self, low_ratio, high_ratio):
+        """Fault thresholds from R/R0*1e7 ratios (e.g. ``rtd.ratio_of`` of the plausible range)."""
+        self.low_threshold = self.code_of(low_ratio)
+        self.high_threshold = self.code_of(high_ratio)
+
+    # --- hot path ------------------------------------------------------------
+    def read_rtd(self):
+        """RTD MSB:LSB as one 16-bit value: 15-bit ratio code << 1 | fault bit (D0)."""
+        tx = self._tx
+        tx[0] = REG_RTD_MSB
+        tx[1] = 0
+        tx[2] = 0
+        cs = self._cs
+        cs.value(0)
+        try:
+            self._spi.write_readinto(tx, self._rx)
+        finally:
+            cs.value(1)
+        rx = self._rx
+        return (rx[1] << 8) | rx[2]
+
+    @property
+    def rtd(self):
+        """15-bit RTD ratio code (ADC code / 2**15 = R_RTD / R_REF)."""
+        return self.read_rtd() >> 1
+
+    @property
+    def fault_status(self):
+        """Fault status register (FAULT_* bits); latched until ``clear_fault``."""
+        return self.read_register(REG_FAULT_STATUS)
+
+    def ratio(self, code):
+        """R/R0 * 1e7 of a 15-bit code for a Pt100 (R0 = 100 ohm)."""
+        return code * self._kh + ((code * self._kl + 16384) >> 15)

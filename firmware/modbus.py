@@ -1,0 +1,324 @@
+"""Modbus RTU slave mode of the serial link (register map in docs/protocol.md).
+
+Function codes 03 (read holding), 04 (read input), 06 (write single holding)
+and 16 (write multiple holding). Anything else gets exception 01 (illegal
+function), a register range outside the map 02 (illegal data address), a bad
+quantity, byte count or register value 03 (illegal data value); a multi-register
+write is validated completely before any register changes. Frames with a bad
+CRC-16/MODBUS, or for another slave address, are ignored, as the Modbus
+specification requires (the master times out). Broadcast (address 0) writes
+are executed without a reply.
+
+A request is complete when its function code's length has arrived, or after a
+silence of 3.5 character times (at least 2 ms) for anything else. Allocation-free.
+"""
+
+try:
+    from micropython import const
+except ImportError:  # CPython
+    def const(x):
+        return x
+
+from firmware import status as st
+from firmware.crc16 import crc16_modbus
+
+# input registers
+IR_STATUS_LO = const(0)
+IR_STATUS_HI = const(1)
+IR_SEQUENCE = const(2)
+IR_TOTAL = const(3)  # 0.1 um, int16, at the reported position
+IR_REF_OFFSET = const(4)  # 0.1 um, int16, at the reference position
+IR_SLOPE = const(5)  # 0.01 um/m, int16
+IR_POSITION = const(6)  # int32 um, high word first
+IR_REFERENCE = const(8)  # int32 um
+IR_TABLE_CRC = const(10)  # uint32
+IR_SLOT = const(12)  # 0 none, 1 A, 2 B
+IR_CHANNELS = const(13)
+IR_TEMPS = const(16)  # 16 x int16 0.01 degC, 0x8000 when faulty
+IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
+N_INPUT = const(48)
+# holding registers
+HR_ENABLE = const(0)  # 0/1
+HR_SLEW = const(1)  # um/s, 1..10000
+HR_LINK_TIMEOUT = const(2)  # ms, 0 = off
+HR_POSITION = const(3)  # int32 um, high word first: writing it is a position report
+HR_REFERENCE = const(5)  # int32 um
+N_HOLDING = const(7)
+
+EX_ILLEGAL_FUNCTION = const(1)
+EX_ILLEGAL_ADDRESS = const(2)
+EX_ILLEGAL_VALUE = const(3)
+
+_POS_HI_LIMIT = const(1525)  # |high word| so that |position| <= 100 m
+_NO_VALUE = const(-32768)
+
+
+def _s16(v):
+    if v > 32767:
+        return 32767
+    if v < -32768:
+        return -32768
+    return v
+
+
+def _round10(v):
+    return (v + 5) // 10 if v >= 0 else -((5 - v) // 10)
+
+
+class ModbusLink:
+    def __init__(self, app):
+        self.app = app
+        self.serial = app.board.serial
+        self.addr = app.cfg.modbus_address
+        self.buf = bytearray(256)
+        self.n = 0
+        self.tx = bytearray(256)
+        self.rx = bytearray(64)
+        self.last_byte = app.clock.ticks_ms()
+        baud = app.cfg.baud
+        self.silence_ms = 2 if baud >= 19200 else (38500 + baud - 1) // baud + 1
+        self.hold = [1, app.cfg.slew_um_per_s, app.cfg.link_timeout_ms, 0, 0, 0, 0]
+        self.vals = [0] * 123  # values of a write, validated before use
+        self.frames = 0  # requests answered (diagnostics)
+
+    def boot(self):
+        pass
+
+    def after_cycle(self, now):
+        pass
+
+    # --- receive --------------------------------------------------------------
+    def poll(self, now):
+        clock = self.app.clock
+        rx = self.rx
+        got = False
+        for _ in range(8):
+            k = self.serial.readinto(rx)
+            if not k:
+                break
+            got = True
+            for j in range(k):
+                if self.n < 256:
+                    self.buf[self.n] = rx[j]
+                    self.n += 1
+            if k < 64:
+                break
+        if got:
+            self.last_byte = now
+        while self.n:
+            need = self._length()
+            if need > 0 and self.n >= need:
+                self._frame(need, now)
+                self._drop(need)
+            elif clock.ticks_diff(now, self.last_byte) >= self.silence_ms or self.n >= 256:
+                self._frame(self.n, now)
+                self.n = 0
+            else:
+                return
+
+    def _drop(self, k):
+        b = self.buf
+        for i in range(k, self.n):
+            b[i - k] = b[i]
+        self.n -= k
+
+    def _length(self):
+        """Length of the request in buf from its function code, 0 if unknown yet."""
+        if self.n < 2:
+            return 0
+        fc = self.buf[1]
+        if fc in (3, 4, 6):
+            return 8
+        if fc == 16:
+            if self.n < 7:
+                return 0
+            return 9 + self.buf[6]
+        return 0
+
+    def _frame(self, n, now):
+        b = self.buf
+        if n < 4:
+            return
+        crc = crc16_modbus(b, 0, n - 2)
+        if b[n - 2] != crc & 0xFF or b[n - 1] != crc >> 8:
+            return
+        addr = b[0]
+        if addr != self.addr and addr != 0:
+            return
+        self.app.link_alive(now)
+        fc = b[1]
+        if fc == 3 or fc == 4:
+            self._read(fc, n, addr)
+        elif fc == 6:
+            self._write_single(n, addr)
+        elif fc == 16:
+            self._write_multiple(n, addr)
+        else:
+            self._exception(fc, EX_ILLEGAL_FUNCTION, addr)
+
+    # --- replies ------------------------------------------------------------------
+    def _send(self, n, addr):
+        if addr == 0:
+            return
+        t = self.tx
+        crc = crc16_modbus(t, 0, n)
+        t[n] = crc & 0xFF
+        t[n + 1] = crc >> 8
+        self.serial.write(t, n + 2)
+        self.frames += 1
+
+    def _exception(self, fc, code, addr):
+        t = self.tx
+        t[0] = self.addr
+        t[1] = (fc | 0x80) & 0xFF
+        t[2] = code
+        self._send(3, addr)
+
+    def _read(self, fc, n, addr):
+        b = self.buf
+        if n != 8:
+            return self._exception(fc, EX_ILLEGAL_VALUE, addr)
+        start = (b[2] << 8) | b[3]
+        qty = (b[4] << 8) | b[5]
+        if qty < 1 or qty > 125:
+            return self._exception(fc, EX_ILLEGAL_VALUE, addr)
+        limit = N_INPUT if fc == 4 else N_HOLDING
+        if start + qty > limit:
+            return self._exception(fc, EX_ILLEGAL_ADDRESS, addr)
+        if addr == 0:
+            return
+        t = self.tx
+        t[0] = self.addr
+        t[1] = fc
+        t[2] = 2 * qty
+        k = 3
+        for r in range(start, start + qty):
+            v = self.input_register(r) if fc == 4 else self.hold[r]
+            v &= 0xFFFF
+            t[k] = v >> 8
+            t[k + 1] = v & 0xFF
+            k += 2
+        self._send(k, addr)
+
+    def input_register(self, r):
+        a = self.app
+        if r == IR_STATUS_LO:
+            return a.status & 0xFFFF
+        if r == IR_STATUS_HI:
+            return (a.status >> 16) & 0xFFFF
+        if r == IR_SEQUENCE:
+            return a.cycles & 0xFFFF
+        if r == IR_TOTAL:
+            return _s16(_round10(a.total))
+        if r == IR_REF_OFFSET:
+            return _s16(_round10(a.ref_out))
+        if r == IR_SLOPE:
+            return _s16(a.slope_out)
+        if r == IR_POSITION or r == IR_POSITION + 1:
+            return self._word(a.pos, r - IR_POSITION)
+        if r == IR_REFERENCE or r == IR_REFERENCE + 1:
+            return self._word(a.ev.pos_ref if a.ev is not None else 0, r - IR_REFERENCE)
+        if r == IR_TABLE_CRC:
+            return (a.table.crc >> 16) if a.table is not None else 0
+        if r == IR_TABLE_CRC + 1:
+            return (a.table.crc & 0xFFFF) if a.table is not None else 0
+        if r == IR_SLOT:
+            return 0 if a.slot is None else a.slot + 1
+        if r == IR_CHANNELS:
+            return a.channels.n
+        ch = a.channels
+        if IR_TEMPS <= r < IR_TEMPS + 16:
+            i = r - IR_TEMPS
+            if i >= ch.n or not ch.good[i]:
+                return _NO_VALUE
+            t = ch.temp[i]
+            return _s16((t + 5) // 10 if t >= 0 else -((5 - t) // 10))
+        if IR_FAULTS <= r < IR_FAULTS + 16:
+            i = r - IR_FAULTS
+            return ch.fault[i] if i < ch.n else 0
+        return 0
+
+    def _word(self, v, low):
+        # int32 as two registers without forming values beyond 2**30
+        if low:
+            return v & 0xFFFF
+        return (v >> 16) & 0xFFFF
+
+    # --- writes --------------------------------------------------------------------
+    def _write_single(self, n, addr):
+        b = self.buf
+        if n != 8:
+            return self._exception(6, EX_ILLEGAL_VALUE, addr)
+        r = (b[2] << 8) | b[3]
+        v = (b[4] << 8) | b[5]
+        if r >= N_HOLDING:
+            return self._exception(6, EX_ILLEGAL_ADDRESS, addr)
+        self.vals[0] = v
+        code = self._apply(r, 1)
+        if code:
+            return self._exception(6, code, addr)
+        t = self.tx
+        for i in range(6):
+            t[i] = b[i]
+        t[0] = self.addr
+        self._send(6, addr)
+
+    def _write_multiple(self, n, addr):
+        b = self.buf
+        start = (b[2] << 8) | b[3]
+        qty = (b[4] << 8) | b[5]
+        if qty < 1 or qty > 123 or b[6] != 2 * qty or n != 9 + 2 * qty:
+            return self._exception(16, EX_ILLEGAL_VALUE, addr)
+        if start + qty > N_HOLDING:
+            return self._exception(16, EX_ILLEGAL_ADDRESS, addr)
+        for i in range(qty):
+            self.vals[i] = (b[7 + 2 * i] << 8) | b[8 + 2 * i]
+        code = self._apply(start, qty)
+        if code:
+            return self._exception(16, code, addr)
+        t = self.tx
+        t[0] = self.addr
+        for i in range(1, 6):
+            t[i] = b[i]
+        self._send(6, addr)
+
+    def _apply(self, start, qty):
+        """Validate ``vals[:qty]`` for registers start.., then store and act; exception code or 0."""
+        h = self.hold
+        vals = self.vals
+        for i in range(qty):
+            r = start + i
+            v = vals[i]
+            if r == HR_ENABLE and v > 1:
+                return EX_ILLEGAL_VALUE
+            if r == HR_SLEW and (v < 1 or v > 10000):
+                return EX_ILLEGAL_VALUE
+            if r == HR_POSITION or r == HR_REFERENCE:
+                hi = v - 65536 if v > 32767 else v
+                if hi > _POS_HI_LIMIT or hi < -_POS_HI_LIMIT - 1:
+                    return EX_ILLEGAL_VALUE
+        pos = False
+        ref = False
+        for i in range(qty):
+            r = start + i
+            h[r] = vals[i]
+            if r == HR_POSITION or r == HR_POSITION + 1:
+                pos = True
+            elif r == HR_REFERENCE or r == HR_REFERENCE + 1:
+                ref = True
+        a = self.app
+        a.enabled = h[HR_ENABLE] == 1
+        if start <= HR_SLEW < start + qty:
+            a.set_slew(h[HR_SLEW])
+        a.link_timeout_ms = h[HR_LINK_TIMEOUT]
+        if pos:
+            a.report_position(self._int32(HR_POSITION))
+        if ref:
+            a.set_reference(self._int32(HR_REFERENCE))
+        return 0
+
+    def _int32(self, r):
+        hi = self.hold[r]
+        if hi > 32767:
+            hi -= 65536
+        return hi * 65536 + self.hold[r + 1]

@@ -1,0 +1,295 @@
+"""Stream mode of the serial link: $TC frames and commands (docs/protocol.md, version 1).
+
+Frames the device sends (``$TC,<seq>,<status>,<type>,...*CRC``):
+H hello, O periodic offsets, Q answer to a query, T temperatures,
+A acknowledgement, E error. Commands from the controller (``$TC,<cmd>,...*CRC``):
+P position, M feed/range, Q query, R reference, S temperatures, V hello,
+U table upload (B begin, D data, C commit, X abort), X reset.
+A line that is corrupt, unknown or out of range is answered with an E frame
+and changes nothing.
+
+Periodic frames, position reports and queries allocate nothing; the upload and
+the hello frame may (they are not part of the steady state).
+"""
+
+try:
+    from micropython import const
+except ImportError:  # CPython
+    def const(x):
+        return x
+
+from firmware import frame as fr
+from firmware.slots import UploadError, SLOT_NAMES
+
+# error codes of E frames
+E_CRC = const(1)
+E_SYNTAX = const(2)
+E_UNKNOWN = const(3)
+E_RANGE = const(4)
+E_STATE = const(5)
+E_TABLE = const(6)
+E_OVERFLOW = const(7)
+ERRORS = {1: b"crc", 2: b"syntax", 3: b"unknown", 4: b"range", 5: b"state", 6: b"table", 7: b"overflow"}
+_UPLOAD_CODES = {"range": E_RANGE, "state": E_STATE, "table": E_TABLE}
+
+POS_LIMIT = const(100000000)  # |position| in um accepted from the controller (100 m)
+FEED_LIMIT = const(1000000)  # mm/min
+MAX_CHUNK = const(64)  # bytes of table data per U,D frame
+_RX_CHUNK = const(64)
+_MAX_READS = const(8)
+
+# frame types and command letters (ASCII)
+_H = const(72)
+_O = const(79)
+_Q = const(81)
+_T = const(84)
+_A = const(65)
+_E = const(69)
+_P = const(80)
+_M = const(77)
+_R = const(82)
+_S = const(83)
+_V = const(86)
+_U = const(85)
+_X = const(88)
+_B = const(66)
+_D = const(68)
+_C = const(67)
+
+
+def _round10(v):
+    """0.01 um -> 0.1 um, rounding half away from zero."""
+    return (v + 5) // 10 if v >= 0 else -((5 - v) // 10)
+
+
+class StreamLink:
+    def __init__(self, app):
+        self.app = app
+        self.serial = app.board.serial
+        self.w = fr.FrameWriter(self.serial)
+        self.r = fr.LineReader()
+        self.rx = bytearray(_RX_CHUNK)
+        self.chunk = bytearray(MAX_CHUNK)
+        self.next_frame = app.clock.ticks_ms()
+        self.frame_ms = app.cfg.frame_ms
+
+    # --- frames out ----------------------------------------------------------
+    def boot(self):
+        self.hello()
+        for slot, reason in self.app.store.refusals:
+            self.error(E_TABLE, b"table", slot.encode() + b" " + reason.encode())
+
+    def hello(self):
+        """H,<protocol>,<firmware>,<slot>,<table crc32>,<provenance[:8] hex>,<kind>,<axis>,<channels>."""
+        a = self.app
+        w = self.w
+        w.begin(a.status, _H)
+        w.int(1)
+        w.text(b"0.1.0")
+        t = a.table
+        if t is None:
+            w.text(b"-,-,-,-,-")
+        else:
+            w.text(SLOT_NAMES[a.slot].encode())
+            w.hex(t.crc, 8)
+            w.hexbytes(t.provenance, 0, 8)
+            w.text(t.kind.encode())
+            w.text(t.axis.encode())
+        w.int(a.channels.n)
+        w.end()
+
+    def offsets(self, kind, pos):
+        """O or Q frame: <t_ms>,<pos_um>,<total um>,<offset at ref um>,<slope um/m>."""
+        a = self.app
+        w = self.w
+        w.begin(a.status, kind)
+        w.int(a.last_t)
+        w.int(pos)
+        w.fixed(_round10(a.total if kind == _O else a.total_at(pos)), 1)
+        w.fixed(_round10(a.ref_out), 1)
+        w.fixed(a.slope_out, 2)
+        w.end()
+
+    def temperatures(self):
+        """T,<t_ms>,<per channel: milli-degC as degC.mmm, or !<fault bits hex>>."""
+        a = self.app
+        ch = a.channels
+        w = self.w
+        w.begin(a.status, _T)
+        w.int(a.last_t)
+        for i in range(ch.n):
+            if ch.good[i]:
+                w.fixed(ch.temp[i], 3)
+            else:
+                w.sep()
+                w.raw(b"!")
+                w._hex(ch.fault[i], 2)
+        w.end()
+
+    def ack(self, cmd, sub=0, value=None, text=None):
+        """A,<cmd>[,<sub>][,<value>][,<text>]."""
+        w = self.w
+        w.begin(self.app.status, _A)
+        w.sep()
+        w.buf[w.n] = cmd
+        w.n += 1
+        if sub:
+            w.sep()
+            w.buf[w.n] = sub
+            w.n += 1
+        if value is not None:
+            w.int(value)
+        if text is not None:
+            w.text(text)
+        w.end()
+
+    def error(self, code, word, detail=None):
+        w = self.w
+        w.begin(self.app.status, _E)
+        w.int(code)
+        w.text(word)
+        if detail is not None:
+            w.sep()
+            for c in detail:  # keep the frame parseable whatever the detail says
+                w.buf[w.n] = c if 32 <= c <= 126 and c not in (44, 42, 36) else 32
+                w.n += 1
+                if w.n > fr.MAX_LINE - 8:
+                    break
+        w.end()
+
+    # --- link service ---------------------------------------------------------
+    def poll(self, now):
+        rx = self.rx
+        r = self.r
+        for _ in range(_MAX_READS):
+            n = self.serial.readinto(rx)
+            if not n:
+                return
+            for k in range(n):
+                if r.feed(rx[k]):
+                    self._line(now)
+            if n < _RX_CHUNK:
+                return
+
+    def after_cycle(self, now):
+        if self.frame_ms and self.app.clock.ticks_diff(now, self.next_frame) >= 0:
+            self.offsets(_O, self.app.pos)
+            self.next_frame += self.frame_ms
+            if self.app.clock.ticks_diff(now, self.next_frame) >= 0:  # fell behind: no burst
+                self.next_frame = now + self.frame_ms
+
+    def _line(self, now):
+        r = self.r
+        if r.status == fr.LINE_CRC:
+            self.error(E_CRC, b"crc")
+            return
+        if r.status == fr.LINE_OVERFLOW:
+            self.error(E_OVERFLOW, b"overflow")
+            return
+        if r.status != fr.LINE_OK:
+            self.error(E_SYNTAX, b"syntax")
+            return
+        self.app.link_alive(now)
+        self._command(r.letter(0), r.nf)
+
+    def _command(self, c, nf):
+        a = self.app
+        r = self.r
+        if c == _P:
+            if nf != 2:
+                return self.error(E_SYNTAX, b"syntax")
+            v = r.int(1, -POS_LIMIT, POS_LIMIT)
+            if v is None:
+                return self.error(E_RANGE, b"range")
+            a.report_position(v)
+        elif c == _Q:
+            if nf != 2:
+                return self.error(E_SYNTAX, b"syntax")
+            v = r.int(1, -POS_LIMIT, POS_LIMIT)
+            if v is None:
+                return self.error(E_RANGE, b"range")
+            self.offsets(_Q, v)
+        elif c == _R:
+            if nf != 2:
+                return self.error(E_SYNTAX, b"syntax")
+            v = r.int(1, -POS_LIMIT, POS_LIMIT)
+            if v is None:
+                return self.error(E_RANGE, b"range")
+            ref = a.set_reference(v)
+            if ref is None:
+                return self.error(E_STATE, b"state", b"no table")
+            self.ack(_R, 0, ref)
+        elif c == _M:
+            if nf != 4:
+                return self.error(E_SYNTAX, b"syntax")
+            f = r.int(1, 0, FEED_LIMIT)
+            lo = r.int(2, -POS_LIMIT, POS_LIMIT)
+            hi = r.int(3, -POS_LIMIT, POS_LIMIT)
+            if f is None or lo is None or hi is None:
+                return self.error(E_RANGE, b"range")
+            if not a.set_feed(f, lo, hi):
+                return self.error(E_STATE, b"state", b"no screw table")
+            self.ack(_M, 0, f)
+        elif c == _S:
+            if nf != 1:
+                return self.error(E_SYNTAX, b"syntax")
+            self.temperatures()
+        elif c == _V:
+            if nf != 1:
+                return self.error(E_SYNTAX, b"syntax")
+            self.hello()
+        elif c == _U:
+            self._upload(nf)
+        elif c == _X:
+            if nf != 1:
+                return self.error(E_SYNTAX, b"syntax")
+            self.ack(_X)
+            a.reset()
+        else:
+            self.error(E_UNKNOWN, b"unknown")
+
+    def _upload(self, nf):
+        a = self.app
+        r = self.r
+        sub = r.letter(1) if nf >= 2 else 0
+        try:
+            if sub == _B and nf == 4:
+                size = r.int(2, 0, 1 << 24)
+                crc = r.hexint(3, 8)
+                if size is None or crc < 0:
+                    return self.error(E_RANGE, b"range")
+                slot = a.store.begin(size, crc)
+                self.ack(_U, _B, None, SLOT_NAMES[slot].encode())
+            elif sub == _D and nf == 4:
+                off = r.int(2, 0, 1 << 24)
+                s = r.fs[3]
+                e = r.fe[3]
+                if off is None or (e - s) & 1 or e == s or e - s > 2 * MAX_CHUNK:
+                    return self.error(E_RANGE, b"range")
+                n = (e - s) >> 1
+                buf = self.chunk
+                for k in range(n):
+                    hi = fr._hexval(r.buf[s + 2 * k])
+                    lo = fr._hexval(r.buf[s + 2 * k + 1])
+                    if hi < 0 or lo < 0:
+                        return self.error(E_SYNTAX, b"syntax")
+                    buf[k] = (hi << 4) | lo
+                got = a.store.write(off, bytes(buf[:n]))
+                self.ack(_U, _D, got)
+            elif sub == _C and nf == 2:
+                t, slot = a.store.commit()
+                a.use_table(t, slot)
+                self.ack(_U, _C, None, SLOT_NAMES[slot].encode())
+                self.hello()
+            elif sub == _X and nf == 2:
+                a.store.abort()
+                self.ack(_U, _X)
+            else:
+                self.error(E_SYNTAX if sub in (_B, _D, _C, _X) else E_UNKNOWN,
+                           b"syntax" if sub in (_B, _D, _C, _X) else b"unknown")
+        except UploadError as e:
+            self.error(_UPLOAD_CODES.get(e.code, E_STATE), ERRORS[_UPLOAD_CODES.get(e.code, E_STATE)],
+                       e.detail.encode())
+        except OSError as e:
+            a.store.abort()
+            self.error(E_STATE, b"state", ("flash: %s" % e).encode())

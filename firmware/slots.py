@@ -1,0 +1,174 @@
+"""Two table slots in flash and the upload into the inactive one.
+
+Files in ``table_dir``: ``table_a.bin``, ``table_b.bin`` and ``active`` (one
+letter, ``A`` or ``B``). An upload is written into the slot that is not active;
+only after the whole table has been received, its length and CRC-32 match what
+the uploader announced and ``firmware.table.parse_table`` accepts it, ``active``
+is replaced by write-new-then-rename (atomic on littlefs and POSIX). A power cut
+at any point therefore leaves either the old or the new table in force, never
+a mix. At boot the active slot is loaded; if it is unusable the other one is
+tried, and the reason for each refusal is kept for the hello/error frames.
+"""
+
+import os
+
+from firmware.crc32 import crc32
+from firmware.table import parse_table, TableError
+
+SLOT_NAMES = ("A", "B")
+MAX_TABLE = 16384
+
+
+def _exists(path):
+    try:
+        os.stat(path)
+        return True
+    except OSError:
+        return False
+
+
+class UploadError(Exception):
+    """An upload step the firmware refuses; ``code`` is a protocol error word."""
+
+    def __init__(self, code, detail):
+        Exception.__init__(self, detail)
+        self.code = code
+        self.detail = detail
+
+
+class TableStore:
+    def __init__(self, directory, accept=None):
+        """``accept(table)`` may raise TableError to refuse a table that parses but
+        does not fit the board (e.g. a sensor name it has no channel for)."""
+        self.dir = directory.rstrip("/") or "/"
+        self.accept = accept
+        self._mkdirs()
+        self.active = None  # slot index in force, or None
+        self.refusals = []  # (slot letter, reason) of tables refused at boot or commit
+        self._up = None  # open upload: [file, size, crc, received, running crc]
+
+    def _mkdirs(self):
+        path = "/" if self.dir.startswith("/") else ""
+        for part in self.dir.split("/"):
+            if not part:
+                continue
+            path = path + part if path in ("", "/") else path + "/" + part
+            if not _exists(path):
+                os.mkdir(path)
+
+    def path(self, slot):
+        return "%s/table_%s.bin" % (self.dir, SLOT_NAMES[slot].lower())
+
+    def _pointer(self):
+        for name in ("active", "active.new"):
+            try:
+                with open(self.dir + "/" + name, "rb") as f:
+                    c = f.read(1)
+                if c in (b"A", b"B"):
+                    return 0 if c == b"A" else 1
+            except OSError:
+                pass
+        return None
+
+    def _parse(self, data):
+        t = parse_table(data)
+        if self.accept is not None:
+            self.accept(t)
+        return t
+
+    def _read(self, slot):
+        with open(self.path(slot), "rb") as f:
+            data = f.read(MAX_TABLE + 1)
+        if len(data) > MAX_TABLE:
+            raise TableError("length mismatch", "larger than %d bytes" % MAX_TABLE)
+        return data
+
+    def load(self):
+        """The table in force and its slot index, or (None, None); refusals recorded."""
+        self.refusals = []
+        first = self._pointer()
+        order = (0, 1) if first is None or first == 0 else (1, 0)
+        for slot in order:
+            if not _exists(self.path(slot)):
+                if slot == first:
+                    self.refusals.append((SLOT_NAMES[slot], "missing"))
+                continue
+            try:
+                t = self._parse(self._read(slot))
+            except TableError as e:
+                self.refusals.append((SLOT_NAMES[slot], e.reason))
+                continue
+            except OSError:
+                self.refusals.append((SLOT_NAMES[slot], "unreadable"))
+                continue
+            self.active = slot
+            return t, slot
+        self.active = None
+        return None, None
+
+    # --- upload ---------------------------------------------------------------
+    @property
+    def uploading(self):
+        return self._up is not None
+
+    def inactive(self):
+        return 1 if self.active == 0 else 0
+
+    def begin(self, size, crc):
+        if not 68 <= size <= MAX_TABLE:
+            raise UploadError("range", "size %d outside 68..%d" % (size, MAX_TABLE))
+        self.abort()
+        f = open(self.path(self.inactive()), "wb")
+        self._up = [f, size, crc, 0, 0]
+        return self.inactive()
+
+    def write(self, offset, data):
+        """Append ``data`` (bytes) at ``offset``, which must be the count received so far."""
+        up = self._up
+        if up is None:
+            raise UploadError("state", "no upload open")
+        if offset != up[3]:
+            raise UploadError("state", "chunk at %d, expected %d" % (offset, up[3]))
+        if up[3] + len(data) > up[1]:
+            raise UploadError("range", "chunk ends at %d beyond size %d" % (up[3] + len(data), up[1]))
+        up[0].write(data)
+        up[3] += len(data)
+        up[4] = crc32(data, up[4])
+        return up[3]
+
+    def commit(self):
+        """Verify and switch to the uploaded table; returns (table, slot)."""
+        up = self._up
+        if up is None:
+            raise UploadError("state", "no upload open")
+        f, size, crc, got, running = up
+        self._up = None
+        f.close()
+        if got != size:
+            raise UploadError("table", "received %d of %d bytes" % (got, size))
+        if running != crc:
+            raise UploadError("table", "CRC-32 %08X, announced %08X" % (running, crc))
+        slot = self.inactive()
+        try:
+            t = self._parse(self._read(slot))
+        except TableError as e:
+            self.refusals = [(SLOT_NAMES[slot], e.reason)]
+            raise UploadError("table", e.reason)
+        tmp = self.dir + "/active.new"
+        with open(tmp, "wb") as g:
+            g.write(SLOT_NAMES[slot].encode())
+        try:
+            os.rename(tmp, self.dir + "/active")
+        except OSError:  # FAT cannot rename over a file; 'active.new' is read at boot meanwhile
+            os.remove(self.dir + "/active")
+            os.rename(tmp, self.dir + "/active")
+        self.active = slot
+        return t, slot
+
+    def abort(self):
+        if self._up is not None:
+            try:
+                self._up[0].close()
+            except OSError:
+                pass
+            self._up = None
