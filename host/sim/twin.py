@@ -82,7 +82,6 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
     n = int(math.ceil(proto.minutes * 60.0 / dt - 1e-9))
     t = np.arange(n + 1) * dt
     air = ambient_C(t, proto.start_hour, params, rng_air)
-    air_step = 0.5 * (air[:-1] + air[1:])
 
     # ---- heat sources per step
     feed_ref = params.feed_ref_mm_min
