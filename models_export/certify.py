@@ -1,0 +1,322 @@
+"""Quantise a model into table fields and certify the integer evaluation.
+
+Everything here mirrors firmware/evaluate.py operation by operation (same
+order, same limb splits, same shifts). Two things are certified, both with
+exact rational arithmetic (``fractions.Fraction``; the model's float
+coefficients are converted exactly):
+
+* integer safety: an interval for every intermediate of the firmware's
+  evaluation, for every input inside the envelope, must lie inside
+  ``|x| <= 2**30 - 1`` (the 31-bit small int of a 32-bit MicroPython port).
+  Scales are chosen so that coefficient products stay below 2**29 (one bit of
+  margin) and accumulators below 2**28; the ``slots`` intervals are what the
+  tests compare with values observed in the firmware's checking mode;
+* accuracy: an interval for ``integer result - exact model`` is carried
+  through every operation (coefficient quantisation, each floor of a right
+  shift, the final rounding), centred by the bias constants (S0, rO, rK, rT,
+  rS) and bounded in um.
+
+For the screw recurrence the state error obeys e[k+1] = A e[k] + r[k] with a
+per-step residual |r| <= rho (quantisation of C = A - I and B, floors, feed
+rounding); clamping the integer state to [0, state_max] is a projection onto
+a box that holds the exact state, so it never increases |e|. Hence
+|e[k]| <= sum_m |A|^m rho <= v for every k, for any v >= 0 with
+v >= |A| v + rho elementwise (the iteration x <- |A| x + rho from 0 is
+monotone and stays below such a v). The exporter finds v with a float solve
+of (I - |A|) v = rho, inflates it, and verifies v >= |A| v + rho exactly; if
+no such v exists (|A| not contracting) it refuses to export.
+"""
+import math
+from fractions import Fraction as F
+
+from firmware.evaluate import (
+    FEED_LIMB, FEED_W_BITS, SLOT_ACC, SLOT_BMUL, SLOT_CMUL, SLOT_CUM, SLOT_CUMMUL, SLOT_D, SLOT_DE, SLOT_FEEDMUL,
+    SLOT_GEO, SLOT_GEOMUL, SLOT_HMUL, SLOT_KMUL, SLOT_LIMB, SLOT_OUT, SLOT_P, SLOT_ROW, SLOT_ROWMUL, SLOT_S,
+    SLOT_SEGMUL, SLOT_SLOPE, SLOT_SMUL, SLOT_STATE, SLOT_THMUL, SLOT_TRAVEL, SLOT_XL,
+)
+
+MAXV = (1 << 30) - 1
+PROD = 1 << 29  # coefficient x limb products are kept below this
+ACC = 1 << 28  # accumulators (scaled values) are kept below this
+MAX_FRAC = 60
+OU_PER_UM = 100  # output unit 0.01 um
+SLOPE_PER_OU_PER_UM = 10 ** 6  # 1 OU/um = 0.01 um/um = 10**6 x 0.01 um/m
+FLOAT_MARGIN_UM = 1e-9  # the float model's own rounding (double precision, |values| < 1e5 um)
+LIMITS_UM = {"poly_slope": 0.05, "linear_direct": 0.05, "screw_reduced": 0.1}
+
+
+class ExportError(ValueError):
+    """The model cannot be exported; the message names the term and the reason."""
+
+
+# ------------------------------------------------------------------ helpers
+def frac_bits(bound, limit, cap=MAX_FRAC):
+    """Largest f <= cap with bound * 2**f <= limit (bound a non-negative Fraction)."""
+    bound = F(bound)
+    if bound == 0:
+        return cap
+    f = math.floor(math.log2(limit / bound))
+    while bound * F(2) ** f > limit:
+        f -= 1
+    while f + 1 <= cap and bound * F(2) ** (f + 1) <= limit:
+        f += 1
+    return min(f, cap)
+
+
+def p2(k):
+    return F(2) ** k
+
+
+def rnd(x):
+    """Round a Fraction to the nearest int (half away from zero)."""
+    x = F(x)
+    return int(math.floor(x + F(1, 2))) if x >= 0 else -int(math.floor(-x + F(1, 2)))
+
+
+def iv_mul(a, b):
+    c = (a[0] * b[0], a[0] * b[1], a[1] * b[0], a[1] * b[1])
+    return (min(c), max(c))
+
+
+def iv_add(*ivs):
+    return (sum(i[0] for i in ivs), sum(i[1] for i in ivs))
+
+
+def iv_scale(a, k):
+    return iv_mul(a, (F(k), F(k)))
+
+
+def iv_abs(a):
+    return max(abs(a[0]), abs(a[1]))
+
+
+def int_iv(real_iv, err_iv):
+    """Integer interval holding real + err."""
+    return (math.floor(real_iv[0] + err_iv[0]), math.ceil(real_iv[1] + err_iv[1]))
+
+
+def limbs(x, L, n):
+    """Intervals of the limbs of x (an int interval) split as the firmware's _mul does."""
+    out = [(0, (1 << L) - 1)] * (n - 1)
+    out.append((x[0] >> (L * (n - 1)), x[1] >> (L * (n - 1))))
+    return out
+
+
+def limb_max(x, L, n):
+    return max(max(abs(a), abs(b)) for a, b in limbs(x, L, n))
+
+
+def top_limbs_needed(x, L, narrow):
+    """Smallest limb count n such that narrow * |top limb| <= PROD."""
+    for n in range(1, 7):
+        top = max(abs(x[0] >> (L * (n - 1))), abs(x[1] >> (L * (n - 1))))
+        if narrow * top <= PROD:
+            return n
+    return None
+
+
+def narrow_width(narrow):
+    """Limb width L for a wide operand multiplied by |narrow| <= narrow: narrow * (2**L - 1) <= PROD."""
+    if narrow <= 0:
+        return 29
+    L = 0
+    while L < 29 and narrow * ((1 << (L + 1)) - 1) <= PROD:
+        L += 1
+    return L
+
+
+def fit_coef(value, limbmax, base_frac, cap=62):
+    """Quantise ``value`` (a Fraction) as q = round(value * 2**(base_frac + sh)) with the largest
+    shift sh <= cap such that |q| * limbmax <= PROD. Returns (q, sh); (0, 0) for a zero value."""
+    if value == 0:
+        return 0, 0
+    sh = frac_bits(abs(value) * p2(base_frac) * limbmax, PROD, cap=cap)
+    while True:
+        q = rnd(value * p2(base_frac + sh))
+        if abs(q) * limbmax <= PROD:
+            return q, sh
+        sh -= 1
+
+
+class Recorder:
+    """Interval of every firmware slot, and the peak |integer| each named term produces."""
+
+    def __init__(self):
+        self.slots = {}
+        self.peaks = {}
+        self.where = {}
+
+    def note(self, slot, lo, hi, term):
+        cur = self.slots.get(slot)
+        self.slots[slot] = (lo, hi) if cur is None else (min(cur[0], lo), max(cur[1], hi))
+        m = max(abs(lo), abs(hi))
+        if m > self.peaks.get(term, -1):
+            self.peaks[term] = m
+        if m > MAXV:
+            raise ExportError("term %s: an intermediate of the integer evaluation reaches %d (2^%.2f), beyond the "
+                              "small-int limit 2^30; the model cannot be made integer-safe over its envelope"
+                              % (term, m, math.log2(m)))
+
+    def mul(self, slot, c, x, L, n, sh, term):
+        """Mirror of Evaluator._mul: returns (result interval, number of flooring shifts)."""
+        rlo = rhi = 0
+        s = sh
+        floors = 0
+        for lo, hi in limbs(x, L, n):
+            cand = (c[0] * lo, c[0] * hi, c[1] * lo, c[1] * hi)
+            plo, phi = min(cand), max(cand)
+            self.note(slot, plo, phi, term)
+            if s > 0:
+                tlo, thi = plo >> s, phi >> s
+                floors += 1
+            else:
+                tlo, thi = plo << -s, phi << -s
+            rlo += tlo
+            rhi += thi
+            self.note(slot + 1, tlo, thi, term)
+            self.note(slot + 1, rlo, rhi, term)
+            s -= L
+        return (rlo, rhi), floors
+
+    def headroom(self, term):
+        m = self.peaks.get(term, 0)
+        return 30.0 - math.log2(m) if m > 0 else 30.0
+
+
+def floor_err(k):
+    """Error interval of k flooring right shifts."""
+    return (F(-k), F(0))
+
+
+def center(err):
+    """Integer bias that centres an error interval on zero (subtracted from the value)."""
+    return rnd(-(err[0] + err[1]) / 2)
+
+
+# ------------------------------------------------------------------ the model, exactly
+class Model:
+    """The model document reduced to exact numbers in table units (see docs/table-format.md)."""
+
+    def __init__(self, doc, ref_position_mm=None):
+        kind = doc.get("kind")
+        self.doc_kind = kind
+        self.kind = "screw_reduced" if kind == "screw" else kind
+        if self.kind not in LIMITS_UM:
+            raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw)" % (kind,))
+        self.sensors = list(doc.get("sensors") or [])
+        env = doc.get("envelope") or {}
+        tenv = env.get("temperature_C") or {}
+        refs = doc.get("reference_C") or {}
+        thermal = doc.get("thermal") or {}
+        self.env_lo, self.env_hi, self.ref, self.ref_frac = [], [], [], []
+        for s in self.sensors:
+            if s not in tenv:
+                raise ExportError("envelope.temperature_C has no range for sensor %r" % s)
+            lo, hi = _pair(tenv[s], "envelope.temperature_C.%s" % s)
+            if s not in refs:
+                raise ExportError("reference_C has no entry for sensor %r" % s)
+            r = F(_num(refs[s], "reference_C.%s" % s)) * 1000
+            lo_m, hi_m = math.ceil(F(lo) * 1000), math.floor(F(hi) * 1000)
+            if lo_m > hi_m:
+                raise ExportError("envelope.temperature_C.%s: empty range %r" % (s, [lo, hi]))
+            self.env_lo.append(lo_m)
+            self.env_hi.append(hi_m)
+            self.ref.append(rnd(r))
+            self.ref_frac.append(r - rnd(r))  # folded into the intercept so d = t - ref stays an exact int
+        if self.kind == "linear_direct":
+            self.pos_lo = self.pos_hi = self.pos_ref = 0
+        else:
+            lo, hi = _pair(env.get("position_mm"), "envelope.position_mm")
+            self.pos_lo, self.pos_hi = math.ceil(F(lo) * 1000), math.floor(F(hi) * 1000)
+            if self.pos_lo > self.pos_hi:
+                raise ExportError("envelope.position_mm: empty range %r" % ([lo, hi],))
+            if ref_position_mm is None:
+                ref = 0 if self.pos_lo <= 0 <= self.pos_hi else self.pos_lo
+            else:
+                ref = rnd(F(ref_position_mm) * 1000)
+                if not self.pos_lo <= ref <= self.pos_hi:
+                    raise ExportError("reference position %s mm is outside envelope.position_mm" % ref_position_mm)
+            self.pos_ref = ref
+        # S: the temperature-linear part. poly_slope/screw: OU per um (slope); linear_direct: OU.
+        if self.kind == "poly_slope":
+            coefs = thermal.get("coefficients_um_per_mm_per_K")
+            per_mc = F(OU_PER_UM, 1000 * 1000)  # (um/mm/K) -> (OU/um per mK)
+            self.b0 = F(_num(thermal.get("intercept_um_per_mm", 0.0), "thermal.intercept_um_per_mm")) * F(OU_PER_UM, 1000)
+            self.b_names = ["thermal.coefficients_um_per_mm_per_K.%s" % s for s in self.sensors]
+            self.b = [F(_num(_get(coefs, s, "thermal.coefficients_um_per_mm_per_K"), self.b_names[i])) * per_mc
+                      for i, s in enumerate(self.sensors)]
+        elif self.kind == "linear_direct":
+            coefs = thermal.get("coefficients_um_per_K")
+            self.b0 = F(_num(thermal.get("intercept_um", 0.0), "thermal.intercept_um")) * OU_PER_UM
+            self.b_names = ["thermal.coefficients_um_per_K.%s" % s for s in self.sensors]
+            self.b = [F(_num(_get(coefs, s, "thermal.coefficients_um_per_K"), self.b_names[i])) * F(OU_PER_UM, 1000)
+                      for i, s in enumerate(self.sensors)]
+        else:
+            red = thermal.get("reduced")
+            if not isinstance(red, dict):
+                raise ExportError("screw model document has no thermal.reduced block (the firmware's recurrence)")
+            self.red = red
+            alpha = F(_num(red.get("alpha_um_per_mm_per_K"), "thermal.reduced.alpha_um_per_mm_per_K"))
+            self.alpha = alpha
+            base = red.get("base_sensor")
+            self.b0 = F(0)
+            self.b = [F(0)] * len(self.sensors)
+            self.b_names = ["thermal.reduced.base_sensor(%s)" % s for s in self.sensors]
+            if base is not None:
+                if base not in self.sensors:
+                    raise ExportError("thermal.reduced.base_sensor %r is not in sensors %r" % (base, self.sensors))
+                i = self.sensors.index(base)
+                self.b[i] = alpha * F(OU_PER_UM, 1000 * 1000)
+                bref = F(_num(red.get("base_ref_C"), "thermal.reduced.base_ref_C")) * 1000
+                self.ref[i] = rnd(bref)
+                self.ref_frac[i] = bref - rnd(bref)
+        for i in range(len(self.sensors)):
+            self.b0 -= self.b[i] * self.ref_frac[i]
+        self.d_lo = [lo - r for lo, r in zip(self.env_lo, self.ref)]
+        self.d_hi = [hi - r for hi, r in zip(self.env_hi, self.ref)]
+        geo = doc.get("geometric") if self.kind != "linear_direct" else None
+        gc = (geo or {}).get("coefficients_um") or [0.0]
+        self.g = [F(_num(c, "geometric.coefficients_um[%d]" % j)) * OU_PER_UM / F(1000) ** j for j, c in enumerate(gc)]
+        if len(self.g) - 1 > 6:
+            raise ExportError("geometric degree %d: the table holds at most degree 6" % (len(self.g) - 1))
+
+    # real ranges ----------------------------------------------------------
+    def s_range(self):
+        lo = hi = self.b0
+        for b, a, c in zip(self.b, self.d_lo, self.d_hi):
+            lo += min(b * a, b * c)
+            hi += max(b * a, b * c)
+        return (lo, hi)
+
+    def s_bound(self):
+        """Bound of |every partial sum| of S."""
+        return abs(self.b0) + sum(abs(b) * max(abs(a), abs(c)) for b, a, c in zip(self.b, self.d_lo, self.d_hi))
+
+    def p_iv(self):
+        return (F(self.pos_lo), F(self.pos_hi))
+
+    def horner_range(self, j):
+        """Sound interval of h_j(p) = sum_{k>=j} g_k p^(k-j) over the position envelope (interval Horner)."""
+        P = self.p_iv()
+        h = (self.g[-1], self.g[-1])
+        for k in range(len(self.g) - 2, j - 1, -1):
+            h = iv_add(iv_mul(h, P), (self.g[k], self.g[k]))
+        return h
+
+
+def _num(v, where):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ExportError("%s: expected a finite number, got %r" % (where, v))
+    return v
+
+
+def _get(d, key, where):
+    if not isinstance(d, dict) or key not in d:
+        raise ExportError("%s has no entry for sensor %r" % (where, key))
+    return d[key]
+
+
+def _pair(v, where):
+    if not (isinstance(v, (list, tuple)) and len(v) == 2):
+        raise ExportError("%s: expected [lo, hi], got %r" % (where, v))
+    return _num(v[0], where + "[0]"), _num(v[1], where + "[1]")

@@ -1,0 +1,111 @@
+"""export_model: quantise + certify + pack; the report the CLI writes."""
+import math
+
+from firmware.crc32 import crc32
+from models_export.certify import LIMITS_UM, OU_PER_UM, ExportError, Model
+from models_export.plan import Planner
+from models_export.tableformat import pack
+
+
+class Export:
+    """Result of export_model: ``table`` (bytes), ``fields`` (dict), ``report`` (dict), ``slots``
+    ({slot: (lo, hi)} certified intervals of the firmware's check slots), ``errors_ou``
+    ({output: (lo, hi)} certified integer-minus-model intervals, output units)."""
+
+    def __init__(self, fields, table, report, slots, errors_ou):
+        self.fields = fields
+        self.table = table
+        self.report = report
+        self.slots = slots
+        self.errors_ou = errors_ou
+
+    def c_header(self, guard="TCOMP_TABLE_H"):
+        from models_export.cheader import c_header
+
+        return c_header(self, guard)
+
+
+def _provenance(doc):
+    from host.models import document_hash
+
+    actual = document_hash(doc)
+    declared = ((doc.get("provenance") or {}).get("sha256")) or None
+    return bytes.fromhex(declared if declared and len(declared) == 64 else actual), declared == actual
+
+
+def export_model(doc, ref_position_mm=None, limit_um=None):
+    """Quantise and certify ``doc`` (a tcomp-model/1 dict). Raises ExportError."""
+    if not isinstance(doc, dict):
+        raise ExportError("model document must be a JSON object")
+    model = Model(doc, ref_position_mm)
+    planner = Planner(model)
+    if model.kind == "linear_direct":
+        errs = planner.linear_direct()
+    else:
+        errs = planner.positional()
+    f = planner.f
+    prov, verified = _provenance(doc)
+    f.update(kind=model.kind, sensors=model.sensors, env_lo=model.env_lo, env_hi=model.env_hi, ref=model.ref,
+             pos_lo=model.pos_lo, pos_hi=model.pos_hi, pos_ref=model.pos_ref, provenance=prov,
+             axis=str(doc.get("axis") or "?"))
+    try:
+        table = pack(f)
+    except ValueError as exc:
+        raise ExportError("table: %s" % exc)
+    rec = planner.rec
+    limit = LIMITS_UM[model.kind] if limit_um is None else limit_um
+    fo = f["fo"]
+    scale_um = 1.0 / OU_PER_UM
+    max_err = _up(max(abs(errs["offset"][0]), abs(errs["offset"][1])) * scale_um) + 1e-9
+    terms = []
+    for t in planner.terms:
+        terms.append({"name": t["name"], "scale": t["scale"], "headroom_bits": round(rec.headroom(t["key"]), 3),
+                      "max_error_um": _up(t["err_ou"] / (1 << fo) * scale_um) if t["err_ou"] else 0.0})
+    if max_err >= limit:
+        worst = max(terms, key=lambda t: t["max_error_um"])
+        raise ExportError("certified worst-case error %.4g um is not below %.4g um for %s; largest contribution: term %s "
+                          "(%.4g um)" % (max_err, limit, model.kind, worst["name"], worst["max_error_um"]))
+    peak = max(max(abs(lo), abs(hi)) for lo, hi in rec.slots.values())
+    envelope = {
+        "temperature_mC": {s: [lo, hi] for s, lo, hi in zip(model.sensors, model.env_lo, model.env_hi)},
+        "reference_mC": dict(zip(model.sensors, model.ref)),
+    }
+    if model.kind != "linear_direct":
+        envelope["position_um"] = [model.pos_lo, model.pos_hi]
+        envelope["reference_position_um"] = model.pos_ref
+    report = {
+        "model_kind": model.kind,
+        "table_format": 1,
+        "table_bytes": len(table),
+        "crc32": "%08x" % crc32(table[:-4]),
+        "units": {"offset": "0.01 um", "slope": "0.01 um/m", "temperature": "milli-degC", "position": "um"},
+        "max_error_um": max_err,
+        "limit_um": limit,
+        "ref_offset_max_error_um": _up(max(map(abs, errs["ref_offset"])) * scale_um) + 1e-9,
+        "slope_max_error_um_per_m": _up(max(map(abs, errs["slope"])) * 0.01) + 1e-9,
+        "min_headroom_bits": round(30.0 - math.log2(peak), 3) if peak else 30.0,
+        "terms": terms,
+        "envelope": envelope,
+        "provenance_sha256": prov.hex(),
+        "provenance_verified": verified,
+    }
+    if model.kind == "screw_reduced":
+        sc = planner.state_cert
+        s = planner.s
+        envelope["state_K"] = [0.0, float(s["Tmax"])]
+        envelope["travel_um_per_step"] = [0, f["umax"]]
+        envelope["feed_max_mm_min"] = f["fmax"]
+        report["screw"] = {
+            "segments": f["M"], "dt_ms": f["dt_ms"], "state_frac_bits": f["ft"], "state_limbs": f["ns"],
+            "state_error_bound_K": max(sc["v_state_units"]) / (1 << f["ft"]),
+            "per_step_residual_K": max(sc["rho_state_units"]) / (1 << f["ft"]),
+            "horizon": "unbounded (steady state): |e| <= v with v >= |A| v + rho verified exactly",
+        }
+    slots = {k: v for k, v in rec.slots.items() if k >= 0}
+    return Export(f, table, report, slots, errs)
+
+
+def _up(x):
+    """float(x) rounded up (x a Fraction or float)."""
+    v = float(x)
+    return math.nextafter(v, math.inf) if v < x else v

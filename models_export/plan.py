@@ -1,0 +1,514 @@
+"""Choose scales, quantise and certify, kind by kind, in the firmware's evaluation order.
+
+``plan(model)`` returns (fields, certificate). ``fields`` are the table fields
+(models_export.tableformat.pack); ``certificate`` carries the error interval of
+every output, per-term scales/headroom/error contributions and the slot
+intervals (models_export.certify explains the argument).
+"""
+import math
+from fractions import Fraction as F
+
+import numpy as np
+
+from firmware.evaluate import (
+    FEED_LIMB, FEED_W_BITS, SLOT_ACC, SLOT_BMUL, SLOT_CMUL, SLOT_CUM, SLOT_CUMMUL, SLOT_D, SLOT_DE, SLOT_FEEDMUL,
+    SLOT_GEO, SLOT_GEOMUL, SLOT_HMUL, SLOT_KMUL, SLOT_LIMB, SLOT_OUT, SLOT_P, SLOT_ROW, SLOT_ROWMUL, SLOT_S,
+    SLOT_SEGMUL, SLOT_SLOPE, SLOT_SMUL, SLOT_STATE, SLOT_THMUL, SLOT_TRAVEL, SLOT_XL,
+)
+from models_export.certify import (
+    ACC, OU_PER_UM, PROD, SLOPE_PER_OU_PER_UM, ExportError, Recorder, center, fit_coef, floor_err, frac_bits,
+    int_iv, iv_abs, iv_add, iv_mul, iv_scale, limb_max, narrow_width, p2, rnd, top_limbs_needed,
+)
+
+ZERO = (F(0), F(0))
+
+
+def _c(x):
+    x = F(x)
+    return (x, x)
+
+
+def _hull(*ivs):
+    return (min(i[0] for i in ivs), max(i[1] for i in ivs))
+
+
+def _meet(a, b):
+    lo, hi = max(a[0], b[0]), min(a[1], b[1])
+    return (lo, hi) if lo <= hi else a
+
+
+def _round_out(err, f):
+    """Error interval of floor((acc + r) / 2**f) given acc's error interval ``err`` (acc units); returns (r, err_out)."""
+    r = rnd(-(err[0] + err[1]) / 2 + F((1 << f) - 1, 2))
+    lo = (err[0] + r) / p2(f) - F((1 << f) - 1, 1 << f)
+    hi = (err[1] + r) / p2(f)
+    return r, (lo, hi)
+
+
+class Planner:
+    def __init__(self, model):
+        self.m = model
+        self.rec = Recorder()
+        self.f = {}
+        self.terms = []  # dicts: name, scale, term (recorder key), err_ou (contribution in output units)
+
+    def term(self, name, scale, err_ou, key=None):
+        self.terms.append({"name": name, "scale": scale, "key": key or name, "err_ou": F(err_ou)})
+
+    # ------------------------------------------------------------ S = S0 + sum b*d
+    def s_block(self, fS, out_factor):
+        """Temperature-linear accumulator at scale 2**fS; out_factor converts its error to output units."""
+        m, rec, f = self.m, self.rec, self.f
+        n = len(m.sensors)
+        dmax = max([max(abs(a), abs(b)) for a, b in zip(m.d_lo, m.d_hi)] + [1])
+        nt = 1 if dmax.bit_length() <= 10 else 2
+        Lt = max(1, min(29, -(-dmax.bit_length() // nt)))
+        f.update(Lt=Lt, nt=nt, fS=fS, b=[], shb=[], fb=[])
+        err = ZERO
+        res_sum = (0, 0)
+        parts = []
+        for i in range(n):
+            d = (m.d_lo[i], m.d_hi[i])
+            rec.note(SLOT_D, d[0], d[1], "temperatures")
+            lm = limb_max(d, Lt, nt)
+            q, sh = fit_coef(m.b[i], lm, fS)
+            f["b"].append(q)
+            f["shb"].append(sh)
+            f["fb"].append(fS + sh)
+            res, k = rec.mul(SLOT_SMUL, (q, q), d, Lt, nt, sh, m.b_names[i])
+            quant = iv_scale((F(d[0]), F(d[1])), F(q) / p2(sh) - m.b[i] * p2(fS))
+            err = iv_add(err, quant, floor_err(k))
+            parts.append((res, m.b_names[i], fS + sh, iv_abs(quant)))
+            self.term(m.b_names[i], fS + sh, iv_abs(quant) * out_factor)
+        bias = center(err)
+        S0 = rnd(m.b0 * p2(fS)) + bias
+        f["S0"] = S0
+        e0 = F(S0) - m.b0 * p2(fS)
+        eS = iv_add(err, _c(e0))
+        self.term("S0 (%s)" % ("intercept_um" if m.kind == "linear_direct" else "intercept_um_per_mm"), fS,
+                  abs(e0 - bias) * out_factor, key="S0")
+        rec.note(-1, S0, S0, "S0")  # slot -1: constants (no firmware slot)
+        acc = (S0, S0)
+        for res, name, _, _ in parts:
+            acc = iv_add(acc, res)
+            rec.note(SLOT_S, acc[0], acc[1], name)
+        s_real = m.s_range()
+        S_iv = _meet(acc, int_iv((s_real[0] * p2(fS), s_real[1] * p2(fS)), eS))
+        return S_iv, eS
+
+    # ------------------------------------------------------------ kinds
+    def linear_direct(self):
+        m, f, rec = self.m, self.f, self.rec
+        bound = max(m.s_bound(), iv_abs(m.s_range()))
+        fo = frac_bits(bound, ACC, cap=24)
+        if fo < 0:
+            raise ExportError("%s: the offset range %.4g um exceeds what the table can hold" % (_largest(m), float(bound) / OU_PER_UM))
+        f["fo"] = fo
+        S_iv, eS = self.s_block(fo, F(1, 1 << fo))
+        rL, err_out = _round_out(eS, fo)
+        f["rL"] = rL
+        rec.note(SLOT_ACC, S_iv[0] + rL, S_iv[1] + rL, "output")
+        rec.note(SLOT_OUT, (S_iv[0] + rL) >> fo, (S_iv[1] + rL) >> fo, "output")
+        self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
+        return {"offset": err_out, "ref_offset": err_out, "slope": ZERO}
+
+    def positional(self):
+        m, f, rec = self.m, self.f, self.rec
+        screw = m.kind == "screw_reduced"
+        P = m.p_iv()
+        PM = max(abs(m.pos_lo), abs(m.pos_hi), 1)
+        if PM > PROD:
+            raise ExportError("envelope.position_mm: |position| up to %d um does not fit the table" % PM)
+        seg_bound = self.screw_prepare() if screw else F(0)
+        geo_bound = iv_abs(m.horner_range(0))
+        acc_bound = geo_bound + m.s_bound() * PM + seg_bound
+        fo = frac_bits(acc_bound, ACC, cap=24)
+        if fo < 0:
+            raise ExportError("%s: the offset range %.4g um over the envelope exceeds what the table can hold"
+                              % (_largest(m), float(acc_bound) / OU_PER_UM))
+        f["fo"] = fo
+        f["rL"] = 0
+        fS = frac_bits(m.s_bound(), ACC)
+        S_iv, eS = self.s_block(fS, F(PM) / p2(fS))
+        rec.note(SLOT_P, m.pos_lo, m.pos_hi, "position")
+        Lw = narrow_width(PM)
+        nw = top_limbs_needed(S_iv, Lw, PM)
+        if nw is None:
+            raise ExportError("%s: slope x position cannot be split into small-int limbs" % _largest(m))
+        shw = fS - fo
+        f.update(Lw=Lw, nw=nw, shw=shw)
+        th, k = rec.mul(SLOT_THMUL, (m.pos_lo, m.pos_hi), S_iv, Lw, nw, shw, "slope x position")
+        err_th = iv_add(iv_scale(iv_mul(P, eS), 1 / p2(shw)), floor_err(k))
+        self.term("rounding: slope x position", fo, F(k), key="slope x position")
+        # geometric polynomial, Horner in p (um)
+        h_iv, err_geo = self.horner(fo, PM)
+        # screw segments
+        if screw:
+            seg_iv, err_seg, seg_at = self.screw_state(fo)
+        else:
+            seg_iv, err_seg, seg_at = (0, 0), ZERO, None
+        acc = iv_add(h_iv, th)
+        rec.note(SLOT_ACC, acc[0], acc[1], "output")
+        if screw:
+            acc = iv_add(acc, seg_iv)
+            rec.note(SLOT_ACC, acc[0], acc[1], "output")
+        err_acc = iv_add(err_geo, err_th, err_seg)
+        rO, err_out = _round_out(err_acc, fo)
+        f["rO"] = rO
+        acc = (acc[0] + rO, acc[1] + rO)
+        rec.note(SLOT_ACC, acc[0], acc[1], "output")
+        rec.note(SLOT_OUT, acc[0] >> fo, acc[1] >> fo, "output")
+        self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
+        # the pair: thermal offset at the reference position ...
+        pr = m.pos_ref
+        th_ref, k = rec.mul(SLOT_THMUL, (pr, pr), S_iv, Lw, nw, shw, "slope x position")
+        err_ref = iv_add(iv_scale(eS, F(pr) / p2(shw)), floor_err(k))
+        acc_ref = th_ref
+        if screw:
+            acc_ref = iv_add(acc_ref, seg_iv)
+            err_ref = iv_add(err_ref, err_seg)
+        rT, err_ref_out = _round_out(err_ref, fo)
+        f["rT"] = rT
+        rec.note(SLOT_ACC, acc_ref[0] + rT, acc_ref[1] + rT, "output")
+        rec.note(SLOT_OUT, (acc_ref[0] + rT) >> fo, (acc_ref[1] + rT) >> fo, "output")
+        # ... and the thermal slope in 0.01 um/m
+        s_real = m.s_range()
+        slope_bound = m.s_bound() * SLOPE_PER_OU_PER_UM
+        span = m.pos_hi - m.pos_lo
+        if screw and span > 0:
+            slope_bound += 2 * seg_bound * SLOPE_PER_OU_PER_UM / span
+        fK = frac_bits(slope_bound, ACC, cap=24)
+        if fK < 0:
+            raise ExportError("%s: thermal slope range exceeds what the table can hold" % _largest(m))
+        lmw = limb_max(S_iv, Lw, nw)
+        KS, shK = fit_coef(F(SLOPE_PER_OU_PER_UM), lmw, fK - fS)
+        f.update(KS=KS, shK=shK, fK=fK)
+        sl, k = rec.mul(SLOT_KMUL, (KS, KS), S_iv, Lw, nw, shK, "KS (slope unit conversion)")
+        kq = F(KS) / p2(shK)
+        err_sl = iv_add(iv_scale((s_real[0] * p2(fS), s_real[1] * p2(fS)), kq - SLOPE_PER_OU_PER_UM * p2(fK - fS)),
+                        iv_scale(eS, kq), floor_err(k))
+        self.term("KS (slope unit conversion)", fK - fS + shK, 0, key="KS (slope unit conversion)")
+        if screw:
+            sl2, err_sl2 = self.screw_chord(seg_at, fo, fK)
+            sl = iv_add(sl, sl2)
+            err_sl = iv_add(err_sl, err_sl2)
+            rec.note(SLOT_SLOPE, sl[0], sl[1], "output")
+        else:
+            self.f.update(KC=0, Lc=1, nc=1, shC=0)
+        rK, err_sl_out = _round_out(err_sl, fK)
+        f["rK"] = rK
+        rec.note(SLOT_SLOPE, sl[0] + rK, sl[1] + rK, "output")
+        rec.note(SLOT_OUT, (sl[0] + rK) >> fK, (sl[1] + rK) >> fK, "output")
+        return {"offset": err_out, "ref_offset": err_ref_out, "slope": err_sl_out}
+
+    def horner(self, fo, PM):
+        m, f, rec = self.m, self.f, self.rec
+        d = len(m.g) - 1
+        fr = [fo] + [frac_bits(iv_abs(m.horner_range(j)), ACC) for j in range(1, d + 1)]
+        G = [rnd(m.g[j] * p2(fr[j])) for j in range(d + 1)]
+        shg = [fr[j + 1] - fr[j] for j in range(d)]
+        P = m.p_iv()
+        Lg = narrow_width(PM)
+        f.update(degree=d, Lg=Lg, G=G, fG=fr, shg=shg)
+        names = ["geometric.coefficients_um[%d]" % j for j in range(d + 1)]
+        for j in range(d + 1):
+            rec.note(-1, G[j], G[j], names[j])
+            self.term(names[j], fr[j], abs(F(G[j]) - m.g[j] * p2(fr[j])) * F(PM) ** j / p2(fr[j]) * p2(fo))
+        for ng in range(1, 7):
+            try:
+                sub = Recorder()
+                h = (G[d], G[d])
+                err = _c(F(G[d]) - m.g[d] * p2(fr[d]))
+                for j in range(d - 1, -1, -1):
+                    if top_limbs_needed(h, Lg, PM) is None or top_limbs_needed(h, Lg, PM) > ng:
+                        raise _Retry()
+                    res, k = sub.mul(SLOT_GEOMUL, (m.pos_lo, m.pos_hi), h, Lg, ng, shg[j], names[j + 1])
+                    err = iv_add(iv_scale(iv_mul(P, err), 1 / p2(shg[j])), floor_err(k), _c(F(G[j]) - m.g[j] * p2(fr[j])))
+                    hr = m.horner_range(j)
+                    h = _meet(iv_add(res, (G[j], G[j])), int_iv((hr[0] * p2(fr[j]), hr[1] * p2(fr[j])), err))
+                    sub.note(SLOT_GEO, h[0], h[1], names[j])
+                break
+            except _Retry:
+                continue
+        else:
+            raise ExportError("geometric.coefficients_um: the polynomial cannot be evaluated in small-int limbs")
+        f["ng"] = ng
+        _merge(rec, sub)
+        return h, err
+
+    # ------------------------------------------------------------ screw_reduced
+    def screw_prepare(self):
+        """Read thermal.reduced; returns the bound of the segment elongation in output units."""
+        m, f = self.m, self.f
+        red = m.red
+        try:
+            M = int(red["segments"])
+            A = np.asarray(red["A"], dtype=float)
+            B = np.asarray(red["B_K_per_mm"], dtype=float)
+            edges = [float(e) for e in red["edges_mm"]]
+            fixed = float(red["fixed_end_mm"])
+            dt = float(red["dt_s"])
+            Tmax = float(red["state_max_K"])
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ExportError("thermal.reduced: missing or invalid field %s" % exc)
+        fmax_f = red.get("feed_max_mm_min")
+        if not isinstance(fmax_f, (int, float)) or not fmax_f >= 0:
+            raise ExportError("thermal.reduced.feed_max_mm_min is missing: the travel bound per step is needed")
+        if not 1 <= M <= 32 or A.shape != (M, M) or B.shape != (M,) or len(edges) != M + 1:
+            raise ExportError("thermal.reduced: segments=%d needs A %dx%d, B_K_per_mm %d, edges_mm %d (got %s, %s, %d)"
+                              % (M, M, M, M, M + 1, A.shape, B.shape, len(edges)))
+        if not (np.all(np.isfinite(A)) and np.all(np.isfinite(B)) and Tmax > 0 and dt > 0):
+            raise ExportError("thermal.reduced: A, B_K_per_mm must be finite, state_max_K and dt_s positive")
+        if np.any(B < 0):
+            raise ExportError("thermal.reduced.B_K_per_mm: negative heating coefficient")
+        if edges[0] != 0 or any(b <= a for a, b in zip(edges, edges[1:])):
+            raise ExportError("thermal.reduced.edges_mm must start at 0 and ascend")
+        dt_ms = rnd(F(dt) * 1000)
+        if abs(F(dt) * 1000 - dt_ms) > F(1, 10 ** 6) or dt_ms < 1:
+            raise ExportError("thermal.reduced.dt_s=%r is not a whole number of milliseconds" % dt)
+        fmax = math.ceil(fmax_f)
+        if fmax * dt_ms >= PROD:
+            raise ExportError("thermal.reduced.feed_max_mm_min x dt_s: travel per step too large for the table")
+        edges_um = [rnd(F(e) * 1000) for e in edges]
+        if any(b <= a for a, b in zip(edges_um, edges_um[1:])):
+            raise ExportError("thermal.reduced.edges_mm: segments shorter than 1 um")
+        fe = rnd(F(fixed) * 1000)
+        if max(abs(m.pos_lo - fe), abs(m.pos_hi - fe)) + edges_um[-1] >= PROD:
+            raise ExportError("thermal.reduced.fixed_end_mm / edges_mm: screw coordinates too large for the table")
+        umax = -(-fmax * dt_ms // 60)
+        self.s = dict(M=M, A=A, B=B, edges=edges, edges_um=edges_um, fixed=fixed, fe=fe, Tmax=F(Tmax), umax=umax)
+        f.update(M=M, dt_ms=dt_ms, fixed_end=fe, fmax=fmax, edges=edges_um, umax=umax)
+        alpha = m.alpha
+        return abs(alpha) * F(Tmax) * F(edges[-1]) * OU_PER_UM * 2  # x2: margin for state errors
+
+    def screw_state(self, fo):
+        """Recurrence, state error certificate, cum/segslope; returns (seg interval, seg error, per-position helper)."""
+        best = None
+        for ns in (2, 3):
+            try:
+                sub = Planner(self.m)
+                sub.f = dict(self.f)
+                sub.s = self.s
+                out = sub._screw_state(fo, ns)
+            except ExportError as exc:
+                last = exc
+                continue
+            e = iv_abs(out[1])
+            if best is None or e < best[0]:
+                best = (e, sub, out)
+        if best is None:
+            raise last
+        _, sub, out = best
+        self.f.update(sub.f)
+        _merge(self.rec, sub.rec)
+        self.terms += sub.terms
+        self.state_cert = sub.state_cert
+        return out
+
+    def _screw_state(self, fo, ns):
+        m, f, rec, s = self.m, self.f, self.rec, self.s
+        M, A = s["M"], s["A"]
+        Tmax = s["Tmax"]
+        ft = frac_bits(Tmax, 1 << 27, cap=30)
+        Tq = math.ceil(Tmax * p2(ft))
+        Ls = max(1, -(-Tq.bit_length() // ns))
+        T_iv = (0, Tq)
+        lms = limb_max(T_iv, Ls, ns)
+        top = Tq >> (Ls * (ns - 1))
+        rec.note(SLOT_LIMB, 0, top, "state")
+        Cx = [[F(float(A[i, j])) - (1 if i == j else 0) for j in range(M)] for i in range(M)]
+        rowsum = max(sum(abs(c) for c in row) for row in Cx)
+        fc = frac_bits(rowsum * lms, PROD, cap=62)
+        while True:
+            Cq = [[rnd(c * p2(fc)) for c in row] for row in Cx]
+            if max(sum(abs(c) for c in row) for row in Cq) * lms <= PROD:
+                break
+            fc -= 1
+        umax = s["umax"]
+        nu = 2
+        Lu = max(1, -(-umax.bit_length() // nu))
+        U_iv = (0, umax)
+        lmu = limb_max(U_iv, Lu, nu)
+        Bq, shB, rS = [], [], []
+        rho = []
+        feed_du = (-(F(umax) / p2(FEED_W_BITS) + 4), F(0))  # feed/range mode travel error per segment (um)
+        limb_ivs = [(0, (1 << Ls) - 1)] * (ns - 1) + [(0, top)]
+        for i in range(M):
+            name = "thermal.reduced.A[%d]" % i
+            acc = (0, 0)
+            err = ZERO
+            sh = fc
+            for k in range(ns):
+                r = (0, 0)
+                for j in range(M):
+                    c = Cq[i][j]
+                    lo, hi = limb_ivs[k]
+                    p = (min(c * lo, c * hi), max(c * lo, c * hi))
+                    rec.note(SLOT_ROWMUL, p[0], p[1], name)
+                    r = iv_add(r, p)
+                    rec.note(SLOT_ROWMUL, r[0], r[1], name)
+                if sh > 0:
+                    acc = iv_add(acc, (r[0] >> sh, r[1] >> sh))
+                    err = iv_add(err, floor_err(1))
+                else:
+                    acc = iv_add(acc, (r[0] << -sh, r[1] << -sh))
+                rec.note(SLOT_ROW, acc[0], acc[1], name)
+                sh -= Ls
+            for j in range(M):
+                dc = F(Cq[i][j]) / p2(fc) - Cx[i][j]
+                err = iv_add(err, iv_mul(_c(dc), (F(0), F(Tq))))
+            q, sb = fit_coef(F(float(s["B"][i])) / 1000, lmu, ft)
+            Bq.append(q)
+            shB.append(sb)
+            res, k = rec.mul(SLOT_BMUL, (q, q), U_iv, Lu, nu, sb, "thermal.reduced.B_K_per_mm[%d]" % i)
+            bq = F(q) / p2(sb)
+            db = bq - F(float(s["B"][i])) / 1000 * p2(ft)
+            err = iv_add(err, iv_mul(_c(db), (F(0), F(umax))), floor_err(k), _hull(ZERO, iv_scale(feed_du, bq)))
+            acc = iv_add(acc, res)
+            rec.note(SLOT_ROW, acc[0], acc[1], name)
+            bias = center(err)
+            rS.append(bias)
+            err = (err[0] + bias, err[1] + bias)
+            rec.note(SLOT_STATE, acc[0] + bias, Tq + acc[1] + bias, name)
+            rho.append(max(abs(err[0]), abs(err[1])))
+            self.term("thermal.reduced.B_K_per_mm[%d]" % i, ft + sb, 0, key="thermal.reduced.B_K_per_mm[%d]" % i)
+        # travel accumulators and the feed fallback
+        maxlen = max(b - a for a, b in zip(s["edges_um"], s["edges_um"][1:]))
+        rec.note(SLOT_TRAVEL, 0, umax + max(maxlen, umax), "travel")
+        rec.mul(SLOT_FEEDMUL, (0, 1 << FEED_W_BITS), (0, umax), FEED_LIMB, 3, FEED_W_BITS, "travel")
+        # state error: v >= |A| v + rho, verified exactly
+        v = _supersolution(A, rho)
+        if v is None:
+            raise ExportError("thermal.reduced.A: the recurrence is not contracting (|A| has spectral radius >= 1); "
+                              "the integer state error cannot be bounded")
+        self.state_cert = {"rho_state_units": [float(r) for r in rho], "v_state_units": [float(x) for x in v], "ft": ft}
+        f.update(ft=ft, Tmax=Tq, Ls=Ls, ns=ns, fc=fc, C=[c for row in Cq for c in row], Lu=Lu, nu=nu, B=Bq, shB=shB, rS=rS)
+        for i in range(M):
+            big = max(abs(c) for c in Cq[i])
+            rec.note(-1, -big, big, "thermal.reduced.A[%d]" % i)
+            self.term("thermal.reduced.A[%d]" % i, fc, 0)
+        # elongation profile: cum (scale 2**fo) and segment slopes (scale 2**fh)
+        alpha = m.alpha
+        edges = s["edges"]
+        G2, shG2 = [], []
+        cum = (0, 0)
+        err_cum = [ZERO]
+        cum_ivs = [(0, 0)]
+        ecum = ZERO
+        for i in range(M):
+            ln = F(edges[i + 1]) - F(edges[i])
+            val = alpha * ln * OU_PER_UM
+            q, sh = fit_coef(val, lms, fo - ft)
+            G2.append(q)
+            shG2.append(sh)
+            res, k = rec.mul(SLOT_CUMMUL, (q, q), T_iv, Ls, ns, sh, "thermal.reduced.alpha x edges[%d]" % i)
+            cum = iv_add(cum, res)
+            rec.note(SLOT_CUM, cum[0], cum[1], "thermal.reduced.alpha x edges[%d]" % i)
+            gq = F(q) / p2(sh)
+            dq = gq - val * p2(fo - ft)
+            ecum = iv_add(ecum, iv_mul(_c(dq), (F(0), F(Tq))), floor_err(k), iv_scale((-v[i], v[i]), abs(gq)))
+            err_cum.append(ecum)
+            cum_ivs.append(cum)
+            self.term("thermal.reduced.alpha x edges[%d]" % i, fo - ft + sh, abs(dq) * Tq)
+        hval = alpha * F(OU_PER_UM, 1000)  # OU per um per K
+        fh = frac_bits(abs(hval) * (Tmax + 1), ACC)
+        H, shH = fit_coef(hval, lms, fh - ft)
+        hq = F(H) / p2(shH)
+        seg_ivs, err_ss = [], []
+        for i in range(M):
+            res, k = rec.mul(SLOT_HMUL, (H, H), T_iv, Ls, ns, shH, "thermal.reduced.alpha_um_per_mm_per_K")
+            seg_ivs.append(res)
+            err_ss.append(iv_add(iv_mul(_c(hq - hval * p2(fh - ft)), (F(0), F(Tq))), floor_err(k),
+                                 iv_scale((-v[i], v[i]), abs(hq))))
+        self.term("thermal.reduced.alpha_um_per_mm_per_K", fh - ft + shH, 0)
+        eu = s["edges_um"]
+        LEN = max(b - a for a, b in zip(eu, eu[1:]))
+        Lx = narrow_width(LEN)
+        ss_all = _hull(*[(F(a), F(b)) for a, b in seg_ivs])
+        ss_int = (int(ss_all[0]), int(ss_all[1]))
+        nx = top_limbs_needed(ss_int, Lx, LEN)
+        if nx is None:
+            raise ExportError("thermal.reduced.alpha_um_per_mm_per_K: segment slope x length does not fit small-int limbs")
+        shX = fh - fo
+        rec.note(SLOT_XL, 0, LEN, "position")
+        segs, segerr = [(0, 0)], [ZERO]
+        for kk in range(M):
+            res, k = rec.mul(SLOT_SEGMUL, (0, eu[kk + 1] - eu[kk]), seg_ivs[kk], Lx, nx, shX, "segment elongation")
+            iv = iv_add(cum_ivs[kk], res)
+            rec.note(SLOT_CUM, iv[0], iv[1], "segment elongation")
+            segs.append(iv)
+            segerr.append(iv_add(err_cum[kk], iv_scale(iv_mul((F(0), F(eu[kk + 1] - eu[kk])), err_ss[kk]), 1 / p2(shX)),
+                                 floor_err(k)))
+        segs.append(cum_ivs[M])
+        segerr.append(err_cum[M])
+        # edge and fixed-end rounding to whole um (geometry, not arithmetic): bound of alpha * T * |d overlap|
+        dfe = abs(F(s["fe"]) - F(s["fixed"]) * 1000)
+        dedges = sum(abs(F(a) - F(b) * 1000) for a, b in zip(eu, edges))
+        geo_um = abs(alpha) * Tmax * (2 * dfe + 3 * dedges) / 1000
+        e_geo = geo_um * OU_PER_UM * p2(fo)
+        seg_iv = _hull(*segs)
+        err_seg = iv_add(_hull(*segerr), (-e_geo, e_geo))
+        self.term("edges/fixed end rounded to 1 um", 0, e_geo)
+        f.update(G2=G2, shG2=shG2, H=H, shH=shH, fh=fh, Lx=Lx, nx=nx, shX=shX)
+        self.seg_info = (seg_iv, err_seg)
+        return seg_iv, err_seg, (seg_iv, err_seg)
+
+    def screw_chord(self, seg_at, fo, fK):
+        m, f, rec = self.m, self.f, self.rec
+        seg_iv, err_seg = seg_at
+        de = (seg_iv[0] - seg_iv[1], seg_iv[1] - seg_iv[0])
+        rec.note(SLOT_DE, de[0], de[1], "slope chord")
+        span = m.pos_hi - m.pos_lo
+        nc = 3
+        Lc = max(1, -(-max(abs(de[0]), abs(de[1]), 1).bit_length() // nc))
+        lmc = limb_max(de, Lc, nc)
+        if span == 0:
+            KC, shC = 0, 0
+        else:
+            KC, shC = fit_coef(F(SLOPE_PER_OU_PER_UM, span), lmc, fK - fo)
+        f.update(KC=KC, Lc=Lc, nc=nc, shC=shC)
+        res, k = rec.mul(SLOT_CMUL, (KC, KC), de, Lc, nc, shC, "KC (chord slope)")
+        kq = F(KC) / p2(shC)
+        target = F(SLOPE_PER_OU_PER_UM, span) * p2(fK - fo) if span else F(0)
+        err = iv_add(iv_scale((F(de[0]), F(de[1])), kq - target),
+                     iv_scale(iv_add(err_seg, (-err_seg[1], -err_seg[0])), kq), floor_err(k))
+        self.term("KC (chord slope)", fK - fo + shC, 0)
+        return res, err
+
+
+class _Retry(Exception):
+    pass
+
+
+def _merge(dst, src):
+    for slot, (lo, hi) in src.slots.items():
+        dst.note(slot, lo, hi, "_merge")
+    for k, v in src.peaks.items():
+        dst.peaks[k] = max(dst.peaks.get(k, 0), v)
+    dst.peaks.pop("_merge", None)
+
+
+def _largest(m):
+    if not m.b:
+        return "thermal intercept"
+    i = max(range(len(m.b)), key=lambda i: abs(m.b[i]) * max(abs(m.d_lo[i]), abs(m.d_hi[i])))
+    return m.b_names[i]
+
+
+def _supersolution(A, rho):
+    """v >= 0 with v >= |A| v + rho (exact check), or None."""
+    Aa = np.abs(np.asarray(A, dtype=float))
+    M = Aa.shape[0]
+    r = np.array([float(x) for x in rho])
+    try:
+        v0 = np.linalg.solve(np.eye(M) - Aa, r)
+    except np.linalg.LinAlgError:
+        return None
+    if not np.all(np.isfinite(v0)) or np.any(v0 < 0):
+        return None
+    AF = [[F(float(Aa[i, j])) for j in range(M)] for i in range(M)]
+    for inflate in (1e-9, 1e-6, 1e-3, 1e-1):
+        v = [F(float(x) * (1 + inflate)) + F(1, 10 ** 6) for x in v0]
+        if all(v[i] >= sum(AF[i][j] * v[j] for j in range(M)) + rho[i] for i in range(M)):
+            return v
+    return None

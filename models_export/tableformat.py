@@ -1,0 +1,82 @@
+"""Write the binary coefficient table (docs/table-format.md); firmware/table.py reads it.
+
+``pack(fields)`` takes the same names the firmware's Table exposes and lays
+them out in the order ``payload_words`` gives, which is the order
+firmware/table.py consumes them in.
+"""
+import struct
+
+from firmware.crc32 import crc32
+from firmware.table import HEADER_SIZE, MAGIC, NAME_SIZE, UNIT_CODE, VERSION
+
+KIND_CODES = {"poly_slope": 1, "linear_direct": 2, "screw_reduced": 3}
+
+COMMON = ("pos_lo", "pos_hi", "pos_ref", "fo", "Lt", "nt", "S0", "fS")
+POSITION = ("Lw", "nw", "shw", "KS", "shK", "fK", "rK", "rT", "degree", "Lg", "ng")
+SCREW_HEAD = ("M", "dt_ms", "fixed_end", "fmax")
+SCREW_STATE = ("ft", "Tmax", "Ls", "ns", "fc")
+SCREW_TRAVEL = ("umax", "Lu", "nu")
+SCREW_TAIL = ("H", "shH", "fh", "Lx", "nx", "shX", "KC", "Lc", "nc", "shC")
+
+
+def payload_words(f):
+    """The payload as a list of (name, int) in table order."""
+    out = [(k, f[k]) for k in COMMON]
+    for i in range(len(f["sensors"])):
+        out += [("b[%d]" % i, f["b"][i]), ("shb[%d]" % i, f["shb"][i]), ("fb[%d]" % i, f["fb"][i])]
+    out.append(("rL", f["rL"]))
+    if f["kind"] == "linear_direct":
+        return out
+    out += [(k, f[k]) for k in POSITION]
+    out += [("G[%d]" % j, v) for j, v in enumerate(f["G"])]
+    out += [("fG[%d]" % j, v) for j, v in enumerate(f["fG"])]
+    out += [("shg[%d]" % j, v) for j, v in enumerate(f["shg"])]
+    out.append(("rO", f["rO"]))
+    if f["kind"] != "screw_reduced":
+        return out
+    out += [(k, f[k]) for k in SCREW_HEAD]
+    out += [("edges[%d]" % i, v) for i, v in enumerate(f["edges"])]
+    out += [(k, f[k]) for k in SCREW_STATE]
+    out += [("C[%d]" % i, v) for i, v in enumerate(f["C"])]
+    out += [(k, f[k]) for k in SCREW_TRAVEL]
+    for name in ("B", "shB", "rS", "G2", "shG2"):
+        out += [("%s[%d]" % (name, i), v) for i, v in enumerate(f[name])]
+    out += [(k, f[k]) for k in SCREW_TAIL]
+    return out
+
+
+def _fixed(text, size, what):
+    raw = text.encode("ascii")
+    if not raw or len(raw) > size or b"\x00" in raw:
+        raise ValueError("%s %r must be 1..%d ASCII characters" % (what, text, size))
+    return raw + b"\x00" * (size - len(raw))
+
+
+def pack(f):
+    """Serialise a fields dict to table bytes (header, sensors, payload words, CRC-32)."""
+    words = payload_words(f)
+    for name, v in words:
+        if not isinstance(v, int) or not -(1 << 31) <= v < (1 << 31):
+            raise ValueError("table field %s=%r is not a 32-bit integer" % (name, v))
+    sensors = f["sensors"]
+    n = len(sensors)
+    total = HEADER_SIZE + n * (NAME_SIZE + 12) + 4 * len(words) + 4
+    prov = bytes(f["provenance"])
+    if len(prov) != 32:
+        raise ValueError("provenance must be 32 bytes (sha256), got %d" % len(prov))
+    out = bytearray()
+    out += MAGIC
+    out += struct.pack("<BBBBI", VERSION, KIND_CODES[f["kind"]], n, UNIT_CODE, total)
+    out += prov
+    out += _fixed(f["axis"], 8, "axis name")
+    out += struct.pack("<I", len(words))
+    out += b"\x00" * 8
+    for name in sensors:
+        out += _fixed(name, NAME_SIZE, "sensor name")
+    for i in range(n):
+        out += struct.pack("<iii", f["env_lo"][i], f["env_hi"][i], f["ref"][i])
+    for _, v in words:
+        out += struct.pack("<i", v)
+    out += struct.pack("<I", crc32(bytes(out)))
+    assert len(out) == total
+    return bytes(out)
