@@ -1,0 +1,90 @@
+"""Identification: recovery of known parameters, uncertainty, flat directions, bad input."""
+import warnings
+
+import numpy as np
+import pytest
+
+from host.runs import Motion
+from host.screw import synth
+from host.screw.identify import IdentifiabilityWarning
+from host.screw.model import ScrewModel
+
+TRUE = {"q_J_per_mm": synth.TRUE.q_J_per_mm, "h_W_m2K": synth.TRUE.h_W_m2K, "lambda_W_mK": synth.TRUE.lambda_W_mK,
+        "alpha_per_K": synth.TRUE.alpha_per_K}
+
+
+def test_noise_free_recovery_within_2_percent(synth_model):
+    # the data come from an 80-segment, 5 s simulation; the model uses 40 segments and 10 s
+    assert set(synth_model.free_) == set(TRUE)
+    for k, v in TRUE.items():
+        assert synth_model.values_[k] == pytest.approx(v, rel=0.02), k
+    assert synth_model.statistics_["rmse_um"] < 0.05
+    assert synth_model.statistics_["warnings"] == []
+
+
+@pytest.mark.parametrize("seed", [3, pytest.param(11, marks=pytest.mark.slow), pytest.param(29, marks=pytest.mark.slow)])
+def test_noisy_recovery_within_reported_uncertainty(seed):
+    run = synth.make_run(noise_um=0.5, seed=seed)
+    m = ScrewModel().fit([run])
+    st = m.statistics_["parameters"]
+    for k, v in TRUE.items():
+        assert abs(st[k]["value"] - v) <= 3.0 * st[k]["std"], (k, st[k], v)
+        assert 0 < st[k]["rel_std"] < 0.1
+    assert m.statistics_["rmse_um"] == pytest.approx(0.5, rel=0.2)
+
+
+def test_several_runs_fit_together():
+    short = dict(heat_s=2 * 3600.0, cool_s=3600.0, sweep_every_s=600.0)
+    runs = [synth.make_run(4000, 210, 490, noise_um=0.2, seed=1, **short), synth.make_run(12000, 0, 700, noise_um=0.2, seed=2, **short)]
+    m = ScrewModel().fit(runs)
+    assert [r["run"] for r in m.statistics_["runs"]] == [r.name for r in runs]
+    for k, v in TRUE.items():
+        assert m.values_[k] == pytest.approx(v, rel=0.05), k
+
+
+def test_flat_direction_is_reported():
+    # without base-temperature change alpha only appears as alpha*q: a flat direction
+    run = synth.make_run(base_drift_K=0.0)
+    with pytest.warns(IdentifiabilityWarning, match="flat direction.*(q_J_per_mm|alpha_per_K)"):
+        m = ScrewModel(free="q,alpha,h,lambda", max_nfev=30).fit([run])
+    flat = m.statistics_["flat_directions"]
+    assert flat and {"q_J_per_mm", "alpha_per_K"} <= set(flat[0]["parameters"])
+    # and by default alpha is then not freed
+    m2 = ScrewModel().fit([run])
+    assert "alpha_per_K" not in m2.free_ and m2.statistics_["parameters"]["alpha_per_K"]["fixed"]
+
+
+def _copy(run, **changes):
+    import copy
+
+    r = copy.deepcopy(run)
+    for k, v in changes.items():
+        setattr(r, k, v)
+    return r
+
+
+def test_bad_input_is_named(synth_run):
+    with pytest.raises(ValueError, match="no motion"):
+        ScrewModel().fit([_copy(synth_run, motion=None)])
+    empty = Motion(*(np.zeros(0) for _ in range(5)))
+    with pytest.raises(ValueError, match="no motion"):
+        ScrewModel().fit([_copy(synth_run, motion=empty)])
+    meta = dict(synth_run.meta, sensors={k: dict(v, role="structure") if v["role"] == "nut" else v for k, v in synth_run.meta["sensors"].items()})
+    with pytest.raises(ValueError, match="no sensor with role 'nut'"):
+        ScrewModel().fit([_copy(synth_run, meta=meta)])
+    meta = dict(synth_run.meta, screw=dict(synth_run.meta["screw"], length_mm=600))
+    with pytest.raises(ValueError, match="shorter than the stroke"):
+        ScrewModel().fit([_copy(synth_run, meta=meta)])
+    meta = dict(synth_run.meta, screw=dict(synth_run.meta["screw"], fixed_end_mm=150))
+    with pytest.raises(ValueError, match="shorter than the stroke"):
+        ScrewModel().fit([_copy(synth_run, meta=meta)])
+    meta = {k: v for k, v in synth_run.meta.items() if k != "screw"}
+    with pytest.raises(ValueError, match="no 'screw' block"):
+        ScrewModel().fit([_copy(synth_run, meta=meta)])
+    with pytest.raises(ValueError, match="free="):
+        ScrewModel(free="q,zeta").fit([synth_run])
+
+
+def test_predict_rejects_runs_outside_the_screw(synth_model, synth_run):
+    with pytest.raises(ValueError, match="no motion"):
+        synth_model.predict(_copy(synth_run, motion=None))
