@@ -15,6 +15,7 @@ def add_arguments(p):
     p.add_argument("--split-h", type=float, metavar="HOURS", help="one run: fit on t < HOURS, predict t >= HOURS")
     p.add_argument("--noise-C", type=float, default=0.2, help="robustness: temperature noise, standard deviation (default 0.2 °C)")
     p.add_argument("--offset-C", type=float, default=0.5, help="robustness: per-sensor offset up to ± this after the start (default 0.5 °C)")
+    p.add_argument("--repeats", type=int, default=5, help="robustness: disturbance realisations averaged per test run (default 5)")
     p.add_argument("--no-intercept", action="store_true", help="fit without intercept")
 
 
@@ -53,7 +54,7 @@ def run(args):
         results = []
         for case in cases:
             results += run_case(case, methods, target, args.channel, sensors, not args.no_intercept,
-                                robustness={"noise_C": args.noise_C, "offset_C": args.offset_C}, keep_models=bool(args.plots))
+                                robustness={"noise_C": args.noise_C, "offset_C": args.offset_C, "repeats": args.repeats}, keep_models=bool(args.plots))
     except EmpiricalDataError as exc:
         raise UserError(str(exc))
     print(table(results))
@@ -61,7 +62,7 @@ def run(args):
     for line in notes:
         print(line)
     doc = {"target": target, "channel": args.channel, "runs": [r.path for r in runs], "methods": methods,
-           "robustness": {"noise_C": args.noise_C, "offset_C": args.offset_C}, "results": public(results), "findings": notes}
+           "robustness": {"noise_C": args.noise_C, "offset_C": args.offset_C, "repeats": args.repeats}, "results": public(results), "findings": notes}
     if args.plots:
         doc["plots"] = write_plots(results, cases, args.plots, target, args.channel)
         print("wrote %d plots to %s" % (len(doc["plots"]), args.plots))

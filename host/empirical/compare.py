@@ -34,7 +34,7 @@ from host.empirical.fitting import fit_model
 
 METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset")
 SELECTORS = ("maxtree", "hclust-ga")
-ROBUSTNESS = {"noise_C": 0.2, "offset_C": 0.5, "seed": 0}
+ROBUSTNESS = {"noise_C": 0.2, "offset_C": 0.5, "seed": 0, "repeats": 5}
 
 
 @dataclass
@@ -46,6 +46,7 @@ class Case:
     ga_data: object = None  # data for the hclust-ga selector (runs or arrays)
     ga_params: dict = field(default_factory=dict)
     ga_note: str = ""
+    summary_tests: list = None  # labels averaged into the mean metrics (None: all tests)
 
 
 def cases_runs(runs, train=(0,)):
@@ -80,7 +81,8 @@ def case_split(run, split_s, target="direct", channel=None, sensors=None, test_w
             note = "hclust-ga fitness: fit on training cycle 1, predict training cycles 2..%d (no held-out data seen)" % len(cyc)
     except EmpiricalDataError as exc:
         note = "hclust-ga not run: %s" % exc
-    return Case("%s t < %.2f h" % (run.name, split_s / 3600), [run], (None, split_s), tests, ga_data=ga_data, ga_params={"train_run": 0}, ga_note=note)
+    return Case("%s t < %.2f h" % (run.name, split_s / 3600), [run], (None, split_s), tests, ga_data=ga_data, ga_params={"train_run": 0}, ga_note=note,
+                summary_tests=[tests[0][0]])
 
 
 def _fit(method, case, target, channel, sensors, fit_intercept, options, selector_params):
@@ -115,7 +117,9 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
     options = options or {}
     selector_params = selector_params or {}
     rob = dict(ROBUSTNESS, **(robustness or {}))
-    disturbed = {label: disturb_run(r, rob["noise_C"], rob["offset_C"], seed=rob["seed"] + k) for k, (label, r, _) in enumerate(case.tests)}
+    # the same disturbance realisations for every method, several of them so one lucky draw decides nothing
+    disturbed = {label: [disturb_run(r, rob["noise_C"], rob["offset_C"], seed=rob["seed"] + 1000 * k + i) for i in range(int(rob["repeats"]))]
+                 for k, (label, r, _) in enumerate(case.tests)}
     results = []
     for method in methods:
         t0 = time.perf_counter()
@@ -143,10 +147,11 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
         res["intercept"] = model.intercept
         res["train"] = evaluate(model, case.train[0], case.window)
         res["tests"] = {label: evaluate(model, r, w) for label, r, w in case.tests}
-        res["disturbed"] = {label: evaluate(model, disturbed[label], w) for label, r, w in case.tests}
-        rm = [v["rmse_um"] for v in res["tests"].values()]
-        dm = [v["rmse_um"] for v in res["disturbed"].values()]
-        acc = [v["accuracy_pct"] for v in res["tests"].values() if v["accuracy_pct"] is not None]
+        res["disturbed"] = {label: _mean_metrics([evaluate(model, d, w) for d in disturbed[label]]) for label, r, w in case.tests}
+        keys = case.summary_tests or list(res["tests"])
+        rm = [res["tests"][k]["rmse_um"] for k in keys]
+        dm = [res["disturbed"][k]["rmse_um"] for k in keys]
+        acc = [res["tests"][k]["accuracy_pct"] for k in keys if res["tests"][k]["accuracy_pct"] is not None]
         res["mean_test_rmse_um"] = float(np.mean(rm))
         res["mean_test_accuracy_pct"] = float(np.mean(acc)) if acc else None
         res["mean_disturbed_rmse_um"] = float(np.mean(dm))
@@ -157,6 +162,18 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
             res["_selection"] = info.get("selection_obj")
         results.append(res)
     return results
+
+
+def _mean_metrics(ms):
+    """Metrics averaged over disturbance realisations (RMSE as the root of the mean square)."""
+    out = dict(ms[0])
+    out["rmse_um"] = float(np.sqrt(np.mean([m["rmse_um"] ** 2 for m in ms])))
+    out["max_residual_um"] = float(max(m["max_residual_um"] for m in ms))
+    out["min_residual_um"] = float(min(m["min_residual_um"] for m in ms))
+    acc = [m["accuracy_pct"] for m in ms]
+    out["accuracy_pct"] = float(np.mean(acc)) if None not in acc else None
+    out["realisations"] = len(ms)
+    return out
 
 
 def findings(results):
