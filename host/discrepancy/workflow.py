@@ -73,6 +73,10 @@ class Candidate:
     accepted: bool = False
     skipped: str = None  # reason the candidate was not tested
     error: str = None  # fit failure message
+    heldout: object = field(default=None, repr=False)
+    joint_with: list = None  # accepted together with these (pair test)
+    single_score: float = None
+    single_p_value: float = None
 
     def as_dict(self):
         d = {"name": self.name, "score": _num(self.score), "p_value": _num(self.p_value), "accepted": bool(self.accepted),
@@ -81,6 +85,10 @@ class Candidate:
             d["skipped"] = self.skipped
         if self.error:
             d["error"] = self.error
+        if self.joint_with:
+            d["joint_with"] = list(self.joint_with)
+            d["single_score"] = _num(self.single_score)
+            d["single_p_value"] = _num(self.single_p_value)
         return d
 
 
@@ -92,6 +100,7 @@ class Round:
     accepted: str = None
     rmse_after_um: float = float("nan")
     localization: list = field(default_factory=list)
+    pairs: list = field(default_factory=list)
 
 
 @dataclass
@@ -129,6 +138,7 @@ class Result:
                     "rmse_after_um": _num(r.rmse_after_um),
                     "localization": r.localization,
                     "candidates": [c.as_dict() for c in r.candidates],
+                    "pairs": [c.as_dict() for c in r.pairs],
                 }
                 for r in self.rounds
             ],
@@ -225,6 +235,68 @@ def _losses(runs, residuals):
 # ---------------------------------------------------------------- the loop
 
 
+def _score(pool, runs, folds, effects, current, sets, cands):
+    """Held-out fits of base+set for each set; fills the Candidate records, returns {name: HeldOut}."""
+    tasks = [(tuple(effects) + tuple(st), k, current.fits[k]) for st in sets for k in range(len(folds))]
+    out = pool.map(tasks)
+    loss0 = _losses(runs, current.residuals)
+    held = {}
+    for j, (st, c) in enumerate(zip(sets, cands)):
+        ho, err = _assemble(runs, folds, tuple(effects) + tuple(st), out[j * len(folds):(j + 1) * len(folds)])
+        if err:
+            c.error = err
+            continue
+        held[c.name] = ho
+        c.heldout = ho
+        c.rmse_um = ho.rmse()
+        c.score = 1.0 - c.rmse_um / current.rmse() if current.rmse() > 0 else 0.0
+        t = stats.dm_test(loss0, _losses(runs, ho.residuals), log=LOG_LOSS)
+        c.p_raw, c.statistic = t["p_value"], t["statistic"]
+    tested = [c for c in cands if c.name in held]
+    for c, p in zip(tested, stats.holm_adjust([c.p_raw for c in tested])):
+        c.p_value = float(p)
+    return held
+
+
+def _try_pairs(pool, runs, folds, effects, current, singles, rnd, alpha, min_gain, log):
+    """Effects can mask each other: with two missing, neither alone may fit well (the base
+    parameters absorb part of each). When no single candidate passes, test every pair
+    jointly (Holm over the pairs); accept the best pair if it passes, and if it also beats
+    each of its members alone (one-sided DM at ``alpha``), so no passenger rides along."""
+    by = {c.name: c for c in singles}
+    names = [c.name for c in singles]
+    sets = [(a, b) for i, a in enumerate(names) for b in names[i + 1:]]
+    cands = [Candidate("+".join(st)) for st in sets]
+    held = _score(pool, runs, folds, effects, current, sets, cands)
+    rnd.pairs = cands
+    for c in cands:
+        if c.name in held:
+            log("  pair %-29s held-out RMSE %.3f  gain %+.1f%%  p %.2g" % (c.name, c.rmse_um, 100 * c.score, c.p_value))
+    ok = [c for c, st in zip(cands, sets) if c.name in held and c.score >= min_gain and c.p_value < alpha]
+    if not ok:
+        return None, None
+    best = max(ok, key=lambda c: c.score)
+    st = sets[cands.index(best)]
+    ho = held[best.name]
+    lp = _losses(runs, ho.residuals)
+    for name in st:
+        if not math.isfinite(by[name].rmse_um) or by[name].heldout is None:
+            return None, None
+        t = stats.dm_test(_losses(runs, by[name].heldout.residuals), lp, log=LOG_LOSS)
+        if not (t["p_value"] < alpha and ho.rmse() < by[name].rmse_um):
+            log("  pair %s does not beat %s alone (p %.2g)" % (best.name, name, t["p_value"]))
+            return None, None
+    best.accepted = True
+    order = sorted(st, key=lambda n: -by[n].score)
+    for name in order:
+        c = by[name]
+        c.accepted, c.joint_with = True, [n for n in order if n != name]
+        c.single_score, c.single_p_value = c.score, c.p_value
+        c.score, c.p_value, c.rmse_um = best.score, best.p_value, best.rmse_um
+    return tuple(order), ho
+
+
+
 def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_effects=None, jobs=None, base_effects=(), log=None):
     """Find the catalog effects the base model is missing, one per round.
 
@@ -261,38 +333,30 @@ def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_
                     todo.append(c)
             if not todo or (max_effects is not None and len(effects) >= max_effects):
                 break
-            tasks = [(tuple(effects) + (c.name,), k, current.fits[k]) for c in todo for k in range(len(folds))]
-            out = pool.map(tasks)
-            loss0 = _losses(runs, current.residuals)
-            held = {}
-            for j, c in enumerate(todo):
-                ho, err = _assemble(runs, folds, tuple(effects) + (c.name,), out[j * len(folds):(j + 1) * len(folds)])
-                if err:
-                    c.error = err
-                    continue
-                held[c.name] = ho
-                c.rmse_um = ho.rmse()
-                c.score = 1.0 - c.rmse_um / current.rmse() if current.rmse() > 0 else 0.0
-                t = stats.dm_test(loss0, _losses(runs, ho.residuals), log=LOG_LOSS)
-                c.p_raw, c.statistic = t["p_value"], t["statistic"]
+            held = _score(pool, runs, folds, effects, current, [(c.name,) for c in todo], todo)
             tested = [c for c in todo if c.name in held]
-            if tested:
-                for c, p in zip(tested, stats.holm_adjust([c.p_raw for c in tested])):
-                    c.p_value = float(p)
             for c in todo:
                 log("  %-22s held-out RMSE %s  gain %s  p %s%s" % (
                     c.name, "%.3f" % c.rmse_um if math.isfinite(c.rmse_um) else "-", "%+.1f%%" % (100 * c.score) if math.isfinite(c.score) else "-",
                     "%.2g" % c.p_value, "  (fit failed: %s)" % c.error if c.error else ""))
             best = max(tested, key=lambda c: c.score, default=None)
-            if best is None or not (best.score >= min_gain and best.p_value < alpha):
-                log("no catalog effect explains the remaining gap")
-                break
-            best.accepted = True
-            rnd.accepted = best.name
-            effects.append(best.name)
-            current = held[best.name]
+            if best is not None and best.score >= min_gain and best.p_value < alpha:
+                best.accepted = True
+                rnd.accepted = best.name
+                effects.append(best.name)
+                current = held[best.name]
+            else:
+                pair = None
+                if len(tested) >= 2 and (max_effects is None or len(effects) + 2 <= max_effects):
+                    pair, current_pair = _try_pairs(pool, runs, folds, effects, current, tested, rnd, alpha, min_gain, log)
+                if pair is None:
+                    log("no catalog effect explains the remaining gap")
+                    break
+                current = current_pair
+                rnd.accepted = "+".join(pair)
+                effects.extend(pair)
             rnd.rmse_after_um = current.rmse()
-            log("accepted %s: held-out RMSE %.3f -> %.3f um" % (best.name, rnd.rmse_before_um, rnd.rmse_after_um))
+            log("accepted %s: held-out RMSE %.3f -> %.3f um" % (rnd.accepted, rnd.rmse_before_um, rnd.rmse_after_um))
     finally:
         pool.close()
     result = Result(effects[len(base_effects):], first, current, rounds, list(runs))
