@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from host.runs import Errors, Run, Temperatures
+from host.runs import Errors, Run, Spindle, Temperatures
 
 
 def make_slope_run(name="run", seed=0, n_sweeps=12, n_sensors=4, coef=(0.004, -0.002), geo=(1.0, 0.01, -2e-5),
@@ -41,8 +41,12 @@ def make_slope_run(name="run", seed=0, n_sweeps=12, n_sensors=4, coef=(0.004, -0
     return Run(meta, temps, errors, name=name)
 
 
-def make_direct_run(name="drun", seed=0, n_sensors=5, coef=(-3.0, 1.5), intercept=0.4, channels=("ch1", "ch2"), noise_um=0.0):
-    """A multi-channel fixed-point run: ch1 = intercept + Σ coef·rise, ch2 = −ch1 + 2."""
+def make_direct_run(name="drun", seed=0, n_sensors=5, coef=(-3.0, 1.5), intercept=0.4, channels=("ch1", "ch2"), noise_um=0.0, spindle=False):
+    """A multi-channel fixed-point run: ch1 = intercept + Σ coef·rise, ch2 = −ch1 + 2.
+
+    ``spindle=True`` adds a schedule of five 2 h cycles (1 h running, 1 h stopped):
+    1000, 2000, 3000 rpm, then 4000 rpm, then mixed 1500/2500 rpm.
+    """
     rng = np.random.default_rng(seed)
     t = np.arange(0.0, 36000.0, 60.0)
     taus = rng.uniform(1500, 9000, n_sensors)
@@ -61,7 +65,15 @@ def make_direct_run(name="drun", seed=0, n_sensors=5, coef=(-3.0, 1.5), intercep
             rc.append(c)
     errors = Errors(np.array(rt), np.array(rp), np.array(re), None, np.array(rc, dtype=object))
     meta = {"format": "tcomp-run/1", "axis": "Z", "sensors": {n: {"role": "structure"} for n in names}}
-    return Run(meta, temps, errors, name=name)
+    sp = None
+    if spindle:
+        rpm = np.zeros(t.size)
+        for k, speed in enumerate((1000, 2000, 3000, 4000)):
+            rpm[(t >= 7200 * k + 600) & (t < 7200 * k + 4200)] = speed
+        rpm[(t >= 29400) & (t < 31200)] = 1500
+        rpm[(t >= 31200) & (t < 33000)] = 2500
+        sp = Spindle(t.copy(), rpm)
+    return Run(meta, temps, errors, spindle=sp, name=name)
 
 
 @pytest.fixture
