@@ -1,0 +1,309 @@
+"""The table as a C header, with the firmware's integer evaluation in C.
+
+For controllers whose firmware is C: ``static const`` coefficient arrays, the
+raw table bytes (for the same upload path as the MicroPython firmware), and
+static functions that perform exactly the operations of firmware/evaluate.py
+in the same order, so the certificate in the header comment applies. Every
+intermediate fits int32_t (the certificate bounds it by 2**30); C's
+undefined cases are avoided: right shifts by 31 or more are computed as the
+sign, left shifts as multiplications. Right shift of a negative int32_t is
+assumed arithmetic (gcc, clang, arm-none-eabi, IAR, Keil all do so).
+"""
+
+SCALARS = {
+    "all": ("pos_lo", "pos_hi", "pos_ref", "fo", "Lt", "nt", "S0", "rL"),
+    "position": ("Lw", "nw", "shw", "KS", "shK", "fK", "rK", "rT", "degree", "Lg", "ng", "rO"),
+    "screw": ("M", "dt_ms", "fixed_end", "fmax", "ft", "Tmax", "Ls", "ns", "fc", "umax", "Lu", "nu", "H", "shH",
+              "Lx", "nx", "shX", "KC", "Lc", "nc", "shC"),
+}
+ARRAYS = {
+    "all": ("env_lo", "env_hi", "ref", "b", "shb"),
+    "position": ("G", "shg"),
+    "screw": ("edges", "C", "B", "shB", "rS", "G2", "shG2"),
+}
+
+CODE = r"""
+#define TCOMP_CLAMP_POSITION 0x1000000u
+#define TCOMP_CLAMP_TRAVEL 0x2000000u
+#define TCOMP_CLAMP_STATE 0x4000000u
+#define TCOMP_FEED_W_BITS 19
+
+typedef struct {
+    int32_t temps[TCOMP_N_SENSORS_ALLOC]; /* milli-degC, channel order; write, then tcomp_update() */
+    int32_t S;
+    uint32_t flags; /* bit i: sensor i clamped; TCOMP_CLAMP_* */
+    int32_t pos_ref;
+#if TCOMP_KIND == 3
+    int32_t T[TCOMP_M], Tn[TCOMP_M], u[TCOMP_M], w[TCOMP_M], limbs[TCOMP_M * TCOMP_NS], cum[TCOMP_M + 1], segslope[TCOMP_M];
+    int32_t x, F;
+    int have_x, feed;
+#endif
+} tcomp_eval_t;
+
+static int32_t tcomp_shift(int32_t p, int sh)
+{
+    if (sh > 0)
+        return sh > 30 ? (p < 0 ? -1 : 0) : p >> sh;
+    return p == 0 ? 0 : p * (int32_t)(1L << -sh);
+}
+
+/* floor-ish c*x/2^sh with x split into n limbs of L bits, top limb signed (firmware Evaluator._mul) */
+static int32_t tcomp_mul(int32_t c, int32_t x, int L, int n, int sh)
+{
+    int32_t m = (int32_t)((1L << L) - 1), r = 0;
+    while (n > 1) {
+        r += tcomp_shift(c * (x & m), sh);
+        x >>= L;
+        sh -= L;
+        n--;
+    }
+    return r + tcomp_shift(c * x, sh);
+}
+
+static void tcomp_update(tcomp_eval_t *e)
+{
+    uint32_t fl = 0;
+    int32_t s = TCOMP_S0;
+    int i;
+    for (i = 0; i < TCOMP_N_SENSORS; i++) {
+        int32_t v = e->temps[i];
+        if (v < tcomp_env_lo[i]) { v = tcomp_env_lo[i]; fl |= 1u << i; }
+        else if (v > tcomp_env_hi[i]) { v = tcomp_env_hi[i]; fl |= 1u << i; }
+        s += tcomp_mul(tcomp_b[i], v - tcomp_ref[i], TCOMP_LT, TCOMP_NT, tcomp_shb[i]);
+    }
+    e->S = s;
+    e->flags = (e->flags & ~0xFFFFFFu) | fl;
+}
+
+static int32_t tcomp_clamp_pos(tcomp_eval_t *e, int32_t pos)
+{
+    if (pos < TCOMP_POS_LO) { e->flags |= TCOMP_CLAMP_POSITION; return TCOMP_POS_LO; }
+    if (pos > TCOMP_POS_HI) { e->flags |= TCOMP_CLAMP_POSITION; return TCOMP_POS_HI; }
+    e->flags &= ~TCOMP_CLAMP_POSITION;
+    return pos;
+}
+
+#if TCOMP_KIND == 3
+static int32_t tcomp_seg(const tcomp_eval_t *e, int32_t p)
+{
+    int32_t x = p - TCOMP_FIXED_END;
+    int k = 0;
+    if (x <= 0) return 0;
+    if (x >= tcomp_edges[TCOMP_M]) return e->cum[TCOMP_M];
+    while (tcomp_edges[k + 1] <= x) k++;
+    return e->cum[k] + tcomp_mul(x - tcomp_edges[k], e->segslope[k], TCOMP_LX, TCOMP_NX, TCOMP_SHX);
+}
+
+static void tcomp_refresh(tcomp_eval_t *e)
+{
+    int32_t c = 0;
+    int i;
+    for (i = 0; i < TCOMP_M; i++) {
+        e->cum[i] = c;
+        c += tcomp_mul(tcomp_G2[i], e->T[i], TCOMP_LS, TCOMP_NS, tcomp_shG2[i]);
+        e->segslope[i] = tcomp_mul(TCOMP_H, e->T[i], TCOMP_LS, TCOMP_NS, TCOMP_SHH);
+    }
+    e->cum[TCOMP_M] = c;
+}
+
+/* nut travel per segment from a position report (um) */
+static void tcomp_advance_position(tcomp_eval_t *e, int32_t pos)
+{
+    int32_t x = tcomp_clamp_pos(e, pos) - TCOMP_FIXED_END, a, b;
+    int i;
+    if (!e->have_x) { e->have_x = 1; e->x = x; return; }
+    a = e->x; b = x; e->x = x;
+    if (a > b) { int32_t t = a; a = b; b = t; }
+    if (a == b) return;
+    for (i = 0; i < TCOMP_M; i++) {
+        int32_t lo = tcomp_edges[i] > a ? tcomp_edges[i] : a;
+        int32_t hi = tcomp_edges[i + 1] < b ? tcomp_edges[i + 1] : b;
+        if (hi > lo) {
+            int32_t v = e->u[i] + (hi - lo);
+            if (v > TCOMP_UMAX) { v = TCOMP_UMAX; e->flags |= TCOMP_CLAMP_TRAVEL; }
+            e->u[i] = v;
+        }
+    }
+}
+
+/* fallback without position reports: feed (mm/min) spread over [lo, hi] (um) every step */
+static void tcomp_set_feed(tcomp_eval_t *e, int32_t feed, int32_t lo_um, int32_t hi_um)
+{
+    int32_t f = feed >= 0 ? feed : -feed, a, b, r;
+    int i, k;
+    if (f > TCOMP_FMAX) { f = TCOMP_FMAX; e->flags |= TCOMP_CLAMP_TRAVEL; }
+    e->F = (f * TCOMP_DT_MS) / 60;
+    a = tcomp_clamp_pos(e, lo_um) - TCOMP_FIXED_END;
+    b = tcomp_clamp_pos(e, hi_um) - TCOMP_FIXED_END;
+    if (a > b) { int32_t t = a; a = b; b = t; }
+    if (a < 0) a = 0;
+    if (b > tcomp_edges[TCOMP_M]) b = tcomp_edges[TCOMP_M];
+    r = b - a;
+    for (i = 0; i < TCOMP_M; i++) {
+        int32_t lo = tcomp_edges[i] > a ? tcomp_edges[i] : a;
+        int32_t hi = tcomp_edges[i + 1] < b ? tcomp_edges[i + 1] : b;
+        e->w[i] = 0;
+        if (r <= 0) {
+            if ((tcomp_edges[i] <= a && a < tcomp_edges[i + 1]) || (i == TCOMP_M - 1 && a == tcomp_edges[TCOMP_M]))
+                e->w[i] = 1 << TCOMP_FEED_W_BITS;
+        } else if (hi > lo) {
+            int32_t q = 0, rem = hi - lo;
+            if (rem >= r) { q = 1; rem -= r; }
+            for (k = 0; k < TCOMP_FEED_W_BITS; k++) {
+                rem <<= 1; q <<= 1;
+                if (rem >= r) { rem -= r; q += 1; }
+            }
+            e->w[i] = q;
+        }
+    }
+    e->feed = 1;
+}
+
+/* one step of T <- T + C*T + B*u, every TCOMP_DT_MS milliseconds */
+static void tcomp_step(tcomp_eval_t *e)
+{
+    const int32_t mask = (int32_t)((1L << TCOMP_LS) - 1);
+    uint32_t fl = 0;
+    int i, j, k;
+    if (e->feed) {
+        for (i = 0; i < TCOMP_M; i++) {
+            int32_t v = e->u[i] + tcomp_mul(e->w[i], e->F, 10, 3, TCOMP_FEED_W_BITS);
+            if (v > TCOMP_UMAX) { v = TCOMP_UMAX; e->flags |= TCOMP_CLAMP_TRAVEL; }
+            e->u[i] = v;
+        }
+    }
+    for (j = 0; j < TCOMP_M; j++) {
+        int32_t x = e->T[j];
+        for (k = 0; k < TCOMP_NS - 1; k++) { e->limbs[k * TCOMP_M + j] = x & mask; x >>= TCOMP_LS; }
+        e->limbs[(TCOMP_NS - 1) * TCOMP_M + j] = x;
+    }
+    for (i = 0; i < TCOMP_M; i++) {
+        int32_t acc = 0, v;
+        int sh = TCOMP_FC;
+        for (k = 0; k < TCOMP_NS; k++) {
+            int32_t r = 0;
+            for (j = 0; j < TCOMP_M; j++) r += tcomp_C[i * TCOMP_M + j] * e->limbs[k * TCOMP_M + j];
+            acc += tcomp_shift(r, sh);
+            sh -= TCOMP_LS;
+        }
+        acc += tcomp_mul(tcomp_B[i], e->u[i], TCOMP_LU, TCOMP_NU, tcomp_shB[i]);
+        v = e->T[i] + acc + tcomp_rS[i];
+        if (v < 0) { v = 0; fl = TCOMP_CLAMP_STATE; }
+        else if (v > TCOMP_TMAX) { v = TCOMP_TMAX; fl = TCOMP_CLAMP_STATE; }
+        e->Tn[i] = v;
+    }
+    for (i = 0; i < TCOMP_M; i++) { e->T[i] = e->Tn[i]; e->u[i] = 0; }
+    e->flags = (e->flags & ~TCOMP_CLAMP_STATE) | fl;
+    tcomp_refresh(e);
+}
+#endif
+
+/* total offset (geometric + thermal) at pos (um), in 0.01 um */
+static int32_t tcomp_offset_at(tcomp_eval_t *e, int32_t pos)
+{
+#if TCOMP_KIND == 2
+    (void)pos;
+    return (e->S + TCOMP_RL) >> TCOMP_FO;
+#else
+    int32_t p = tcomp_clamp_pos(e, pos), h = tcomp_G[TCOMP_DEGREE], acc;
+    int j;
+    for (j = TCOMP_DEGREE - 1; j >= 0; j--)
+        h = tcomp_mul(p, h, TCOMP_LG, TCOMP_NG, tcomp_shg[j]) + tcomp_G[j];
+    acc = h + tcomp_mul(p, e->S, TCOMP_LW, TCOMP_NW, TCOMP_SHW);
+#if TCOMP_KIND == 3
+    acc += tcomp_seg(e, p);
+#endif
+    return (acc + TCOMP_RO) >> TCOMP_FO;
+#endif
+}
+
+/* thermal offset at the reference position, 0.01 um (with tcomp_slope: the Siemens/Beckhoff pair) */
+static int32_t tcomp_ref_offset(tcomp_eval_t *e)
+{
+#if TCOMP_KIND == 2
+    return tcomp_offset_at(e, 0);
+#else
+    int32_t acc = tcomp_mul(e->pos_ref, e->S, TCOMP_LW, TCOMP_NW, TCOMP_SHW);
+#if TCOMP_KIND == 3
+    acc += tcomp_seg(e, e->pos_ref);
+#endif
+    return (acc + TCOMP_RT) >> TCOMP_FO;
+#endif
+}
+
+/* thermal slope in 0.01 um/m */
+static int32_t tcomp_slope(tcomp_eval_t *e)
+{
+#if TCOMP_KIND == 2
+    (void)e;
+    return 0;
+#else
+    int32_t acc = tcomp_mul(TCOMP_KS, e->S, TCOMP_LW, TCOMP_NW, TCOMP_SHK);
+#if TCOMP_KIND == 3
+    acc += tcomp_mul(TCOMP_KC, tcomp_seg(e, TCOMP_POS_HI) - tcomp_seg(e, TCOMP_POS_LO), TCOMP_LC, TCOMP_NC, TCOMP_SHC);
+#endif
+    return (acc + TCOMP_RK) >> TCOMP_FK;
+#endif
+}
+
+static void tcomp_init(tcomp_eval_t *e)
+{
+    int i;
+    for (i = 0; i < TCOMP_N_SENSORS_ALLOC; i++)
+        e->temps[i] = (i < TCOMP_N_SENSORS && tcomp_env_lo[i] <= 0 && 0 <= tcomp_env_hi[i]) ? 0 : tcomp_env_lo[i];
+    e->flags = 0;
+    e->pos_ref = TCOMP_POS_REF;
+#if TCOMP_KIND == 3
+    for (i = 0; i < TCOMP_M; i++) { e->T[i] = 0; e->u[i] = 0; e->w[i] = 0; }
+    e->have_x = 0; e->feed = 0; e->x = 0; e->F = 0;
+#endif
+    tcomp_update(e);
+#if TCOMP_KIND == 3
+    tcomp_refresh(e);
+#endif
+}
+"""
+
+
+def _array(name, values):
+    vals = list(values) or [0]
+    body = ", ".join(str(v) for v in vals)
+    return "static const int32_t tcomp_%s[%d] = {%s};\n" % (name, len(vals), body)
+
+
+def c_header(ex, guard="TCOMP_TABLE_H"):
+    f = ex.fields
+    r = ex.report
+    kind = f["kind"]
+    code = {"poly_slope": 1, "linear_direct": 2, "screw_reduced": 3}[kind]
+    groups = ["all"] + (["position"] if kind != "linear_direct" else []) + (["screw"] if kind == "screw_reduced" else [])
+    out = []
+    out.append("/* tcomp coefficient table, generated by `tcomp export` (docs/table-format.md).\n")
+    out.append(" * model kind %s, axis %s, model sha256 %s\n" % (kind, f["axis"], r["provenance_sha256"]))
+    out.append(" * sensors (channel order): %s\n" % (", ".join(f["sensors"]) or "none"))
+    out.append(" * units: temperatures milli-degC, positions um, offsets 0.01 um, slopes 0.01 um/m\n")
+    out.append(" * certified over the envelope: max |integer - model| = %.6f um (limit %.3f um),\n"
+               " * every intermediate |x| < 2^30, min headroom %.3f bits.\n" % (r["max_error_um"], r["limit_um"], r["min_headroom_bits"]))
+    out.append(" * The functions below perform the operations of firmware/evaluate.py in the same order;\n"
+               " * the certificate holds for them only if they are not reordered. Usage:\n"
+               " *   tcomp_eval_t e; tcomp_init(&e); e.temps[i] = ...; tcomp_update(&e); tcomp_offset_at(&e, pos_um);\n"
+               " * screw tables: tcomp_advance_position(&e, pos_um) on each report, tcomp_step(&e) every TCOMP_DT_MS.\n */\n")
+    out.append("#ifndef %s\n#define %s\n#include <stdint.h>\n\n" % (guard, guard))
+    out.append("#define TCOMP_KIND %d /* 1 poly_slope, 2 linear_direct, 3 screw_reduced */\n" % code)
+    out.append("#define TCOMP_N_SENSORS %d\n#define TCOMP_N_SENSORS_ALLOC %d\n" % (len(f["sensors"]), max(1, len(f["sensors"]))))
+    for g in groups:
+        for k in SCALARS[g]:
+            out.append("#define TCOMP_%s (%d)\n" % (k.upper(), f[k]))
+    out.append("\nstatic const char *const tcomp_sensor_names[%d] = {%s};\n"
+               % (max(1, len(f["sensors"])), ", ".join('"%s"' % s for s in f["sensors"]) or "0"))
+    for g in groups:
+        for k in ARRAYS[g]:
+            out.append(_array(k, f[k]))
+    out.append("/* the binary table (same bytes as the .bin, CRC-32 included) */\n")
+    out.append("static const uint8_t tcomp_table_bin[%d] = {\n" % len(ex.table))
+    for i in range(0, len(ex.table), 16):
+        out.append("    " + ", ".join("0x%02x" % b for b in ex.table[i:i + 16]) + ",\n")
+    out.append("};\n")
+    out.append(CODE)
+    out.append("\n#endif /* %s */\n" % guard)
+    return "".join(out)
