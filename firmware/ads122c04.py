@@ -27,41 +27,41 @@ except ImportError:  # CPython
         return x
 
 # commands
-CMD_RESET = const(0x06)
-CMD_START_SYNC = const(0x08)
-CMD_POWERDOWN = const(0x02)
-CMD_RDATA = const(0x10)
-CMD_RREG = const(0x20)  # | reg << 2
-CMD_WREG = const(0x40)  # | reg << 2
+_CMD_RESET = const(0x06)
+_CMD_START_SYNC = const(0x08)
+_CMD_POWERDOWN = const(0x02)
+_CMD_RDATA = const(0x10)
+_CMD_RREG = const(0x20)  # | reg << 2
+_CMD_WREG = const(0x40)  # | reg << 2
 
 # configuration register 0
-REG0_MUX_SHIFT = const(4)  # MUX[3:0]
-MUX_AIN0_AIN1 = const(0x0)
-MUX_SHORTED = const(0xE)  # (AINp, AINn) shorted to (AVDD + AVSS) / 2: offset check
-REG0_GAIN_SHIFT = const(1)  # GAIN[2:0]: gain = 2**GAIN
-REG0_PGA_BYPASS = const(0x01)
+_REG0_MUX_SHIFT = const(4)  # MUX[3:0]
+_MUX_AIN0_AIN1 = const(0x0)
+_MUX_SHORTED = const(0xE)  # (AINp, AINn) shorted to (AVDD + AVSS) / 2: offset check
+_REG0_GAIN_SHIFT = const(1)  # GAIN[2:0]: gain = 2**GAIN
+_REG0_PGA_BYPASS = const(0x01)
 # configuration register 1
-REG1_DR_SHIFT = const(5)  # DR[2:0]: 000 = 20 SPS normal mode
-REG1_MODE_TURBO = const(0x10)
-REG1_CM_CONTINUOUS = const(0x08)
-REG1_VREF_SHIFT = const(1)  # VREF[1:0]
-VREF_INTERNAL = const(0)
-VREF_EXTERNAL = const(1)  # REFP0 / REFN0
-REG1_TS = const(0x01)
+_REG1_DR_SHIFT = const(5)  # DR[2:0]: 000 = 20 SPS normal mode
+_REG1_MODE_TURBO = const(0x10)
+_REG1_CM_CONTINUOUS = const(0x08)
+_REG1_VREF_SHIFT = const(1)  # VREF[1:0]
+_VREF_INTERNAL = const(0)
+_VREF_EXTERNAL = const(1)  # REFP0 / REFN0
+_REG1_TS = const(0x01)
 # configuration register 2
-REG2_DRDY = const(0x80)
-REG2_DCNT = const(0x40)
-REG2_CRC_SHIFT = const(4)
-REG2_BCS = const(0x08)  # burn-out current sources
-REG2_IDAC_MASK = const(0x07)
+_REG2_DRDY = const(0x80)
+_REG2_DCNT = const(0x40)
+_REG2_CRC_SHIFT = const(4)
+_REG2_BCS = const(0x08)  # burn-out current sources
+_REG2_IDAC_MASK = const(0x07)
 # configuration register 3
-REG3_I1MUX_SHIFT = const(5)
-REG3_I2MUX_SHIFT = const(2)
-IMUX_OFF = const(0)
-IMUX_AIN0 = const(1)
-IMUX_AIN1 = const(2)
-IMUX_AIN2 = const(3)
-IMUX_AIN3 = const(4)
+_REG3_I1MUX_SHIFT = const(5)
+_REG3_I2MUX_SHIFT = const(2)
+_IMUX_OFF = const(0)
+_IMUX_AIN0 = const(1)
+_IMUX_AIN1 = const(2)
+_IMUX_AIN2 = const(3)
+_IMUX_AIN3 = const(4)
 
 IDAC_UA = (0, 10, 50, 100, 250, 500, 1000, 1500)  # IDAC[2:0] code -> uA
 _MAX_RATIO_R = const(400000)  # mohm: Pt100 at +850 degC is 390.48 ohm
@@ -108,16 +108,16 @@ class ADS122C04:
         while (1 << g) < gain:
             g += 1
         if wires == 3:
-            i1, i2 = IMUX_AIN0, IMUX_AIN1
+            i1, i2 = _IMUX_AIN0, _IMUX_AIN1
         elif wires == 2:
-            i1, i2 = IMUX_AIN0, IMUX_OFF
+            i1, i2 = _IMUX_AIN0, _IMUX_OFF
         else:
-            i1, i2 = IMUX_AIN3, IMUX_OFF
+            i1, i2 = _IMUX_AIN3, _IMUX_OFF
         self._config = (
-            (MUX_AIN0_AIN1 << REG0_MUX_SHIFT) | (g << REG0_GAIN_SHIFT),
-            REG1_CM_CONTINUOUS | (VREF_EXTERNAL << REG1_VREF_SHIFT),
+            (_MUX_AIN0_AIN1 << _REG0_MUX_SHIFT) | (g << _REG0_GAIN_SHIFT),
+            _REG1_CM_CONTINUOUS | (_VREF_EXTERNAL << _REG1_VREF_SHIFT),
             IDAC_UA.index(idac_ua),
-            (i1 << REG3_I1MUX_SHIFT) | (i2 << REG3_I2MUX_SHIFT),
+            (i1 << _REG3_I1MUX_SHIFT) | (i2 << _REG3_I2MUX_SHIFT),
         )
         self.reset()
         for reg in range(4):
@@ -125,7 +125,7 @@ class ADS122C04:
         for reg in range(4):
             got = self.read_register(reg)
             if reg == 2:
-                got &= ~REG2_DRDY
+                got &= ~_REG2_DRDY
             if got != self._config[reg]:
                 raise OSError(5, "ADS122C04 at 0x%02x: register %d reads 0x%02x after writing 0x%02x"
                               % (address, reg, got, self._config[reg]))
@@ -138,67 +138,34 @@ class ADS122C04:
         self._i2c.writeto(self.address, b)
 
     def reset(self):
-        self._command(CMD_RESET)
+        self._command(_CMD_RESET)
 
     def start(self):
         """START/SYNC: begin (continuous) conversion."""
-        self._command(CMD_START_SYNC)
+        self._command(_CMD_START_SYNC)
 
     def powerdown(self):
-        self._command(CMD_POWERDOWN)
+        self._command(_CMD_POWERDOWN)
 
     def read_register(self, reg):
-        self._i2c.readfrom_mem_into(self.address, CMD_RREG | (reg << 2), self._b1)
+        self._i2c.readfrom_mem_into(self.address, _CMD_RREG | (reg << 2), self._b1)
         return self._b1[0]
 
     def write_register(self, reg, value):
         b = self._b1
         b[0] = value
-        self._i2c.writeto_mem(self.address, CMD_WREG | (reg << 2), b)
-
-    # --- datasheet-named settings -----------------------------------------
-    @property
-    def mux(self):
-        return self.read_register(0) >> REG0_MUX_SHIFT
-
-    @property
-    def pga_gain(self):
-        return 1 << ((self.read_register(0) >> REG0_GAIN_SHIFT) & 7)
-
-    @property
-    def continuous(self):
-        return bool(self.read_register(1) & REG1_CM_CONTINUOUS)
-
-    @property
-    def vref(self):
-        return (self.read_register(1) >> REG1_VREF_SHIFT) & 3
-
-    @property
-    def idac_ua(self):
-        return IDAC_UA[self.read_register(2) & REG2_IDAC_MASK]
-
-    @property
-    def burnout_current(self):
-        return bool(self.read_register(2) & REG2_BCS)
-
-    @property
-    def i1mux(self):
-        return self.read_register(3) >> REG3_I1MUX_SHIFT
-
-    @property
-    def i2mux(self):
-        return (self.read_register(3) >> REG3_I2MUX_SHIFT) & 7
+        self._i2c.writeto_mem(self.address, _CMD_WREG | (reg << 2), b)
 
     # --- hot path ------------------------------------------------------------
     @property
     def data_ready(self):
         """DRDY: a new conversion result is waiting (cleared by reading it)."""
-        return bool(self.read_register(2) & REG2_DRDY)
+        return bool(self.read_register(2) & _REG2_DRDY)
 
     def read_data(self):
         """Latest conversion result, signed 24-bit (RDATA)."""
         b = self._b3
-        self._i2c.readfrom_mem_into(self.address, CMD_RDATA, b)
+        self._i2c.readfrom_mem_into(self.address, _CMD_RDATA, b)
         v = (b[0] << 16) | (b[1] << 8) | b[2]
         if v & 0x800000:
             v -= 0x1000000

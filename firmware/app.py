@@ -20,7 +20,6 @@ except ImportError:  # CPython
         return x
 
 from firmware import status as st
-from firmware.board import load_config
 from firmware.channels import Channels
 from firmware.evaluate import Evaluator
 from firmware.safety import Limiter
@@ -33,6 +32,19 @@ _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is
 _POLL_MS = const(5)  # serial polling period while waiting for the next cycle
 
 
+def _load_config(d):
+    # validation is needed once per boot: unload it again to give the RAM back
+    import sys
+    from firmware.config import load_config
+    try:
+        return load_config(d)
+    finally:
+        sys.modules.pop("firmware.config", None)
+        import firmware
+        if hasattr(firmware, "config"):
+            delattr(firmware, "config")
+
+
 class Restart(Exception):
     """Raised by a reset command when the board has no hardware reset."""
 
@@ -40,7 +52,7 @@ class Restart(Exception):
 class App:
     def __init__(self, board):
         self.board = board
-        cfg = self.cfg = load_config(board.config)
+        cfg = self.cfg = _load_config(board.config)
         clock = self.clock = board.clock
         now = clock.ticks_ms()
         self.channels = Channels(cfg, board, now)

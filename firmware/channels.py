@@ -5,9 +5,9 @@ fault, the bus raises OSError, the temperature is outside the plausible range,
 it changed faster than ``max_rate_mC_per_s`` allows since the last good
 reading ("faster than physics"), the raw code has not changed for
 ``stuck_ms``, or (ADS122C04) no new conversion arrived for a while. A faulty
-channel becomes good again after ``RECOVER_READS`` consecutive readings that
+channel becomes good again after ``_RECOVER_READS`` consecutive readings that
 pass every check and agree with each other; a channel whose chip is faulty is
-re-initialised every ``REINIT_MS`` so that a chip that lost power and came back
+re-initialised every ``_REINIT_MS`` so that a chip that lost power and came back
 is configured again.
 
 ``read_all`` is the hot path: no allocation, integers below 2**30.
@@ -21,23 +21,23 @@ except ImportError:  # CPython
 
 from firmware import rtd
 
-DRV_MAX31865 = const(1)
-DRV_ADS122C04 = const(2)
+_DRV_MAX31865 = const(1)
+_DRV_ADS122C04 = const(2)
 
 # per-channel fault reasons (``Channels.fault``)
-F_CHIP = const(0x01)  # MAX31865 fault bit (details in ``chip_status``)
-F_RANGE = const(0x02)  # outside the plausible range
-F_RATE = const(0x04)  # jump faster than max_rate_mC_per_s
-F_STUCK = const(0x08)  # identical raw code for stuck_ms
-F_BUS = const(0x10)  # bus error (OSError) or chip absent
-F_STALE = const(0x20)  # ADS122C04 delivered no new conversion
-F_NEVER = const(0x40)  # no good reading since start-up
-FAULT_NAMES = ((F_CHIP, "chip"), (F_RANGE, "range"), (F_RATE, "rate"), (F_STUCK, "stuck"),
-               (F_BUS, "bus"), (F_STALE, "stale"), (F_NEVER, "never"))
+_F_CHIP = const(0x01)  # MAX31865 fault bit (details in ``chip_status``)
+_F_RANGE = const(0x02)  # outside the plausible range
+_F_RATE = const(0x04)  # jump faster than max_rate_mC_per_s
+_F_STUCK = const(0x08)  # identical raw code for stuck_ms
+_F_BUS = const(0x10)  # bus error (OSError) or chip absent
+_F_STALE = const(0x20)  # ADS122C04 delivered no new conversion
+_F_NEVER = const(0x40)  # no good reading since start-up
+FAULT_NAMES = ((_F_CHIP, "chip"), (_F_RANGE, "range"), (_F_RATE, "rate"), (_F_STUCK, "stuck"),
+               (_F_BUS, "bus"), (_F_STALE, "stale"), (_F_NEVER, "never"))
 
-RECOVER_READS = const(3)
-REINIT_MS = const(1000)
-STALE_MS = const(1000)
+_RECOVER_READS = const(3)
+_REINIT_MS = const(1000)
+_STALE_MS = const(1000)
 _NOISE_MC = const(200)  # allowance for conversion noise on top of the physical rate
 _RATE_DT_CAP_MS = const(100000)  # beyond this the last good value says nothing
 
@@ -62,7 +62,7 @@ class Channels:
         self.cfg = cfg
         self.board = board
         self.names = [c.name for c in cfg.channels]
-        self.kind = [DRV_MAX31865 if c.driver == "max31865" else DRV_ADS122C04 for c in cfg.channels]
+        self.kind = [_DRV_MAX31865 if c.driver == "max31865" else _DRV_ADS122C04 for c in cfg.channels]
         self.lead = [c.lead_mohm * 100 for c in cfg.channels]  # ratio units (R0 = 100 ohm)
         self.cal = [c.cal_mC for c in cfg.channels]
         self.lo = cfg.plausible_lo_mC
@@ -73,7 +73,7 @@ class Channels:
         self.reading = [0] * n  # last converted reading, good or not
         self.good = [False] * n
         self.have_good = [False] * n
-        self.fault = [F_NEVER] * n
+        self.fault = [_F_NEVER] * n
         self.chip_status = [0] * n
         self.good_t = [now] * n
         self.code = [-1] * n
@@ -103,7 +103,7 @@ class Channels:
     def _driver_args(self, i):
         ch = self.cfg.channels[i]
         bus = self.board.buses[ch.bus]
-        if self.kind[i] == DRV_MAX31865:
+        if self.kind[i] == _DRV_MAX31865:
             return (bus, self.board.pin(ch.cs) if self.drivers[i] is None else self.drivers[i]._cs,
                     ch.rref_mohm, ch.wires, ch.filter_hz)
         return (bus, ch.address, ch.rref_mohm, ch.wires, ch.idac_ua, ch.filter_hz)
@@ -114,7 +114,7 @@ class Channels:
         hi = rtd.ratio_of(self.hi)
         for i in range(self.n):
             d = self.drivers[i]
-            if self.kind[i] == DRV_MAX31865 and d is not None:
+            if self.kind[i] == _DRV_MAX31865 and d is not None:
                 try:
                     d.set_thresholds_ratio(lo + self.lead[i], hi + self.lead[i])
                 except OSError:
@@ -144,29 +144,29 @@ class Channels:
     def _read(self, i, now, clock):
         """Raw read of channel i into ``reading``; returns fault bits, or -1 for no new data."""
         d = self.drivers[i]
-        if d is None or (self.fault[i] & (F_CHIP | F_BUS | F_STALE | F_RANGE)
-                         and clock.ticks_diff(now, self.reinit_t[i]) >= REINIT_MS):
+        if d is None or (self.fault[i] & (_F_CHIP | _F_BUS | _F_STALE | _F_RANGE)
+                         and clock.ticks_diff(now, self.reinit_t[i]) >= _REINIT_MS):
             self.reinit_t[i] = now
             if not self._init_driver(i):
-                return F_BUS
+                return _F_BUS
             d = self.drivers[i]
         try:
-            if self.kind[i] == DRV_MAX31865:
+            if self.kind[i] == _DRV_MAX31865:
                 raw = d.read_rtd()
                 if raw & 1:
                     self.chip_status[i] = d.fault_status
                     d.clear_fault()
-                    return F_CHIP
+                    return _F_CHIP
                 code = raw >> 1
             else:
                 if not d.data_ready:
-                    if clock.ticks_diff(now, self.data_t[i]) >= STALE_MS:
-                        return F_STALE
+                    if clock.ticks_diff(now, self.data_t[i]) >= _STALE_MS:
+                        return _F_STALE
                     return -1
                 code = d.read_data()
             r = d.ratio(code)
         except OSError:
-            return F_BUS
+            return _F_BUS
         self.data_t[i] = now
         f = 0
         if self.stuck_ms:
@@ -174,12 +174,12 @@ class Channels:
                 self.code[i] = code
                 self.code_t[i] = now
             elif clock.ticks_diff(now, self.code_t[i]) >= self.stuck_ms:
-                f = F_STUCK
+                f = _F_STUCK
         r -= self.lead[i]
         t = rtd.temperature_mC(r) + self.cal[i]
         self.reading[i] = t
         if t < self.lo or t > self.hi:
-            f |= F_RANGE
+            f |= _F_RANGE
         return f
 
     def _allowed(self, dt_ms):
@@ -192,7 +192,7 @@ class Channels:
         if f == 0 and self.have_good[i]:
             a = self._allowed(clock.ticks_diff(now, self.good_t[i]))
             if a >= 0 and (t - self.temp[i] > a or self.temp[i] - t > a):
-                f = F_RATE
+                f = _F_RATE
         if f:
             self.fault[i] = f
             self.good[i] = False
@@ -210,7 +210,7 @@ class Channels:
         self.streak[i] += 1
         self.prev[i] = t
         self.prev_t[i] = now
-        if self.streak[i] >= RECOVER_READS:
+        if self.streak[i] >= _RECOVER_READS:
             self.good[i] = True
             self.have_good[i] = True
             self.fault[i] = 0

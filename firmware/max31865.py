@@ -17,43 +17,43 @@ except ImportError:  # CPython
         return x
 
 # register read addresses; write address = read address | 0x80
-REG_CONFIG = const(0x00)
-REG_RTD_MSB = const(0x01)
-REG_RTD_LSB = const(0x02)
-REG_HIGH_FAULT_MSB = const(0x03)
-REG_HIGH_FAULT_LSB = const(0x04)
-REG_LOW_FAULT_MSB = const(0x05)
-REG_LOW_FAULT_LSB = const(0x06)
-REG_FAULT_STATUS = const(0x07)
+_REG_CONFIG = const(0x00)
+_REG_RTD_MSB = const(0x01)
+_REG_RTD_LSB = const(0x02)
+_REG_HIGH_FAULT_MSB = const(0x03)
+_REG_HIGH_FAULT_LSB = const(0x04)
+_REG_LOW_FAULT_MSB = const(0x05)
+_REG_LOW_FAULT_LSB = const(0x06)
+_REG_FAULT_STATUS = const(0x07)
 _WRITE = const(0x80)
 
 # configuration register bits
-CONFIG_VBIAS = const(0x80)  # D7: V_BIAS on
-CONFIG_AUTO = const(0x40)  # D6: conversion mode auto (1) / normally off (0)
-CONFIG_1SHOT = const(0x20)  # D5: one-shot (self-clearing)
-CONFIG_3WIRE = const(0x10)  # D4: 3-wire (1) / 2- or 4-wire (0)
-CONFIG_FAULT_CYCLE = const(0x0C)  # D3:D2: fault-detection cycle control
-CONFIG_FAULT_CLEAR = const(0x02)  # D1: fault status clear (self-clearing)
-CONFIG_FILTER_50HZ = const(0x01)  # D0: 50 Hz (1) / 60 Hz (0) notch
-FAULT_CYCLE_NONE = const(0x00)
-FAULT_CYCLE_AUTO = const(0x04)  # automatic fault detection with delay
-FAULT_CYCLE_MANUAL_1 = const(0x08)
-FAULT_CYCLE_MANUAL_2 = const(0x0C)
+_CONFIG_VBIAS = const(0x80)  # D7: V_BIAS on
+_CONFIG_AUTO = const(0x40)  # D6: conversion mode auto (1) / normally off (0)
+_CONFIG_1SHOT = const(0x20)  # D5: one-shot (self-clearing)
+_CONFIG_3WIRE = const(0x10)  # D4: 3-wire (1) / 2- or 4-wire (0)
+_CONFIG_FAULT_CYCLE = const(0x0C)  # D3:D2: fault-detection cycle control
+_CONFIG_FAULT_CLEAR = const(0x02)  # D1: fault status clear (self-clearing)
+_CONFIG_FILTER_50HZ = const(0x01)  # D0: 50 Hz (1) / 60 Hz (0) notch
+_FAULT_CYCLE_NONE = const(0x00)
+_FAULT_CYCLE_AUTO = const(0x04)  # automatic fault detection with delay
+_FAULT_CYCLE_MANUAL_1 = const(0x08)
+_FAULT_CYCLE_MANUAL_2 = const(0x0C)
 
 # fault status register bits
-FAULT_HIGH_THRESHOLD = const(0x80)  # D7: RTD high threshold
-FAULT_LOW_THRESHOLD = const(0x40)  # D6: RTD low threshold
-FAULT_REFIN_HIGH = const(0x20)  # D5: REFIN- > 0.85 x V_BIAS
-FAULT_REFIN_LOW_OPEN = const(0x10)  # D4: REFIN- < 0.85 x V_BIAS (FORCE- open)
-FAULT_RTDIN_LOW_OPEN = const(0x08)  # D3: RTDIN- < 0.85 x V_BIAS (FORCE- open)
-FAULT_OVUV = const(0x04)  # D2: overvoltage / undervoltage
+_FAULT_HIGH_THRESHOLD = const(0x80)  # D7: RTD high threshold
+_FAULT_LOW_THRESHOLD = const(0x40)  # D6: RTD low threshold
+_FAULT_REFIN_HIGH = const(0x20)  # D5: REFIN- > 0.85 x V_BIAS
+_FAULT_REFIN_LOW_OPEN = const(0x10)  # D4: REFIN- < 0.85 x V_BIAS (FORCE- open)
+_FAULT_RTDIN_LOW_OPEN = const(0x08)  # D3: RTDIN- < 0.85 x V_BIAS (FORCE- open)
+_FAULT_OVUV = const(0x04)  # D2: overvoltage / undervoltage
 FAULT_NAMES = (
-    (FAULT_HIGH_THRESHOLD, "rtd_high_threshold"),
-    (FAULT_LOW_THRESHOLD, "rtd_low_threshold"),
-    (FAULT_REFIN_HIGH, "refin_high"),
-    (FAULT_REFIN_LOW_OPEN, "refin_low_force_open"),
-    (FAULT_RTDIN_LOW_OPEN, "rtdin_low_force_open"),
-    (FAULT_OVUV, "over_under_voltage"),
+    (_FAULT_HIGH_THRESHOLD, "rtd_high_threshold"),
+    (_FAULT_LOW_THRESHOLD, "rtd_low_threshold"),
+    (_FAULT_REFIN_HIGH, "refin_high"),
+    (_FAULT_REFIN_LOW_OPEN, "refin_low_force_open"),
+    (_FAULT_RTDIN_LOW_OPEN, "rtdin_low_force_open"),
+    (_FAULT_OVUV, "over_under_voltage"),
 )
 
 _FAULT_CYCLE_POLLS = const(100)
@@ -93,14 +93,14 @@ class MAX31865:
         k = rref_mohm * 100
         self._kh = k >> 15
         self._kl = k & 0x7FFF
-        self._base = CONFIG_VBIAS | (CONFIG_3WIRE if wires == 3 else 0) | (
-            CONFIG_FILTER_50HZ if filter_hz == 50 else 0)
+        self._base = _CONFIG_VBIAS | (_CONFIG_3WIRE if wires == 3 else 0) | (
+            _CONFIG_FILTER_50HZ if filter_hz == 50 else 0)
         cs.value(1)
         # the filter may only change while not converting automatically
         self.configuration = self._base
         self.last_fault_cycle_status = self.run_fault_detection()
         self.clear_fault()
-        self.configuration = self._base | CONFIG_AUTO
+        self.configuration = self._base | _CONFIG_AUTO
 
     # --- register access -------------------------------------------------
     def read_register(self, reg):
@@ -129,69 +129,35 @@ class MAX31865:
     # --- configuration (datasheet names) ---------------------------------
     @property
     def configuration(self):
-        return self.read_register(REG_CONFIG)
+        return self.read_register(_REG_CONFIG)
 
     @configuration.setter
     def configuration(self, value):
-        self.write_register(REG_CONFIG, value)
+        self.write_register(_REG_CONFIG, value)
 
-    def _bit(self, mask):
+    def config_bit(self, mask):
+        """True if the configuration bits in ``mask`` (e.g. V_BIAS 0x80) are set."""
         return bool(self.configuration & mask)
 
-    def _set_bit(self, mask, on):
-        c = self.configuration & ~(CONFIG_1SHOT | CONFIG_FAULT_CLEAR | CONFIG_FAULT_CYCLE)
+    def set_config_bit(self, mask, on):
+        """Set or clear configuration bits; one-shot, fault-cycle and fault-clear are never re-written."""
+        c = self.configuration & ~(_CONFIG_1SHOT | _CONFIG_FAULT_CLEAR | _CONFIG_FAULT_CYCLE)
         self.configuration = (c | mask) if on else (c & ~mask)
-
-    @property
-    def bias(self):
-        """V_BIAS on (D7)."""
-        return self._bit(CONFIG_VBIAS)
-
-    @bias.setter
-    def bias(self, on):
-        self._set_bit(CONFIG_VBIAS, on)
-
-    @property
-    def auto_convert(self):
-        """Conversion mode auto (D6); False is normally-off, use ``one_shot``."""
-        return self._bit(CONFIG_AUTO)
-
-    @auto_convert.setter
-    def auto_convert(self, on):
-        self._set_bit(CONFIG_AUTO, on)
-
-    @property
-    def three_wire(self):
-        """3-wire (D4); False for 2- and 4-wire sensors."""
-        return self._bit(CONFIG_3WIRE)
-
-    @three_wire.setter
-    def three_wire(self, on):
-        self._set_bit(CONFIG_3WIRE, on)
-
-    @property
-    def filter_50hz(self):
-        """50 Hz notch (D0); False is 60 Hz."""
-        return self._bit(CONFIG_FILTER_50HZ)
-
-    @filter_50hz.setter
-    def filter_50hz(self, on):
-        self._set_bit(CONFIG_FILTER_50HZ, on)
 
     @property
     def fault_detection(self):
         """Fault-detection cycle control bits D3:D2 (FAULT_CYCLE_*); 0 when idle."""
-        return self.configuration & CONFIG_FAULT_CYCLE
+        return self.configuration & _CONFIG_FAULT_CYCLE
 
     def one_shot(self):
         """Start a single conversion (D5) with V_BIAS already on."""
-        c = self.configuration & ~(CONFIG_FAULT_CLEAR | CONFIG_FAULT_CYCLE)
-        self.configuration = c | CONFIG_1SHOT
+        c = self.configuration & ~(_CONFIG_FAULT_CLEAR | _CONFIG_FAULT_CYCLE)
+        self.configuration = c | _CONFIG_1SHOT
 
     def clear_fault(self):
         """Clear the fault status (D1), writing D5, D3 and D2 as 0 as the datasheet requires."""
-        c = self.read_register(REG_CONFIG)
-        self.write_register(REG_CONFIG, (c & ~(CONFIG_1SHOT | CONFIG_FAULT_CYCLE)) | CONFIG_FAULT_CLEAR)
+        c = self.read_register(_REG_CONFIG)
+        self.write_register(_REG_CONFIG, (c & ~(_CONFIG_1SHOT | _CONFIG_FAULT_CYCLE)) | _CONFIG_FAULT_CLEAR)
 
     def run_fault_detection(self):
         """Automatic fault-detection cycle (D3:D2 = 01); returns the fault status byte.
@@ -199,11 +165,11 @@ class MAX31865:
         The chip must not convert automatically meanwhile; the previous
         configuration is restored afterwards. OSError if the cycle never ends.
         """
-        saved = self.configuration & ~(CONFIG_1SHOT | CONFIG_FAULT_CLEAR | CONFIG_FAULT_CYCLE)
-        c = (saved & ~(CONFIG_AUTO | CONFIG_1SHOT)) | CONFIG_VBIAS
-        self.configuration = c | FAULT_CYCLE_AUTO
+        saved = self.configuration & ~(_CONFIG_1SHOT | _CONFIG_FAULT_CLEAR | _CONFIG_FAULT_CYCLE)
+        c = (saved & ~(_CONFIG_AUTO | _CONFIG_1SHOT)) | _CONFIG_VBIAS
+        self.configuration = c | _FAULT_CYCLE_AUTO
         for _ in range(_FAULT_CYCLE_POLLS):
-            if self.configuration & CONFIG_FAULT_CYCLE == 0:
+            if self.configuration & _CONFIG_FAULT_CYCLE == 0:
                 break
         else:
             raise OSError(110, "MAX31865 fault-detection cycle did not finish")
@@ -224,20 +190,20 @@ class MAX31865:
     @property
     def high_threshold(self):
         """High fault threshold as a 15-bit RTD code."""
-        return self._read15(REG_HIGH_FAULT_MSB)
+        return self._read15(_REG_HIGH_FAULT_MSB)
 
     @high_threshold.setter
     def high_threshold(self, code):
-        self._write15(REG_HIGH_FAULT_MSB, code)
+        self._write15(_REG_HIGH_FAULT_MSB, code)
 
     @property
     def low_threshold(self):
         """Low fault threshold as a 15-bit RTD code."""
-        return self._read15(REG_LOW_FAULT_MSB)
+        return self._read15(_REG_LOW_FAULT_MSB)
 
     @low_threshold.setter
     def low_threshold(self, code):
-        self._write15(REG_LOW_FAULT_MSB, code)
+        self._write15(_REG_LOW_FAULT_MSB, code)
 
     def code_of(self, ratio):
         """15-bit RTD code of an R/R0*1e7 ratio (start-up use: thresholds)."""
@@ -253,7 +219,7 @@ class MAX31865:
     def read_rtd(self):
         """RTD MSB:LSB as one 16-bit value: 15-bit ratio code << 1 | fault bit (D0)."""
         tx = self._tx
-        tx[0] = REG_RTD_MSB
+        tx[0] = _REG_RTD_MSB
         tx[1] = 0
         tx[2] = 0
         cs = self._cs
@@ -273,7 +239,7 @@ class MAX31865:
     @property
     def fault_status(self):
         """Fault status register (FAULT_* bits); latched until ``clear_fault``."""
-        return self.read_register(REG_FAULT_STATUS)
+        return self.read_register(_REG_FAULT_STATUS)
 
     def ratio(self, code):
         """R/R0 * 1e7 of a 15-bit code for a Pt100 (R0 = 100 ohm)."""

@@ -23,31 +23,31 @@ from firmware import status as st
 from firmware.crc16 import crc16_modbus
 
 # input registers
-IR_STATUS_LO = const(0)
-IR_STATUS_HI = const(1)
-IR_SEQUENCE = const(2)
-IR_TOTAL = const(3)  # 0.1 um, int16, at the reported position
-IR_REF_OFFSET = const(4)  # 0.1 um, int16, at the reference position
-IR_SLOPE = const(5)  # 0.01 um/m, int16
-IR_POSITION = const(6)  # int32 um, high word first
-IR_REFERENCE = const(8)  # int32 um
-IR_TABLE_CRC = const(10)  # uint32
-IR_SLOT = const(12)  # 0 none, 1 A, 2 B
-IR_CHANNELS = const(13)
-IR_TEMPS = const(16)  # 16 x int16 0.01 degC, 0x8000 when faulty
-IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
-N_INPUT = const(48)
+_IR_STATUS_LO = const(0)
+_IR_STATUS_HI = const(1)
+_IR_SEQUENCE = const(2)
+_IR_TOTAL = const(3)  # 0.1 um, int16, at the reported position
+_IR_REF_OFFSET = const(4)  # 0.1 um, int16, at the reference position
+_IR_SLOPE = const(5)  # 0.01 um/m, int16
+_IR_POSITION = const(6)  # int32 um, high word first
+_IR_REFERENCE = const(8)  # int32 um
+_IR_TABLE_CRC = const(10)  # uint32
+_IR_SLOT = const(12)  # 0 none, 1 A, 2 B
+_IR_CHANNELS = const(13)
+_IR_TEMPS = const(16)  # 16 x int16 0.01 degC, 0x8000 when faulty
+_IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
+_N_INPUT = const(48)
 # holding registers
-HR_ENABLE = const(0)  # 0/1
-HR_SLEW = const(1)  # um/s, 1..10000
-HR_LINK_TIMEOUT = const(2)  # ms, 0 = off
-HR_POSITION = const(3)  # int32 um, high word first: writing it is a position report
-HR_REFERENCE = const(5)  # int32 um
-N_HOLDING = const(7)
+_HR_ENABLE = const(0)  # 0/1
+_HR_SLEW = const(1)  # um/s, 1..10000
+_HR_LINK_TIMEOUT = const(2)  # ms, 0 = off
+_HR_POSITION = const(3)  # int32 um, high word first: writing it is a position report
+_HR_REFERENCE = const(5)  # int32 um
+_N_HOLDING = const(7)
 
-EX_ILLEGAL_FUNCTION = const(1)
-EX_ILLEGAL_ADDRESS = const(2)
-EX_ILLEGAL_VALUE = const(3)
+_EX_ILLEGAL_FUNCTION = const(1)
+_EX_ILLEGAL_ADDRESS = const(2)
+_EX_ILLEGAL_VALUE = const(3)
 
 _POS_HI_LIMIT = const(1525)  # |high word| so that |position| <= 100 m
 _NO_VALUE = const(-32768)
@@ -154,7 +154,7 @@ class ModbusLink:
         elif fc == 16:
             self._write_multiple(n, addr)
         else:
-            self._exception(fc, EX_ILLEGAL_FUNCTION, addr)
+            self._exception(fc, _EX_ILLEGAL_FUNCTION, addr)
 
     # --- replies ------------------------------------------------------------------
     def _send(self, n, addr):
@@ -177,14 +177,14 @@ class ModbusLink:
     def _read(self, fc, n, addr):
         b = self.buf
         if n != 8:
-            return self._exception(fc, EX_ILLEGAL_VALUE, addr)
+            return self._exception(fc, _EX_ILLEGAL_VALUE, addr)
         start = (b[2] << 8) | b[3]
         qty = (b[4] << 8) | b[5]
         if qty < 1 or qty > 125:
-            return self._exception(fc, EX_ILLEGAL_VALUE, addr)
-        limit = N_INPUT if fc == 4 else N_HOLDING
+            return self._exception(fc, _EX_ILLEGAL_VALUE, addr)
+        limit = _N_INPUT if fc == 4 else _N_HOLDING
         if start + qty > limit:
-            return self._exception(fc, EX_ILLEGAL_ADDRESS, addr)
+            return self._exception(fc, _EX_ILLEGAL_ADDRESS, addr)
         if addr == 0:
             return
         t = self.tx
@@ -202,39 +202,39 @@ class ModbusLink:
 
     def input_register(self, r):
         a = self.app
-        if r == IR_STATUS_LO:
+        if r == _IR_STATUS_LO:
             return a.status & 0xFFFF
-        if r == IR_STATUS_HI:
+        if r == _IR_STATUS_HI:
             return (a.status >> 16) & 0xFFFF
-        if r == IR_SEQUENCE:
+        if r == _IR_SEQUENCE:
             return a.cycles & 0xFFFF
-        if r == IR_TOTAL:
+        if r == _IR_TOTAL:
             return _s16(_round10(a.total))
-        if r == IR_REF_OFFSET:
+        if r == _IR_REF_OFFSET:
             return _s16(_round10(a.ref_out))
-        if r == IR_SLOPE:
+        if r == _IR_SLOPE:
             return _s16(a.slope_out)
-        if r == IR_POSITION or r == IR_POSITION + 1:
-            return self._word(a.pos, r - IR_POSITION)
-        if r == IR_REFERENCE or r == IR_REFERENCE + 1:
-            return self._word(a.ev.pos_ref if a.ev is not None else 0, r - IR_REFERENCE)
-        if r == IR_TABLE_CRC:
+        if r == _IR_POSITION or r == _IR_POSITION + 1:
+            return self._word(a.pos, r - _IR_POSITION)
+        if r == _IR_REFERENCE or r == _IR_REFERENCE + 1:
+            return self._word(a.ev.pos_ref if a.ev is not None else 0, r - _IR_REFERENCE)
+        if r == _IR_TABLE_CRC:
             return (a.table.crc >> 16) if a.table is not None else 0
-        if r == IR_TABLE_CRC + 1:
+        if r == _IR_TABLE_CRC + 1:
             return (a.table.crc & 0xFFFF) if a.table is not None else 0
-        if r == IR_SLOT:
+        if r == _IR_SLOT:
             return 0 if a.slot is None else a.slot + 1
-        if r == IR_CHANNELS:
+        if r == _IR_CHANNELS:
             return a.channels.n
         ch = a.channels
-        if IR_TEMPS <= r < IR_TEMPS + 16:
-            i = r - IR_TEMPS
+        if _IR_TEMPS <= r < _IR_TEMPS + 16:
+            i = r - _IR_TEMPS
             if i >= ch.n or not ch.good[i]:
                 return _NO_VALUE
             t = ch.temp[i]
             return _s16((t + 5) // 10 if t >= 0 else -((5 - t) // 10))
-        if IR_FAULTS <= r < IR_FAULTS + 16:
-            i = r - IR_FAULTS
+        if _IR_FAULTS <= r < _IR_FAULTS + 16:
+            i = r - _IR_FAULTS
             return ch.fault[i] if i < ch.n else 0
         return 0
 
@@ -248,11 +248,11 @@ class ModbusLink:
     def _write_single(self, n, addr):
         b = self.buf
         if n != 8:
-            return self._exception(6, EX_ILLEGAL_VALUE, addr)
+            return self._exception(6, _EX_ILLEGAL_VALUE, addr)
         r = (b[2] << 8) | b[3]
         v = (b[4] << 8) | b[5]
-        if r >= N_HOLDING:
-            return self._exception(6, EX_ILLEGAL_ADDRESS, addr)
+        if r >= _N_HOLDING:
+            return self._exception(6, _EX_ILLEGAL_ADDRESS, addr)
         self.vals[0] = v
         code = self._apply(r, 1)
         if code:
@@ -268,9 +268,9 @@ class ModbusLink:
         start = (b[2] << 8) | b[3]
         qty = (b[4] << 8) | b[5]
         if qty < 1 or qty > 123 or b[6] != 2 * qty or n != 9 + 2 * qty:
-            return self._exception(16, EX_ILLEGAL_VALUE, addr)
-        if start + qty > N_HOLDING:
-            return self._exception(16, EX_ILLEGAL_ADDRESS, addr)
+            return self._exception(16, _EX_ILLEGAL_VALUE, addr)
+        if start + qty > _N_HOLDING:
+            return self._exception(16, _EX_ILLEGAL_ADDRESS, addr)
         for i in range(qty):
             self.vals[i] = (b[7 + 2 * i] << 8) | b[8 + 2 * i]
         code = self._apply(start, qty)
@@ -289,32 +289,32 @@ class ModbusLink:
         for i in range(qty):
             r = start + i
             v = vals[i]
-            if r == HR_ENABLE and v > 1:
-                return EX_ILLEGAL_VALUE
-            if r == HR_SLEW and (v < 1 or v > 10000):
-                return EX_ILLEGAL_VALUE
-            if r == HR_POSITION or r == HR_REFERENCE:
+            if r == _HR_ENABLE and v > 1:
+                return _EX_ILLEGAL_VALUE
+            if r == _HR_SLEW and (v < 1 or v > 10000):
+                return _EX_ILLEGAL_VALUE
+            if r == _HR_POSITION or r == _HR_REFERENCE:
                 hi = v - 65536 if v > 32767 else v
                 if hi > _POS_HI_LIMIT or hi < -_POS_HI_LIMIT - 1:
-                    return EX_ILLEGAL_VALUE
+                    return _EX_ILLEGAL_VALUE
         pos = False
         ref = False
         for i in range(qty):
             r = start + i
             h[r] = vals[i]
-            if r == HR_POSITION or r == HR_POSITION + 1:
+            if r == _HR_POSITION or r == _HR_POSITION + 1:
                 pos = True
-            elif r == HR_REFERENCE or r == HR_REFERENCE + 1:
+            elif r == _HR_REFERENCE or r == _HR_REFERENCE + 1:
                 ref = True
         a = self.app
-        a.enabled = h[HR_ENABLE] == 1
-        if start <= HR_SLEW < start + qty:
-            a.set_slew(h[HR_SLEW])
-        a.link_timeout_ms = h[HR_LINK_TIMEOUT]
+        a.enabled = h[_HR_ENABLE] == 1
+        if start <= _HR_SLEW < start + qty:
+            a.set_slew(h[_HR_SLEW])
+        a.link_timeout_ms = h[_HR_LINK_TIMEOUT]
         if pos:
-            a.report_position(self._int32(HR_POSITION))
+            a.report_position(self._int32(_HR_POSITION))
         if ref:
-            a.set_reference(self._int32(HR_REFERENCE))
+            a.set_reference(self._int32(_HR_REFERENCE))
         return 0
 
     def _int32(self, r):

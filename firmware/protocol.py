@@ -22,19 +22,19 @@ from firmware import frame as fr
 from firmware.slots import UploadError, SLOT_NAMES
 
 # error codes of E frames
-E_CRC = const(1)
-E_SYNTAX = const(2)
-E_UNKNOWN = const(3)
-E_RANGE = const(4)
-E_STATE = const(5)
-E_TABLE = const(6)
-E_OVERFLOW = const(7)
+_E_CRC = const(1)
+_E_SYNTAX = const(2)
+_E_UNKNOWN = const(3)
+_E_RANGE = const(4)
+_E_STATE = const(5)
+_E_TABLE = const(6)
+_E_OVERFLOW = const(7)
 ERRORS = {1: b"crc", 2: b"syntax", 3: b"unknown", 4: b"range", 5: b"state", 6: b"table", 7: b"overflow"}
-_UPLOAD_CODES = {"range": E_RANGE, "state": E_STATE, "table": E_TABLE}
+_UPLOAD_CODES = {"range": _E_RANGE, "state": _E_STATE, "table": _E_TABLE}
 
-POS_LIMIT = const(100000000)  # |position| in um accepted from the controller (100 m)
-FEED_LIMIT = const(1000000)  # mm/min
-MAX_CHUNK = const(64)  # bytes of table data per U,D frame
+_POS_LIMIT = const(100000000)  # |position| in um accepted from the controller (100 m)
+_FEED_LIMIT = const(1000000)  # mm/min
+_MAX_CHUNK = const(64)  # bytes of table data per U,D frame
 _RX_CHUNK = const(64)
 _MAX_READS = const(8)
 
@@ -69,7 +69,7 @@ class StreamLink:
         self.w = fr.FrameWriter(self.serial)
         self.r = fr.LineReader()
         self.rx = bytearray(_RX_CHUNK)
-        self.chunk = bytearray(MAX_CHUNK)
+        self.chunk = bytearray(_MAX_CHUNK)
         self.next_frame = app.clock.ticks_ms()
         self.frame_ms = app.cfg.frame_ms
 
@@ -77,7 +77,7 @@ class StreamLink:
     def boot(self):
         self.hello()
         for slot, reason in self.app.store.refusals:
-            self.error(E_TABLE, b"table", slot.encode() + b" " + reason.encode())
+            self.error(_E_TABLE, b"table", slot.encode() + b" " + reason.encode())
 
     def hello(self):
         """H,<protocol>,<firmware>,<slot>,<table crc32>,<provenance[:8] hex>,<kind>,<axis>,<channels>."""
@@ -181,13 +181,13 @@ class StreamLink:
     def _line(self, now):
         r = self.r
         if r.status == fr.LINE_CRC:
-            self.error(E_CRC, b"crc")
+            self.error(_E_CRC, b"crc")
             return
         if r.status == fr.LINE_OVERFLOW:
-            self.error(E_OVERFLOW, b"overflow")
+            self.error(_E_OVERFLOW, b"overflow")
             return
         if r.status != fr.LINE_OK:
-            self.error(E_SYNTAX, b"syntax")
+            self.error(_E_SYNTAX, b"syntax")
             return
         self.app.link_alive(now)
         self._command(r.letter(0), r.nf)
@@ -197,56 +197,56 @@ class StreamLink:
         r = self.r
         if c == _P:
             if nf != 2:
-                return self.error(E_SYNTAX, b"syntax")
-            v = r.int(1, -POS_LIMIT, POS_LIMIT)
+                return self.error(_E_SYNTAX, b"syntax")
+            v = r.int(1, -_POS_LIMIT, _POS_LIMIT)
             if v is None:
-                return self.error(E_RANGE, b"range")
+                return self.error(_E_RANGE, b"range")
             a.report_position(v)
         elif c == _Q:
             if nf != 2:
-                return self.error(E_SYNTAX, b"syntax")
-            v = r.int(1, -POS_LIMIT, POS_LIMIT)
+                return self.error(_E_SYNTAX, b"syntax")
+            v = r.int(1, -_POS_LIMIT, _POS_LIMIT)
             if v is None:
-                return self.error(E_RANGE, b"range")
+                return self.error(_E_RANGE, b"range")
             self.offsets(_Q, v)
         elif c == _R:
             if nf != 2:
-                return self.error(E_SYNTAX, b"syntax")
-            v = r.int(1, -POS_LIMIT, POS_LIMIT)
+                return self.error(_E_SYNTAX, b"syntax")
+            v = r.int(1, -_POS_LIMIT, _POS_LIMIT)
             if v is None:
-                return self.error(E_RANGE, b"range")
+                return self.error(_E_RANGE, b"range")
             ref = a.set_reference(v)
             if ref is None:
-                return self.error(E_STATE, b"state", b"no table")
+                return self.error(_E_STATE, b"state", b"no table")
             self.ack(_R, 0, ref)
         elif c == _M:
             if nf != 4:
-                return self.error(E_SYNTAX, b"syntax")
-            f = r.int(1, 0, FEED_LIMIT)
-            lo = r.int(2, -POS_LIMIT, POS_LIMIT)
-            hi = r.int(3, -POS_LIMIT, POS_LIMIT)
+                return self.error(_E_SYNTAX, b"syntax")
+            f = r.int(1, 0, _FEED_LIMIT)
+            lo = r.int(2, -_POS_LIMIT, _POS_LIMIT)
+            hi = r.int(3, -_POS_LIMIT, _POS_LIMIT)
             if f is None or lo is None or hi is None:
-                return self.error(E_RANGE, b"range")
+                return self.error(_E_RANGE, b"range")
             if not a.set_feed(f, lo, hi):
-                return self.error(E_STATE, b"state", b"no screw table")
+                return self.error(_E_STATE, b"state", b"no screw table")
             self.ack(_M, 0, f)
         elif c == _S:
             if nf != 1:
-                return self.error(E_SYNTAX, b"syntax")
+                return self.error(_E_SYNTAX, b"syntax")
             self.temperatures()
         elif c == _V:
             if nf != 1:
-                return self.error(E_SYNTAX, b"syntax")
+                return self.error(_E_SYNTAX, b"syntax")
             self.hello()
         elif c == _U:
             self._upload(nf)
         elif c == _X:
             if nf != 1:
-                return self.error(E_SYNTAX, b"syntax")
+                return self.error(_E_SYNTAX, b"syntax")
             self.ack(_X)
             a.reset()
         else:
-            self.error(E_UNKNOWN, b"unknown")
+            self.error(_E_UNKNOWN, b"unknown")
 
     def _upload(self, nf):
         a = self.app
@@ -257,22 +257,22 @@ class StreamLink:
                 size = r.int(2, 0, 1 << 24)
                 crc = r.hexint(3, 8)
                 if size is None or crc < 0:
-                    return self.error(E_RANGE, b"range")
+                    return self.error(_E_RANGE, b"range")
                 slot = a.store.begin(size, crc)
                 self.ack(_U, _B, None, SLOT_NAMES[slot].encode())
             elif sub == _D and nf == 4:
                 off = r.int(2, 0, 1 << 24)
                 s = r.fs[3]
                 e = r.fe[3]
-                if off is None or (e - s) & 1 or e == s or e - s > 2 * MAX_CHUNK:
-                    return self.error(E_RANGE, b"range")
+                if off is None or (e - s) & 1 or e == s or e - s > 2 * _MAX_CHUNK:
+                    return self.error(_E_RANGE, b"range")
                 n = (e - s) >> 1
                 buf = self.chunk
                 for k in range(n):
                     hi = fr._hexval(r.buf[s + 2 * k])
                     lo = fr._hexval(r.buf[s + 2 * k + 1])
                     if hi < 0 or lo < 0:
-                        return self.error(E_SYNTAX, b"syntax")
+                        return self.error(_E_SYNTAX, b"syntax")
                     buf[k] = (hi << 4) | lo
                 got = a.store.write(off, bytes(buf[:n]))
                 self.ack(_U, _D, got)
@@ -285,11 +285,11 @@ class StreamLink:
                 a.store.abort()
                 self.ack(_U, _X)
             else:
-                self.error(E_SYNTAX if sub in (_B, _D, _C, _X) else E_UNKNOWN,
+                self.error(_E_SYNTAX if sub in (_B, _D, _C, _X) else _E_UNKNOWN,
                            b"syntax" if sub in (_B, _D, _C, _X) else b"unknown")
         except UploadError as e:
-            self.error(_UPLOAD_CODES.get(e.code, E_STATE), ERRORS[_UPLOAD_CODES.get(e.code, E_STATE)],
+            self.error(_UPLOAD_CODES.get(e.code, _E_STATE), ERRORS[_UPLOAD_CODES.get(e.code, _E_STATE)],
                        e.detail.encode())
         except OSError as e:
             a.store.abort()
-            self.error(E_STATE, b"state", ("flash: %s" % e).encode())
+            self.error(_E_STATE, b"state", ("flash: %s" % e).encode())

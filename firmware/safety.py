@@ -21,22 +21,6 @@ No floats, no allocation; integers stay far below 2**30.
 from firmware import status as st
 
 
-def _toward(cur, target, step):
-    if target > cur + step:
-        return cur + step, True
-    if target < cur - step:
-        return cur - step, True
-    return target, False
-
-
-def _clamp(v, lim):
-    if v > lim:
-        return lim, True
-    if v < -lim:
-        return -lim, True
-    return v, False
-
-
 class Limiter:
     """``slew_um_per_s``, ``max_um``: limits; ``span_um``: largest |P - P_ref| in the envelope."""
 
@@ -60,7 +44,13 @@ class Limiter:
         self.rate_s = self.rate * 1000 // self.span_mm
         self.max_s = self.max * 1000 // self.span_mm
 
-    def _steps(self, dt_ms):
+    def update(self, raw_ref, raw_slope, raw_total, dp_mm, usable, dt_ms):
+        """Advance by ``dt_ms``; ``usable`` False means ramp to zero.
+
+        ``dp_mm`` is P - P_ref in mm (clamped to the envelope). Returns the flags
+        (RATE_LIMITED, MAG_LIMITED, RECOVERING) also kept in ``self.flags``.
+        Written without helper calls returning tuples: those would allocate.
+        """
         if dt_ms < 0:
             dt_ms = 0
         if dt_ms > 10000:  # a stalled loop must not earn a huge step
@@ -71,41 +61,69 @@ class Limiter:
         a = self.rate_s * dt_ms + self._acc_s
         step_s = a // 1000
         self._acc_s = a - step_s * 1000
-        return step, step_s
-
-    def update(self, raw_ref, raw_slope, raw_total, dp_mm, usable, dt_ms):
-        """Advance by ``dt_ms``; ``usable`` False means ramp to zero.
-
-        ``dp_mm`` is P - P_ref in mm (clamped to the envelope). Returns the flags
-        (RATE_LIMITED, MAG_LIMITED, RECOVERING) also kept in ``self.flags``.
-        """
-        step, step_s = self._steps(dt_ms)
         fl = 0
         if not usable:
             raw_ref = 0
             raw_slope = 0
             raw_total = 0
             self.recovering = True
-        t_ref, m1 = _clamp(raw_ref, self.max)
-        t_slope, m2 = _clamp(raw_slope, self.max_s)
-        self.ref, r1 = _toward(self.ref, t_ref, step)
-        self.slope, r2 = _toward(self.slope, t_slope, step_s)
-        t_total, m3 = _clamp(raw_total, self.max)
+        m = self.max
+        ms = self.max_s
+        # magnitude first, then rate: the output never exceeds either limit
+        t = raw_ref
+        if t > m or t < -m:
+            t = m if t > 0 else -m
+            fl = st.MAG_LIMITED
+        v = self.ref
+        if t > v + step:
+            v += step
+            fl |= st.RATE_LIMITED
+        elif t < v - step:
+            v -= step
+            fl |= st.RATE_LIMITED
+        else:
+            v = t
+        self.ref = v
+        t = raw_slope
+        if t > ms or t < -ms:
+            t = ms if t > 0 else -ms
+            fl |= st.MAG_LIMITED
+        v = self.slope
+        if t > v + step_s:
+            v += step_s
+            fl |= st.RATE_LIMITED
+        elif t < v - step_s:
+            v -= step_s
+            fl |= st.RATE_LIMITED
+        else:
+            v = t
+        self.slope = v
         if self.recovering:
-            self.total, r3 = _toward(self.total, t_total, step)
-            if usable and not r3:
-                self.recovering = False
-            elif usable:
-                fl |= st.RECOVERING
+            t = raw_total
+            if t > m or t < -m:
+                t = m if t > 0 else -m
+                fl |= st.MAG_LIMITED
+            v = self.total
+            if t > v + step:
+                v += step
+                fl |= st.RATE_LIMITED
+                if usable:
+                    fl |= st.RECOVERING
+            elif t < v - step:
+                v -= step
+                fl |= st.RATE_LIMITED
+                if usable:
+                    fl |= st.RECOVERING
+            else:
+                v = t
+                if usable:
+                    self.recovering = False
+            self.total = v
         else:
             v = raw_total + (self.ref - raw_ref) + ((self.slope - raw_slope) * dp_mm) // 1000
-            v, m4 = _clamp(v, self.max)
+            if v > m or v < -m:
+                v = m if v > 0 else -m
+                fl |= st.MAG_LIMITED
             self.total = v
-            r3 = False
-            m3 = m3 or m4
-        if r1 or r2 or r3:
-            fl |= st.RATE_LIMITED
-        if m1 or m2 or m3:
-            fl |= st.MAG_LIMITED
         self.flags = fl
         return fl

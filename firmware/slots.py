@@ -77,11 +77,12 @@ class TableStore:
         return t
 
     def _read(self, slot):
-        with open(self.path(slot), "rb") as f:
-            data = f.read(MAX_TABLE + 1)
-        if len(data) > MAX_TABLE:
-            raise TableError("length mismatch", "larger than %d bytes" % MAX_TABLE)
-        return data
+        path = self.path(slot)
+        size = os.stat(path)[6]
+        if size > MAX_TABLE:
+            raise TableError("length mismatch", "%d bytes, at most %d" % (size, MAX_TABLE))
+        with open(path, "rb") as f:
+            return f.read(size)
 
     def load(self):
         """The table in force and its slot index, or (None, None); refusals recorded."""

@@ -87,19 +87,22 @@ class FakeMAX31865:
         self.regs[3] = 0xFF
         self.regs[4] = 0xFF
         self.rref = rref_ohm
-        self.ohm = ohm
         self.open_circuit = False
         self.present = True
         self.fault_cycles = 0
+        self.set_ohm(ohm)
 
     def set_temperature(self, t_c):
-        self.ohm = pt100_ohm(t_c)
+        self.set_ohm(pt100_ohm(t_c))
+
+    def set_ohm(self, ohm):
+        # the conversion result is computed here so that reads allocate nothing
+        self.ohm = ohm
+        c = int(ohm / self.rref * 32768.0 + 0.5)
+        self.rtd_code = 0x7FFF if c > 0x7FFF else c
 
     def code(self):
-        if self.open_circuit:
-            return 0x7FFF
-        c = int(self.ohm / self.rref * 32768.0 + 0.5)
-        return 0x7FFF if c > 0x7FFF else c
+        return 0x7FFF if self.open_circuit else self.rtd_code
 
     def _convert(self):
         r = self.regs
@@ -198,14 +201,21 @@ class FakeADS122C04:
     def __init__(self, rref_ohm=1620.0, ohm=100.0):
         self.regs = bytearray(4)
         self.rref = rref_ohm
-        self.ohm = ohm
         self.present = True
         self.data = 0
         self.started = False
         self.auto = True  # every RREG of register 2 finds a fresh conversion
+        self._codes = [0] * 8
+        self.set_ohm(ohm)
 
     def set_temperature(self, t_c):
-        self.ohm = pt100_ohm(t_c)
+        self.set_ohm(pt100_ohm(t_c))
+
+    def set_ohm(self, ohm):
+        # codes for every gain and wiring are computed here so that reads allocate nothing
+        self.ohm = ohm
+        for g in range(8):
+            self._codes[g] = int(ohm * (1 << g) / self.rref * 8388608.0)
 
     def command(self, c):
         if c & 0xFE == 0x06:
@@ -216,10 +226,9 @@ class FakeADS122C04:
             self.started = True
 
     def convert(self):
-        g = 1 << ((self.regs[0] >> 1) & 7)
-        two = (self.regs[3] >> 2) & 7 != 0  # both IDACs: 3-wire, V_REF carries both currents
-        m = 2.0 if two else 1.0
-        code = int(self.ohm * g / (m * self.rref) * 8388608.0)
+        code = self._codes[(self.regs[0] >> 1) & 7]
+        if (self.regs[3] >> 2) & 7:  # both IDACs: 3-wire, V_REF carries both currents
+            code >>= 1
         if code > 0x7FFFFF:
             code = 0x7FFFFF
         self.data = code
@@ -253,7 +262,7 @@ class FakeADS122C04:
 class FakeSerial:
     """Non-blocking serial: ``feed`` queues bytes for the firmware, ``tx`` collects its output."""
 
-    def __init__(self, size=4096):
+    def __init__(self, size=1024):
         self.inq = bytearray(size)
         self.head = 0
         self.tail = 0
