@@ -107,5 +107,5 @@ def ratio_of(t_mC):
         return _NODES[_LAST]
     rk = _NODES[k]
     d = _NODES[k + 1] - rk
-    u = ((t_mC - _T0_MC - k * 10000) << 15) // 10000  # fraction in 2**-15
-    return rk + (d * u >> 15) - ((_CURV[k] * u * (32768 - u)) >> 30)
+    u = ((t_mC - _T0_MC - k * 10000) << 20) // 10000  # fraction in 2**-20
+    return rk + ((d * u + (1 << 19)) >> 20) - ((_CURV[k] * u * ((1 << 20) - u)) >> 40)

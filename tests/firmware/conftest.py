@@ -45,3 +45,43 @@ def need_micropython():
     if not os.path.exists(MICROPYTHON):
         pytest.skip("MicroPython unix port not installed")
     return MICROPYTHON
+
+
+def cmd(body):
+    """A command line ``$<body>*CRC\\r\\n`` for ``body`` like b"TC,P,1000"."""
+    from firmware.crc16 import crc16_ccitt
+    return b"$" + body + b"*%04X\r\n" % crc16_ccitt(body)
+
+
+def frames(data):
+    """Split device output into frames, checking each CRC; returns lists of str fields."""
+    from firmware.crc16 import crc16_ccitt
+    out = []
+    for line in data.split(b"\r\n"):
+        if not line:
+            continue
+        assert line[:1] == b"$" and line[-5:-4] == b"*", line
+        body = line[1:-5]
+        assert int(line[-4:], 16) == crc16_ccitt(body), line
+        out.append(body.decode().split(","))
+    return out
+
+
+def rig_app(tmp_path, kind="poly_slope", n_max=9, n_ads=2, table=True, extra=None, serial_mode="stream",
+            table_kw=None):
+    """An App on fakes with a table in slot A; returns (app, board)."""
+    from fwfakes import make_rig
+    from firmware.app import App
+    names = ["T%d" % i for i in range(1, n_max + n_ads + 1)]
+    if table:
+        kw = {"kind": kind, "sensors": names}
+        kw.update(table_kw or {})
+        (tmp_path / "table_a.bin").write_bytes(make_table(**kw))
+    board = make_rig(n_max, n_ads, table_dir=str(tmp_path), extra=extra, serial_mode=serial_mode)
+    return App(board), board
+
+
+def run_cycles(app, board, n, dt=100):
+    for _ in range(n):
+        app.cycle()
+        board.clock.t += dt
