@@ -16,6 +16,8 @@ def add_arguments(p):
     p.add_argument("--noise-C", type=float, default=0.2, help="robustness: temperature noise, standard deviation (default 0.2 °C)")
     p.add_argument("--offset-C", type=float, default=0.5, help="robustness: per-sensor offset up to ± this after the start (default 0.5 °C)")
     p.add_argument("--repeats", type=int, default=5, help="robustness: disturbance realisations averaged per test run (default 5)")
+    p.add_argument("--reference", choices=("run_start", "fixed"), default="run_start",
+                   help="temperature-rise reference when predicting a run: its own first sample (default, the literature's ΔT) or the training runs' mean start (as exported)")
     p.add_argument("--no-intercept", action="store_true", help="fit without intercept")
 
 
@@ -54,14 +56,14 @@ def run(args):
         results = []
         for case in cases:
             results += run_case(case, methods, target, args.channel, sensors, not args.no_intercept,
-                                robustness={"noise_C": args.noise_C, "offset_C": args.offset_C, "repeats": args.repeats}, keep_models=bool(args.plots))
+                                robustness={"noise_C": args.noise_C, "offset_C": args.offset_C, "repeats": args.repeats}, keep_models=bool(args.plots), reference=args.reference)
     except EmpiricalDataError as exc:
         raise UserError(str(exc))
     print(table(results))
     notes = findings(results)
     for line in notes:
         print(line)
-    doc = {"target": target, "channel": args.channel, "runs": [r.path for r in runs], "methods": methods,
+    doc = {"target": target, "channel": args.channel, "reference": args.reference, "runs": [r.path for r in runs], "methods": methods,
            "robustness": {"noise_C": args.noise_C, "offset_C": args.offset_C, "repeats": args.repeats}, "results": public(results), "findings": notes}
     if args.plots:
         doc["plots"] = write_plots(results, cases, args.plots, target, args.channel)

@@ -85,7 +85,7 @@ def case_split(run, split_s, target="direct", channel=None, sensors=None, test_w
                 summary_tests=[tests[0][0]])
 
 
-def _fit(method, case, target, channel, sensors, fit_intercept, options, selector_params):
+def _fit(method, case, target, channel, sensors, fit_intercept, options, selector_params, reference):
     """Fitted model and selection info for one method on one case."""
     from host.empirical.selectors import select
     from host.empirical.targets import training_arrays
@@ -105,15 +105,21 @@ def _fit(method, case, target, channel, sensors, fit_intercept, options, selecto
         sel = select(method, data, target=target, channel=channel, sensors=sensors, **params)
         info["selection"] = sel.reason
         info["selection_obj"] = sel
-        model = fit_model(case.train, "mlr", target, channel, sel.sensors, fit_intercept, case.window)
+        model = fit_model(case.train, "mlr", target, channel, sel.sensors, fit_intercept, case.window, reference=reference)
     else:
-        model = fit_model(case.train, method, target, channel, sensors, fit_intercept, case.window, **opts)
+        model = fit_model(case.train, method, target, channel, sensors, fit_intercept, case.window, reference=reference, **opts)
     return model, info
 
 
 def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, fit_intercept=True, options=None,
-             selector_params=None, robustness=None, keep_models=False):
-    """Fit and evaluate every method on one case -> list of result dicts (one per method)."""
+             selector_params=None, robustness=None, keep_models=False, reference="run_start"):
+    """Fit and evaluate every method on one case -> list of result dicts (one per method).
+
+    ``reference="run_start"`` (default) evaluates every run with temperature rises
+    over its own first sample, as the literature does; "fixed" uses the
+    training runs' mean start temperature, as a controller without a latched
+    cold start would.
+    """
     options = options or {}
     selector_params = selector_params or {}
     rob = dict(ROBUSTNESS, **(robustness or {}))
@@ -125,7 +131,7 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
         t0 = time.perf_counter()
         res = {"case": case.label, "method": method}
         try:
-            model, info = _fit(method, case, target, channel, sensors, fit_intercept, options, selector_params)
+            model, info = _fit(method, case, target, channel, sensors, fit_intercept, options, selector_params, reference)
         except EmpiricalDataError as exc:
             res.update({"error": str(exc), "sensors": [], "n_sensors": 0, "mean_test_rmse_um": None, "seconds": time.perf_counter() - t0})
             results.append(res)

@@ -97,11 +97,17 @@ def cv_groups(runs, arrays, cv_blocks=None):
 
 
 def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
-              reference="run_start", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
+              reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
               cv_blocks=None, **options):
     """Fit ``method`` (mlr|pcr|stepwise) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
+    ``reference``: "fixed" (default: inputs are T − reference_C, the document
+    contract the exporter and firmware implement; reference_C is the mean
+    cold-start temperature of the training runs) or "run_start" (rises over
+    each evaluated run's own first sample, the literature's ΔT; the document
+    then says so in thermal.reference). Training always uses each training
+    run's own rises, so with one training run both give the same model.
     ``cv_blocks``: cross-validation groups of ``cv-subset`` (see :func:`cv_groups`).
     """
     runs = list(runs)

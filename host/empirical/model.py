@@ -5,12 +5,15 @@ Both are plain linear functions of temperature rises ``T_s − ref_s``:
 * ``poly_slope``: δ(P, T) = Σ_j g_j·P^j + s(T)·P, s(T) = b0 + Σ_s b_s·(T_s − ref_s) (µm/mm);
 * ``linear_direct``: δ(T) = b0 + Σ_s b_s·(T_s − ref_s) (µm), one channel at a fixed point.
 
-The rise reference is declared in ``thermal.reference``: ``"run_start"`` (the
-default for models fitted on rises: ref_s is the run's first temperature
-sample, i.e. the controller latches the temperatures at the cold start) or
-``"fixed"`` (ref_s = ``reference_C``). ``reference_C`` always holds the mean
-cold-start temperature of the training runs, so a consumer that only supports a
-fixed reference still gets the training runs' typical start state.
+The rise reference is declared in ``thermal.reference`` (an additive key of
+the document; absent means ``"fixed"``): ``"fixed"`` (ref_s = ``reference_C``,
+the contract of docs/model-format.md that the exporter and firmware implement;
+the default of ``tcomp fit``) or ``"run_start"`` (ref_s is the evaluated run's
+first temperature sample, i.e. a controller that latches temperatures at the
+cold start; the literature's ΔT, used by ``tcomp compare`` by default).
+``reference_C`` always holds the mean cold-start temperature of the training
+runs, so a consumer that only supports a fixed reference still gets the
+training runs' typical start state.
 
 ``predict(run)`` returns one value per row of ``run.errors`` in file order;
 rows of other channels than the model's are NaN.
@@ -26,7 +29,7 @@ REFERENCES = ("run_start", "fixed")
 class _Base:
     kind = None
 
-    def __init__(self, sensors, coefficients, intercept, reference_C, reference="run_start", channel=None, method="mlr", axis=None,
+    def __init__(self, sensors, coefficients, intercept, reference_C, reference="fixed", channel=None, method="mlr", axis=None,
                  envelope=None, statistics=None, training=None):
         self.sensors = list(sensors)
         self.coefficients = np.asarray(coefficients, dtype=float)

@@ -104,8 +104,9 @@ def test_poly_slope_model_fits_predicts_and_round_trips(tmp_path, method, make_s
     assert doc["kind"] == "poly_slope" and doc["geometric"]["degree"] >= 1
     assert doc["envelope"]["position_mm"] == [0.0, 500.0] and set(doc["envelope"]["temperature_C"]) == set(model.sensors)
     if method == "mlr":
-        # exact data: the slope model reproduces the measured thermal error
-        assert evaluate(model, test)["rmse_um"] < 0.05
+        # exact data: with rises over the test run's own start the slope model reproduces its thermal error
+        latched = fit_model([train], method, reference="run_start")
+        assert evaluate(latched, test)["rmse_um"] < 0.05
 
 
 def test_linear_direct_model_channels_nan_and_no_intercept(tmp_path, make_direct):
@@ -118,17 +119,30 @@ def test_linear_direct_model_channels_nan_and_no_intercept(tmp_path, make_direct
     assert np.all(np.isnan(pred[~ch1])) and np.all(np.isfinite(pred[ch1]))
     np.testing.assert_allclose(pred[ch1], run.errors.error_um[ch1], atol=1e-9)
     doc = model.to_document()
-    assert doc["geometric"] is None and doc["thermal"]["reference"] == "run_start"
+    assert doc["geometric"] is None and doc["thermal"]["reference"] == "fixed"
     back = LinearDirectModel.from_document(json.loads(json.dumps(doc)))
     np.testing.assert_allclose(back.predict(run), pred, equal_nan=True)
 
 
-def test_fixed_reference_uses_reference_C(make_direct):
+def test_rise_reference_fixed_vs_run_start(make_direct):
+    """A run started 1 K warmer: run_start rises ignore it, the fixed reference_C sees 1 K on every sensor."""
+    import copy
+
     run = make_direct()
-    m = fit_model([run], "mlr", target="direct", channel="ch1", reference="fixed")
-    shifted = disturb_run(run)  # no disturbance: same temperatures
-    np.testing.assert_allclose(m.predict(shifted), m.predict(run), equal_nan=True)
-    assert m.to_document()["thermal"]["reference"] == "fixed"
+    warm = copy.copy(run)
+    warm.temperatures = copy.copy(run.temperatures)
+    warm.temperatures.values = run.temperatures.values + 1.0
+    fixed = fit_model([run], "mlr", target="direct", channel="ch1")
+    latched = fit_model([run], "mlr", target="direct", channel="ch1", reference="run_start")
+    ch1 = run.errors.channel == "ch1"
+    np.testing.assert_allclose(latched.predict(warm)[ch1], latched.predict(run)[ch1], atol=1e-9)
+    np.testing.assert_allclose(fixed.predict(warm)[ch1] - fixed.predict(run)[ch1], fixed.coefficients.sum(), atol=1e-9)
+    assert fixed.to_document()["thermal"]["reference"] == "fixed" and latched.to_document()["thermal"]["reference"] == "run_start"
+    assert fixed.reference_C["t1"] == run.temperatures.values[0, 0]
+    # documents without the key are read as the contract's fixed reference
+    doc = latched.to_document()
+    del doc["thermal"]["reference"]
+    assert LinearDirectModel.from_document(doc).reference == "fixed"
 
 
 def test_metrics_definition():
