@@ -34,11 +34,13 @@ def test_batched_fit_equals_lstsq_per_combination(seed, k):
         assert rmse[i] == pytest.approx(np.sqrt(np.mean((pred - yt) ** 2)), rel=1e-8)
 
 
-def test_chunking_does_not_change_rmse():
-    X, y = _data(5)
+def test_cross_product_rmse_equals_direct_residuals_on_a_long_run():
+    X, y = _data(5, n=4000)
     combos = np.array(list(itertools.product(range(3), range(3, 7))))
-    b0, b = SubsetFitter(X, y).fit(combos)
-    np.testing.assert_allclose(subset_rmse(b0, b, combos, X, y, chunk_bytes=8), subset_rmse(b0, b, combos, X, y), rtol=1e-12)
+    b0, b = SubsetFitter(X[:200], y[:200]).fit(combos)
+    Xd = X + np.random.default_rng(0).uniform(-0.5, 0.5, X.shape)
+    direct = np.sqrt(((b0[:, None] + np.einsum("nmk,mk->mn", Xd[:, combos], b) - y[None, :]) ** 2).mean(axis=1))
+    np.testing.assert_allclose(subset_rmse(b0, b, combos, Xd, y), direct, rtol=1e-9)
 
 
 def test_exactly_collinear_subset_gets_the_minimum_norm_solution():

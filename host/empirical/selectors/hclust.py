@@ -12,21 +12,34 @@ from dataclasses import dataclass
 import numpy as np
 
 
-def _corr_abs(A, B):
-    """|r| between every column of A (n, a) and every column of B (n, b)."""
-    A = A - A.mean(axis=0)
-    B = B - B.mean(axis=0)
-    na = np.sqrt((A * A).sum(axis=0))
-    nb = np.sqrt((B * B).sum(axis=0))
+class Moments:
+    """Second moments of the sensor series: everything the agglomeration needs.
+
+    A cluster's mean series is X @ w (w = 1/|cluster| on its members), so the
+    Euclidean distance and correlation between any two mean series follow from
+    M = X'X and the covariance C = Xc'Xc as quadratic forms in the weights. One
+    O(n p^2) pass over the data, then every agglomeration is O(p^3) whatever n.
+    """
+
+    def __init__(self, X):
+        X = np.asarray(X, dtype=float)
+        self.p = X.shape[1]
+        # raw moments about a common origin (the grand mean) keep M well scaled
+        Xo = X - X.mean()
+        self.M = Xo.T @ Xo
+        Xc = X - X.mean(axis=0)
+        self.C = Xc.T @ Xc
+
+
+def _pair_terms(mom, w, W):
+    """Euclidean distance and |r| between mean series w (p,) and each row of W (m, p)."""
+    eu2 = w @ mom.M @ w + np.einsum("mp,pq,mq->m", W, mom.M, W) - 2.0 * (W @ (mom.M @ w))
+    cov = W @ (mom.C @ w)
+    var = (w @ mom.C @ w) * np.einsum("mp,pq,mq->m", W, mom.C, W)
     with np.errstate(invalid="ignore", divide="ignore"):
-        r = (A.T @ B) / np.outer(na, nb)
+        r = cov / np.sqrt(var)
     # a mean series can be constant (two mirrored sensors): no correlation information
-    return np.nan_to_num(np.abs(np.clip(r, -1.0, 1.0)), nan=0.0)
-
-
-def _euclid(A, B):
-    d2 = (A * A).sum(axis=0)[:, None] + (B * B).sum(axis=0)[None, :] - 2.0 * (A.T @ B)
-    return np.sqrt(np.maximum(d2, 0.0))
+    return np.sqrt(np.maximum(eu2, 0.0)), np.nan_to_num(np.abs(np.clip(r, -1.0, 1.0)), nan=0.0)
 
 
 @dataclass
@@ -59,22 +72,25 @@ class Agglomeration:
         return np.asarray(rows, dtype=float).reshape(-1, 4)
 
 
-def agglomerate(X, alpha):
-    """Cluster the columns of X (n, p) on the combined distance with weight ``alpha`` on D_e."""
-    X = np.asarray(X, dtype=float)
-    n, p = X.shape
-    De = _euclid(X, X)
+def agglomerate(X, alpha, moments=None):
+    """Cluster the columns of X (n, p) on the combined distance with weight ``alpha`` on D_e.
+
+    ``moments``: a precomputed :class:`Moments` of X (reused across alphas by the GA).
+    """
+    mom = moments if moments is not None else Moments(X)
+    p = mom.p
+    dM = np.diag(mom.M)
+    De = np.sqrt(np.maximum(dM[:, None] + dM[None, :] - 2.0 * mom.M, 0.0))
+    dC = np.diag(mom.C)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        R = np.nan_to_num(np.abs(np.clip(mom.C / np.sqrt(np.outer(dC, dC)), -1.0, 1.0)), nan=0.0)
     off = De[~np.eye(p, dtype=bool)]
     lo, hi = (float(off.min()), float(off.max())) if off.size else (0.0, 1.0)
     span = hi - lo if hi > lo else 1.0
-
-    def dist(A, B):
-        return alpha * (_euclid(A, B) - lo) / span + (1.0 - alpha) * (1.0 - _corr_abs(A, B))
-
-    members = [(i,) for i in range(p)]
-    means = X.copy()
-    D = dist(means, means)
+    D = alpha * (De - lo) / span + (1.0 - alpha) * (1.0 - R)
     np.fill_diagonal(D, np.inf)
+    members = [(i,) for i in range(p)]
+    W = np.eye(p)
     active = list(range(p))
     merges = []
     while len(active) > 1:
@@ -85,12 +101,14 @@ def agglomerate(X, alpha):
         a, b = min(a, b), max(a, b)
         merges.append((members[a], members[b], float(D[a, b])))
         members[a] = members[a] + members[b]
-        means[:, a] = X[:, list(members[a])].mean(axis=1)
+        W[a] = 0.0
+        W[a, list(members[a])] = 1.0 / len(members[a])
         active.remove(b)
         D[b, :] = D[:, b] = np.inf
         others = [j for j in active if j != a]
         if others:
-            d = dist(means[:, [a]], means[:, others])[0]
+            eu, r = _pair_terms(mom, W[a], W[others])
+            d = alpha * (eu - lo) / span + (1.0 - alpha) * (1.0 - r)
             D[a, others] = d
             D[others, a] = d
     return Agglomeration(float(alpha), merges, p)

@@ -21,8 +21,8 @@ import numpy as np
 
 from host.empirical.selectors.common import Selection, SelectionError, check_params, data_label
 from host.empirical.selectors.ga import binary_ga, decode_uint
-from host.empirical.selectors.hclust import agglomerate
-from host.empirical.selectors.linalg import SubsetFitter, subset_rmse
+from host.empirical.selectors.hclust import Moments, agglomerate
+from host.empirical.selectors.linalg import SubsetFitter, SubsetScorer
 
 ALPHA_BITS = 8
 
@@ -82,15 +82,17 @@ class RobustnessProblem:
             else:
                 raise SelectionError("hclust-ga: disturbance must be 'uniform' or 'offset', got %r" % (disturbance,))
             self.tests.append((X, X + noise, y))
+        self.scorers = [SubsetScorer(Xd, y) for _, Xd, y in self.tests]
         self.score = np.abs([np.corrcoef(Xtr[:, j], ytr)[0, 1] for j in range(p)])
         self.max_combinations = int(max_combinations)
+        self.moments = Moments(Xtr)
         self._agg = {}
         self._part = {}
         self.evaluations = 0  # subset models fitted and scored
 
     def agglomeration(self, alpha):
         if alpha not in self._agg:
-            self._agg[alpha] = agglomerate(self.X, alpha)
+            self._agg[alpha] = agglomerate(self.X, alpha, self.moments)
         return self._agg[alpha]
 
     def evaluate(self, clusters):
@@ -99,7 +101,7 @@ class RobustnessProblem:
             return self._part[key]
         combos, trimmed = combinations(clusters, self.score, self.max_combinations)
         b0, b = self.fitter.fit(combos)
-        per_run = np.stack([subset_rmse(b0, b, combos, Xd, y) for _, Xd, y in self.tests])  # (runs, m)
+        per_run = np.stack([sc.rmse(b0, b, combos) for sc in self.scorers])  # (runs, m)
         cost = per_run.mean(axis=0)
         i = int(np.argmin(cost))
         self.evaluations += combos.shape[0]

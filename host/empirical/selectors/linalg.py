@@ -85,15 +85,37 @@ class SubsetFitter:
         return intercept, coef
 
 
-def subset_rmse(intercept, coef, combos, X, y, chunk_bytes=16 << 20):
-    """RMSE of every subset model on (X, y) -> (m,). Chunked so memory stays bounded."""
-    combos = np.asarray(combos, dtype=np.intp)
-    m, k = combos.shape
-    n = X.shape[0]
-    out = np.empty(m)
-    step = max(1, int(chunk_bytes // (8 * max(1, n * k))))
-    for s in range(0, m, step):
-        sl = slice(s, s + step)
-        pred = np.einsum("nmk,mk->mn", X[:, combos[sl]], coef[sl]) + intercept[sl, None]
-        out[sl] = np.sqrt(((pred - y[None, :]) ** 2).mean(axis=1))
-    return out
+class SubsetScorer:
+    """RMSE of many subset models on one data set, from its centred cross products.
+
+    With r = y - b0 - X b and the data centred on its own means, the cross term
+    vanishes: sum r^2 = |yc|^2 - 2 b.(Xc'yc)_S + b'(Xc'Xc)_SS b + n d^2 with
+    d = mean(y) - b0 - mean(X)_S.b. So each model costs O(k^2), not O(n k), and a
+    long test run costs no more per model than a short one.
+    """
+
+    def __init__(self, X, y):
+        X = np.asarray(X, dtype=float)
+        y = np.asarray(y, dtype=float)
+        self.n = X.shape[0]
+        self.x_mean = X.mean(axis=0)
+        self.y_mean = float(y.mean())
+        Xc = X - self.x_mean
+        yc = y - self.y_mean
+        self.gram = Xc.T @ Xc
+        self.cross = Xc.T @ yc
+        self.yy = float(yc @ yc)
+
+    def rmse(self, intercept, coef, combos):
+        combos = np.asarray(combos, dtype=np.intp)
+        G = self.gram[combos[:, :, None], combos[:, None, :]]
+        quad = np.einsum("mk,mkl,ml->m", coef, G, coef)
+        lin = np.einsum("mk,mk->m", coef, self.cross[combos])
+        d = self.y_mean - intercept - np.einsum("mk,mk->m", coef, self.x_mean[combos])
+        sse = self.yy - 2.0 * lin + quad + self.n * d * d
+        return np.sqrt(np.maximum(sse, 0.0) / self.n)
+
+
+def subset_rmse(intercept, coef, combos, X, y):
+    """RMSE of every subset model on (X, y) -> (m,)."""
+    return SubsetScorer(X, y).rmse(intercept, coef, combos)
