@@ -43,6 +43,7 @@ def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
         "alpha_um_per_mm_per_K": float(1e3 * p.alpha_per_K),
         "base_sensor": model.base_sensor_,
         "base_ref_C": model.base_ref_C_,
+        "base_ref": getattr(model, "base_ref", "fixed"),
         "feed_max_mm_min": float(feed_max_mm_min),
         "state_max_K": state_bound(A, B, feed_max_mm_min / 60.0 * dt_s),
     }
