@@ -125,3 +125,19 @@ def test_target_corr_errors(tmp_path, text, message):
     with pytest.raises(SelectionError, match=None) as exc:
         read_target_corr_csv(str(p), ["a", "b"])
     assert message in str(exc.value) and str(p) in str(exc.value)
+
+
+def test_library_on_runs_and_run_arrays_names_the_runs(twin_runs):
+    from host.empirical.selectors import select
+    from host.empirical.targets import training_arrays
+    from host.runs import load_runs
+
+    runs = load_runs(twin_runs)
+    via_runs = select("hclust-ga", runs, seed=5, population=8, generations=3)
+    via_arrays = select("hclust-ga", training_arrays(runs), seed=5, population=8, generations=3)
+    assert via_runs.sensors == via_arrays.sensors
+    assert via_runs.reason["train_run"] == PROTOCOLS[0]
+    assert via_arrays.reason["test_runs"] == list(PROTOCOLS[1:])
+    # the same arrays as plain tuples give the same choice (labels differ only)
+    plain = select("hclust-ga", [tuple(a) for a in training_arrays(runs)], seed=5, population=8, generations=3)
+    assert plain.sensors == via_runs.sensors and plain.reason["test_runs"] == ["run 2", "run 3"]

@@ -53,7 +53,8 @@ def as_arrays(data, target="slope", channel=None, sensors=None):
         raise SelectionError("mix of run folders and arrays; give one kind")
     else:
         arrays = data
-        labels = ["run %d" % (i + 1) for i in range(len(data))]
+        # targets.RunArrays carry their run's name; plain tuples get a position
+        labels = [a.run if isinstance(getattr(a, "run", None), str) else "run %d" % (i + 1) for i, a in enumerate(data)]
         if sensors is not None:
             arrays = [_subset(a, sensors, labels[i]) for i, a in enumerate(arrays)]
     checked = [check_arrays(a, labels[i]) for i, a in enumerate(arrays)]
