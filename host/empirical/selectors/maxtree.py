@@ -311,7 +311,11 @@ def _plot_selection(path, tree, rows, chosen, label):
 
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(max(11.0, 0.45 * len(tree.names) + 6), 4.8), gridspec_kw={"width_ratios": [3, 2]})
     lam = 0.5 * (chosen["lambda_low"] + chosen["lambda_high"])
-    tree.plot(None, title="maximal tree; dashed: chosen λ", mark_lambda=lam, ax=a1)
+    tree.plot(None, title="maximal tree; dashed: chosen λ; chosen sensors in red", mark_lambda=lam, ax=a1)
+    for tick in a1.get_xticklabels():
+        if tick.get_text() in chosen["representatives"]:
+            tick.set_color("red")
+            tick.set_fontweight("bold")
     ev = [r for r in rows if "r2" in r]
     ks = [len(r["representatives"]) for r in ev]
     a2.plot(ks, [r["r2"] for r in ev], "o-", label="R²")

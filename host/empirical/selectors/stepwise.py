@@ -58,7 +58,7 @@ def _plot(path, est, prm, label):
     ax.set_yscale("log")
     ax.set_ylabel("partial F at the step")
     ax.legend(fontsize=8)
-    ax.set_title("Stepwise sensor selection (R² = %.4f with %s): %s" % (est.rsquared_, ", ".join(est.selected_names_), label), fontsize=9)
+    ax.set_title("Stepwise sensor selection: R² = %.4f with %s\n%s" % (est.rsquared_, ", ".join(est.selected_names_), label), fontsize=9)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
