@@ -59,11 +59,12 @@ def plot_residual_maps(result, path):
     """Held-out residual over sweep time x position, per run (rows) before/after (columns)."""
     plt = _plt()
     runs = result.runs
-    fig, axes = plt.subplots(len(runs), 2, figsize=(10, 2.6 * len(runs) + 0.6), squeeze=False)
+    fig, axes = plt.subplots(len(runs), 2, figsize=(10, 2.6 * len(runs) + 0.8), squeeze=False, layout="constrained")
+    fig.suptitle("held-out residual; after = base + %s" % (", ".join(result.effects) or "nothing (no effect named)"), fontsize=10)
     allr = np.concatenate(result.before.residuals + result.after.residuals)
     lim = float(np.nanmax(np.abs(allr))) if np.isfinite(allr).any() else 1.0
     for i, run in enumerate(runs):
-        for j, (label, ho) in enumerate((("before", result.before), ("after: " + (", ".join(result.effects) or "no effect added"), result.after))):
+        for j, (label, ho) in enumerate((("before", result.before), ("after", result.after))):
             ax = axes[i][j]
             maps = residual_map(run, ho.residuals[i])
             d = 1 if 1 in maps else sorted(maps)[0]
@@ -77,6 +78,32 @@ def plot_residual_maps(result, path):
     fig.colorbar(im, ax=axes, label="held-out residual [um]", shrink=0.8)
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def evidence(result):
+    """Per named effect: the round, where the residual was, what improved."""
+    out = []
+    for k, rnd in enumerate(result.rounds):
+        if not rnd.accepted:
+            continue
+        after = result.rounds[k + 1].localization if k + 1 < len(result.rounds) else []
+        share_after = {d["factor"]: d["share"] for d in after}
+        top = rnd.localization[:3]
+        for c in rnd.candidates:
+            if not c.accepted:
+                continue
+            out.append({
+                "effect": c.name,
+                "round": k + 1,
+                "rmse_before_um": rnd.rmse_before_um,
+                "rmse_after_um": rnd.rmse_after_um,
+                "score": c.score,
+                "p_value": c.p_value,
+                "joint_with": c.joint_with,
+                "where": [{"factor": d["factor"], "share_before": d["share"], "worst": d["worst"],
+                           "share_after": share_after.get(d["factor"])} for d in top],
+            })
+    return out
 
 
 def plot_error_curves(result, family, path):
@@ -119,6 +146,20 @@ def markdown(result, js, model_path=None, model_error=None):
     lines.append("|---|---|---|")
     for r in js["per_run"]:
         lines.append("| %s | %.3f | %.3f |" % (r["run"], r["rmse_before_um"] or float("nan"), r["rmse_after_um"] or float("nan")))
+    lines.append("")
+    lines.append("## Evidence per named effect")
+    for ev in js.get("evidence", []):
+        lines.append("")
+        lines.append("- **%s** (round %d%s): held-out RMSE %.3f -> %.3f um (%.0f %% less), DM p (Holm) %.2g." % (
+            ev["effect"], ev["round"], ", jointly with " + ", ".join(ev["joint_with"]) if ev["joint_with"] else "",
+            ev["rmse_before_um"], ev["rmse_after_um"], 100 * ev["score"], ev["p_value"]))
+        for w in ev["where"]:
+            lines.append("  - residual variance explained by %s: %.0f %%%s%s" % (
+                w["factor"], 100 * w["share_before"], " (worst: %s)" % w["worst"] if w["worst"] else "",
+                "" if w["share_after"] is None else ", after adding it %.0f %% of a smaller residual" % (100 * w["share_after"])))
+    if not js.get("evidence"):
+        lines.append("")
+        lines.append("No catalog effect passed the test; the base model's gap is not explained by the catalog.")
     for k, rnd in enumerate(result.rounds, 1):
         lines.append("")
         lines.append("## Round %d: base + %s (held-out RMSE %.3f um)" % (k, ", ".join(rnd.base_effects) or "nothing", rnd.rmse_before_um))
@@ -157,7 +198,7 @@ def write_report(result, family, folder, json_path=None):
         save_model(final_model_document(result, result.runs), model_path)
     except Exception as exc:  # the findings stand even when the final document cannot be built
         model_path, model_error = None, "%s: %s" % (type(exc).__name__, exc)
-    extra = {"model": model_path, "model_error": model_error}
+    extra = {"model": model_path, "model_error": model_error, "evidence": evidence(result)}
     js = result.as_json()
     js.update(extra)
     if json_path:
