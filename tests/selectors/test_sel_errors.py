@@ -99,3 +99,31 @@ def test_selection_without_plot_data():
 
     with pytest.raises(SelectionError, match="no plot data"):
         Selection(["A"], "manual", {}).plot("x.png")
+
+
+@pytest.mark.parametrize(
+    "method, params, message",
+    [
+        ("maxtree", {"alpha": "abc"}, "maxtree: alpha must be a number >= 0 and <= 1"),
+        ("maxtree", {"alpha": 1.5}, "alpha must be"),
+        ("maxtree", {"max_sensors": 0}, "max_sensors must be an integer >= 1"),
+        ("maxtree", {"absolute": "yes"}, "absolute must be true or false"),
+        ("stepwise", {"f_enter": -1}, "f_enter must be a number >= 0"),
+        ("hclust-ga", {"seed": 1.5}, "seed must be an integer"),
+        ("hclust-ga", {"generations": 0}, "generations must be an integer >= 1"),
+        ("hclust-ga", {"mutation": 2}, "mutation must be a number >= 0 and <= 1"),
+        ("hclust-ga", {"disturbance_C": float("nan")}, "disturbance_C must be"),
+    ],
+)
+def test_bad_parameters_are_named(method, params, message):
+    runs = [_base(seed=s) for s in range(3)]
+    with pytest.raises(SelectionError, match=message):
+        select(method, runs, **params)
+
+
+def test_single_run_arrays_object_is_accepted():
+    from host.empirical.targets import RunArrays
+
+    X, y, names = _base()
+    sel = select("maxtree", RunArrays(X, y, names, np.arange(len(y)), "long-run"))
+    assert sel.reason["samples"] == len(y)

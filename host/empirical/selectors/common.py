@@ -36,7 +36,9 @@ def _is_run(obj):
 
 def as_arrays(data, target="slope", channel=None, sensors=None):
     """Normalise runs or ``(X, y, names)`` tuples to a checked list of tuples plus run labels."""
-    if isinstance(data, tuple) and len(data) == 3 and not _is_run(data[0]) and np.ndim(data[0]) == 2:
+    if _is_run(data) or (hasattr(data, "X") and hasattr(data, "y")):
+        data = [data]  # one Run or one targets.RunArrays
+    elif isinstance(data, tuple) and len(data) == 3 and not _is_run(data[0]) and np.ndim(data[0]) == 2:
         data = [data]
     data = list(data)
     if not data:
@@ -129,6 +131,23 @@ def check_params(method, params, allowed):
     out = dict(allowed)
     out.update(params)
     return out
+
+
+def number(method, name, value, lo=None, hi=None, integer=False, allow_none=False):
+    """A numeric parameter checked against its range (CLI --option values arrive as JSON)."""
+    if value is None and allow_none:
+        return None
+    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
+    if ok and integer:
+        ok = float(value).is_integer()
+    if ok and lo is not None:
+        ok = value >= lo
+    if ok and hi is not None:
+        ok = value <= hi
+    if not ok:
+        rng = "%s%s" % ("" if lo is None else ">= %g" % lo, "" if hi is None else (" and " if lo is not None else "") + "<= %g" % hi)
+        raise SelectionError("%s: %s must be %s%s, got %r" % (method, name, "an integer" if integer else "a number", " " + rng if rng else "", value))
+    return int(value) if integer else float(value)
 
 
 def data_label(context, n_samples):

@@ -19,7 +19,7 @@ import zlib
 
 import numpy as np
 
-from host.empirical.selectors.common import Selection, SelectionError, check_params, data_label
+from host.empirical.selectors.common import Selection, SelectionError, check_params, data_label, number
 from host.empirical.selectors.ga import binary_ga, decode_uint
 from host.empirical.selectors.hclust import Moments, agglomerate
 from host.empirical.selectors.linalg import SubsetFitter, SubsetScorer
@@ -125,19 +125,15 @@ def select_hclust_ga(arrays, context=None, **params):
         raise SelectionError(
             "hclust-ga needs runs to test robustness on: it fits on one run and predicts at least one other (published: two); got %d run" % len(arrays)
         )
-    tr = prm["train_run"]
-    if not isinstance(tr, int) or not 0 <= tr < len(arrays):
-        raise SelectionError("hclust-ga: train_run must be an index 0..%d, got %r" % (len(arrays) - 1, tr))
+    tr = prm["train_run"] = number("hclust-ga", "train_run", prm["train_run"], 0, len(arrays) - 1, integer=True)
     for key in ("population", "generations", "max_clusters", "max_combinations"):
-        if not isinstance(prm[key], int) or prm[key] < 1:
-            raise SelectionError("hclust-ga: %s must be a positive integer, got %r" % (key, prm[key]))
+        prm[key] = number("hclust-ga", key, prm[key], 1, integer=True)
     if prm["population"] % 2:
         raise SelectionError("hclust-ga: population must be even (pairs for crossover), got %d" % prm["population"])
     for key in ("crossover", "mutation"):
-        if not 0.0 <= float(prm[key]) <= 1.0:
-            raise SelectionError("hclust-ga: %s is a probability in [0, 1], got %r" % (key, prm[key]))
-    if not float(prm["disturbance_C"]) >= 0.0:
-        raise SelectionError("hclust-ga: disturbance_C must be >= 0, got %r" % (prm["disturbance_C"],))
+        prm[key] = number("hclust-ga", key, prm[key], 0.0, 1.0)
+    prm["disturbance_C"] = number("hclust-ga", "disturbance_C", prm["disturbance_C"], 0.0)
+    prm["seed"] = number("hclust-ga", "seed", prm["seed"], 0, integer=True)
     train = arrays[tr]
     tests = [a for i, a in enumerate(arrays) if i != tr]
     test_names = [r for i, r in enumerate(runs) if i != tr]

@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from host.empirical.selectors.common import Selection, SelectionError, check_params, data_label, pooled
+from host.empirical.selectors.common import Selection, SelectionError, check_params, data_label, number, pooled
 from host.empirical.selectors.linalg import ols_stats
 
 SYMMETRY_TOL = 1e-6  # published matrices are printed to 2-4 decimals; real asymmetry is larger
@@ -250,6 +250,11 @@ def select_maxtree(arrays, context=None, **params):
     fewer sensors. ``r2_tolerance=0`` is pure R² maximisation.
     """
     prm = check_params("maxtree", params, DEFAULTS)
+    prm["alpha"] = number("maxtree", "alpha", prm["alpha"], 0.0, 1.0)
+    prm["r2_tolerance"] = number("maxtree", "r2_tolerance", prm["r2_tolerance"], 0.0, 1.0)
+    prm["max_sensors"] = number("maxtree", "max_sensors", prm["max_sensors"], 1, integer=True, allow_none=True)
+    if not isinstance(prm["absolute"], bool):
+        raise SelectionError("maxtree: absolute must be true or false, got %r" % (prm["absolute"],))
     X, y, names = pooled(arrays)
     n = X.shape[0]
     C = np.corrcoef(X, rowvar=False).reshape(len(names), len(names))

@@ -5,7 +5,7 @@ implementation for the model and the selector); this module runs it on the
 pooled runs and reports the entry/removal history as the reason.
 """
 from host.empirical import EmpiricalDataError
-from host.empirical.selectors.common import Selection, SelectionError, check_params, data_label, pooled
+from host.empirical.selectors.common import Selection, SelectionError, check_params, data_label, number, pooled
 
 DEFAULTS = {"f_enter": 100.0, "f_remove": 50.0}
 
@@ -14,6 +14,8 @@ def select_stepwise(arrays, context=None, **params):
     from host.empirical.regression import Stepwise
 
     prm = check_params("stepwise", params, DEFAULTS)
+    prm["f_enter"] = number("stepwise", "f_enter", prm["f_enter"], 0.0)
+    prm["f_remove"] = number("stepwise", "f_remove", prm["f_remove"], 0.0)
     X, y, names = pooled(arrays)
     try:
         est = Stepwise(f_enter=float(prm["f_enter"]), f_remove=float(prm["f_remove"])).fit(X, y, names)
