@@ -187,3 +187,23 @@ def test_selection_plot_is_written(arrays3, tmp_path):
     out = sel.plot(str(tmp_path / "mt.png"))
     with open(out, "rb") as fh:
         assert fh.read(8) == b"\x89PNG\r\n\x1a\n"
+
+
+def test_degenerate_intervals():
+    one = maximal_tree(np.array([[1.0]]), ["A"])
+    assert one.edges == [] and [(p.lambda_low, p.lambda_high, p.clusters) for p in one.partitions] == [(0.0, 1.0, [["A"]])]
+    # zero similarity: together only at λ = 0 exactly, the closed first interval [0, 0]
+    zero = maximal_tree(np.eye(2), ["A", "B"])
+    assert [(p.lambda_low, p.lambda_high, p.clusters) for p in zero.partitions] == [(0.0, 0.0, [["A", "B"]]), (0.0, 1.0, [["A"], ["B"]])]
+    # signed similarity below 0 never joins for λ in [0, 1]
+    neg = maximal_tree(np.array([[1.0, -0.5], [-0.5, 1.0]]), ["A", "B"], absolute=False)
+    assert [(p.lambda_low, p.lambda_high, p.clusters) for p in neg.partitions] == [(0.0, 1.0, [["A"], ["B"]])]
+
+
+def test_single_sensor_selection_and_plot(tmp_path):
+    rng = np.random.default_rng(0)
+    X = np.cumsum(rng.normal(size=(30, 1)), axis=0)
+    y = 2 * X[:, 0] + 0.1 * rng.normal(size=30)
+    sel = select("maxtree", (X, y, ["A"]))
+    assert sel.sensors == ["A"]
+    assert sel.plot(str(tmp_path / "one.png"))
