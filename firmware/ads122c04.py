@@ -23,8 +23,7 @@ The bus is a ``machine.I2C`` (``writeto``, ``readfrom_mem_into``,
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 # commands
 _CMD_RESET = const(0x06)

@@ -16,8 +16,7 @@ slopes 0.01 um/m (the evaluator's); the links convert for the wire.
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 from firmware import status as st
 from firmware.channels import Channels
@@ -123,7 +122,10 @@ class App:
 
     def _span(self):
         t = self.table
-        r = self.ev.pos_ref
+        ev = self.ev
+        if t is None or ev is None:
+            return
+        r = ev.pos_ref
         span = t.pos_hi - r if t.pos_hi - r > r - t.pos_lo else r - t.pos_lo
         self.limiter.configure(self.slew, self.cfg.max_offset_um, span)
 
@@ -165,11 +167,14 @@ class App:
     # --- outputs ---------------------------------------------------------------
     def _dp_mm(self, pos):
         t = self.table
+        ev = self.ev
+        if t is None or ev is None:
+            return 0
         if pos < t.pos_lo:
             pos = t.pos_lo
         elif pos > t.pos_hi:
             pos = t.pos_hi
-        return (pos - self.ev.pos_ref) // 1000
+        return (pos - ev.pos_ref) // 1000
 
     def total_at(self, pos):
         """Limited total offset (0.01 um) at ``pos`` without touching the state (queries)."""
@@ -195,11 +200,12 @@ class App:
         s = ch.read_all(now, clock)
         usable = self.enabled
         ev = self.ev
+        t = self.table
         raw_total = 0
         raw_ref = 0
         raw_slope = 0
         dp = 0
-        if ev is None:
+        if ev is None or t is None:
             s |= st.NO_TABLE
             usable = False
         else:
@@ -227,7 +233,7 @@ class App:
                 self.fault_active = False
             ev.update()
             if self.screw:
-                dtm = self.table.dt_ms
+                dtm = t.dt_ms
                 k = 0
                 while clock.ticks_diff(now, self.next_step) >= 0:
                     ev.step()

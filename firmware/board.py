@@ -70,7 +70,7 @@ container for them):
 ``clock``
     ``ticks_ms()``, ``ticks_diff(a, b)`` (a - b, wrap-safe as in MicroPython's
     ``time``) and ``sleep_ms(ms)``. The HIL rig supplies simulated time here.
-    ``SystemClock`` below is the real one on both interpreters.
+    ``SystemClock`` below is MicroPython's; ``board_linux.MonotonicClock`` CPython's.
 
 ``watchdog``
     An object with ``feed()`` (``machine.WDT``), or None. The app feeds it only
@@ -84,33 +84,20 @@ Bad configuration raises ``ValueError`` (``firmware.config.load_config``); the
 app lets it propagate at start-up so a wrong config never runs.
 """
 
-try:
-    from time import ticks_ms as _ticks_ms, ticks_diff as _ticks_diff, sleep_ms as _sleep_ms
-except ImportError:  # CPython: no ticks; monotonic time never wraps there
-    import time as _time
-
-    def _ticks_ms():
-        return _time.monotonic_ns() // 1000000
-
-    def _ticks_diff(a, b):
-        return a - b
-
-    def _sleep_ms(ms):
-        if ms > 0:
-            _time.sleep(ms / 1000)
+import time
 
 
 class SystemClock:
-    """The interpreter's own monotonic millisecond clock."""
+    """MicroPython's millisecond tick clock (``board_linux.MonotonicClock`` on CPython)."""
 
     def ticks_ms(self):
-        return _ticks_ms()
+        return time.ticks_ms()
 
     def ticks_diff(self, a, b):
-        return _ticks_diff(a, b)
+        return time.ticks_diff(a, b)
 
     def sleep_ms(self, ms):
-        _sleep_ms(ms)
+        time.sleep_ms(ms)
 
 
 class Board:

@@ -16,7 +16,23 @@ CPython only (not part of the MicroPython image).
 
 import os
 
-from firmware.board import Board, SystemClock
+import time
+
+from firmware.board import Board
+
+
+class MonotonicClock:
+    """CPython's monotonic clock in the MicroPython ticks interface (never wraps)."""
+
+    def ticks_ms(self):
+        return time.monotonic_ns() // 1000000
+
+    def ticks_diff(self, a, b):
+        return a - b
+
+    def sleep_ms(self, ms):
+        if ms > 0:
+            time.sleep(ms / 1000)
 
 
 class SMBusI2C:
@@ -152,4 +168,4 @@ def make_linux_board(config, port):
 
     baud = (config.get("serial") or {}).get("baud", 115200)
     ser = SerialPort(serial.Serial(port, baud, timeout=0))
-    return Board(config, buses, pin, ser, clock=SystemClock(), watchdog=None, reset=None)
+    return Board(config, buses, pin, ser, clock=MonotonicClock(), watchdog=None, reset=None)

@@ -16,8 +16,7 @@ is configured again.
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 from firmware import rtd
 
@@ -83,7 +82,7 @@ class Channels:
         self.prev = [0] * n
         self.prev_t = [now] * n
         self.reinit_t = [now] * n
-        self.drivers = [None] * n
+        self.drivers: list = [None] * n
         for i in range(n):
             self._init_driver(i)
             self.reinit_t[i] = now

@@ -32,7 +32,40 @@ DRIVERS = ("max31865", "ads122c04")
 
 
 class Config:
-    pass
+    """Validated top-level settings (annotations are for the type checker only)."""
+    channels: list
+    max_rate_mC_per_s: int
+    stuck_ms: int
+    slew_um_per_s: int
+    max_offset_um: int
+    hold_ms: int
+    cycle_ms: int
+    frame_ms: int
+    watchdog_ms: int
+    link_timeout_ms: int
+    baud: int
+    address: int
+    modbus_address: int
+    serial_mode: str
+    plausible_lo_mC: int
+    plausible_hi_mC: int
+    reference_um: "int | None"
+    table_dir: str
+
+
+class Channel:
+    """Validated settings of one sensor channel."""
+    name: str
+    driver: str
+    bus: str
+    cs: object
+    rref_mohm: int
+    wires: int
+    lead_mohm: int
+    cal_mC: int
+    filter_hz: int
+    idac_ua: int
+    address: int
 
 
 def _err(where, msg):
@@ -60,7 +93,7 @@ def _fill(obj, where, d, spec, extra):
 
 def _channel(i, d):
     w = "channels[%d]." % i
-    c = Config()
+    c = Channel()
     _fill(c, w, d, _CHAN, ("name", "driver", "bus", "cs"))
     for k in ("name", "driver", "bus"):
         if k not in d:

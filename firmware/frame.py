@@ -13,8 +13,7 @@ field boundaries, so commands are parsed in place.
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 from firmware.crc16 import crc16_ccitt
 

@@ -15,7 +15,7 @@ def _board_module(name):
             mod = getattr(mod, part)
         return mod
     try:
-        import tcomp_board
+        import tcomp_board  # type: ignore  # the user's board file, copied to the board root
         return tcomp_board
     except ImportError:
         from firmware.boards import rp2040

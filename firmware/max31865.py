@@ -13,8 +13,7 @@ allocates nothing and keeps every integer below 2**30.
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 # register read addresses; write address = read address | 0x80
 _REG_CONFIG = const(0x00)

@@ -16,8 +16,7 @@ silence of 3.5 character times (at least 2 ms) for anything else. Allocation-fre
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 from firmware import status as st
 from firmware.crc16 import crc16_modbus

@@ -15,8 +15,7 @@ the hello frame may (they are not part of the steady state).
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 from firmware import frame as fr
 from firmware.slots import UploadError, SLOT_NAMES

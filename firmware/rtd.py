@@ -19,8 +19,7 @@ The tables are generated from the floating-point relation by
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 RATIO_ONE = const(10000000)  # R/R0 = 1 in the ratio unit
 T_UNDER = const(-999999)  # below -200 degC (shorted RTD or wiring fault)

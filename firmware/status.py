@@ -7,8 +7,7 @@ above say why the output is what it is. docs/protocol.md lists them.
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 SENSOR_MASK = const(0xFFFF)
 CLAMPED = const(0x10000)  # a model input was clamped to the table's envelope
