@@ -94,3 +94,18 @@ def test_convection_multiplier_and_bad_shapes():
         heat.simulate_segments(geo, par, t, heat_J=np.zeros((3, 8)))
     with pytest.raises(ValueError, match="diameter_mm"):
         heat.ScrewGeometry(length_mm=100.0, diameter_mm=0.0)
+
+
+@pytest.mark.parametrize("n", [1, 5, 64, 65, 1000])
+def test_blocked_modal_scan_equals_the_plain_recurrence(n):
+    rng = np.random.default_rng(n)
+    e = rng.uniform(0.0, 1.0, 7)
+    e[0], e[1] = 1.0, 1e-30  # an undamped mode and a mode that dies within one step
+    W = rng.normal(size=(n, 7))
+    z = rng.normal(size=7)
+    got = heat.modal_scan(e, W, z)
+    ref = []
+    for k in range(n):
+        z = e * z + W[k]
+        ref.append(z)
+    np.testing.assert_allclose(got, np.array(ref), rtol=1e-12, atol=1e-12)
