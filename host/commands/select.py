@@ -12,6 +12,8 @@ def add_arguments(p):
     p.add_argument("--channel", help="errors.csv channel to model (multi-channel runs)")
     p.add_argument("--target", choices=("slope", "direct"), default="slope", help="slope of each sweep (default) or the error itself")
     p.add_argument("--sensors", help="comma-separated candidate sensors (default: all common to the runs)")
+    p.add_argument("--split", type=int, default=1, metavar="N",
+                   help="cut each run into N equal time windows used as separate runs (one long record for hclust-ga)")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", help="method parameter, e.g. seed=3, f_enter=50, alpha=0.01 (repeatable)")
     p.add_argument("--corr", metavar="CORR.csv", help="maxtree on a precomputed correlation matrix (header of names, square matrix)")
     p.add_argument("--target-corr", metavar="TCORR.csv", help="with --corr: sensor,r rows (optional header line) for the representatives")
@@ -97,10 +99,32 @@ def _run_data(args):
         raise UserError(str(exc))
     sensors = [s.strip() for s in args.sensors.split(",") if s.strip()] if args.sensors else None
     params = _options(args.option)
-    sel = select(args.method, runs, target=args.target, channel=args.channel, sensors=sensors, **params)
+    data = runs if args.split == 1 else _windows(runs, args.split, args.target, args.channel, sensors)
+    sel = select(args.method, data, target=args.target, channel=args.channel, sensors=sensors, **params)
     doc = sel.to_json()
-    doc.update({"target": args.target, "channel": args.channel, "runs": list(args.runs)})
+    doc.update({"target": args.target, "channel": args.channel, "runs": list(args.runs), "split": args.split})
     if args.plot:
         sel.plot(args.plot)
     print("%s on %d run(s): %s" % (args.method, len(runs), ", ".join(sel.sensors)))
     return doc
+
+
+def _windows(runs, n, target, channel, sensors):
+    """Each run's targets cut into ``n`` equal time windows, as separate RunArrays.
+
+    Temperature rises stay relative to the run's start, as in the whole run.
+    """
+    from host.cli import UserError
+    from host.empirical.targets import RunArrays, targets, training_arrays
+
+    if n < 1:
+        raise UserError("--split must be >= 1, got %d" % n)
+    out = []
+    for run in runs:
+        t, _ = targets(run, target, channel)
+        edges = [t[0] + (t[-1] - t[0]) * i / n for i in range(n)] + [None]
+        for i in range(n):
+            a = training_arrays([run], target, channel, sensors, window=(edges[i], edges[i + 1]))[0]
+            hi = t[-1] if edges[i + 1] is None else edges[i + 1]
+            out.append(RunArrays(a.X, a.y, a.names, a.time_s, "%s[%.4g-%.4g h]" % (run.name, edges[i] / 3600, hi / 3600)))
+    return out

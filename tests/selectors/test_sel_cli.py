@@ -141,3 +141,13 @@ def test_library_on_runs_and_run_arrays_names_the_runs(twin_runs):
     # the same arrays as plain tuples give the same choice (labels differ only)
     plain = select("hclust-ga", [tuple(a) for a in training_arrays(runs)], seed=5, population=8, generations=3)
     assert plain.sensors == via_runs.sensors and plain.reason["test_runs"] == ["run 2", "run 3"]
+
+
+def test_split_one_long_run_into_windows(twin_runs, tmp_path):
+    out = tmp_path / "split.json"
+    assert main(["select", "--method", "hclust-ga", twin_runs[0], "--split", "3", "--option", "population=8", "--option", "generations=3", "--json", str(out)]) == 0
+    r = json.loads(out.read_text())["reason"]
+    assert r["train_run"].startswith(PROTOCOLS[0] + "[0-") and len(r["test_runs"]) == 2
+    # windows partition the run's sweeps: 21 sweeps -> 7 + 7 + 7
+    assert r["samples_train"] == 7
+    assert main(["select", "--method", "maxtree", twin_runs[0], "--split", "0", "--json", str(out)]) == 2
