@@ -37,65 +37,35 @@ def _fmt(v, nd=2):
     return "–" if v is None else "%.*f" % (nd, v)
 
 
-def main(argv=None):
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--run", default=os.path.join(ROOT, "data", "fl_thermal"))
-    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "results.md"))
-    ap.add_argument("--json", default=os.path.join(ROOT, "out", "results_fl_thermal.json"))
-    ap.add_argument("--plots", help="also write the comparison plots per channel into this folder")
-    ap.add_argument("--train-cycles", type=int, default=3, help="constant-speed spindle cycles used for fitting (default 3)")
-    ap.add_argument("--channels", help="comma list (default: every channel of errors.csv)")
-    args = ap.parse_args(argv)
-
-    t_start = time.perf_counter()
-    run = load_run(args.run)
+def evaluate_split(run, k, channels, plots_dir, t_start):
+    """Fit on the first k cycles, evaluate on the rest -> (split_s, parts, {channel: results})."""
     cyc = cycles(run)
-    if args.train_cycles < 2 or args.train_cycles >= len(cyc):
+    if k < 2 or k >= len(cyc):
         raise SystemExit("--train-cycles must be 2..%d" % (len(cyc) - 1))
-    if not all(c["constant"] for c in cyc[: args.train_cycles]):
-        raise SystemExit("the first %d cycles are not all constant-speed" % args.train_cycles)
-    split = cyc[args.train_cycles]["t_start_s"]
+    if not all(c["constant"] for c in cyc[:k]):
+        raise SystemExit("the first %d cycles are not all constant-speed" % k)
+    split = cyc[k]["t_start_s"]
     parts = []
-    for c in cyc[args.train_cycles:]:
-        name = ("%g rpm cycle" % c["speeds_rpm"][0]) if c["constant"] else ("mixed %s rpm" % "/".join("%g" % s for s in c["speeds_rpm"]))
+    for c in cyc[k:]:
+        name = ("%g rpm cycle" % c["speeds_rpm"][0]) if c["constant"] else ("mixed %s rpm" % "/".join("%g" % v for v in c["speeds_rpm"]))
         parts.append((name, (c["t_start_s"], None if c is cyc[-1] else c["t_end_s"])))
-    channels = args.channels.split(",") if args.channels else run.errors.channels()
-
-    all_results, per_channel = [], {}
+    per_channel = {}
     for ch in channels:
         case = case_split(run, split, "direct", ch, None, test_windows=parts)
-        case.label = ch
-        res = run_case(case, METHODS, "direct", ch, None, True, keep_models=bool(args.plots))
-        if args.plots:
-            write_plots(res, [case], os.path.join(args.plots, ch), "direct", ch)
+        case.label = "%s, %d training cycles" % (ch, k)
+        res = run_case(case, METHODS, "direct", ch, None, True, keep_models=bool(plots_dir))
+        if plots_dir:
+            write_plots(res, [case], os.path.join(plots_dir, "train%d" % k, ch), "direct", ch)
         per_channel[ch] = res
-        all_results += res
-        print("%s done (%.1f s)" % (ch, time.perf_counter() - t_start), flush=True)
-    elapsed = time.perf_counter() - t_start
+        print("%d training cycles, %s done (%.1f s)" % (k, ch, time.perf_counter() - t_start), flush=True)
+    return split, parts, per_channel
 
+
+def render_split(L, k, split, parts, per_channel, detailed):
     held = "held-out (t >= %.2f h)" % (split / 3600)
-    L = []
-    L.append("# Results on real data: FL_THERMAL spindle test\n")
-    L.append("Regenerate this file with one command (it overwrites it; every number below comes from that run):\n")
-    L.append("```\n.venv/bin/python tools/results_fl_thermal.py\n```\n")
-    L.append("Data: `data/fl_thermal/` (the real 46.3 h measurement in `../shared/data/fl_thermal/`, converted by `tcomp import`; "
-             "16 temperature sensors t1..t16, five displacement channels ch1..ch5, 15 s sampling). "
-             "Models: direct (`linear_direct`) models of each channel, δ = b0 + Σ b_s·(T_s − T_s(0)), temperature rises over the "
-             "run's first sample, with intercept, fitted by least squares on every 15 s sample of the training span.\n")
-    L.append("**Split (by time, from `spindle.csv`).** A cycle starts when the spindle starts from standstill. "
-             "Training: the first %d cycles, all constant-speed (%s rpm, each 4 h running then 4 h stopped), t < %.2f h. "
-             "Held out: everything from %.2f h on: %s. The held-out part includes a higher speed (5000 rpm) than any training "
-             "cycle, so it tests extrapolation as well as other conditions.\n" % (
-                 args.train_cycles, ", ".join("%g" % c["speeds_rpm"][0] for c in cyc[: args.train_cycles]), split / 3600, split / 3600,
-                 ", ".join(p[0] for p in parts)))
-    L.append("**Methods** (docs/empirical.md): %s. Selectors choose on the training span only; hclust-GA's robustness "
-             "fitness fits on training cycle 1 and predicts training cycles 2–%d, so no method sees held-out data. "
-             "`disturbed` = held-out RMSE with temperature noise (σ 0.2 °C) plus a per-sensor offset (±0.5 °C) after the start, "
-             "root-mean-square over 5 realisations, identical for every method.\n" % (
-                 "; ".join("`%s` = %s" % (m, LABELS[m]) for m in METHODS), args.train_cycles))
-
-    # summary
-    L.append("## Summary: best model with at most 5 sensors vs the 16-sensor MLR baseline\n")
+    L.append("## %s: training on the first %d cycles (t < %.2f h), held out %s\n" % (
+        "Main split" if detailed else "Sensitivity check", k, split / 3600, ", ".join(p[0] for p in parts)))
+    L.append("### Best model with at most 5 sensors vs the 16-sensor MLR baseline\n")
     L.append("| channel | RMS of held-out error µm | baseline MLR-16 RMSE µm | best ≤ 5-sensor model | its sensors | its RMSE µm | beats baseline? |")
     L.append("|---|---|---|---|---|---|---|")
     verdicts = []
@@ -120,9 +90,35 @@ def main(argv=None):
              "%d of %d channels (%s)%s.\n" % (
                  n_yes, len(verdicts), ", ".join(c for c, v in verdicts if v) or "none",
                  "" if n_yes == len(verdicts) else "; it does not on %s" % ", ".join(c for c, v in verdicts if not v)))
-
+    L.append("### Held-out RMSE (µm) per channel and method, number of sensors in brackets\n")
+    L.append("| method | %s |" % " | ".join(per_channel))
+    L.append("|---|%s" % ("---|" * len(per_channel)))
+    for m in METHODS:
+        cells = []
+        for ch, res in per_channel.items():
+            r = next(x for x in res if x["method"] == m)
+            cells.append("failed" if r.get("error") else "%.2f (%d)" % (r["tests"][held]["rmse_um"], r["n_sensors"]))
+        L.append("| %s | %s |" % (m, " | ".join(cells)))
+    L.append("")
+    pcr_wins = [ch for ch, res in per_channel.items()
+                if all(not r.get("error") for r in res if r["method"] in ("mlr", "pcr"))
+                and next(r for r in res if r["method"] == "pcr")["mean_test_rmse_um"] < next(r for r in res if r["method"] == "mlr")["mean_test_rmse_um"]]
+    least = {}
     for ch, res in per_channel.items():
-        L.append("## Channel %s\n" % ch)
+        ok = [r for r in res if not r.get("error")]
+        least[ch] = min(ok, key=lambda r: r["degradation_um"])["method"]
+    fits_worse = [ch for ch, res in per_channel.items()
+                  if all(not r.get("error") for r in res if r["method"] in ("mlr", "pcr"))
+                  and next(r for r in res if r["method"] == "pcr")["fit"]["r2"] < next(r for r in res if r["method"] == "mlr")["fit"]["r2"]]
+    L.append("**PCR vs MLR on other conditions.** The published finding is that PCR predicts other conditions better than MLR even "
+             "when it fits worse. Here PCR fits worse (lower training R²) on %d of %d channels and predicts the held-out part better than MLR on %d of %d "
+             "channels%s. Least degradation under disturbed temperatures: %s.\n" % (
+                 len(fits_worse), len(per_channel), len(pcr_wins), len(per_channel), (" (%s)" % ", ".join(pcr_wins)) if pcr_wins else "",
+                 ", ".join("%s %s" % (ch, m) for ch, m in least.items())))
+    if not detailed:
+        return
+    for ch, res in per_channel.items():
+        L.append("### Channel %s\n" % ch)
         L.append("| method | sensors (n) | held-out RMSE µm | %s | max / min residual µm | accuracy %% | disturbed RMSE µm | training R² |" % " | ".join(p[0] + " RMSE" for p in parts))
         L.append("|---|---|---|%s---|---|---|---|" % ("---|" * len(parts)))
         for r in res:
@@ -136,29 +132,68 @@ def main(argv=None):
                 h["max_residual_um"], h["min_residual_um"], _fmt(h["accuracy_pct"], 1), r["disturbed"][held]["rmse_um"], r["fit"]["r2"]))
         L.append("")
         for line in findings(res):
-            L.append("- " + line.replace("%s: " % ch, "", 1))
+            L.append("- " + line.split(": ", 1)[1])
         pcr = next((r for r in res if r["method"] == "pcr" and not r.get("error")), None)
         if pcr:
             L.append("- PCR kept %d of 16 components." % pcr["fit"]["n_components"])
         L.append("")
 
-    # PCR vs MLR overall
-    pcr_wins = [ch for ch, res in per_channel.items()
-                if all(not r.get("error") for r in res if r["method"] in ("mlr", "pcr"))
-                and next(r for r in res if r["method"] == "pcr")["mean_test_rmse_um"] < next(r for r in res if r["method"] == "mlr")["mean_test_rmse_um"]]
-    L.append("## PCR vs MLR on other conditions\n")
-    L.append("The published finding is that PCR predicts other conditions better than MLR even when it fits worse. On this data "
-             "PCR predicts the held-out part better than MLR on %d of %d channels%s.\n" % (
-                 len(pcr_wins), len(per_channel), (" (%s)" % ", ".join(pcr_wins)) if pcr_wins else ""))
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--run", default=os.path.join(ROOT, "data", "fl_thermal"))
+    ap.add_argument("--out", default=os.path.join(ROOT, "docs", "results.md"))
+    ap.add_argument("--json", default=os.path.join(ROOT, "out", "results_fl_thermal.json"))
+    ap.add_argument("--plots", help="also write the comparison plots per channel into this folder")
+    ap.add_argument("--train-cycles", default="3,4", help="constant-speed spindle cycles used for fitting; a comma list gives one split each, the first is the main one (default 3,4)")
+    ap.add_argument("--channels", help="comma list (default: every channel of errors.csv)")
+    args = ap.parse_args(argv)
+
+    t_start = time.perf_counter()
+    run = load_run(args.run)
+    splits = [int(v) for v in str(args.train_cycles).split(",")]
+    channels = args.channels.split(",") if args.channels else run.errors.channels()
+    evaluated = []
+    for k in splits:
+        split, parts, per_channel = evaluate_split(run, k, channels, args.plots, t_start)
+        evaluated.append((k, split, parts, per_channel))
+    elapsed = time.perf_counter() - t_start
+    cyc = cycles(run)
+
+    L = []
+    L.append("# Results on real data: FL_THERMAL spindle test\n")
+    L.append("Regenerate this file with one command (it overwrites it; every number below comes from that run):\n")
+    L.append("```\n.venv/bin/python tools/results_fl_thermal.py\n```\n")
+    L.append("Data: `data/fl_thermal/` (the real 46.3 h measurement in `../shared/data/fl_thermal/`, converted by `tcomp import`; "
+             "16 temperature sensors t1..t16, five displacement channels ch1..ch5, 15 s sampling). "
+             "Models: direct (`linear_direct`) models of each channel, δ = b0 + Σ b_s·(T_s − T_s(0)), temperature rises over the "
+             "run's first sample, with intercept, fitted by least squares on every 15 s sample of the training span.\n")
+    k0, split0, parts0, _ = evaluated[0]
+    L.append("**Split (by time, from `spindle.csv`).** A cycle starts when the spindle starts from standstill: %s. "
+             "Main split: training on the first %d cycles, all constant-speed (each 4 h running then 4 h stopped), t < %.2f h; "
+             "held out: everything from %.2f h on (%s). The held-out part includes a higher speed (5000 rpm) than any training "
+             "cycle, so it tests extrapolation as well as other conditions.%s\n" % (
+                 "; ".join("%.2f–%.2f h %s rpm" % (c["t_start_s"] / 3600, c["t_end_s"] / 3600, "/".join("%g" % v for v in c["speeds_rpm"])) for c in cyc),
+                 k0, split0 / 3600, split0 / 3600, ", ".join(p[0] for p in parts0),
+                 "" if len(evaluated) == 1 else " A second split (training on the first %s cycles) is reported after it as a sensitivity check." % ", ".join(str(e[0]) for e in evaluated[1:])))
+    L.append("**Methods** (docs/empirical.md): %s. Selectors choose on the training span only; hclust-GA's robustness "
+             "fitness fits on training cycle 1 and predicts the other training cycles, so no method sees held-out data. "
+             "`disturbed` = held-out RMSE with temperature noise (σ 0.2 °C) plus a per-sensor offset (±0.5 °C) after the start, "
+             "root-mean-square over 5 realisations, identical for every method.\n" % (
+                 "; ".join("`%s` = %s" % (m, LABELS[m]) for m in METHODS)))
+    for i, (k, split, parts, per_channel) in enumerate(evaluated):
+        render_split(L, k, split, parts, per_channel, detailed=(i == 0))
     L.append("## Reproducibility\n")
     L.append("Generated in %.0f s on %s (%s, Python %s). Full results: `%s` (written by the same command).\n" % (
         elapsed, platform.machine(), platform.system(), platform.python_version(), os.path.relpath(args.json, ROOT)))
+    all_results = [r for e in evaluated for res in e[3].values() for r in res]
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
     with open(args.out, "w", encoding="utf-8") as fh:
         fh.write("\n".join(L))
     os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
     with open(args.json, "w", encoding="utf-8") as fh:
-        json.dump({"run": args.run, "split_s": split, "parts": parts, "results": public(all_results)}, fh, indent=1, default=float)
+        json.dump({"run": args.run, "splits": [{"train_cycles": e[0], "split_s": e[1], "parts": e[2]} for e in evaluated],
+                   "results": public(all_results)}, fh, indent=1, default=float)
     print("wrote %s and %s in %.1f s" % (args.out, args.json, elapsed))
     return 0
 
