@@ -157,4 +157,4 @@ def data_label(context, n_samples):
     if ctx.get("channel"):
         what += " of channel %s" % ctx["channel"]
     runs_s = ", ".join(runs[:4]) + (" +%d" % (len(runs) - 4) if len(runs) > 4 else "")
-    return "%s; %d samples from %s" % (what, n_samples, runs_s or "the given arrays")
+    return "%s; %d training samples; runs %s" % (what, n_samples, runs_s or "given as arrays")

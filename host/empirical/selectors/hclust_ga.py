@@ -215,7 +215,7 @@ def _plot(path, agg, clusters, chosen, names, history, reason, label):
     cluster_of = {j: ci + 1 for ci, c in enumerate(clusters) for j in c}
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(max(11.0, 0.45 * len(names) + 6), 4.8), gridspec_kw={"width_ratios": [3, 2]})
     if len(names) > 1:
-        dendrogram(agg.linkage(), labels=["%s [%d]" % (names[j], cluster_of[j]) for j in range(len(names))], ax=a1, color_threshold=0)
+        dendrogram(agg.linkage(), labels=["%s [%d]" % (names[j], cluster_of[j]) for j in range(len(names))], ax=a1, color_threshold=0, leaf_rotation=90)
         for tick in a1.get_xticklabels():
             base = tick.get_text().split(" [")[0]
             if base in {names[j] for j in chosen}:

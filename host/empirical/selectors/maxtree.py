@@ -94,7 +94,7 @@ class MaxTree:
         if len(self.names) > 1:
             Z = self.linkage()
             # heights are 1 - λ; negative similarities give heights above 1, which scipy accepts
-            dendrogram(Z, labels=list(self.names), ax=ax, color_threshold=None if mark_lambda is None else 1.0 - mark_lambda)
+            dendrogram(Z, labels=list(self.names), ax=ax, leaf_rotation=90, color_threshold=None if mark_lambda is None else 1.0 - mark_lambda)
             ticks = ax.get_yticks()
             ax.set_yticks(ticks)
             ax.set_yticklabels(["%.2f" % (1.0 - t) for t in ticks])
