@@ -51,7 +51,7 @@ def run(args):
     except EmpiricalDataError as exc:
         raise UserError(str(exc))
     with open(args.json, "w", encoding="utf-8") as fh:
-        json.dump(doc, fh, indent=2)
+        json.dump(doc, fh, indent=2, allow_nan=False)
         fh.write("\n")
     return 0
 

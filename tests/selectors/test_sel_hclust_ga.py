@@ -136,3 +136,34 @@ def test_train_run_choice_and_plot(arrays3, tmp_path):
     path = sel.plot(str(tmp_path / "hg.png"))
     with open(path, "rb") as fh:
         assert fh.read(4) == b"\x89PNG"
+
+
+def test_hclust_ga_picks_the_informative_group():
+    """Two groups of four sensors follow two unrelated heat sources; the target follows
+    group A only. The robust model must use group A, and predict the other runs well."""
+    rng = np.random.default_rng(8)
+    t = np.linspace(0, 1, 50)
+    runs = []
+    for r in range(3):
+        sa = (1 + 0.3 * r) * (1 - np.exp(-4 * t)) * 8
+        sb = (1.5 - 0.4 * r) * np.sin(3 * t + r) * 5
+        X = np.column_stack([sa * w + rng.normal(scale=0.05, size=50) for w in (1.0, 0.9, 1.1, 0.8)]
+                            + [sb * w + rng.normal(scale=0.05, size=50) for w in (1.0, 0.7, 1.2, 0.9)])
+        y = 3.0 * sa + rng.normal(scale=0.05, size=50)
+        runs.append((X, y, ["A1", "A2", "A3", "A4", "B1", "B2", "B3", "B4"]))
+    sel = select("hclust-ga", runs, seed=0)
+    assert any(s.startswith("A") for s in sel.sensors)
+    # clean prediction of the other runs is close to the noise floor of y (0.05) plus
+    # what 0.05 K sensor noise costs through coefficients of about 3 um/K
+    assert max(sel.reason["rmse_clean"].values()) < 0.5
+    assert sel.to_json()["reason"]["ga"]["seed"] == 0
+
+
+def test_to_json_is_strict():
+    import json
+
+    from host.empirical.selectors import Selection
+
+    doc = Selection(["A"], "x", {"F": float("inf"), "r": np.float64(0.5), "k": np.int64(3), "v": np.array([1.0, np.nan])}).to_json()
+    assert doc["reason"] == {"F": None, "r": 0.5, "k": 3, "v": [1.0, None]}
+    json.dumps(doc, allow_nan=False)

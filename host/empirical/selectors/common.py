@@ -27,7 +27,24 @@ class Selection:
         return path
 
     def to_json(self):
-        return {"method": self.method, "sensors": list(self.sensors), "reason": self.reason}
+        """Strict-JSON dict: numpy scalars become Python numbers, inf/NaN become None."""
+        return plain({"method": self.method, "sensors": list(self.sensors), "reason": self.reason})
+
+
+def plain(obj):
+    if isinstance(obj, dict):
+        return {str(k): plain(v) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [plain(v) for v in obj]
+    if isinstance(obj, np.ndarray):
+        return plain(obj.tolist())
+    if isinstance(obj, (bool, np.bool_)):
+        return bool(obj)
+    if isinstance(obj, (int, np.integer)):
+        return int(obj)
+    if isinstance(obj, (float, np.floating)):
+        return float(obj) if np.isfinite(obj) else None
+    return obj
 
 
 def _is_run(obj):
