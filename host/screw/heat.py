@@ -188,17 +188,30 @@ def _cumulative_travel(s, start, end, lo, hi):
     return legs[:, None] * full_cov[None, :] + _leg_overlap(p0, direction, r, lo, hi)
 
 
-def nut_travel_per_segment(motion, edges_mm, fixed_end_mm, t_grid):
+def nut_travel_per_segment(motion, edges_mm, fixed_end_mm, t_grid, spread=False):
     """Travel of the nut inside each segment during each step [mm]: (n_steps, M).
 
     motion: host.runs.Motion (or any object with t_start_s, t_end_s, from_mm, to_mm,
     feed_mm_min arrays): during each interval the nut reciprocates from from_mm to
     to_mm and back at feed_mm_min, starting at from_mm.  t_grid: (n_steps+1,)
-    ascending times.  The loop runs over motion intervals (vectorised over steps
-    and segments)."""
+    ascending times.  Exact by default (the loop runs over motion intervals,
+    vectorised over steps and segments); ``spread=True`` spreads feed·time over the
+    range in proportion to overlap instead (the firmware's feed/range-state input,
+    docs/model-format.md), one matrix product for all intervals."""
     t = np.asarray(t_grid, dtype=float)
     edges = np.asarray(edges_mm, dtype=float) + fixed_end_mm  # axis coordinates
     lo, hi = edges[:-1], edges[1:]
+    if spread:
+        if motion is None or len(motion.t_start_s) == 0:
+            return np.zeros((t.size - 1, lo.size))
+        ts, te = np.asarray(motion.t_start_s, float), np.asarray(motion.t_end_s, float)
+        a = np.minimum(motion.from_mm, motion.to_mm)
+        b = np.maximum(motion.from_mm, motion.to_mm)
+        span = b - a
+        frac = np.clip(np.minimum(b[:, None], hi[None, :]) - np.maximum(a[:, None], lo[None, :]), 0.0, None)
+        frac = np.divide(frac, span[:, None], out=np.zeros_like(frac), where=span[:, None] > 0)
+        moved = np.clip(t[:, None] - ts[None, :], 0.0, (te - ts)[None, :]) * (np.asarray(motion.feed_mm_min, float) / 60.0)[None, :]
+        return np.diff(moved @ frac, axis=0)
     cum = np.zeros((t.size, lo.size))
     if motion is not None:
         for ts, te, a, b, f in zip(motion.t_start_s, motion.t_end_s, motion.from_mm, motion.to_mm, motion.feed_mm_min):

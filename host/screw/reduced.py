@@ -77,12 +77,15 @@ def _arr(reduced):
             np.asarray(reduced["edges_mm"], dtype=float))
 
 
-def simulate_reduced(reduced, motion, t0, n_steps):
-    """States (n_steps+1, M) of the float recurrence from a cold start at t0."""
+def simulate_reduced(reduced, motion, t0, n_steps, spread=False):
+    """States (n_steps+1, M) of the float recurrence from a cold start at t0.
+
+    spread: feed the travel as a feed/range state (spread over the range) instead of
+    the exact reciprocation (position reports)."""
     A, B, edges = _arr(reduced)
     dt = reduced["dt_s"]
     t = t0 + dt * np.arange(n_steps + 1)
-    u = heat.nut_travel_per_segment(motion, edges, reduced["fixed_end_mm"], t)
+    u = heat.nut_travel_per_segment(motion, edges, reduced["fixed_end_mm"], t, spread=spread)
     drive = u * B[None, :]
     T = np.zeros((n_steps + 1, B.size))
     x = T[0].copy()
@@ -104,19 +107,20 @@ def reduced_error_um(reduced, T, positions_mm, base_rise_K=None):
     return E
 
 
-def reduction_error(model, run, positions=21):
+def reduction_error(model, run, positions=21, spread=False):
     """Difference of E_m between the full model and its reduced form on one run.
 
     Both are evaluated at every reduced step time on ``positions`` equally spaced
     points over the model's position envelope; the reduced model uses its latest
-    state (as the firmware does), the full model its own grid interpolated.
+    state (as the firmware does), the full model its own grid interpolated;
+    ``spread`` feeds the reduced model from the feed/range state.
     Returns {"rms_um", "max_um", "points"}."""
     red = model.reduced_
     ctx_full = model._context(run)
     rises = model.simulate_context(ctx_full)
     t0 = ctx_full.t_grid[0]
     n = int(np.floor((ctx_full.t_grid[-1] - t0) / red["dt_s"] + 1e-9))
-    t, Tr = simulate_reduced(red, run.motion, t0, n)
+    t, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread)
     lo, hi = model.envelope_["position_mm"] if model.envelope_ else (0.0, model.geometry_.length_mm)
     P = np.linspace(lo, hi, positions)
     Rf = np.stack([np.interp(t, ctx_full.t_grid, rises[:, i]) for i in range(ctx_full.M)], axis=1)

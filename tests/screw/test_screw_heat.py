@@ -109,3 +109,16 @@ def test_blocked_modal_scan_equals_the_plain_recurrence(n):
         z = e * z + W[k]
         ref.append(z)
     np.testing.assert_allclose(got, np.array(ref), rtol=1e-12, atol=1e-12)
+
+
+def test_spread_travel_matches_exact_travel_on_average():
+    edges = np.linspace(0.0, 800.0, 17)
+    mot = _motion([[0, 3600, 210, 490, 8000], [4000, 5000, 700, 0, 12000]])
+    t = np.arange(0.0, 6001.0, 10.0)
+    exact = heat.nut_travel_per_segment(mot, edges, 0.0, t)
+    spread = heat.nut_travel_per_segment(mot, edges, 0.0, t, spread=True)
+    np.testing.assert_allclose(spread.sum(axis=1), exact.sum(axis=1), rtol=1e-12, atol=1e-9)  # same distance per step
+    # same travel per segment over each interval, up to the last unfinished leg
+    np.testing.assert_allclose(spread[:360].sum(axis=0), exact[:360].sum(axis=0), atol=280.0)
+    assert np.all(spread[:360].sum(axis=0)[edges[1:] <= 210] == 0)
+    assert heat.nut_travel_per_segment(None, edges, 0.0, t, spread=True).shape == (600, 16)

@@ -99,9 +99,10 @@ def test_screw_beats_mlr_on_synthetic_unseen_states():
     assert s["screw (base sensor + motion)"]["mean_unseen_rmse_um"] < min(v["mean_unseen_rmse_um"] for k, v in s.items() if k.startswith("MLR"))
 
 
-def test_reduction_error_on_bundled_runs_below_half_a_micron(demo_model, demo_runs):
+@pytest.mark.parametrize("spread", [False, True], ids=["position-reports", "feed-range-state"])
+def test_reduction_error_on_bundled_runs_below_half_a_micron(demo_model, demo_runs, spread):
     for name, run in demo_runs.items():
-        e = reduction_error(demo_model, run)
+        e = reduction_error(demo_model, run, spread=spread)
         assert e["rms_um"] < 0.5, (name, e)
         assert e["full_max_um"] > 10.0  # the comparison is over a real thermal error
 
