@@ -1,5 +1,6 @@
 """Outputs of the discrepancy workflow: JSON, the final model document, plots, a Markdown report."""
 import json
+import math
 import os
 import warnings
 
@@ -178,6 +179,17 @@ def markdown(result, js, model_path=None, model_error=None):
                 lines.append("| %s | fit failed: %s | | | |" % (c.name, c.error))
             else:
                 lines.append("| %s | %.3f | %+.1f %% | %.3g | %s |" % (c.name, c.rmse_um, 100 * c.score, c.p_value, "yes" if c.accepted else ""))
+        for c in rnd.candidates:
+            if c.note:
+                lines.append("")
+                lines.append("Note on %s: %s." % (c.name, c.note))
+        if rnd.pairs:
+            lines.append("")
+            lines.append("No single candidate passed; pairs tested jointly:")
+            lines.append("")
+            for c in rnd.pairs:
+                if math.isfinite(c.rmse_um):
+                    lines.append("- %s: held-out RMSE %.3f um, gain %+.1f %%, p (Holm) %.3g%s" % (c.name, c.rmse_um, 100 * c.score, c.p_value, ", accepted" if c.accepted else ""))
     lines.append("")
     if model_path:
         lines.append("Final model: `%s` (kind screw, docs/model-format.md)." % model_path)

@@ -142,6 +142,21 @@ class ScrewFamily:
                 return "all runs move at one feed; a feed-dependent heat is not identifiable"
         return None
 
+    def note(self, runs, name):
+        """A caveat about testing ``name`` on these runs with leave-one-run-out, or None."""
+        if name != "speed_dependent_heat" or len(runs) < 2:
+            return None
+        feeds = [set(np.round(r.motion.feed_mm_min, 6).tolist()) if r.motion is not None else set() for r in runs]
+        alone = []
+        for i, r in enumerate(runs):
+            others = set().union(*(f for j, f in enumerate(feeds) if j != i))
+            if len(others) < 2:
+                alone.append(r.name)
+        if alone:
+            return ("the other runs move at a single feed when %s is held out, so the feed dependence "
+                    "cannot be learnt for its prediction; add runs at more feeds" % ", ".join(alone))
+        return None
+
     # ------------------------------------------------------------ parameter layout
 
     def _layout(self, effects):

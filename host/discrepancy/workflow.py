@@ -74,6 +74,7 @@ class Candidate:
     skipped: str = None  # reason the candidate was not tested
     error: str = None  # fit failure message
     heldout: object = field(default=None, repr=False)
+    note: str = None  # caveat about the test on these runs
     joint_with: list = None  # accepted together with these (pair test)
     single_score: float = None
     single_p_value: float = None
@@ -85,6 +86,8 @@ class Candidate:
             d["skipped"] = self.skipped
         if self.error:
             d["error"] = self.error
+        if self.note:
+            d["note"] = self.note
         if self.joint_with:
             d["joint_with"] = list(self.joint_with)
             d["single_score"] = _num(self.single_score)
@@ -328,6 +331,7 @@ def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_
                     continue
                 c = Candidate(name)
                 c.skipped = family.applicable(runs, name)
+                c.note = getattr(family, "note", lambda runs, name: None)(runs, name)
                 rnd.candidates.append(c)
                 if not c.skipped:
                     todo.append(c)
@@ -338,7 +342,7 @@ def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_
             for c in todo:
                 log("  %-22s held-out RMSE %s  gain %s  p %s%s" % (
                     c.name, "%.3f" % c.rmse_um if math.isfinite(c.rmse_um) else "-", "%+.1f%%" % (100 * c.score) if math.isfinite(c.score) else "-",
-                    "%.2g" % c.p_value, "  (fit failed: %s)" % c.error if c.error else ""))
+                    "%.2g" % c.p_value, "  (fit failed: %s)" % c.error if c.error else "") + ("\n      note: %s" % c.note if c.note else ""))
             best = max(tested, key=lambda c: c.score, default=None)
             if best is not None and best.score >= min_gain and best.p_value < alpha:
                 best.accepted = True
