@@ -97,7 +97,7 @@ class TableStore:
             try:
                 t = self._parse(self._read(slot))
             except TableError as e:
-                self.refusals.append((SLOT_NAMES[slot], e.reason))
+                self.refusals.append((SLOT_NAMES[slot], str(e)))
                 continue
             except OSError:
                 self.refusals.append((SLOT_NAMES[slot], "unreadable"))
@@ -153,8 +153,8 @@ class TableStore:
         try:
             t = self._parse(self._read(slot))
         except TableError as e:
-            self.refusals = [(SLOT_NAMES[slot], e.reason)]
-            raise UploadError("table", e.reason)
+            self.refusals = [(SLOT_NAMES[slot], str(e))]
+            raise UploadError("table", str(e))
         tmp = self.dir + "/active.new"
         with open(tmp, "wb") as g:
             g.write(SLOT_NAMES[slot].encode())
