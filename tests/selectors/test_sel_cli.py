@@ -151,3 +151,17 @@ def test_split_one_long_run_into_windows(twin_runs, tmp_path):
     # windows partition the run's sweeps: 21 sweeps -> 7 + 7 + 7
     assert r["samples_train"] == 7
     assert main(["select", "--method", "maxtree", twin_runs[0], "--split", "0", "--json", str(out)]) == 2
+
+
+def test_runs_path_is_blind_to_a_sensor_offset(twin_runs):
+    """From run folders the features are temperature rises, so a sensor read 3.7 K too high
+    (a calibration offset) changes nothing in any method, hclust-ga's Euclidean part included."""
+    from host.empirical.selectors import select
+    from host.runs import load_runs
+
+    runs = load_runs(twin_runs)
+    shifted = load_runs(twin_runs)
+    for r in shifted:
+        r.temperatures.values[:, r.temperatures.names.index("T4")] += 3.7
+    for method, params in (("maxtree", {}), ("stepwise", {"f_enter": 20.0, "f_remove": 10.0}), ("hclust-ga", {"seed": 1})):
+        assert select(method, runs, **params).sensors == select(method, shifted, **params).sensors, method
