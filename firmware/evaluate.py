@@ -30,7 +30,7 @@ MAXV = const(0x3FFFFFFF)  # |intermediate| must stay <= 2**30 - 1
 SENSOR_BITS = const(0xFFFFFF)
 CLAMP_POSITION = const(0x1000000)  # the last position given was outside the envelope
 CLAMP_TRAVEL = const(0x2000000)  # nut travel or feed beyond the table's bound (screw)
-CLAMP_STATE = const(0x4000000)  # a segment state hit 0 or its bound (screw)
+CLAMP_STATE = const(0x4000000)  # a segment state hit the table's state bound (screw)
 
 # Check-mode slots: a _mul call site uses slot s for its limb products and s+1
 # for its shifted terms and partial sums.
@@ -419,12 +419,13 @@ class Evaluator:
         B = t.B
         shB = t.shB
         rS = t.rS
-        fc = t.fc
+        gs = t.gs
         Tmax = t.Tmax
         fl = 0
         for i in range(m):
+            # the row is summed at gs guard bits below the state unit and rounded once
             acc = 0
-            sh = fc
+            sh = t.fc - gs
             base = i * m
             for k in range(ns):
                 r = 0
@@ -441,15 +442,14 @@ class Evaluator:
                 if chk:
                     self._note(SLOT_ROW, acc)
                 sh -= Ls
-            acc += self._mul(SLOT_BMUL, B[i], u[i], t.Lu, t.nu, shB[i])
+            acc += self._mul(SLOT_BMUL, B[i], u[i], t.Lu, t.nu, shB[i]) + rS[i]
             if chk:
                 self._note(SLOT_ROW, acc)
-            v = T[i] + acc + rS[i]
+            v = T[i] + (acc >> gs)
             if chk:
                 self._note(SLOT_STATE, v)
             if v < 0:
-                v = 0
-                fl = CLAMP_STATE
+                v = 0  # rounding just below zero: the exact state is >= 0, so this only removes error
             elif v > Tmax:
                 v = Tmax
                 fl = CLAMP_STATE

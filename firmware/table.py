@@ -182,6 +182,7 @@ def _name(buf, off, size):
 
 
 _SH = 62  # shifts beyond this are exporter bugs; a 31-bit port could not use them
+_SCALE = 1000  # fraction bits of a coefficient (informational, not used by the evaluation)
 
 
 def _common(t, w):
@@ -194,14 +195,14 @@ def _common(t, w):
     t.Lt = w.take_range("Lt", 1, 29)
     t.nt = w.take_range("nt", 1, 4)
     t.S0 = w.take("S0")
-    t.fS = w.take_range("fS", -_SH, _SH)
+    t.fS = w.take_range("fS", -_SCALE, _SCALE)
     t.b = []
     t.shb = []
     t.fb = []
     for i in range(t.n_sensors):
         t.b.append(w.take("b[%d]" % i))
         t.shb.append(w.take_range("shb[%d]" % i, -_SH, _SH))
-        t.fb.append(w.take_range("fb[%d]" % i, -_SH, _SH))
+        t.fb.append(w.take_range("fb[%d]" % i, -_SCALE, _SCALE))
     t.rL = w.take("rL")
 
 
@@ -237,8 +238,9 @@ def _screw(t, w):
     t.ft = w.take_range("ft", 0, 30)
     t.Tmax = w.take_range("Tmax", 0, (1 << 30) - 1)
     t.Ls = w.take_range("Ls", 1, 29)
-    t.ns = w.take_range("ns", 1, 4)
+    t.ns = w.take_range("ns", 1, 6)
     t.fc = w.take_range("fc", 0, _SH)
+    t.gs = w.take_range("gs", 0, 30)
     t.C = w.take_list("C", m * m)
     t.umax = w.take_range("umax", 0, (1 << 30) - 1)
     t.Lu = w.take_range("Lu", 1, 29)
@@ -250,7 +252,7 @@ def _screw(t, w):
     t.shG2 = w.take_list("shG2", m)
     t.H = w.take("H")
     t.shH = w.take_range("shH", -_SH, _SH)
-    t.fh = w.take_range("fh", -_SH, _SH)
+    t.fh = w.take_range("fh", -_SCALE, _SCALE)
     t.Lx = w.take_range("Lx", 1, 29)
     t.nx = w.take_range("nx", 1, 6)
     t.shX = w.take_range("shX", -_SH, _SH)

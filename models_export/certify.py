@@ -55,7 +55,10 @@ def frac_bits(bound, limit, cap=MAX_FRAC):
     bound = F(bound)
     if bound == 0:
         return cap
-    f = math.floor(math.log2(limit / bound))
+    ratio = F(limit) / bound
+    f = ratio.numerator.bit_length() - ratio.denominator.bit_length()  # within 1 of log2(ratio)
+    if f > cap + 1:
+        return cap
     while bound * F(2) ** f > limit:
         f -= 1
     while f + 1 <= cap and bound * F(2) ** (f + 1) <= limit:
@@ -130,9 +133,12 @@ def fit_coef(value, limbmax, base_frac, cap=62):
     shift sh <= cap such that |q| * limbmax <= PROD. Returns (q, sh); (0, 0) for a zero value."""
     if value == 0:
         return 0, 0
+    limbmax = max(limbmax, 1)  # a zero operand range still needs |q| <= PROD
     sh = frac_bits(abs(value) * p2(base_frac) * limbmax, PROD, cap=cap)
     while True:
         q = rnd(value * p2(base_frac + sh))
+        if q == 0:
+            return 0, 0  # below the resolution of the result: the term's error is its whole value
         if abs(q) * limbmax <= PROD:
             return q, sh
         sh -= 1

@@ -13,7 +13,7 @@ assumed arithmetic (gcc, clang, arm-none-eabi, IAR, Keil all do so).
 SCALARS = {
     "all": ("pos_lo", "pos_hi", "pos_ref", "fo", "Lt", "nt", "S0", "rL"),
     "position": ("Lw", "nw", "shw", "KS", "shK", "fK", "rK", "rT", "degree", "Lg", "ng", "rO"),
-    "screw": ("M", "dt_ms", "fixed_end", "fmax", "ft", "Tmax", "Ls", "ns", "fc", "umax", "Lu", "nu", "H", "shH",
+    "screw": ("M", "dt_ms", "fixed_end", "fmax", "ft", "Tmax", "Ls", "ns", "fc", "gs", "umax", "Lu", "nu", "H", "shH",
               "Lx", "nx", "shX", "KC", "Lc", "nc", "shC"),
 }
 ARRAYS = {
@@ -179,16 +179,16 @@ static void tcomp_step(tcomp_eval_t *e)
     }
     for (i = 0; i < TCOMP_M; i++) {
         int32_t acc = 0, v;
-        int sh = TCOMP_FC;
+        int sh = TCOMP_FC - TCOMP_GS;
         for (k = 0; k < TCOMP_NS; k++) {
             int32_t r = 0;
             for (j = 0; j < TCOMP_M; j++) r += tcomp_C[i * TCOMP_M + j] * e->limbs[k * TCOMP_M + j];
             acc += tcomp_shift(r, sh);
             sh -= TCOMP_LS;
         }
-        acc += tcomp_mul(tcomp_B[i], e->u[i], TCOMP_LU, TCOMP_NU, tcomp_shB[i]);
-        v = e->T[i] + acc + tcomp_rS[i];
-        if (v < 0) { v = 0; fl = TCOMP_CLAMP_STATE; }
+        acc += tcomp_mul(tcomp_B[i], e->u[i], TCOMP_LU, TCOMP_NU, tcomp_shB[i]) + tcomp_rS[i];
+        v = e->T[i] + (acc >> TCOMP_GS);
+        if (v < 0) v = 0;
         else if (v > TCOMP_TMAX) { v = TCOMP_TMAX; fl = TCOMP_CLAMP_STATE; }
         e->Tn[i] = v;
     }

@@ -204,7 +204,9 @@ class Planner:
     def horner(self, fo, PM):
         m, f, rec = self.m, self.f, self.rec
         d = len(m.g) - 1
-        fr = [fo] + [frac_bits(iv_abs(m.horner_range(j)), ACC) for j in range(1, d + 1)]
+        fr = [fo]
+        for j in range(1, d + 1):  # high powers need many fraction bits; the shifts between levels stay ~log2(PM)
+            fr.append(min(frac_bits(iv_abs(m.horner_range(j)), ACC, cap=400), fr[-1] + 62))
         G = [rnd(m.g[j] * p2(fr[j])) for j in range(d + 1)]
         shg = [fr[j + 1] - fr[j] for j in range(d)]
         P = m.p_iv()
@@ -282,9 +284,13 @@ class Planner:
         return abs(alpha) * F(Tmax) * F(edges[-1]) * OU_PER_UM * 2  # x2: margin for state errors
 
     def screw_state(self, fo):
-        """Recurrence, state error certificate, cum/segslope; returns (seg interval, seg error, per-position helper)."""
+        """Recurrence, state error certificate, cum/segslope; returns (seg interval, seg error, per-position helper).
+
+        Tries 2..5 state limbs (more limbs: finer C = A - I, more multiplications per step) and keeps
+        the one with the smallest certified offset error."""
         best = None
-        for ns in (2, 3):
+        last = None
+        for ns in (2, 3, 4, 5):
             try:
                 sub = Planner(self.m)
                 sub.f = dict(self.f)
@@ -294,7 +300,7 @@ class Planner:
                 last = exc
                 continue
             e = iv_abs(out[1])
-            if best is None or e < best[0]:
+            if best is None or e < best[0] * F(99, 100):  # fewer limbs unless clearly better
                 best = (e, sub, out)
         if best is None:
             raise last
@@ -309,9 +315,11 @@ class Planner:
         m, f, rec, s = self.m, self.f, self.rec, self.s
         M, A = s["M"], s["A"]
         Tmax = s["Tmax"]
-        ft = frac_bits(Tmax, 1 << 27, cap=30)
+        ft = frac_bits(Tmax, ACC, cap=30)
         Tq = math.ceil(Tmax * p2(ft))
         Ls = max(1, -(-Tq.bit_length() // ns))
+        if Ls * (ns - 1) >= Tq.bit_length() and ns > 2:
+            raise ExportError("state limbs: %d limbs are more than the state needs" % ns)
         T_iv = (0, Tq)
         lms = limb_max(T_iv, Ls, ns)
         top = Tq >> (Ls * (ns - 1))
@@ -329,6 +337,9 @@ class Planner:
         Lu = max(1, -(-umax.bit_length() // nu))
         U_iv = (0, umax)
         lmu = limb_max(U_iv, Lu, nu)
+        # guard bits: the row sum |C T| + B u (state units) times 2**gs stays below ACC
+        Bmax = max(F(float(b)) for b in s["B"]) / 1000 * p2(ft) * umax
+        gs = max(0, min(20, frac_bits(rowsum * Tq + Bmax + 1, ACC)))
         Bq, shB, rS = [], [], []
         rho = []
         feed_du = (-(F(umax) / p2(FEED_W_BITS) + 4), F(0))  # feed/range mode travel error per segment (um)
@@ -336,8 +347,8 @@ class Planner:
         for i in range(M):
             name = "thermal.reduced.A[%d]" % i
             acc = (0, 0)
-            err = ZERO
-            sh = fc
+            err = ZERO  # guard units: 2**-(ft + gs) K
+            sh = fc - gs
             for k in range(ns):
                 r = (0, 0)
                 for j in range(M):
@@ -356,22 +367,22 @@ class Planner:
                 sh -= Ls
             for j in range(M):
                 dc = F(Cq[i][j]) / p2(fc) - Cx[i][j]
-                err = iv_add(err, iv_mul(_c(dc), (F(0), F(Tq))))
-            q, sb = fit_coef(F(float(s["B"][i])) / 1000, lmu, ft)
+                err = iv_add(err, iv_mul(_c(dc * p2(gs)), (F(0), F(Tq))))
+            q, sb = fit_coef(F(float(s["B"][i])) / 1000, lmu, ft + gs)
             Bq.append(q)
             shB.append(sb)
             res, k = rec.mul(SLOT_BMUL, (q, q), U_iv, Lu, nu, sb, "thermal.reduced.B_K_per_mm[%d]" % i)
             bq = F(q) / p2(sb)
-            db = bq - F(float(s["B"][i])) / 1000 * p2(ft)
+            db = bq - F(float(s["B"][i])) / 1000 * p2(ft + gs)
             err = iv_add(err, iv_mul(_c(db), (F(0), F(umax))), floor_err(k), _hull(ZERO, iv_scale(feed_du, bq)))
             acc = iv_add(acc, res)
-            rec.note(SLOT_ROW, acc[0], acc[1], name)
-            bias = center(err)
+            bias, err_state = _round_out(err, gs)  # v = T + (acc + rS) >> gs
             rS.append(bias)
-            err = (err[0] + bias, err[1] + bias)
-            rec.note(SLOT_STATE, acc[0] + bias, Tq + acc[1] + bias, name)
-            rho.append(max(abs(err[0]), abs(err[1])))
-            self.term("thermal.reduced.B_K_per_mm[%d]" % i, ft + sb, 0, key="thermal.reduced.B_K_per_mm[%d]" % i)
+            acc = (acc[0] + bias, acc[1] + bias)
+            rec.note(SLOT_ROW, acc[0], acc[1], name)
+            rec.note(SLOT_STATE, acc[0] >> gs, Tq + (acc[1] >> gs), name)
+            rho.append(max(abs(err_state[0]), abs(err_state[1])))
+            self.term("thermal.reduced.B_K_per_mm[%d]" % i, ft + gs + sb, 0, key="thermal.reduced.B_K_per_mm[%d]" % i)
         # travel accumulators and the feed fallback
         maxlen = max(b - a for a, b in zip(s["edges_um"], s["edges_um"][1:]))
         rec.note(SLOT_TRAVEL, 0, umax + max(maxlen, umax), "travel")
@@ -382,7 +393,7 @@ class Planner:
             raise ExportError("thermal.reduced.A: the recurrence is not contracting (|A| has spectral radius >= 1); "
                               "the integer state error cannot be bounded")
         self.state_cert = {"rho_state_units": [float(r) for r in rho], "v_state_units": [float(x) for x in v], "ft": ft}
-        f.update(ft=ft, Tmax=Tq, Ls=Ls, ns=ns, fc=fc, C=[c for row in Cq for c in row], Lu=Lu, nu=nu, B=Bq, shB=shB, rS=rS)
+        f.update(ft=ft, Tmax=Tq, Ls=Ls, ns=ns, fc=fc, gs=gs, C=[c for row in Cq for c in row], Lu=Lu, nu=nu, B=Bq, shB=shB, rS=rS)
         for i in range(M):
             big = max(abs(c) for c in Cq[i])
             rec.note(-1, -big, big, "thermal.reduced.A[%d]" % i)
@@ -441,10 +452,13 @@ class Planner:
                                  floor_err(k)))
         segs.append(cum_ivs[M])
         segerr.append(err_cum[M])
-        # edge and fixed-end rounding to whole um (geometry, not arithmetic): bound of alpha * T * |d overlap|
+        # edges and fixed end rounded to whole um (geometry, not arithmetic). E(x) = alpha * integral of the
+        # piecewise-constant profile T(s) in [0, Tmax] up to x: moving x by d changes it by <= alpha*Tmax*|d|;
+        # the integer profile differs from the exact one only where the segment containing x starts (cum uses
+        # the exact lengths), which moves by <= 2 max|d edge|.
         dfe = abs(F(s["fe"]) - F(s["fixed"]) * 1000)
-        dedges = sum(abs(F(a) - F(b) * 1000) for a, b in zip(eu, edges))
-        geo_um = abs(alpha) * Tmax * (2 * dfe + 3 * dedges) / 1000
+        dedge = max(abs(F(a) - F(b) * 1000) for a, b in zip(eu, edges))
+        geo_um = abs(alpha) * Tmax * (dfe + 2 * dedge) / 1000
         e_geo = geo_um * OU_PER_UM * p2(fo)
         seg_iv = _hull(*segs)
         err_seg = iv_add(_hull(*segerr), (-e_geo, e_geo))

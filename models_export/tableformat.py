@@ -14,7 +14,7 @@ KIND_CODES = {"poly_slope": 1, "linear_direct": 2, "screw_reduced": 3}
 COMMON = ("pos_lo", "pos_hi", "pos_ref", "fo", "Lt", "nt", "S0", "fS")
 POSITION = ("Lw", "nw", "shw", "KS", "shK", "fK", "rK", "rT", "degree", "Lg", "ng")
 SCREW_HEAD = ("M", "dt_ms", "fixed_end", "fmax")
-SCREW_STATE = ("ft", "Tmax", "Ls", "ns", "fc")
+SCREW_STATE = ("ft", "Tmax", "Ls", "ns", "fc", "gs")
 SCREW_TRAVEL = ("umax", "Lu", "nu")
 SCREW_TAIL = ("H", "shH", "fh", "Lx", "nx", "shX", "KC", "Lc", "nc", "shC")
 
