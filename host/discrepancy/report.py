@@ -177,6 +177,9 @@ def markdown(result, js, model_path=None, model_error=None):
                 lines.append("| %s | skipped: %s | | | |" % (c.name, c.skipped))
             elif c.error:
                 lines.append("| %s | fit failed: %s | | | |" % (c.name, c.error))
+            elif c.joint_with:
+                lines.append("| %s | %.3f | %+.1f %% | %.3g | yes, jointly with %s (pair below) |" % (
+                    c.name, c.single_rmse_um, 100 * c.single_score, c.single_p_value, ", ".join(c.joint_with)))
             else:
                 lines.append("| %s | %.3f | %+.1f %% | %.3g | %s |" % (c.name, c.rmse_um, 100 * c.score, c.p_value, "yes" if c.accepted else ""))
         for c in rnd.candidates:

@@ -78,6 +78,7 @@ class Candidate:
     joint_with: list = None  # accepted together with these (pair test)
     single_score: float = None
     single_p_value: float = None
+    single_rmse_um: float = None
 
     def as_dict(self):
         d = {"name": self.name, "score": _num(self.score), "p_value": _num(self.p_value), "accepted": bool(self.accepted),
@@ -294,7 +295,7 @@ def _try_pairs(pool, runs, folds, effects, current, singles, rnd, alpha, min_gai
     for name in order:
         c = by[name]
         c.accepted, c.joint_with = True, [n for n in order if n != name]
-        c.single_score, c.single_p_value = c.score, c.p_value
+        c.single_score, c.single_p_value, c.single_rmse_um = c.score, c.p_value, c.rmse_um
         c.score, c.p_value, c.rmse_um = best.score, best.p_value, best.rmse_um
     return tuple(order), ho
 

@@ -8,7 +8,7 @@ import pytest
 
 from host.cli import main
 from host.discrepancy.screw_family import ScrewFamily
-from host.discrepancy.workflow import discover
+from host.discrepancy.workflow import ALPHA, MIN_GAIN, discover
 from host.models import load_model
 from host.runs import load_run, write_run
 from host.sim import EFFECTS, simulate_run
@@ -42,6 +42,9 @@ def test_two_hidden_effects_both_named():
     res = discover(twin_runs({"ambient_expansion": 1.1, "moving_convection": 0.8}, 515151, 0.5), ScrewFamily(), jobs=1)
     assert set(res.effects) == {"ambient_expansion", "moving_convection"}
     assert res.after.rmse() < 0.65
+    acc = {c["name"]: c for c in res.as_json()["candidates"] if c["accepted"]}
+    assert set(acc) == set(res.effects)
+    assert all(c["p_value"] < ALPHA and c["score"] >= MIN_GAIN for c in acc.values())
 
 
 @pytest.mark.slow
