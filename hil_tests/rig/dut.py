@@ -1,0 +1,193 @@
+"""The device under test's process: simulated board around the unmodified firmware.
+
+Run as ``micropython dut.py SPEC.json`` (MICROPYPATH = repo root and
+hil_tests/mp) or ``python dut.py SPEC.json``, with stdin/stdout on the pty
+the controller opens. SPEC holds the firmware's board ``config``, the
+control socket path ``ctl``, initial temperatures, sensor noise and seed.
+
+The control channel (a unix socket, one JSON object per line) is served
+only while the firmware sleeps past the time the test granted: the firmware
+never sees it. Requests (``op``): ``run`` (grant time up to ``until_ms``,
+ramping sensors linearly to ``temps`` meanwhile; ``gc``: collect and report
+``mem_free``; ``lock``: run under micropython.heap_lock), ``jump`` (step
+temperatures now), ``sensor`` (condition ok/open/short/stuck), ``chip``
+(``present``, ``ovuv``, ``force_open``), ``bus`` (inject ``kind`` for
+``count`` transfers to ``target``), ``stats``, ``quit``. Replies (``ev``):
+``at`` (time reached, with statistics), ``stats``, ``crash``, ``watchdog``.
+"""
+
+import gc
+import json
+import sys
+
+try:
+    import micropython
+except ImportError:
+    micropython = None
+
+MICRO = sys.implementation.name == "micropython"
+
+
+def _connect(path):
+    import socket
+    s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+    if MICRO:
+        import struct
+        s.connect(struct.pack("H", 1) + path.encode() + b"\0")
+        return s, s
+    s.connect(path)
+    return s, s.makefile("rb")
+
+
+class Control:
+    def __init__(self, path, world):
+        self.sock, self.rf = _connect(path)
+        self.world = world
+        self.locked = False
+        self.lock_failures = 0
+        self.gates = 0
+
+    def send(self, obj):
+        data = (json.dumps(obj) + "\n").encode()
+        if MICRO:
+            self.sock.write(data)
+        else:
+            self.sock.sendall(data)
+
+    def mem(self, collect):
+        if collect:
+            gc.collect()
+        try:
+            return gc.mem_free()
+        except AttributeError:  # CPython
+            return -1
+
+    def gate(self):
+        """Time reached the grant: report, then obey requests until the next ``run``."""
+        if self.locked:
+            micropython.heap_unlock()
+            self.locked = False
+        self.gates += 1
+        w = self.world
+        self.send({"ev": "at", "t_ms": w.clock.now_ms(), "ticks_ms": w.clock.ticks_ms(), "mem_free": self.mem(False)})
+        while True:
+            line = self.rf.readline()
+            if not line:
+                raise SystemExit(0)  # the test went away
+            m = json.loads(line)
+            op = m.get("op")
+            if op == "run":
+                until = m["until_ms"]
+                if "temps" in m:
+                    w.ramp(until, m["temps"])
+                w.clock.limit_us = until * 1000
+                if m.get("gc"):
+                    self.send({"ev": "mem", "mem_free": self.mem(True)})
+                if m.get("lock") and micropython is not None and hasattr(micropython, "heap_lock"):
+                    gc.collect()
+                    micropython.heap_lock()
+                    self.locked = True
+                return
+            if op == "jump":
+                w.jump(m["temps"])
+            elif op == "sensor":
+                from hil_tests.sim.stimulus import CONDITIONS
+                w.rtds[m["name"]].set_condition(CONDITIONS[m["condition"]], w.clock.now_ms())
+            elif op == "chip":
+                c = w.chips[m["name"]]
+                if "present" in m:
+                    c.power(m["present"])
+                if "ovuv" in m:
+                    c.ovuv = m["ovuv"]
+                if "force_open" in m:
+                    c.force_open = m["force_open"]
+            elif op == "bus":
+                b = w.buses[m["bus"]]
+                if m.get("kind", "none") == "none":
+                    b.faults.clear()
+                else:
+                    b.faults.inject(m["kind"], m.get("count", 1), m.get("target"))
+            elif op == "stats":
+                st = w.stats()
+                st["ev"] = "stats"
+                st["t_ms"] = w.clock.now_ms()
+                st["mem_free"] = self.mem(m.get("gc", False))
+                st["uart"] = [w.uart.rx_bytes, w.uart.tx_bytes] if w.uart is not None else None
+                st["wdt_feeds"] = w.wdt.feeds if w.wdt is not None else None
+                st["impl"] = sys.implementation.name
+                self.send(st)
+            elif op == "quit":
+                raise SystemExit(0)
+            else:
+                self.send({"ev": "error", "error": "unknown op %r" % (op,)})
+
+
+def make_board(world, config):
+    from firmware.board import Board
+    from hil_tests.sim.uart import StdioUART
+    uart = StdioUART()
+    world.uart = uart
+    wdt = world.watchdog(config["watchdog_ms"]) if config.get("watchdog_ms") else None
+    world.clock.watchdog = wdt
+    names = []
+    for ch in config["channels"]:
+        if ch["bus"] not in names:
+            names.append(ch["bus"])
+    buses = {}
+    if MICRO:
+        import machine  # hil_tests/mp/machine.py: the simulated hardware
+        for name in names:
+            b = world.buses[name]
+            if hasattr(b, "pins"):
+                buses[name] = machine.SPI(b.ident, baudrate=1000000, polarity=0, phase=1)
+            else:
+                buses[name] = machine.I2C(b.ident, freq=400000)
+
+        def pin(cs):
+            return machine.Pin(cs, machine.Pin.OUT, value=1)
+    else:
+        from firmware.board_linux import SMBusI2C
+        from hil_tests.sim.buses import SMBus
+        for name in names:
+            b = world.buses[name]
+            buses[name] = b if hasattr(b, "pins") else SMBusI2C(SMBus(b))
+
+        def pin(cs):
+            return world.pin(cs)
+    return Board(config, buses, pin, uart, clock=world.clock, watchdog=wdt, reset=None)
+
+
+def main(spec_path):
+    with open(spec_path) as f:
+        spec = json.load(f)
+    from hil_tests.sim import world as world_mod
+    config = spec["config"]
+    w = world_mod.World(config, spec.get("temps"), spec.get("noise_uohm", 0), spec.get("seed", 1),
+                        spec.get("start_ms", 0))
+    w.uart = None
+    world_mod.set_current(w)
+    ctl = Control(spec["ctl"], w)
+    w.clock.gate = ctl.gate
+    board = make_board(w, config)
+    ctl.gate()  # initial stimulus and faults before power-up
+    from firmware.app import main as fw_main
+    try:
+        fw_main(board)
+    except world_mod.WatchdogExpired as e:
+        ctl.send({"ev": "watchdog", "t_ms": w.clock.now_ms(), "error": str(e)})
+        raise SystemExit(3)
+    except Exception as e:
+        if ctl.locked:
+            micropython.heap_unlock()
+            ctl.locked = False
+        if MICRO:
+            sys.print_exception(e)
+        else:
+            import traceback
+            traceback.print_exc()
+        ctl.send({"ev": "crash", "t_ms": w.clock.now_ms(), "error": "%s: %s" % (type(e).__name__, e)})
+        raise SystemExit(1)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])

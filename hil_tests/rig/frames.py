@@ -1,0 +1,106 @@
+"""Controller-side codec for the $TC stream (docs/protocol.md), independent of firmware/ code.
+
+CRC-16/CCITT-FALSE comes from ``binascii.crc_hqx`` so a firmware CRC bug
+cannot cancel itself out in the tests.
+"""
+import binascii
+from dataclasses import dataclass, field
+
+STATUS_BITS = {
+    0x10000: "CLAMPED", 0x20000: "RATE_LIMITED", 0x40000: "MAG_LIMITED", 0x80000: "HELD",
+    0x100000: "FALLBACK", 0x200000: "NO_TABLE", 0x400000: "LINK_TIMEOUT", 0x800000: "NO_POSITION",
+    0x1000000: "DISABLED", 0x2000000: "UPLOADING", 0x4000000: "RECOVERING",
+}
+HELD = 0x80000
+FALLBACK = 0x100000
+RECOVERING = 0x4000000
+SENSOR_MASK = 0xFFFF
+
+
+def crc16(body):
+    return binascii.crc_hqx(body, 0xFFFF)
+
+
+def command(*fields):
+    """``$TC,<fields>*CRC\\r\\n`` as bytes."""
+    body = b"TC," + b",".join(f if isinstance(f, bytes) else str(f).encode() for f in fields)
+    return b"$" + body + b"*%04X\r\n" % crc16(body)
+
+
+@dataclass
+class Frame:
+    seq: int
+    status: int
+    kind: str
+    fields: list
+    raw: bytes
+    arrival: float = 0.0
+    extra: dict = field(default_factory=dict)
+
+    def status_names(self):
+        names = [n for bit, n in STATUS_BITS.items() if self.status & bit]
+        sensors = self.status & SENSOR_MASK
+        if sensors:
+            names.append("SENSORS:%04X" % sensors)
+        return names
+
+    # O / Q frames: t_ms, pos_um, total um, offset at ref um, slope um/m
+    @property
+    def t_ms(self):
+        return int(self.fields[0])
+
+    @property
+    def total_um(self):
+        return float(self.fields[2])
+
+    @property
+    def pos_um(self):
+        return int(self.fields[1])
+
+
+class FrameError(ValueError):
+    pass
+
+
+def parse_line(line):
+    """One line without CR LF -> Frame; FrameError naming what is wrong."""
+    if not line.startswith(b"$") or len(line) < 9 or line[-5:-4] != b"*":
+        raise FrameError("not a $...*XXXX frame: %r" % line[:80])
+    body = line[1:-5]
+    try:
+        crc = int(line[-4:], 16)
+    except ValueError:
+        raise FrameError("bad CRC digits: %r" % line[:80])
+    if crc16(body) != crc:
+        raise FrameError("CRC mismatch (%04X computed, %04X sent): %r" % (crc16(body), crc, line[:80]))
+    parts = body.decode("ascii").split(",")
+    if parts[0] != "TC" or len(parts) < 4 or len(parts[3]) != 1:
+        raise FrameError("bad header: %r" % line[:80])
+    return Frame(int(parts[1]), int(parts[2], 16), parts[3], parts[4:], bytes(line))
+
+
+class StreamDecoder:
+    """Feed bytes, get frames; keeps malformed lines in ``bad``."""
+
+    def __init__(self):
+        self.buf = bytearray()
+        self.bad = []
+
+    def feed(self, data, arrival=0.0):
+        self.buf += data
+        out = []
+        while True:
+            i = self.buf.find(b"\n")
+            if i < 0:
+                break
+            line = bytes(self.buf[:i]).rstrip(b"\r")
+            del self.buf[:i + 1]
+            if not line:
+                continue
+            try:
+                f = parse_line(line)
+                f.arrival = arrival
+                out.append(f)
+            except (FrameError, ValueError, UnicodeDecodeError) as exc:
+                self.bad.append((line, str(exc)))
+        return out

@@ -1,0 +1,400 @@
+"""The controller's side of the rig: start the firmware's process on a pty, talk to it like a PLC.
+
+``Rig(config, ...)`` creates a pseudo-terminal in raw mode, opens its device
+node with pyserial (exactly as a controller opens /dev/ttyACM0), starts
+hil_tests/rig/dut.py under MicroPython or CPython with the pty as its
+stdin/stdout and the board's flash directory as its working directory, and
+accepts the DUT's connection on the control socket. A reader thread drains
+the serial port continuously (the DUT blocks when the pty buffer is full) and
+decodes $TC frames (or keeps raw bytes in Modbus mode).
+
+Simulated time only moves inside ``run(until_ms)``; between runs the DUT is
+parked in its clock and the test may change temperatures and inject faults.
+"""
+import json
+import os
+import select
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+import tty
+
+import serial
+
+from hil_tests.rig.frames import StreamDecoder, command
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+MP_DIR = os.path.join(ROOT, "hil_tests", "mp")
+DUT = os.path.join(ROOT, "hil_tests", "rig", "dut.py")
+VENV_BIN = os.path.join(ROOT, ".venv", "bin")
+HEAP = os.environ.get("TCOMP_HIL_HEAP", "192K")  # 64-bit unix port: ~2x a 32-bit MCU (docs/hil.md)
+
+
+class RigError(RuntimeError):
+    pass
+
+
+def micropython_path():
+    p = os.path.join(VENV_BIN, "micropython")
+    return p if os.path.exists(p) else shutil.which("micropython")
+
+
+def interpreter_cmd(name, heap=HEAP):
+    if name == "micropython":
+        mp = micropython_path()
+        if mp is None:
+            raise RigError("MicroPython unix port not found (.venv/bin/micropython)")
+        return [mp, "-X", "heapsize=" + heap]
+    if name == "cpython":
+        return [sys.executable, "-u"]
+    raise RigError("interpreter must be micropython or cpython, got %r" % (name,))
+
+
+_MPY_CACHE = {}
+
+
+def compile_mpy(dest=None):
+    """mpy-cross the firmware, the simulation and the launcher into ``dest`` (cached per process).
+
+    The unix port compiling .py at import needs several times the heap the
+    code itself takes; a board ships .mpy for the same reason.
+    """
+    key = dest or "default"
+    if key in _MPY_CACHE:
+        return _MPY_CACHE[key]
+    dest = dest or tempfile.mkdtemp(prefix="tcomp-hil-mpy-")
+    cross = os.path.join(VENV_BIN, "mpy-cross")
+    if not os.path.exists(cross):
+        cross = shutil.which("mpy-cross")
+    jobs = []
+    for pkg in ("firmware", "hil_tests/sim", "hil_tests/rig", "hil_tests"):
+        src_dir = os.path.join(ROOT, pkg)
+        for name in os.listdir(src_dir):
+            if not name.endswith(".py") or name in ("board_linux.py", "harness.py", "frames.py", "conftest.py") \
+                    or name.startswith("test_"):
+                continue
+            out_dir = os.path.join(dest, pkg)
+            os.makedirs(out_dir, exist_ok=True)
+            jobs.append([cross, "-o", os.path.join(out_dir, name[:-3] + ".mpy"), os.path.join(src_dir, name)])
+    boards = os.path.join(ROOT, "firmware", "boards")
+    for name in os.listdir(boards):
+        if name.endswith(".py"):
+            os.makedirs(os.path.join(dest, "firmware", "boards"), exist_ok=True)
+            jobs.append([cross, "-o", os.path.join(dest, "firmware", "boards", name[:-3] + ".mpy"),
+                         os.path.join(boards, name)])
+    for j in jobs:
+        subprocess.run(j, check=True, capture_output=True)
+    _MPY_CACHE[key] = dest
+    return dest
+
+
+class SerialReader(threading.Thread):
+    """Drains a pyserial port into a decoder (stream mode) or a byte buffer (Modbus mode)."""
+
+    def __init__(self, ser, stream=True):
+        super().__init__(daemon=True)
+        self.ser = ser
+        self.stream = stream
+        self.decoder = StreamDecoder()
+        self.frames = []
+        self.raw = bytearray()
+        self.lock = threading.Condition()
+        self.stop = False
+        self.last_rx = time.monotonic()
+        self.on_frame = None
+
+    def run(self):
+        fd = self.ser.fileno()
+        while not self.stop:
+            r, _, _ = select.select([fd], [], [], 0.05)
+            if not r:
+                continue
+            try:
+                data = os.read(fd, 65536)
+            except OSError:
+                time.sleep(0.01)  # the DUT's side of the pty closed (process ended or restarting)
+                continue
+            if not data:
+                continue
+            now = time.monotonic()
+            with self.lock:
+                self.last_rx = now
+                if self.stream:
+                    new = self.decoder.feed(data, now)
+                    self.frames.extend(new)
+                    if self.on_frame is not None:
+                        for f in new:
+                            self.on_frame(f)
+                else:
+                    self.raw += data
+                self.lock.notify_all()
+
+    def quiet(self, idle_s=0.03, timeout=5.0):
+        """Wait until nothing arrived for ``idle_s`` and the port has no pending bytes."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            with self.lock:
+                idle = time.monotonic() - self.last_rx
+            if idle >= idle_s and self.ser.in_waiting == 0:
+                return
+            time.sleep(idle_s / 3)
+
+
+class Rig:
+    """One simulated board running the firmware. Use as a context manager."""
+
+    def __init__(self, config, table=None, interpreter="micropython", workdir=None, temps=None, noise_uohm=0,
+                 seed=1, start_ms=0, heap=HEAP, slot="A", use_mpy=True):
+        self.config = json.loads(json.dumps(config))
+        self.interpreter = interpreter
+        self.own_dir = workdir is None
+        self.workdir = workdir or tempfile.mkdtemp(prefix="tcomp-hil-")
+        self.flash = os.path.join(self.workdir, "flash")
+        os.makedirs(self.flash, exist_ok=True)
+        tdir = os.path.join(self.flash, self.config.get("table_dir", "tables"))
+        os.makedirs(tdir, exist_ok=True)
+        if table is not None:
+            with open(os.path.join(tdir, "table_%s.bin" % slot.lower()), "wb") as f:
+                f.write(table)
+            with open(os.path.join(tdir, "active"), "w") as f:
+                f.write(slot)
+        self.spec = {"config": self.config, "ctl": os.path.join(self.workdir, "ctl.sock"), "temps": temps or {},
+                     "noise_uohm": noise_uohm, "seed": seed, "start_ms": start_ms}
+        self.heap = heap
+        self.use_mpy = use_mpy
+        self.stream = (self.config.get("serial") or {}).get("mode", "stream") == "stream"
+        self.proc = None
+        self.ser = None
+        self.reader = None
+        self.events = []
+        self.t_ms = 0
+        self.mem = []  # (t_ms, gc.mem_free after collect) samples
+        self.starts = 0
+        self._open_pty()
+
+    # --- process lifetime --------------------------------------------------------
+    def _open_pty(self):
+        self.master, self.slave = os.openpty()
+        # raw on both sides before anything opens it, or the line discipline echoes frames back
+        tty.setraw(self.master)
+        tty.setraw(self.slave)
+        self.port = os.ttyname(self.slave)
+        baud = (self.config.get("serial") or {}).get("baud", 115200)
+        self.ser = serial.Serial(self.port, baud, timeout=0)
+        self.reader = SerialReader(self.ser, self.stream)
+        self.reader.start()
+
+    def start(self):
+        ctl = self.spec["ctl"]
+        if os.path.exists(ctl):
+            os.unlink(ctl)
+        self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.listener.bind(ctl)
+        self.listener.listen(1)
+        spec_path = os.path.join(self.workdir, "spec.json")
+        with open(spec_path, "w") as f:
+            json.dump(self.spec, f)
+        env = dict(os.environ)
+        if self.interpreter == "micropython":
+            paths = [MP_DIR]
+            if self.use_mpy:
+                paths.append(compile_mpy())
+            paths.append(ROOT)
+            env["MICROPYPATH"] = ":".join(paths)
+            dut = os.path.join(compile_mpy(), "hil_tests", "rig", "dut.mpy") if self.use_mpy else DUT
+            argv = interpreter_cmd("micropython", self.heap) + (["-m", "hil_tests.rig.dut"] if self.use_mpy else [DUT])
+            del dut
+        else:
+            env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
+            argv = interpreter_cmd("cpython") + [DUT]
+        argv = argv + [spec_path]
+        self.stderr_path = os.path.join(self.workdir, "dut-stderr-%d.txt" % self.starts)
+        self.stderr = open(self.stderr_path, "wb")
+        self.proc = subprocess.Popen(argv, stdin=self.master, stdout=self.master, stderr=self.stderr,
+                                     cwd=self.flash, env=env)
+        self.starts += 1
+        self.listener.settimeout(30)
+        try:
+            self.conn, _ = self.listener.accept()
+        except socket.timeout:
+            raise RigError("the DUT never connected to the control socket:\n" + self.log())
+        self.conn.settimeout(None)
+        self.rf = self.conn.makefile("rb")
+        ev = self._recv()
+        if ev.get("ev") != "at":
+            raise RigError("unexpected first control event %r" % ev)
+        self.t_ms = ev["t_ms"]
+        return self
+
+    def log(self):
+        try:
+            with open(self.stderr_path, "rb") as f:
+                return f.read().decode(errors="replace")
+        except (OSError, AttributeError):
+            return ""
+
+    def _recv(self):
+        line = self.rf.readline()
+        if not line:
+            code = self.proc.poll() if self.proc else None
+            raise RigError("DUT closed the control channel (exit code %r):\n%s" % (code, self.log()))
+        ev = json.loads(line)
+        if ev.get("ev") in ("crash", "watchdog"):
+            self.events.append(ev)
+            raise RigError("DUT %s at %s ms: %s\n%s" % (ev["ev"], ev.get("t_ms"), ev.get("error"), self.log()))
+        return ev
+
+    def _send(self, obj):
+        self.conn.sendall((json.dumps(obj) + "\n").encode())
+
+    def kill(self):
+        """Power cut: SIGKILL, no chance to flush or close anything."""
+        if self.proc and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGKILL)
+            self.proc.wait()
+        self._close_ctl()
+
+    def _close_ctl(self):
+        for a in ("rf", "conn", "listener"):
+            o = getattr(self, a, None)
+            if o is not None:
+                try:
+                    o.close()
+                except OSError:
+                    pass
+                setattr(self, a, None)
+        if self.stderr:
+            self.stderr.close()
+            self.stderr = None
+
+    def restart(self):
+        self.kill()
+        return self.start()
+
+    def close(self):
+        if self.proc and self.proc.poll() is None:
+            try:
+                self._send({"op": "quit"})
+                self.proc.wait(timeout=5)
+            except (OSError, subprocess.TimeoutExpired, AttributeError):
+                pass
+        self.kill()
+        if self.reader:
+            self.reader.stop = True
+            self.reader.join(timeout=1)
+        for fd in (self.master, self.slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        if self.ser:
+            try:
+                self.ser.close()
+            except Exception:
+                pass
+        if self.own_dir:
+            shutil.rmtree(self.workdir, ignore_errors=True)
+
+    def __enter__(self):
+        if self.proc is None:
+            self.start()
+        return self
+
+    def __exit__(self, *exc):
+        self.close()
+
+    @property
+    def alive(self):
+        return self.proc is not None and self.proc.poll() is None
+
+    # --- time and stimulus ------------------------------------------------------------
+    def run(self, until_ms, temps=None, gc=False, lock=False, sync=True):
+        """Let simulated time run to ``until_ms`` (temperatures ramp linearly to ``temps``)."""
+        msg = {"op": "run", "until_ms": int(until_ms)}
+        if temps:
+            msg["temps"] = {k: float(v) for k, v in temps.items()}
+        if gc:
+            msg["gc"] = True
+        if lock:
+            msg["lock"] = True
+        self._send(msg)
+        if gc:
+            ev = self._recv()
+            self.mem.append((self.t_ms, ev["mem_free"]))
+        ev = self._recv()
+        self.t_ms = ev["t_ms"]
+        if sync:
+            self.reader.quiet()
+        return ev
+
+    def advance(self, ms, **kw):
+        return self.run(self.t_ms + ms, **kw)
+
+    def jump(self, temps):
+        self._send({"op": "jump", "temps": {k: float(v) for k, v in temps.items()}})
+
+    def sensor(self, name, condition):
+        self._send({"op": "sensor", "name": name, "condition": condition})
+
+    def chip(self, name, **kw):
+        msg = {"op": "chip", "name": name}
+        msg.update(kw)
+        self._send(msg)
+
+    def bus_fault(self, bus, kind, count=1, target=None):
+        self._send({"op": "bus", "bus": bus, "kind": kind, "count": count, "target": target})
+
+    def stats(self, gc=False):
+        self._send({"op": "stats", "gc": gc})
+        return self._recv()
+
+    # --- the serial link ------------------------------------------------------------------
+    def write(self, data):
+        self.ser.write(data)
+        self.ser.flush()
+
+    def send(self, *fields):
+        self.write(command(*fields))
+
+    @property
+    def frames(self):
+        return self.reader.frames
+
+    def take_frames(self):
+        with self.reader.lock:
+            out = list(self.reader.frames)
+            self.reader.frames.clear()
+        return out
+
+    def take_raw(self):
+        with self.reader.lock:
+            out = bytes(self.reader.raw)
+            self.reader.raw.clear()
+        return out
+
+    def wait_frames(self, pred, timeout=10.0, step_ms=10):
+        """Advance time in small steps until a received frame satisfies ``pred``; returns it."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            for f in self.reader.frames:
+                if pred(f):
+                    return f
+            self.advance(step_ms)
+        raise RigError("no matching frame within %.1f s real time (t=%d ms)" % (timeout, self.t_ms))
+
+    def request(self, *fields, kinds=("Q", "A", "E", "H", "T"), step_ms=10, timeout=10.0):
+        """Send a command and return the first reply frame of one of ``kinds`` that follows it."""
+        n0 = len(self.reader.frames)
+        self.send(*fields)
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self.advance(step_ms)
+            for f in self.reader.frames[n0:]:
+                if f.kind in kinds:
+                    return f
+        raise RigError("no reply to %r within %.1f s (t=%d ms)" % (fields, timeout, self.t_ms))
