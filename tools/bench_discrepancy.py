@@ -6,7 +6,11 @@ drifting ambient) with
   - each catalog effect hidden at a random realistic magnitude (0.5-1.5 x the
     twin's default): the effect must be named first and the held-out RMSE at
     least halved;
-at a random laser noise level (0.3-1.0 um). Prints the rates and wall times.
+  - two effects hidden at once (a pair from PAIRS, rotating with the seed): both
+    must be named;
+at a random laser noise level (0.3-1.0 um). Every other null seed writes
+bidirectional sweeps with a zero reversal value, so ``reversal_error`` is tested
+on the null too. Prints the rates and wall times.
 
     .venv/bin/python tools/bench_discrepancy.py [--seeds 40] [--first-seed 1000] [--jobs 2]
 """
@@ -24,12 +28,13 @@ from host.discrepancy.workflow import discover  # noqa: E402
 from host.sim import EFFECTS, simulate_run  # noqa: E402
 
 PROTOCOLS = ("v6500_r210_490", "v15000_r210_490", "mixed")
+PAIRS = (("ambient_expansion", "moving_convection"), ("bearing_heat", "reversal_error"),
+         ("speed_dependent_heat", "ambient_expansion"), ("moving_convection", "bearing_heat"))
 CATALOG_EFFECTS = ("ambient_expansion", "speed_dependent_heat", "bearing_heat", "moving_convection", "reversal_error")
 
 
-def scenario(seed, effects, noise):
-    runs = [simulate_run(p, effects=effects, seed=seed, noise_um=noise) for p in PROTOCOLS]
-    return runs
+def scenario(seed, effects, noise, protocols=PROTOCOLS):
+    return [simulate_run(p, effects=effects, seed=seed, noise_um=noise) for p in protocols]
 
 
 def main(argv=None):
@@ -38,8 +43,12 @@ def main(argv=None):
     ap.add_argument("--first-seed", type=int, default=1000)
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--effects", default=",".join(CATALOG_EFFECTS), help="hidden effects to test (comma list, '' = null only)")
+    ap.add_argument("--no-pairs", action="store_true", help="skip the two-effect scenarios")
+    ap.add_argument("--protocols", default=",".join(PROTOCOLS), help="twin protocols of one scenario's runs")
     args = ap.parse_args(argv)
     effects = [e for e in args.effects.split(",") if e]
+    protocols = [p for p in args.protocols.split(",") if p]
+    pair_hits, pair_n = 0, 0
     null_false, null_times, null_gains = 0, [], []
     hits = {e: [0, 0] for e in effects}  # named first, halved
     times = []
@@ -48,22 +57,33 @@ def main(argv=None):
         rng = np.random.default_rng(seed)
         noise = float(rng.uniform(0.3, 1.0))
         t0 = time.perf_counter()
-        res = discover(scenario(seed, None, noise), ScrewFamily(), jobs=args.jobs)
+        null_effects = {"reversal_error": 0.0} if k % 2 else None
+        res = discover(scenario(seed, null_effects, noise, protocols), ScrewFamily(), jobs=args.jobs)
         null_times.append(time.perf_counter() - t0)
         null_false += bool(res.effects)
         best = max((c.score for c in res.rounds[0].candidates if np.isfinite(c.score)), default=float("nan"))
         null_gains.append(best)
-        line = ["seed %d noise %.2f: null -> %s (best gain %+.1f%%)" % (seed, noise, ",".join(res.effects) or "-", 100 * best)]
+        line = ["seed %d noise %.2f: null%s -> %s (best gain %+.1f%%)" % (seed, noise, " (bidirectional)" if null_effects else "",
+                                                                         ",".join(res.effects) or "-", 100 * best)]
         for e in effects:
             mag = EFFECTS[e].default * float(rng.uniform(0.5, 1.5))
             t0 = time.perf_counter()
-            res = discover(scenario(seed, {e: mag}, noise), ScrewFamily(), jobs=args.jobs)
+            res = discover(scenario(seed, {e: mag}, noise, protocols), ScrewFamily(), jobs=args.jobs)
             times.append(time.perf_counter() - t0)
             first = res.effects[:1] == [e]
             halved = res.after.rmse() <= 0.5 * res.before.rmse()
             hits[e][0] += first
             hits[e][1] += halved
             line.append("%s(%.2g): %s %.2f->%.2f" % (e, mag, ",".join(res.effects) or "-", res.before.rmse(), res.after.rmse()))
+        if not args.no_pairs:
+            pair = PAIRS[k % len(PAIRS)]
+            mags = {e: EFFECTS[e].default * float(rng.uniform(0.7, 1.3)) for e in pair}
+            t0 = time.perf_counter()
+            res = discover(scenario(seed, mags, noise, protocols), ScrewFamily(), jobs=args.jobs)
+            times.append(time.perf_counter() - t0)
+            pair_n += 1
+            pair_hits += set(res.effects) >= set(pair)
+            line.append("pair %s: %s %.2f->%.2f" % ("+".join(pair), ",".join(res.effects) or "-", res.before.rmse(), res.after.rmse()))
         print("; ".join(line), flush=True)
     n = args.seeds
     print()
@@ -71,6 +91,8 @@ def main(argv=None):
     print("null best candidate gain: median %+.1f%%, 95th percentile %+.1f%%, max %+.1f%%" % tuple(100 * np.nanpercentile(null_gains, [50, 95, 100])))
     for e in effects:
         print("%-22s named first %d/%d, held-out RMSE halved %d/%d" % (e, hits[e][0], n, hits[e][1], n))
+    if pair_n:
+        print("two effects hidden: both named %d/%d" % (pair_hits, pair_n))
     allt = np.array(null_times + times)
     print("workflow wall time on 3 runs (jobs=%d): median %.2f s, max %.2f s" % (args.jobs, np.median(allt), allt.max()))
 

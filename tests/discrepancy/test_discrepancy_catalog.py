@@ -1,0 +1,61 @@
+import numpy as np
+import pytest
+
+from host.discrepancy.catalog import CATALOG, FEED_REF_MM_MIN
+from host.discrepancy.screw_family import Drive, ScrewFamily
+from host.sim import EFFECTS, simulate_run
+
+REQUIRED = ("ambient_expansion", "speed_dependent_heat", "bearing_heat", "moving_convection", "reversal_error")
+
+
+@pytest.fixture(scope="module")
+def run():
+    return simulate_run("mixed", effects={"reversal_error": 0.0}, seed=5, noise_um=0.0)
+
+
+def test_catalog_names_are_the_twins():
+    assert set(REQUIRED) <= set(CATALOG)
+    assert set(CATALOG) <= set(EFFECTS)
+    for e in CATALOG.values():
+        assert e.hook in ("heat", "convection", "output")
+        assert e.params and all(p.lo < p.hi for p in e.params)
+
+
+def test_hooks_follow_the_documented_forms(run):
+    d = Drive(run)
+    e = run.errors
+    base = run.sensors_with_role("base")[0]
+    rise = np.interp(e.time_s, run.temperatures.time_s, run.temperatures.column(base)) - run.temperatures.column(base)[0]
+    np.testing.assert_allclose(CATALOG["ambient_expansion"].columns(d)[:, 0], d.alpha_per_K * 1e3 * rise * e.position_mm)
+    np.testing.assert_allclose(CATALOG["reversal_error"].columns(d)[:, 0], 0.5 * e.direction)
+    (hj, src), = CATALOG["speed_dependent_heat"].unit_inputs(d)
+    assert src is None and hj.shape == d.travel.shape
+    # every step is at one feed (the grid follows the motion boundaries): travel_feed = travel * feed / feed_ref
+    moving = d.travel.sum(axis=1) > 0
+    ratio = hj[moving].sum(axis=1) / d.travel[moving].sum(axis=1)
+    assert set(np.round(ratio * FEED_REF_MM_MIN).tolist()) == set(run.motion.feed_mm_min.tolist())
+    (hj, src), = CATALOG["bearing_heat"].unit_inputs(d)
+    assert hj is None and np.all(src[:, 1:] == 0)
+    np.testing.assert_allclose(src[:, 0], d.speed)
+    g = CATALOG["moving_convection"].convection(d, {"rise": 0.7})
+    np.testing.assert_allclose(g[~moving], 1.0)
+    assert np.all(g[moving] > 1.0)
+
+
+def test_zero_magnitude_effect_changes_nothing(run):
+    fam = ScrewFamily()
+    full = [np.ones(len(run.errors), bool)]
+    a = fam.fit([run], full, (), None)
+    for name in ("bearing_heat", "speed_dependent_heat", "reversal_error"):
+        b = fam.fit([run], full, (name,), a)
+        # noise-free data of the base model: the extra amplitude stays ~0 and the fit is as good
+        assert abs(list(b.linear.values())[-1]) < 1e-2 * (CATALOG[name].params[0].hi - CATALOG[name].params[0].lo)
+        assert b.rmse_um <= a.rmse_um + 1e-6
+
+
+def test_base_fit_recovers_twin_parameters(run):
+    fit = ScrewFamily().fit([run], [np.ones(len(run.errors), bool)], (), None)
+    p = run.meta["simulation"]["params"]
+    assert fit.nonlinear["h_W_m2K"] == pytest.approx(p["h_W_m2K"], rel=0.1)
+    assert fit.linear["q_J_per_mm"] == pytest.approx(p["friction_J_per_mm"] * p["screw_share"], rel=0.1)
+    assert fit.rmse_um < 0.2
