@@ -26,7 +26,7 @@ import numpy as np  # noqa: E402
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.runs import load_run  # noqa: E402
+from host.runs import Motion, load_run  # noqa: E402
 from host.screw import heat  # noqa: E402
 from host.screw.identify import IdentifiabilityWarning  # noqa: E402
 from host.screw.model import ScrewModel  # noqa: E402
@@ -37,9 +37,7 @@ THREE = ("v8000_r210_490", "v6500_r210_490", "v8000_r0_700")
 
 
 def bench_simulation():
-    motion = type("Motion", (), {})()
-    motion.t_start_s, motion.t_end_s = np.array([0.0]), np.array([4 * 3600.0])
-    motion.from_mm, motion.to_mm, motion.feed_mm_min = np.array([210.0]), np.array([490.0]), np.array([8000.0])
+    motion = Motion(np.array([0.0]), np.array([4 * 3600.0]), np.array([210.0]), np.array([490.0]), np.array([8000.0]))
     par = heat.ScrewParams()
     print("simulation (8 h at dt = 10 s, 2880 steps):")
     for M in (12, 40, 80, 160):

@@ -9,14 +9,17 @@ import numpy as np
 from host.screw import heat
 
 
-def check_run(run, geometry=None):
-    """ValueError naming what makes ``run`` unusable for the screw model."""
+def check_run(run, geometry=None, require_nut=True):
+    """ValueError naming what makes ``run`` unusable for the screw model.
+
+    require_nut: identification needs a sensor with role 'nut' (diagnostic and
+    optional residual); prediction does not read it."""
     name = run.path or run.name
     if run.motion is None or len(run.motion) == 0:
         raise ValueError("%s: the run has no motion (motion.csv missing or empty); the screw model is driven by the nut's travel" % name)
     if not np.any(np.abs(run.motion.to_mm - run.motion.from_mm) > 0):
         raise ValueError("%s: motion.csv has no travel (every interval has from_mm == to_mm)" % name)
-    if not run.sensors_with_role("nut"):
+    if require_nut and not run.sensors_with_role("nut"):
         raise ValueError("%s: meta.json has no sensor with role 'nut' (sensors: %s); the screw model needs the nut temperature"
                          % (name, ", ".join("%s=%s" % (k, v.get("role")) for k, v in run.sensors.items())))
     if geometry is None:

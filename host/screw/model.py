@@ -179,7 +179,7 @@ class ScrewModel:
             unknown = [n for n in names if n not in BASE_PARAMS]
             if unknown:
                 raise ValueError("unknown screw parameter(s) %s in free= (known: %s, aliases %s)"
-                                 % (", ".join(unknown), ", ".join(BASE_PARAMS), ", ".join(ALIASES)))
+                                 % (", ".join(str(u) for u in unknown), ", ".join(BASE_PARAMS), ", ".join(ALIASES)))
             base = names
         else:
             base = ["q_J_per_mm", "h_W_m2K", "lambda_W_mK"]
@@ -314,7 +314,7 @@ class ScrewModel:
                           "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window}
         feeds = np.concatenate([r.motion.feed_mm_min for r in runs])
         P_all = np.concatenate([P] + [np.r_[r.motion.from_mm, r.motion.to_mm] for r in runs])
-        self.envelope_ = {"position_mm": [float(P_all.min()), float(P_all.max())],
+        self.envelope_: dict = {"position_mm": [float(P_all.min()), float(P_all.max())],
                           "feed_mm_min": [float(feeds.min()), float(feeds.max())]}
         if self.base_sensor_ is not None:
             tb = np.concatenate([r.temperatures.column(self.base_sensor_) for r in runs])
@@ -332,13 +332,13 @@ class ScrewModel:
     def predict(self, run):
         """Predicted error (µm) at every row of ``run.errors``: the run's own motion and
         base temperature are simulated from a cold (ambient) screw at the run's start."""
-        check_run(run, self.geometry_)
+        check_run(run, self.geometry_, require_nut=False)
         ctx = self._context(run)
         return self.thermal_context(ctx) + self.geometric_um(ctx.positions_mm)
 
     def predict_grid(self, run, positions_mm, times_s=None):
         """Thermal + geometric error on a time × position grid (default times: the model grid)."""
-        check_run(run, self.geometry_)
+        check_run(run, self.geometry_, require_nut=False)
         ctx = self._context(run)
         rises = self.simulate_context(ctx)
         t = ctx.t_grid if times_s is None else np.asarray(times_s, dtype=float)

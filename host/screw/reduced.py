@@ -60,6 +60,7 @@ def state_bound(A, B, travel_max_mm):
     if rho >= 1.0:
         raise ValueError("reduced model has no heat loss (row sum of A = %g >= 1): no finite state bound; h must be > 0" % rho)
     acc = np.zeros(A.shape[0])
+    term = np.zeros(A.shape[0])
     P = np.eye(A.shape[0])
     for _ in range(200000):
         term = np.max(P * B[None, :], axis=1)
