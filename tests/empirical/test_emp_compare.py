@@ -108,3 +108,19 @@ def test_compare_cli_writes_json_and_titled_plots(tmp_path, three_runs, capsys):
     assert main(["compare", folders[0], "--json", out]) == 2
     assert "at least 2 runs" in capsys.readouterr().err
     assert main(["compare"] + folders + ["--json", out, "--methods", "mlr,foo"]) == 2
+
+
+def test_compare_cli_split_of_one_run(tmp_path, make_direct):
+    from host.cli import main
+    from host.runs import write_run
+
+    run = make_direct(spindle=True, noise_um=0.2)
+    folder = write_run(run, str(tmp_path / "d"))
+    out = str(tmp_path / "s.json")
+    assert main(["compare", folder, "--split-h", "6.1", "--direct", "--channel", "ch2", "--json", out,
+                 "--methods", "mlr,stepwise,cv-subset", "--reference", "fixed", "--repeats", "1"]) == 0
+    doc = json.load(open(out))
+    assert doc["reference"] == "fixed" and doc["target"] == "direct"
+    res = {r["method"]: r for r in doc["results"]}
+    assert list(res["mlr"]["tests"]) == ["held-out (t >= 6.10 h)"]
+    assert res["stepwise"]["sensors"] == ["t1", "t2"]

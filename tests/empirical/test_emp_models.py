@@ -191,3 +191,21 @@ def test_fit_cli_direct_on_multichannel_run(tmp_path, capsys, make_direct):
     assert doc["kind"] == "linear_direct" and doc["channel"] == "ch2" and sorted(doc["sensors"]) == ["t1", "t2"]
     assert main(["fit", "--model", "mlr", folder, "--out", out]) == 2
     assert "channels" in capsys.readouterr().err
+
+
+def test_fit_cli_options_reference_and_window(tmp_path, make_direct):
+    from host.cli import main
+
+    run = make_direct()
+    folder = write_run(run, str(tmp_path / "d"))
+    out = str(tmp_path / "m.json")
+    assert main(["fit", "--model", "mlr", "--direct", "--channel", "ch1", folder, "--out", out, "--sensors", "t1,t2",
+                 "--option", "reference=run_start", "--option", "t_max_s=7200", "--option", "envelope_margin_K=1"]) == 0
+    doc = json.load(open(out))
+    assert doc["thermal"]["reference"] == "run_start" and doc["training"]["window_s"] == [None, 7200.0]
+    assert doc["training"]["n_samples"] == 120 and doc["envelope"]["margin_K"] == 1.0
+    assert doc["envelope"]["position_mm"] == [0.0, 0.0]
+    lo, hi = doc["envelope"]["temperature_C"]["t1"]
+    t1 = run.temperatures.values[:121, 0]
+    assert lo == pytest.approx(t1.min() - 1) and hi == pytest.approx(t1[:120].max() + 1, abs=0.2)
+    assert main(["fit", "--model", "mlr", folder, "--out", out, "--option", "bogus=1"]) == 2
