@@ -46,11 +46,12 @@ def run(args):
     for r in runs:
         if r.screw is None:
             raise UserError("%s: meta.json has no 'screw' block; the screw model needs the screw geometry" % (r.path or r.name))
-        if r.motion is None or not len(r.motion):
-            raise UserError("%s: no motion.csv; the screw model is driven by the axis motion" % (r.path or r.name))
         if r.errors.channel is not None and len(r.errors.channels()) > 1:
             raise UserError("%s: errors.csv has several channels (%s); the screw model describes one positioning error"
                             % (r.path or r.name, ", ".join(r.errors.channels())))
+    if not any(r.motion is not None and len(r.motion) for r in runs):
+        raise UserError("none of the runs has a motion.csv; the screw model is driven by the axis motion (%s)"
+                        % ", ".join(r.path or r.name for r in runs))
     try:
         result = workflow.discover(runs, family, candidates=candidates, alpha=alpha, min_gain=min_gain,
                                    max_effects=args.max_effects, jobs=args.jobs, log=print)

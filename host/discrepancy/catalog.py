@@ -45,13 +45,16 @@ class CandidateEffect:
     columns: object = None  # output: drive -> (n_rows, n_params)
     requires: tuple = field(default_factory=tuple)  # "motion", "direction", "base_sensor", "feeds"
 
-    def applicable(self, run):
-        if "motion" in self.requires and (run.motion is None or not len(run.motion)):
-            return "run %s has no motion.csv" % run.name
-        if "direction" in self.requires and run.errors.direction is None:
-            return "run %s has no bidirectional sweeps (errors.csv 'direction')" % run.name
-        if "base_sensor" in self.requires and not run.sensors_with_role("base"):
-            return "run %s has no temperature sensor with role 'base'" % run.name
+    def applicable(self, runs):
+        """None, or why the effect cannot be tested on ``runs`` (a list of host.runs.Run)."""
+        if "motion" in self.requires and not any(r.motion is not None and len(r.motion) for r in runs):
+            return "no run has motion.csv"
+        if "direction" in self.requires and not any(r.errors.direction is not None for r in runs):
+            return "no run has bidirectional sweeps (errors.csv 'direction')"
+        if "base_sensor" in self.requires:
+            missing = [r.name for r in runs if not r.sensors_with_role("base")]
+            if missing:
+                return "run %s has no temperature sensor with role 'base'" % ", ".join(missing)
         return None
 
 
@@ -80,6 +83,8 @@ def _ambient_columns(drive):
 
 
 def _reversal_columns(drive):
+    if drive.direction is None:  # a unidirectional run carries no reversal information
+        return np.zeros((drive.positions_mm.size, 1))
     return (0.5 * drive.direction.astype(float))[:, None]
 
 

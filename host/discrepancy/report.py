@@ -25,7 +25,8 @@ def final_model_document(result, runs):
     model = ScrewModel(segments=20, dt_s=20.0, ambient="ambient_expansion" in result.effects, effects=effects, geometric_degree=3)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        model.fit(runs)
+        # host/screw refuses runs without motion (nothing drives E_m); they carry no screw information
+        model.fit([r for r in runs if r.motion is not None and len(r.motion)])
     doc = model.to_document()
     doc.setdefault("training", {})
     doc["training"]["discrepancy"] = {

@@ -128,11 +128,9 @@ class ScrewFamily:
         return self._drives[key][1]
 
     def applicable(self, runs, name):
-        eff = self.catalog[name]
-        for r in runs:
-            why = eff.applicable(r)
-            if why:
-                return why
+        why = self.catalog[name].applicable(runs)
+        if why:
+            return why
         if name == "speed_dependent_heat":
             feeds = set()
             for r in runs:

@@ -128,7 +128,7 @@ def test_clear_errors(tmp_path, capsys):
     folder = write_run(run, str(tmp_path / "r"))
     os.remove(os.path.join(folder, "motion.csv"))
     assert main(["discrepancy", folder, "--json", str(tmp_path / "o.json"), "--report", str(tmp_path / "rep")]) == 2
-    assert "no motion.csv" in capsys.readouterr().err
+    assert "none of the runs has a motion.csv" in capsys.readouterr().err
     assert main(["discrepancy", str(tmp_path / "nope"), "--json", str(tmp_path / "o.json"), "--report", str(tmp_path / "rep")]) == 2
     assert "not a folder" in capsys.readouterr().err
     folder2 = write_run(run, str(tmp_path / "r2"))
