@@ -18,7 +18,42 @@ def add_arguments(p):
     p.add_argument("--repeats", type=int, default=5, help="robustness: disturbance realisations averaged per test run (default 5)")
     p.add_argument("--reference", choices=("run_start", "fixed"), default="run_start",
                    help="temperature-rise reference when predicting a run: its own first sample (default, the literature's ΔT) or the training runs' mean start (as exported)")
+    p.add_argument("--option", action="append", default=[], metavar="METHOD.KEY=VALUE",
+                   help="method setting, e.g. pcr.variance_threshold=0.9, stepwise.f_enter=50, cv-subset.max_sensors=3, hclust-ga.seed=2 (repeatable)")
     p.add_argument("--no-intercept", action="store_true", help="fit without intercept")
+
+
+def _method_options(items, methods):
+    """--option METHOD.KEY=VALUE list -> (estimator options, selector parameters), values parsed as JSON when possible."""
+    import json
+
+    from host.cli import UserError
+    from host.empirical.compare import METHODS, SELECTORS
+
+    options, selector = {}, {}
+    for item in items:
+        lhs, sep, value = item.partition("=")
+        method, dot, key = lhs.strip().partition(".")
+        if not sep or not dot or not key:
+            raise UserError("--option %r: expected METHOD.KEY=VALUE, e.g. pcr.variance_threshold=0.9" % item)
+        if method not in METHODS:
+            raise UserError("--option %r: unknown method %r (known: %s)" % (item, method, ", ".join(METHODS)))
+        if method == "mlr":
+            raise UserError("--option %r: mlr has no settings" % item)
+        if method not in SELECTORS:
+            import inspect
+
+            from host.empirical.regression import ESTIMATORS
+
+            known = [k for k in inspect.signature(ESTIMATORS[method].__init__).parameters if k not in ("self", "fit_intercept")]
+            if key not in known:
+                raise UserError("--option %r: %s has no setting %r (settings: %s)" % (item, method, key, ", ".join(known)))
+        try:
+            v = json.loads(value)
+        except ValueError:
+            v = value.strip()
+        (selector if method in SELECTORS else options).setdefault(method, {})[key] = v
+    return options, selector
 
 
 def run(args):
@@ -37,6 +72,7 @@ def run(args):
         runs = load_runs(args.runs)
     except RunFormatError as exc:
         raise UserError(str(exc))
+    options, selector_params = _method_options(args.option, methods)
     target = "direct" if args.direct else "slope"
     sensors = [s.strip() for s in args.sensors.split(",") if s.strip()] if args.sensors else None
     try:
@@ -55,7 +91,8 @@ def run(args):
             cases = cases_runs(runs, idx)
         results = []
         for case in cases:
-            results += run_case(case, methods, target, args.channel, sensors, not args.no_intercept,
+            results += run_case(case, methods, target, args.channel, sensors, not args.no_intercept, options=options,
+                                selector_params=selector_params,
                                 robustness={"noise_C": args.noise_C, "offset_C": args.offset_C, "repeats": args.repeats}, keep_models=bool(args.plots), reference=args.reference)
     except EmpiricalDataError as exc:
         raise UserError(str(exc))

@@ -63,20 +63,20 @@ def check_xy(X, y, names=None, n_params=None, what="regression"):
 
 
 def _collinear_groups(A, names, has_intercept):
-    """Names of the columns of A that are linear combinations of earlier ones."""
+    """Names of the columns of A that are (numerically) linear combinations of earlier ones.
+
+    |R_jj| of the QR decomposition is the norm of column j's residual on the
+    columns before it; compared with the column's own (centred) norm.
+    """
+    R = np.linalg.qr(A, mode="r")
+    d2 = np.diag(R) ** 2
     dep = []
     for j in range(A.shape[1]):
         if has_intercept and j == 0:
             continue
-        prev = A[:, :j]
         col = A[:, j]
-        if prev.shape[1]:
-            coef, *_ = np.linalg.lstsq(prev, col, rcond=None)
-            r = col - prev @ coef
-        else:
-            r = col
         ref = col - col.mean() if has_intercept else col
-        if np.dot(r, r) <= _COLLINEAR_TOL * max(np.dot(ref, ref), 1e-300):
+        if d2[j] <= _COLLINEAR_TOL * max(float(ref @ ref), 1e-300):
             dep.append(names[j - int(has_intercept)])
     return dep
 
@@ -97,8 +97,9 @@ def ols_statistics(A, y, beta, has_intercept):
     if tss == 0.0:
         raise EmpiricalDataError("regression: the target is constant (%g) over all %d samples; nothing to model" % (y[0], n))
     sigma2 = rss / df_resid
-    # (A'A)^-1 from the SVD: same value as the explicit inverse, better conditioned
-    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    # (A'A)^-1 from the SVD of R (A = QR, same singular values and V as A): the
+    # explicit inverse's value, better conditioned, and cheap for tall A
+    _, s, Vt = np.linalg.svd(np.linalg.qr(A, mode="r"))
     xtx_inv = (Vt.T / s**2) @ Vt
     cov = sigma2 * xtx_inv
     bse = np.sqrt(np.clip(np.diag(cov), 0.0, None))

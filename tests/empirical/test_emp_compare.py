@@ -124,3 +124,18 @@ def test_compare_cli_split_of_one_run(tmp_path, make_direct):
     res = {r["method"]: r for r in doc["results"]}
     assert list(res["mlr"]["tests"]) == ["held-out (t >= 6.10 h)"]
     assert res["stepwise"]["sensors"] == ["t1", "t2"]
+
+
+def test_compare_cli_method_options(tmp_path, three_runs, capsys):
+    from host.cli import main
+    from host.runs import write_run
+
+    folders = [write_run(r, str(tmp_path / r.name)) for r in three_runs]
+    out = str(tmp_path / "o.json")
+    assert main(["compare"] + folders + ["--json", out, "--methods", "pcr,cv-subset", "--repeats", "1",
+                                         "--option", "pcr.n_components=1", "--option", "cv-subset.max_sensors=1"]) == 0
+    res = {r["method"]: r for r in json.load(open(out))["results"]}
+    assert res["pcr"]["fit"]["n_components"] == 1 and res["cv-subset"]["n_sensors"] == 1
+    assert main(["compare"] + folders + ["--json", out, "--option", "pcr.bogus=1"]) == 2
+    assert "no setting 'bogus'" in capsys.readouterr().err
+    assert main(["compare"] + folders + ["--json", out, "--option", "nothing"]) == 2
