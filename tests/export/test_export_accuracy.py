@@ -1,0 +1,236 @@
+"""The firmware's own integer evaluation against the float model, within the exporter's certificate.
+
+Hypothesis draws models in realistic coefficient ranges and inputs inside (and
+beyond) the envelope; the evaluator runs in checking mode, so every
+intermediate is also asserted against +-2**30, and the values it observed per
+slot must lie inside the exporter's certified intervals.
+"""
+import random
+
+import pytest
+from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import strategies as st
+
+from firmware.evaluate import Evaluator
+from firmware.table import parse_table
+from host.models import document_hash
+from models_export import export_model
+from models_export.reference import Reference
+from models_export.samples import screw_doc
+
+SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+
+
+def _finish(doc):
+    doc["provenance"] = {"sha256": document_hash(doc)}
+    return doc
+
+
+@st.composite
+def sensor_block(draw, n):
+    names = ["S%d" % i for i in range(n)]
+    env, ref = {}, {}
+    for s in names:
+        lo = draw(st.floats(-30.0, 30.0, allow_nan=False))
+        hi = lo + draw(st.floats(1.0, 100.0, allow_nan=False))
+        env[s] = [lo, hi]
+        ref[s] = draw(st.floats(lo, hi, allow_nan=False))
+    return names, env, ref
+
+
+@st.composite
+def poly_slope_docs(draw):
+    n = draw(st.integers(0, 11))
+    names, env, ref = draw(sensor_block(n))
+    stroke = draw(st.floats(50.0, 3000.0))
+    p0 = draw(st.sampled_from([0.0, -stroke / 2, 100.0]))
+    d = draw(st.integers(0, 5))
+    geo = [draw(st.floats(-20.0, 20.0))] + [draw(st.floats(-30.0, 30.0)) / stroke ** j for j in range(1, d + 1)]
+    coef = {s: draw(st.floats(-0.05, 0.05)) for s in names}
+    return _finish({
+        "format": "tcomp-model/1", "kind": "poly_slope", "axis": "X", "sensors": names, "reference_C": ref,
+        "geometric": {"degree": d, "coefficients_um": geo},
+        "thermal": {"intercept_um_per_mm": draw(st.floats(-0.01, 0.01)), "coefficients_um_per_mm_per_K": coef},
+        "envelope": {"temperature_C": env, "position_mm": [p0, p0 + stroke]},
+    })
+
+
+@st.composite
+def linear_direct_docs(draw):
+    n = draw(st.integers(0, 11))
+    names, env, ref = draw(sensor_block(n))
+    return _finish({
+        "format": "tcomp-model/1", "kind": "linear_direct", "axis": "Z", "sensors": names, "reference_C": ref,
+        "geometric": None,
+        "thermal": {"intercept_um": draw(st.floats(-50.0, 50.0)), "coefficients_um_per_K": {s: draw(st.floats(-5.0, 5.0)) for s in names}},
+        "envelope": {"temperature_C": env},
+    })
+
+
+def _temps(draw, t, margin=5000):
+    return [draw(st.integers(t.env_lo[i] - margin, t.env_hi[i] + margin)) for i in range(t.n_sensors)]
+
+
+def _check(ex, ev, ref, temps, pos):
+    r = ex.report
+    off = ev.offset_at(pos)
+    assert abs(off * 0.01 - ref.offset(temps, pos)) <= r["max_error_um"]
+    assert abs(ev.ref_offset() * 0.01 - ref.thermal(temps, ev.pos_ref)) <= r["ref_offset_max_error_um"]
+    assert abs(ev.slope() * 0.01 - ref.slope(temps)) <= r["slope_max_error_um_per_m"]
+    clamped = [i for i in range(len(temps)) if not ev.table.env_lo[i] <= temps[i] <= ev.table.env_hi[i]]
+    assert ev.flags & 0xFFFFFF == sum(1 << i for i in clamped)
+
+
+def _slots_inside(ex, ev):
+    seen = 0
+    for slot, (lo, hi) in ex.slots.items():
+        if ev.lo[slot] <= ev.hi[slot]:
+            seen += 1
+            assert lo <= ev.lo[slot] and ev.hi[slot] <= hi, "slot %d observed %s certified %s" % (slot, (ev.lo[slot], ev.hi[slot]), (lo, hi))
+    return seen
+
+
+@settings(max_examples=60 if not pytest.slow_mode else 600, **SETTINGS)
+@given(doc=poly_slope_docs(), data=st.data())
+def test_poly_slope_within_certificate(doc, data):
+    ex = export_model(doc)
+    assert ex.report["max_error_um"] < 0.05
+    t = parse_table(ex.table)
+    ev = Evaluator(t, check=True)
+    ref = Reference(doc, t)
+    for _ in range(20):
+        temps = _temps(data.draw, t)
+        pos = data.draw(st.integers(t.pos_lo - 10000, t.pos_hi + 10000))
+        for i, v in enumerate(temps):
+            ev.temps[i] = v
+        ev.update()
+        _check(ex, ev, ref, temps, pos)
+        assert bool(ev.flags & 0x1000000) == (not t.pos_lo <= pos <= t.pos_hi)
+    assert _slots_inside(ex, ev) > 5
+
+
+@settings(max_examples=60 if not pytest.slow_mode else 600, **SETTINGS)
+@given(doc=linear_direct_docs(), data=st.data())
+def test_linear_direct_within_certificate(doc, data):
+    ex = export_model(doc)
+    assert ex.report["max_error_um"] < 0.05
+    t = parse_table(ex.table)
+    ev = Evaluator(t, check=True)
+    ref = Reference(doc, t)
+    for _ in range(20):
+        temps = _temps(data.draw, t)
+        for i, v in enumerate(temps):
+            ev.temps[i] = v
+        ev.update()
+        _check(ex, ev, ref, temps, 0)
+        assert ev.slope() == 0
+    assert _slots_inside(ex, ev) >= 2
+
+
+def test_extreme_corners_poly_slope():
+    """Every corner of the envelope (where interval bounds are attained) stays within the certificate."""
+    import itertools
+
+    rng = random.Random(11)
+    from models_export.samples import poly_slope_doc
+
+    for seed in range(5):
+        doc = poly_slope_doc(random.Random(seed), n_sensors=4, degree=3)
+        ex = export_model(doc)
+        t = parse_table(ex.table)
+        ev = Evaluator(t, check=True)
+        ref = Reference(doc, t)
+        for corner in itertools.product(*[(t.env_lo[i], t.env_hi[i]) for i in range(t.n_sensors)]):
+            for i, v in enumerate(corner):
+                ev.temps[i] = v
+            ev.update()
+            for pos in (t.pos_lo, t.pos_hi, rng.randint(t.pos_lo, t.pos_hi)):
+                _check(ex, ev, ref, list(corner), pos)
+        _slots_inside(ex, ev)
+
+
+def _feed_travel(t, feed, lo, hi):
+    """Exact per-segment travel (um, float) of one step of the feed/range fallback."""
+    a, b = sorted((min(max(lo, t.pos_lo), t.pos_hi) - t.fixed_end, min(max(hi, t.pos_lo), t.pos_hi) - t.fixed_end))
+    a, b = max(a, 0), min(b, t.edges[-1])
+    total = min(abs(feed), t.fmax) * t.dt_ms / 60.0
+    out = [0.0] * t.M
+    if b <= a:
+        for i in range(t.M):
+            if t.edges[i] <= a < t.edges[i + 1] or (i == t.M - 1 and a == t.edges[-1]):
+                out[i] = total
+        return out
+    for i in range(t.M):
+        ov = min(b, t.edges[i + 1]) - max(a, t.edges[i])
+        if ov > 0:
+            out[i] = total * ov / (b - a)
+    return out
+
+
+@settings(max_examples=12 if not pytest.slow_mode else 120, phases=[Phase.explicit, Phase.reuse, Phase.generate], **SETTINGS)
+@given(seed=st.integers(0, 2 ** 31), data=st.data())
+def test_screw_reduced_within_certificate(seed, data):
+    rng = random.Random(seed)
+    doc = screw_doc(rng)
+    ex = export_model(doc)
+    r = ex.report
+    assert r["max_error_um"] < 0.1
+    t = parse_table(ex.table)
+    ev = Evaluator(t, check=True)
+    ref = Reference(doc, t)
+    x = data.draw(st.integers(t.pos_lo, t.pos_hi))
+    ev.advance_position(x)
+    steps = 150 if not pytest.slow_mode else 1500
+    feed_mode = False
+    for k in range(steps):
+        if rng.random() < 0.05:
+            feed_mode = not feed_mode
+            if feed_mode:
+                feed = rng.randint(0, t.fmax)
+                lo, hi = rng.randint(t.pos_lo, t.pos_hi), rng.randint(t.pos_lo, t.pos_hi)
+                ev.set_feed(feed, lo, hi)
+                travel = _feed_travel(t, feed, lo, hi)
+            else:
+                ev.clear_feed()
+        if feed_mode:
+            ev.step()
+            ref.step(travel)
+        else:
+            budget = t.umax  # the model's own bound: total travel per step <= feed_max * dt
+            for _ in range(rng.randint(0, 3)):
+                nx = min(max(x + rng.randint(-budget, budget), t.pos_lo), t.pos_hi)
+                if abs(nx - x) > budget:
+                    break
+                budget -= abs(nx - x)
+                ev.advance_position(nx)
+                x = nx
+            u = list(ev.u)
+            ev.step()
+            ref.step(u)
+        temps = [rng.randint(t.env_lo[i] - 2000, t.env_hi[i] + 2000) for i in range(t.n_sensors)]
+        for i, v in enumerate(temps):
+            ev.temps[i] = v
+        ev.update()
+        _check(ex, ev, ref, temps, data.draw(st.integers(t.pos_lo - 5000, t.pos_hi + 5000)) if k % 10 == 0 else rng.randint(t.pos_lo, t.pos_hi))
+        assert not ev.flags & 0x4000000  # the certified state bound is never hit by admissible motion
+    assert _slots_inside(ex, ev) > 20
+
+
+def test_screw_state_error_stays_within_bound_at_steady_state():
+    """Long constant reciprocation: the state error approaches its steady value and stays below the certified v."""
+    doc = screw_doc(random.Random(7), dt_s=1.0, feed_max_mm_min=12000.0)
+    ex = export_model(doc)
+    t = parse_table(ex.table)
+    ev = Evaluator(t)
+    ref = Reference(doc, t)
+    bound = ex.report["screw"]["state_error_bound_K"]
+    lo, hi = t.pos_lo, t.pos_hi
+    ev.set_feed(t.fmax, lo, hi)
+    travel = _feed_travel(t, t.fmax, lo, hi)
+    worst = 0.0
+    for k in range(3000 if not pytest.slow_mode else 30000):
+        ev.step()
+        ref.step(travel)
+        worst = max(worst, max(abs(a / (1 << t.ft) - b) for a, b in zip(ev.T, ref.T)))
+    assert worst <= bound
+    assert max(ref.T) > 0.5  # the axis really heated

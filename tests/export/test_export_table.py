@@ -1,0 +1,165 @@
+"""Table format: round trip, CRC-32 check values, and every corruption rejected with its reason."""
+import random
+import struct
+import zlib
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from firmware.crc32 import crc32, crc32_nibble
+from firmware.table import (
+    HEADER_SIZE, REASON_CRC, REASON_FIELD, REASON_KIND, REASON_LENGTH, REASON_MAGIC, REASON_SENSORS, REASON_TRUNCATED,
+    REASON_UNIT, REASON_VERSION, TableError, parse_table,
+)
+from models_export import export_model
+from models_export.samples import linear_direct_doc, poly_slope_doc, screw_doc
+from models_export.tableformat import payload_words
+
+
+@pytest.fixture(scope="module")
+def exports():
+    return {
+        "poly_slope": export_model(poly_slope_doc(random.Random(1), n_sensors=5, degree=3)),
+        "linear_direct": export_model(linear_direct_doc(random.Random(2), n_sensors=3)),
+        "screw_reduced": export_model(screw_doc(random.Random(3), segments=8)),
+    }
+
+
+def refresh_crc(buf):
+    buf = bytearray(buf)
+    struct.pack_into("<I", buf, len(buf) - 4, zlib.crc32(bytes(buf[:-4])))
+    return bytes(buf)
+
+
+def reason(buf, **kw):
+    with pytest.raises(TableError) as exc:
+        parse_table(buf, **kw)
+    return exc.value.reason
+
+
+def test_crc32_check_values():
+    assert crc32(b"123456789") == 0xCBF43926
+    assert crc32_nibble(b"123456789") == 0xCBF43926
+    assert crc32(b"") == 0 and crc32_nibble(b"") == 0
+
+
+@given(st.binary(max_size=300), st.integers(0, 2 ** 32 - 1))
+def test_crc32_fallback_equals_zlib(data, start):
+    assert crc32_nibble(data, start) == zlib.crc32(data, start)
+    assert crc32(data, start) == zlib.crc32(data, start)
+
+
+@pytest.mark.parametrize("kind", ["poly_slope", "linear_direct", "screw_reduced"])
+def test_round_trip(exports, kind):
+    ex = exports[kind]
+    t = parse_table(ex.table, expected_sensors=len(ex.fields["sensors"]))
+    f = ex.fields
+    assert t.kind == kind and t.version == 1 and t.unit_code == 1
+    assert t.axis == f["axis"] and t.sensors == f["sensors"] and t.provenance == f["provenance"]
+    assert (t.env_lo, t.env_hi, t.ref) == (f["env_lo"], f["env_hi"], f["ref"])
+    for name, value in payload_words(f):
+        base, _, idx = name.partition("[")
+        got = getattr(t, base)
+        if idx:
+            got = got[int(idx[:-1])]
+        assert got == value, name
+    assert t.crc == zlib.crc32(ex.table[:-4])
+    assert ex.report["crc32"] == "%08x" % t.crc
+
+
+@pytest.mark.parametrize("kind", ["poly_slope", "linear_direct", "screw_reduced"])
+def test_every_bit_flip_is_rejected(exports, kind):
+    buf = exports[kind].table
+    seen = set()
+    for i in range(len(buf)):
+        for bit in range(8):
+            bad = bytearray(buf)
+            bad[i] ^= 1 << bit
+            r = reason(bytes(bad))
+            seen.add(r)
+            if i < 4:
+                assert r == REASON_MAGIC
+            elif i == 4:
+                assert r == REASON_VERSION
+            elif i == 5:
+                assert r in (REASON_KIND, REASON_CRC)
+            elif 8 <= i < 12:
+                assert r in (REASON_TRUNCATED, REASON_LENGTH)
+            else:
+                assert r == REASON_CRC, (i, bit, r)
+    assert {REASON_MAGIC, REASON_VERSION, REASON_CRC, REASON_TRUNCATED, REASON_LENGTH} <= seen
+
+
+@pytest.mark.parametrize("kind", ["poly_slope", "screw_reduced"])
+def test_every_truncation_and_extension_is_rejected(exports, kind):
+    buf = exports[kind].table
+    for n in range(len(buf)):
+        assert reason(buf[:n]) == REASON_TRUNCATED
+    assert reason(buf + b"\x00") == REASON_LENGTH
+    assert reason(refresh_crc(buf + b"\x00\x00\x00\x00")) == REASON_LENGTH
+
+
+def test_specific_reasons(exports):
+    buf = exports["poly_slope"].table
+    n = len(exports["poly_slope"].fields["sensors"])
+    v2 = bytearray(buf)
+    v2[4] = 2
+    assert reason(bytes(v2)) == REASON_VERSION
+    assert reason(refresh_crc(v2)) == REASON_VERSION
+    k = bytearray(buf)
+    k[5] = 9
+    assert reason(refresh_crc(k)) == REASON_KIND
+    bad_crc = buf[:-4] + struct.pack("<I", (zlib.crc32(buf[:-4]) + 1) & 0xFFFFFFFF)
+    assert reason(bad_crc) == REASON_CRC
+    assert reason(buf, expected_sensors=n + 1) == REASON_SENSORS
+    with pytest.raises(TableError, match="table has %d sensors, board has %d" % (n, n - 1)):
+        parse_table(buf, expected_sensors=n - 1)
+    ns = bytearray(buf)
+    ns[6] = n + 1  # header sensor count disagrees with the sizes
+    with pytest.raises(TableError, match="sensors") as exc:
+        parse_table(refresh_crc(ns))
+    assert exc.value.reason == REASON_LENGTH
+    ns[6] = 200
+    assert reason(refresh_crc(ns)) == REASON_SENSORS
+    u = bytearray(buf)
+    u[7] = 2
+    assert reason(refresh_crc(u)) == REASON_UNIT
+    r = bytearray(buf)
+    r[60] = 1
+    assert reason(refresh_crc(r)) == REASON_FIELD
+    nm = bytearray(buf)
+    nm[HEADER_SIZE + 15] = ord("x")  # first sensor name: garbage after the NUL
+    with pytest.raises(TableError, match="NUL-padded"):
+        parse_table(refresh_crc(nm))
+    assert reason(b"XXXX" + buf[4:]) == REASON_MAGIC
+    assert reason(b"") == REASON_TRUNCATED
+
+
+def test_field_range_checks_name_the_field(exports):
+    ex = exports["poly_slope"]
+    f = dict(ex.fields)
+    from models_export.tableformat import pack
+
+    f["Lt"] = 0
+    with pytest.raises(TableError, match="Lt=0") as exc:
+        parse_table(pack(f))
+    assert exc.value.reason == REASON_FIELD
+    f = dict(ex.fields, pos_ref=ex.fields["pos_hi"] + 1)
+    with pytest.raises(TableError, match="position envelope"):
+        parse_table(pack(f))
+    g = dict(exports["screw_reduced"].fields)
+    g["edges"] = list(g["edges"])
+    g["edges"][3] = g["edges"][2]
+    with pytest.raises(TableError, match="edges not ascending at 3"):
+        parse_table(pack(g))
+
+
+def test_table_is_data_not_code(exports):
+    """The loader never evaluates table content: a payload full of Python source is just bytes with a bad CRC."""
+    buf = bytearray(exports["linear_direct"].table)
+    src = b"__import__('os').system('false')"
+    buf[HEADER_SIZE:HEADER_SIZE + len(src)] = src
+    assert reason(bytes(buf)) == REASON_CRC
+    t = parse_table(refresh_crc(buf))  # with a valid CRC it is parsed as what it is: sensor names
+    assert t.sensors[:2] == [src[:16].decode(), src[16:32].decode()]
