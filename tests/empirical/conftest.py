@@ -96,3 +96,9 @@ def make_slope():
 def make_direct():
     """Factory: make_direct(**kw) -> synthetic multi-channel fixed-point run (see make_direct_run)."""
     return make_direct_run
+
+
+@pytest.fixture(scope="module")
+def bidirectional_run():
+    """One bidirectional slope run shared by a module (hypothesis tests cannot use function-scoped fixtures)."""
+    return make_slope_run(bidirectional=True)

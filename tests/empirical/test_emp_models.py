@@ -209,3 +209,28 @@ def test_fit_cli_options_reference_and_window(tmp_path, make_direct):
     t1 = run.temperatures.values[:121, 0]
     assert lo == pytest.approx(t1.min() - 1) and hi == pytest.approx(t1[:120].max() + 1, abs=0.2)
     assert main(["fit", "--model", "mlr", folder, "--out", out, "--option", "bogus=1"]) == 2
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=20, deadline=None)
+@given(g=st.lists(st.floats(-5, 5), min_size=1, max_size=4), shift=st.floats(-30, 30))
+def test_slope_targets_ignore_the_geometric_error_and_sensor_offsets(bidirectional_run, g, shift):
+    """Any fixed geometric polynomial cancels out of k_i − k_0; a constant on a sensor cancels out of rises."""
+    import copy
+
+    from host.runs import Errors
+
+    run = bidirectional_run
+    base = training_arrays([run])[0]
+    other = copy.copy(run)
+    e = run.errors
+    coef = np.asarray(g) * np.array([1, 1e-2, 1e-5, 1e-8])[: len(g)]
+    other.errors = Errors(e.time_s, e.position_mm, e.error_um + np.polynomial.polynomial.polyval(e.position_mm, coef), e.direction, e.channel)
+    other.temperatures = copy.copy(run.temperatures)
+    other.temperatures.values = run.temperatures.values + np.array([shift, 0, 0, 0])
+    moved = training_arrays([other])[0]
+    np.testing.assert_allclose(moved.y, base.y, atol=1e-9)
+    np.testing.assert_allclose(moved.X, base.X, atol=1e-9)
