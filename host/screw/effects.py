@@ -13,6 +13,8 @@ An effect is an object with
     ``heat_scale(ctx, p)``        -> (n_steps,) factor on the friction heat;
     ``convection_mult(ctx, p)``   -> (n_steps,) or (n_steps, M) factor on h·S;
     ``error_um(ctx, p)``          -> (n_rows,) extra error at the run's error rows;
+- optional ``check(contexts)``: raise ValueError when the runs cannot show the
+  effect at all (e.g. reversal error without bidirectional sweeps);
 - ``to_document()`` -> dict and a ``from_document(d)`` classmethod for settings
   that are not parameters (reference speeds, sensor names).
 
@@ -113,6 +115,11 @@ class ReversalError(Effect):
     def parameters(self):
         return [ParamSpec("b_um", 0.0, -100.0, 100.0, "um", positive=False)]
 
+    def check(self, contexts):
+        if not any(c.direction is not None and np.any(c.direction > 0) and np.any(c.direction < 0) for c in contexts):
+            raise ValueError("reversal_error needs bidirectional sweeps (errors.csv 'direction' column with +1 and -1); "
+                             "none of %s has them" % ", ".join(c.run_name for c in contexts))
+
     def error_um(self, ctx, p):
         if ctx.direction is None:
             return np.zeros(ctx.n_rows)
@@ -120,7 +127,11 @@ class ReversalError(Effect):
 
 
 class AmbientExpansion(Effect):
-    """Expansion with the air temperature, separate from the base term: k·(T_amb − T_amb0)·P."""
+    """Expansion with the machine's surroundings as its own term: k·(T_s − T_s,start)·P.
+
+    T_s is ``sensor``, by default the base sensor (as in the twin's effect of the same
+    name), else the first air sensor.  It duplicates the model's E_e term, so use it
+    with ``ScrewModel(ambient=False)`` (a base model without E_e + this effect)."""
 
     name = "ambient_expansion"
 
@@ -131,9 +142,9 @@ class AmbientExpansion(Effect):
         return [ParamSpec("um_per_m_K", 0.0, -50.0, 50.0, "um/(m K)", positive=False)]
 
     def error_um(self, ctx, p):
-        name = self.sensor or ctx.ambient_sensor
+        name = self.sensor or ctx.base_sensor or ctx.ambient_sensor
         if name is None:
-            raise ValueError("ambient_expansion: run %s has no sensor with role 'ambient'" % ctx.run_name)
+            raise ValueError("ambient_expansion: run %s has no sensor with role 'base' or 'ambient'" % ctx.run_name)
         rise = ctx.sensor_rise_at_rows(name)
         return 1e-3 * p["um_per_m_K"] * rise * ctx.positions_mm
 

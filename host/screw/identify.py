@@ -60,15 +60,19 @@ def fit_parameters(residual, specs, start=None, max_nfev=200, flat_ratio=1e-4, p
             comp = np.abs(Vt[k])
             names = [specs[j].name for j in np.argsort(-comp) if comp[j] > 0.2 * comp.max()]
             flat.append({"parameters": names, "singular_ratio": float(ratio[k])})
-            msgs.append("flat direction (singular value ratio %.2g): %s cannot be told apart from the data; fix all but one of them "
-                        "(--option free=...) or add runs with other moving states" % (ratio[k], " / ".join(names)))
+            if len(names) == 1:
+                msgs.append("flat direction (singular value ratio %.2g): %s has no visible effect on these data; fix it "
+                            "(--option free=...) or add runs that excite it" % (ratio[k], names[0]))
+            else:
+                msgs.append("flat direction (singular value ratio %.2g): %s cannot be told apart from the data; fix all but one of them "
+                            "(--option free=...) or add runs with other moving states" % (ratio[k], " / ".join(names)))
     for j, s in enumerate(specs):
         if s.positive and rel[j] > poor_rel_std:
             poor.append(s.name)
             msgs.append("parameter %s is poorly identified (relative standard error %.0f %%)" % (s.name, 100 * rel[j]))
         at_bound = np.isclose(sol.x[j], lo[j], rtol=0, atol=1e-6 * max(1.0, abs(lo[j]))) or np.isclose(sol.x[j], hi[j], rtol=0, atol=1e-6 * max(1.0, abs(hi[j])))
         if at_bound:
-            msgs.append("parameter %s ended at its bound (%g, bounds %g..%g): the data push it outside the physical range" % (s.name, values[j], s.lo, s.hi))
+            msgs.append("parameter %s ended at its bound (%g, bounds %g..%g): the best fit lies at or beyond it" % (s.name, values[j], s.lo, s.hi))
     for m in msgs:
         warnings.warn(m, IdentifiabilityWarning, stacklevel=2)
     return {

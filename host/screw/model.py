@@ -233,6 +233,9 @@ class ScrewModel:
         fixed = {s.name: s.start for s in specs_all if s.name not in free}
         specs = [s for s in specs_all if s.name in free]
         ctxs = [self._context(r, self._rows(r)) for r in runs]
+        for e in self.effects:
+            if hasattr(e, "check"):
+                e.check(ctxs)
         y = np.concatenate([c.measured_um for c in ctxs])
         if not np.all(np.isfinite(y)):
             raise ValueError("errors.csv contains non-finite values")

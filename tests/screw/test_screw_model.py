@@ -180,3 +180,13 @@ def test_effects_plug_in_parameters_and_hooks(synth_run):
     tail = m.simulate_context(ctx)[-1]
     base_tail = base.simulate_context(base._context(run))[-1]
     assert tail[-1] > base_tail[-1] + 1.0
+
+
+def test_effect_checks_and_ambient_expansion_equals_the_base_term():
+    run = synth.make_run(heat_s=3600.0, cool_s=1800.0, sweep_every_s=600.0)
+    with pytest.raises(ValueError, match="reversal_error needs bidirectional sweeps"):
+        ScrewModel(free="q", effects=[ReversalError()]).fit([run])
+    from host.screw.effects import AmbientExpansion
+
+    m = ScrewModel(free="q,h", geometric_degree=2, ambient=False, effects=[AmbientExpansion()]).fit([run])
+    assert m.values_["ambient_expansion.um_per_m_K"] == pytest.approx(1e6 * synth.TRUE.alpha_per_K, rel=0.02)
