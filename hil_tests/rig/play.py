@@ -1,0 +1,107 @@
+"""Play a run folder into the rig: temperatures ramp sample to sample, motion is reported, and at
+every row of errors.csv the firmware is asked for the offset at that time and position (Q).
+
+Simulated time = run time + ``warmup_ms`` (the firmware boots and its
+limiter settles on the run's first temperatures before t = 0).
+"""
+import math
+
+from hil_tests.rig.frames import FALLBACK, HELD, RECOVERING
+
+
+def sensor_rows(run, sensors):
+    t = run.temperatures
+    cols = [t.column(s) for s in sensors]
+    for i in range(len(t.time_s)):
+        yield float(t.time_s[i]), {s: float(c[i]) for s, c in zip(sensors, cols)}
+
+
+def motion_events(run):
+    """(time_s, feed_mm_min, lo_mm, hi_mm) at move starts and (time_s, 0, 0, 0) at move ends."""
+    out = []
+    m = run.motion
+    if m is None:
+        return out
+    for i in range(len(m)):
+        lo, hi = sorted((float(m.from_mm[i]), float(m.to_mm[i])))
+        out.append((float(m.t_start_s[i]), float(m.feed_mm_min[i]), lo, hi))
+        out.append((float(m.t_end_s[i]), 0.0, 0.0, 0.0))
+    out.sort(key=lambda e: e[0])
+    return out
+
+
+def play(rig, run, sensors, warmup_ms=60000, motion=True, on_answer=None, faults=None):
+    """Returns a list of answers (dict per errors.csv row, in file order)."""
+    rows = list(sensor_rows(run, sensors))
+    t0_ms = warmup_ms
+    first = rows[0][1]
+    rig.jump(first)
+    rig.run(t0_ms)
+    events = []
+    for t, temps in rows:
+        events.append((t, 1, temps))
+    if motion:
+        for t, f, lo, hi in motion_events(run):
+            events.append((t, 0, (f, lo, hi)))
+    e = run.errors
+    for i in range(len(e)):
+        events.append((float(e.time_s[i]), 2, i))
+    for spec in faults or []:
+        events.append((spec[0], 3, spec[1]))
+    events.sort(key=lambda ev: (ev[0], ev[1]))
+    answers = [None] * len(e)
+    pending_temps = first
+    for t, kind, data in events:
+        target = t0_ms + int(round(t * 1000))
+        if target > rig.t_ms:
+            rig.run(target, temps=pending_temps if kind == 1 else None)
+        if kind == 1:
+            pending_temps = data
+            continue
+        if kind == 0:
+            f, lo, hi = data
+            rig.send("M", int(round(f)), int(round(lo * 1000)), int(round(hi * 1000)))
+        elif kind == 3:
+            data(rig)
+        else:
+            pos_um = int(round(float(e.position_mm[data]) * 1000))
+            q = rig.request("Q", pos_um, kinds=("Q",))
+            a = {"time_s": float(e.time_s[data]), "position_mm": float(e.position_mm[data]),
+                 "offset_um": q.total_um, "status": "%08X" % q.status, "held": bool(q.status & HELD),
+                 "fallback": bool(q.status & (FALLBACK | RECOVERING))}
+            answers[data] = a
+            if on_answer is not None:
+                on_answer(a)
+    return answers
+
+
+def rtd_bound_K(run, sensors, horizon_s=0.3):
+    """Worst temperature error of the measurement chain per sensor, in K.
+
+    MAX31865 half LSB with R_REF = 430 ohm at the Pt100's smallest slope in
+    range (0.379 ohm/K at 80 degC): 0.0173 K; the firmware's integer inverse:
+    < 0.002 K; a conversion up to ``horizon_s`` older than the query times
+    the run's fastest temperature rate. The ADS122C04's LSB is far smaller.
+    """
+    t = run.temperatures
+    out = {}
+    for s in sensors:
+        c = t.column(s)
+        rate = 0.0
+        for i in range(1, len(c)):
+            dt = float(t.time_s[i] - t.time_s[i - 1])
+            if dt > 0:
+                rate = max(rate, abs(float(c[i] - c[i - 1])) / dt)
+        out[s] = 0.0173 + 0.002 + rate * horizon_s
+    return out
+
+
+def poly_slope_bound_um(doc, run, sensors, pos_mm):
+    """RTD chain bound propagated through a poly_slope model at position ``pos_mm``."""
+    coef = doc["thermal"]["coefficients_um_per_mm_per_K"]
+    dT = rtd_bound_K(run, sensors)
+    return sum(abs(coef[s]) * dT[s] for s in sensors) * abs(pos_mm)
+
+
+def finite(x):
+    return x is not None and math.isfinite(x)

@@ -1,0 +1,65 @@
+"""A real board on a serial port with the Rig's link-level interface (time is wall-clock time)."""
+import time
+
+import serial
+
+from hil_tests.rig.frames import command
+from hil_tests.rig.harness import RigError, SerialReader
+
+
+class RealDut:
+    real = True
+
+    def __init__(self, port, baud=115200):
+        self.ser = serial.Serial(port, baud, timeout=0)
+        self.reader = SerialReader(self.ser, True)
+        self.reader.start()
+        self.t0 = time.monotonic()
+
+    @property
+    def t_ms(self):
+        return int((time.monotonic() - self.t0) * 1000)
+
+    def advance(self, ms, **kw):
+        time.sleep(ms / 1000.0)
+        self.reader.quiet(0.02, 1.0)
+
+    def run(self, until_ms, **kw):
+        self.advance(max(0, until_ms - self.t_ms))
+
+    @property
+    def alive(self):
+        return True
+
+    @property
+    def frames(self):
+        return self.reader.frames
+
+    def take_frames(self):
+        with self.reader.lock:
+            out = list(self.reader.frames)
+            self.reader.frames.clear()
+        return out
+
+    def write(self, data):
+        self.ser.write(data)
+        self.ser.flush()
+
+    def send(self, *fields):
+        self.write(command(*fields))
+
+    def request(self, *fields, kinds=("Q", "A", "E", "H", "T"), step_ms=20, timeout=5.0):
+        n0 = len(self.reader.frames)
+        self.send(*fields)
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self.advance(step_ms)
+            for f in self.reader.frames[n0:]:
+                if f.kind in kinds:
+                    return f
+        raise RigError("no reply to %r from the board" % (fields,))
+
+    def close(self):
+        self.reader.stop = True
+        self.reader.join(timeout=1)
+        self.ser.close()

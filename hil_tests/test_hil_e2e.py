@@ -1,0 +1,105 @@
+"""Scenario 1: a twin run drives the simulated chips; the firmware's offsets match the host's float model.
+
+Tolerance per answer: the exporter's certified bound (integer table vs
+float model) + the RTD chain bound propagated through the model + half the
+0.1 um resolution of the frame.
+"""
+import os
+
+import numpy as np
+import pytest
+
+from hil_tests.conftest import SLOW
+from hil_tests.rig.boards import export, poly_slope_for_run, rig_config, screw_doc
+from hil_tests.rig.play import play, poly_slope_bound_um
+
+pytestmark = pytest.mark.rig
+
+
+def _subset(run, hours):
+    """The first ``hours`` of a run (CI uses a part of the 5 h twin run; TCOMP_SLOW=1 the whole)."""
+    from host.runs import Errors, Run, Temperatures
+    t = run.temperatures
+    keep = t.time_s <= hours * 3600
+    e = run.errors
+    ke = e.time_s <= hours * 3600
+    return Run(run.meta, Temperatures(t.time_s[keep], t.names, t.values[keep]),
+               Errors(e.time_s[ke], e.position_mm[ke], e.error_um[ke]), run.motion, run.spindle)
+
+
+def test_e2e_poly_slope_matches_host_model(make_rig, demo_run):
+    from host.models import load_model
+    run = demo_run if SLOW else _subset(demo_run, 1.0)
+    sensors = ["T1", "T2", "T4"]  # two on MAX31865 (SPI), one on an ADS122C04 (I2C)
+    doc = poly_slope_for_run(run, sensors)
+    ex = export(doc)
+    temps = {s: float(run.temperatures.column(s)[0]) for s in sensors}
+    rig = make_rig(rig_config(sensors), ex.table, temps=temps, noise_uohm=2000)
+    answers = play(rig, run, sensors, motion=False)
+    pred = np.asarray(load_model(doc).predict(run))
+    cert = ex.report["max_error_um"]
+    worst = 0.0
+    for a, p in zip(answers, pred):
+        bound = cert + poly_slope_bound_um(doc, run, sensors, a["position_mm"]) + 0.05 + 1e-9
+        err = abs(a["offset_um"] - p)
+        worst = max(worst, err / bound)
+        assert err <= bound, "t=%.0f s P=%.1f mm: firmware %.2f um, host %.4f um, bound %.4f um (status %s)" % (
+            a["time_s"], a["position_mm"], a["offset_um"], p, bound, a["status"])
+        assert not a["held"] and not a["fallback"]
+    assert len(answers) == len(run.errors) and worst <= 1.0
+    st = rig.stats()
+    for name, c in st["chips"].items():
+        assert c["violations"] == 0, c["violation_text"]
+    assert not rig.reader.decoder.bad
+
+
+def test_e2e_screw_reduced_matches_reference(make_rig):
+    """Axis motion reported by position frames; the float reduced recurrence on the same travel."""
+    from firmware.table import parse_table
+    from models_export.reference import Reference
+    doc = screw_doc(["T1"])
+    ex = export(doc)
+    table = parse_table(ex.table)
+    ref = Reference(doc, table)
+    rig = make_rig(rig_config(["T1"], n_ads=0), ex.table, temps={"T1": 22.0})
+    rig.run(500)
+    dt = table.dt_ms
+    # the firmware steps at table load + k*dt; positions are reported half a step later
+    lo, hi = table.pos_lo + 50000, table.pos_hi - 50000
+    pos = lo
+    x_prev = None
+    travel = [0.0] * table.M
+    n_steps = 600 if SLOW else 240
+    checked = 0
+    rig.send("P", pos)
+    import math
+    for k in range(n_steps):
+        rig.run(500 + k * dt + dt // 2)
+        x = min(max(pos, table.pos_lo), table.pos_hi) - table.fixed_end
+        if x_prev is not None and x != x_prev:
+            a, b = sorted((x_prev, x))
+            for i in range(table.M):
+                seg_lo, seg_hi = max(table.edges[i], a), min(table.edges[i + 1], b)
+                if seg_hi > seg_lo:
+                    travel[i] = min(travel[i] + seg_hi - seg_lo, table.umax)
+        x_prev = x
+        # the step at 500 + (k+1)*dt consumes the travel accumulated so far
+        rig.run(500 + (k + 1) * dt + dt // 4)
+        ref.step(travel)
+        travel = [0.0] * table.M
+        # a slow back-and-forth stroke: 100 mm per second for 8 s, then pause
+        phase = (k // 8) % 3
+        if phase < 2:
+            pos = pos + (100000 if phase == 0 else -100000)
+            pos = min(max(pos, lo), hi)
+            rig.send("P", pos)
+        if k % 10 == 9 and k > 60:
+            q = rig.request("Q", pos, kinds=("Q",), step_ms=5)
+            want = ref.offset([22000], pos)
+            bound = ex.report["max_error_um"] + abs(doc["thermal"]["reduced"]["alpha_um_per_mm_per_K"]) * 0.02 * \
+                (pos / 1000.0) + 0.05 + 1e-9
+            assert math.isfinite(want)
+            assert abs(q.total_um - want) <= bound, "step %d: firmware %.2f, reference %.4f, bound %.4f" % (
+                k, q.total_um, want, bound)
+            checked += 1
+    assert checked >= 10
