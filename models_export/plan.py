@@ -125,7 +125,7 @@ class Planner:
         fo = frac_bits(acc_bound, ACC, cap=24)
         if fo < 0:
             raise ExportError("%s: the offset range %.4g um over the envelope exceeds what the table can hold"
-                              % (_largest(m), float(acc_bound) / OU_PER_UM))
+                              % (_largest(m, PM, seg_bound), float(acc_bound) / OU_PER_UM))
         f["fo"] = fo
         f["rL"] = 0
         fS = frac_bits(m.s_bound(), ACC)
@@ -134,7 +134,7 @@ class Planner:
         Lw = narrow_width(PM)
         nw = top_limbs_needed(S_iv, Lw, PM)
         if nw is None:
-            raise ExportError("%s: slope x position cannot be split into small-int limbs" % _largest(m))
+            raise ExportError("%s: slope x position cannot be split into small-int limbs" % _largest(m, PM))
         shw = fS - fo
         f.update(Lw=Lw, nw=nw, shw=shw)
         th, k = rec.mul(SLOT_THMUL, (m.pos_lo, m.pos_hi), S_iv, Lw, nw, shw, "slope x position")
@@ -502,11 +502,14 @@ def _merge(dst, src):
     dst.peaks.pop("_merge", None)
 
 
-def _largest(m):
-    if not m.b:
-        return "thermal intercept"
-    i = max(range(len(m.b)), key=lambda i: abs(m.b[i]) * max(abs(m.d_lo[i]), abs(m.d_hi[i])))
-    return m.b_names[i]
+def _largest(m, PM=1, seg_bound=0):
+    """Name of the term with the largest contribution to the output range (for refusals)."""
+    cands = [(abs(m.b0) * PM, "thermal intercept")]
+    cands += [(abs(b) * max(abs(lo), abs(hi)) * PM, n) for b, lo, hi, n in zip(m.b, m.d_lo, m.d_hi, m.b_names)]
+    if m.kind != "linear_direct":
+        cands += [(abs(g) * F(PM) ** j, "geometric.coefficients_um[%d]" % j) for j, g in enumerate(m.g)]
+        cands.append((F(seg_bound), "thermal.reduced (segment elongation)"))
+    return max(cands, key=lambda c: c[0])[1]
 
 
 def _supersolution(A, rho):

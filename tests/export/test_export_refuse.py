@@ -1,0 +1,138 @@
+"""Models the exporter must refuse, each with a message naming the term, and the tcomp export verb."""
+import json
+import random
+import subprocess
+
+import pytest
+
+from firmware.table import parse_table
+from host.cli import main
+from models_export import ExportError, export_model
+from models_export.samples import linear_direct_doc, poly_slope_doc, screw_doc
+
+
+def test_huge_slope_coefficient_is_refused_naming_it():
+    doc = poly_slope_doc(random.Random(1), n_sensors=3)
+    doc["thermal"]["coefficients_um_per_mm_per_K"]["T1"] = 5.0e4
+    with pytest.raises(ExportError, match=r"thermal\.coefficients_um_per_mm_per_K\.T1"):
+        export_model(doc)
+
+
+def test_huge_direct_coefficient_is_refused_naming_it():
+    doc = linear_direct_doc(random.Random(1), n_sensors=4)
+    doc["thermal"]["coefficients_um_per_K"]["T2"] = -3.0e7
+    with pytest.raises(ExportError, match=r"thermal\.coefficients_um_per_K\.T2"):
+        export_model(doc)
+
+
+def test_geometric_polynomial_that_overflows_is_refused_naming_the_term():
+    doc = poly_slope_doc(random.Random(2), n_sensors=2, degree=3, stroke_mm=2000.0)
+    doc["geometric"]["coefficients_um"][3] = 1.0e3  # 1e3 um/mm^3 at 2000 mm: 8e12 um
+    with pytest.raises(ExportError, match=r"geometric\.coefficients_um\[3\]"):
+        export_model(doc)
+
+
+def test_non_contracting_screw_recurrence_is_refused():
+    doc = screw_doc(random.Random(3), segments=8)
+    A = doc["thermal"]["reduced"]["A"]
+    A[2][2] = 1.001  # a segment that heats itself: no bounded state error
+    with pytest.raises(ExportError, match=r"thermal\.reduced\.A"):
+        export_model(doc)
+
+
+def test_accuracy_limit_refusal_names_largest_term():
+    with pytest.raises(ExportError, match=r"not below 1e-06 um .* largest contribution: term "):
+        export_model(poly_slope_doc(random.Random(4)), limit_um=1e-6)
+
+
+@pytest.mark.parametrize("edit, match", [
+    (lambda d: d["envelope"]["temperature_C"].pop("T0"), r"envelope\.temperature_C has no range for sensor 'T0'"),
+    (lambda d: d["reference_C"].pop("T0"), r"reference_C has no entry for sensor 'T0'"),
+    (lambda d: d["envelope"].update(position_mm=[10.0, 5.0]), r"envelope\.position_mm: empty range"),
+    (lambda d: d["envelope"].update(position_mm=[0.0, 1e6]), r"envelope\.position_mm"),
+    (lambda d: d["thermal"]["coefficients_um_per_mm_per_K"].update(T0=float("nan")), r"coefficients_um_per_mm_per_K\.T0: expected a finite number"),
+    (lambda d: d["thermal"]["coefficients_um_per_mm_per_K"].pop("T0"), r"has no entry for sensor 'T0'"),
+    (lambda d: d.update(kind="spline"), r"model kind 'spline'"),
+])
+def test_bad_documents_name_the_field(edit, match):
+    doc = poly_slope_doc(random.Random(5), n_sensors=2)
+    edit(doc)
+    with pytest.raises(ExportError, match=match):
+        export_model(doc)
+
+
+def test_screw_without_reduced_block_is_refused():
+    doc = screw_doc(random.Random(6), segments=8)
+    del doc["thermal"]["reduced"]
+    with pytest.raises(ExportError, match="thermal.reduced"):
+        export_model(doc)
+
+
+def test_cli_writes_table_report_and_header(tmp_path, capsys):
+    doc = poly_slope_doc(random.Random(7), n_sensors=4)
+    model = tmp_path / "model.json"
+    model.write_text(json.dumps(doc))
+    out, rep, hdr = tmp_path / "t.bin", tmp_path / "r.json", tmp_path / "table.h"
+    assert main(["export", str(model), "--out", str(out), "--report", str(rep), "--c-header", str(hdr), "--ref-position-mm", "100"]) == 0
+    t = parse_table(out.read_bytes())
+    assert t.kind == "poly_slope" and t.pos_ref == 100000 and t.sensors == doc["sensors"]
+    r = json.loads(rep.read_text())
+    assert {"model_kind", "max_error_um", "min_headroom_bits", "terms", "envelope"} <= set(r)
+    assert r["model_kind"] == "poly_slope" and 0 < r["max_error_um"] < 0.05 and r["min_headroom_bits"] >= 1.0
+    assert all({"name", "scale", "headroom_bits", "max_error_um"} <= set(x) for x in r["terms"])
+    assert {x["name"] for x in r["terms"]} >= {"thermal.coefficients_um_per_mm_per_K.%s" % s for s in doc["sensors"]}
+    assert r["envelope"]["position_um"] == [0, int(doc["envelope"]["position_mm"][1] * 1000)]
+    assert r["provenance_verified"] is True and bytes.fromhex(r["provenance_sha256"]) == t.provenance
+    assert "#define TCOMP_KIND 1" in hdr.read_text() and "TCOMP_TABLE_H" in hdr.read_text()
+    assert "certified max |integer - model|" in capsys.readouterr().out
+
+
+def test_cli_errors_are_user_errors(tmp_path, capsys):
+    assert main(["export", str(tmp_path / "missing.json"), "--out", str(tmp_path / "t.bin")]) == 2
+    assert "file is missing" in capsys.readouterr().err
+    doc = poly_slope_doc(random.Random(8), n_sensors=2)
+    doc["thermal"]["coefficients_um_per_mm_per_K"]["T1"] = 1e5
+    model = tmp_path / "model.json"
+    model.write_text(json.dumps(doc))
+    assert main(["export", str(model), "--out", str(tmp_path / "t.bin")]) == 2
+    err = capsys.readouterr().err
+    assert "thermal.coefficients_um_per_mm_per_K.T1" in err and not (tmp_path / "t.bin").exists()
+
+
+def test_c_header_compiles_and_matches_firmware(tmp_path, runner):
+    """The C evaluation gives the firmware's integers (gcc, -fsanitize=undefined: no UB on the way)."""
+    import shutil
+
+    if not shutil.which("gcc"):
+        pytest.skip("gcc not installed")
+    rng = random.Random(10)
+    for make in (poly_slope_doc, linear_direct_doc, screw_doc):
+        ex = export_model(make(random.Random(11)))
+        t = parse_table(ex.table)
+        (tmp_path / "table.h").write_text(ex.c_header())
+        lines, ops = [], []
+        x = t.pos_lo
+        for k in range(60):
+            temps = [rng.randint(t.env_lo[i] - 2000, t.env_hi[i] + 2000) for i in range(t.n_sensors)]
+            ops.append(["t", temps])
+            lines.append("".join("e.temps[%d] = %d; " % (i, v) for i, v in enumerate(temps)) + "tcomp_update(&e);")
+            if t.kind == "screw_reduced":
+                if k == 30:
+                    ops.append(["f", t.fmax // 2, t.pos_lo, t.pos_hi])
+                    lines.append("tcomp_set_feed(&e, %d, %d, %d);" % (t.fmax // 2, t.pos_lo, t.pos_hi))
+                x = rng.randint(t.pos_lo, t.pos_hi)
+                ops += [["p", x], ["s"]]
+                lines.append("tcomp_advance_position(&e, %d); tcomp_step(&e);" % x)
+            p = rng.randint(t.pos_lo - 500, t.pos_hi + 500)
+            ops.append(["e", p])
+            lines.append('o = tcomp_offset_at(&e, %d); printf("%%ld %%ld %%ld %%lu\\n", (long)o, (long)tcomp_ref_offset(&e), '
+                         '(long)tcomp_slope(&e), (unsigned long)e.flags);' % p)
+        src = ('#include <stdio.h>\n#include "table.h"\nint main(void) {\n tcomp_eval_t e; int32_t o;\n tcomp_init(&e);\n '
+               + "\n ".join(lines) + "\n return 0;\n}\n")
+        (tmp_path / "main.c").write_text(src)
+        exe = tmp_path / "main"
+        subprocess.run(["gcc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-Wno-unused-function", "-O1", "-fsanitize=undefined",
+                        "-fno-sanitize-recover=all", "-o", str(exe), str(tmp_path / "main.c")], check=True, capture_output=True)
+        got = subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout.split("\n")[:-1]
+        want, _ = runner.run_case(ex.table, ops)
+        assert got == ["%d %d %d %d" % tuple(r) for r in want], t.kind
