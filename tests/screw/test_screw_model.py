@@ -188,5 +188,5 @@ def test_effect_checks_and_ambient_expansion_equals_the_base_term():
         ScrewModel(free="q", effects=[ReversalError()]).fit([run])
     from host.screw.effects import AmbientExpansion
 
-    m = ScrewModel(free="q,h", geometric_degree=2, ambient=False, effects=[AmbientExpansion()]).fit([run])
+    m = ScrewModel(free="q,h,lambda", geometric_degree=2, ambient=False, effects=[AmbientExpansion()]).fit([run])
     assert m.values_["ambient_expansion.um_per_m_K"] == pytest.approx(1e6 * synth.TRUE.alpha_per_K, rel=0.02)
