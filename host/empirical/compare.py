@@ -74,10 +74,19 @@ def case_split(run, split_s, target="direct", channel=None, sensors=None, test_w
         tests.append((label, run, w))
     ga_data, note = None, ""
     try:
-        cyc = [c for c in cycles(run) if c["t_start_s"] < split_s]
-        if len(cyc) >= 2:
-            ga_data = [training_arrays([run], target, channel, sensors, window=(c["t_start_s"] if k else None, min(c["t_end_s"], split_s)))[0]
-                       for k, c in enumerate(cyc)]
+        spans = []
+        for c in cycles(run):
+            if c["t_start_s"] >= split_s:
+                break
+            lo, hi = c["t_start_s"], min(c["t_end_s"], split_s)
+            # a cycle cut after less than a quarter of it joins the previous one
+            if spans and (hi - lo) < 0.25 * (c["t_end_s"] - c["t_start_s"]):
+                spans[-1] = (spans[-1][0], hi)
+            else:
+                spans.append((lo, hi))
+        if len(spans) >= 2:
+            ga_data = [training_arrays([run], target, channel, sensors, window=(lo if k else None, hi))[0] for k, (lo, hi) in enumerate(spans)]
+            cyc = spans
             note = "hclust-ga fitness: fit on training cycle 1, predict training cycles 2..%d (no held-out data seen)" % len(cyc)
     except EmpiricalDataError as exc:
         note = "hclust-ga not run: %s" % exc

@@ -68,6 +68,23 @@ def select_columns(arrays, sensors):
     return out
 
 
+def merge_small_groups(groups, fraction=0.25):
+    """Merge groups smaller than ``fraction`` of the largest into the group before them in time.
+
+    A training window that ends just after a cycle starts would otherwise make
+    a group of a few samples whose CV error counts as much as a whole cycle's.
+    """
+    groups = np.asarray(groups).copy()
+    labels, counts = np.unique(groups, return_counts=True)
+    small = set(labels[counts < fraction * counts.max()].tolist())
+    order = list(dict.fromkeys(groups.tolist()))  # labels in time order
+    for i, lab in enumerate(order):
+        if lab in small:
+            into = order[i - 1] if i > 0 else next((o for o in order if o not in small), lab)
+            groups[groups == lab] = into
+    return groups
+
+
 def cv_groups(runs, arrays, cv_blocks=None):
     """Cross-validation group of every stacked sample.
 
@@ -90,7 +107,7 @@ def cv_groups(runs, arrays, cv_blocks=None):
         edges = np.linspace(t.min(), t.max(), 4)[1:-1]
         return block_labels(t, edges)
     edges = [c["t_start_s"] for c in cycles(runs[0])[1:]]
-    g = block_labels(t, edges)
+    g = merge_small_groups(block_labels(t, edges))
     if np.unique(g).size < 2:
         raise EmpiricalDataError("cv-subset: the training span covers a single spindle cycle; give cv_blocks=N")
     return g

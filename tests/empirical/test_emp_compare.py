@@ -139,3 +139,19 @@ def test_compare_cli_method_options(tmp_path, three_runs, capsys):
     assert main(["compare"] + folders + ["--json", out, "--option", "pcr.bogus=1"]) == 2
     assert "no setting 'bogus'" in capsys.readouterr().err
     assert main(["compare"] + folders + ["--json", out, "--option", "nothing"]) == 2
+
+
+def test_split_just_after_a_cycle_start_does_not_make_a_tiny_group(make_direct):
+    from host.empirical.fitting import merge_small_groups
+
+    g = merge_small_groups(np.array([0] * 50 + [1] * 40 + [2] * 3))
+    assert g.tolist() == [0] * 50 + [1] * 43
+    assert merge_small_groups(np.array([0] * 2 + [1] * 40 + [2] * 40)).tolist() == [1] * 42 + [2] * 40
+    run = make_direct(spindle=True, noise_um=0.2)
+    exact = cycles(run)[3]["t_start_s"]
+    a = case_split(run, exact, "direct", "ch1")
+    b = case_split(run, exact + 120.0, "direct", "ch1")
+    assert len(a.ga_data) == len(b.ga_data) == 3
+    ra = {r["method"]: r for r in run_case(a, ["cv-subset"], "direct", "ch1", robustness={"repeats": 1})}
+    rb = {r["method"]: r for r in run_case(b, ["cv-subset"], "direct", "ch1", robustness={"repeats": 1})}
+    assert ra["cv-subset"]["sensors"] == rb["cv-subset"]["sensors"]
