@@ -77,6 +77,10 @@ class ADS122C04:
     continuous conversion.
     """
 
+    # transfer buffers shared by all instances (transfers never interleave)
+    _b1 = bytearray(1)
+    _b3 = bytearray(3)
+
     def __init__(self, i2c, address=0x40, rref_mohm=1620000, wires=3, idac_ua=250, filter_hz=50):
         if not 0x40 <= address <= 0x4F:
             raise ValueError("ADS122C04 address 0x%02x outside 0x40..0x4F" % address)
@@ -90,8 +94,6 @@ class ADS122C04:
             raise ValueError("ADS122C04 rref_mohm %r outside 100000..10000000" % (rref_mohm,))
         self._i2c = i2c
         self.address = address
-        self._b1 = bytearray(1)
-        self._b3 = bytearray(3)
         m = 2 if wires == 3 else 1
         gain = 1
         while gain < 128 and gain * 2 * _MAX_RATIO_R * 10 < 9 * m * rref_mohm:

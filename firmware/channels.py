@@ -143,12 +143,14 @@ class Channels:
     def _read(self, i, now, clock):
         """Raw read of channel i into ``reading``; returns fault bits, or -1 for no new data."""
         d = self.drivers[i]
-        if d is None or (self.fault[i] & (_F_CHIP | _F_BUS | _F_STALE | _F_RANGE)
-                         and clock.ticks_diff(now, self.reinit_t[i]) >= _REINIT_MS):
+        if ((d is None or self.fault[i] & (_F_CHIP | _F_BUS | _F_STALE | _F_RANGE))
+                and clock.ticks_diff(now, self.reinit_t[i]) >= _REINIT_MS):
             self.reinit_t[i] = now
             if not self._init_driver(i):
                 return _F_BUS
             d = self.drivers[i]
+        if d is None:
+            return _F_BUS
         try:
             if self.kind[i] == _DRV_MAX31865:
                 raw = d.read_rtd()

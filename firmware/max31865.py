@@ -73,6 +73,13 @@ class MAX31865:
     cycle.
     """
 
+    # transfer buffers shared by all instances: transfers never interleave
+    # (one thread, no interrupt handler touches a driver), and RAM is scarce
+    _tx = bytearray(3)
+    _rx = bytearray(3)
+    _t2 = bytearray(2)
+    _r2 = bytearray(2)
+
     def __init__(self, spi, cs, rref_mohm=430000, wires=3, filter_hz=50):
         if wires not in (2, 3, 4):
             raise ValueError("MAX31865 wires must be 2, 3 or 4, got %r" % (wires,))
@@ -82,10 +89,6 @@ class MAX31865:
             raise ValueError("MAX31865 rref_mohm %r outside 100000..10000000" % (rref_mohm,))
         self._spi = spi
         self._cs = cs
-        self._tx = bytearray(3)
-        self._rx = bytearray(3)
-        self._t2 = bytearray(2)
-        self._r2 = bytearray(2)
         self.rref_mohm = rref_mohm
         # R/R0*1e7 = code * rref_mohm * 100 / 2**15 (R0 = 100 ohm), split so
         # that no product reaches 2**30

@@ -142,3 +142,18 @@ def test_unknown_bus_is_valueerror(tmp_path):
     board.config["channels"][0]["bus"] = "spi9"
     with pytest.raises(ValueError, match="spi9"):
         App(board)
+
+
+def test_chip_missing_at_start_is_picked_up_when_it_appears(tmp_path):
+    from fwfakes import make_rig
+    from firmware.app import App
+    board = make_rig(2, 1, table_dir=str(tmp_path))
+    board.chips[2].present = False
+    app = App(board)
+    ch = app.channels
+    assert ch.drivers[2] is None
+    run_cycles(app, board, 5)
+    assert ch.fault[2] == chm._F_BUS and ch.good[0] and ch.good[1]
+    board.chips[2].present = True
+    run_cycles(app, board, 15)
+    assert ch.drivers[2] is not None and ch.good[2]
