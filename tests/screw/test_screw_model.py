@@ -190,3 +190,18 @@ def test_effect_checks_and_ambient_expansion_equals_the_base_term():
 
     m = ScrewModel(free="q,h,lambda", geometric_degree=2, ambient=False, effects=[AmbientExpansion()]).fit([run])
     assert m.values_["ambient_expansion.um_per_m_K"] == pytest.approx(1e6 * synth.TRUE.alpha_per_K, rel=0.02)
+
+
+def test_validation_script_writes_table_json_and_plot(tmp_path):
+    short = dict(heat_s=5400.0, cool_s=2700.0, sweep_every_s=450.0, noise_um=0.3)
+    fit = write_run(synth.make_run(8000, 210, 490, seed=1, **short), str(tmp_path / "fit"))
+    other = write_run(synth.make_run(12000, 0, 700, seed=2, **short), str(tmp_path / "other"))
+    from host.screw.validate import main
+
+    out = tmp_path / "val"
+    assert main([fit, other, "--out", str(out)]) == 0
+    md = (out / "validation.md").read_text()
+    assert "fit heating (fitted)" in md and "fit cool-down" in md and "| other |" in md
+    rep = json.loads((out / "validation.json").read_text())
+    assert {r["model"] for r in rep["rows"]} >= {"screw (base sensor + motion)", "MLR slope (nut+base)"}
+    assert (out / "validation.png").stat().st_size > 10000
