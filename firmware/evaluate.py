@@ -22,7 +22,7 @@ except ImportError:  # CPython
     def const(x):
         return x
 
-from firmware.table import KIND_LINEAR_DIRECT, KIND_SCREW_REDUCED
+from firmware.table import KIND_LINEAR_DIRECT, KIND_SCREW_REDUCED, REF_LATCHED
 
 MAXV = const(0x3FFFFFFF)  # |intermediate| must stay <= 2**30 - 1
 
@@ -81,6 +81,7 @@ class Evaluator:
         self.check = check
         n = table.n_sensors
         self.temps = [0] * n
+        self.ref = list(table.ref)
         for i in range(n):
             lo, hi = table.env_lo[i], table.env_hi[i]
             self.temps[i] = 0 if lo <= 0 <= hi else lo
@@ -157,6 +158,25 @@ class Evaluator:
     def set_temperature(self, i, milli_c):
         self.temps[i] = milli_c
 
+    def latch_references(self):
+        """Take the current ``temps`` (clamped to the envelope) as the reference temperatures.
+
+        For models fitted on rises from the run start (table.ref_mode == 1) the
+        controller latches the temperatures at a cold start; the exporter has
+        certified every reference inside the envelope. Raises ValueError for a
+        table certified only for its fixed references."""
+        t = self.table
+        if t.ref_mode != REF_LATCHED:
+            raise ValueError("table is certified for its fixed reference temperatures only")
+        for i in range(t.n_sensors):
+            v = self.temps[i]
+            if v < t.env_lo[i]:
+                v = t.env_lo[i]
+            elif v > t.env_hi[i]:
+                v = t.env_hi[i]
+            self.ref[i] = v
+        self.update()
+
     def update(self):
         """Recompute the temperature-dependent terms from ``temps``; flag clamped sensors."""
         t = self.table
@@ -164,7 +184,7 @@ class Evaluator:
         temps = self.temps
         lo = t.env_lo
         hi = t.env_hi
-        ref = t.ref
+        ref = self.ref
         b = t.b
         shb = t.shb
         Lt = t.Lt

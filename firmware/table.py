@@ -23,6 +23,8 @@ MAX_SENSORS = const(24)
 MAX_SEGMENTS = const(32)
 MAX_DEGREE = const(6)
 UNIT_CODE = const(1)  # offsets in 0.01 um, slopes in 0.01 um/m
+REF_FIXED = const(0)  # the model uses the table's reference temperatures
+REF_LATCHED = const(1)  # certified for any reference in the envelope (models fitted on rises from the run start)
 
 KIND_POLY_SLOPE = const(1)
 KIND_LINEAR_DIRECT = const(2)
@@ -54,7 +56,8 @@ class Table:
     positions in um; scales are fraction bits):
 
     kind (str), kind_code, version, axis (str), sensors (list of str, channel order),
-    n_sensors, env_lo/env_hi/ref (lists, milli-degC), pos_lo/pos_hi/pos_ref (um),
+    n_sensors, env_lo/env_hi/ref (lists, milli-degC), ref_mode (0: references fixed,
+    1: certified for references latched anywhere in the envelope), pos_lo/pos_hi/pos_ref (um),
     unit_code, provenance (32 bytes, the model document's sha256), crc,
     and the kind-specific coefficients documented in docs/table-format.md
     (fo, Lt, nt, S0, fS, b, shb, fb, ...).
@@ -128,7 +131,9 @@ def parse_table(buf, expected_sensors=None):
     if buf[7] != UNIT_CODE:
         raise TableError(REASON_UNIT, "unit code %d" % buf[7])
     nwords = struct.unpack_from("<I", buf, 52)[0]
-    for i in range(56, 64):
+    if buf[56] > 1:
+        raise TableError(REASON_FIELD, "reference mode %d" % buf[56])
+    for i in range(57, 64):
         if buf[i] != 0:
             raise TableError(REASON_FIELD, "reserved byte %d is not zero" % i)
     payload = HEADER_SIZE + ns * (NAME_SIZE + 12)
@@ -141,6 +146,7 @@ def parse_table(buf, expected_sensors=None):
     t.kind = KINDS[kind]
     t.n_sensors = ns
     t.unit_code = buf[7]
+    t.ref_mode = buf[56]
     t.provenance = bytes(buf[12:44])
     t.axis = _name(buf, 44, 8)
     t.crc = stored

@@ -214,6 +214,9 @@ class Model:
         tenv = env.get("temperature_C") or {}
         refs = doc.get("reference_C") or {}
         thermal = doc.get("thermal") or {}
+        # "run_start": the firmware may latch the references at a cold start (Evaluator.latch_references),
+        # so every integer reference inside the envelope is certified; "fixed": the document's reference_C.
+        self.ref_mode = 1 if thermal.get("reference") == "run_start" else 0
         self.env_lo, self.env_hi, self.ref, self.ref_frac = [], [], [], []
         for s in self.sensors:
             if s not in tenv:
@@ -227,8 +230,10 @@ class Model:
                 raise ExportError("envelope.temperature_C.%s: empty range %r" % (s, [lo, hi]))
             self.env_lo.append(lo_m)
             self.env_hi.append(hi_m)
-            self.ref.append(rnd(r))
-            self.ref_frac.append(r - rnd(r))  # folded into the intercept so d = t - ref stays an exact int
+            ri = min(max(rnd(r), lo_m), hi_m) if self.ref_mode else rnd(r)
+            self.ref.append(ri)
+            # fixed references: the fraction is folded into the intercept so d = t - ref stays an exact int
+            self.ref_frac.append(0 if self.ref_mode else r - ri)
         if self.kind == "linear_direct":
             self.pos_lo = self.pos_hi = self.pos_ref = 0
         else:
@@ -278,8 +283,12 @@ class Model:
                 self.ref_frac[i] = bref - rnd(bref)
         for i in range(len(self.sensors)):
             self.b0 -= self.b[i] * self.ref_frac[i]
-        self.d_lo = [lo - r for lo, r in zip(self.env_lo, self.ref)]
-        self.d_hi = [hi - r for hi, r in zip(self.env_hi, self.ref)]
+        if self.ref_mode:
+            self.d_lo = [lo - hi for lo, hi in zip(self.env_lo, self.env_hi)]
+            self.d_hi = [hi - lo for lo, hi in zip(self.env_lo, self.env_hi)]
+        else:
+            self.d_lo = [lo - r for lo, r in zip(self.env_lo, self.ref)]
+            self.d_hi = [hi - r for hi, r in zip(self.env_hi, self.ref)]
         geo = doc.get("geometric") if self.kind != "linear_direct" else None
         gc = (geo or {}).get("coefficients_um") or [0.0]
         self.g = [F(_num(c, "geometric.coefficients_um[%d]" % j)) * OU_PER_UM / F(1000) ** j for j, c in enumerate(gc)]

@@ -30,6 +30,7 @@ CODE = r"""
 
 typedef struct {
     int32_t temps[TCOMP_N_SENSORS_ALLOC]; /* milli-degC, channel order; write, then tcomp_update() */
+    int32_t ref[TCOMP_N_SENSORS_ALLOC]; /* reference temperatures (tcomp_latch_references when TCOMP_REF_MODE == 1) */
     int32_t S;
     uint32_t flags; /* bit i: sensor i clamped; TCOMP_CLAMP_* */
     int32_t pos_ref;
@@ -69,11 +70,24 @@ static void tcomp_update(tcomp_eval_t *e)
         int32_t v = e->temps[i];
         if (v < tcomp_env_lo[i]) { v = tcomp_env_lo[i]; fl |= 1u << i; }
         else if (v > tcomp_env_hi[i]) { v = tcomp_env_hi[i]; fl |= 1u << i; }
-        s += tcomp_mul(tcomp_b[i], v - tcomp_ref[i], TCOMP_LT, TCOMP_NT, tcomp_shb[i]);
+        s += tcomp_mul(tcomp_b[i], v - e->ref[i], TCOMP_LT, TCOMP_NT, tcomp_shb[i]);
     }
     e->S = s;
     e->flags = (e->flags & ~0xFFFFFFu) | fl;
 }
+
+#if TCOMP_REF_MODE == 1
+/* models fitted on rises from the run start: latch the current temperatures as references (cold start) */
+static void tcomp_latch_references(tcomp_eval_t *e)
+{
+    int i;
+    for (i = 0; i < TCOMP_N_SENSORS; i++) {
+        int32_t v = e->temps[i];
+        e->ref[i] = v < tcomp_env_lo[i] ? tcomp_env_lo[i] : (v > tcomp_env_hi[i] ? tcomp_env_hi[i] : v);
+    }
+    tcomp_update(e);
+}
+#endif
 
 static int32_t tcomp_clamp_pos(tcomp_eval_t *e, int32_t pos)
 {
@@ -249,8 +263,10 @@ static int32_t tcomp_slope(tcomp_eval_t *e)
 static void tcomp_init(tcomp_eval_t *e)
 {
     int i;
-    for (i = 0; i < TCOMP_N_SENSORS_ALLOC; i++)
+    for (i = 0; i < TCOMP_N_SENSORS_ALLOC; i++) {
         e->temps[i] = (i < TCOMP_N_SENSORS && tcomp_env_lo[i] <= 0 && 0 <= tcomp_env_hi[i]) ? 0 : tcomp_env_lo[i];
+        e->ref[i] = tcomp_ref[i];
+    }
     e->flags = 0;
     e->pos_ref = TCOMP_POS_REF;
 #if TCOMP_KIND == 3
@@ -291,6 +307,7 @@ def c_header(ex, guard="TCOMP_TABLE_H"):
     out.append("#ifndef %s\n#define %s\n#include <stdint.h>\n\n" % (guard, guard))
     out.append("#define TCOMP_KIND %d /* 1 poly_slope, 2 linear_direct, 3 screw_reduced */\n" % code)
     out.append("#define TCOMP_N_SENSORS %d\n#define TCOMP_N_SENSORS_ALLOC %d\n" % (len(f["sensors"]), max(1, len(f["sensors"]))))
+    out.append("#define TCOMP_REF_MODE %d /* 1: references may be latched (tcomp_latch_references) */\n" % f.get("ref_mode", 0))
     for g in groups:
         for k in SCALARS[g]:
             out.append("#define TCOMP_%s (%d)\n" % (k.upper(), f[k]))

@@ -45,7 +45,7 @@ def export_model(doc, ref_position_mm=None, limit_um=None):
         errs = planner.positional()
     f = planner.f
     prov, verified = _provenance(doc)
-    f.update(kind=model.kind, sensors=model.sensors, env_lo=model.env_lo, env_hi=model.env_hi, ref=model.ref,
+    f.update(kind=model.kind, sensors=model.sensors, env_lo=model.env_lo, env_hi=model.env_hi, ref=model.ref, ref_mode=model.ref_mode,
              pos_lo=model.pos_lo, pos_hi=model.pos_hi, pos_ref=model.pos_ref, provenance=prov,
              axis=str(doc.get("axis") or "?"))
     try:
@@ -69,6 +69,7 @@ def export_model(doc, ref_position_mm=None, limit_um=None):
     envelope = {
         "temperature_mC": {s: [lo, hi] for s, lo, hi in zip(model.sensors, model.env_lo, model.env_hi)},
         "reference_mC": dict(zip(model.sensors, model.ref)),
+        "reference_mode": "latched (any reference inside the envelope)" if model.ref_mode else "fixed",
     }
     if model.kind != "linear_direct":
         envelope["position_um"] = [model.pos_lo, model.pos_hi]

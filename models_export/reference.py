@@ -42,8 +42,14 @@ class Reference:
             self.fixed = float(red["fixed_end_mm"])
             self.alpha = float(red["alpha_um_per_mm_per_K"])
             self.T = [0.0] * len(self.B)
+        if getattr(table, "ref_mode", 0) == 1:
+            self.ref = [r / 1000.0 for r in table.ref]  # latched references: whole milli-degC, as the firmware holds them
         geo = doc.get("geometric") or {}
         self.g = [float(v) for v in (geo.get("coefficients_um") or [0.0])]
+
+    def latch(self, refs_mC):
+        """References latched by the firmware (Evaluator.ref), milli-degC."""
+        self.ref = [r / 1000.0 for r in refs_mC]
 
     def temps_C(self, temps_mC):
         t = self.t

@@ -70,7 +70,8 @@ def pack(f):
     out += prov
     out += _fixed(f["axis"], 8, "axis name")
     out += struct.pack("<I", len(words))
-    out += b"\x00" * 8
+    out += struct.pack("<B", f.get("ref_mode", 0))
+    out += b"\x00" * 7
     for name in sensors:
         out += _fixed(name, NAME_SIZE, "sensor name")
     for i in range(n):

@@ -7,6 +7,7 @@ A case is a table (hex) and a list of operations:
   ["f", mm_min, lo, hi]     set_feed
   ["c"]                     clear_feed
   ["r", um]                 set_reference
+  ["l"]                     latch_references (tables certified for latched references)
   ["e", um]                 record [offset_at(um), ref_offset(), slope(), flags]
 Usage on MicroPython: micropython export_vector_runner.py CASES.json  -> prints JSON results.
 """
@@ -39,6 +40,8 @@ def run_case(table, ops, check=False):
             ev.clear_feed()
         elif k == "r":
             ev.set_reference(op[1])
+        elif k == "l":
+            ev.latch_references()
         elif k == "e":
             out.append([ev.offset_at(op[1]), ev.ref_offset(), ev.slope(), ev.flags])
     return out, ev

@@ -50,7 +50,8 @@ def poly_slope_docs(draw):
     return _finish({
         "format": "tcomp-model/1", "kind": "poly_slope", "axis": "X", "sensors": names, "reference_C": ref,
         "geometric": {"degree": d, "coefficients_um": geo},
-        "thermal": {"intercept_um_per_mm": draw(st.floats(-0.01, 0.01)), "coefficients_um_per_mm_per_K": coef},
+        "thermal": {"intercept_um_per_mm": draw(st.floats(-0.01, 0.01)), "coefficients_um_per_mm_per_K": coef,
+                    "reference": draw(st.sampled_from(["fixed", "run_start"]))},
         "envelope": {"temperature_C": env, "position_mm": [p0, p0 + stroke]},
     })
 
@@ -62,7 +63,8 @@ def linear_direct_docs(draw):
     return _finish({
         "format": "tcomp-model/1", "kind": "linear_direct", "axis": "Z", "sensors": names, "reference_C": ref,
         "geometric": None,
-        "thermal": {"intercept_um": draw(st.floats(-50.0, 50.0)), "coefficients_um_per_K": {s: draw(st.floats(-5.0, 5.0)) for s in names}},
+        "thermal": {"intercept_um": draw(st.floats(-50.0, 50.0)), "coefficients_um_per_K": {s: draw(st.floats(-5.0, 5.0)) for s in names},
+                    "reference": draw(st.sampled_from(["fixed", "run_start"]))},
         "envelope": {"temperature_C": env},
     })
 
@@ -79,6 +81,20 @@ def _check(ex, ev, ref, temps, pos):
     assert abs(ev.slope() * 0.01 - ref.slope(temps)) <= r["slope_max_error_um_per_m"]
     clamped = [i for i in range(len(temps)) if not ev.table.env_lo[i] <= temps[i] <= ev.table.env_hi[i]]
     assert ev.flags & 0xFFFFFF == sum(1 << i for i in clamped)
+
+
+def _maybe_latch(data, ev, ref):
+    """Models fitted on rises from the run start: the controller latches references at a cold start."""
+    t = ev.table
+    if t.ref_mode != 1:
+        with pytest.raises(ValueError):
+            ev.latch_references()
+        return
+    if data.draw(st.booleans()):
+        for i in range(t.n_sensors):
+            ev.temps[i] = data.draw(st.integers(t.env_lo[i] - 1000, t.env_hi[i] + 1000))
+        ev.latch_references()
+        ref.latch(ev.ref)
 
 
 def _slots_inside(ex, ev):
@@ -98,7 +114,9 @@ def test_poly_slope_within_certificate(doc, data):
     t = parse_table(ex.table)
     ev = Evaluator(t, check=True)
     ref = Reference(doc, t)
-    for _ in range(20):
+    for k in range(20):
+        if k % 7 == 0:
+            _maybe_latch(data, ev, ref)
         temps = _temps(data.draw, t)
         pos = data.draw(st.integers(t.pos_lo - 10000, t.pos_hi + 10000))
         for i, v in enumerate(temps):
@@ -117,7 +135,9 @@ def test_linear_direct_within_certificate(doc, data):
     t = parse_table(ex.table)
     ev = Evaluator(t, check=True)
     ref = Reference(doc, t)
-    for _ in range(20):
+    for k in range(20):
+        if k % 7 == 0:
+            _maybe_latch(data, ev, ref)
         temps = _temps(data.draw, t)
         for i, v in enumerate(temps):
             ev.temps[i] = v

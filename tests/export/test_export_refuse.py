@@ -107,7 +107,10 @@ def test_c_header_compiles_and_matches_firmware(tmp_path, runner):
         pytest.skip("gcc not installed")
     rng = random.Random(10)
     for make in (poly_slope_doc, linear_direct_doc, screw_doc):
-        ex = export_model(make(random.Random(11)))
+        doc = make(random.Random(11))
+        if make is poly_slope_doc:
+            doc["thermal"]["reference"] = "run_start"
+        ex = export_model(doc)
         t = parse_table(ex.table)
         (tmp_path / "table.h").write_text(ex.c_header())
         lines, ops = [], []
@@ -116,6 +119,9 @@ def test_c_header_compiles_and_matches_firmware(tmp_path, runner):
             temps = [rng.randint(t.env_lo[i] - 2000, t.env_hi[i] + 2000) for i in range(t.n_sensors)]
             ops.append(["t", temps])
             lines.append("".join("e.temps[%d] = %d; " % (i, v) for i, v in enumerate(temps)) + "tcomp_update(&e);")
+            if k == 20 and t.ref_mode == 1:
+                ops.append(["l"])
+                lines.append("tcomp_latch_references(&e);")
             if t.kind == "screw_reduced":
                 if k == 30:
                     ops.append(["f", t.fmax // 2, t.pos_lo, t.pos_hi])
