@@ -29,6 +29,7 @@ VERSION = "0.1.0"
 PROTOCOL_VERSION = const(1)
 _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is dropped
 _POLL_MS = const(5)  # serial polling period while waiting for the next cycle
+_CAP = const(0x20000000)  # elapsed-time counters saturate at 2**29 ms
 
 
 def _load_config(d):
@@ -61,11 +62,12 @@ class App:
         self.link_timeout_ms = cfg.link_timeout_ms
         self.pos = 0
         self.have_pos = False
-        self.last_rx = now
+        # elapsed-time counters (ms, saturating) rather than timestamps: ticks wrap
+        self.rx_ms = 0  # since the last valid controller traffic
         self.fault_active = False
-        self.fault_since = now
+        self.fault_ms = 0  # since a sensor the model needs went bad
         self.last_t = now
-        self.next_step = now
+        self.step_ms = 0  # time not yet consumed by screw-model steps
         self.cycles = 0
         self.status = 0
         self.total = 0  # limited outputs, 0.01 um / 0.01 um/m
@@ -117,7 +119,7 @@ class App:
         for i in self.map:
             self.tmask |= 1 << i
         self.screw = table.kind_code == KIND_SCREW_REDUCED
-        self.next_step = self.clock.ticks_ms()
+        self.step_ms = 0
         self._span()
 
     def _span(self):
@@ -162,7 +164,7 @@ class App:
         return True
 
     def link_alive(self, now):
-        self.last_rx = now
+        self.rx_ms = 0
 
     # --- outputs ---------------------------------------------------------------
     def _dp_mm(self, pos):
@@ -195,6 +197,12 @@ class App:
         now = clock.ticks_ms()
         dt = clock.ticks_diff(now, self.last_t)
         self.last_t = now
+        if dt < 0:
+            dt = 0
+        elif dt > _CAP:
+            dt = _CAP
+        v = self.rx_ms + dt
+        self.rx_ms = v if v < _CAP else _CAP
         self.link.poll(now)
         ch = self.channels
         s = ch.read_all(now, clock)
@@ -224,8 +232,11 @@ class App:
             if needed:
                 if not self.fault_active:
                     self.fault_active = True
-                    self.fault_since = now
-                if never or clock.ticks_diff(now, self.fault_since) >= self.cfg.hold_ms:
+                    self.fault_ms = 0
+                else:
+                    v = self.fault_ms + dt
+                    self.fault_ms = v if v < _CAP else _CAP
+                if never or self.fault_ms >= self.cfg.hold_ms:
                     usable = False
                 else:
                     s |= st.HELD
@@ -234,13 +245,14 @@ class App:
             ev.update()
             if self.screw:
                 dtm = t.dt_ms
+                self.step_ms += dt
                 k = 0
-                while clock.ticks_diff(now, self.next_step) >= 0:
+                while self.step_ms >= dtm:
                     ev.step()
-                    self.next_step += dtm
+                    self.step_ms -= dtm
                     k += 1
-                    if k >= _MAX_CATCHUP:
-                        self.next_step = now + dtm
+                    if k >= _MAX_CATCHUP:  # after a stall: drop the time rather than burst
+                        self.step_ms = 0
                         break
             pos = self.pos if self.have_pos else ev.pos_ref
             raw_total = ev.offset_at(pos)
@@ -262,7 +274,7 @@ class App:
             s |= st.DISABLED
         if not self.have_pos:
             s |= st.NO_POSITION
-        if self.link_timeout_ms and clock.ticks_diff(now, self.last_rx) >= self.link_timeout_ms:
+        if self.link_timeout_ms and self.rx_ms >= self.link_timeout_ms:
             s |= st.LINK_TIMEOUT
         if self.store.uploading:
             s |= st.UPLOADING

@@ -39,6 +39,7 @@ _REINIT_MS = const(1000)
 _STALE_MS = const(1000)
 _NOISE_MC = const(200)  # allowance for conversion noise on top of the physical rate
 _RATE_DT_CAP_MS = const(100000)  # beyond this the last good value says nothing
+_CAP = const(0x20000000)  # elapsed-time counters saturate here (2**29 ms, 6.2 days)
 
 
 def _make_driver(ch, board):
@@ -74,18 +75,21 @@ class Channels:
         self.have_good = [False] * n
         self.fault = [_F_NEVER] * n
         self.chip_status = [0] * n
-        self.good_t = [now] * n
+        # elapsed milliseconds since an event, saturating at _CAP: timestamps would
+        # need wrap-aware arithmetic (MicroPython ticks wrap every 2**30 ms and
+        # ticks_diff is only valid for half of that), counters never do
+        self.good_ms = [0] * n  # since the last good reading
         self.code = [-1] * n
-        self.code_t = [now] * n
-        self.data_t = [now] * n
+        self.code_ms = [0] * n  # since the raw code last changed
+        self.data_ms = [0] * n  # since the last new conversion
         self.streak = [0] * n
         self.prev = [0] * n
-        self.prev_t = [now] * n
-        self.reinit_t = [now] * n
+        self.prev_ms = [0] * n  # since the previous reading while recovering
+        self.reinit_ms = [0] * n  # since the last (re-)initialisation attempt
+        self.last_now = now
         self.drivers: list = [None] * n
         for i in range(n):
             self._init_driver(i)
-            self.reinit_t[i] = now
 
     def _init_driver(self, i):
         ch = self.cfg.channels[i]
@@ -128,24 +132,43 @@ class Channels:
 
     def read_all(self, now, clock):
         """Read and check every channel; returns the mask of faulty channels."""
+        dt = clock.ticks_diff(now, self.last_now)
+        self.last_now = now
+        if dt < 0:
+            dt = 0
+        elif dt > _CAP:
+            dt = _CAP
         m = 0
         for i in range(self.n):
-            f = self._read(i, now, clock)
+            self._tick(i, dt)
+            f = self._read(i)
             if f < 0:  # no new data this cycle (ADS122C04 between conversions)
                 if not self.good[i]:
                     m |= 1 << i
                 continue
-            self._judge(i, f, now, clock)
+            self._judge(i, f)
             if not self.good[i]:
                 m |= 1 << i
         return m
 
-    def _read(self, i, now, clock):
+    def _tick(self, i, dt):
+        v = self.good_ms[i] + dt
+        self.good_ms[i] = v if v < _CAP else _CAP
+        v = self.code_ms[i] + dt
+        self.code_ms[i] = v if v < _CAP else _CAP
+        v = self.data_ms[i] + dt
+        self.data_ms[i] = v if v < _CAP else _CAP
+        v = self.prev_ms[i] + dt
+        self.prev_ms[i] = v if v < _CAP else _CAP
+        v = self.reinit_ms[i] + dt
+        self.reinit_ms[i] = v if v < _CAP else _CAP
+
+    def _read(self, i):
         """Raw read of channel i into ``reading``; returns fault bits, or -1 for no new data."""
         d = self.drivers[i]
         if ((d is None or self.fault[i] & (_F_CHIP | _F_BUS | _F_STALE | _F_RANGE))
-                and clock.ticks_diff(now, self.reinit_t[i]) >= _REINIT_MS):
-            self.reinit_t[i] = now
+                and self.reinit_ms[i] >= _REINIT_MS):
+            self.reinit_ms[i] = 0
             if not self._init_driver(i):
                 return _F_BUS
             d = self.drivers[i]
@@ -161,20 +184,20 @@ class Channels:
                 code = raw >> 1
             else:
                 if not d.data_ready:
-                    if clock.ticks_diff(now, self.data_t[i]) >= _STALE_MS:
+                    if self.data_ms[i] >= _STALE_MS:
                         return _F_STALE
                     return -1
                 code = d.read_data()
             r = d.ratio(code)
         except OSError:
             return _F_BUS
-        self.data_t[i] = now
+        self.data_ms[i] = 0
         f = 0
         if self.stuck_ms:
             if code != self.code[i]:
                 self.code[i] = code
-                self.code_t[i] = now
-            elif clock.ticks_diff(now, self.code_t[i]) >= self.stuck_ms:
+                self.code_ms[i] = 0
+            elif self.code_ms[i] >= self.stuck_ms:
                 f = _F_STUCK
         r -= self.lead[i]
         t = rtd.temperature_mC(r) + self.cal[i]
@@ -184,14 +207,14 @@ class Channels:
         return f
 
     def _allowed(self, dt_ms):
-        if dt_ms > _RATE_DT_CAP_MS or dt_ms < 0:
+        if dt_ms > _RATE_DT_CAP_MS:
             return -1
         return (self.rate * dt_ms) // 1000 + _NOISE_MC
 
-    def _judge(self, i, f, now, clock):
+    def _judge(self, i, f):
         t = self.reading[i]
         if f == 0 and self.have_good[i]:
-            a = self._allowed(clock.ticks_diff(now, self.good_t[i]))
+            a = self._allowed(self.good_ms[i])
             if a >= 0 and (t - self.temp[i] > a or self.temp[i] - t > a):
                 f = _F_RATE
         if f:
@@ -201,20 +224,20 @@ class Channels:
             return
         if self.good[i]:
             self.temp[i] = t
-            self.good_t[i] = now
+            self.good_ms[i] = 0
             return
         # recovering: consecutive agreeing readings before the channel counts again
         if self.streak[i]:
-            a = self._allowed(clock.ticks_diff(now, self.prev_t[i]))
+            a = self._allowed(self.prev_ms[i])
             if a < 0 or t - self.prev[i] > a or self.prev[i] - t > a:
                 self.streak[i] = 0
         self.streak[i] += 1
         self.prev[i] = t
-        self.prev_t[i] = now
+        self.prev_ms[i] = 0
         if self.streak[i] >= _RECOVER_READS:
             self.good[i] = True
             self.have_good[i] = True
             self.fault[i] = 0
             self.chip_status[i] = 0
             self.temp[i] = t
-            self.good_t[i] = now
+            self.good_ms[i] = 0

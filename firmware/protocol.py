@@ -69,7 +69,8 @@ class StreamLink:
         self.r = fr.LineReader()
         self.rx = bytearray(_RX_CHUNK)
         self.chunk = bytearray(_MAX_CHUNK)
-        self.next_frame = app.clock.ticks_ms()
+        self.last = app.clock.ticks_ms()
+        self.due_ms = 0  # time towards the next periodic frame (a counter: ticks wrap)
         self.frame_ms = app.cfg.frame_ms
 
     # --- frames out ----------------------------------------------------------
@@ -171,11 +172,17 @@ class StreamLink:
                 return
 
     def after_cycle(self, now):
-        if self.frame_ms and self.app.clock.ticks_diff(now, self.next_frame) >= 0:
+        dt = self.app.clock.ticks_diff(now, self.last)
+        self.last = now
+        if not self.frame_ms:
+            return
+        if dt > 0:
+            self.due_ms += dt
+        if self.due_ms >= 0:
             self.offsets(_O, self.app.pos)
-            self.next_frame += self.frame_ms
-            if self.app.clock.ticks_diff(now, self.next_frame) >= 0:  # fell behind: no burst
-                self.next_frame = now + self.frame_ms
+            self.due_ms -= self.frame_ms
+            if self.due_ms >= 0:  # fell behind: no burst of frames
+                self.due_ms = -self.frame_ms
 
     def _line(self, now):
         r = self.r

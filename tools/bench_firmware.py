@@ -117,6 +117,30 @@ def run_mp(work, mpy, n, wrapper=(), faken=None):
     return p
 
 
+LOADED = r"""
+import sys, fwfakes
+from firmware.app import App
+board = fwfakes.make_rig(N_MAX, N_ADS, table_dir=".", serial_mode=MODE)
+app = App(board)
+for k in range(20):
+    app.cycle(); board.clock.t += 100
+print("LOADED", " ".join(sorted(m for m in sys.modules if m.startswith("firmware."))))
+"""
+
+
+def loaded_modules(work, mpy, n_max, n_ads, mode):
+    """Firmware modules a booted board of this kind has imported (config is unloaded after boot)."""
+    env = dict(os.environ, MICROPYPATH=mpy)
+    script = LOADED.replace("N_MAX", str(n_max)).replace("N_ADS", str(n_ads)).replace("MODE", repr(mode))
+    p = subprocess.run([MP, "-X", "heapsize=256K", "-c", script], cwd=work, env=env, capture_output=True,
+                       text=True)
+    if p.returncode != 0:
+        raise SystemExit("MicroPython run failed:\n" + p.stdout + p.stderr)
+    names = p.stdout.split("LOADED")[1].split()
+    # main.py runs the app and config.py is imported at boot (then dropped): both are on flash
+    return sorted(set(n.split(".", 1)[1].replace(".", "/") + ".py" for n in names) | {"main.py", "config.py"})
+
+
 def callgrind_ir(work, mpy, n):
     out = os.path.join(work, "cg.out")
     # the fakes-only loop runs a fixed number of times so that it cancels in the difference
@@ -159,6 +183,13 @@ def main():
             print("  %-24s %6d B" % (rel, s))
         print("  total %d B = %.1f kB (target < 24 kB): %s" % (total, total / 1024,
                                                                "met" if total < 24 * 1024 else "NOT met"))
+        size = dict(sizes)
+        for label, args_ in (("MAX31865 channels, stream mode", (11, 0, "stream")),
+                             ("ADS122C04 channels, Modbus mode", (0, 11, "modbus"))):
+            mods = loaded_modules(work, mpy, *args_)
+            sub = sum(size[m] for m in mods)
+            print("  a board with %s needs %d modules (%s): %d B = %.1f kB, plus its board file"
+                  % (label, len(mods), " ".join(m[:-3] for m in mods), sub, sub / 1024))
         print("heap on the unix port (64-bit objects):")
         print("  firmware code loaded: %d B" % h_code)
         print("  app data after boot and warm-up (table, evaluator, drivers, buffers): %d B = %.1f kB"

@@ -154,3 +154,48 @@ def test_watchdog_fed_once_per_completed_cycle(tmp_path):
     with pytest.raises(TypeError):
         app.cycle()
     assert board.watchdog.fed == n + 7
+
+
+class WrapClock:
+    """MicroPython tick semantics: ticks_ms wraps at 2**30, ticks_diff is modular."""
+
+    def __init__(self, t):
+        self.t = t
+
+    def ticks_ms(self):
+        return self.t & 0x3FFFFFFF
+
+    def ticks_diff(self, a, b):
+        return ((a - b + 0x20000000) & 0x3FFFFFFF) - 0x20000000
+
+    def sleep_ms(self, ms):
+        self.t += ms
+
+
+def test_tick_wrap_and_week_long_fault(tmp_path):
+    from fwfakes import make_rig
+    from firmware.app import App
+    names = ["T%d" % i for i in range(1, 12)]
+    from conftest import make_table
+    (tmp_path / "table_a.bin").write_bytes(make_table(kind="linear_direct", sensors=names,
+                                                      b=[1] * 11, shb=4))
+    board = make_rig(table_dir=str(tmp_path), extra={"hold_ms": 60000, "frame_ms": 1000})
+    board.clock = WrapClock((1 << 30) - 50000)  # wraps 50 s after boot
+    app = App(board)
+    data = b""
+    for _ in range(1500):
+        app.cycle()
+        board.clock.t += 100
+        data += board.serial.take()
+    good = app.total
+    assert good > 1000 and app.status & (st.SENSOR_MASK | st.FALLBACK | st.RATE_LIMITED) == 0
+    out = frames(data)
+    seqs = [int(f[1]) for f in out if f[3] == "O"]
+    assert len(seqs) >= 149 and seqs == list(range(seqs[0], seqs[0] + len(seqs)))  # across the wrap
+    board.chips[0].open_circuit = True
+    for _ in range(200):  # 200 h in 1 h steps: longer than ticks_diff's 6.2-day range
+        app.cycle()
+        board.clock.t += 3600 * 1000
+        board.serial.take()
+    assert app.status & st.FALLBACK and app.total == 0
+    assert app.channels.fault[0]
