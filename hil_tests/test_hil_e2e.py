@@ -29,7 +29,7 @@ def _subset(run, hours):
 
 def test_e2e_poly_slope_matches_host_model(make_rig, demo_run):
     from host.models import load_model
-    run = demo_run if SLOW else _subset(demo_run, 1.0)
+    run = demo_run if SLOW else _subset(demo_run, 0.5)
     sensors = ["T1", "T2", "T4"]  # two on MAX31865 (SPI), one on an ADS122C04 (I2C)
     doc = poly_slope_for_run(run, sensors)
     ex = export(doc)
@@ -69,7 +69,7 @@ def test_e2e_screw_reduced_matches_reference(make_rig):
     pos = lo
     x_prev = None
     travel = [0.0] * table.M
-    n_steps = 600 if SLOW else 240
+    n_steps = 600 if SLOW else 150
     checked = 0
     rig.send("P", pos)
     import math

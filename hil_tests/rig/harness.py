@@ -136,10 +136,11 @@ class SerialReader(threading.Thread):
 
     def quiet(self, idle_s=0.03, timeout=5.0):
         """Wait until nothing arrived for ``idle_s`` and the port has no pending bytes."""
-        end = time.monotonic() + timeout
+        start = time.monotonic()
+        end = start + timeout
         while time.monotonic() < end:
             with self.lock:
-                idle = time.monotonic() - self.last_rx
+                idle = time.monotonic() - max(self.last_rx, start)
             if idle >= idle_s and self.ser.in_waiting == 0:
                 return
             time.sleep(idle_s / 3)
