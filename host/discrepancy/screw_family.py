@@ -1,14 +1,15 @@
 """The screw heat-transfer model as a family for the discrepancy loop: base E_m plus catalog effects.
 
 Physics: host/screw/heat.py (segments, exact exponential integrator, nut travel,
-E_m). The base model is E = geometric(P) + E_m with the friction heat per mm q and
-the convection coefficient h identified; c, rho, lambda and alpha are the
-material values from meta.json (steel by default).
+E_m). The base model is E = geometric(P) + E_m with the friction heat per mm q,
+the convection coefficient h and the axial conductivity lambda identified; c, rho
+and alpha are the material values from meta.json (steel by default; q, c and rho
+only enter as q/(c rho) and alpha scales q, so they cannot be identified apart).
 
 Identification is by variable projection: the segment equations are linear in
 their heat inputs and the output is linear in the geometric coefficients and the
-output-hook parameters, so for given nonlinear parameters (log h and any
-convection-hook parameters) all linear amplitudes (q, extra heat sources,
+output-hook parameters, so for given nonlinear parameters (log h, log lambda
+and any convection-hook parameters) all linear amplitudes (q, extra heat sources,
 geometric polynomial, output columns) come from one bounded linear least-squares
 solve. The outer optimiser (scipy least_squares, 1-3 dimensions) starts from the
 previous fit. This is what makes scoring every candidate with leave-one-run-out
@@ -27,6 +28,8 @@ GEOMETRIC_DEGREE = 3
 H_BOUNDS = (1.0, 300.0)  # W/(m^2 K): still air to strong forced convection
 Q_BOUNDS = (0.0, 10.0)  # J/mm
 PRIOR_WEIGHT_UM = 1.0
+LAMBDA_BOUNDS = (5.0, 200.0)  # W/(m K): the axial conduction of the screw (steel ~46)
+LOG_PARAMS = ("h_W_m2K", "lambda_W_mK")
 
 
 class Drive:
@@ -86,9 +89,10 @@ class Drive:
             self.base_rise = np.interp(e.time_s, tt.time_s, col) - t0
         self.error_um = e.error_um
 
-    def response(self, h, conv, heat_J=None, source_W=None):
-        """E_m (um) at the error rows for one heat input, convection h and multiplier conv."""
-        mat = heat.ScrewParams(1.0, self.material.c_J_kgK, self.material.density_kg_m3, self.material.lambda_W_mK, h, self.alpha_per_K)
+    def response(self, h, conv, heat_J=None, source_W=None, lam=None):
+        """E_m (um) at the error rows for one heat input, convection h (and conductivity lam) and multiplier conv."""
+        lam = self.material.lambda_W_mK if lam is None else lam
+        mat = heat.ScrewParams(1.0, self.material.c_J_kgK, self.material.density_kg_m3, lam, h, self.alpha_per_K)
         rises = heat.simulate_segments(self.geometry, mat, self.t, heat_J=heat_J, convection_mult=conv, source_W=source_W)
         return 1e3 * self.alpha_per_K * np.einsum("rm,rm->r", rises[self.row_step], self.overlap)
 
@@ -114,7 +118,8 @@ class ScrewFit:
 class ScrewFamily:
     """Base screw model (E_m, no ambient term) plus effects from ``catalog``."""
 
-    def __init__(self, catalog=None, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE):
+    def __init__(self, catalog=None, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE, free_lambda=True):
+        self.free_lambda = free_lambda
         self.catalog = dict(CATALOG if catalog is None else catalog)
         self.candidates = tuple(self.catalog)
         self.segments = segments
@@ -159,6 +164,8 @@ class ScrewFamily:
 
     def _layout(self, effects):
         nl = [("h_W_m2K", np.log(H_BOUNDS[0]), np.log(H_BOUNDS[1]), np.log(15.0))]
+        if self.free_lambda:
+            nl.append(("lambda_W_mK", np.log(LAMBDA_BOUNDS[0]), np.log(LAMBDA_BOUNDS[1]), np.log(45.0)))
         for name in effects:
             eff = self.catalog[name]
             if eff.hook == "convection":
@@ -175,8 +182,9 @@ class ScrewFamily:
 
     def _design(self, drive, effects, x, nl_names):
         """Columns (rows, n_linear) for nonlinear parameter vector x (h in log space)."""
-        h = float(np.exp(x[0]))
-        vals = dict(zip(nl_names[1:], x[1:]))
+        vals = dict(zip(nl_names, x))
+        h = float(np.exp(vals["h_W_m2K"]))
+        lam = float(np.exp(vals["lambda_W_mK"])) if "lambda_W_mK" in vals else None
         conv = None
         for name in effects:
             eff = self.catalog[name]
@@ -184,13 +192,13 @@ class ScrewFamily:
                 v = {p.name: vals["%s.%s" % (name, p.name)] for p in eff.params}
                 c = eff.convection(drive, v)
                 conv = c if conv is None else conv * c
-        cols = [drive.response(h, conv, heat_J=drive.travel)]
+        cols = [drive.response(h, conv, heat_J=drive.travel, lam=lam)]
         cols += list(drive.geometric.T)
         for name in effects:
             eff = self.catalog[name]
             if eff.hook == "heat":
                 for hj, src in eff.unit_inputs(drive):
-                    cols.append(drive.response(h, conv, heat_J=hj, source_W=src))
+                    cols.append(drive.response(h, conv, heat_J=hj, source_W=src, lam=lam))
             elif eff.hook == "output":
                 cols += list(np.asarray(eff.columns(drive), dtype=float).T)
         return np.column_stack(cols)
@@ -211,7 +219,7 @@ class ScrewFamily:
             for i, name in enumerate(nl_names):
                 if name in start.nonlinear:
                     v = start.nonlinear[name]
-                    x0[i] = np.log(v) if name == "h_W_m2K" else v
+                    x0[i] = np.log(v) if name in LOG_PARAMS else v
         x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
         used = [(self.drive(r), m) for r, m in zip(runs, masks) if m is not None and np.any(m)]
         if not used:
@@ -247,15 +255,14 @@ class ScrewFamily:
         opt = least_squares(lambda x: solve(x)[1], x0, bounds=(lo, hi), x_scale=1.0, diff_step=1e-4, xtol=1e-6, ftol=1e-8, max_nfev=60)
         beta, r = solve(opt.x)
         r = r[: y.size]
-        nonlinear = {"h_W_m2K": float(np.exp(opt.x[0]))}
-        nonlinear.update({n: float(v) for n, v in zip(nl_names[1:], opt.x[1:])})
+        nonlinear = {n: float(np.exp(v) if n in LOG_PARAMS else v) for n, v in zip(nl_names, opt.x)}
         linear = {p[0]: float(b) for p, b in zip(lin, beta)}
         return ScrewFit(effects, nonlinear, linear, float(np.sqrt(np.mean(r ** 2))), int(opt.nfev))
 
     def predict(self, fitted, run):
         nl, lin = self._layout(fitted.effects)
         nl_names = [p[0] for p in nl]
-        x = np.array([np.log(fitted.nonlinear["h_W_m2K"])] + [fitted.nonlinear[n] for n in nl_names[1:]])
+        x = np.array([np.log(fitted.nonlinear[n]) if n in LOG_PARAMS else fitted.nonlinear[n] for n in nl_names])
         X = self._design(self.drive(run), fitted.effects, x, nl_names)
         beta = np.array([fitted.linear[p[0]] for p in lin])
         return X @ beta
