@@ -22,6 +22,7 @@ import numpy as np
 
 from host.empirical import EmpiricalDataError
 from host.empirical.targets import _channel_rows
+from host.models import ModelFormatError
 
 REFERENCES = ("run_start", "fixed")
 
@@ -89,10 +90,12 @@ class _Base:
             sensors = list(doc["sensors"])
             ref = doc["reference_C"]
         except (KeyError, TypeError) as exc:
-            raise EmpiricalDataError("model document lacks %s" % exc)
+            raise ModelFormatError("model document lacks %s" % exc)
         missing = [s for s in sensors if s not in ref]
         if missing:
-            raise EmpiricalDataError("model document: reference_C has no entry for %s" % ", ".join(missing))
+            raise ModelFormatError("model document: reference_C has no entry for %s" % ", ".join(missing))
+        if thermal.get("reference", "fixed") not in REFERENCES:
+            raise ModelFormatError("model document: thermal.reference must be one of %s, got %r" % (", ".join(REFERENCES), thermal.get("reference")))
         return thermal, sensors, ref, dict(
             reference=thermal.get("reference", "fixed"), channel=doc.get("channel"), method=doc.get("method", "mlr"), axis=doc.get("axis"),
             envelope=doc.get("envelope"), statistics=doc.get("statistics"), training=doc.get("training"),
@@ -131,7 +134,7 @@ class LinearDirectModel(_Base):
             coefs = [thermal["coefficients_um_per_K"][s] for s in sensors]
             b0 = thermal.get("intercept_um", 0.0)
         except (KeyError, TypeError) as exc:
-            raise EmpiricalDataError("linear_direct document: thermal.coefficients_um_per_K lacks %s" % exc)
+            raise ModelFormatError("linear_direct document: thermal.coefficients_um_per_K lacks %s" % exc)
         return cls(sensors, coefs, b0, ref, **kw)
 
 
@@ -176,6 +179,6 @@ class PolySlopeModel(_Base):
             coefs = [thermal["coefficients_um_per_mm_per_K"][s] for s in sensors]
             b0 = thermal.get("intercept_um_per_mm", 0.0)
         except (KeyError, TypeError) as exc:
-            raise EmpiricalDataError("poly_slope document: thermal.coefficients_um_per_mm_per_K lacks %s" % exc)
+            raise ModelFormatError("poly_slope document: thermal.coefficients_um_per_mm_per_K lacks %s" % exc)
         geo = doc.get("geometric") or {"coefficients_um": [0.0]}
         return cls(sensors, coefs, b0, ref, geometric_coef=geo.get("coefficients_um", [0.0]), **kw)

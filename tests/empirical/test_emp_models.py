@@ -234,3 +234,21 @@ def test_slope_targets_ignore_the_geometric_error_and_sensor_offsets(bidirection
     moved = training_arrays([other])[0]
     np.testing.assert_allclose(moved.y, base.y, atol=1e-9)
     np.testing.assert_allclose(moved.X, base.X, atol=1e-9)
+
+
+def test_malformed_documents_are_model_format_errors(make_direct):
+    from host.models import ModelFormatError
+
+    doc = fit_model([make_direct()], "mlr", target="direct", channel="ch1").to_document()
+    bad = json.loads(json.dumps(doc))
+    del bad["thermal"]["coefficients_um_per_K"]["t3"]
+    with pytest.raises(ModelFormatError, match="t3"):
+        load_model(bad)
+    bad = json.loads(json.dumps(doc))
+    bad["reference_C"].pop("t1")
+    with pytest.raises(ModelFormatError, match="reference_C"):
+        load_model(bad)
+    bad = json.loads(json.dumps(doc))
+    bad["thermal"]["reference"] = "yesterday"
+    with pytest.raises(ModelFormatError, match="thermal.reference"):
+        load_model(bad)
