@@ -15,14 +15,7 @@ import sys
 import time
 import warnings
 
-# The model's matrices are small (M <= 160): multi-threaded BLAS gains nothing on
-# them and, on a loaded machine, its spinning threads cost up to 10x (measured:
-# identification of three runs 1.0 s single-threaded vs 7.9 s at load average 8).
-# Set OPENBLAS_NUM_THREADS yourself to measure another setting.
-BLAS_THREADS_SET_HERE = "OPENBLAS_NUM_THREADS" not in os.environ
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
-
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -92,9 +85,8 @@ def main(argv=None):
     a = ap.parse_args(argv)
     folders = a.runs or [os.path.join(DEMO, n) for n in sorted(os.listdir(DEMO))] if os.path.isdir(DEMO) or a.runs else []
     runs = [load_run(f) for f in folders]
-    print("cores visible: %d, load average %s, OPENBLAS_NUM_THREADS=%s%s" % (
-        os.cpu_count(), ", ".join("%.1f" % x for x in os.getloadavg()), os.environ["OPENBLAS_NUM_THREADS"],
-        " (set by this script)" if BLAS_THREADS_SET_HERE else ""))
+    print("cores visible: %d, load average %s, OPENBLAS_NUM_THREADS=%s" % (
+        os.cpu_count(), ", ".join("%.1f" % x for x in os.getloadavg()), os.environ.get("OPENBLAS_NUM_THREADS", "(unset)")))
     bench_simulation()
     if not runs:
         print("no runs (data/demo/ missing): identification and reduction skipped")
