@@ -25,8 +25,7 @@ from firmware.safety import Limiter
 from firmware.slots import TableStore
 from firmware.table import TableError, REASON_SENSORS, KIND_SCREW_REDUCED
 
-VERSION = "0.1.0"
-PROTOCOL_VERSION = const(1)
+VERSION = "0.1.0"  # firmware version, sent in the hello frame
 _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is dropped
 _POLL_MS = const(5)  # serial polling period while waiting for the next cycle
 _CAP = const(0x20000000)  # elapsed-time counters saturate at 2**29 ms

@@ -18,7 +18,6 @@ try:
 except ImportError:  # CPython
     const = lambda x: x  # noqa: E731
 
-from firmware import status as st
 from firmware.crc16 import crc16_modbus
 
 # input registers

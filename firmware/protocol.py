@@ -20,6 +20,8 @@ except ImportError:  # CPython
 from firmware import frame as fr
 from firmware.slots import UploadError, SLOT_NAMES
 
+PROTOCOL_VERSION = const(1)  # docs/protocol.md
+
 # error codes of E frames
 _E_CRC = const(1)
 _E_SYNTAX = const(2)
@@ -81,11 +83,12 @@ class StreamLink:
 
     def hello(self):
         """H,<protocol>,<firmware>,<slot>,<table crc32>,<provenance[:8] hex>,<kind>,<axis>,<channels>."""
+        from firmware.app import VERSION
         a = self.app
         w = self.w
         w.begin(a.status, _H)
-        w.int(1)
-        w.text(b"0.1.0")
+        w.int(PROTOCOL_VERSION)
+        w.text(VERSION.encode())
         t = a.table
         if t is None:
             w.text(b"-,-,-,-,-")

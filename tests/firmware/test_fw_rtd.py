@@ -1,5 +1,4 @@
 """Integer Pt100 conversion against IEC 60751 reference points and the exact inverse."""
-import math
 
 import pytest
 from hypothesis import given, settings, strategies as st
