@@ -151,6 +151,18 @@ def overlap_mm(edges_mm, x_mm):
     return np.clip(x - edges[:-1], 0.0, np.diff(edges))
 
 
+def interp_rows(t, t_grid, values):
+    """Linear interpolation of every column of ``values`` (len(t_grid), ...) at times t
+    (clamped to the grid's ends): (len(t), ...)."""
+    t = np.asarray(t, dtype=float)
+    tg = np.asarray(t_grid, dtype=float)
+    k = np.clip(np.searchsorted(tg, t, side="right") - 1, 0, max(tg.size - 2, 0))
+    if tg.size == 1:
+        return np.repeat(values[:1], t.size, axis=0)
+    w = np.clip((t - tg[k]) / (tg[k + 1] - tg[k]), 0.0, 1.0).reshape((-1,) + (1,) * (values.ndim - 1))
+    return values[k] * (1.0 - w) + values[k + 1] * w
+
+
 def thermal_error_um(edges_mm, rises, positions_mm, fixed_end_mm, alpha):
     """E_m in µm: α·Σ_i T_i·overlap_i(P).
 

@@ -345,7 +345,7 @@ class ScrewModel:
         ctx = self._context(run)
         rises = self.simulate_context(ctx)
         t = ctx.t_grid if times_s is None else np.asarray(times_s, dtype=float)
-        R = np.stack([np.interp(t, ctx.t_grid, rises[:, i]) for i in range(ctx.M)], axis=1)
+        R = heat.interp_rows(t, ctx.t_grid, rises)
         P = np.asarray(positions_mm, dtype=float)
         E = heat.thermal_error_um(ctx.edges_mm, R[:, None, :], P[None, :], self.geometry_.fixed_end_mm, self.params_.alpha_per_K)
         if self.base_sensor_ is not None:

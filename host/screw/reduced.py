@@ -124,7 +124,7 @@ def reduction_error(model, run, positions=21, spread=False):
     t, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread)
     lo, hi = model.envelope_["position_mm"] if model.envelope_ else (0.0, model.geometry_.length_mm)
     P = np.linspace(lo, hi, positions)
-    Rf = np.stack([np.interp(t, ctx_full.t_grid, rises[:, i]) for i in range(ctx_full.M)], axis=1)
+    Rf = heat.interp_rows(t, ctx_full.t_grid, rises)
     Ef = heat.thermal_error_um(ctx_full.edges_mm, Rf[:, None, :], P[None, :], model.geometry_.fixed_end_mm, model.params_.alpha_per_K)
     Er = reduced_error_um(red, Tr[:, None, :], P[None, :])
     d = Er - Ef

@@ -45,7 +45,7 @@ def make_run(feed_mm_min=8000.0, lo_mm=210.0, hi_mm=490.0, params=TRUE, heat_s=4
     P = np.arange(0.0, meta["stroke_mm"] + 1e-9, 50.0) if positions_mm is None else np.asarray(positions_mm, dtype=float)
     ts = np.repeat(sweeps, P.size)
     ps = np.tile(P, sweeps.size)
-    R = np.stack([np.interp(ts, t, rises[:, i]) for i in range(geo.segments)], axis=1)
+    R = heat.interp_rows(ts, t, rises)
     base = 20.0 + base_drift_K * np.sin(np.pi * t / (t_end * 1.3))
     air = 20.0 + 1.2 * base_drift_K * np.sin(np.pi * t / (t_end * 1.3) + 0.2)
     centres = 0.5 * (geo.edges_mm[1:] + geo.edges_mm[:-1]) + geo.fixed_end_mm

@@ -122,3 +122,11 @@ def test_spread_travel_matches_exact_travel_on_average():
     np.testing.assert_allclose(spread[:360].sum(axis=0), exact[:360].sum(axis=0), atol=280.0)
     assert np.all(spread[:360].sum(axis=0)[edges[1:] <= 210] == 0)
     assert heat.nut_travel_per_segment(None, edges, 0.0, t, spread=True).shape == (600, 16)
+
+
+def test_interp_rows_matches_np_interp():
+    tg = np.array([0.0, 10.0, 25.0, 40.0])
+    v = np.arange(12.0).reshape(4, 3) ** 2
+    t = np.array([-5.0, 0.0, 3.0, 10.0, 24.9, 40.0, 50.0])
+    ref = np.stack([np.interp(t, tg, v[:, j]) for j in range(3)], axis=1)
+    np.testing.assert_allclose(heat.interp_rows(t, tg, v), ref)
