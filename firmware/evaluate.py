@@ -19,8 +19,7 @@ tests compare with the exporter's interval bounds.
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 from firmware.table import KIND_LINEAR_DIRECT, KIND_SCREW_REDUCED, REF_LATCHED
 

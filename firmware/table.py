@@ -12,8 +12,7 @@ from firmware.crc32 import crc32
 try:
     from micropython import const
 except ImportError:  # CPython
-    def const(x):
-        return x
+    const = lambda x: x  # noqa: E731
 
 MAGIC = b"TCTB"
 VERSION = const(1)
@@ -64,7 +63,19 @@ class Table:
     """
 
     def __init__(self):
+        self.version = 0
+        self.kind_code = 0
+        self.kind = ""
+        self.n_sensors = 0
+        self.unit_code = 0
+        self.ref_mode = 0
+        self.provenance = b""
+        self.axis = ""
+        self.crc = 0
         self.sensors = []
+        self.env_lo = []
+        self.env_hi = []
+        self.ref = []
 
 
 class _Words:
@@ -150,9 +161,6 @@ def parse_table(buf, expected_sensors=None):
     t.provenance = bytes(buf[12:44])
     t.axis = _name(buf, 44, 8)
     t.crc = stored
-    t.env_lo = []
-    t.env_hi = []
-    t.ref = []
     for i in range(ns):
         t.sensors.append(_name(buf, HEADER_SIZE + i * NAME_SIZE, NAME_SIZE))
     off = HEADER_SIZE + ns * NAME_SIZE
