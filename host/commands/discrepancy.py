@@ -8,8 +8,8 @@ def add_arguments(p):
     p.add_argument("--json", required=True, help="write the findings as JSON (effects, held-out RMSEs, localization, candidates)")
     p.add_argument("--report", required=True, metavar="DIR", help="folder for report.md, plots and the final model.json")
     p.add_argument("--candidates", help="comma-separated catalog effects to test (default: the whole catalog)")
-    p.add_argument("--alpha", type=float, default=None, help="family-wise significance level per round (default %(default)s = workflow.ALPHA)")
-    p.add_argument("--min-gain", type=float, default=None, help="smallest held-out relative RMSE reduction to accept (default workflow.MIN_GAIN)")
+    p.add_argument("--alpha", type=float, default=None, help="family-wise significance level per round (default: host.discrepancy.workflow.ALPHA = 0.01)")
+    p.add_argument("--min-gain", type=float, default=None, help="smallest held-out relative RMSE reduction to accept (default: host.discrepancy.workflow.MIN_GAIN = 0.10)")
     p.add_argument("--max-effects", type=int, default=None, help="stop after naming this many effects")
     p.add_argument("--jobs", type=int, default=None, help="worker processes for candidate fits (default: up to 2)")
 
