@@ -22,6 +22,9 @@ def check_run(run, geometry=None, require_nut=True):
     if require_nut and not run.sensors_with_role("nut"):
         raise ValueError("%s: meta.json has no sensor with role 'nut' (sensors: %s); the screw model needs the nut temperature"
                          % (name, ", ".join("%s=%s" % (k, v.get("role")) for k, v in run.sensors.items())))
+    if require_nut and not any(n in run.temperatures.names for n in run.sensors_with_role("nut")):
+        raise ValueError("%s: the nut sensor(s) %s declared in meta.json have no column in temperatures.csv"
+                         % (name, ", ".join(run.sensors_with_role("nut"))))
     if geometry is None:
         try:
             geometry = heat.ScrewGeometry.from_meta(run.meta)

@@ -22,10 +22,11 @@ def _from_x(x, specs):
     return np.array([np.exp(v) if s.positive else v for v, s in zip(x, specs)], dtype=float)
 
 
-def fit_parameters(residual, specs, start=None, max_nfev=200, flat_ratio=1e-4, poor_rel_std=0.5):
+def fit_parameters(residual, specs, start=None, max_nfev=200, flat_ratio=1e-4, poor_rel_std=0.5, n_linear=0):
     """Minimise ||residual(values)||² over the parameters described by ``specs``.
 
-    residual: values (array, in spec order) -> residual vector.
+    residual: values (array, in spec order) -> residual vector; n_linear: linear
+    parameters already profiled out of it (they use degrees of freedom too).
     Returns dict: values, std (absolute), rel_std, cov_x (in search coordinates),
     rmse, n, dof, cost, nfev, status, message, flat (list of
     {"parameters": [...], "singular_ratio": r}), poor (names), warnings (strings).
@@ -42,7 +43,7 @@ def fit_parameters(residual, specs, start=None, max_nfev=200, flat_ratio=1e-4, p
     values = _from_x(sol.x, specs)
     r = sol.fun
     n, p = r.size, len(specs)
-    dof = max(n - p, 1)
+    dof = max(n - p - int(n_linear), 1)
     s2 = float(r @ r) / dof
     J = sol.jac
     U, sv, Vt = np.linalg.svd(J, full_matrices=False)

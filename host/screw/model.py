@@ -226,7 +226,7 @@ class ScrewModel:
             self.base_ref_C_ = float(runs[0].temperatures.column(self.base_sensor_)[0])
         else:
             self.base_ref_C_ = None
-        self.nut_sensor_ = runs[0].sensors_with_role("nut")[0]
+        self.nut_sensor_ = next(n for n in runs[0].sensors_with_role("nut") if n in runs[0].temperatures.names)
         specs_all = self._specs(meta_params)
         free = self._free_names(runs, meta_params)
         self.free_ = free
@@ -270,7 +270,7 @@ class ScrewModel:
             raise ValueError("geometric_degree must be 0..%d or 'auto' (got %r)" % (MAX_GEOMETRIC_DEGREE, self.geometric_degree))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", IdentifiabilityWarning)
-            res = fit_parameters(make_residual(top)[0], specs, max_nfev=self.max_nfev) if specs else None
+            res = fit_parameters(make_residual(top)[0], specs, max_nfev=self.max_nfev, n_linear=top + 1) if specs else None
         values = res["values"] if res else np.zeros(0)
         degree = top
         degree_scores = None
@@ -281,7 +281,7 @@ class ScrewModel:
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always", IdentifiabilityWarning)
                     specs_start = [ParamSpec(s.name, v, s.lo, s.hi, s.unit, s.positive) for s, v in zip(specs, values)]
-                    res = fit_parameters(make_residual(degree)[0], specs_start, max_nfev=self.max_nfev)
+                    res = fit_parameters(make_residual(degree)[0], specs_start, max_nfev=self.max_nfev, n_linear=degree + 1)
                 values = res["values"]
         for w in caught:
             warnings.warn(str(w.message), IdentifiabilityWarning, stacklevel=2)

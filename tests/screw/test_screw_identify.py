@@ -93,3 +93,13 @@ def test_bad_input_is_named(synth_run):
 def test_predict_rejects_runs_outside_the_screw(synth_model, synth_run):
     with pytest.raises(ValueError, match="no motion"):
         synth_model.predict(_copy(synth_run, motion=None))
+
+
+def test_nut_sensor_without_a_column_is_named(synth_run):
+    import copy
+
+    r = copy.deepcopy(synth_run)
+    r.meta["sensors"]["T_extra_nut"] = {"role": "nut"}
+    r.meta["sensors"]["T_nut"]["role"] = "structure"
+    with pytest.raises(ValueError, match="T_extra_nut.*no column in temperatures.csv"):
+        ScrewModel().fit([r])
