@@ -88,6 +88,9 @@ def test_cli_end_to_end(tmp_path):
     assert js["localization"] and all("factor" in d and "share" in d for d in js["localization"])
     for f in ("report.md", "residual_map.png", "error_curves.png", "model.json"):
         assert (rep / f).stat().st_size > 0
+    ev = js["evidence"][0]
+    assert ev["effect"] == "bearing_heat" and ev["rmse_after_um"] < ev["rmse_before_um"] and ev["where"]
+    assert "**bearing_heat** (round 1)" in (rep / "report.md").read_text()
     model = load_model(str(rep / "model.json"))
     assert model.to_document()["kind"] == "screw"
     run = load_run(folders[0])
