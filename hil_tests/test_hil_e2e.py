@@ -93,7 +93,7 @@ def test_e2e_screw_reduced_matches_reference(make_rig):
             pos = pos + (100000 if phase == 0 else -100000)
             pos = min(max(pos, lo), hi)
             rig.send("P", pos)
-        if k % 10 == 9 and k > 60:
+        if k % 10 == 9 and k > 40:
             q = rig.request("Q", pos, kinds=("Q",), step_ms=5)
             want = ref.offset([22000], pos)
             bound = ex.report["max_error_um"] + abs(doc["thermal"]["reduced"]["alpha_um_per_mm_per_K"]) * 0.02 * \

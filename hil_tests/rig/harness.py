@@ -150,7 +150,7 @@ class Rig:
     """One simulated board running the firmware. Use as a context manager."""
 
     def __init__(self, config, table=None, interpreter="micropython", workdir=None, temps=None, noise_uohm=0,
-                 seed=1, start_ms=0, heap=HEAP, slot="A", use_mpy=True):
+                 seed=1, start_ms=0, heap=HEAP, slot="A", use_mpy=True, open_port=True):
         self.config = json.loads(json.dumps(config))
         self.interpreter = interpreter
         self.own_dir = workdir is None
@@ -176,6 +176,8 @@ class Rig:
         self.t_ms = 0
         self.mem = []  # (t_ms, gc.mem_free after collect) samples
         self.starts = 0
+        self.open_port = open_port
+        self._free = None
         self._open_pty()
 
     # --- process lifetime --------------------------------------------------------
@@ -185,6 +187,8 @@ class Rig:
         tty.setraw(self.master)
         tty.setraw(self.slave)
         self.port = os.ttyname(self.slave)
+        if not self.open_port:
+            return  # another client (pymodbus, mpremote) opens self.port
         baud = (self.config.get("serial") or {}).get("baud", 115200)
         self.ser = serial.Serial(self.port, baud, timeout=0)
         self.reader = SerialReader(self.ser, self.stream)
@@ -285,7 +289,7 @@ class Rig:
             except (OSError, subprocess.TimeoutExpired, AttributeError):
                 pass
         self.kill()
-        if self.reader:
+        if self.reader and self.open_port:
             self.reader.stop = True
             self.reader.join(timeout=1)
         for fd in (self.master, self.slave):
@@ -293,7 +297,7 @@ class Rig:
                 os.close(fd)
             except OSError:
                 pass
-        if self.ser:
+        if self.ser and self.open_port:
             try:
                 self.ser.close()
             except Exception:
@@ -329,7 +333,7 @@ class Rig:
             self.mem.append((self.t_ms, ev["mem_free"]))
         ev = self._recv()
         self.t_ms = ev["t_ms"]
-        if sync:
+        if sync and self.open_port:
             self.reader.quiet()
         return ev
 
@@ -353,6 +357,34 @@ class Rig:
     def stats(self, gc=False):
         self._send({"op": "stats", "gc": gc})
         return self._recv()
+
+    def free_run(self, chunk_ms=20, pace_s=0.002):
+        """Context manager: a thread keeps granting time (``chunk_ms`` every ``pace_s`` real seconds)
+        so that a blocking client with real-time timeouts (pymodbus) gets answers."""
+        rig = self
+
+        class _Free:
+            def __enter__(self):
+                self.stop = False
+                self.error = None
+
+                def loop():
+                    try:
+                        while not self.stop:
+                            rig.run(rig.t_ms + chunk_ms, sync=False)
+                            time.sleep(pace_s)
+                    except Exception as exc:  # surfaced in __exit__
+                        self.error = exc
+                self.th = threading.Thread(target=loop, daemon=True)
+                self.th.start()
+                return rig
+
+            def __exit__(self, *exc):
+                self.stop = True
+                self.th.join(timeout=10)
+                if self.error is not None and exc[0] is None:
+                    raise self.error
+        return _Free()
 
     # --- the serial link ------------------------------------------------------------------
     def write(self, data):

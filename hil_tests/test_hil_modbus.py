@@ -1,0 +1,98 @@
+"""Scenario 8: Modbus RTU mode. pymodbus, as the master, polls the firmware over the pty and reads
+the same offsets the stream mode emits; malformed requests get the right exception (or, for a
+bad CRC, silence, as the Modbus serial line specification requires) and never a crash.
+"""
+import time
+
+import pytest
+import serial
+
+from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
+
+pytestmark = pytest.mark.rig
+SENSORS = ["T1", "T2", "T4"]
+TEMPS = {"T1": 24.0, "T2": 25.5, "T4": 23.0}
+POS = 600000
+
+
+def crc_modbus(data):
+    crc = 0xFFFF
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return bytes((crc & 0xFF, crc >> 8))
+
+
+def _s16(v):
+    return v - 0x10000 if v & 0x8000 else v
+
+
+def _raw(port, req, wait=0.3):
+    with serial.Serial(port, 115200, timeout=0) as s:
+        s.reset_input_buffer()
+        s.write(req)
+        s.flush()
+        end = time.monotonic() + wait
+        out = b""
+        while time.monotonic() < end:
+            out += s.read(256)
+            time.sleep(0.01)
+        return out
+
+
+def test_modbus_reads_stream_offsets_and_answers_bad_requests(make_rig, demo_run):
+    from pymodbus.client import ModbusSerialClient
+    table = export(poly_slope_for_run(demo_run, SENSORS, seed=21)).table
+    stream = make_rig(rig_config(SENSORS), table, temps=TEMPS)
+    stream.send("P", POS)
+    stream.run(150000)
+    o = [f for f in stream.frames if f.kind == "O"][-1]
+    assert o.status & 0xFFFF == 0 and o.pos_um == POS
+
+    rig = make_rig(rig_config(SENSORS, mode="modbus"), table, temps=TEMPS, open_port=False)
+    client = ModbusSerialClient(rig.port, baudrate=115200, timeout=1.0, retries=0)
+    assert client.connect()
+    try:
+        with rig.free_run():
+            w = client.write_registers(3, [(POS >> 16) & 0xFFFF, POS & 0xFFFF], device_id=1)
+            assert not w.isError(), w
+        rig.run(150000)
+        with rig.free_run():
+            rr = client.read_input_registers(0, count=16, device_id=1)
+            assert not rr.isError(), rr
+            regs = rr.registers
+            assert (regs[6] << 16 | regs[7]) == POS
+            assert regs[0] == 0  # no sensor fault (status low word)
+            # the same offsets as the stream: total and reference offset in 0.1 um, slope in 0.01 um/m
+            assert abs(_s16(regs[3]) - round(o.total_um * 10)) <= 1, (regs[3], o.raw)
+            assert abs(_s16(regs[4]) - round(float(o.fields[3]) * 10)) <= 1, (regs[4], o.raw)
+            assert abs(_s16(regs[5]) - round(float(o.fields[4]) * 100)) <= 2, (regs[5], o.raw)
+            # illegal data address: input registers end at 48
+            bad = client.read_input_registers(40, count=10, device_id=1)
+            assert bad.isError() and bad.exception_code == 2
+            bad = client.read_holding_registers(7, count=1, device_id=1)
+            assert bad.isError() and bad.exception_code == 2
+            # illegal data value: slew 0 is out of range
+            bad = client.write_register(1, 0, device_id=1)
+            assert bad.isError() and bad.exception_code == 3
+        client.close()
+        with rig.free_run():
+            # illegal function (read coils)
+            req = bytes((1, 1, 0, 0, 0, 1))
+            assert _raw(rig.port, req + crc_modbus(req)) == bytes((1, 0x81, 1)) + crc_modbus(bytes((1, 0x81, 1)))
+            # quantity 0
+            req = bytes((1, 4, 0, 0, 0, 0))
+            assert _raw(rig.port, req + crc_modbus(req))[:3] == bytes((1, 0x84, 3))
+            # bad CRC: discarded silently, and the slave still answers the next good request
+            req = bytes((1, 4, 0, 3, 0, 1))
+            good = req + crc_modbus(req)
+            assert _raw(rig.port, good[:-1] + bytes((good[-1] ^ 0x5A,))) == b""
+            ans = _raw(rig.port, good)
+            assert ans[:3] == bytes((1, 4, 2)) and ans[-2:] == crc_modbus(ans[:-2])
+            # another slave's address: not ours, no answer
+            req = bytes((7, 4, 0, 3, 0, 1))
+            assert _raw(rig.port, req + crc_modbus(req)) == b""
+        assert rig.alive
+    finally:
+        client.close()
