@@ -29,11 +29,6 @@ no such v exists (|A| not contracting) it refuses to export.
 import math
 from fractions import Fraction as F
 
-from firmware.evaluate import (
-    FEED_LIMB, FEED_W_BITS, SLOT_ACC, SLOT_BMUL, SLOT_CMUL, SLOT_CUM, SLOT_CUMMUL, SLOT_D, SLOT_DE, SLOT_FEEDMUL,
-    SLOT_GEO, SLOT_GEOMUL, SLOT_HMUL, SLOT_KMUL, SLOT_LIMB, SLOT_OUT, SLOT_P, SLOT_ROW, SLOT_ROWMUL, SLOT_S,
-    SLOT_SEGMUL, SLOT_SLOPE, SLOT_SMUL, SLOT_STATE, SLOT_THMUL, SLOT_TRAVEL, SLOT_XL,
-)
 
 MAXV = (1 << 30) - 1
 PROD = 1 << 29  # coefficient x limb products are kept below this

@@ -342,6 +342,7 @@ class Planner:
         gs = max(0, min(20, frac_bits(rowsum * Tq + Bmax + 1, ACC)))
         Bq, shB, rS = [], [], []
         rho = []
+        parts = []  # per row: (C quantisation, B quantisation + feed rounding), state units per step
         feed_du = (-(F(umax) / p2(FEED_W_BITS) + 4), F(0))  # feed/range mode travel error per segment (um)
         limb_ivs = [(0, (1 << Ls) - 1)] * (ns - 1) + [(0, top)]
         for i in range(M):
@@ -365,16 +366,20 @@ class Planner:
                     acc = iv_add(acc, (r[0] << -sh, r[1] << -sh))
                 rec.note(SLOT_ROW, acc[0], acc[1], name)
                 sh -= Ls
+            errC = ZERO
             for j in range(M):
                 dc = F(Cq[i][j]) / p2(fc) - Cx[i][j]
-                err = iv_add(err, iv_mul(_c(dc * p2(gs)), (F(0), F(Tq))))
+                errC = iv_add(errC, iv_mul(_c(dc * p2(gs)), (F(0), F(Tq))))
+            err = iv_add(err, errC)
             q, sb = fit_coef(F(float(s["B"][i])) / 1000, lmu, ft + gs)
             Bq.append(q)
             shB.append(sb)
             res, k = rec.mul(SLOT_BMUL, (q, q), U_iv, Lu, nu, sb, "thermal.reduced.B_K_per_mm[%d]" % i)
             bq = F(q) / p2(sb)
             db = bq - F(float(s["B"][i])) / 1000 * p2(ft + gs)
-            err = iv_add(err, iv_mul(_c(db), (F(0), F(umax))), floor_err(k), _hull(ZERO, iv_scale(feed_du, bq)))
+            errB = iv_add(iv_mul(_c(db), (F(0), F(umax))), _hull(ZERO, iv_scale(feed_du, bq)))
+            err = iv_add(err, errB, floor_err(k))
+            parts.append((iv_abs(errC) / p2(gs), iv_abs(errB) / p2(gs)))
             acc = iv_add(acc, res)
             bias, err_state = _round_out(err, gs)  # v = T + (acc + rS) >> gs
             rS.append(bias)
@@ -382,7 +387,6 @@ class Planner:
             rec.note(SLOT_ROW, acc[0], acc[1], name)
             rec.note(SLOT_STATE, acc[0] >> gs, Tq + (acc[1] >> gs), name)
             rho.append(max(abs(err_state[0]), abs(err_state[1])))
-            self.term("thermal.reduced.B_K_per_mm[%d]" % i, ft + gs + sb, 0, key="thermal.reduced.B_K_per_mm[%d]" % i)
         # travel accumulators and the feed fallback
         maxlen = max(b - a for a, b in zip(s["edges_um"], s["edges_um"][1:]))
         rec.note(SLOT_TRAVEL, 0, umax + max(maxlen, umax), "travel")
@@ -394,10 +398,18 @@ class Planner:
                               "the integer state error cannot be bounded")
         self.state_cert = {"rho_state_units": [float(r) for r in rho], "v_state_units": [float(x) for x in v], "ft": ft}
         f.update(ft=ft, Tmax=Tq, Ls=Ls, ns=ns, fc=fc, gs=gs, C=[c for row in Cq for c in row], Lu=Lu, nu=nu, B=Bq, shB=shB, rS=rS)
+        # informational split of the certified state error by source: output weight of a unit residual in row i
+        W = np.linalg.inv(np.eye(M) - np.abs(np.asarray(A, dtype=float)))
+        wout = [float(abs(m.alpha) * (F(s["edges"][j + 1]) - F(s["edges"][j])) * OU_PER_UM) / 2.0 ** ft * 2.0 ** fo for j in range(M)]
+        gain = [sum(wout[j] * W[j, i] for j in range(M)) for i in range(M)]
         for i in range(M):
             big = max(abs(c) for c in Cq[i])
             rec.note(-1, -big, big, "thermal.reduced.A[%d]" % i)
-            self.term("thermal.reduced.A[%d]" % i, fc, 0)
+            self.term("thermal.reduced.A[%d]" % i, fc, F(gain[i] * float(parts[i][0])))
+            self.term("thermal.reduced.B_K_per_mm[%d]" % i, ft + gs + shB[i], F(gain[i] * float(parts[i][1])),
+                      key="thermal.reduced.B_K_per_mm[%d]" % i)
+        self.term("state rounding (2^-%d K per step)" % ft, ft,
+                  F(sum(gain[i] * max(0.0, float(rho[i]) - float(parts[i][0]) - float(parts[i][1])) for i in range(M))), key="state")
         # elongation profile: cum (scale 2**fo) and segment slopes (scale 2**fh)
         alpha = m.alpha
         edges = s["edges"]
