@@ -181,7 +181,7 @@ def main(spec_path):
             micropython.heap_unlock()
             ctl.locked = False
         if MICRO:
-            sys.print_exception(e)
+            sys.print_exception(e, sys.stderr)
         else:
             import traceback
             traceback.print_exc()

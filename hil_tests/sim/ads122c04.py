@@ -146,9 +146,10 @@ class ADS122C04:
             if r[2] & 0x40 and len(buf) > 3:
                 buf[0] = self.counter
                 k = 1
-            vals = (d >> 16, (d >> 8) & 0xFF, d & 0xFF)
-            for i in range(len(buf) - k):
-                buf[k + i] = vals[i] if i < 3 else 0xFF
+            n = len(buf)
+            for i in range(k, n):
+                j = i - k  # byte j of the 24-bit result, MSB first; beyond it the bus reads FFh
+                buf[i] = ((d >> (16 - 8 * j)) & 0xFF) if j < 3 else 0xFF
             r[2] &= 0x7F
             return True
         if cmd & 0xF0 == 0x20:

@@ -210,6 +210,7 @@ class I2CBus:
         self.devices = {}
         self.faults = _Faults(seed)
         self.transactions = 0
+        self._k = F_NONE
 
     def init(self, freq=400000, **kw):
         self.freq = freq
@@ -229,13 +230,14 @@ class I2CBus:
         d = self.devices.get(addr)
         if d is None or not d.present:
             raise OSError(ENODEV)
-        return d, k
+        self._k = k  # not returned as a tuple: that would allocate under heap_lock
+        return d
 
     def scan(self):
         return [a for a in sorted(self.devices) if self.devices[a].present]
 
     def writeto(self, addr, buf, stop=True):
-        d, k = self._dev(addr, len(buf))
+        d = self._dev(addr, len(buf))
         if len(buf) == 0:
             return 0
         if len(buf) == 1:
@@ -246,10 +248,10 @@ class I2CBus:
         return len(buf)
 
     def readfrom_mem_into(self, addr, memaddr, buf, addrsize=8):
-        d, k = self._dev(addr, len(buf) + 1)
+        d = self._dev(addr, len(buf) + 1)
         if not d.read(memaddr, buf):
             raise OSError(EIO)
-        self.faults.mangle(k, buf, 0, len(buf))
+        self.faults.mangle(self._k, buf, 0, len(buf))
 
     def readfrom_mem(self, addr, memaddr, nbytes, addrsize=8):
         buf = bytearray(nbytes)
@@ -257,7 +259,7 @@ class I2CBus:
         return bytes(buf)
 
     def writeto_mem(self, addr, memaddr, buf, addrsize=8):
-        d, k = self._dev(addr, len(buf) + 1)
+        d = self._dev(addr, len(buf) + 1)
         if not d.write(memaddr, buf):
             raise OSError(EIO)
 

@@ -1,0 +1,56 @@
+"""Scenario 7: the steady-state cycle runs under micropython.heap_lock() on the real interpreter.
+
+The whole rig process runs locked between two control-channel gates: the
+firmware's cycles (chip reads over the simulated buses, conversion,
+evaluation, limiting, $TC frames, parsing position reports and queries
+from the pty) and the simulation around them. Any allocation raises
+MemoryError inside the firmware and the DUT reports a crash.
+"""
+import os
+
+import pytest
+
+from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
+
+pytestmark = pytest.mark.rig
+
+
+@pytest.mark.parametrize("mode", ["stream", "modbus"])
+def test_steady_state_cycle_allocates_nothing(tmp_path, demo_run, mode):
+    from hil_tests.rig.harness import Rig, micropython_path
+    if micropython_path() is None:
+        pytest.skip("MicroPython unix port not installed")
+    sensors = ["T1", "T2", "T4"]
+    table = export(poly_slope_for_run(demo_run, sensors, seed=4)).table
+    cfg = rig_config(sensors, mode=mode, frame_ms=100)
+    locked_s = 600 if os.environ.get("TCOMP_SLOW") else 60
+    with Rig(cfg, table, interpreter="micropython", workdir=str(tmp_path / "rig"), noise_uohm=20000,
+             temps={"T1": 23.0, "T2": 24.0, "T4": 22.0}, open_port=(mode == "stream")) as rig:
+        rig.run(20000)  # boot, first conversions, limiter ramp: allocation allowed here
+        if mode == "stream":
+            rig.take_frames()
+            for k in range(10):
+                rig.send("P", 100000 + 1000 * k)
+            rig.send("Q", 250000)
+            rig.run(rig.t_ms + 1000, lock=True)
+            n0 = len(rig.frames)
+            rig.run(rig.t_ms + locked_s * 1000, temps={"T1": 25.0, "T2": 25.5, "T4": 23.0}, lock=True)
+            frames = rig.take_frames()
+            assert len(frames) >= locked_s * 10 - 1 + n0 // 2
+            assert any(f.kind == "Q" for f in frames) and frames[-1].pos_um == 109000
+            assert all(f.status & 0xFFFF == 0 for f in frames if f.kind == "O")
+        else:
+            import serial
+            from hil_tests.test_hil_modbus import crc_modbus
+            req = bytes((1, 4, 0, 0, 0, 48))
+            with serial.Serial(rig.port, 115200, timeout=0) as s:
+                for _ in range(5):
+                    s.write(req + crc_modbus(req))
+                    rig.run(rig.t_ms + 200, lock=True)
+                rig.run(rig.t_ms + locked_s * 1000, lock=True)
+                import time
+                time.sleep(0.2)
+                ans = s.read(4096)
+            assert len(ans) == 5 * (3 + 96 + 2) and ans[:3] == bytes((1, 4, 96))
+        st = rig.stats()
+        assert st["impl"] == "micropython" and all(c["violations"] == 0 for c in st["chips"].values())
