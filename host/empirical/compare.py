@@ -25,6 +25,7 @@ cycles, so nothing held out is seen.
 """
 import time
 from dataclasses import dataclass, field
+from typing import Any, Optional
 
 import numpy as np
 
@@ -41,12 +42,12 @@ ROBUSTNESS = {"noise_C": 0.2, "offset_C": 0.5, "seed": 0, "repeats": 5}
 class Case:
     label: str
     train: list  # runs
-    window: tuple = None  # training window on target time
+    window: Optional[tuple] = None  # training window on target time
     tests: list = field(default_factory=list)  # [(label, run, window)]
-    ga_data: object = None  # data for the hclust-ga selector (runs or arrays)
+    ga_data: Any = None  # data for the hclust-ga selector (runs or arrays)
     ga_params: dict = field(default_factory=dict)
     ga_note: str = ""
-    summary_tests: list = None  # labels averaged into the mean metrics (None: all tests)
+    summary_tests: Optional[list] = None  # labels averaged into the mean metrics (None: all tests)
 
 
 def cases_runs(runs, train=(0,)):

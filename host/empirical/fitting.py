@@ -158,7 +158,7 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
         "candidate_sensors": list(names),
         "options": {k: v for k, v in options.items()},
     }
-    kw = dict(reference=reference, channel=channel, method=method, axis=runs[0].meta.get("axis"),
+    kw: dict = dict(reference=reference, channel=channel, method=method, axis=runs[0].meta.get("axis"),
               envelope=_envelope(runs, arrays, used, envelope_margin_K, target, channel), statistics=stats, training=training)
     if target == "direct":
         model = LinearDirectModel(used, coefs, est.intercept_, ref, **kw)

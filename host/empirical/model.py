@@ -18,6 +18,8 @@ training runs' typical start state.
 ``predict(run)`` returns one value per row of ``run.errors`` in file order;
 rows of other channels than the model's are NaN.
 """
+from typing import Any
+
 import numpy as np
 
 from host.empirical import EmpiricalDataError
@@ -29,6 +31,10 @@ REFERENCES = ("run_start", "fixed")
 
 class _Base:
     kind = None
+    # set by host.empirical.fitting.fit_model (the fitted estimator and its data), absent on loaded documents
+    estimator_: Any = None
+    arrays_: Any = None
+    geometric_: Any = None
 
     def __init__(self, sensors, coefficients, intercept, reference_C, reference="fixed", channel=None, method="mlr", axis=None,
                  envelope=None, statistics=None, training=None):

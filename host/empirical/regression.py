@@ -125,6 +125,10 @@ def _f(x):
 class _Linear:
     """Shared prediction and reporting of the fitted linear form."""
 
+    coef_: np.ndarray
+    intercept_: float
+    n_samples_: int
+
     def predict(self, X):
         X = np.asarray(X, dtype=float)
         if X.ndim == 1:
@@ -204,7 +208,7 @@ class MLR(_Linear):
             n: {"coef": _f(c), "std_error": _f(s), "t": _f(t), "p": _f(p)}
             for n, c, s, t, p in zip(self.names_, self.coef_, self.bse_, self.tvalues_, self.pvalues_)
         }
-        extra = {"coefficients": coefs}
+        extra: dict = {"coefficients": coefs}
         if self.fit_intercept:
             extra["intercept"] = {"coef": _f(self.intercept_), "std_error": _f(self.intercept_bse_), "t": _f(self.intercept_t_), "p": _f(self.intercept_p_)}
         return self._stats_dict(self._st, extra)
