@@ -17,7 +17,7 @@ def check_run(run, geometry=None, require_nut=True):
     name = run.path or run.name
     if run.motion is None or len(run.motion) == 0:
         raise ValueError("%s: the run has no motion (motion.csv missing or empty); the screw model is driven by the nut's travel" % name)
-    if not np.any(np.abs(run.motion.to_mm - run.motion.from_mm) > 0):
+    if not np.any(np.abs(run.motion.to_mm - run.motion.from_mm) > heat.MIN_RANGE_MM):
         raise ValueError("%s: motion.csv has no travel (every interval has from_mm == to_mm)" % name)
     if require_nut and not run.sensors_with_role("nut"):
         raise ValueError("%s: meta.json has no sensor with role 'nut' (sensors: %s); the screw model needs the nut temperature"

@@ -45,6 +45,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy.linalg import eigh_tridiagonal
 
+MIN_RANGE_MM = 1e-6  # an interval whose range is shorter than this is a dwell: no travel, no friction heat
 STEEL = {"density_kg_m3": 7850.0, "c_J_kgK": 460.0, "lambda_W_mK": 46.0, "alpha_per_K": 11.5e-6}
 
 
@@ -189,7 +190,7 @@ def _cumulative_travel(s, start, end, lo, hi):
 
     s: (k,) distances; returns (k, M)."""
     span = abs(end - start)
-    if span <= 0.0:
+    if span <= MIN_RANGE_MM:
         return np.zeros((s.size, lo.size))
     full_cov = np.clip(np.minimum(max(start, end), hi) - np.maximum(min(start, end), lo), 0.0, None)
     legs = np.floor(s / span)
@@ -221,7 +222,7 @@ def nut_travel_per_segment(motion, edges_mm, fixed_end_mm, t_grid, spread=False)
         b = np.maximum(motion.from_mm, motion.to_mm)
         span = b - a
         frac = np.clip(np.minimum(b[:, None], hi[None, :]) - np.maximum(a[:, None], lo[None, :]), 0.0, None)
-        frac = np.divide(frac, span[:, None], out=np.zeros_like(frac), where=span[:, None] > 0)
+        frac = np.divide(frac, span[:, None], out=np.zeros_like(frac), where=span[:, None] > MIN_RANGE_MM)
         moved = np.clip(t[:, None] - ts[None, :], 0.0, (te - ts)[None, :]) * (np.asarray(motion.feed_mm_min, float) / 60.0)[None, :]
         return np.diff(moved @ frac, axis=0)
     cum = np.zeros((t.size, lo.size))

@@ -130,3 +130,35 @@ def test_interp_rows_matches_np_interp():
     t = np.array([-5.0, 0.0, 3.0, 10.0, 24.9, 40.0, 50.0])
     ref = np.stack([np.interp(t, tg, v[:, j]) for j in range(3)], axis=1)
     np.testing.assert_allclose(heat.interp_rows(t, tg, v), ref)
+
+
+from hypothesis import given, settings  # noqa: E402
+from hypothesis import strategies as st  # noqa: E402
+
+
+@settings(max_examples=60, deadline=None)
+@given(a=st.floats(0, 700), b=st.floats(0, 700), feed=st.floats(100, 20000), t0=st.floats(0, 500), dur=st.floats(1, 5000),
+       dt=st.floats(0.5, 400), spread=st.booleans())
+def test_nut_travel_conserves_distance(a, b, feed, t0, dur, dt, spread):
+    edges = np.linspace(0.0, 800.0, 23)
+    mot = _motion([[t0, t0 + dur, a, b, feed]])
+    t = np.arange(0.0, t0 + dur + 3 * dt, dt)
+    u = heat.nut_travel_per_segment(mot, edges, 0.0, t, spread=spread)
+    assert np.all(u >= -1e-9)
+    moved = feed / 60.0 * (min(t[-1], t0 + dur) - t0) if abs(b - a) > heat.MIN_RANGE_MM else 0.0
+    assert u.sum() == pytest.approx(moved, rel=1e-9, abs=1e-6)
+    # nothing outside the range
+    lo, hi = min(a, b), max(a, b)
+    outside = (edges[1:] <= lo) | (edges[:-1] >= hi)
+    assert np.all(u[:, outside] == 0)
+
+
+@settings(max_examples=30, deadline=None)
+@given(seed=st.integers(0, 10**6), M=st.integers(1, 30), dt=st.floats(0.1, 5000))
+def test_nonnegative_heat_gives_nonnegative_rises(seed, M, dt):
+    rng = np.random.default_rng(seed)
+    geo = heat.ScrewGeometry(length_mm=500.0, diameter_mm=25.0, segments=M)
+    t = np.arange(0, 30) * dt
+    T = heat.simulate_segments(geo, heat.ScrewParams(), t, rng.uniform(0, 50, (29, M)) * (rng.uniform(size=(29, 1)) > 0.5))
+    assert np.all(T >= -1e-9 * max(1.0, T.max()))
+    assert np.all(np.isfinite(T))
