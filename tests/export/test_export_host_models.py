@@ -1,0 +1,104 @@
+"""Models fitted by the host code (tcomp fit on a demo run) exported and checked against the host's own evaluation."""
+import json
+import random
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from firmware.evaluate import Evaluator
+from firmware.table import parse_table
+from host.cli import main
+from host.models import load_model, read_document
+from host.runs import load_run
+from models_export import export_model
+from models_export.reference import Reference
+
+RUN = Path(__file__).resolve().parents[2] / "data" / "demo" / "v8000_r0_700"
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    if not RUN.exists():
+        pytest.skip("demo run data/demo/v8000_r0_700 not present")
+    d = tmp_path_factory.mktemp("fit")
+    out = {}
+    for method in ("mlr", "screw"):
+        path = d / (method + ".json")
+        assert main(["fit", "--model", method, str(RUN), "--out", str(path)]) == 0
+        out[method] = read_document(str(path))
+    return out
+
+
+@pytest.mark.parametrize("reference", ["as fitted", "run_start"])
+def test_poly_slope_from_tcomp_fit_matches_host_model(fitted, reference):
+    doc = json.loads(json.dumps(fitted["mlr"]))
+    assert doc["kind"] == "poly_slope"
+    if reference == "run_start":
+        doc["thermal"]["reference"] = "run_start"
+    ex = export_model(doc)
+    t = parse_table(ex.table)
+    model = load_model(doc)
+    ev = Evaluator(t, check=True)
+    rng = random.Random(1)
+    cert = ex.report["max_error_um"]
+    for _ in range(300):
+        temps = [rng.randint(lo, hi) for lo, hi in zip(t.env_lo, t.env_hi)]
+        if t.ref_mode == 1 and rng.random() < 0.1:
+            ev.temps[:] = [rng.randint(lo, hi) for lo, hi in zip(t.env_lo, t.env_hi)]
+            ev.latch_references()
+        for i, v in enumerate(temps):
+            ev.temps[i] = v
+        ev.update()
+        p = rng.randint(t.pos_lo, t.pos_hi)
+        # latched references are whole milli-degC in the firmware; fixed ones are the document's reference_C
+        refs = np.array(ev.ref) / 1000.0 if t.ref_mode == 1 else np.array([doc["reference_C"][s] for s in t.sensors])
+        R = np.array(temps) / 1000.0 - refs
+        host = float(model.geometric(p / 1000.0) + model.slope(R[None, :])[0] * p / 1000.0)
+        assert abs(ev.offset_at(p) * 0.01 - host) <= cert + 1e-9
+    for slot, (lo, hi) in ex.slots.items():
+        if ev.lo[slot] <= ev.hi[slot]:
+            assert lo <= ev.lo[slot] and ev.hi[slot] <= hi
+
+
+def test_screw_from_tcomp_fit_matches_host_reduced_model(fitted):
+    from host.screw import heat
+    from host.screw.reduced import reduced_error_um
+
+    doc = fitted["screw"]
+    red = doc["thermal"]["reduced"]
+    ex = export_model(doc)
+    t = parse_table(ex.table)
+    ev = Evaluator(t, check=True)
+    ref = Reference(doc, t)
+    run = load_run(str(RUN))
+    dt = red["dt_s"]
+    n = 400
+    times = run.motion.t_start_s[0] + dt * np.arange(n + 1) if run.motion is not None else dt * np.arange(n + 1)
+    u_mm = heat.nut_travel_per_segment(run.motion, np.asarray(red["edges_mm"]), red["fixed_end_mm"], times)
+    A, B = np.asarray(red["A"]), np.asarray(red["B_K_per_mm"])
+    x = np.zeros(len(B))
+    cert = ex.report["max_error_um"]
+    base = red.get("base_sensor")
+    rng = random.Random(2)
+    for k in range(n):
+        u_um = [int(round(v * 1000.0)) for v in u_mm[k]]
+        # the host recurrence on the same (whole-um) travel the firmware accumulates from position reports
+        x = A @ x + B * (np.array(u_um) / 1000.0)
+        for i, v in enumerate(u_um):
+            ev.u[i] = v
+        ev.step()
+        ref.step(u_um)
+        assert np.allclose(ref.T, x, rtol=1e-12, atol=1e-12)
+        temps = [rng.randint(lo, hi) for lo, hi in zip(t.env_lo, t.env_hi)]
+        for i, v in enumerate(temps):
+            ev.temps[i] = v
+        ev.update()
+        P = rng.randint(t.pos_lo, t.pos_hi)
+        rise = (temps[t.sensors.index(base)] / 1000.0 - red["base_ref_C"]) if base else None
+        host = float(load_model(doc).geometric_um(np.array([P / 1000.0]))[0]
+                     + reduced_error_um(red, x, P / 1000.0, base_rise_K=rise))
+        assert abs(ref.offset(temps, P) - host) < 1e-9
+        assert abs(ev.offset_at(P) * 0.01 - host) <= cert + 1e-9
+    assert max(x) > 0.1  # the run heated the screw
+    assert json.dumps(ex.report)  # the report is plain JSON
