@@ -252,3 +252,20 @@ def test_malformed_documents_are_model_format_errors(make_direct):
     bad["thermal"]["reference"] = "yesterday"
     with pytest.raises(ModelFormatError, match="thermal.reference"):
         load_model(bad)
+
+
+def test_training_arrays_common_sensors_and_errors(make_slope):
+    import copy
+
+    a = make_slope(n_sensors=4)
+    b = make_slope(seed=2, n_sensors=4)
+    b.temperatures = copy.copy(b.temperatures)
+    b.temperatures.names = ["T1", "T2", "T3", "X9"]
+    arrs = training_arrays([a, b])
+    assert [x.names for x in arrs] == [["T1", "T2", "T3"]] * 2
+    with pytest.raises(EmpiricalDataError, match="no run"):
+        training_arrays([])
+    with pytest.raises(EmpiricalDataError, match="duplicates"):
+        training_arrays([a], sensors=["T1", "T1"])
+    with pytest.raises(EmpiricalDataError, match="T4.*not in temperatures.csv"):
+        training_arrays([a, b], sensors=["T1", "T4"])
