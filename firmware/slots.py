@@ -31,7 +31,7 @@ class UploadError(Exception):
     """An upload step the firmware refuses; ``code`` is a protocol error word."""
 
     def __init__(self, code, detail):
-        Exception.__init__(self, detail)
+        super().__init__(detail)  # MicroPython has no Exception.__init__ to call directly
         self.code = code
         self.detail = detail
 
