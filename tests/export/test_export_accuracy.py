@@ -5,6 +5,7 @@ beyond) the envelope; the evaluator runs in checking mode, so every
 intermediate is also asserted against +-2**30, and the values it observed per
 slot must lie inside the exporter's certified intervals.
 """
+import os
 import random
 
 import pytest
@@ -17,6 +18,8 @@ from host.models import document_hash
 from models_export import export_model
 from models_export.reference import Reference
 from models_export.samples import screw_doc
+
+SLOW = os.environ.get("TCOMP_SLOW") == "1"  # full-size runs; the default is the reduced form
 
 SETTINGS = dict(deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
@@ -106,7 +109,8 @@ def _slots_inside(ex, ev):
     return seen
 
 
-@settings(max_examples=60 if not pytest.slow_mode else 600, **SETTINGS)
+@pytest.mark.slow
+@settings(max_examples=60 if not SLOW else 600, **SETTINGS)
 @given(doc=poly_slope_docs(), data=st.data())
 def test_poly_slope_within_certificate(doc, data):
     ex = export_model(doc)
@@ -127,7 +131,8 @@ def test_poly_slope_within_certificate(doc, data):
     assert _slots_inside(ex, ev) > 5
 
 
-@settings(max_examples=60 if not pytest.slow_mode else 600, **SETTINGS)
+@pytest.mark.slow
+@settings(max_examples=60 if not SLOW else 600, **SETTINGS)
 @given(doc=linear_direct_docs(), data=st.data())
 def test_linear_direct_within_certificate(doc, data):
     ex = export_model(doc)
@@ -187,7 +192,8 @@ def _feed_travel(t, feed, lo, hi):
     return out
 
 
-@settings(max_examples=12 if not pytest.slow_mode else 120, phases=[Phase.explicit, Phase.reuse, Phase.generate], **SETTINGS)
+@pytest.mark.slow
+@settings(max_examples=12 if not SLOW else 120, phases=[Phase.explicit, Phase.reuse, Phase.generate], **SETTINGS)
 @given(seed=st.integers(0, 2 ** 31), data=st.data())
 def test_screw_reduced_within_certificate(seed, data):
     rng = random.Random(seed)
@@ -200,7 +206,7 @@ def test_screw_reduced_within_certificate(seed, data):
     ref = Reference(doc, t)
     x = data.draw(st.integers(t.pos_lo, t.pos_hi))
     ev.advance_position(x)
-    steps = 150 if not pytest.slow_mode else 1500
+    steps = 150 if not SLOW else 1500
     feed_mode = False
     for k in range(steps):
         if rng.random() < 0.05:
@@ -236,6 +242,7 @@ def test_screw_reduced_within_certificate(seed, data):
     assert _slots_inside(ex, ev) > 20
 
 
+@pytest.mark.slow
 def test_screw_state_error_stays_within_bound_at_steady_state():
     """Long constant reciprocation: the state error approaches its steady value and stays below the certified v."""
     doc = screw_doc(random.Random(7), dt_s=1.0, feed_max_mm_min=12000.0)
@@ -248,7 +255,7 @@ def test_screw_state_error_stays_within_bound_at_steady_state():
     ev.set_feed(t.fmax, lo, hi)
     travel = _feed_travel(t, t.fmax, lo, hi)
     worst = 0.0
-    for k in range(3000 if not pytest.slow_mode else 30000):
+    for k in range(3000 if not SLOW else 30000):
         ev.step()
         ref.step(travel)
         worst = max(worst, max(abs(a / (1 << t.ft) - b) for a, b in zip(ev.T, ref.T)))

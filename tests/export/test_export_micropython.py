@@ -1,6 +1,7 @@
 """The firmware side on the real MicroPython unix port (mpy-cross compiled, 64 kB heap):
 bit-identical integer results to CPython, allocation-free steady state, same loader verdicts."""
 import json
+import os
 import random
 import struct
 import zlib
@@ -10,6 +11,8 @@ import pytest
 from firmware.table import TableError, parse_table
 from models_export import export_model
 from models_export.samples import linear_direct_doc, poly_slope_doc, screw_doc
+
+SLOW = os.environ.get("TCOMP_SLOW") == "1"  # full-size runs; the default is the reduced form
 
 pytestmark = pytest.mark.micropython
 
@@ -38,9 +41,10 @@ def _vectors(ex, rng, n):
     return ops
 
 
+@pytest.mark.slow
 def test_bit_identical_to_cpython(tmp_path, mp, runner):
     rng = random.Random(2026)
-    n = 300 if not pytest.slow_mode else 3000
+    n = 300 if not SLOW else 3000
     cases = []
     for seed in range(3):
         doc = poly_slope_doc(random.Random(seed))
