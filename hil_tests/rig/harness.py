@@ -178,6 +178,7 @@ class Rig:
         self.starts = 0
         self.open_port = open_port
         self._free = None
+        self.powered = False
         self._open_pty()
 
     # --- process lifetime --------------------------------------------------------
@@ -220,6 +221,7 @@ class Rig:
         argv = argv + [spec_path]
         self.stderr_path = os.path.join(self.workdir, "dut-stderr-%d.txt" % self.starts)
         self.stderr = open(self.stderr_path, "wb")
+        self.powered = True
         self.proc = subprocess.Popen(argv, stdin=self.master, stdout=self.master, stderr=self.stderr,
                                      cwd=self.flash, env=env)
         self.starts += 1
@@ -259,10 +261,21 @@ class Rig:
 
     def kill(self):
         """Power cut: SIGKILL, no chance to flush or close anything."""
+        self.powered = False
         if self.proc and self.proc.poll() is None:
             self.proc.send_signal(signal.SIGKILL)
             self.proc.wait()
         self._close_ctl()
+
+    def wait_real(self, pred, timeout=5.0, since=0):
+        """Wait in real time (time granted by ``free_run``) for a frame from index ``since`` on."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            for f in self.reader.frames[since:]:
+                if pred(f):
+                    return f
+            time.sleep(0.001)
+        raise RigError("no matching frame within %.1f s" % timeout)
 
     def _close_ctl(self):
         for a in ("rf", "conn", "listener"):
@@ -373,8 +386,9 @@ class Rig:
                         while not self.stop:
                             rig.run(rig.t_ms + chunk_ms, sync=False)
                             time.sleep(pace_s)
-                    except Exception as exc:  # surfaced in __exit__
-                        self.error = exc
+                    except Exception as exc:  # surfaced in __exit__, unless the test cut the power
+                        if rig.powered:
+                            self.error = exc
                 self.th = threading.Thread(target=loop, daemon=True)
                 self.th.start()
                 return rig

@@ -1,0 +1,81 @@
+"""Scenario 4: table update over the link with the power cut (process killed) at random points.
+
+Each trial uploads the table not in force (U,B / U,D... / U,C) while the
+firmware runs, and SIGKILLs the process at a random step, a random few
+milliseconds after sending it. After restart the hello frame must name a
+slot and a CRC of either the complete old or the complete new table, the
+active slot file must be byte-identical to that table, and the firmware's
+offsets must come from it. Then the upload is repeated to completion.
+"""
+import os
+import random
+import time
+import zlib
+
+import pytest
+
+from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
+from hil_tests.rig.frames import command
+
+pytestmark = pytest.mark.rig
+TRIALS = 40 if os.environ.get("TCOMP_SLOW") else 6
+SENSORS = ["T1", "T2", "T4"]
+CHUNK = 48
+
+
+def _steps(table):
+    out = [command("U", "B", len(table), "%08X" % zlib.crc32(table))]
+    for off in range(0, len(table), CHUNK):
+        out.append(command("U", "D", off, table[off:off + CHUNK].hex().upper()))
+    out.append(command("U", "C"))
+    return out
+
+
+def test_power_cut_during_upload_leaves_old_or_new_table(make_rig, demo_run):
+    tables = [export(poly_slope_for_run(demo_run, SENSORS, seed=s)).table for s in (31, 32)]
+    crcs = ["%08X" % zlib.crc32(t[:-4]) for t in tables]
+    by_crc = dict(zip(crcs, tables))
+    assert len(set(crcs)) == 2
+    rig = make_rig(rig_config(SENSORS), tables[0], temps={"T1": 23.0, "T2": 24.0, "T4": 22.0})
+    rng = random.Random(1234)
+    outcomes = {"old": 0, "new": 0}
+    boot_hellos = 0
+    for trial in range(TRIALS + 1):
+        final = trial == TRIALS  # the last upload runs to completion
+        h = rig.request("V", kinds=("H",))
+        slot, crc = h.fields[2], h.fields[3]
+        assert crc in by_crc, h.raw
+        in_force = by_crc[crc]
+        with open(os.path.join(rig.flash, "tables", "table_%s.bin" % slot.lower()), "rb") as f:
+            assert f.read() == in_force  # the slot in force holds the complete table
+        new = tables[1] if in_force == tables[0] else tables[0]
+        steps = _steps(new)
+        cut = len(steps) + 5 if final else rng.randrange(len(steps))
+        killed = False
+        with rig.free_run(chunk_ms=10, pace_s=0.0005):
+            for i, data in enumerate(steps):
+                k = len(rig.frames)
+                rig.write(data)
+                if i == cut:
+                    time.sleep(rng.random() * 0.004)
+                    rig.kill()
+                    killed = True
+                    break
+                a = rig.wait_real(lambda f: f.kind in ("A", "E"), 5.0, k)
+                assert a.kind == "A", a.raw
+        if killed:
+            k = len(rig.frames)
+            rig.start()
+            rig.run(300)
+            h2 = rig.wait_real(lambda f: f.kind == "H", 5.0, k)  # the boot hello
+            boot_hellos += 1
+        else:
+            h2 = rig.request("V", kinds=("H",))
+        crc2 = h2.fields[3]
+        assert crc2 in by_crc, h2.raw  # complete old or complete new, never a mix
+        outcomes["new" if by_crc[crc2] == new else "old"] += 1
+        if final:
+            assert by_crc[crc2] == new
+    assert rig.alive
+    assert boot_hellos == TRIALS
+    print("upload power cuts: %d trials, %s" % (TRIALS, outcomes))
