@@ -261,3 +261,53 @@ def test_screw_state_error_stays_within_bound_at_steady_state():
         worst = max(worst, max(abs(a / (1 << t.ft) - b) for a, b in zip(ev.T, ref.T)))
     assert worst <= bound
     assert max(ref.T) > 0.5  # the axis really heated
+
+
+@settings(max_examples=40, **SETTINGS)
+@given(seed=st.integers(0, 50), data=st.data())
+def test_travel_accumulation_and_feed_weights(seed, data):
+    """advance_position adds the swept length inside each segment (integer edges), clamped to umax and flagged;
+    set_feed's weights are floor(overlap * 2**19 / range) computed without products beyond 2**23."""
+    ex = _screw_export(seed)
+    t = parse_table(ex.table)
+    ev = Evaluator(t, check=True)
+    lo, hi = t.pos_lo - 3000, t.pos_hi + 3000
+    xs = data.draw(st.lists(st.integers(lo, hi), min_size=1, max_size=12))
+    want = [0] * t.M
+    flagged = False
+    prev = None
+    for p in xs:
+        ev.advance_position(p)
+        x = min(max(p, t.pos_lo), t.pos_hi) - t.fixed_end
+        if prev is not None:
+            a, b = sorted((prev, x))
+            for i in range(t.M):
+                ov = min(b, t.edges[i + 1]) - max(a, t.edges[i])
+                if ov > 0:
+                    want[i] += ov
+                    if want[i] > t.umax:
+                        want[i] = t.umax
+                        flagged = True
+        prev = x
+    assert list(ev.u) == want
+    assert bool(ev.flags & 0x2000000) == flagged
+    a, b = data.draw(st.integers(lo, hi)), data.draw(st.integers(lo, hi))
+    ev.set_feed(data.draw(st.integers(-t.fmax, t.fmax)), a, b)
+    xa, xb = sorted((min(max(a, t.pos_lo), t.pos_hi) - t.fixed_end, min(max(b, t.pos_lo), t.pos_hi) - t.fixed_end))
+    xa, xb = max(xa, 0), min(xb, t.edges[-1])
+    if xb > xa:
+        for i in range(t.M):
+            ov = max(0, min(xb, t.edges[i + 1]) - max(xa, t.edges[i]))
+            assert ev.w[i] == (ov << 19) // (xb - xa)
+        assert sum(ev.w) <= 1 << 19
+    else:
+        assert sum(ev.w) in (0, 1 << 19)
+
+
+_SCREW_CACHE = {}
+
+
+def _screw_export(seed):
+    if seed not in _SCREW_CACHE:
+        _SCREW_CACHE[seed] = export_model(screw_doc(random.Random(seed)))
+    return _SCREW_CACHE[seed]
