@@ -51,6 +51,7 @@ def main(argv=None):
     pair_hits, pair_n = 0, 0
     null_false, null_times, null_gains = 0, [], []
     hits = {e: [0, 0] for e in effects}  # named first, halved
+    floor = {e: [] for e in effects}  # held-out RMSE after / laser noise
     times = []
     for k in range(args.seeds):
         seed = args.first_seed + k
@@ -74,6 +75,7 @@ def main(argv=None):
             halved = res.after.rmse() <= 0.5 * res.before.rmse()
             hits[e][0] += first
             hits[e][1] += halved
+            floor[e].append(res.after.rmse() / noise)
             line.append("%s(%.2g): %s %.2f->%.2f" % (e, mag, ",".join(res.effects) or "-", res.before.rmse(), res.after.rmse()))
         if not args.no_pairs:
             pair = PAIRS[k % len(PAIRS)]
@@ -90,7 +92,8 @@ def main(argv=None):
     print("null (no effect hidden): %d false discoveries in %d seeds = %.3f (target <= 0.05)" % (null_false, n, null_false / n))
     print("null best candidate gain: median %+.1f%%, 95th percentile %+.1f%%, max %+.1f%%" % tuple(100 * np.nanpercentile(null_gains, [50, 95, 100])))
     for e in effects:
-        print("%-22s named first %d/%d, held-out RMSE halved %d/%d" % (e, hits[e][0], n, hits[e][1], n))
+        print("%-22s named first %d/%d, held-out RMSE halved %d/%d, RMSE after / laser noise: median %.3f, max %.3f"
+              % (e, hits[e][0], n, hits[e][1], n, np.median(floor[e]), np.max(floor[e])))
     if pair_n:
         print("two effects hidden: both named %d/%d" % (pair_hits, pair_n))
     allt = np.array(null_times + times)
