@@ -3,7 +3,8 @@
 Options (``--option KEY=VALUE``, repeatable): segments, dt_s, free (comma list of
 q,h,lambda,c,alpha), geometric_degree (0..4 or auto), effects (comma list of
 host/screw/effects.py names), nut_weight, reduced_segments, reduced_dt_s,
-feed_max_mm_min, ambient (on/off), base_ref (run_start/fixed), max_nfev.  ``--sensors NAME`` picks the base
+feed_max_mm_min, ambient (on/off), base_ref (run_start/fixed), max_nfev,
+fit_window (LO:HI seconds, either side may be empty: fit only on error rows in it).  ``--sensors NAME`` picks the base
 sensor of the E_e term; ``--channel`` the errors.csv channel.
 """
 import json
@@ -14,7 +15,7 @@ from host.screw.identify import IdentifiabilityWarning
 
 OPTIONS = {
     "segments": int, "dt_s": float, "free": str, "geometric_degree": str, "effects": str, "nut_weight": float,
-    "reduced_segments": int, "reduced_dt_s": float, "feed_max_mm_min": float, "ambient": str, "max_nfev": int, "base_ref": str,
+    "reduced_segments": int, "reduced_dt_s": float, "feed_max_mm_min": float, "ambient": str, "max_nfev": int, "base_ref": str, "fit_window": str,
 }
 
 
@@ -39,6 +40,14 @@ def parse_options(items):
             if v not in ("on", "off"):
                 raise ValueError("--option ambient: expected on or off, got %r" % value)
             v = v == "on"
+        if key == "fit_window":
+            lo, colon, hi = v.partition(":")
+            try:
+                if not colon:
+                    raise ValueError
+                v = (float(lo) if lo.strip() else None, float(hi) if hi.strip() else None)
+            except ValueError:
+                raise ValueError("--option fit_window: expected LO:HI in seconds (e.g. 0:10800 or :10800), got %r" % value)
         if key == "effects":
             v = [make_effect(n.strip()) for n in v.split(",") if n.strip()]
         kw[key] = v

@@ -45,9 +45,11 @@ def test_cli_fit_and_predict(tmp_path):
     for i, (f, lo, hi) in enumerate([(8000, 210, 490), (12000, 0, 700)]):
         runs.append(write_run(synth.make_run(f, lo, hi, heat_s=7200.0, cool_s=3600.0, noise_um=0.2, seed=i), str(tmp_path / ("r%d" % i))))
     out, rep = str(tmp_path / "m.json"), str(tmp_path / "fit.json")
-    assert tcomp(["fit", "--model", "screw", runs[0], "--out", out, "--json", rep, "--option", "reduced_segments=10"]) == 0
+    assert tcomp(["fit", "--model", "screw", runs[0], "--out", out, "--json", rep, "--option", "reduced_segments=10",
+                  "--option", "fit_window=:7200"]) == 0
     doc = read_document(out)
     assert doc["kind"] == "screw" and doc["thermal"]["reduced"]["segments"] == 10
+    assert doc["training"]["fit_window_s"] == [None, 7200.0]
     assert doc["provenance"]["sha256"]
     assert json.load(open(rep))["statistics"]["runs"][0]["rmse_um"] < 0.4
     pred = str(tmp_path / "p.csv")
@@ -68,6 +70,8 @@ def test_cli_bad_input_is_a_user_error(tmp_path, capsys):
     assert "no motion" in capsys.readouterr().err
     assert tcomp(["fit", "--model", "screw", folder, "--out", str(tmp_path / "m.json"), "--option", "segmnts=3"]) == 2
     assert "segments" in capsys.readouterr().err
+    assert tcomp(["fit", "--model", "screw", folder, "--out", str(tmp_path / "m.json"), "--option", "fit_window=100"]) == 2
+    assert "LO:HI" in capsys.readouterr().err
 
 
 def test_screw_beats_mlr_on_unseen_states_of_the_bundled_runs(demo_runs):
