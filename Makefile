@@ -33,8 +33,9 @@ sysdeps:
 demo: setup
 	$(BIN)/python tools/demo.py --out $(OUT)
 
+# One BLAS thread per worker: pytest -n 2 on 2 cores plus BLAS threads oversubscribes the machine.
 test: setup
-	$(BIN)/python -m pytest -q -n 2 --dist loadfile
+	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile
 	$(MAKE) --no-print-directory typecheck
 
 typecheck: setup

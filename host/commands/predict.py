@@ -27,7 +27,10 @@ def run(args):
     rows = np.arange(len(e))
     if getattr(model, "channel", None) and e.channel is not None:
         rows = np.flatnonzero(e.channel == model.channel)
-    pred = np.asarray(model.predict(run_), dtype=float)
+    try:
+        pred = np.asarray(model.predict(run_), dtype=float)
+    except ValueError as exc:  # the run lacks what the model needs (a sensor, motion, a channel)
+        raise UserError("%s cannot be predicted with %s: %s" % (args.run, args.model, exc))
     if pred.shape != (len(e),):
         raise UserError("model returned %s predictions for %d rows of %s" % (pred.shape, len(e), args.run))
     header = ["time_s", "position_mm"] + (["direction"] if e.direction is not None else []) + (["channel"] if e.channel is not None else []) + ["predicted_um"]
