@@ -443,9 +443,9 @@ class Planner:
             seg_ivs.append(res)
             err_ss.append(iv_add(iv_mul(_c(hq - hval * p2(fh - ft)), (F(0), F(Tq))), floor_err(k),
                                  iv_scale((-v[i], v[i]), abs(hq))))
-        self.term("thermal.reduced.alpha_um_per_mm_per_K", fh - ft + shH, 0)
         eu = s["edges_um"]
         LEN = max(b - a for a, b in zip(eu, eu[1:]))
+        self.term("thermal.reduced.alpha_um_per_mm_per_K", fh - ft + shH, abs(hq - hval * p2(fh - ft)) * Tq * LEN / p2(fh - fo))
         Lx = narrow_width(LEN)
         ss_all = _hull(*[(F(a), F(b)) for a, b in seg_ivs])
         ss_int = (int(ss_all[0]), int(ss_all[1]))
