@@ -33,15 +33,18 @@ _CAP = const(0x20000000)  # elapsed-time counters saturate at 2**29 ms
 
 def _load_config(d):
     # validation is needed once per boot: unload it again to give the RAM back
+    # (every reference is dropped explicitly: the GC scans the stack conservatively)
     import sys
-    from firmware.config import load_config
+    import firmware
+    from firmware import config
     try:
-        return load_config(d)
+        cfg = config.load_config(d)
     finally:
+        config = None
         sys.modules.pop("firmware.config", None)
-        import firmware
         if hasattr(firmware, "config"):
             delattr(firmware, "config")
+    return cfg
 
 
 class Restart(Exception):

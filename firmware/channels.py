@@ -139,9 +139,17 @@ class Channels:
         elif dt > _CAP:
             dt = _CAP
         m = 0
+        good_ms = self.good_ms
         for i in range(self.n):
-            self._tick(i, dt)
-            f = self._read(i)
+            # only the counters a channel in this state will look at are advanced
+            v = good_ms[i] + dt
+            good_ms[i] = v if v < _CAP else _CAP
+            if not self.good[i]:
+                v = self.prev_ms[i] + dt
+                self.prev_ms[i] = v if v < _CAP else _CAP
+                v = self.reinit_ms[i] + dt
+                self.reinit_ms[i] = v if v < _CAP else _CAP
+            f = self._read(i, dt)
             if f < 0:  # no new data this cycle (ADS122C04 between conversions)
                 if not self.good[i]:
                     m |= 1 << i
@@ -151,19 +159,7 @@ class Channels:
                 m |= 1 << i
         return m
 
-    def _tick(self, i, dt):
-        v = self.good_ms[i] + dt
-        self.good_ms[i] = v if v < _CAP else _CAP
-        v = self.code_ms[i] + dt
-        self.code_ms[i] = v if v < _CAP else _CAP
-        v = self.data_ms[i] + dt
-        self.data_ms[i] = v if v < _CAP else _CAP
-        v = self.prev_ms[i] + dt
-        self.prev_ms[i] = v if v < _CAP else _CAP
-        v = self.reinit_ms[i] + dt
-        self.reinit_ms[i] = v if v < _CAP else _CAP
-
-    def _read(self, i):
+    def _read(self, i, dt):
         """Raw read of channel i into ``reading``; returns fault bits, or -1 for no new data."""
         d = self.drivers[i]
         if ((d is None or self.fault[i] & (_F_CHIP | _F_BUS | _F_STALE | _F_RANGE))
@@ -183,6 +179,8 @@ class Channels:
                     return _F_CHIP
                 code = raw >> 1
             else:
+                v = self.data_ms[i] + dt
+                self.data_ms[i] = v if v < _CAP else _CAP
                 if not d.data_ready:
                     if self.data_ms[i] >= _STALE_MS:
                         return _F_STALE
@@ -194,6 +192,8 @@ class Channels:
         self.data_ms[i] = 0
         f = 0
         if self.stuck_ms:
+            v = self.code_ms[i] + dt
+            self.code_ms[i] = v if v < _CAP else _CAP
             if code != self.code[i]:
                 self.code[i] = code
                 self.code_ms[i] = 0
