@@ -62,7 +62,8 @@ class App:
         self.enabled = True
         self.slew = cfg.slew_um_per_s
         self.link_timeout_ms = cfg.link_timeout_ms
-        self.pos = 0
+        self.pos = 0  # last reported position
+        self.pos_used = 0  # position the last cycle's total was evaluated at
         self.have_pos = False
         # elapsed-time counters (ms, saturating) rather than timestamps: ticks wrap
         self.rx_ms = 0  # since the last valid controller traffic
@@ -257,6 +258,7 @@ class App:
                         self.step_ms = 0
                         break
             pos = self.pos if self.have_pos else ev.pos_ref
+            self.pos_used = pos
             raw_total = ev.offset_at(pos)
             raw_ref = ev.ref_offset()
             raw_slope = ev.slope()

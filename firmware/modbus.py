@@ -213,7 +213,7 @@ class ModbusLink:
         if r == _IR_SLOPE:
             return _s16(a.slope_out)
         if r == _IR_POSITION or r == _IR_POSITION + 1:
-            return self._word(a.pos, r - _IR_POSITION)
+            return self._word(a.pos_used, r - _IR_POSITION)
         if r == _IR_REFERENCE or r == _IR_REFERENCE + 1:
             return self._word(a.ev.pos_ref if a.ev is not None else 0, r - _IR_REFERENCE)
         if r == _IR_TABLE_CRC:

@@ -182,7 +182,7 @@ class StreamLink:
         if dt > 0:
             self.due_ms += dt
         if self.due_ms >= 0:
-            self.offsets(_O, self.app.pos)
+            self.offsets(_O, self.app.pos_used)
             self.due_ms -= self.frame_ms
             if self.due_ms >= 0:  # fell behind: no burst of frames
                 self.due_ms = -self.frame_ms
