@@ -58,8 +58,7 @@ def I2C(ident=0, scl=None, sda=None, freq=400000, timeout=50000):
 
 
 def UART(ident=0, baudrate=115200, **kw):
-    from hil_tests.sim.uart import StdioUART
-    return StdioUART()
+    return _w().make_uart()
 
 
 def WDT(id=0, timeout=5000):

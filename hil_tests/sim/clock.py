@@ -56,3 +56,35 @@ class SimClock:
     def now_ms(self):
         """Milliseconds since power-on (not wrapped)."""
         return self.us // 1000
+
+
+class WallClock:
+    """Real time for the chips of a board that runs on the interpreter's own clock (the flashed
+    board of scenario 5 uses firmware.board.SystemClock): same ``us``/``spend_us`` interface."""
+
+    def __init__(self):
+        import time
+        self._time = time
+        self._micro = hasattr(time, "ticks_us")
+        self._last = self._raw()
+        self._acc = 0
+        self.watchdog = None
+
+    def _raw(self):
+        t = self._time
+        return t.ticks_us() if self._micro else t.monotonic_ns() // 1000
+
+    @property
+    def us(self):
+        now = self._raw()
+        d = self._time.ticks_diff(now, self._last) if self._micro else now - self._last
+        self._last = now
+        self._acc += d
+        return self._acc
+
+    def spend_us(self, us):
+        # a simulated transfer returns at once; the chips see the time a real one takes
+        self._acc += us
+
+    def now_ms(self):
+        return self.us // 1000

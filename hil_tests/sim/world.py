@@ -20,9 +20,20 @@ _WORLD = None
 
 
 def current():
+    """The process's world; built on first use from the JSON spec named by the environment
+    variable TCOMP_HIL_WORLD (a flashed board booting main.py), on real time."""
     global _WORLD
     if _WORLD is None:
-        _WORLD = World({"channels": []})
+        import os
+        path = os.getenv("TCOMP_HIL_WORLD")
+        spec = {"config": {"channels": []}}
+        if path:
+            import json
+            with open(path) as f:
+                spec = json.load(f)
+        from hil_tests.sim.clock import WallClock
+        _WORLD = World(spec["config"], spec.get("temps"), spec.get("noise_uohm", 0), spec.get("seed", 1),
+                       clock=WallClock())
     return _WORLD
 
 
@@ -54,14 +65,15 @@ class SimWDT:
 
 
 class World:
-    def __init__(self, config, temps=None, noise_uohm=0, seed=1, start_ms=0):
+    def __init__(self, config, temps=None, noise_uohm=0, seed=1, start_ms=0, clock=None):
         self.config = config
-        self.clock = SimClock(start_ms)
+        self.clock = clock if clock is not None else SimClock(start_ms)
         self.rtds = {}
         self.chips = {}
         self.buses = {}
         self.pins = {}
         self.wdt = None
+        self.uart = None
         temps = temps or {}
         for i, ch in enumerate(config.get("channels", [])):
             name = ch["name"]
@@ -104,6 +116,11 @@ class World:
     def watchdog(self, timeout_ms):
         self.wdt = SimWDT(self.clock, timeout_ms)
         return self.wdt
+
+    def make_uart(self):
+        from hil_tests.sim.uart import StdioUART
+        self.uart = StdioUART()
+        return self.uart
 
     # --- stimulus and faults (the control channel calls these) ----------------------
     def ramp(self, until_ms, temps):

@@ -1,0 +1,73 @@
+"""Scenario 5: flashing as a user does it. ``tcomp flash`` (mpremote) copies the firmware, a board
+file generated from a config and a table onto a simulated board (a MicroPython unix REPL on a
+socat pty whose working directory is the board's flash); after a power cycle the board boots
+main.py from those files: its hello names the flashed table and its sensors read good.
+"""
+import json
+import os
+import shutil
+import time
+import zlib
+
+import pytest
+import serial
+
+from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
+from hil_tests.rig.frames import StreamDecoder, command
+
+pytestmark = [pytest.mark.rig, pytest.mark.micropython]
+
+
+def _frames(ser, decoder, seconds, want=None):
+    out = []
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        data = ser.read(4096)
+        if data:
+            out += decoder.feed(data)
+            if want and want(out):
+                return out
+        else:
+            time.sleep(0.02)
+    return out
+
+
+def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run):
+    from hil_tests.rig.harness import micropython_path
+    from hil_tests.rig.socatboard import SocatBoard
+    from host.cli import main as tcomp
+    if shutil.which("socat") is None or micropython_path() is None:
+        pytest.skip("socat and the MicroPython unix port are needed")
+    sensors = ["T1", "T2", "T4"]
+    table = export(poly_slope_for_run(demo_run, sensors, seed=41)).table
+    (tmp_path / "table.bin").write_bytes(table)
+    cfg = rig_config(sensors, watchdog_ms=0)
+    cfg["channels"][-1]["bus"] = "i2c1"  # rp2040.make_board names its buses spi0 / i2c1
+    (tmp_path / "board.json").write_text(json.dumps(cfg))
+    flash = tmp_path / "flash"
+    flash.mkdir()
+    link = str(tmp_path / "ttyBOARD")
+    with SocatBoard(str(flash), link):
+        rc = tcomp(["flash", "--port", link, "--table", str(tmp_path / "table.bin"),
+                    "--config", str(tmp_path / "board.json")])
+        assert rc == 0
+    for rel in ("main.py", "tcomp_board.py", "firmware/app.py", "firmware/boards/rp2040.py", "tables/table_a.bin"):
+        assert (flash / rel).is_file(), rel
+    assert (flash / "tables" / "table_a.bin").read_bytes() == table
+    assert (flash / "firmware" / "app.py").read_bytes() == open(os.path.join(
+        os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "firmware", "app.py"), "rb").read()
+    assert not (flash / "firmware" / "board_linux.py").exists()
+    spec = tmp_path / "world.json"
+    spec.write_text(json.dumps({"config": cfg, "temps": {"T1": 23.0, "T2": 24.0, "T4": 22.0}}))
+    with SocatBoard(str(flash), link, script="main.py", world_spec=str(spec)):  # power on: boot main.py
+        with serial.Serial(link, 115200, timeout=0) as ser:
+            dec = StreamDecoder()
+            frames = _frames(ser, dec, 20.0, lambda fr: sum(f.kind == "O" and f.status & 0xFFFF == 0
+                                                           for f in fr) >= 2)
+            ser.write(command("V"))
+            frames += _frames(ser, dec, 5.0, lambda fr: any(f.kind == "H" for f in fr))
+    assert not dec.bad, dec.bad[:3]
+    hello = [f for f in frames if f.kind == "H"][-1]
+    assert hello.fields[2] == "A" and hello.fields[3] == "%08X" % zlib.crc32(table[:-4]), hello.raw
+    good = [f for f in frames if f.kind == "O" and f.status & 0xFFFF == 0]
+    assert len(good) >= 2, [f.raw for f in frames[-5:]]

@@ -1,0 +1,144 @@
+"""tcomp flash --port PORT [--table table.bin] [--config board.json | --board board.py]"""
+HELP = "copy the firmware, a board file and a table onto a MicroPython board with mpremote"
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+# CPython-only modules that never go onto a board
+_HOST_ONLY = ("board_linux.py",)
+
+
+def add_arguments(p):
+    p.add_argument("--port", required=True, help="serial port of the board (e.g. /dev/ttyACM0, or a pty)")
+    p.add_argument("--table", help="coefficient table (tcomp export) installed as slot A and made active")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--config", help="board config JSON (firmware/board.py format); generates tcomp_board.py "
+                                    "around firmware/boards/rp2040.py's make_board")
+    g.add_argument("--board", help="your board file, copied to the board root as tcomp_board.py")
+    p.add_argument("--table-dir", help="table directory on the board (default: the config's table_dir, else /tables)")
+    p.add_argument("--no-firmware", action="store_true", help="copy only the table and the board file")
+    p.add_argument("--reset", action="store_true", help="soft-reset the board afterwards so that main.py runs "
+                                                        "(not for a unix-port board: it would exit)")
+    p.add_argument("--mpremote", default=None, help="mpremote executable (default: the one next to this Python)")
+    p.add_argument("--dry-run", action="store_true", help="print the mpremote command instead of running it")
+
+
+def _mpremote(explicit):
+    if explicit:
+        return explicit
+    here = os.path.join(os.path.dirname(sys.executable), "mpremote")
+    return here if os.path.exists(here) else (shutil.which("mpremote") or "mpremote")
+
+
+def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=True):
+    """Lay out the board's flash under ``dest``; returns {remote dir: [local files]} and the table dir."""
+    from host.cli import UserError
+    files = {}
+    if firmware:
+        fw = os.path.join(dest, "firmware")
+        os.makedirs(os.path.join(fw, "boards"))
+        for sub, out in (("", fw), ("boards", os.path.join(fw, "boards"))):
+            src = os.path.join(ROOT, "firmware", sub)
+            for name in sorted(os.listdir(src)):
+                if name.endswith(".py") and name not in _HOST_ONLY:
+                    shutil.copy(os.path.join(src, name), os.path.join(out, name))
+                    files.setdefault(("firmware/" + sub).rstrip("/"), []).append(os.path.join(out, name))
+        shutil.copy(os.path.join(ROOT, "firmware", "main.py"), os.path.join(dest, "main.py"))
+        files.setdefault("", []).append(os.path.join(dest, "main.py"))
+    cfg = None
+    if config:
+        try:
+            with open(config, encoding="utf-8") as f:
+                cfg = json.load(f)
+        except (OSError, json.JSONDecodeError) as exc:
+            raise UserError("%s: cannot read the board config: %s" % (config, exc))
+        try:
+            from firmware.config import load_config
+            load_config(cfg)
+        except ValueError as exc:
+            raise UserError("%s: %s" % (config, exc))
+        path = os.path.join(dest, "tcomp_board.py")
+        with open(path, "w", encoding="utf-8") as f:
+            f.write('"""Board file written by tcomp flash from %s."""\n' % os.path.basename(config))
+            f.write("CONFIG = %r\n\n\n" % (cfg,))
+            f.write("def make_board(config=CONFIG):\n")
+            f.write("    from firmware.boards.rp2040 import make_board as _make\n")
+            f.write("    return _make(config)\n")
+        files.setdefault("", []).append(path)
+    elif board:
+        if not os.path.isfile(board):
+            raise UserError("%s: board file is missing" % board)
+        path = os.path.join(dest, "tcomp_board.py")
+        shutil.copy(board, path)
+        files.setdefault("", []).append(path)
+    tdir = (table_dir or (cfg or {}).get("table_dir") or "/tables").strip("/") or "tables"
+    if table:
+        try:
+            with open(table, "rb") as f:
+                data = f.read()
+        except OSError as exc:
+            raise UserError("%s: cannot read the table: %s" % (table, exc))
+        try:
+            from firmware.table import parse_table
+            parse_table(data)
+        except Exception as exc:  # firmware.table.TableError or a malformed file
+            raise UserError("%s: not a valid coefficient table: %s" % (table, exc))
+        os.makedirs(os.path.join(dest, tdir), exist_ok=True)
+        for name, content in (("table_a.bin", data), ("active", b"A")):
+            p = os.path.join(dest, tdir, name)
+            with open(p, "wb") as f:
+                f.write(content)
+            files.setdefault(tdir, []).append(p)
+    return files, tdir
+
+
+def command(port, files, mpremote="mpremote", reset=False):
+    """One mpremote invocation (``resume``: no soft reset on connect) that creates the directories
+    and copies every file."""
+    dirs = sorted({d for d in files if d})
+    mk = "import os\nfor d in %r:\n    try:\n        os.mkdir(d)\n    except OSError:\n        pass\n" % (
+        [p for d in dirs for p in _parents(d)],)
+    argv = [mpremote, "connect", port, "resume", "exec", mk]
+    for d in sorted(files):
+        argv += ["+", "fs", "cp"] + files[d] + [":" + (d + "/" if d else "./")]
+    if reset:
+        argv += ["+", "soft-reset"]
+    return argv
+
+
+def _parents(d):
+    parts = d.split("/")
+    return ["/".join(parts[:i + 1]) for i in range(len(parts))]
+
+
+def run(args):
+    from host.cli import UserError
+    if not (args.table or args.config or args.board or not args.no_firmware):
+        raise UserError("nothing to flash: give --table, --config or --board, or drop --no-firmware")
+    tmp = tempfile.mkdtemp(prefix="tcomp-flash-")
+    try:
+        files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware)
+        argv = command(args.port, files, _mpremote(args.mpremote), args.reset)
+        if args.dry_run:
+            print(" ".join(repr(a) if ("\n" in a or " " in a) else a for a in argv))
+            return 0
+        n = sum(len(v) for v in files.values())
+        print("flashing %d files to %s (tables in /%s)" % (n, args.port, tdir))
+        try:
+            p = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+        except FileNotFoundError:
+            raise UserError("mpremote not found (%s); install the dev extra" % argv[0])
+        except subprocess.TimeoutExpired:
+            raise UserError("mpremote did not finish within 300 s on %s" % args.port)
+        if p.returncode != 0:
+            raise UserError("mpremote failed on %s (exit %d): %s" % (args.port, p.returncode,
+                                                                     (p.stderr or p.stdout).strip()[-800:]))
+        print("done: %s" % ", ".join(sorted(os.path.relpath(f, tmp) for v in files.values() for f in v)))
+        return 0
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
