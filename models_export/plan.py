@@ -160,9 +160,9 @@ class Planner:
         rec.note(SLOT_OUT, acc[0] >> fo, acc[1] >> fo, "output")
         self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
         # the pair: thermal offset at the reference position ...
-        pr = m.pos_ref
-        th_ref, k = rec.mul(SLOT_THMUL, (pr, pr), S_iv, Lw, nw, shw, "slope x position")
-        err_ref = iv_add(iv_scale(eS, F(pr) / p2(shw)), floor_err(k))
+        # certified for any reference position inside the envelope (Evaluator.set_reference), not only pos_ref
+        th_ref, k = rec.mul(SLOT_THMUL, (m.pos_lo, m.pos_hi), S_iv, Lw, nw, shw, "slope x position")
+        err_ref = iv_add(iv_scale(iv_mul(P, eS), 1 / p2(shw)), floor_err(k))
         acc_ref = th_ref
         if screw:
             acc_ref = iv_add(acc_ref, seg_iv)

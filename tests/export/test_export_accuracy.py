@@ -121,6 +121,8 @@ def test_poly_slope_within_certificate(doc, data):
     for k in range(20):
         if k % 7 == 0:
             _maybe_latch(data, ev, ref)
+        if k % 5 == 0:
+            ev.set_reference(data.draw(st.integers(t.pos_lo - 1000, t.pos_hi + 1000)))
         temps = _temps(data.draw, t)
         pos = data.draw(st.integers(t.pos_lo - 10000, t.pos_hi + 10000))
         for i, v in enumerate(temps):
