@@ -6,12 +6,14 @@ Export: wall time of export_model per model kind (sample documents from
 models_export.samples), table size, certified error. Evaluation: microseconds
 per call of update / offset_at / ref_offset+slope / step on CPython and on the
 MicroPython unix port (firmware modules compiled with mpy-cross, 64 kB heap),
+instructions per call under valgrind/callgrind (stable on a loaded machine),
 best of several repetitions (the machine may be shared),
 and the .mpy size of the three firmware modules for armv6m (RP2040).
 """
 import argparse
 import os
 import random
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -80,10 +82,41 @@ def cpython_bench(ev, n, pos, screw, repeat=5):
     return out
 
 
+CG_SCRIPT = """
+from firmware.table import parse_table
+from firmware.evaluate import Evaluator
+f = open(%(path)r, 'rb')
+ev = Evaluator(parse_table(f.read()))
+f.close()
+def run(ev, n):
+    for k in range(n):
+        %(stmt)s
+run(ev, %(n)d)
+"""
+
+
+def callgrind_per_call(tmp, table_path, stmt, n1=50, n2=250):
+    """Instructions per call on the MicroPython unix port: (Ir(n2) - Ir(n1)) / (n2 - n1), stable under load."""
+    irs = []
+    for n in (n1, n2):
+        script = tmp / "cg.py"
+        script.write_text(CG_SCRIPT % dict(path=str(table_path), stmt=stmt, n=n))
+        out = tmp / "cg.out"
+        proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=%s" % out, str(BIN / "micropython"),
+                               "-X", "heapsize=64K", str(script)], capture_output=True, text=True,
+                              env=dict(os.environ, MICROPYPATH=str(tmp)))
+        if proc.returncode != 0:
+            return None
+        summary = [line for line in out.read_text().splitlines() if line.startswith("summary:") or line.startswith("totals:")]
+        irs.append(int(summary[0].split()[1]))
+    return (irs[1] - irs[0]) / (n2 - n1)
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--repeat", type=int, default=5, help="exports per model for the timing")
     ap.add_argument("--n", type=int, default=2000, help="evaluations per timing loop")
+    ap.add_argument("--no-valgrind", action="store_true", help="skip the callgrind instruction counts")
     args = ap.parse_args()
     cases = [
         ("poly_slope, 11 sensors, degree 3", poly_slope_doc(random.Random(1), n_sensors=11, degree=3)),
@@ -132,6 +165,21 @@ def main():
             ns = args.n // 10 + 1
             vals = [us[0] / args.n - loop, us[1] / args.n - loop, us[2] / args.n - loop, us[3] / ns if screw else float("nan")]
             print("  %-36s MicroPython %7.2f | %7.2f | %7.2f | %8.1f" % ("", *vals))
+    if mp_ok and not args.no_valgrind and shutil.which("valgrind"):
+        print("\ninstructions per call on the MicroPython unix port (valgrind --tool=callgrind, x86-64):")
+        for label, ex in tables:
+            t = parse_table(ex.table)
+            path = tmp / "table.bin"
+            path.write_bytes(ex.table)
+            pos = (t.pos_lo + t.pos_hi) // 2
+            stmts = [("update", "ev.update()"), ("offset_at", "ev.offset_at(%d)" % pos)]
+            if t.kind == "screw_reduced":
+                stmts.append(("advance_position+step", "ev.advance_position(%d + (k %% 5) * 1000); ev.step()" % pos))
+            figs = []
+            for name, stmt in stmts:
+                ir = callgrind_per_call(tmp, path, stmt)
+                figs.append("%s %s" % (name, "%.0f" % ir if ir is not None else "n/a"))
+            print("  %-36s %s" % (label, " | ".join(figs)))
     if mp_ok:
         print("\n.mpy size for armv6m (mpy-cross -march=armv6m):")
         total = 0
