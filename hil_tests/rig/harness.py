@@ -106,6 +106,7 @@ class SerialReader(threading.Thread):
         self.lock = threading.Condition()
         self.stop = False
         self.last_rx = time.monotonic()
+        self.busy = False
         self.on_frame = None
 
     def run(self):
@@ -114,12 +115,15 @@ class SerialReader(threading.Thread):
             r, _, _ = select.select([fd], [], [], 0.05)
             if not r:
                 continue
+            self.busy = True
             try:
                 data = os.read(fd, 65536)
             except OSError:
+                self.busy = False
                 time.sleep(0.01)  # the DUT's side of the pty closed (process ended or restarting)
                 continue
             if not data:
+                self.busy = False
                 continue
             now = time.monotonic()
             with self.lock:
@@ -132,18 +136,20 @@ class SerialReader(threading.Thread):
                             self.on_frame(f)
                 else:
                     self.raw += data
+                self.busy = False
                 self.lock.notify_all()
 
-    def quiet(self, idle_s=0.03, timeout=5.0):
-        """Wait until nothing arrived for ``idle_s`` and the port has no pending bytes."""
+    def quiet(self, idle_s=0.003, timeout=5.0):
+        """Wait until the port has no pending bytes, nothing is being decoded and nothing arrived
+        for ``idle_s`` (the kernel hands pty data over asynchronously)."""
         start = time.monotonic()
         end = start + timeout
         while time.monotonic() < end:
             with self.lock:
                 idle = time.monotonic() - max(self.last_rx, start)
-            if idle >= idle_s and self.ser.in_waiting == 0:
+            if idle >= idle_s and not self.busy and self.ser.in_waiting == 0:
                 return
-            time.sleep(idle_s / 3)
+            time.sleep(0.0005)
 
 
 class Rig:

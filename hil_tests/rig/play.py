@@ -54,7 +54,8 @@ def play(rig, run, sensors, warmup_ms=60000, motion=True, on_answer=None, faults
     for t, kind, data in events:
         target = t0_ms + int(round(t * 1000))
         if target > rig.t_ms:
-            rig.run(target, temps=pending_temps if kind == 1 else None)
+            # frames need not be read before a query: only the query's reply is waited for
+            rig.run(target, temps=pending_temps if kind == 1 else None, sync=False)
         if kind == 1:
             pending_temps = data
             continue

@@ -1,0 +1,126 @@
+"""tcomp hil --run RUN_DIR --table table.bin [--interpreter micropython|cpython] [--json OUT.json]"""
+HELP = "run the firmware on the HIL rig, driven by a run folder; query it at every errors.csv row"
+
+import json
+import re
+import sys
+import time
+
+_FAULT = re.compile(r"^(open|short|stuck|absent):([^@]+)@([0-9.]+)-([0-9.]+)$")
+
+
+def add_arguments(p):
+    p.add_argument("--run", required=True, help="run folder (twin or measured) whose temperatures drive the chips")
+    p.add_argument("--table", required=True, help="coefficient table (tcomp export)")
+    p.add_argument("--interpreter", choices=("micropython", "cpython"), default="micropython",
+                   help="interpreter of the firmware process (default micropython)")
+    p.add_argument("--json", help="write {answers, frames, faults, ...} here")
+    p.add_argument("--config", help="board config JSON (default: the table's sensors on MAX31865s, the last on an "
+                                    "ADS122C04)")
+    p.add_argument("--fault", action="append", default=[], metavar="KIND:SENSOR@START-END",
+                   help="inject a sensor fault (open, short, stuck, absent) between two run times in s; repeatable")
+    p.add_argument("--noise-uohm", type=int, default=2000, help="RTD noise, micro-ohm standard deviation")
+    p.add_argument("--warmup-s", type=float, default=60.0, help="simulated seconds before the run's t=0")
+    p.add_argument("--print-every", type=int, default=60,
+                   help="print every Nth periodic O frame (all other frames are printed); 0: none")
+
+
+def _faults(specs, sensors):
+    from host.cli import UserError
+    out = []
+    for s in specs:
+        m = _FAULT.match(s)
+        if not m:
+            raise UserError("--fault %r: expected KIND:SENSOR@START-END, e.g. open:T1@600-900" % s)
+        kind, sensor, a, b = m.group(1), m.group(2), float(m.group(3)), float(m.group(4))
+        if sensor not in sensors:
+            raise UserError("--fault %r: sensor %s is not one of the table's %s" % (s, sensor, ", ".join(sensors)))
+        if b <= a:
+            raise UserError("--fault %r: end %.3g s is not after start %.3g s" % (s, b, a))
+        out.append({"kind": kind, "sensor": sensor, "start_s": a, "end_s": b})
+    return out
+
+
+def _actions(faults):
+    acts = []
+    for f in faults:
+        s = f["sensor"]
+        if f["kind"] == "absent":
+            acts.append((f["start_s"], lambda r, s=s: r.chip(s, present=False)))
+            acts.append((f["end_s"], lambda r, s=s: r.chip(s, present=True)))
+        else:
+            acts.append((f["start_s"], lambda r, s=s, k=f["kind"]: r.sensor(s, k)))
+            acts.append((f["end_s"], lambda r, s=s: r.sensor(s, "ok")))
+    return acts
+
+
+def run(args):
+    from firmware.table import TableError, parse_table
+    from hil_tests.rig.boards import rig_config
+    from hil_tests.rig.harness import Rig, RigError
+    from hil_tests.rig.play import play
+    from host.cli import UserError
+    from host.runs import RunFormatError, load_run
+
+    try:
+        run_ = load_run(args.run)
+    except RunFormatError as exc:
+        raise UserError(str(exc))
+    try:
+        with open(args.table, "rb") as f:
+            data = f.read()
+        table = parse_table(data)
+    except OSError as exc:
+        raise UserError("%s: %s" % (args.table, exc))
+    except TableError as exc:
+        raise UserError("%s: not a valid table: %s" % (args.table, exc))
+    sensors = list(table.sensors)
+    missing = [s for s in sensors if s not in run_.temperatures.names]
+    if missing:
+        raise UserError("%s: the table's sensors %s are not columns of %s/temperatures.csv"
+                        % (args.table, ", ".join(missing), args.run))
+    if args.config:
+        try:
+            with open(args.config, encoding="utf-8") as f:
+                cfg = json.load(f)
+        except (OSError, json.JSONDecodeError) as exc:
+            raise UserError("%s: %s" % (args.config, exc))
+    else:
+        cfg = rig_config(sensors, n_ads=1 if len(sensors) > 1 else 0)
+    faults = _faults(args.fault, sensors)
+    screw = table.kind == "screw_reduced"
+    every = args.print_every
+    count = {"O": 0}
+
+    def show(f):
+        if f.kind == "O":
+            count["O"] += 1
+            if not every or count["O"] % every:
+                return
+        print(f.raw.decode("ascii", "replace"))
+        sys.stdout.flush()
+
+    t0 = time.monotonic()
+    temps = {s: float(run_.temperatures.column(s)[0]) for s in sensors}
+    try:
+        with Rig(cfg, data, interpreter=args.interpreter, temps=temps, noise_uohm=args.noise_uohm) as rig:
+            rig.reader.on_frame = show
+            answers = play(rig, run_, sensors, warmup_ms=int(args.warmup_s * 1000), motion=screw,
+                           faults=_actions(faults))
+            n = len(rig.frames)
+            bad = len(rig.reader.decoder.bad)
+            sim_s = rig.t_ms / 1000.0
+    except RigError as exc:
+        raise UserError("the firmware did not survive: %s" % exc)
+    wall = time.monotonic() - t0
+    out = {"answers": [{k: a[k] for k in ("time_s", "position_mm", "offset_um", "status")} for a in answers],
+           "frames": n, "faults": faults, "malformed_frames": bad, "interpreter": args.interpreter,
+           "table": {"kind": table.kind, "crc32": "%08X" % table.crc, "sensors": sensors},
+           "simulated_s": sim_s, "wall_s": round(wall, 3)}
+    print("%s: %d answers, %d frames (%d malformed), %.0f s simulated in %.1f s on %s" % (
+        args.run, len(answers), n, bad, sim_s, wall, args.interpreter))
+    if args.json:
+        with open(args.json, "w", encoding="utf-8") as f:
+            json.dump(out, f, indent=1)
+            f.write("\n")
+    return 0 if bad == 0 else 1

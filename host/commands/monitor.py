@@ -1,0 +1,94 @@
+"""tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S]"""
+HELP = "decode the $TC stream of a board (a real port or a pty) into a table, optionally logged as CSV"
+
+import csv
+import sys
+import time
+
+COLUMNS = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_offset_um", "slope_um_per_m",
+           "fields")
+
+
+def add_arguments(p):
+    p.add_argument("--port", required=True, help="serial port (e.g. /dev/ttyACM0)")
+    p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    p.add_argument("--csv", help="append every decoded frame to this CSV file")
+    p.add_argument("--count", type=int, default=0, help="stop after this many frames (0: never)")
+    p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: never)")
+    p.add_argument("--hello", action="store_true", help="ask the board for its hello frame (V) first")
+
+
+def row(f):
+    """A decoded frame as the monitor's columns."""
+    from hil_tests.rig.frames import STATUS_BITS
+    flags = [n for bit, n in STATUS_BITS.items() if f.status & bit]
+    if f.status & 0xFFFF:
+        flags.append("sensors:%04X" % (f.status & 0xFFFF))
+    r = {"seq": f.seq, "kind": f.kind, "status": "%08X" % f.status, "flags": "|".join(flags),
+         "t_ms": "", "pos_um": "", "total_um": "", "ref_offset_um": "", "slope_um_per_m": "",
+         "fields": ",".join(f.fields)}
+    if f.kind in ("O", "Q") and len(f.fields) >= 5:
+        r.update(t_ms=f.fields[0], pos_um=f.fields[1], total_um=f.fields[2], ref_offset_um=f.fields[3],
+                 slope_um_per_m=f.fields[4], fields="")
+    return r
+
+
+def run(args):
+    import serial
+
+    from hil_tests.rig.frames import StreamDecoder, command
+    from host.cli import UserError
+    try:
+        ser = serial.Serial(args.port, args.baud, timeout=0.1)
+    except (serial.SerialException, OSError) as exc:
+        raise UserError("cannot open %s: %s" % (args.port, exc))
+    out = None
+    writer = None
+    if args.csv:
+        try:
+            out = open(args.csv, "a", newline="", encoding="utf-8")
+        except OSError as exc:
+            raise UserError("cannot write %s: %s" % (args.csv, exc))
+        writer = csv.DictWriter(out, COLUMNS)
+        if out.tell() == 0:
+            writer.writeheader()
+    dec = StreamDecoder()
+    n = 0
+    bad = 0
+    start = time.monotonic()
+    print("%6s %1s %8s %10s %10s %9s %9s %9s  %s" % ("seq", "", "status", "t_ms", "pos_um", "total_um",
+                                                      "ref_um", "slope", "flags / fields"))
+    try:
+        if args.hello:
+            ser.write(command("V"))
+        while not (args.count and n >= args.count) and not (args.duration and time.monotonic() - start
+                                                               >= args.duration):
+            try:
+                data = ser.read(4096)
+            except serial.SerialException as exc:
+                raise UserError("%s: %s" % (args.port, exc))
+            if not data:
+                continue
+            for f in dec.feed(data, time.monotonic()):
+                r = row(f)
+                print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
+                    f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
+                    r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
+                if writer:
+                    writer.writerow(r)
+                n += 1
+                if args.count and n >= args.count:
+                    break
+            while dec.bad:
+                line, why = dec.bad.pop(0)
+                bad += 1
+                print("bad frame: %s" % why, file=sys.stderr)
+            sys.stdout.flush()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        ser.close()
+        if out:
+            out.close()
+    print("%d frames, %d malformed" % (n, bad))
+    return 0
