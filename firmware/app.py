@@ -53,8 +53,19 @@ class Restart(Exception):
 
 class App:
     def __init__(self, board):
+        import gc
         self.board = board
         cfg = self.cfg = _load_config(board.config)
+        # Code first, and a collection between boot steps: the heap never moves
+        # objects, so long-lived ones placed between boot garbage fragment it
+        # until a later import finds no contiguous block.
+        if cfg.serial_mode == "modbus":
+            from firmware.modbus import ModbusLink as Link
+        else:
+            from firmware.protocol import StreamLink as Link
+        for ch in cfg.channels:
+            __import__("firmware." + ch.driver)
+        gc.collect()
         clock = self.clock = board.clock
         now = clock.ticks_ms()
         self.channels = Channels(cfg, board, now)
@@ -85,14 +96,11 @@ class App:
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
         t, slot = self.store.load()
+        gc.collect()
         if t is not None:
             self.use_table(t, slot)
-        if cfg.serial_mode == "modbus":
-            from firmware.modbus import ModbusLink
-            self.link = ModbusLink(self)
-        else:
-            from firmware.protocol import StreamLink
-            self.link = StreamLink(self)
+        self.link = Link(self)
+        gc.collect()
         self.link.boot()
 
     # --- table ---------------------------------------------------------------

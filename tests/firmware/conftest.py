@@ -77,7 +77,8 @@ def rig_app(tmp_path, kind="poly_slope", n_max=9, n_ads=2, table=True, extra=Non
         kw = {"kind": kind, "sensors": names}
         kw.update(table_kw or {})
         (tmp_path / "table_a.bin").write_bytes(make_table(**kw))
-    board = make_rig(n_max, n_ads, table_dir=str(tmp_path), extra=extra, serial_mode=serial_mode)
+    board = make_rig(n_max, n_ads, table_dir=str(tmp_path), extra=extra, serial_mode=serial_mode,
+                     serial_size=1 << 20)
     return App(board), board
 
 
@@ -109,11 +110,18 @@ def compile_mpy(dest, extra=()):
 
 
 def run_micropython(script, cwd, path, heap="128K", timeout=120):
-    """Run ``script`` (text) on the MicroPython unix port; returns stdout, fails on error."""
+    """Run ``script`` (text) on the MicroPython unix port; returns stdout, fails on error.
+
+    The script is run from a file, not with -c: a -c source string stays on the
+    heap for the whole run and would distort memory figures.
+    """
     import subprocess
     mp = need_micropython()
     env = dict(os.environ, MICROPYPATH=path)
-    p = subprocess.run([mp, "-X", "heapsize=" + heap, "-c", script], cwd=cwd, env=env,
+    f = os.path.join(cwd, "_fw_script.py")
+    with open(f, "w") as fh:
+        fh.write(script)
+    p = subprocess.run([mp, "-X", "heapsize=" + heap, f], cwd=cwd, env=env,
                        capture_output=True, text=True, timeout=timeout)
     assert p.returncode == 0, "MicroPython failed:\n" + p.stdout + p.stderr
     return p.stdout

@@ -268,6 +268,7 @@ class FakeSerial:
         self.tail = 0
         self.out = bytearray(size)
         self.nout = 0
+        self.dropped = 0  # bytes that did not fit: take() refuses to hide them
 
     def feed(self, data):
         for c in data:
@@ -292,11 +293,18 @@ class FakeSerial:
             if k < len(out):
                 out[k] = buf[i]
                 k += 1
+            else:
+                self.dropped += 1
         self.nout = k
         return n
 
     def take(self):
         """Everything written since the last take, as bytes (allocates: test side)."""
+        if self.dropped:
+            n = self.dropped
+            self.dropped = 0
+            self.nout = 0
+            raise OverflowError("FakeSerial dropped %d bytes: take() more often" % n)
         b = bytes(self.out[:self.nout])
         self.nout = 0
         return b
@@ -324,7 +332,8 @@ class FakeWDT:
         self.fed += 1
 
 
-def make_rig(n_max=9, n_ads=2, temps=None, serial_mode="stream", table_dir="tables", extra=None):
+def make_rig(n_max=9, n_ads=2, temps=None, serial_mode="stream", table_dir="tables", extra=None,
+             serial_size=1024):
     """A Board with ``n_max`` MAX31865 on one SPI bus and ``n_ads`` ADS122C04 on one I2C bus."""
     from firmware.board import Board
     spi = FakeSPI()
@@ -353,7 +362,7 @@ def make_rig(n_max=9, n_ads=2, temps=None, serial_mode="stream", table_dir="tabl
     if extra:
         for k in extra:
             cfg[k] = extra[k]
-    ser = FakeSerial()
+    ser = FakeSerial(serial_size)
     clock = FakeClock(1000)
     board = Board(cfg, {"spi0": spi, "i2c0": i2c}, lambda cs: pins[cs], ser, clock, FakeWDT(), None)
     board.chips = chips
