@@ -47,6 +47,10 @@ def _load_config(d):
     return cfg
 
 
+def _nothing():
+    pass
+
+
 class Restart(Exception):
     """Raised by a reset command when the board has no hardware reset."""
 
@@ -54,6 +58,8 @@ class Restart(Exception):
 class App:
     def __init__(self, board):
         import gc
+        # CPython's heap needs no help, and a full collection there is slow
+        collect = gc.collect if hasattr(gc, "mem_free") else _nothing
         self.board = board
         cfg = self.cfg = _load_config(board.config)
         # Code first, and a collection between boot steps: the heap never moves
@@ -65,7 +71,7 @@ class App:
             from firmware.protocol import StreamLink as Link
         for ch in cfg.channels:
             __import__("firmware." + ch.driver)
-        gc.collect()
+        collect()
         clock = self.clock = board.clock
         now = clock.ticks_ms()
         self.channels = Channels(cfg, board, now)
@@ -96,11 +102,11 @@ class App:
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
         t, slot = self.store.load()
-        gc.collect()
+        collect()
         if t is not None:
             self.use_table(t, slot)
         self.link = Link(self)
-        gc.collect()
+        collect()
         self.link.boot()
 
     # --- table ---------------------------------------------------------------
