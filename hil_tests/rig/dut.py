@@ -69,7 +69,8 @@ class Control:
             self.locked = False
         self.gates += 1
         w = self.world
-        self.send({"ev": "at", "t_ms": w.clock.now_ms(), "ticks_ms": w.clock.ticks_ms(), "mem_free": self.mem(False)})
+        self.send({"ev": "at", "t_ms": w.clock.now_ms(), "ticks_ms": w.clock.ticks_ms(), "mem_free": self.mem(False),
+                   "tx": w.uart.tx_bytes if w.uart is not None else 0})
         while True:
             line = self.rf.readline()
             if not line:

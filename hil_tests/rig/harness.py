@@ -107,6 +107,7 @@ class SerialReader(threading.Thread):
         self.stop = False
         self.last_rx = time.monotonic()
         self.busy = False
+        self.rx_total = 0
         self.on_frame = None
 
     def run(self):
@@ -128,6 +129,7 @@ class SerialReader(threading.Thread):
             now = time.monotonic()
             with self.lock:
                 self.last_rx = now
+                self.rx_total += len(data)
                 if self.stream:
                     new = self.decoder.feed(data, now)
                     self.frames.extend(new)
@@ -138,6 +140,16 @@ class SerialReader(threading.Thread):
                     self.raw += data
                 self.busy = False
                 self.lock.notify_all()
+
+    def until(self, total, timeout=20.0):
+        """Wait until ``total`` bytes have been received and decoded (the DUT reports what it sent)."""
+        end = time.monotonic() + timeout
+        with self.lock:
+            while self.rx_total < total:
+                left = end - time.monotonic()
+                if left <= 0:
+                    raise RigError("only %d of %d serial bytes arrived" % (self.rx_total, total))
+                self.lock.wait(min(left, 0.05))
 
     def quiet(self, idle_s=0.003, timeout=5.0):
         """Wait until the port has no pending bytes, nothing is being decoded and nothing arrived
@@ -185,6 +197,7 @@ class Rig:
         self.open_port = open_port
         self._free = None
         self.powered = False
+        self.rx_base = 0
         self._open_pty()
 
     # --- process lifetime --------------------------------------------------------
@@ -242,6 +255,9 @@ class Rig:
         if ev.get("ev") != "at":
             raise RigError("unexpected first control event %r" % ev)
         self.t_ms = ev["t_ms"]
+        if self.open_port:
+            self.reader.quiet(0.05)  # whatever a previous process left in flight
+            self.rx_base = self.reader.rx_total
         return self
 
     def log(self):
@@ -353,7 +369,7 @@ class Rig:
         ev = self._recv()
         self.t_ms = ev["t_ms"]
         if sync and self.open_port:
-            self.reader.quiet()
+            self.reader.until(self.rx_base + ev.get("tx", 0))
         return ev
 
     def advance(self, ms, **kw):
