@@ -32,6 +32,14 @@ F_ETIMEDOUT = 2
 F_CORRUPT = 3
 F_MISO00 = 4
 F_MISOFF = 5
+_NAMES = {EIO: "EIO", ENODEV: "ENODEV", ETIMEDOUT: "ETIMEDOUT"}
+
+
+def _err(n):
+    """OSError with errno set on both interpreters (CPython needs the two-argument form)."""
+    return OSError(n, _NAMES[n])
+
+
 FAULTS = {"none": F_NONE, "eio": F_EIO, "etimedout": F_ETIMEDOUT, "corrupt": F_CORRUPT,
           "miso00": F_MISO00, "misoff": F_MISOFF}
 
@@ -159,10 +167,10 @@ class SPIBus:
                 sel = p
         k = self.faults.take(sel.ident if sel is not None else None)
         if k == F_EIO:
-            raise OSError(EIO)
+            raise _err(EIO)
         if k == F_ETIMEDOUT:
             self.clock.spend_us(50000)
-            raise OSError(ETIMEDOUT)
+            raise _err(ETIMEDOUT)
         if nsel > 1:
             self.contention += 1
         # MAX31865: SPI modes 1 and 3 (CPHA = 1); in mode 0/2 it samples on the wrong edge
@@ -223,13 +231,13 @@ class I2CBus:
         self.clock.spend_us(((nbytes + 2) * 9 * 1000000) // self.freq)
         k = self.faults.take(addr)
         if k == F_EIO:
-            raise OSError(EIO)
+            raise _err(EIO)
         if k == F_ETIMEDOUT:
             self.clock.spend_us(self.timeout)
-            raise OSError(ETIMEDOUT)
+            raise _err(ETIMEDOUT)
         d = self.devices.get(addr)
         if d is None or not d.present:
-            raise OSError(ENODEV)
+            raise _err(ENODEV)
         self._k = k  # not returned as a tuple: that would allocate under heap_lock
         return d
 
@@ -242,15 +250,15 @@ class I2CBus:
             return 0
         if len(buf) == 1:
             if not d.command(buf[0]):
-                raise OSError(EIO)
+                raise _err(EIO)
         elif not d.write(buf[0], memoryview(buf)[1:]):
-            raise OSError(EIO)
+            raise _err(EIO)
         return len(buf)
 
     def readfrom_mem_into(self, addr, memaddr, buf, addrsize=8):
         d = self._dev(addr, len(buf) + 1)
         if not d.read(memaddr, buf):
-            raise OSError(EIO)
+            raise _err(EIO)
         self.faults.mangle(self._k, buf, 0, len(buf))
 
     def readfrom_mem(self, addr, memaddr, nbytes, addrsize=8):
@@ -261,14 +269,14 @@ class I2CBus:
     def writeto_mem(self, addr, memaddr, buf, addrsize=8):
         d = self._dev(addr, len(buf) + 1)
         if not d.write(memaddr, buf):
-            raise OSError(EIO)
+            raise _err(EIO)
 
     def readfrom_into(self, addr, buf, stop=True):
         # the ADS122C04 answers a bare read with the last RDATA/RREG result; not used by the firmware
-        raise OSError(EIO)
+        raise _err(EIO)
 
     def readfrom(self, addr, nbytes, stop=True):
-        raise OSError(EIO)
+        raise _err(EIO)
 
 
 class SMBus:

@@ -13,7 +13,7 @@ What is modelled, bit by bit:
   fault status clears only when D1 is written 1 with D5, D3 and D2 written
   0; a one-shot written together with a fault-detection request is ignored;
   the automatic fault-detection cycle starts only on 100X010Xb (V_BIAS on,
-  auto off, one-shot off) and runs 550 us (D3:D2 read 01 meanwhile, then
+  auto off; a one-shot bit written with it is ignored) and runs 550 us (D3:D2 read 01 meanwhile, then
   00); the manual cycle (10 then 11) is modelled too. Changing the filter in
   auto mode, converting without V_BIAS, or a one-shot sooner than 10.5 time
   constants after V_BIAS on are recorded as ``violations`` (the datasheet
@@ -171,7 +171,7 @@ class MAX31865:
             if v & 0x20:
                 self.ignored_one_shots += 1
             if cyc == 0x04:
-                if v & 0xE0 == 0x80 and self.cycle_end < 0:
+                if v & 0xC0 == 0x80 and self.cycle_end < 0:  # D5 is ignored with a cycle request
                     self.cycle_end = now + _T_FAULT_CYCLE_US
                     self.auto_next = -1
                     new = (new & ~0x40) | 0x04
