@@ -93,8 +93,8 @@ class App:
         self.total = 0  # limited outputs, 0.01 um / 0.01 um/m
         self.ref_out = 0
         self.slope_out = 0
-        self.raw_ref = 0
-        self.raw_slope = 0
+        self.usable = False
+        self.dev = 0  # limited total minus the model at the current position
         self.ev = None
         self.table = None
         self.slot = None
@@ -184,27 +184,19 @@ class App:
         self.rx_ms = 0
 
     # --- outputs ---------------------------------------------------------------
-    def _dp_mm(self, pos):
-        t = self.table
-        ev = self.ev
-        if t is None or ev is None:
-            return 0
-        if pos < t.pos_lo:
-            pos = t.pos_lo
-        elif pos > t.pos_hi:
-            pos = t.pos_hi
-        return (pos - ev.pos_ref) // 1000
-
     def total_at(self, pos):
-        """Limited total offset (0.01 um) at ``pos`` without touching the state (queries)."""
+        """The output the last cycle would have given at ``pos`` (queries; state untouched).
+
+        The model at ``pos`` plus the limiter's present deviation from the model,
+        which is what the output becomes if the axis moves there now.
+        """
         ev = self.ev
         lim = self.limiter
-        if ev is None or lim.recovering:
+        if ev is None or not self.usable:
             return lim.total
         fl = ev.flags
-        raw = ev.offset_at(pos)
+        v = ev.offset_at(pos) + self.dev
         ev.flags = fl
-        v = raw + (lim.ref - self.raw_ref) + ((lim.slope - self.raw_slope) * self._dp_mm(pos)) // 1000
         m = lim.max
         return m if v > m else (-m if v < -m else v)
 
@@ -227,9 +219,9 @@ class App:
         ev = self.ev
         t = self.table
         raw_total = 0
+        raw_prev = 0
         raw_ref = 0
         raw_slope = 0
-        dp = 0
         if ev is None or t is None:
             s |= st.NO_TABLE
             usable = False
@@ -272,17 +264,18 @@ class App:
                         self.step_ms = 0
                         break
             pos = self.pos if self.have_pos else ev.pos_ref
+            # the model at last cycle's position too: the limiter tells motion from drift
+            raw_prev = ev.offset_at(self.pos_used)
             self.pos_used = pos
             raw_total = ev.offset_at(pos)
             raw_ref = ev.ref_offset()
             raw_slope = ev.slope()
-            dp = self._dp_mm(pos)
             if ev.flags:
                 s |= st.CLAMPED
-        self.raw_ref = raw_ref
-        self.raw_slope = raw_slope
         lim = self.limiter
-        s |= lim.update(raw_ref, raw_slope, raw_total, dp, usable, dt)
+        s |= lim.update(raw_ref, raw_slope, raw_total, raw_prev, usable, dt)
+        self.usable = usable
+        self.dev = lim.total - raw_total
         self.total = lim.total
         self.ref_out = lim.ref
         self.slope_out = lim.slope

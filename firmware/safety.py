@@ -1,24 +1,39 @@
-"""Output limiter: slew limit, maximum magnitude, hold-then-ramp-to-zero fallback.
+"""Output limiter: slew limit, maximum magnitude, ramp to zero and ramped recovery.
 
-Works on the evaluator's units (offsets in 0.01 um, slopes in 0.01 um/m) and
-on three outputs: the offset at the reference position ``ref``, the slope
-``slope`` and the total offset at the reported position ``total``.
+Works in the evaluator's units (offsets 0.01 um, slopes 0.01 um/m) on the
+three outputs: the total offset at the reported position, the offset at the
+reference position and the slope.
 
-The pair (ref, slope) depends on temperatures (and screw state) only, so it is
-slew-limited and clamped directly. The total also moves with the axis
-position, which is legitimate at any speed, so in normal operation it is
-``raw total + (limited ref - raw ref) + (limited slope - raw slope) * (P - P_ref)``:
-position changes pass at once, temperature-driven steps are ramped exactly as
-the pair is. In fallback (model not usable, or output disabled) and while
-recovering from it, the total itself ramps at the slew limit towards zero or
-back to the model's value. The slope's limits are the offset limits spread
-over the table's position span, so its contribution anywhere in the envelope
-obeys the same um and um/s bounds.
+The total may follow the axis at any speed (a position-dependent compensation
+must), but not jump because the temperatures, the table or the fault state
+changed. So each cycle the model is evaluated at the current position P and
+at the previous one P0 with the new state: the output at P0 moves towards the
+new model value there by at most the slew step, and then follows the model's
+position change from P0 to P unchanged. At a standing axis the total therefore
+never moves faster than the slew limit, whatever the model does; when the
+model cannot be used the target is zero and position changes are ignored.
 
-No floats, no allocation; integers stay far below 2**30.
+The pair (offset at reference, slope) is one affine function of position.
+It moves towards its target as a whole, both parts scaled by the same factor,
+so that at no position of the table's envelope (the span) it changes by more
+than the slew step: a controller applying the pair itself sees the same bound.
+
+No floats, no allocation, no tuple returns; integers stay far below 2**30
+(config limits: max_offset_um <= 100000, span <= 100 m).
 """
 
 from firmware import status as st
+
+_MAX_DT_MS = 10000  # a stalled loop must not earn a huge step
+
+
+def _clamp(v, m):
+    return m if v > m else (-m if v < -m else v)
+
+
+def _div0(x, r):
+    """x / r rounded towards zero (r > 0)."""
+    return x // r if x >= 0 else -((-x) // r)
 
 
 class Limiter:
@@ -29,10 +44,10 @@ class Limiter:
         self.ref = 0
         self.slope = 0
         self.total = 0
-        self.recovering = False
         self.flags = 0
-        self._acc = 0  # sub-unit remainders of the step budgets (exact long-run rate)
-        self._acc_s = 0
+        self.recovering = False
+        self._acc = 0  # sub-unit remainder of the step budget (exact long-run rate)
+        self._carry = 0  # budget left unused while the pair was too coarse to move
 
     def configure(self, slew_um_per_s, max_um, span_um):
         if span_um < 1000:
@@ -40,90 +55,104 @@ class Limiter:
         self.span_mm = span_um // 1000
         self.rate = slew_um_per_s * 100  # 0.01 um per second
         self.max = max_um * 100
-        # slope (0.01 um/m) whose contribution over the span equals the offset limits
-        self.rate_s = self.rate * 1000 // self.span_mm
+        # the slope whose contribution over the span equals the magnitude limit
         self.max_s = self.max * 1000 // self.span_mm
 
-    def update(self, raw_ref, raw_slope, raw_total, dp_mm, usable, dt_ms):
-        """Advance by ``dt_ms``; ``usable`` False means ramp to zero.
+    def _span_part(self, ds):
+        """|ds| * span_mm / 1000: the slope change's effect at the envelope's edge, in 0.01 um."""
+        if ds < 0:
+            ds = -ds
+        return (ds // 1000) * self.span_mm + (ds % 1000) * self.span_mm // 1000
 
-        ``dp_mm`` is P - P_ref in mm (clamped to the envelope). Returns the flags
-        (RATE_LIMITED, MAG_LIMITED, RECOVERING) also kept in ``self.flags``.
-        Written without helper calls returning tuples: those would allocate.
+    def update(self, raw_ref, raw_slope, raw_total, raw_total_prev, usable, dt_ms):
+        """Advance by ``dt_ms``.
+
+        ``raw_total`` is the model at the current position, ``raw_total_prev``
+        the model (same state) at the previous cycle's position; ``usable``
+        False ramps everything to zero. Returns the flags (RATE_LIMITED,
+        MAG_LIMITED, RECOVERING), also kept in ``self.flags``.
         """
         if dt_ms < 0:
             dt_ms = 0
-        if dt_ms > 10000:  # a stalled loop must not earn a huge step
-            dt_ms = 10000
+        elif dt_ms > _MAX_DT_MS:
+            dt_ms = _MAX_DT_MS
         a = self.rate * dt_ms + self._acc
         step = a // 1000
         self._acc = a - step * 1000
-        a = self.rate_s * dt_ms + self._acc_s
-        step_s = a // 1000
-        self._acc_s = a - step_s * 1000
+        m = self.max
         fl = 0
-        if not usable:
+        if usable:
+            target = raw_total_prev
+            moved = raw_total - raw_total_prev
+        else:
+            target = 0
+            moved = 0
             raw_ref = 0
             raw_slope = 0
-            raw_total = 0
             self.recovering = True
-        m = self.max
-        ms = self.max_s
-        # magnitude first, then rate: the output never exceeds either limit
-        t = raw_ref
-        if t > m or t < -m:
-            t = m if t > 0 else -m
+        # total: ramp at the previous position, then follow the axis
+        if target > m or target < -m:
+            target = _clamp(target, m)
             fl = st.MAG_LIMITED
-        v = self.ref
-        if t > v + step:
+        v = self.total
+        limited = False
+        if target > v + step:
             v += step
-            fl |= st.RATE_LIMITED
-        elif t < v - step:
+            limited = True
+        elif target < v - step:
             v -= step
-            fl |= st.RATE_LIMITED
+            limited = True
         else:
-            v = t
-        self.ref = v
-        t = raw_slope
-        if t > ms or t < -ms:
-            t = ms if t > 0 else -ms
+            v = target
+        v += moved
+        if v > m or v < -m:
+            v = _clamp(v, m)
             fl |= st.MAG_LIMITED
-        v = self.slope
-        if t > v + step_s:
-            v += step_s
-            fl |= st.RATE_LIMITED
-        elif t < v - step_s:
-            v -= step_s
-            fl |= st.RATE_LIMITED
-        else:
-            v = t
-        self.slope = v
-        if self.recovering:
-            t = raw_total
-            if t > m or t < -m:
-                t = m if t > 0 else -m
-                fl |= st.MAG_LIMITED
-            v = self.total
-            if t > v + step:
-                v += step
-                fl |= st.RATE_LIMITED
-                if usable:
-                    fl |= st.RECOVERING
-            elif t < v - step:
-                v -= step
-                fl |= st.RATE_LIMITED
-                if usable:
-                    fl |= st.RECOVERING
+        self.total = v
+        # pair: move the affine function as a whole within the step budget
+        tr = raw_ref
+        ts = raw_slope
+        if tr > m or tr < -m:
+            tr = _clamp(tr, m)
+            fl |= st.MAG_LIMITED
+        if ts > self.max_s or ts < -self.max_s:
+            ts = _clamp(ts, self.max_s)
+            fl |= st.MAG_LIMITED
+        dr = tr - self.ref
+        ds = ts - self.slope
+        if dr or ds:
+            need = (dr if dr >= 0 else -dr) + self._span_part(ds)
+            budget = step + self._carry
+            if need <= budget:
+                self.ref = tr
+                self.slope = ts
+                self._carry = 0
             else:
-                v = t
-                if usable:
-                    self.recovering = False
-            self.total = v
-        else:
-            v = raw_total + (self.ref - raw_ref) + ((self.slope - raw_slope) * dp_mm) // 1000
-            if v > m or v < -m:
-                v = m if v > 0 else -m
-                fl |= st.MAG_LIMITED
-            self.total = v
+                limited = True
+                if budget > 0:
+                    if ds == 0:  # one part only: use the whole budget
+                        mr = budget if dr > 0 else -budget
+                        ms = 0
+                    elif dr == 0:
+                        mr = 0
+                        ms = budget * 1000 // self.span_mm
+                        if ds < 0:
+                            ms = -ms
+                    else:
+                        r = (need + budget - 1) // budget  # ceil: the scaled move fits the budget
+                        mr = _div0(dr, r)
+                        ms = _div0(ds, r)
+                    if mr or ms:
+                        self.ref += mr
+                        self.slope += ms
+                        self._carry = 0
+                    else:  # moves below one unit: save the budget until one fits
+                        self._carry = budget if budget < need else need
+        if limited:
+            fl |= st.RATE_LIMITED
+            if usable and self.recovering:
+                fl |= st.RECOVERING
+        elif usable:
+            self.recovering = False
         self.flags = fl
         return fl

@@ -10,7 +10,7 @@ def test_slew_limit_is_exact_over_time():
     lim = Limiter(5, 300, 500000)
     outs = []
     for _ in range(100):  # 10 s in 100 ms steps towards +100 um
-        fl = lim.update(10000, 0, 10000, 0, True, 100)
+        fl = lim.update(10000, 0, 10000, 10000, True, 100)
         outs.append(lim.ref)
         assert fl & st.RATE_LIMITED
     assert outs[9] == 500 and outs[-1] == 5000  # 5 um/s in 0.01 um
@@ -18,14 +18,14 @@ def test_slew_limit_is_exact_over_time():
     # odd dt: the remainder carries, the long-run rate stays exact
     lim = Limiter(3, 300, 500000)
     for _ in range(1000):
-        lim.update(-100000, 0, -100000, 0, True, 7)
+        lim.update(-100000, 0, -100000, -100000, True, 7)
     assert lim.ref == -2100
 
 
 def test_magnitude_limit_and_flag():
     lim = Limiter(1000, 50, 500000)
     for _ in range(20):
-        fl = lim.update(9000, 0, 9000, 0, True, 100)
+        fl = lim.update(9000, 0, 9000, 9000, True, 100)
     assert lim.ref == 5000 and lim.total == 5000
     assert fl & st.MAG_LIMITED and not fl & st.RATE_LIMITED
 
@@ -36,37 +36,63 @@ def test_slope_limits_scale_with_span():
         lim.update(0, 10 ** 6, 0, 0, True, 100)
     assert lim.slope == 1000  # 10.00 um/m after 1 s
     for _ in range(1000):
-        lim.update(0, 10 ** 6, 0, 0, True, 100)
+        fl = lim.update(0, 10 ** 6, 0, 0, True, 100)
     assert lim.slope == lim.max_s == 60000  # 300 um over 0.5 m = 600 um/m
+    assert fl & st.MAG_LIMITED
 
 
 def test_position_changes_pass_through_temperature_steps_ramp():
     lim = Limiter(5, 300, 500000)
-    lim.update(1000, 100, 1000 + 100 * 200 // 1000, 200, True, 100)  # from zero: ramps
-    lim.recovering = False
-    lim.ref, lim.slope = 1000, 100
-    lim.update(1000, 100, 7777, 300, True, 100)
-    assert lim.total == 7777  # raw total at any position passes unchanged when the pair is steady
-    lim.update(3000, 100, 9777, 300, True, 100)  # temperature step of +20 um
-    assert lim.ref == 1050
-    assert lim.total == 9777 - 1950  # total lags exactly as the pair does
+    lim.total = 1000
+    # the axis moves: the model is 1000 at the old position and 7777 at the new one
+    lim.update(0, 0, 7777, 1000, True, 100)
+    assert lim.total == 7777
+    # standing axis, the model jumps by +20 um: the output ramps at 0.5 um per 100 ms
+    lim.update(0, 0, 9777, 9777, True, 100)
+    assert lim.total == 7827
+    # both at once: the ramp at the old position, then the model's change with position
+    lim.update(0, 0, 12000, 9777, True, 100)
+    assert lim.total == 7877 + (12000 - 9777)
+
+
+def test_total_never_faster_than_slew_at_a_standing_axis():
+    import random
+    rnd = random.Random(5)
+    lim = Limiter(5, 300, 500000)
+    prev = lim.total
+    for _ in range(3000):
+        raw = rnd.choice([0, 29000, -31000, rnd.randint(-40000, 40000)])
+        lim.update(rnd.randint(-40000, 40000), rnd.randint(-99999, 99999), raw, raw,
+                   rnd.random() < 0.8, 100)
+        assert abs(lim.total - prev) <= 50 and abs(lim.total) <= 30000
+        prev = lim.total
+
+
+def test_pair_moves_as_one_affine_function():
+    lim = Limiter(5, 300, 500000)  # span 500 mm
+    for _ in range(400):
+        r0, s0 = lim.ref, lim.slope
+        lim.update(8000, -9000, 0, 0, True, 100)
+        # change of ref + slope * (P - P_ref) at the envelope's edge
+        edge = abs(lim.ref - r0) + abs(lim.slope - s0) * 500 // 1000
+        assert edge <= 50
+    assert (lim.ref, lim.slope) == (8000, -9000)
 
 
 def test_fallback_ramps_to_zero_and_recovers_ramped():
     lim = Limiter(5, 300, 500000)
     lim.ref = lim.total = 2000
-    lim.recovering = False
     seq = []
     for _ in range(50):
-        lim.update(2000, 0, 2000, 0, False, 100)
+        lim.update(2000, 0, 2000, 2000, False, 100)
         seq.append(lim.total)
-    assert seq[0] == 1950 and seq[-1] == 0 and min(seq) == 0
+    assert seq[0] == 1950 and seq[-1] == 0 and min(seq) == 0 and lim.ref == 0
     assert all(a - b <= 50 for a, b in zip([2000] + seq, seq))
-    fl = lim.update(2000, 0, 2000, 0, True, 100)
+    fl = lim.update(2000, 0, 2000, 2000, True, 100)
     assert fl & st.RECOVERING and lim.total == 50
     for _ in range(60):
-        lim.update(2000, 0, 2000, 0, True, 100)
-    assert lim.total == 2000 and not lim.recovering
+        fl = lim.update(2000, 0, 2000, 2000, True, 100)
+    assert lim.total == 2000 and not fl & (st.RECOVERING | st.RATE_LIMITED)
 
 
 def _setup(tmp_path, **kw):
