@@ -59,3 +59,17 @@ def test_base_fit_recovers_twin_parameters(run):
     assert fit.nonlinear["h_W_m2K"] == pytest.approx(p["h_W_m2K"], rel=0.1)
     assert fit.linear["q_J_per_mm"] == pytest.approx(p["friction_J_per_mm"] * p["screw_share"], rel=0.1)
     assert fit.rmse_um < 0.2
+
+
+def test_bounded_lstsq_matches_scipy():
+    from scipy.optimize import lsq_linear
+
+    from host.discrepancy.screw_family import _bounded_lstsq
+
+    rng = np.random.default_rng(8)
+    X = rng.normal(size=(500, 6))
+    X /= np.linalg.norm(X, axis=0)
+    y = X @ np.array([3.0, -2.0, 0.5, 1.0, -4.0, 2.0]) + rng.normal(0, 0.1, 500)
+    for lo, hi in ((np.full(6, -np.inf), np.full(6, np.inf)), (np.full(6, -1.0), np.full(6, 1.5))):
+        ref = lsq_linear(X, y, bounds=(lo, hi), method="bvls").x
+        np.testing.assert_allclose(_bounded_lstsq(X, y, lo, hi), ref, atol=1e-8)
