@@ -305,9 +305,9 @@ def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_
     """Find the catalog effects the base model is missing, one per round.
 
     Returns a :class:`Result`. ``candidates`` defaults to ``family.candidates``.
-    An effect is accepted when it has the largest held-out RMSE reduction of the
-    round, that reduction is at least ``min_gain``, and its Holm-adjusted DM
-    p-value is below ``alpha``.
+    A candidate passes when its held-out RMSE reduction is at least ``min_gain``
+    and its Holm-adjusted DM p-value is below ``alpha``; of the passing ones the
+    largest reduction is accepted. With none passing, pairs are tried.
     """
     log = log or (lambda msg: None)
     candidates = list(family.candidates if candidates is None else candidates)
@@ -344,8 +344,11 @@ def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_
                 log("  %-22s held-out RMSE %s  gain %s  p %s%s" % (
                     c.name, "%.3f" % c.rmse_um if math.isfinite(c.rmse_um) else "-", "%+.1f%%" % (100 * c.score) if math.isfinite(c.score) else "-",
                     "%.2g" % c.p_value, "  (fit failed: %s)" % c.error if c.error else "") + ("\n      note: %s" % c.note if c.note else ""))
-            best = max(tested, key=lambda c: c.score, default=None)
-            if best is not None and best.score >= min_gain and best.p_value < alpha:
+            # the best of the candidates that pass both rules (Holm keeps the family-wise
+            # error of the round at alpha whichever of them is taken)
+            passing = [c for c in tested if c.score >= min_gain and c.p_value < alpha]
+            best = max(passing, key=lambda c: c.score, default=None)
+            if best is not None:
                 best.accepted = True
                 rnd.accepted = best.name
                 effects.append(best.name)
