@@ -132,9 +132,6 @@ class App:
         self.table = table
         self.slot = slot
         self.ev = ev
-        self.tmask = 0
-        for i in self.map:
-            self.tmask |= 1 << i
         self.screw = table.kind_code == KIND_SCREW_REDUCED
         self.step_ms = 0
         self._span()
