@@ -73,6 +73,8 @@ def dut(request, make_rig):
     """The device under test for link-level scenarios: the rig (default) or a real board (--port)."""
     port = request.config.getoption("--port")
     if port:
+        if request.node.callspec.params.get("interpreter") == "cpython":
+            pytest.skip("one run against the real port is enough")
         from hil_tests.rig.realport import RealDut
         d = RealDut(port, request.config.getoption("--baud"))
         yield d
