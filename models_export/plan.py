@@ -144,9 +144,9 @@ class Planner:
         h_iv, err_geo = self.horner(fo, PM)
         # screw segments
         if screw:
-            seg_iv, err_seg, seg_at = self.screw_state(fo)
+            seg_iv, err_seg = self.screw_state(fo)
         else:
-            seg_iv, err_seg, seg_at = (0, 0), ZERO, None
+            seg_iv, err_seg = (0, 0), ZERO
         acc = iv_add(h_iv, th)
         rec.note(SLOT_ACC, acc[0], acc[1], "output")
         if screw:
@@ -189,7 +189,7 @@ class Planner:
                         iv_scale(eS, kq), floor_err(k))
         self.term("KS (slope unit conversion)", fK - fS + shK, 0, key="KS (slope unit conversion)")
         if screw:
-            sl2, err_sl2 = self.screw_chord(seg_at, fo, fK)
+            sl2, err_sl2 = self.screw_chord(seg_iv, err_seg, fo, fK)
             sl = iv_add(sl, sl2)
             err_sl = iv_add(err_sl, err_sl2)
             rec.note(SLOT_SLOPE, sl[0], sl[1], "output")
@@ -284,7 +284,7 @@ class Planner:
         return abs(alpha) * F(Tmax) * F(edges[-1]) * OU_PER_UM * 2  # x2: margin for state errors
 
     def screw_state(self, fo):
-        """Recurrence, state error certificate, cum/segslope; returns (seg interval, seg error, per-position helper).
+        """Recurrence, state error certificate, cum/segslope; returns (seg(p) interval, seg(p) error interval).
 
         Tries 2..5 state limbs (more limbs: finer C = A - I, more multiplications per step) and keeps
         the one with the smallest certified offset error."""
@@ -476,12 +476,11 @@ class Planner:
         err_seg = iv_add(_hull(*segerr), (-e_geo, e_geo))
         self.term("edges/fixed end rounded to 1 um", 0, e_geo)
         f.update(G2=G2, shG2=shG2, H=H, shH=shH, fh=fh, Lx=Lx, nx=nx, shX=shX)
-        self.seg_info = (seg_iv, err_seg)
-        return seg_iv, err_seg, (seg_iv, err_seg)
+        return seg_iv, err_seg
 
-    def screw_chord(self, seg_at, fo, fK):
+    def screw_chord(self, seg_iv, err_seg, fo, fK):
+        """slope += KC * (seg(pos_hi) - seg(pos_lo)): the chord of the segment elongation over the envelope."""
         m, f, rec = self.m, self.f, self.rec
-        seg_iv, err_seg = seg_at
         de = (seg_iv[0] - seg_iv[1], seg_iv[1] - seg_iv[0])
         rec.note(SLOT_DE, de[0], de[1], "slope chord")
         span = m.pos_hi - m.pos_lo

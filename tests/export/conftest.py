@@ -1,6 +1,5 @@
 """Helpers for the export tests: MicroPython subprocess runner, vector runner, exports."""
 import importlib.util
-import json
 import os
 import shutil
 import subprocess
@@ -67,9 +66,3 @@ class MicroPython:
 @pytest.fixture(scope="session")
 def mp(mpy_root):
     return MicroPython(mpy_root)
-
-
-def write_cases(path, cases):
-    """cases: list of (table bytes, ops); see export_vector_runner.run_case."""
-    with open(path, "w") as fh:
-        json.dump([{"table": t.hex(), "ops": ops} for t, ops in cases], fh)

@@ -9,7 +9,7 @@ A case is a table (hex) and a list of operations:
   ["r", um]                 set_reference
   ["l"]                     latch_references (tables certified for latched references)
   ["e", um]                 record [offset_at(um), ref_offset(), slope(), flags]
-Usage on MicroPython: micropython export_vector_runner.py CASES.json  -> prints JSON results.
+Usage on MicroPython: micropython export_vector_runner.py CASES.jsonl  -> prints one JSON result line per case.
 """
 import binascii
 import json
@@ -48,11 +48,18 @@ def run_case(table, ops, check=False):
 
 
 def main(path):
+    """CASES file: one JSON object {"table": hex, "ops": [...]} per line (one case in memory at a time)."""
     with open(path) as fh:
-        cases = json.load(fh)
-    for c in cases:
-        out, _ = run_case(binascii.unhexlify(c["table"]), c["ops"])
-        print(json.dumps(out))
+        while True:
+            line = fh.readline()
+            if not line:
+                break
+            if not line.strip():
+                continue
+            c = json.loads(line)
+            out, _ = run_case(binascii.unhexlify(c["table"]), c["ops"])
+            c = None
+            print(json.dumps(out))
 
 
 if __name__ == "__main__":

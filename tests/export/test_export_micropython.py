@@ -53,9 +53,9 @@ def test_bit_identical_to_cpython(tmp_path, mp, runner):
         cases.append((export_model(linear_direct_doc(random.Random(seed))).table, None))
         cases.append((export_model(screw_doc(random.Random(seed))).table, None))
     cases = [(tb, _vectors(_FakeEx(tb), rng, n)) for tb, _ in cases]
-    path = tmp_path / "cases.json"
-    path.write_text(json.dumps([{"table": tb.hex(), "ops": ops} for tb, ops in cases]))
-    out = mp.run(mp.runner, [path], heapsize="2M", timeout=300)
+    path = tmp_path / "cases.jsonl"
+    path.write_text("".join(json.dumps({"table": tb.hex(), "ops": ops}) + "\n" for tb, ops in cases))
+    out = mp.run(mp.runner, [path], heapsize="2M" if not SLOW else "32M", timeout=600)
     got = [json.loads(line) for line in out.splitlines() if line.strip()]
     assert len(got) == len(cases)
     total = 0
