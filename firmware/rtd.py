@@ -16,6 +16,8 @@ The tables were generated from the floating-point relation;
 tests/firmware/test_fw_rtd.py recomputes and checks every entry.
 """
 
+from array import array
+
 try:
     from micropython import const
 except ImportError:  # CPython
@@ -27,41 +29,57 @@ T_OVER = const(999999)  # above +850 degC (open RTD)
 _T0_MC = const(-200000)
 _LAST = const(105)  # index of the last node
 
-# R/R0 * 1e7 at -200, -190, ..., +850 degC
-_NODES = (
-    1852008, 2282548, 2709643, 3133505, 3554333, 3972318, 4387642, 4800475,
-    5210978, 5619301, 6025584, 6429959, 6832545, 7233453, 7632784, 8030628,
-    8427065, 8822166, 9215990, 9608588, 10000000, 10390252, 10779350, 11167292,
-    11554080, 11939713, 12324190, 12707512, 13089680, 13470693, 13850550, 14229252,
-    14606800, 14983192, 15358430, 15732512, 16105440, 16477212, 16847830, 17217292,
-    17585600, 17952752, 18318750, 18683592, 19047280, 19409812, 19771190, 20131412,
-    20490480, 20848392, 21205150, 21560753, 21915200, 22268492, 22620630, 22971612,
-    23321440, 23670112, 24017630, 24363993, 24709200, 25053252, 25396150, 25737893,
-    26078480, 26417912, 26756190, 27093312, 27429280, 27764092, 28097750, 28430252,
-    28761600, 29091793, 29420830, 29748712, 30075440, 30401012, 30725430, 31048692,
-    31370800, 31691752, 32011550, 32330192, 32647680, 32964012, 33279190, 33593212,
-    33906080, 34217792, 34528350, 34837752, 35146000, 35453092, 35759030, 36063812,
-    36367440, 36669912, 36971230, 37271393, 37570400, 37868252, 38164950, 38460492,
-    38754880, 39048112,
+# The tables, packed to keep the .mpy small (1.7 kB as tuples, 0.6 kB as bytes):
+# R/R0 * 1e7 at -200 degC, then the 105 increments to -190, ..., +850 degC as
+# 3-byte little-endian integers; per segment 2*(R_k + R_k+1) - 4*R(T_k + 5 degC)
+# in 1e-7 R0 as 2-byte little-endian signed integers.
+_NODE0 = const(1852008)
+_DELTAS = (
+    b"\xcc\x91\x06W\x84\x06\xb6w\x06\xdck\x06\xc1`\x06\\V\x06\xa1L\x06\x87C"
+    b"\x06\x03;\x06\x0b3\x06\x97+\x06\x9a$\x06\x0c\x1e\x06\xe3\x17\x06\x14\x12"
+    b"\x06\x95\x0c\x06]\x07\x06`\x02\x06\x96\xfd\x05\xf4\xf8\x05l\xf4\x05\xea"
+    b"\xef\x05f\xeb\x05\xe4\xe6\x05a\xe2\x05\xdd\xdd\x05Z\xd9\x05\xd8\xd4\x05U"
+    b"\xd0\x05\xd1\xcb\x05N\xc7\x05\xcc\xc2\x05H\xbe\x05\xc6\xb9\x05B\xb5\x05"
+    b"\xc0\xb0\x05<\xac\x05\xba\xa7\x056\xa3\x05\xb4\x9e\x050\x9a\x05\xae\x95"
+    b"\x05*\x91\x05\xa8\x8c\x05$\x88\x05\xa2\x83\x05\x1e\x7f\x05\x9cz\x05\x18v"
+    b"\x05\x96q\x05\x13m\x05\x8fh\x05\x0cd\x05\x8a_\x05\x06[\x05\x84V\x05\x00R"
+    b"\x05~M\x05\xfbH\x05wD\x05\xf4?\x05r;\x05\xef6\x05k2\x05\xe8-\x05f)\x05"
+    b"\xe2$\x05` \x05\xdc\x1b\x05Z\x17\x05\xd6\x12\x05T\x0e\x05\xd1\t\x05M\x05"
+    b"\x05\xca\x00\x05H\xfc\x04\xc4\xf7\x04B\xf3\x04\xbe\xee\x04<\xea\x04\xb8"
+    b"\xe5\x046\xe1\x04\xb2\xdc\x040\xd8\x04\xac\xd3\x04*\xcf\x04\xa6\xca\x04$"
+    b"\xc6\x04\xa0\xc1\x04\x1e\xbd\x04\x9a\xb8\x04\x18\xb4\x04\x94\xaf\x04\x12"
+    b"\xab\x04\x8e\xa6\x04\x0c\xa2\x04\x88\x9d\x04\x06\x99\x04\x83\x94\x04\xff"
+    b"\x8f\x04|\x8b\x04\xfa\x86\x04v\x82\x04\xf4}\x04py\x04"
 )
+_CURVS = (
+    b"\x0f\xf9{\xf9\xe2\xf9D\xfa\xa1\xfa\xf9\xfaL\xfb\x99\xfb\xe2\xfb&\xfce"
+    b"\xfc\x9e\xfc\xd3\xfc\x03\xfd-\xfdS\xfdt\xfd\x8f\xfd\xa6\xfd\xb7\xfd\xbe"
+    b"\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbe"
+    b"\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe"
+    b"\xfd\xbe\xfd\xbf\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbe"
+    b"\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbf\xfd\xbe\xfd\xbf\xfd\xbe\xfd\xbe\xfd\xbe"
+    b"\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbe\xfd\xbf\xfd\xbe"
+    b"\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbf\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbe"
+    b"\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbe\xfd\xbe\xfd\xbe"
+    b"\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe"
+    b"\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbe\xfd\xbf\xfd\xbf\xfd\xbe\xfd\xbe"
+    b"\xfd\xbe\xfd\xbe\xfd\xbe\xfd"
+)
+_NODES = array("i", bytes(4 * (_LAST + 1)))
+_CURV = array("h", bytes(2 * _LAST))
 
-# per segment: 2*(R_k + R_k+1) - 4*R(T_k + 5 degC), units of 1e-7 R0
-_CURV = (
-    -1777, -1669, -1566, -1468, -1375, -1287, -1204, -1127,
-    -1054, -986, -923, -866, -813, -765, -723, -685,
-    -652, -625, -602, -585, -578, -578, -578, -578,
-    -578, -577, -578, -578, -577, -578, -578, -578,
-    -578, -578, -578, -578, -578, -578, -578, -578,
-    -577, -578, -578, -578, -578, -578, -577, -578,
-    -578, -578, -577, -577, -578, -577, -578, -578,
-    -578, -578, -578, -578, -578, -578, -577, -578,
-    -577, -578, -578, -578, -577, -577, -578, -578,
-    -578, -577, -578, -578, -578, -578, -578, -578,
-    -577, -578, -578, -578, -578, -578, -577, -578,
-    -578, -578, -578, -578, -578, -578, -578, -578,
-    -578, -578, -577, -577, -578, -578, -578, -578,
-    -578,
-)
+
+def _unpack():
+    r = _NODE0
+    _NODES[0] = r
+    for k in range(_LAST):
+        r += _DELTAS[3 * k] | (_DELTAS[3 * k + 1] << 8) | (_DELTAS[3 * k + 2] << 16)
+        _NODES[k + 1] = r
+        c = _CURVS[2 * k] | (_CURVS[2 * k + 1] << 8)
+        _CURV[k] = c - 65536 if c > 32767 else c
+
+
+_unpack()
 
 
 def temperature_mC(r):
