@@ -12,7 +12,7 @@ from hypothesis import HealthCheck, given, settings, strategies as st
 
 from hil_tests.rig.frames import command, crc16
 
-N_EXAMPLES = 200 if os.environ.get("TCOMP_SLOW") else 25
+N_EXAMPLES = 300 if os.environ.get("TCOMP_SLOW") else 60
 POS_LIMIT = 100000000
 
 _garbage = st.binary(min_size=1, max_size=60).map(

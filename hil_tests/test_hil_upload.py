@@ -18,7 +18,7 @@ from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
 from hil_tests.rig.frames import command
 
 pytestmark = pytest.mark.rig
-TRIALS = 40 if os.environ.get("TCOMP_SLOW") else 6
+TRIALS = 40 if os.environ.get("TCOMP_SLOW") else 8
 SENSORS = ["T1", "T2", "T4"]
 CHUNK = 48
 
@@ -50,14 +50,15 @@ def test_power_cut_during_upload_leaves_old_or_new_table(make_rig, demo_run):
             assert f.read() == in_force  # the slot in force holds the complete table
         new = tables[1] if in_force == tables[0] else tables[0]
         steps = _steps(new)
-        cut = len(steps) + 5 if final else rng.randrange(len(steps))
+        # half the cuts anywhere, half around the commit (before, during or after it takes effect)
+        cut = len(steps) + 5 if final else (rng.randrange(len(steps)) if trial % 2 else len(steps) - 1)
         killed = False
         with rig.free_run(chunk_ms=10, pace_s=0.0005):
             for i, data in enumerate(steps):
                 k = len(rig.frames)
                 rig.write(data)
                 if i == cut:
-                    time.sleep(rng.random() * 0.004)
+                    time.sleep(rng.random() * (0.02 if i == len(steps) - 1 else 0.004))
                     rig.kill()
                     killed = True
                     break
