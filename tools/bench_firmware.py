@@ -117,7 +117,7 @@ def compile_tree(dest, march=None):
 
 
 def prepare(work):
-    from conftest import make_table
+    from fwhelpers import make_table
     names = ["T%d" % i for i in range(1, 12)]
     with open(os.path.join(work, "table_a.bin"), "wb") as f:
         f.write(make_table(kind="poly_slope", sensors=names))

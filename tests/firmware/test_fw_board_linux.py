@@ -88,7 +88,7 @@ def test_clock_and_null_pin():
 
 def test_app_runs_on_cpython_adapters(tmp_path):
     """A whole App on the Linux adapters: the ADS122C04 behind SMBusI2C, pyserial behind SerialPort."""
-    from conftest import make_table
+    from fwhelpers import make_table
     from firmware.board import Board
     from firmware.app import App
     from fwfakes import FakeClock

@@ -1,7 +1,7 @@
 """Sensor plausibility: chip faults, range, rate, stuck, bus errors, a chip that goes and comes back."""
 import pytest
 
-from conftest import rig_app, run_cycles
+from fwhelpers import rig_app, run_cycles
 from firmware import channels as chm
 
 

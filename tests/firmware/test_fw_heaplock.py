@@ -17,7 +17,7 @@ import os
 
 import pytest
 
-from conftest import compile_mpy, run_micropython, make_table, HERE
+from fwhelpers import compile_mpy, run_micropython, make_table, HERE
 
 HEAP = "160K"
 

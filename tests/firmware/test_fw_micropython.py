@@ -13,7 +13,7 @@ import sys
 
 import pytest
 
-from conftest import compile_mpy, run_micropython, make_table, HERE, ROOT
+from fwhelpers import compile_mpy, run_micropython, make_table, HERE, ROOT
 
 SCENARIO = r"""
 import binascii

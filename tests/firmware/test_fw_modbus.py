@@ -4,7 +4,7 @@ import struct
 import pytest
 from hypothesis import given, strategies as st
 
-from conftest import rig_app, run_cycles
+from fwhelpers import rig_app, run_cycles
 from firmware.crc16 import crc16_modbus
 from firmware import status as stw
 

@@ -4,7 +4,7 @@ import zlib
 import pytest
 from hypothesis import given, settings, strategies as st, HealthCheck
 
-from conftest import cmd, frames, rig_app, run_cycles, make_table
+from fwhelpers import cmd, frames, rig_app, run_cycles, make_table
 from fwfakes import FakeSerial
 from firmware import frame as fr
 from firmware.crc16 import crc16_ccitt, crc16_modbus

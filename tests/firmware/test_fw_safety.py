@@ -1,7 +1,7 @@
 """Output limiter and the app's hold / fallback / recovery behaviour."""
 import pytest
 
-from conftest import rig_app, run_cycles, frames
+from fwhelpers import rig_app, run_cycles, frames
 from firmware import status as st
 from firmware.safety import Limiter
 
@@ -202,7 +202,7 @@ def test_tick_wrap_and_week_long_fault(tmp_path):
     from fwfakes import make_rig
     from firmware.app import App
     names = ["T%d" % i for i in range(1, 12)]
-    from conftest import make_table
+    from fwhelpers import make_table
     (tmp_path / "table_a.bin").write_bytes(make_table(kind="linear_direct", sensors=names,
                                                       b=[1] * 11, shb=4))
     board = make_rig(table_dir=str(tmp_path), extra={"hold_ms": 60000, "frame_ms": 1000})

@@ -3,7 +3,7 @@ import random
 
 import pytest
 
-from conftest import cmd, frames, run_cycles
+from fwhelpers import cmd, frames, run_cycles
 
 
 @pytest.fixture(scope="module")
@@ -75,7 +75,7 @@ def test_feed_range_fallback(tmp_path, screw_table):
 
 
 def test_feed_command_without_screw_table(tmp_path):
-    from conftest import rig_app
+    from fwhelpers import rig_app
     app, board = rig_app(tmp_path)
     board.serial.take()
     board.serial.feed(cmd(b"TC,M,6000,0,100000"))

@@ -5,7 +5,7 @@ import zlib
 import pytest
 from hypothesis import given, settings, strategies as st, HealthCheck
 
-from conftest import make_table
+from fwhelpers import make_table
 from firmware.slots import TableStore, UploadError
 
 NAMES = ["T1", "T2"]
