@@ -235,18 +235,6 @@ class LineReader:
         self.status = LINE_OK
 
     # --- field access (valid after LINE_OK) ---------------------------------
-    def is_field(self, k, text):
-        """Field k equals the bytes constant ``text``."""
-        s = self.fs[k]
-        e = self.fe[k]
-        if e - s != len(text):
-            return False
-        b = self.buf
-        for i in range(e - s):
-            if b[s + i] != text[i]:
-                return False
-        return True
-
     def letter(self, k):
         """The single character of field k, or 0 if it is not one character."""
         s = self.fs[k]
