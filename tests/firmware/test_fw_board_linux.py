@@ -109,3 +109,35 @@ def test_app_runs_on_cpython_adapters(tmp_path):
     ser.rx += b"$TC,S*56EA\r\n"
     app.run(max_cycles=12)
     assert any(b",T," in l and b",25.00" in l for l in ser.tx.split(b"\r\n")[2:])
+
+
+def test_spidev_adapter_ioctl_layout(monkeypatch):
+    """SpidevSPI against a fake kernel: ioctl numbers of linux/spi/spidev.h and the
+    32-byte spi_ioc_transfer, with the reply copied into the caller's buffer."""
+    import ctypes
+    import fcntl
+    import os
+    import struct
+    from firmware import board_linux as bl
+    calls = []
+
+    def ioctl(fd, req, arg):
+        calls.append((req, arg))
+        if req == 0x40206B00:  # SPI_IOC_MESSAGE(1)
+            tx, rx, n, speed, delay, bits, cs_change = struct.unpack("QQIIHBB", arg[:28])
+            assert len(arg) == 32 and bits == 8
+            sent = ctypes.string_at(tx, n)
+            reply = bytes([0xFF]) + bytes(b ^ 0x5A for b in sent[1:])
+            ctypes.memmove(rx, reply, n)
+        return 0
+
+    monkeypatch.setattr(os, "open", lambda path, flags: 99)
+    monkeypatch.setattr(fcntl, "ioctl", ioctl)
+    spi = bl.SpidevSPI("/dev/spidev0.0", baudrate=2000000, mode=1)
+    assert calls[0] == (0x40016B01, struct.pack("B", 1))  # SPI_IOC_WR_MODE
+    assert calls[1] == (0x40046B04, struct.pack("I", 2000000))  # SPI_IOC_WR_MAX_SPEED_HZ
+    rx = bytearray(3)
+    spi.write_readinto(bytearray([0x01, 0x00, 0x33]), rx)
+    assert rx == bytearray([0xFF, 0x5A, 0x69])
+    spi.write(bytearray([0x80, 0xC1]))
+    assert struct.unpack("QQI", calls[-1][1][:20])[2] == 2
