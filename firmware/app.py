@@ -107,6 +107,9 @@ class App:
             self.use_table(t, slot)
         self.link = Link(self)
         collect()
+        # what the hello frame reports before the first cycle: nothing read yet
+        self.status = (self.channels.faulty_mask() | st.NO_POSITION | st.FALLBACK
+                       | (0 if t is not None else st.NO_TABLE))
         self.link.boot()
 
     # --- table ---------------------------------------------------------------
