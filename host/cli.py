@@ -11,6 +11,48 @@ class UserError(Exception):
     """A problem with the user's input (file, flag, data): printed without a traceback."""
 
 
+def _reason(exc):
+    return exc.strerror or str(exc)
+
+
+def check_output(path, flag="--out"):
+    """Raise UserError unless ``path`` can be created as a file; call it before long work starts."""
+    import os
+
+    if os.path.isdir(path):
+        raise UserError("%s %s: is a folder, expected a file path" % (flag, path))
+    parent = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(parent):
+        raise UserError("%s %s: folder %s does not exist" % (flag, path, parent))
+    if not os.access(parent, os.W_OK | os.X_OK) or (os.path.exists(path) and not os.access(path, os.W_OK)):
+        raise UserError("%s %s: not writable" % (flag, path))
+
+
+def check_output_dir(path, flag="--out"):
+    """Raise UserError unless ``path`` is, or can be created as, a folder (parents included)."""
+    import os
+
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise UserError("%s %s: exists and is not a folder" % (flag, path))
+    probe = os.path.abspath(path)
+    while not os.path.exists(probe):
+        probe = os.path.dirname(probe)
+    if not os.path.isdir(probe):
+        raise UserError("%s %s: %s is a file, not a folder" % (flag, path, probe))
+    if not os.access(probe, os.W_OK | os.X_OK):
+        raise UserError("%s %s: %s is not writable" % (flag, path, probe))
+
+
+def open_output(path, mode="w", **kwargs):
+    """``open(path, mode)`` for an output file; an OSError becomes "cannot write PATH: reason"."""
+    if "b" not in mode:
+        kwargs.setdefault("encoding", "utf-8")
+    try:
+        return open(path, mode, **kwargs)
+    except OSError as exc:
+        raise UserError("cannot write %s: %s" % (path, _reason(exc)))
+
+
 def _verbs():
     names = sorted(m.name for m in pkgutil.iter_modules(_commands.__path__) if not m.name.startswith("_"))
     return {name.rstrip("_").replace("_", "-"): importlib.import_module("host.commands." + name) for name in names}
@@ -40,6 +82,13 @@ def main(argv=None):
         return 2
     except KeyboardInterrupt:
         return 130
+    except OSError as exc:
+        # Safety net for file-system failures the verb did not anticipate (disk full, permissions):
+        # one line naming the path, not a traceback. Verbs should still check their paths up front.
+        if exc.filename is None:
+            raise
+        print("tcomp %s: error: %s: %s" % (args.verb, exc.filename, _reason(exc)), file=sys.stderr)
+        return 2
 
 
 if __name__ == "__main__":

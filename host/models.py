@@ -54,6 +54,12 @@ def read_document(path):
             doc = json.load(fh)
     except FileNotFoundError:
         raise ModelFormatError("%s: file is missing" % path)
+    except IsADirectoryError:
+        raise ModelFormatError("%s: is a folder, expected a model document (tcomp-model/1 JSON)" % path)
+    except UnicodeDecodeError:
+        raise ModelFormatError("%s: not a text file (a binary file? expected a model document, tcomp-model/1 JSON)" % path)
+    except OSError as exc:
+        raise ModelFormatError("%s: cannot be read (%s)" % (path, exc.strerror or exc))
     except json.JSONDecodeError as exc:
         raise ModelFormatError("%s line %d column %d: invalid JSON (%s)" % (path, exc.lineno, exc.colno, exc.msg))
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
@@ -69,5 +75,16 @@ def model_class(kind):
 
 
 def load_model(path_or_doc):
-    doc = read_document(path_or_doc) if isinstance(path_or_doc, str) else path_or_doc
-    return model_class(doc["kind"]).from_document(doc)
+    """Model object from a document path (or an already read document); errors name the path."""
+    if isinstance(path_or_doc, str):
+        path, doc = path_or_doc, read_document(path_or_doc)
+    else:
+        path, doc = None, path_or_doc
+    try:
+        return model_class(doc["kind"]).from_document(doc)
+    except (ModelFormatError, ValueError) as exc:
+        # from_document names the field; the file name is only known here.
+        msg = str(exc)
+        if path and not msg.startswith(path):
+            msg = "%s: %s" % (path, msg)
+        raise ModelFormatError(msg) from exc

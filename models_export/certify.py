@@ -239,9 +239,12 @@ class Model:
             if ref_position_mm is None:
                 ref = 0 if self.pos_lo <= 0 <= self.pos_hi else self.pos_lo
             else:
+                if not math.isfinite(ref_position_mm):
+                    raise ExportError("reference position must be a finite number of mm, got %r" % (ref_position_mm,))
                 ref = rnd(F(ref_position_mm) * 1000)
                 if not self.pos_lo <= ref <= self.pos_hi:
-                    raise ExportError("reference position %s mm is outside envelope.position_mm" % ref_position_mm)
+                    raise ExportError("reference position %s mm is outside envelope.position_mm %s..%s mm"
+                                      % (ref_position_mm, lo, hi))
             self.pos_ref = ref
         # S: the temperature-linear part. poly_slope/screw: OU per um (slope); linear_direct: OU.
         if self.kind == "poly_slope":

@@ -91,21 +91,56 @@ class _Base:
 
     @staticmethod
     def _common_args(doc):
-        try:
-            thermal = doc["thermal"]
-            sensors = list(doc["sensors"])
-            ref = doc["reference_C"]
-        except (KeyError, TypeError) as exc:
-            raise ModelFormatError("model document lacks %s" % exc)
+        where = "%s model document" % doc.get("kind", "model")
+        for key in ("thermal", "sensors", "reference_C"):
+            if key not in doc:
+                raise ModelFormatError("%s lacks the field '%s'" % (where, key))
+        thermal, sensors, ref = doc["thermal"], doc["sensors"], doc["reference_C"]
+        if not isinstance(thermal, dict):
+            raise ModelFormatError("%s: field 'thermal' must be an object, found %s" % (where, type(thermal).__name__))
+        if not isinstance(sensors, list) or not all(isinstance(s, str) for s in sensors):
+            raise ModelFormatError("%s: field 'sensors' must be a list of sensor names" % where)
+        if not isinstance(ref, dict):
+            raise ModelFormatError("%s: field 'reference_C' must be an object {sensor: degC}, found %s" % (where, type(ref).__name__))
         missing = [s for s in sensors if s not in ref]
         if missing:
-            raise ModelFormatError("model document: reference_C has no entry for %s" % ", ".join(missing))
+            raise ModelFormatError("%s: reference_C has no entry for %s" % (where, ", ".join(missing)))
+        bad = [s for s in sensors if not _is_number(ref[s])]
+        if bad:
+            raise ModelFormatError("%s: reference_C.%s must be a number, found %r" % (where, bad[0], ref[bad[0]]))
         if thermal.get("reference", "fixed") not in REFERENCES:
-            raise ModelFormatError("model document: thermal.reference must be one of %s, got %r" % (", ".join(REFERENCES), thermal.get("reference")))
+            raise ModelFormatError("%s: thermal.reference must be one of %s, got %r" % (where, ", ".join(REFERENCES), thermal.get("reference")))
         return thermal, sensors, ref, dict(
             reference=thermal.get("reference", "fixed"), channel=doc.get("channel"), method=doc.get("method", "mlr"), axis=doc.get("axis"),
             envelope=doc.get("envelope"), statistics=doc.get("statistics"), training=doc.get("training"),
         )
+
+
+def _is_number(v):
+    return isinstance(v, (int, float)) and not isinstance(v, bool)
+
+
+def _thermal_terms(doc, thermal, sensors, coef_key, intercept_key):
+    """(coefficients in sensor order, intercept) from ``thermal``, each problem named by its field."""
+    kind = doc.get("kind")
+    if coef_key not in thermal:
+        other = [k for k in ("coefficients_um_per_K", "coefficients_um_per_mm_per_K") if k != coef_key and k in thermal]
+        hint = " (it has thermal.%s: is 'kind' wrong?)" % other[0] if other else ""
+        raise ModelFormatError("%s model document lacks the field thermal.%s%s" % (kind, coef_key, hint))
+    coefs = thermal[coef_key]
+    if not isinstance(coefs, dict):
+        raise ModelFormatError("%s model document: thermal.%s must be an object {sensor: number}, found %s"
+                               % (kind, coef_key, type(coefs).__name__))
+    missing = [s for s in sensors if s not in coefs]
+    if missing:
+        raise ModelFormatError("%s model document: thermal.%s has no entry for sensor(s) %s" % (kind, coef_key, ", ".join(missing)))
+    for s in sensors:
+        if not _is_number(coefs[s]):
+            raise ModelFormatError("%s model document: thermal.%s.%s must be a number, found %r" % (kind, coef_key, s, coefs[s]))
+    b0 = thermal.get(intercept_key, 0.0)
+    if not _is_number(b0):
+        raise ModelFormatError("%s model document: thermal.%s must be a number, found %r" % (kind, intercept_key, b0))
+    return [coefs[s] for s in sensors], b0
 
 
 class LinearDirectModel(_Base):
@@ -136,11 +171,7 @@ class LinearDirectModel(_Base):
     @classmethod
     def from_document(cls, doc):
         thermal, sensors, ref, kw = cls._common_args(doc)
-        try:
-            coefs = [thermal["coefficients_um_per_K"][s] for s in sensors]
-            b0 = thermal.get("intercept_um", 0.0)
-        except (KeyError, TypeError) as exc:
-            raise ModelFormatError("linear_direct document: thermal.coefficients_um_per_K lacks %s" % exc)
+        coefs, b0 = _thermal_terms(doc, thermal, sensors, "coefficients_um_per_K", "intercept_um")
         return cls(sensors, coefs, b0, ref, **kw)
 
 
@@ -181,10 +212,9 @@ class PolySlopeModel(_Base):
     @classmethod
     def from_document(cls, doc):
         thermal, sensors, ref, kw = cls._common_args(doc)
-        try:
-            coefs = [thermal["coefficients_um_per_mm_per_K"][s] for s in sensors]
-            b0 = thermal.get("intercept_um_per_mm", 0.0)
-        except (KeyError, TypeError) as exc:
-            raise ModelFormatError("poly_slope document: thermal.coefficients_um_per_mm_per_K lacks %s" % exc)
+        coefs, b0 = _thermal_terms(doc, thermal, sensors, "coefficients_um_per_mm_per_K", "intercept_um_per_mm")
         geo = doc.get("geometric") or {"coefficients_um": [0.0]}
+        if not isinstance(geo, dict) or not isinstance(geo.get("coefficients_um", [0.0]), list) \
+                or not all(_is_number(c) for c in geo.get("coefficients_um", [0.0])):
+            raise ModelFormatError("poly_slope model document: geometric.coefficients_um must be a list of numbers")
         return cls(sensors, coefs, b0, ref, geometric_coef=geo.get("coefficients_um", [0.0]), **kw)

@@ -76,7 +76,7 @@ def format_report(model):
 
 
 def fit_command(args):
-    from host.cli import UserError
+    from host.cli import UserError, open_output
     from host.models import save_model
     from host.runs import RunFormatError, load_run
     from host.screw.model import ScrewModel
@@ -103,10 +103,13 @@ def fit_command(args):
             model.fit(runs)
     except ValueError as exc:
         raise UserError(str(exc))
-    doc = save_model(model.to_document(), args.out)
+    try:
+        doc = save_model(model.to_document(), args.out)
+    except OSError as exc:
+        raise UserError("cannot write %s: %s" % (args.out, exc.strerror or exc))
     print(format_report(model))
     print("wrote %s" % args.out)
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
+        with open_output(args.json) as fh:
             json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": model.reduced_["reduction_error_um"]}, fh, indent=2)
     return 0
