@@ -150,7 +150,8 @@ def _read_csv(path, required, optional, problems, text_columns=()):
     """Parse a numeric CSV strictly. Returns {column: list} or None if unreadable."""
     fname = os.path.basename(path)
     try:
-        with open(path, newline="", encoding="utf-8") as fh:
+        # utf-8-sig: spreadsheet programs (Excel) start a UTF-8 CSV with a byte-order mark
+        with open(path, newline="", encoding="utf-8-sig") as fh:
             rows = list(csv.reader(fh))
     except FileNotFoundError:
         problems.add(path, "file is missing")
@@ -258,10 +259,12 @@ def load_meta(folder):
     path = os.path.join(folder, META)
     problems = _Problems()
     try:
-        with open(path, encoding="utf-8") as fh:
+        with open(path, encoding="utf-8-sig") as fh:
             meta = json.load(fh)
     except FileNotFoundError:
         raise RunFormatError(["%s: file is missing" % path])
+    except (OSError, UnicodeDecodeError) as exc:
+        raise RunFormatError(["%s: cannot be read as UTF-8 JSON (%s)" % (path, getattr(exc, "strerror", None) or exc)])
     except json.JSONDecodeError as exc:
         raise RunFormatError(["%s line %d column %d: invalid JSON (%s)" % (path, exc.lineno, exc.colno, exc.msg)])
     _check_meta(path, meta, problems)
@@ -400,7 +403,14 @@ def _g(decimals):
 
 
 def write_run(run, folder, decimals=4):
-    """Write ``run`` as a tcomp-run/1 folder (created if needed). Returns the folder."""
+    """Write ``run`` as a tcomp-run/1 folder (created if needed). Returns the folder.
+
+    Raises NotADirectoryError naming ``folder`` when it exists as a file (os.makedirs would only say "File exists").
+    """
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        import errno
+
+        raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder (a run is written as a folder)", folder)
     os.makedirs(folder, exist_ok=True)
     meta = dict(run.meta)
     meta.setdefault("format", FORMAT)

@@ -59,7 +59,7 @@ def _method_options(items, methods):
 def run(args):
     import json
 
-    from host.cli import UserError
+    from host.cli import UserError, check_output, check_output_dir, open_output
     from host.empirical import EmpiricalDataError
     from host.empirical.compare import METHODS, case_split, cases_runs, findings, public, run_case, table, write_plots
     from host.runs import RunFormatError, load_runs
@@ -68,10 +68,15 @@ def run(args):
     bad = [m for m in methods if m not in METHODS]
     if bad:
         raise UserError("--methods: unknown %s (known: %s)" % (", ".join(bad), ", ".join(METHODS)))
+    check_output(args.json, "--json")
+    if args.plots:
+        check_output_dir(args.plots, "--plots")
     try:
         runs = load_runs(args.runs)
     except RunFormatError as exc:
         raise UserError(str(exc))
+    if args.split_h is not None:
+        _check_split(args.split_h, runs)
     options, selector_params = _method_options(args.option, methods)
     target = "direct" if args.direct else "slope"
     sensors = [s.strip() for s in args.sensors.split(",") if s.strip()] if args.sensors else None
@@ -105,8 +110,28 @@ def run(args):
     if args.plots:
         doc["plots"] = write_plots(results, cases, args.plots, target, args.channel)
         print("wrote %d plots to %s" % (len(doc["plots"]), args.plots))
-    with open(args.json, "w", encoding="utf-8") as fh:
+    with open_output(args.json) as fh:
         json.dump(doc, fh, indent=2, default=float)
         fh.write("\n")
     print("wrote %s" % args.json)
+    failed = [r for r in results if r.get("error")]
+    if results and len(failed) == len(results):
+        raise UserError("every method failed (first: %s: %s); details in %s" % (failed[0]["method"], failed[0]["error"], args.json))
     return 0
+
+
+def _check_split(split_h, runs):
+    """--split-h must cut the one run's measured span into a training and a test part."""
+    import math
+
+    from host.cli import UserError
+
+    if len(runs) != 1:
+        raise UserError("--split-h takes exactly one run (got %d)" % len(runs))
+    if not math.isfinite(split_h) or split_h <= 0:
+        raise UserError("--split-h %s: must be a positive number of hours" % split_h)
+    t = runs[0].errors.time_s
+    lo, hi = float(t.min()) / 3600.0, float(t.max()) / 3600.0
+    if not lo < split_h < hi:
+        raise UserError("--split-h %s: must lie inside the measured span of %s, %.4g..%.4g h (errors.csv), "
+                        "so that there is data to fit before it and to test after it" % (split_h, runs[0].path, lo, hi))

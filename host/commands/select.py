@@ -40,9 +40,12 @@ def _options(items):
 def run(args):
     import json
 
-    from host.cli import UserError
+    from host.cli import check_output, open_output, UserError
     from host.empirical import EmpiricalDataError
 
+    check_output(args.json, "--json")
+    if args.plot:
+        check_output(args.plot, "--plot")
     try:
         if args.corr:
             doc = _run_corr(args)
@@ -50,7 +53,7 @@ def run(args):
             doc = _run_data(args)
     except EmpiricalDataError as exc:
         raise UserError(str(exc))
-    with open(args.json, "w", encoding="utf-8") as fh:
+    with open_output(args.json) as fh:
         json.dump(doc, fh, indent=2, allow_nan=False)
         fh.write("\n")
     return 0

@@ -95,10 +95,13 @@ def run(args):
 
     import numpy as np
 
-    from host.cli import UserError
+    from host.cli import UserError, check_output, check_output_dir, open_output
     from host.runs import load_run
     from host.sim import DEFAULT_NOISE_UM, write_runs
 
+    check_output_dir(args.out, "--out")
+    if args.json:
+        check_output(args.json, "--json")
     try:
         effects = parse_effects(args.effects)
         overrides = parse_overrides(args.set)
@@ -125,7 +128,7 @@ def run(args):
         print("%-17s -> %s (%d sweeps, %.1f h, max |error| %.1f um)"
               % (name, folder, len(e.sweeps()), run_.temperatures.time_s[-1] / 3600.0, np.max(np.abs(e.error_um))))
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
+        with open_output(args.json) as fh:
             json.dump(summary, fh, indent=2)
             fh.write("\n")
     return 0

@@ -67,6 +67,9 @@ EFFECTS = {
 }
 
 
+NON_NEGATIVE = ("ambient_expansion", "speed_dependent_heat", "bearing_heat", "sensor_lag")
+
+
 def resolve_effects(effects):
     """Normalise ``effects`` to {name: magnitude} for the effects that are on.
 
@@ -94,8 +97,10 @@ def resolve_effects(effects):
             raise ValueError("effect %r: magnitude must be a number (found %r)" % (name, mag))
         if mag != mag or mag in (float("inf"), float("-inf")):
             raise ValueError("effect %r: magnitude must be finite (found %r)" % (name, mag))
-        if name in ("sensor_lag", "bearing_heat") and mag < 0:
-            raise ValueError("effect %r: magnitude must be >= 0 (found %g %s)" % (name, mag, EFFECTS[name].unit))
+        # Shares, powers and time constants have no negative meaning; reversal_error's sign is the
+        # sign of B and moving_convection only needs h > 0 (checked below).
+        if name in NON_NEGATIVE and mag < 0:
+            raise ValueError("effect %r: magnitude must be >= 0 (found %g; unit %s)" % (name, mag, EFFECTS[name].unit))
         if name == "moving_convection" and mag <= -1:
             raise ValueError("effect 'moving_convection': magnitude must be > -1 so h stays positive (found %g)" % mag)
         out[name] = mag
