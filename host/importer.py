@@ -33,6 +33,35 @@ class ImportError_(ValueError):
     """A mapping or source file problem; the message names file, line and column."""
 
 
+def _number(value, what, where):
+    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+        raise ImportError_("%s: %s must be a number, found %r" % (where, what, value))
+    try:
+        v = float(value)
+    except ValueError:
+        raise ImportError_("%s: %s must be a number, found %r" % (where, what, value))
+    if not math.isfinite(v):
+        raise ImportError_("%s: %s must be a finite number, found %r" % (where, what, value))
+    return v
+
+
+def _columns(value, key, where):
+    """'temperatures'/'errors' as {column: spec}; column names must be strings, specs objects."""
+    if isinstance(value, list):
+        value = {c: {} for c in value} if all(isinstance(c, str) for c in value) else value
+    if isinstance(value, list):
+        bad = [c for c in value if not isinstance(c, str)]
+        raise ImportError_("%s: '%s' lists column names, which must be strings (found %r); write them as in the CSV header, in quotes"
+                           % (where, key, bad[0]))
+    if not isinstance(value, dict):
+        raise ImportError_("%s: '%s' must be a list of column names or an object {column: settings}, found %s"
+                           % (where, key, type(value).__name__))
+    for col, spec in value.items():
+        if spec is not None and not isinstance(spec, dict):
+            raise ImportError_("%s: %s.%s must be an object of settings, found %r" % (where, key, col, spec))
+    return value
+
+
 def _normalise_mapping(mapping, where):
     if not isinstance(mapping, dict):
         raise ImportError_("%s: mapping must be a JSON object" % where)
@@ -41,12 +70,22 @@ def _normalise_mapping(mapping, where):
         raise ImportError_("%s: unknown mapping key(s) %s" % (where, ", ".join(sorted(unknown))))
     if "time" not in mapping:
         raise ImportError_("%s: mapping needs 'time' (the source column holding the time)" % where)
-    temps = mapping.get("temperatures") or {}
-    if isinstance(temps, list):
-        temps = {c: {} for c in temps}
-    errs = mapping.get("errors") or {}
-    if isinstance(errs, list):
-        errs = {c: {} for c in errs}
+    if not isinstance(mapping["time"], str) or not mapping["time"]:
+        raise ImportError_("%s: 'time' must be a column name (a string), found %r" % (where, mapping["time"]))
+    spindle = mapping.get("spindle")
+    if spindle is not None and not isinstance(spindle, str):
+        raise ImportError_("%s: 'spindle' must be a column name (a string), found %r" % (where, spindle))
+    ignore = mapping.get("ignore") or []
+    if not isinstance(ignore, list) or not all(isinstance(c, str) for c in ignore):
+        raise ImportError_("%s: 'ignore' must be a list of column names (strings), found %r" % (where, ignore))
+    meta = mapping.get("meta") or {}
+    if not isinstance(meta, dict):
+        raise ImportError_("%s: 'meta' must be an object, found %r" % (where, meta))
+    time_scale = _number(mapping.get("time_scale", 1.0), "time_scale", where)
+    if time_scale <= 0:
+        raise ImportError_("%s: time_scale must be > 0 (the factor from the time column to seconds), found %g" % (where, time_scale))
+    temps = _columns(mapping.get("temperatures") or {}, "temperatures", where)
+    errs = _columns(mapping.get("errors") or {}, "errors", where)
     if not temps:
         raise ImportError_("%s: mapping needs at least one temperature column" % where)
     if not errs:
@@ -57,7 +96,10 @@ def _normalise_mapping(mapping, where):
         role = spec.get("role", "structure")
         if role not in ROLES:
             raise ImportError_("%s: temperature column %r has role %r; expected one of %s" % (where, col, role, ", ".join(ROLES)))
-        t_out[col] = {"name": spec.get("name", col), "role": role, "location": spec.get("location", "")}
+        name = spec.get("name", col)
+        if not isinstance(name, str) or not name:
+            raise ImportError_("%s: temperatures.%s.name must be a non-empty string, found %r" % (where, col, name))
+        t_out[col] = {"name": name, "role": role, "location": spec.get("location", "")}
     names = [s["name"] for s in t_out.values()]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
@@ -67,17 +109,17 @@ def _normalise_mapping(mapping, where):
         spec = dict(spec or {})
         e_out[col] = {
             "channel": str(spec.get("channel", col)),
-            "position_mm": float(spec.get("position_mm", 0.0)),
-            "scale": float(spec.get("scale", 1.0)),
+            "position_mm": _number(spec.get("position_mm", 0.0), "errors.%s.position_mm" % col, where),
+            "scale": _number(spec.get("scale", 1.0), "errors.%s.scale" % col, where),
         }
     return {
         "time": mapping["time"],
-        "time_scale": float(mapping.get("time_scale", 1.0)),
+        "time_scale": time_scale,
         "temperatures": t_out,
         "errors": e_out,
-        "spindle": mapping.get("spindle"),
-        "ignore": list(mapping.get("ignore") or []),
-        "meta": dict(mapping.get("meta") or {}),
+        "spindle": spindle,
+        "ignore": list(ignore),
+        "meta": dict(meta),
     }
 
 
@@ -85,10 +127,13 @@ def import_csv(source, mapping, mapping_where="mapping"):
     """Read ``source`` (CSV path) with ``mapping``; return a Run (not yet written)."""
     m = _normalise_mapping(mapping, mapping_where)
     try:
-        with open(source, newline="", encoding="utf-8") as fh:
+        # utf-8-sig: spreadsheet programs (Excel) start a UTF-8 CSV with a byte-order mark
+        with open(source, newline="", encoding="utf-8-sig") as fh:
             rows = list(csv.reader(fh))
+    except UnicodeDecodeError as exc:
+        raise ImportError_("%s: not a UTF-8 text CSV (byte %d cannot be decoded); save the log as CSV (UTF-8)" % (source, exc.start))
     except OSError as exc:
-        raise ImportError_("%s: cannot be read (%s)" % (source, exc))
+        raise ImportError_("%s: cannot be read (%s)" % (source, exc.strerror or exc))
     if not rows:
         raise ImportError_("%s line 1: file is empty" % source)
     header = [h.strip() for h in rows[0]]

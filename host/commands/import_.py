@@ -17,6 +17,8 @@ def add_arguments(p):
 
 
 def _from_flags(args):
+    from host.cli import UserError
+
     temps = {}
     for spec in args.temp:
         col, _, rest = spec.partition("=")
@@ -26,7 +28,11 @@ def _from_flags(args):
     for spec in args.error:
         col, _, rest = spec.partition("=")
         chan, _, pos = rest.partition("@")
-        errors[col] = {"channel": chan or col, "position_mm": float(pos) if pos else 0.0}
+        try:
+            position = float(pos) if pos else 0.0
+        except ValueError:
+            raise UserError("--error %r: position %r is not a number of mm (COL[=CHANNEL[@POSITION_MM]])" % (spec, pos))
+        errors[col] = {"channel": chan or col, "position_mm": position}
     mapping = {"time": args.time, "time_scale": args.time_scale, "temperatures": temps, "errors": errors, "ignore": args.ignore}
     if args.spindle:
         mapping["spindle"] = args.spindle
@@ -36,15 +42,22 @@ def _from_flags(args):
 def run(args):
     import json
 
-    from host.cli import UserError
+    import math
+
+    from host.cli import UserError, check_output, check_output_dir, open_output
     from host.importer import ImportError_, import_to_folder
 
+    if not (math.isfinite(args.time_scale) and args.time_scale > 0):
+        raise UserError("--time-scale %s: must be a positive factor to seconds (60 for minutes)" % args.time_scale)
+    check_output_dir(args.out, "--out")
+    if args.json:
+        check_output(args.json, "--json")
     if args.mapping:
         try:
-            with open(args.mapping, encoding="utf-8") as fh:
+            with open(args.mapping, encoding="utf-8-sig") as fh:
                 mapping = json.load(fh)
-        except OSError as exc:
-            raise UserError("%s: cannot be read (%s)" % (args.mapping, exc))
+        except (OSError, UnicodeDecodeError) as exc:
+            raise UserError("%s: cannot be read as UTF-8 JSON (%s)" % (args.mapping, getattr(exc, "strerror", None) or exc))
         except json.JSONDecodeError as exc:
             raise UserError("%s line %d column %d: invalid JSON (%s)" % (args.mapping, exc.lineno, exc.colno, exc.msg))
         where = args.mapping
@@ -62,6 +75,6 @@ def run(args):
     print("%s -> %s: %d samples, %d temperatures, %d error channels, %.1f h"
           % (args.source, args.out, t.time_s.size, len(t.names), len(run_.errors.channels()), (t.time_s[-1] - t.time_s[0]) / 3600))
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
+        with open_output(args.json) as fh:
             json.dump({"out": args.out, "samples": int(t.time_s.size), "sensors": t.names, "channels": run_.errors.channels()}, fh, indent=2)
     return 0
