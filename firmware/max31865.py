@@ -38,6 +38,7 @@ _FAULT_CYCLE_NONE = const(0x00)
 _FAULT_CYCLE_AUTO = const(0x04)  # automatic fault detection with delay
 _FAULT_CYCLE_MANUAL_1 = const(0x08)
 _FAULT_CYCLE_MANUAL_2 = const(0x0C)
+_SELF_CLEARING = const(0x2E)  # D5 one-shot, D3:D2 fault cycle, D1 fault clear
 
 # fault status register bits
 _FAULT_HIGH_THRESHOLD = const(0x80)  # D7: RTD high threshold
@@ -95,14 +96,14 @@ class MAX31865:
         k = rref_mohm * 100
         self._kh = k >> 15
         self._kl = k & 0x7FFF
-        self._base = _CONFIG_VBIAS | (_CONFIG_3WIRE if wires == 3 else 0) | (
+        base = _CONFIG_VBIAS | (_CONFIG_3WIRE if wires == 3 else 0) | (
             _CONFIG_FILTER_50HZ if filter_hz == 50 else 0)
         cs.value(1)
         # the filter may only change while not converting automatically
-        self.configuration = self._base
+        self.configuration = base
         self.last_fault_cycle_status = self.run_fault_detection()
         self.clear_fault()
-        self.configuration = self._base | _CONFIG_AUTO
+        self.configuration = base | _CONFIG_AUTO
 
     # --- register access -------------------------------------------------
     def read_register(self, reg):
@@ -129,21 +130,27 @@ class MAX31865:
             cs.value(1)
 
     # --- configuration (datasheet names) ---------------------------------
+    # Every configuration write is built from ``_conf``, the configuration the
+    # driver set (V_BIAS, auto, wiring, filter), never from a read-back: a bus
+    # error that corrupts a read must not switch V_BIAS off or change the
+    # filter or wiring through a read-modify-write.
     @property
     def configuration(self):
         return self.read_register(_REG_CONFIG)
 
     @configuration.setter
     def configuration(self, value):
+        # self-clearing bits are commands, not part of the configuration to keep
+        self._conf = value & ~_SELF_CLEARING
         self.write_register(_REG_CONFIG, value)
 
     def config_bit(self, mask):
-        """True if the configuration bits in ``mask`` (e.g. V_BIAS 0x80) are set."""
+        """True if the configuration bits in ``mask`` (e.g. V_BIAS 0x80) are set on the chip."""
         return bool(self.configuration & mask)
 
     def set_config_bit(self, mask, on):
         """Set or clear configuration bits; one-shot, fault-cycle and fault-clear are never re-written."""
-        c = self.configuration & ~(_CONFIG_1SHOT | _CONFIG_FAULT_CLEAR | _CONFIG_FAULT_CYCLE)
+        c = self._conf
         self.configuration = (c | mask) if on else (c & ~mask)
 
     @property
@@ -153,23 +160,20 @@ class MAX31865:
 
     def one_shot(self):
         """Start a single conversion (D5) with V_BIAS already on."""
-        c = self.configuration & ~(_CONFIG_FAULT_CLEAR | _CONFIG_FAULT_CYCLE)
-        self.configuration = c | _CONFIG_1SHOT
+        self.write_register(_REG_CONFIG, self._conf | _CONFIG_1SHOT)
 
     def clear_fault(self):
         """Clear the fault status (D1), writing D5, D3 and D2 as 0 as the datasheet requires."""
-        c = self.read_register(_REG_CONFIG)
-        self.write_register(_REG_CONFIG, (c & ~(_CONFIG_1SHOT | _CONFIG_FAULT_CYCLE)) | _CONFIG_FAULT_CLEAR)
+        self.write_register(_REG_CONFIG, self._conf | _CONFIG_FAULT_CLEAR)
 
     def run_fault_detection(self):
         """Automatic fault-detection cycle (D3:D2 = 01); returns the fault status byte.
 
-        The chip must not convert automatically meanwhile; the previous
+        The chip must not convert automatically meanwhile; the driver's
         configuration is restored afterwards. OSError if the cycle never ends.
         """
-        saved = self.configuration & ~(_CONFIG_1SHOT | _CONFIG_FAULT_CLEAR | _CONFIG_FAULT_CYCLE)
-        c = (saved & ~(_CONFIG_AUTO | _CONFIG_1SHOT)) | _CONFIG_VBIAS
-        self.configuration = c | _FAULT_CYCLE_AUTO
+        saved = self._conf
+        self.write_register(_REG_CONFIG, (saved & ~_CONFIG_AUTO) | _CONFIG_VBIAS | _FAULT_CYCLE_AUTO)
         for _ in range(_FAULT_CYCLE_POLLS):
             if self.configuration & _CONFIG_FAULT_CYCLE == 0:
                 break
