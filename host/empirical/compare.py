@@ -74,6 +74,10 @@ def case_split(run, split_s, target="direct", channel=None, sensors=None, test_w
     for label, w in (test_windows or []):
         tests.append((label, run, w))
     ga_data, note = None, ""
+    if run.spindle is None and run.motion is not None:
+        # A feed-axis run (motion.csv, no spindle.csv) has no spindle cycles: hclust-ga's fitness then
+        # uses equal time windows of the training part, as `tcomp select --split` does.
+        return _split_case(run, split_s, target, channel, sensors, tests)
     try:
         spans = []
         for c in cycles(run):
@@ -93,6 +97,30 @@ def case_split(run, split_s, target="direct", channel=None, sensors=None, test_w
         note = "hclust-ga not run: %s" % exc
     return Case("%s t < %.2f h" % (run.name, split_s / 3600), [run], (None, split_s), tests, ga_data=ga_data, ga_params={"train_run": 0}, ga_note=note,
                 summary_tests=[tests[0][0]])
+
+
+GA_WINDOWS = 3  # fit on the first, predict the others: the published protocol predicts two further runs
+
+
+def _split_case(run, split_s, target, channel, sensors, tests):
+    """case_split for a run without a spindle schedule: hclust-ga fitness on equal windows before split_s."""
+    from host.empirical.targets import training_arrays
+
+    t = run.errors.time_s
+    t0 = float(t.min())
+    edges = [t0 + (split_s - t0) * k / GA_WINDOWS for k in range(GA_WINDOWS + 1)]
+    ga_data, note = None, ""
+    try:
+        ga_data = [training_arrays([run], target, channel, sensors, window=(edges[k] if k else None, edges[k + 1]))[0]
+                   for k in range(GA_WINDOWS)]
+        note = ("hclust-ga fitness: %s is a feed-axis run (motion.csv, no spindle cycles), so the training part t < %.2f h is cut into "
+                "%d equal windows: fit on the first, predict the others (no held-out data seen)" % (run.name, split_s / 3600, GA_WINDOWS))
+    except EmpiricalDataError as exc:
+        ga_data = None
+        note = ("hclust-ga not run: %s is a feed-axis run (no spindle cycles), and the %d equal windows of t < %.2f h it would use instead are too "
+                "small: %s" % (run.name, GA_WINDOWS, split_s / 3600, exc))
+    return Case("%s t < %.2f h" % (run.name, split_s / 3600), [run], (None, split_s), tests, ga_data=ga_data, ga_params={"train_run": 0},
+                ga_note=note, summary_tests=[tests[0][0]])
 
 
 def _fit(method, case, target, channel, sensors, fit_intercept, options, selector_params, reference):
