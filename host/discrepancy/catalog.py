@@ -18,6 +18,7 @@ mean the same thing on both sides. Add an effect by writing one more instance of
 :class:`CandidateEffect` and putting it in ``CATALOG`` (docs/discrepancy.md).
 """
 from dataclasses import dataclass, field
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -40,10 +41,19 @@ class CandidateEffect:
     hook: str  # "heat", "convection" or "output"
     description: str
     params: tuple
-    unit_inputs: object = None  # heat: drive -> [(heat_J|None, source_W|None)] per param
-    convection: object = None  # convection: (drive, values) -> (n_steps,) multiplier
-    columns: object = None  # output: drive -> (n_rows, n_params)
+    unit_inputs: Optional[Callable[[Any], list]] = None  # heat: drive -> [(heat_J|None, source_W|None)] per param
+    convection: Optional[Callable[[Any, dict], Any]] = None  # convection: (drive, values) -> (n_steps,) multiplier
+    columns: Optional[Callable[[Any], Any]] = None  # output: drive -> (n_rows, n_params)
     requires: tuple = field(default_factory=tuple)  # "motion", "direction", "base_sensor", "feeds"
+
+    def __post_init__(self):
+        need = {"heat": "unit_inputs", "convection": "convection", "output": "columns"}
+        if self.hook not in need:
+            raise ValueError("effect %r: hook must be one of %s (found %r)" % (self.name, ", ".join(need), self.hook))
+        if getattr(self, need[self.hook]) is None:
+            raise ValueError("effect %r: a %s-hook effect needs %s=..." % (self.name, self.hook, need[self.hook]))
+        if not self.params:
+            raise ValueError("effect %r: needs at least one Param" % self.name)
 
     def applicable(self, runs):
         """None, or why the effect cannot be tested on ``runs`` (a list of host.runs.Run)."""

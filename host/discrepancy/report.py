@@ -65,6 +65,7 @@ def plot_residual_maps(result, path):
     fig.suptitle("held-out residual; after = base + %s" % (", ".join(result.effects) or "nothing (no effect named)"), fontsize=10)
     allr = np.concatenate(result.before.residuals + result.after.residuals)
     lim = float(np.nanmax(np.abs(allr))) if np.isfinite(allr).any() else 1.0
+    im = None
     for i, run in enumerate(runs):
         for j, (label, ho) in enumerate((("before", result.before), ("after", result.after))):
             ax = axes[i][j]
@@ -77,7 +78,8 @@ def plot_residual_maps(result, path):
             ax.set_title("%s, %s%s" % (run.name, label, "" if d == 0 else " (direction %+d)" % d), fontsize=9)
             ax.set_xlabel("position [mm]")
             ax.set_ylabel("time [h]")
-    fig.colorbar(im, ax=axes, label="held-out residual [um]", shrink=0.8)
+    if im is not None:
+        fig.colorbar(im, ax=axes, label="held-out residual [um]", shrink=0.8)
     fig.savefig(path, dpi=90)
     plt.close(fig)
 

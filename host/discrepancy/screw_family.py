@@ -212,7 +212,7 @@ class ScrewFamily:
         conv = None
         for name in effects:
             eff = self.catalog[name]
-            if eff.hook == "convection":
+            if eff.hook == "convection" and eff.convection is not None:
                 v = {p.name: vals["%s.%s" % (name, p.name)] for p in eff.params}
                 c = eff.convection(drive, v)
                 conv = c if conv is None else conv * c
@@ -220,10 +220,10 @@ class ScrewFamily:
         cols += list(drive.geometric.T)
         for name in effects:
             eff = self.catalog[name]
-            if eff.hook == "heat":
+            if eff.hook == "heat" and eff.unit_inputs is not None:
                 for hj, src in eff.unit_inputs(drive):
                     cols.append(drive.response(h, conv, heat_J=hj, source_W=src, lam=lam))
-            elif eff.hook == "output":
+            elif eff.hook == "output" and eff.columns is not None:
                 cols += list(np.asarray(eff.columns(drive), dtype=float).T)
         return np.column_stack(cols)
 

@@ -15,6 +15,7 @@ import multiprocessing as mp
 import os
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass, field
+from typing import Any, List, Optional
 
 import numpy as np
 
@@ -71,14 +72,14 @@ class Candidate:
     statistic: float = float("nan")
     rmse_um: float = float("nan")
     accepted: bool = False
-    skipped: str = None  # reason the candidate was not tested
-    error: str = None  # fit failure message
-    heldout: object = field(default=None, repr=False)
-    note: str = None  # caveat about the test on these runs
-    joint_with: list = None  # accepted together with these (pair test)
-    single_score: float = None
-    single_p_value: float = None
-    single_rmse_um: float = None
+    skipped: Optional[str] = None  # reason the candidate was not tested
+    error: Optional[str] = None  # fit failure message
+    heldout: Any = field(default=None, repr=False)
+    note: Optional[str] = None  # caveat about the test on these runs
+    joint_with: Optional[List[str]] = None  # accepted together with these (pair test)
+    single_score: Optional[float] = None
+    single_p_value: Optional[float] = None
+    single_rmse_um: Optional[float] = None
 
     def as_dict(self):
         d = {"name": self.name, "score": _num(self.score), "p_value": _num(self.p_value), "accepted": bool(self.accepted),
@@ -101,7 +102,7 @@ class Round:
     base_effects: tuple
     rmse_before_um: float
     candidates: list
-    accepted: str = None
+    accepted: Optional[str] = None
     rmse_after_um: float = float("nan")
     localization: list = field(default_factory=list)
     pairs: list = field(default_factory=list)
@@ -247,7 +248,7 @@ def _score(pool, runs, folds, effects, current, sets, cands):
     held = {}
     for j, (st, c) in enumerate(zip(sets, cands)):
         ho, err = _assemble(runs, folds, tuple(effects) + tuple(st), out[j * len(folds):(j + 1) * len(folds)])
-        if err:
+        if err or ho is None:
             c.error = err
             continue
         held[c.name] = ho
@@ -318,7 +319,7 @@ def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_
         effects = list(base_effects)
         base_res = pool.map([(tuple(effects), k, None) for k in range(len(folds))])
         current, err = _assemble(runs, folds, effects, base_res)
-        if err:
+        if err or current is None:
             raise RuntimeError("the base model could not be fitted: %s" % err)
         first = current
         log("base model %s: held-out RMSE %.3f um" % ("+".join(effects) or "(no effects)", current.rmse()))
@@ -354,10 +355,10 @@ def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_
                 effects.append(best.name)
                 current = held[best.name]
             else:
-                pair = None
+                pair, current_pair = None, None
                 if len(tested) >= 2 and (max_effects is None or len(effects) + 2 <= max_effects):
                     pair, current_pair = _try_pairs(pool, runs, folds, effects, current, tested, rnd, alpha, min_gain, log)
-                if pair is None:
+                if pair is None or current_pair is None:
                     log("no catalog effect explains the remaining gap")
                     break
                 current = current_pair

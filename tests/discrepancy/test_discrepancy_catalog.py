@@ -73,3 +73,29 @@ def test_bounded_lstsq_matches_scipy():
     for lo, hi in ((np.full(6, -np.inf), np.full(6, np.inf)), (np.full(6, -1.0), np.full(6, 1.5))):
         ref = lsq_linear(X, y, bounds=(lo, hi), method="bvls").x
         np.testing.assert_allclose(_bounded_lstsq(X, y, lo, hi), ref, atol=1e-8)
+
+
+def test_effect_definition_is_checked():
+    from host.discrepancy.catalog import CandidateEffect, Param
+
+    with pytest.raises(ValueError, match="needs unit_inputs"):
+        CandidateEffect("x", "heat", "no hook function", (Param("a", "W", 0.0, 1.0),))
+    with pytest.raises(ValueError, match="hook must be one of"):
+        CandidateEffect("x", "radiation", "bad hook", (Param("a", "W", 0.0, 1.0),), columns=lambda d: None)
+
+
+def test_a_new_effect_plugs_in(run):
+    """docs/discrepancy.md 'Adding an effect': one definition, the family fits it."""
+    from host.discrepancy.catalog import CandidateEffect, Param
+
+    def floating_end(drive):
+        src = np.zeros_like(drive.travel)
+        src[:, -1] = drive.speed
+        return [(None, src)]
+
+    extra = CandidateEffect("floating_end_heat", "heat", "source at the floating end", (Param("P_W", "W", 0.0, 50.0),),
+                            unit_inputs=floating_end, requires=("motion",))
+    fam = ScrewFamily(catalog={**CATALOG, extra.name: extra})
+    assert "floating_end_heat" in fam.candidates
+    fit = fam.fit([run], [np.ones(len(run.errors), bool)], ("floating_end_heat",), None)
+    assert "floating_end_heat.P_W" in fit.linear
