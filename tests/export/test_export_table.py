@@ -44,6 +44,7 @@ def test_crc32_check_values():
     assert crc32(b"") == 0 and crc32_nibble(b"") == 0
 
 
+@settings(deadline=None)  # pure-Python CRC loop: the default 200 ms deadline flakes on a loaded machine
 @given(st.binary(max_size=300), st.integers(0, 2 ** 32 - 1))
 def test_crc32_fallback_equals_zlib(data, start):
     assert crc32_nibble(data, start) == zlib.crc32(data, start)
