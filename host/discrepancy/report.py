@@ -75,6 +75,8 @@ def plot_residual_maps(result, path):
             im = ax.pcolormesh(p, t / 3600.0, grid, cmap="RdBu_r", vmin=-lim, vmax=lim, shading="nearest")
             if run.motion is not None and len(run.motion):
                 ax.axhline(float(np.max(run.motion.t_end_s)) / 3600.0, color="k", lw=0.8, ls="--")
+                if j == 0:
+                    _label_states(ax, run.motion)
             ax.set_title("%s, %s%s" % (run.name, label, "" if d == 0 else " (direction %+d)" % d), fontsize=9)
             ax.set_xlabel("position [mm]")
             ax.set_ylabel("time [h]")
@@ -82,6 +84,17 @@ def plot_residual_maps(result, path):
         fig.colorbar(im, ax=axes, label="held-out residual [um]", shrink=0.8)
     fig.savefig(path, dpi=90)
     plt.close(fig)
+
+
+def _label_states(ax, m):
+    """Name each moving state where it starts (the dashed line marks the start of the cool-down)."""
+    last = None
+    for i in range(len(m)):
+        state = (m.feed_mm_min[i], min(m.from_mm[i], m.to_mm[i]), max(m.from_mm[i], m.to_mm[i]))
+        if state != last:
+            ax.text(0.01, m.t_start_s[i] / 3600.0, "%g mm/min %g-%g" % state, transform=ax.get_yaxis_transform(),
+                    fontsize=6, va="bottom", bbox={"facecolor": "white", "alpha": 0.6, "lw": 0, "pad": 1})
+            last = state
 
 
 def evidence(result):
