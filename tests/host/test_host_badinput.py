@@ -1,0 +1,327 @@
+"""Bad input to every `tcomp` verb: exit status 2 and one clear line naming what and where, never a traceback.
+
+Most cases call host.cli.main in-process (an uncaught exception fails the test just as a traceback would,
+and it is ten times faster than a subprocess); test_no_traceback_in_a_subprocess checks the real command.
+"""
+import json
+import os
+import subprocess
+import sys
+
+import pytest
+
+from host.cli import UserError, main, open_output
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+DEMO = os.path.join(ROOT, "data", "demo")
+RUN = os.path.join(DEMO, "v8000_r210_490")
+FEW = "T1,T2,T3,T4,T5"  # a small sensor set keeps the fits quick
+NOWHERE = "/nonexistent-tcomp-dir/out"
+
+
+def _fail(capsys, argv):
+    """Run ``tcomp argv``; assert exit status 2 and return the one-line error message."""
+    rc = main(argv)
+    err = capsys.readouterr().err.strip()
+    assert rc == 2, err
+    assert err.startswith("tcomp %s: error: " % argv[0]), err
+    assert "Traceback" not in err
+    return err
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    path = str(tmp_path_factory.mktemp("model") / "mlr.json")
+    assert main(["fit", "--model", "mlr", RUN, "--sensors", FEW, "--out", path]) == 0
+    return path
+
+
+@pytest.fixture
+def binary(tmp_path):
+    path = tmp_path / "t.bin"
+    path.write_bytes(bytes(range(128, 256)) * 3)
+    return str(path)
+
+
+def _edited(model, tmp_path, fn):
+    with open(model) as fh:
+        doc = json.load(fh)
+    fn(doc)
+    path = str(tmp_path / "edited.json")
+    with open(path, "w") as fh:
+        json.dump(doc, fh)
+    return path
+
+
+# ------------------------------------------------------------ 1. model path is a folder or a binary file
+
+def test_model_path_that_is_a_folder(capsys, tmp_path):
+    err = _fail(capsys, ["predict", RUN, RUN, "--out", str(tmp_path / "p.csv")])
+    assert RUN in err and "is a folder" in err
+
+
+def test_model_path_that_is_a_binary_file(capsys, tmp_path, binary):
+    err = _fail(capsys, ["export", binary, "--out", str(tmp_path / "x.bin")])
+    assert binary in err and "not a text file" in err
+
+
+# ------------------------------------------------------------ 2. unwritable outputs, checked before the work
+
+@pytest.mark.parametrize("argv, flag", [
+    (["predict", "{model}", RUN, "--out", NOWHERE], "--out"),
+    (["predict", "{model}", RUN, "--out", "{tmp}/p.csv", "--json", NOWHERE], "--json"),
+    (["fit", "--model", "mlr", RUN, "--out", NOWHERE], "--out"),
+    (["fit", "--model", "mlr", RUN, "--out", "{tmp}/m.json", "--json", NOWHERE], "--json"),
+    (["fit", "--model", "screw", RUN, "--out", NOWHERE], "--out"),
+    (["select", "--method", "stepwise", RUN, "--json", NOWHERE], "--json"),
+    (["select", "--method", "stepwise", RUN, "--json", "{tmp}/s.json", "--plot", NOWHERE + ".png"], "--plot"),
+    (["compare", RUN, "--split-h", "3", "--json", NOWHERE], "--json"),
+    (["export", "{model}", "--out", NOWHERE], "--out"),
+    (["export", "{model}", "--out", "{tmp}/x.bin", "--json", NOWHERE], "--json"),
+    (["simulate", "--out", "{tmp}/sim", "--json", NOWHERE], "--json"),
+    (["import", os.path.join(ROOT, "data", "fl_thermal", "spindle.csv"), "--time", "time_s", "--temp", "rpm",
+      "--error", "rpm", "--out", "{tmp}/i", "--json", NOWHERE], "--json"),
+])
+def test_unwritable_output_is_named_before_the_work(capsys, tmp_path, model, argv, flag):
+    argv = [a.format(model=model, tmp=tmp_path) for a in argv]
+    err = _fail(capsys, argv)
+    assert flag in err and "does not exist" in err and os.path.dirname(NOWHERE) in err
+    assert os.listdir(tmp_path) == []  # nothing written before the check
+
+
+def test_output_path_that_is_a_folder(capsys, tmp_path, model):
+    err = _fail(capsys, ["predict", model, RUN, "--out", str(tmp_path)])
+    assert "--out %s: is a folder" % tmp_path in err
+
+
+def test_open_output_names_the_path():
+    with pytest.raises(UserError, match="cannot write %s: " % NOWHERE):
+        open_output(NOWHERE)
+
+
+def test_an_unexpected_oserror_is_one_line(capsys, monkeypatch):
+    import host.commands.validate as validate
+
+    def boom(args):
+        raise PermissionError(13, "Permission denied", "/some/where.json")
+
+    monkeypatch.setattr(validate, "run", boom)
+    err = _fail(capsys, ["validate", RUN])
+    assert err == "tcomp validate: error: /some/where.json: Permission denied"
+
+
+# ------------------------------------------------------------ 3. simulate --out onto a regular file
+
+def test_simulate_out_on_an_existing_file(capsys, tmp_path):
+    f = tmp_path / "afile"
+    f.write_text("x")
+    err = _fail(capsys, ["simulate", "--out", str(f)])
+    assert str(f) in err and "not a folder" in err
+    err = _fail(capsys, ["simulate", "--out", str(f / "sub")])
+    assert str(f) in err and "is a file" in err
+
+
+def test_write_run_onto_a_file_names_it(tmp_path, make_run):
+    from host.runs import write_run
+
+    f = tmp_path / "afile"
+    f.write_text("x")
+    with pytest.raises(NotADirectoryError, match="not a folder") as info:
+        write_run(make_run(), str(f))
+    assert info.value.filename == str(f)
+
+
+# ------------------------------------------------------------ 4. export --ref-position-mm
+
+@pytest.mark.parametrize("value", ["nan", "inf", "-inf"])
+def test_export_reference_position_must_be_finite(capsys, tmp_path, model, value):
+    err = _fail(capsys, ["export", model, "--out", str(tmp_path / "x.bin"), "--ref-position-mm=" + value])
+    assert "--ref-position-mm" in err and "finite" in err
+
+
+def test_export_reference_position_outside_the_envelope_says_the_envelope(capsys, tmp_path, model):
+    err = _fail(capsys, ["export", model, "--out", str(tmp_path / "x.bin"), "--ref-position-mm", "1e6"])
+    assert model in err and "outside envelope.position_mm 0.0..700.0 mm" in err
+
+
+def test_certify_rejects_a_non_finite_reference_position(model):
+    from host.models import read_document
+    from models_export import ExportError, export_model
+
+    with pytest.raises(ExportError, match="finite"):
+        export_model(read_document(model), ref_position_mm=float("nan"))
+
+
+# ------------------------------------------------------------ 5, 6. import: binary source, mapping values, flags, BOM
+
+def _csv(tmp_path, text=b"time_s,a,b,c\n0,20,1,x\n60,21,2,y\n", name="s.csv"):
+    path = tmp_path / name
+    path.write_bytes(text)
+    return str(path)
+
+
+def _mapping(tmp_path, doc):
+    path = tmp_path / "map.json"
+    path.write_text(json.dumps(doc))
+    return str(path)
+
+
+def test_import_binary_source(capsys, tmp_path, binary):
+    err = _fail(capsys, ["import", binary, "--mapping", os.path.join(ROOT, "data", "fl_thermal_mapping.json"),
+                         "--out", str(tmp_path / "i")])
+    assert binary in err and "not a UTF-8 text CSV" in err
+
+
+def test_import_mapping_with_a_text_position(capsys, tmp_path):
+    m = _mapping(tmp_path, {"time": "time_s", "temperatures": ["a"], "errors": {"b": {"position_mm": "x"}}, "ignore": ["c"]})
+    err = _fail(capsys, ["import", _csv(tmp_path), "--mapping", m, "--out", str(tmp_path / "i")])
+    assert m in err and "errors.b.position_mm must be a number, found 'x'" in err
+
+
+def test_import_mapping_with_numeric_column_names(capsys, tmp_path):
+    m = _mapping(tmp_path, {"time": "time_s", "temperatures": [1, 2], "errors": ["b"], "ignore": ["c"]})
+    err = _fail(capsys, ["import", _csv(tmp_path), "--mapping", m, "--out", str(tmp_path / "i")])
+    assert m in err and "'temperatures'" in err and "must be strings" in err
+
+
+def test_import_error_flag_with_a_text_position(capsys, tmp_path):
+    err = _fail(capsys, ["import", _csv(tmp_path), "--time", "time_s", "--temp", "a", "--error", "b=c@abc", "--ignore", "c",
+                         "--out", str(tmp_path / "i")])
+    assert "--error 'b=c@abc'" in err and "'abc' is not a number" in err
+
+
+@pytest.mark.parametrize("scale", ["0", "-1", "nan"])
+def test_import_time_scale_must_be_positive(capsys, tmp_path, scale):
+    err = _fail(capsys, ["import", _csv(tmp_path), "--time", "time_s", "--temp", "a", "--error", "b", "--ignore", "c",
+                         "--out", str(tmp_path / "i"), "--time-scale=" + scale])
+    assert "--time-scale" in err and "positive" in err
+
+
+def test_import_mapping_time_scale_must_be_positive(capsys, tmp_path):
+    m = _mapping(tmp_path, {"time": "time_s", "time_scale": 0, "temperatures": ["a"], "errors": ["b"], "ignore": ["c"]})
+    err = _fail(capsys, ["import", _csv(tmp_path), "--mapping", m, "--out", str(tmp_path / "i")])
+    assert m in err and "time_scale must be > 0" in err
+
+
+def test_import_out_on_an_existing_file(capsys, tmp_path):
+    f = tmp_path / "afile"
+    f.write_text("x")
+    err = _fail(capsys, ["import", _csv(tmp_path), "--time", "time_s", "--temp", "a", "--error", "b", "--ignore", "c", "--out", str(f)])
+    assert str(f) in err and "not a folder" in err
+
+
+def test_import_accepts_a_byte_order_mark(capsys, tmp_path):
+    src = _csv(tmp_path, b"\xef\xbb\xbftime_s,a,b\n0,20,1\n60,21,2\n", "excel.csv")
+    assert main(["import", src, "--time", "time_s", "--temp", "a", "--error", "b", "--out", str(tmp_path / "i")]) == 0
+    from host.runs import load_run
+
+    assert load_run(str(tmp_path / "i")).temperatures.names == ["a"]
+
+
+def test_run_folder_with_byte_order_marks_loads(tmp_path, make_run):
+    from host.runs import load_run, write_run
+
+    folder = write_run(make_run(), str(tmp_path / "run"))
+    for name in ("meta.json", "temperatures.csv", "errors.csv", "motion.csv"):
+        path = os.path.join(folder, name)
+        with open(path, "rb") as fh:
+            body = fh.read()
+        with open(path, "wb") as fh:
+            fh.write(b"\xef\xbb\xbf" + body)
+    run = load_run(folder)
+    assert run.temperatures.names == ["T1", "T2", "T3", "T4"] and run.motion is not None
+
+
+# ------------------------------------------------------------ 7. compare --split-h
+
+@pytest.mark.parametrize("hours, words", [("-1", "positive"), ("0", "positive"), ("99", "inside the measured span"),
+                                          ("nan", "positive")])
+def test_compare_split_outside_the_run(capsys, tmp_path, hours, words):
+    err = _fail(capsys, ["compare", RUN, "--split-h=" + hours, "--methods", "mlr", "--json", str(tmp_path / "c.json")])
+    assert "--split-h" in err and words in err
+    if words.startswith("inside"):
+        assert RUN in err and "0..5 h" in err
+
+
+def test_compare_exits_non_zero_when_every_method_failed(capsys, tmp_path):
+    out = tmp_path / "c.json"
+    err = _fail(capsys, ["compare", RUN, "--split-h", "0.3", "--methods", "mlr,pcr", "--json", str(out)])
+    assert "every method failed" in err and str(out) in err
+    assert all(r["error"] for r in json.loads(out.read_text())["results"])  # the details are still written
+
+
+# ------------------------------------------------------------ 8. model documents with wrong fields
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda d: d["thermal"].update(coefficients_um_per_mm_per_K="abc"), "thermal.coefficients_um_per_mm_per_K must be an object"),
+    (lambda d: d["thermal"]["coefficients_um_per_mm_per_K"].update(T1="x"), "thermal.coefficients_um_per_mm_per_K.T1 must be a number"),
+    (lambda d: d.update(kind="linear_direct"), "lacks the field thermal.coefficients_um_per_K (it has thermal.coefficients_um_per_mm_per_K"),
+    (lambda d: d.pop("thermal"), "lacks the field 'thermal'"),
+    (lambda d: d.update(reference_C=[1, 2]), "field 'reference_C' must be an object"),
+    (lambda d: d["thermal"].update(intercept_um_per_mm="0.1"), "thermal.intercept_um_per_mm must be a number"),
+])
+def test_model_document_errors_name_file_and_field(capsys, tmp_path, model, edit, words):
+    path = _edited(model, tmp_path, edit)
+    err = _fail(capsys, ["predict", path, RUN, "--out", str(tmp_path / "p.csv")])
+    assert path in err and words in err
+
+
+def test_load_model_prefixes_the_path(tmp_path, model):
+    from host.models import ModelFormatError, load_model
+
+    path = _edited(model, tmp_path, lambda d: d.pop("sensors"))
+    with pytest.raises(ModelFormatError, match="^%s: poly_slope model document lacks the field 'sensors'" % path):
+        load_model(path)
+
+
+# ------------------------------------------------------------ 9. values accepted silently before
+
+def test_fit_with_an_empty_sensor_list(capsys, tmp_path):
+    err = _fail(capsys, ["fit", "--model", "mlr", RUN, "--sensors", "", "--out", str(tmp_path / "m.json")])
+    assert "--sensors" in err and "empty sensor list" in err
+
+
+@pytest.mark.parametrize("effect", ["ambient_expansion=-5", "speed_dependent_heat=-0.1", "bearing_heat=-1", "sensor_lag=-3"])
+def test_simulate_negative_effect_magnitude(capsys, tmp_path, effect):
+    err = _fail(capsys, ["simulate", "--out", str(tmp_path / "s"), "--effects", effect])
+    assert repr(effect.partition("=")[0]) in err and "must be >= 0" in err
+    assert not os.path.exists(tmp_path / "s")
+
+
+def test_signed_effects_keep_their_documented_meaning():
+    from host.sim.effects import resolve_effects
+
+    # reversal_error is the signed reversal value B; moving_convection only needs h > 0
+    assert resolve_effects({"reversal_error": -4, "moving_convection": -0.5}) == {"moving_convection": -0.5, "reversal_error": -4.0}
+
+
+# ------------------------------------------------------------ 10. hclust-ga on a split feed-axis run
+
+def test_compare_split_hclust_ga_on_a_feed_axis_run(capsys, tmp_path):
+    out = tmp_path / "c.json"
+    assert main(["compare", RUN, "--split-h", "3", "--methods", "hclust-ga", "--sensors", FEW, "--repeats", "1",
+                 "--json", str(out)]) == 0
+    capsys.readouterr()
+    (res,) = json.loads(out.read_text())["results"]
+    assert not res.get("error") and res["sensors"]
+    assert "feed-axis run" in res["note"] and "3 equal windows" in res["note"] and "spindle.csv" not in res.get("error", "")
+
+
+# ------------------------------------------------------------ 11. export --json
+
+def test_export_json_is_the_certificate(capsys, tmp_path, model):
+    j, r = tmp_path / "e.json", tmp_path / "r.json"
+    assert main(["export", model, "--out", str(tmp_path / "x.bin"), "--json", str(j), "--report", str(r)]) == 0
+    capsys.readouterr()
+    doc = json.loads(j.read_text())
+    assert j.read_text() == r.read_text() and doc["model_kind"] == "poly_slope" and doc["max_error_um"] < doc["limit_um"]
+
+
+# ------------------------------------------------------------ the real command
+
+def test_no_traceback_in_a_subprocess(tmp_path, binary):
+    p = subprocess.run([sys.executable, "-m", "host", "export", binary, "--out", str(tmp_path / "x.bin")],
+                       cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert p.returncode == 2 and "Traceback" not in p.stderr
+    assert p.stderr.strip().splitlines() == ["tcomp export: error: %s: not a text file (a binary file? expected a model "
+                                             "document, tcomp-model/1 JSON)" % binary]
