@@ -47,6 +47,13 @@ def test_two_hidden_effects_both_named():
     assert all(c["p_value"] < ALPHA and c["score"] >= MIN_GAIN for c in acc.values())
 
 
+def test_all_five_hidden_all_named():
+    hidden = {"ambient_expansion": 0.9, "speed_dependent_heat": 0.5, "bearing_heat": 3.5, "moving_convection": 1.1, "reversal_error": 3.0}
+    res = discover(twin_runs(hidden, 525252, 0.45), ScrewFamily())
+    assert set(res.effects) == set(hidden)
+    assert res.after.rmse() < 1.2 * 0.45
+
+
 @pytest.mark.slow
 def test_false_discovery_rate_on_the_null():
     """No effect hidden: the share of seeds where anything is named is at most 1 in 20.
