@@ -11,7 +11,14 @@ Prints
   (stable): the difference in total instructions between two runs with
   different cycle counts, divided by the difference;
 - the size of every firmware module compiled with ``mpy-cross -march=armv6m``
-  (what a Cortex-M0+ board gets) and the total (target < 24 kB);
+  (what a Cortex-M0+ board gets), at -O0 and at -O3 (the firmware has no
+  asserts or ``__debug__`` blocks, so -O3 only drops line numbers from
+  tracebacks): per serial mode what a board loads (a board runs in ONE mode:
+  the stream link or the Modbus link is imported only when configured; the
+  boot-only config validator counts, it is on flash) and the total of every
+  board-side module (target < 24 kB). ``board_linux.py`` and
+  ``boards/linux.py`` are CPython-only (smbus2, spidev, pyserial adapters) and
+  are not counted;
 - heap in use on the unix port (a 64-bit build: objects and loaded bytecode
   are about twice their size on a 32-bit MCU): code after imports, data of the
   running app after warm-up, and the largest in-use figure seen (target < 16 kB
@@ -100,7 +107,7 @@ print("RESULT", total // N, worst, fakes // 1000)
 """
 
 
-def compile_tree(dest, march=None):
+def compile_tree(dest, march=None, opt=0):
     files = []
     for src in sorted(glob.glob(os.path.join(ROOT, "firmware", "**", "*.py"), recursive=True)):
         rel = os.path.relpath(src, os.path.join(ROOT, "firmware"))
@@ -108,10 +115,10 @@ def compile_tree(dest, march=None):
             continue
         out = os.path.join(dest, "firmware", rel[:-3] + ".mpy")
         os.makedirs(os.path.dirname(out), exist_ok=True)
-        cmd = [CROSS] + (["-march=" + march] if march else []) + ["-o", out, src]
+        cmd = [CROSS] + (["-march=" + march] if march else []) + ["-O%d" % opt, "-o", out, src]
         subprocess.run(cmd, check=True)
         files.append((rel, os.path.getsize(out)))
-    subprocess.run([CROSS, "-o", os.path.join(dest, "fwfakes.mpy"),
+    subprocess.run([CROSS, "-O%d" % opt, "-o", os.path.join(dest, "fwfakes.mpy"),
                     os.path.join(ROOT, "tests", "firmware", "fwfakes.py")], check=True)
     return files
 
@@ -145,7 +152,10 @@ print("LOADED", " ".join(sorted(m for m in sys.modules if m.startswith("firmware
 
 
 def loaded_modules(work, mpy, n_max, n_ads, mode):
-    """Firmware modules a booted board of this kind has imported (config is unloaded after boot)."""
+    """Firmware modules a booted board of this kind has imported (config is unloaded after boot).
+
+    The board file itself imports firmware.board (``Board``, ``SystemClock``), so it counts too.
+    """
     env = dict(os.environ, MICROPYPATH=mpy)
     script = LOADED.replace("N_MAX", str(n_max)).replace("N_ADS", str(n_ads)).replace("MODE", repr(mode))
     p = subprocess.run([MP, "-X", "heapsize=256K", "-c", script], cwd=work, env=env, capture_output=True,
@@ -154,7 +164,50 @@ def loaded_modules(work, mpy, n_max, n_ads, mode):
         raise SystemExit("MicroPython run failed:\n" + p.stdout + p.stderr)
     names = p.stdout.split("LOADED")[1].split()
     # main.py runs the app and config.py is imported at boot (then dropped): both are on flash
-    return sorted(set(n.split(".", 1)[1].replace(".", "/") + ".py" for n in names) | {"main.py", "config.py"})
+    return sorted(set(n.split(".", 1)[1].replace(".", "/") + ".py" for n in names)
+                  | {"main.py", "config.py", "board.py"})
+
+
+MODE_HEAP = r"""
+import gc
+gc.collect(); h0 = gc.mem_alloc()
+import firmware.app, firmware.max31865, firmware.ads122c04
+__import__("firmware.protocol" if MODE == "stream" else "firmware.modbus")
+gc.collect(); h1 = gc.mem_alloc()
+import fwfakes
+board = fwfakes.make_rig(table_dir=".", serial_mode=MODE)
+gc.collect(); h2 = gc.mem_alloc()
+print("MODEHEAP", h1 - h0, h2 - h1)
+"""
+
+
+def mode_heap(work, mpy, mode):
+    """Per serial mode on the unix port: heap of the loaded code, of the fakes, app data, and the
+    smallest -X heapsize (kB) with which boot, warm-up and 50 cycles under heap_lock work."""
+    from fwhelpers import HEAPLOCK_SCRIPT
+    env = dict(os.environ, MICROPYPATH=mpy)
+    f = os.path.join(work, "_mode_heap.py")
+    with open(f, "w") as fh:
+        fh.write("MODE = %r\n" % mode + MODE_HEAP)
+    p = subprocess.run([MP, "-X", "heapsize=256K", f], cwd=work, env=env, capture_output=True, text=True)
+    code, fakes = [int(x) for x in p.stdout.split("MODEHEAP")[1].split()]
+    with open(f, "w") as fh:
+        fh.write("MODE = %r\nN = 50\n" % mode + HEAPLOCK_SCRIPT)
+
+    def run(k):
+        p = subprocess.run([MP, "-X", "heapsize=%dK" % k, f], cwd=work, env=env, capture_output=True,
+                           text=True)
+        return p.stdout.split() if p.returncode == 0 and p.stdout.startswith("OK") else None
+
+    lo, hi = 32, 256
+    while hi - lo > 1:
+        m = (lo + hi) // 2
+        if run(m):
+            hi = m
+        else:
+            lo = m
+    out = run(256)
+    return code, fakes, int(out[6]), int(out[7]), hi
 
 
 def callgrind_ir(work, mpy, n):
@@ -176,9 +229,10 @@ def main():
     with tempfile.TemporaryDirectory() as work:
         mpy = os.path.join(work, "mpy")
         prepare(work)
-        compile_tree(mpy)
-        arm = os.path.join(work, "arm")
-        sizes = compile_tree(arm, "armv6m")
+        compile_tree(mpy, opt=3)
+        sizes = {}
+        for opt in (0, 3):
+            sizes[opt] = compile_tree(os.path.join(work, "arm%d" % opt), "armv6m", opt)
 
         p = run_mp(work, mpy, args.cycles)
         mean_us, worst_us, fakes_us = [int(x) for x in p.stdout.split("RESULT")[1].split()]
@@ -196,20 +250,34 @@ def main():
             print("  instructions per cycle (callgrind, steady state): %d" % ((ib - ia) // (b - a)))
         else:
             print("  instructions per cycle: skipped (valgrind not run)")
-        total = sum(s for _, s in sizes)
-        print("mpy-cross -march=armv6m sizes (board-side modules):")
-        for rel, s in sizes:
-            print("  %-24s %6d B" % (rel, s))
-        print("  total %d B = %.1f kB (target < 24 kB): %s" % (total, total / 1024,
-                                                               "met" if total < 24 * 1024 else "NOT met"))
-        size = dict(sizes)
-        for label, args_ in (("MAX31865 channels, stream mode", (11, 0, "stream")),
-                             ("ADS122C04 channels, Modbus mode", (0, 11, "modbus"))):
+        print("mpy-cross -march=armv6m sizes (board-side modules; board_linux.py and boards/linux.py are"
+              " CPython-only and not counted):")
+        print("  %-24s %8s %8s" % ("module", "-O0", "-O3"))
+        for (rel, s0), (_, s3) in zip(sizes[0], sizes[3]):
+            print("  %-24s %6d B %6d B" % (rel, s0, s3))
+        for opt in (0, 3):
+            total = sum(s for _, s in sizes[opt])
+            print("  -O%d total, every board-side module: %d B = %.1f kB (target < 24 kB): %s"
+                  % (opt, total, total / 1024, "met" if total < 24 * 1024 else "NOT met"))
+        for label, args_ in (("stream board (9 MAX31865 + 2 ADS122C04, $TC stream)", (9, 2, "stream")),
+                             ("stream board, MAX31865 channels only", (11, 0, "stream")),
+                             ("modbus board (9 MAX31865 + 2 ADS122C04, Modbus RTU)", (9, 2, "modbus")),
+                             ("modbus board, ADS122C04 channels only", (0, 11, "modbus"))):
             mods = loaded_modules(work, mpy, *args_)
-            sub = sum(size[m] for m in mods)
-            print("  a board with %s needs %d modules (%s): %d B = %.1f kB, plus its board file"
-                  % (label, len(mods), " ".join(m[:-3] for m in mods), sub, sub / 1024))
-        print("heap on the unix port (64-bit objects):")
+            sub = [sum(dict(sizes[opt])[m] for m in mods) for opt in (0, 3)]
+            print("  %s loads %d modules: -O0 %d B = %.1f kB, -O3 %d B = %.1f kB (target < 24 kB): %s"
+                  % (label, len(mods), sub[0], sub[0] / 1024, sub[1], sub[1] / 1024,
+                     "met" if sub[1] < 24 * 1024 else "NOT met"))
+            print("    (%s, plus the board file)" % " ".join(m[:-3] for m in mods))
+        print("heap per serial mode on the unix port (64-bit: pointers and objects twice a 32-bit MCU's;"
+              " .mpy bytecode is copied into the heap), firmware from -O3 .mpy:")
+        for mode in ("stream", "modbus"):
+            code, fakes, data, peak, smallest = mode_heap(work, mpy, mode)
+            print("  %s: code %d B, test fakes %d B, app data after warm-up %d B = %.1f kB (target < 16 kB):"
+                  " %s; largest allocated %d B; smallest heap that runs boot + heap-locked cycles: %d kB"
+                  % (mode, code, fakes, data, data / 1024, "met" if data < 16 * 1024 else "NOT met", peak,
+                     smallest))
+        print("heap on the unix port (64-bit objects), all modules, the bench's own script:")
         print("  firmware code loaded: %d B" % h_code)
         print("  app data after boot and warm-up (table, evaluator, drivers, buffers): %d B = %.1f kB"
               " (target < 16 kB): %s" % (h_data, h_data / 1024, "met" if h_data < 16 * 1024 else "NOT met"))

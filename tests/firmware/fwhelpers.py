@@ -82,11 +82,13 @@ def run_cycles(app, board, n, dt=100):
         board.clock.t += dt
 
 
-def compile_mpy(dest, extra=()):
+def compile_mpy(dest, extra=(), opt=3):
     """mpy-cross every firmware module (and ``extra`` helper files) into ``dest``; returns dest.
 
     The unix port loads .mpy without compiling, so the heap the firmware needs is
-    that of the code and data, as on a board that ships .mpy files.
+    that of the code and data, as on a board that ships .mpy files. Bytecode-only
+    .mpy (no -march) is what the unix port loads whatever its architecture; -O3
+    as shipped to boards (the firmware has no asserts; only line numbers go).
     """
     import glob
     import subprocess
@@ -96,10 +98,11 @@ def compile_mpy(dest, extra=()):
         if name == "board_linux":  # CPython only
             continue
         os.makedirs(os.path.join(dest, "firmware"), exist_ok=True)
-        subprocess.run([cross, "-o", os.path.join(dest, "firmware", name + ".mpy"), src], check=True)
-    for src in extra:
-        subprocess.run([cross, "-o", os.path.join(dest, os.path.basename(src)[:-3] + ".mpy"), src],
+        subprocess.run([cross, "-O%d" % opt, "-o", os.path.join(dest, "firmware", name + ".mpy"), src],
                        check=True)
+    for src in extra:
+        subprocess.run([cross, "-O%d" % opt, "-o", os.path.join(dest, os.path.basename(src)[:-3] + ".mpy"),
+                        src], check=True)
     return dest
 
 
@@ -119,3 +122,71 @@ def run_micropython(script, cwd, path, heap="128K", timeout=120):
                        capture_output=True, text=True, timeout=timeout)
     assert p.returncode == 0, "MicroPython failed:\n" + p.stdout + p.stderr
     return p.stdout
+
+
+# The steady-state cycle under micropython.heap_lock() on the unix port (prefix
+# "MODE = 'stream'|'modbus'\nN = cycles\n"). Used by test_fw_heaplock.py and by
+# tools/bench_firmware.py (smallest heap that works). Prints
+# "OK cycles bytes_sent status pos free_delta app_data peak": app_data is the heap
+# the running app holds (table, evaluator, channels, drivers, buffers) after boot
+# and warm-up, peak the largest in-use heap seen (code + fakes + data).
+HEAPLOCK_SCRIPT = r"""
+import gc, micropython, sys
+# the mode's modules first, as main.py on a board would: each import from a file
+# needs a contiguous buffer, which a heap full of small objects may no longer have
+import firmware.app, firmware.max31865, firmware.ads122c04
+__import__("firmware.protocol" if MODE == "stream" else "firmware.modbus")
+from firmware.app import App
+from firmware.crc16 import crc16_ccitt, crc16_modbus
+from fwfakes import make_rig
+board = make_rig(table_dir=".", serial_mode=MODE, extra={"frame_ms": 100})
+gc.collect()
+h1 = gc.mem_alloc()
+peak = h1
+app = App(board)
+for k in range(100):  # warm-up: channels become good, the output ramps up
+    app.cycle(); board.clock.t += 100
+    board.serial.take()
+    a = gc.mem_alloc()
+    peak = a if a > peak else peak
+# MicroPython's GC is conservative: a stale word can keep boot garbage alive for
+# a while, so the settled figure is the lowest after a few collections
+data = 1 << 30
+for k in range(5):
+    gc.collect()
+    a = gc.mem_alloc() - h1
+    data = a if a < data else data
+def line(body):
+    c = crc16_ccitt(body)
+    return b"$" + body + b"*" + b"%04X" % c + b"\r\n"
+def rtu(body):
+    c = crc16_modbus(body)
+    return body + bytes([c & 0xFF, c >> 8])
+if MODE == "stream":
+    msgs = [line(b"TC,P,%d" % (1000 * k)) for k in range(10)] + [line(b"TC,Q,250000")]
+else:
+    msgs = [rtu(bytes([1, 16, 0, 3, 0, 2, 4, 0, 0, 0x30, k])) for k in range(10)] + [rtu(bytes([1, 4, 0, 0, 0, 48]))]
+sent = 0
+err = None
+free1 = 0  # every global exists before the lock: a new one could grow the module dict
+gc.collect()
+free0 = gc.mem_free()
+micropython.heap_lock()
+try:
+    for k in range(N):
+        board.serial.feed(msgs[k % len(msgs)])
+        app.cycle()
+        board.clock.t += 100
+        sent += board.serial.nout
+        board.serial.nout = 0
+except Exception as e:
+    err = e
+micropython.heap_unlock()
+free1 = gc.mem_free()
+if err is not None:
+    sys.print_exception(err)
+    raise SystemExit(1)
+a = gc.mem_alloc()
+peak = a if a > peak else peak
+print("OK", app.cycles, sent, "%08X" % app.status, app.pos, free1 - free0, data, peak)
+"""
