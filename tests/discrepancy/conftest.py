@@ -70,5 +70,11 @@ class ToyFamily:
 
 
 @pytest.fixture
+def make():
+    """The synthetic run factory ``make_run`` (conftest modules cannot be imported from tests)."""
+    return make_run
+
+
+@pytest.fixture
 def toy_family():
     return ToyFamily()

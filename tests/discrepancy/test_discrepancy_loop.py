@@ -5,12 +5,6 @@ from host.discrepancy import workflow
 from host.discrepancy.workflow import discover, make_folds
 
 
-@pytest.fixture
-def make(request):
-    mod = request.config.pluginmanager.get_plugin(str(request.path.parent / "conftest.py"))
-    return mod.make_run
-
-
 def test_hidden_ambient_named_first_and_gap_halved(make, toy_family):
     runs = [make(100 + i, "r%d" % i, ambient_um_per_K=4.0) for i in range(3)]
     res = discover(runs, toy_family, jobs=1)

@@ -84,8 +84,7 @@ def test_eta_squared_exact():
     assert share == pytest.approx(0.0)
 
 
-def test_localization_points_at_direction_and_position(request):
-    make = request.config.pluginmanager.get_plugin(str(request.path.parent / "conftest.py")).make_run
+def test_localization_points_at_direction_and_position(make):
     run = make(7, "loc", noise_um=0.1)
     e = run.errors
     loc = {d["factor"]: d for d in localize([run], [2.0 * e.direction])}
