@@ -82,7 +82,11 @@ class Candidate:
     single_rmse_um: Optional[float] = None
 
     def as_dict(self):
-        d = {"name": self.name, "score": _num(self.score), "p_value": _num(self.p_value), "accepted": bool(self.accepted),
+        # a candidate that could not be tested (skipped, fit failed) reports score 0 and p 1:
+        # nothing was added, nothing was shown; the reason is in "skipped"/"error"
+        untested = not math.isfinite(self.score)
+        d = {"name": self.name, "score": 0.0 if untested else float(self.score), "p_value": 1.0 if untested else _num(self.p_value),
+             "accepted": bool(self.accepted),
              "p_raw": _num(self.p_raw), "dm_statistic": _num(self.statistic), "rmse_um": _num(self.rmse_um)}
         if self.skipped:
             d["skipped"] = self.skipped
