@@ -43,6 +43,16 @@ def check_output_dir(path, flag="--out"):
         raise UserError("%s %s: %s is not writable" % (flag, path, probe))
 
 
+def sensor_list(text, flag="--sensors"):
+    """Comma-separated names -> list, None when the flag was not given; an empty list is a UserError."""
+    if text is None:
+        return None
+    names = [s.strip() for s in text.split(",") if s.strip()]
+    if not names:
+        raise UserError("%s %r: empty sensor list (give comma-separated names, or leave %s out for all)" % (flag, text, flag))
+    return names
+
+
 def open_output(path, mode="w", **kwargs):
     """``open(path, mode)`` for an output file; an OSError becomes "cannot write PATH: reason"."""
     if "b" not in mode:

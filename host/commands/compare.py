@@ -59,7 +59,7 @@ def _method_options(items, methods):
 def run(args):
     import json
 
-    from host.cli import UserError, check_output, check_output_dir, open_output
+    from host.cli import UserError, check_output, check_output_dir, open_output, sensor_list
     from host.empirical import EmpiricalDataError
     from host.empirical.compare import METHODS, case_split, cases_runs, findings, public, run_case, table, write_plots
     from host.runs import RunFormatError, load_runs
@@ -79,7 +79,7 @@ def run(args):
         _check_split(args.split_h, runs)
     options, selector_params = _method_options(args.option, methods)
     target = "direct" if args.direct else "slope"
-    sensors = [s.strip() for s in args.sensors.split(",") if s.strip()] if args.sensors else None
+    sensors = sensor_list(args.sensors)
     try:
         if args.split_h is not None:
             if len(runs) != 1:

@@ -17,14 +17,13 @@ def add_arguments(p):
 
 
 def run(args):
-    from host.cli import UserError, check_output
+    from host.cli import check_output, sensor_list
 
     # Checked before the fit, which can take minutes, so a typo in a path does not waste it.
     check_output(args.out, "--out")
     if args.json:
         check_output(args.json, "--json")
-    if args.sensors is not None and not [s for s in args.sensors.split(",") if s.strip()]:
-        raise UserError("--sensors %r: empty sensor list (give comma-separated names, or leave --sensors out for all)" % args.sensors)
+    sensor_list(args.sensors)
     if args.model in EMPIRICAL:
         from host.empirical.cli import fit_command
     else:

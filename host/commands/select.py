@@ -88,7 +88,7 @@ def _run_corr(args):
 
 
 def _run_data(args):
-    from host.cli import UserError
+    from host.cli import UserError, sensor_list
     from host.empirical.selectors import select
     from host.runs import RunFormatError, load_runs
 
@@ -100,7 +100,7 @@ def _run_data(args):
         runs = load_runs(args.runs)
     except RunFormatError as exc:
         raise UserError(str(exc))
-    sensors = [s.strip() for s in args.sensors.split(",") if s.strip()] if args.sensors else None
+    sensors = sensor_list(args.sensors)
     params = _options(args.option)
     data = runs if args.split == 1 else _windows(runs, args.split, args.target, args.channel, sensors)
     sel = select(args.method, data, target=args.target, channel=args.channel, sensors=sensors, **params)

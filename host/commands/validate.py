@@ -10,8 +10,11 @@ def add_arguments(p):
 def run(args):
     import json
 
+    from host.cli import check_output, open_output
     from host.runs import check_run
 
+    if args.json:
+        check_output(args.json, "--json")
     report = {}
     for folder in args.runs:
         problems = check_run(folder)
@@ -23,6 +26,6 @@ def run(args):
         else:
             print("%s: ok" % folder)
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as fh:
+        with open_output(args.json) as fh:
             json.dump({"runs": [{"run": k, "ok": not v, "problems": v} for k, v in report.items()]}, fh, indent=2)
     return 1 if any(report.values()) else 0

@@ -79,6 +79,7 @@ def test_model_path_that_is_a_binary_file(capsys, tmp_path, binary):
     (["export", "{model}", "--out", NOWHERE], "--out"),
     (["export", "{model}", "--out", "{tmp}/x.bin", "--json", NOWHERE], "--json"),
     (["simulate", "--out", "{tmp}/sim", "--json", NOWHERE], "--json"),
+    (["validate", RUN, "--json", NOWHERE], "--json"),
     (["import", os.path.join(ROOT, "data", "fl_thermal", "spindle.csv"), "--time", "time_s", "--temp", "rpm",
       "--error", "rpm", "--out", "{tmp}/i", "--json", NOWHERE], "--json"),
 ])
@@ -276,9 +277,16 @@ def test_load_model_prefixes_the_path(tmp_path, model):
 
 # ------------------------------------------------------------ 9. values accepted silently before
 
-def test_fit_with_an_empty_sensor_list(capsys, tmp_path):
-    err = _fail(capsys, ["fit", "--model", "mlr", RUN, "--sensors", "", "--out", str(tmp_path / "m.json")])
-    assert "--sensors" in err and "empty sensor list" in err
+@pytest.mark.parametrize("argv", [
+    ["fit", "--model", "mlr", RUN, "--out", "{tmp}/m.json"],
+    ["fit", "--model", "screw", RUN, "--out", "{tmp}/m.json"],
+    ["select", "--method", "stepwise", RUN, "--json", "{tmp}/s.json"],
+    ["compare", RUN, "--split-h", "3", "--json", "{tmp}/c.json"],
+])
+@pytest.mark.parametrize("empty", ["", " , "])
+def test_an_empty_sensor_list(capsys, tmp_path, argv, empty):
+    err = _fail(capsys, [a.format(tmp=tmp_path) for a in argv] + ["--sensors", empty])
+    assert "--sensors %r: empty sensor list" % empty in err
 
 
 @pytest.mark.parametrize("effect", ["ambient_expansion=-5", "speed_dependent_heat=-0.1", "bearing_heat=-1", "sensor_lag=-3"])
