@@ -127,7 +127,9 @@ class Result:
         # or from the last round it was tested in
         for rnd in self.rounds:
             for c in rnd.candidates:
-                if c.name not in cand or not cand[c.name].accepted:
+                prev = cand.get(c.name)
+                tested = math.isfinite(c.score) or c.skipped or c.error
+                if prev is None or (not prev.accepted and tested):
                     cand[c.name] = c
         return {
             "effects": list(self.effects),

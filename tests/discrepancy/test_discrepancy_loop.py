@@ -60,3 +60,12 @@ def test_parallel_equals_serial(make, toy_family):
     b = discover(runs, toy_family, jobs=2).as_json()
     assert a["effects"] == b["effects"]
     assert a["rmse_after_um"] == pytest.approx(b["rmse_after_um"], rel=1e-12)
+
+
+def test_max_effects_stops_and_keeps_the_tested_figures(make, toy_family):
+    runs = [make(600 + i, "r%d" % i, ambient_um_per_K=3.0, reversal_um=4.0) for i in range(3)]
+    res = discover(runs, toy_family, jobs=1, max_effects=1)
+    assert len(res.effects) == 1
+    js = res.as_json()
+    assert all(c["rmse_um"] is not None for c in js["candidates"])
+    assert sum(c["accepted"] for c in js["candidates"]) == 1
