@@ -23,12 +23,13 @@ from firmware.channels import Channels
 from firmware.evaluate import Evaluator
 from firmware.safety import Limiter
 from firmware.slots import TableStore
-from firmware.table import TableError, REASON_SENSORS, KIND_SCREW_REDUCED
+from firmware.table import TableError, REASON_SENSORS
 
 VERSION = "0.1.0"  # firmware version, sent in the hello frame
 _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is dropped
 _POLL_MS = const(5)  # serial polling period while waiting for the next cycle
 _CAP = const(0x20000000)  # elapsed-time counters saturate at 2**29 ms
+_KIND_SCREW_REDUCED = const(3)  # firmware.table's (tests/firmware/test_fw_consts.py checks)
 
 
 def _load_config(d):
@@ -135,7 +136,7 @@ class App:
         self.table = table
         self.slot = slot
         self.ev = ev
-        self.screw = table.kind_code == KIND_SCREW_REDUCED
+        self.screw = table.kind_code == _KIND_SCREW_REDUCED
         self.step_ms = 0
         self._span()
 

@@ -12,56 +12,67 @@ ref_offset, slope, advance_position, step) allocate nothing: all state lives in
 lists created by the constructor.
 
 Checking mode (``Evaluator(table, check=True)``, for tests; off in production)
-asserts every intermediate against +-2**30 and records per-slot minima and
-maxima in ``lo``/``hi`` (slot numbers are the SLOT_* constants), which the
-tests compare with the exporter's interval bounds.
+checks every intermediate against +-2**30 (OverflowError; an ``if``, not an
+``assert``, so it works in code compiled with ``mpy-cross -O3``) and records
+per-slot minima and maxima in ``lo``/``hi`` (slot numbers are the SLOT_*
+constants), which the tests compare with the exporter's interval bounds.
+
+The module's constants are ``_``-prefixed ``const()``: MicroPython folds those
+into the bytecode and stores no name for them (public constants cost a global
+and a name each, ~0.6 kB of .mpy here). On CPython the end of this module
+publishes each under its public name (``SLOT_D``, ``FEED_W_BITS``, ``CLAMP_*``,
+...) for the exporter (models_export/plan.py) and the tests.
 """
 try:
     from micropython import const
 except ImportError:  # CPython
     const = lambda x: x  # noqa: E731
 
-from firmware.table import KIND_LINEAR_DIRECT, KIND_SCREW_REDUCED, REF_LATCHED
+# table format values (docs/table-format.md, firmware/table.py), as local consts:
+# folded into the bytecode (tests/firmware/test_fw_consts.py checks they agree)
+_KIND_LINEAR_DIRECT = const(2)
+_KIND_SCREW_REDUCED = const(3)
+_REF_LATCHED = const(1)
 
-MAXV = const(0x3FFFFFFF)  # |intermediate| must stay <= 2**30 - 1
+_MAXV = const(0x3FFFFFFF)  # |intermediate| must stay <= 2**30 - 1
 
 # Bits of Evaluator.flags: bit i (i < 24) = sensor i was clamped to its envelope.
-SENSOR_BITS = const(0xFFFFFF)
-CLAMP_POSITION = const(0x1000000)  # the last position given was outside the envelope
-CLAMP_TRAVEL = const(0x2000000)  # nut travel or feed beyond the table's bound (screw)
-CLAMP_STATE = const(0x4000000)  # a segment state hit the table's state bound (screw)
+_SENSOR_BITS = const(0xFFFFFF)
+_CLAMP_POSITION = const(0x1000000)  # the last position given was outside the envelope
+_CLAMP_TRAVEL = const(0x2000000)  # nut travel or feed beyond the table's bound (screw)
+_CLAMP_STATE = const(0x4000000)  # a segment state hit the table's state bound (screw)
 
 # Check-mode slots: a _mul call site uses slot s for its limb products and s+1
 # for its shifted terms and partial sums.
-SLOT_D = const(0)
-SLOT_SMUL = const(1)
-SLOT_S = const(3)
-SLOT_P = const(4)
-SLOT_THMUL = const(5)
-SLOT_GEOMUL = const(7)
-SLOT_GEO = const(9)
-SLOT_ACC = const(10)
-SLOT_OUT = const(11)
-SLOT_KMUL = const(12)
-SLOT_SLOPE = const(14)
-SLOT_ROWMUL = const(15)
-SLOT_ROW = const(16)
-SLOT_LIMB = const(17)
-SLOT_BMUL = const(18)
-SLOT_STATE = const(20)
-SLOT_CUMMUL = const(21)
-SLOT_CUM = const(23)
-SLOT_HMUL = const(24)
-SLOT_SEGMUL = const(26)
-SLOT_XL = const(28)
-SLOT_TRAVEL = const(29)
-SLOT_FEEDMUL = const(30)
-SLOT_CMUL = const(32)
-SLOT_DE = const(34)
-N_SLOTS = const(35)
+_SLOT_D = const(0)
+_SLOT_SMUL = const(1)
+_SLOT_S = const(3)
+_SLOT_P = const(4)
+_SLOT_THMUL = const(5)
+_SLOT_GEOMUL = const(7)
+_SLOT_GEO = const(9)
+_SLOT_ACC = const(10)
+_SLOT_OUT = const(11)
+_SLOT_KMUL = const(12)
+_SLOT_SLOPE = const(14)
+_SLOT_ROWMUL = const(15)
+_SLOT_ROW = const(16)
+_SLOT_LIMB = const(17)
+_SLOT_BMUL = const(18)
+_SLOT_STATE = const(20)
+_SLOT_CUMMUL = const(21)
+_SLOT_CUM = const(23)
+_SLOT_HMUL = const(24)
+_SLOT_SEGMUL = const(26)
+_SLOT_XL = const(28)
+_SLOT_TRAVEL = const(29)
+_SLOT_FEEDMUL = const(30)
+_SLOT_CMUL = const(32)
+_SLOT_DE = const(34)
+_N_SLOTS = const(35)
 
-FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
-FEED_LIMB = const(10)
+_FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
+_FEED_LIMB = const(10)
 
 
 class Evaluator:
@@ -87,9 +98,9 @@ class Evaluator:
         self.flags = 0
         self.S = t.S0
         self.pos_ref = t.pos_ref
-        self.lo = [MAXV] * N_SLOTS
-        self.hi = [-MAXV] * N_SLOTS
-        if self.kind == KIND_SCREW_REDUCED:
+        self.lo = [_MAXV] * _N_SLOTS
+        self.hi = [-_MAXV] * _N_SLOTS
+        if self.kind == _KIND_SCREW_REDUCED:
             m = t.M
             self.T = [0] * m
             self.Tn = [0] * m
@@ -103,12 +114,12 @@ class Evaluator:
             self.have_x = False
             self.x = 0
         self.update()
-        if self.kind == KIND_SCREW_REDUCED:
+        if self.kind == _KIND_SCREW_REDUCED:
             self._refresh()
 
     # -- checking mode ------------------------------------------------------
     def _note(self, slot, v):
-        if v > MAXV or v < -MAXV:
+        if v > _MAXV or v < -_MAXV:
             raise OverflowError("slot %d: %d outside +-2**30" % (slot, v))
         if v < self.lo[slot]:
             self.lo[slot] = v
@@ -165,7 +176,7 @@ class Evaluator:
         certified every reference inside the envelope. Raises ValueError for a
         table certified only for its fixed references."""
         t = self.table
-        if t.ref_mode != REF_LATCHED:
+        if t.ref_mode != _REF_LATCHED:
             raise ValueError("table is certified for its fixed reference temperatures only")
         for i in range(t.n_sensors):
             v = self.temps[i]
@@ -200,60 +211,60 @@ class Evaluator:
                 fl |= 1 << i
             d = v - ref[i]
             if chk:
-                self._note(SLOT_D, d)
-            s += self._mul(SLOT_SMUL, b[i], d, Lt, nt, shb[i])
+                self._note(_SLOT_D, d)
+            s += self._mul(_SLOT_SMUL, b[i], d, Lt, nt, shb[i])
             if chk:
-                self._note(SLOT_S, s)
+                self._note(_SLOT_S, s)
         self.S = s
-        self.flags = (self.flags & ~SENSOR_BITS) | fl
+        self.flags = (self.flags & ~_SENSOR_BITS) | fl
 
     # -- outputs --------------------------------------------------------------
     def _clamp_pos(self, pos):
         t = self.table
         if pos < t.pos_lo:
-            self.flags |= CLAMP_POSITION
+            self.flags |= _CLAMP_POSITION
             return t.pos_lo
         if pos > t.pos_hi:
-            self.flags |= CLAMP_POSITION
+            self.flags |= _CLAMP_POSITION
             return t.pos_hi
-        self.flags &= ~CLAMP_POSITION
+        self.flags &= ~_CLAMP_POSITION
         return pos
 
     def offset_at(self, pos_um):
         """Total model offset (geometric + thermal) at ``pos_um``, in 0.01 um."""
         t = self.table
         chk = self.check
-        if self.kind == KIND_LINEAR_DIRECT:
+        if self.kind == _KIND_LINEAR_DIRECT:
             v = (self.S + t.rL) >> t.fo
             if chk:
-                self._note(SLOT_ACC, self.S + t.rL)
-                self._note(SLOT_OUT, v)
+                self._note(_SLOT_ACC, self.S + t.rL)
+                self._note(_SLOT_OUT, v)
             return v
         p = self._clamp_pos(pos_um)
         if chk:
-            self._note(SLOT_P, p)
+            self._note(_SLOT_P, p)
         G = t.G
         shg = t.shg
         Lg = t.Lg
         ng = t.ng
         h = G[t.degree]
         for j in range(t.degree - 1, -1, -1):
-            h = self._mul(SLOT_GEOMUL, p, h, Lg, ng, shg[j]) + G[j]
+            h = self._mul(_SLOT_GEOMUL, p, h, Lg, ng, shg[j]) + G[j]
             if chk:
-                self._note(SLOT_GEO, h)
-        acc = h + self._mul(SLOT_THMUL, p, self.S, t.Lw, t.nw, t.shw)
+                self._note(_SLOT_GEO, h)
+        acc = h + self._mul(_SLOT_THMUL, p, self.S, t.Lw, t.nw, t.shw)
         if chk:
-            self._note(SLOT_ACC, acc)
-        if self.kind == KIND_SCREW_REDUCED:
+            self._note(_SLOT_ACC, acc)
+        if self.kind == _KIND_SCREW_REDUCED:
             acc += self._seg(p)
             if chk:
-                self._note(SLOT_ACC, acc)
+                self._note(_SLOT_ACC, acc)
         acc += t.rO
         if chk:
-            self._note(SLOT_ACC, acc)
+            self._note(_SLOT_ACC, acc)
         v = acc >> t.fo
         if chk:
-            self._note(SLOT_OUT, v)
+            self._note(_SLOT_OUT, v)
         return v
 
     def set_reference(self, pos_um):
@@ -269,38 +280,38 @@ class Evaluator:
         """
         t = self.table
         chk = self.check
-        if self.kind == KIND_LINEAR_DIRECT:
+        if self.kind == _KIND_LINEAR_DIRECT:
             return self.offset_at(0)
         p = self.pos_ref
-        acc = self._mul(SLOT_THMUL, p, self.S, t.Lw, t.nw, t.shw)
-        if self.kind == KIND_SCREW_REDUCED:
+        acc = self._mul(_SLOT_THMUL, p, self.S, t.Lw, t.nw, t.shw)
+        if self.kind == _KIND_SCREW_REDUCED:
             acc += self._seg(p)
         acc += t.rT
         if chk:
-            self._note(SLOT_ACC, acc)
+            self._note(_SLOT_ACC, acc)
         v = acc >> t.fo
         if chk:
-            self._note(SLOT_OUT, v)
+            self._note(_SLOT_OUT, v)
         return v
 
     def slope(self):
         """Thermal slope d(offset)/dP in 0.01 um/m (0 for linear_direct)."""
         t = self.table
         chk = self.check
-        if self.kind == KIND_LINEAR_DIRECT:
+        if self.kind == _KIND_LINEAR_DIRECT:
             return 0
-        acc = self._mul(SLOT_KMUL, t.KS, self.S, t.Lw, t.nw, t.shK)
-        if self.kind == KIND_SCREW_REDUCED:
+        acc = self._mul(_SLOT_KMUL, t.KS, self.S, t.Lw, t.nw, t.shK)
+        if self.kind == _KIND_SCREW_REDUCED:
             de = self._seg(t.pos_hi) - self._seg(t.pos_lo)
             if chk:
-                self._note(SLOT_DE, de)
-            acc += self._mul(SLOT_CMUL, t.KC, de, t.Lc, t.nc, t.shC)
+                self._note(_SLOT_DE, de)
+            acc += self._mul(_SLOT_CMUL, t.KC, de, t.Lc, t.nc, t.shC)
         acc += t.rK
         if chk:
-            self._note(SLOT_SLOPE, acc)
+            self._note(_SLOT_SLOPE, acc)
         v = acc >> t.fK
         if chk:
-            self._note(SLOT_OUT, v)
+            self._note(_SLOT_OUT, v)
         return v
 
     # -- screw_reduced ----------------------------------------------------------
@@ -319,10 +330,10 @@ class Evaluator:
             k += 1
         xl = x - e[k]
         if self.check:
-            self._note(SLOT_XL, xl)
-        v = self.cum[k] + self._mul(SLOT_SEGMUL, xl, self.segslope[k], t.Lx, t.nx, t.shX)
+            self._note(_SLOT_XL, xl)
+        v = self.cum[k] + self._mul(_SLOT_SEGMUL, xl, self.segslope[k], t.Lx, t.nx, t.shX)
         if self.check:
-            self._note(SLOT_CUM, v)
+            self._note(_SLOT_CUM, v)
         return v
 
     def advance_position(self, pos_um):
@@ -350,10 +361,10 @@ class Evaluator:
             if hi > lo:
                 v = u[i] + (hi - lo)
                 if self.check:
-                    self._note(SLOT_TRAVEL, v)
+                    self._note(_SLOT_TRAVEL, v)
                 if v > umax:
                     v = umax
-                    self.flags |= CLAMP_TRAVEL
+                    self.flags |= _CLAMP_TRAVEL
                 u[i] = v
 
     def set_feed(self, feed_mm_min, lo_um, hi_um):
@@ -362,7 +373,7 @@ class Evaluator:
         f = feed_mm_min if feed_mm_min >= 0 else -feed_mm_min
         if f > t.fmax:
             f = t.fmax
-            self.flags |= CLAMP_TRAVEL
+            self.flags |= _CLAMP_TRAVEL
         self.F = (f * t.dt_ms) // 60
         e = t.edges
         m = t.M
@@ -382,7 +393,7 @@ class Evaluator:
             hi = e[i + 1] if e[i + 1] < b else b
             if r <= 0:
                 if e[i] <= a < e[i + 1] or (i == m - 1 and a == e[m]):
-                    w[i] = 1 << FEED_W_BITS
+                    w[i] = 1 << _FEED_W_BITS
             elif hi > lo:
                 # floor((hi - lo) * 2**19 / r) by long division: no product beyond 2**23
                 q = 0
@@ -390,7 +401,7 @@ class Evaluator:
                 if rem >= r:
                     q = 1
                     rem -= r
-                for _ in range(FEED_W_BITS):
+                for _ in range(_FEED_W_BITS):
                     rem <<= 1
                     q <<= 1
                     if rem >= r:
@@ -415,12 +426,12 @@ class Evaluator:
             w = self.w
             F = self.F
             for i in range(m):
-                v = u[i] + self._mul(SLOT_FEEDMUL, w[i], F, FEED_LIMB, 3, FEED_W_BITS)
+                v = u[i] + self._mul(_SLOT_FEEDMUL, w[i], F, _FEED_LIMB, 3, _FEED_W_BITS)
                 if chk:
-                    self._note(SLOT_TRAVEL, v)
+                    self._note(_SLOT_TRAVEL, v)
                 if v > umax:
                     v = umax
-                    self.flags |= CLAMP_TRAVEL
+                    self.flags |= _CLAMP_TRAVEL
                 u[i] = v
         ns = t.ns
         Ls = t.Ls
@@ -433,7 +444,7 @@ class Evaluator:
                 x >>= Ls
             limbs[(ns - 1) * m + j] = x
             if chk:
-                self._note(SLOT_LIMB, x)
+                self._note(_SLOT_LIMB, x)
         C = t.C
         B = t.B
         shB = t.shB
@@ -452,31 +463,31 @@ class Evaluator:
                 for j in range(m):
                     r += C[base + j] * limbs[lb + j]
                     if chk:
-                        self._note(SLOT_ROWMUL, C[base + j] * limbs[lb + j])
-                        self._note(SLOT_ROWMUL, r)
+                        self._note(_SLOT_ROWMUL, C[base + j] * limbs[lb + j])
+                        self._note(_SLOT_ROWMUL, r)
                 if sh > 0:
                     acc += r >> sh
                 else:
                     acc += r << -sh
                 if chk:
-                    self._note(SLOT_ROW, acc)
+                    self._note(_SLOT_ROW, acc)
                 sh -= Ls
-            acc += self._mul(SLOT_BMUL, B[i], u[i], t.Lu, t.nu, shB[i]) + rS[i]
+            acc += self._mul(_SLOT_BMUL, B[i], u[i], t.Lu, t.nu, shB[i]) + rS[i]
             if chk:
-                self._note(SLOT_ROW, acc)
+                self._note(_SLOT_ROW, acc)
             v = T[i] + (acc >> gs)
             if chk:
-                self._note(SLOT_STATE, v)
+                self._note(_SLOT_STATE, v)
             if v < 0:
                 v = 0  # rounding just below zero: the exact state is >= 0, so this only removes error
             elif v > Tmax:
                 v = Tmax
-                fl = CLAMP_STATE
+                fl = _CLAMP_STATE
             Tn[i] = v
         for i in range(m):
             T[i] = Tn[i]
             u[i] = 0
-        self.flags = (self.flags & ~CLAMP_STATE) | fl
+        self.flags = (self.flags & ~_CLAMP_STATE) | fl
         self._refresh()
 
     def _refresh(self):
@@ -493,8 +504,16 @@ class Evaluator:
         c = 0
         for i in range(t.M):
             cum[i] = c
-            c += self._mul(SLOT_CUMMUL, G2[i], T[i], Ls, ns, shG2[i])
+            c += self._mul(_SLOT_CUMMUL, G2[i], T[i], Ls, ns, shG2[i])
             if chk:
-                self._note(SLOT_CUM, c)
-            seg[i] = self._mul(SLOT_HMUL, t.H, T[i], Ls, ns, t.shH)
+                self._note(_SLOT_CUM, c)
+            seg[i] = self._mul(_SLOT_HMUL, t.H, T[i], Ls, ns, t.shH)
         cum[t.M] = c
+
+
+try:
+    import micropython  # noqa: F401
+except ImportError:  # CPython: the constants under their public names (see the module docstring)
+    _g = globals()
+    for _k in [k for k in _g if k[:1] == "_" and k[1:2].isupper() and k == k.upper()]:
+        _g[_k[1:]] = _g[_k]

@@ -4,6 +4,11 @@ The table is data: it is parsed field by field, nothing in it is executed or
 imported. Every rejection raises TableError whose ``reason`` is one of the
 REASON_* strings below, so callers (and the protocol's error frames) can name it.
 Runs unchanged on MicroPython and CPython.
+
+Integer constants are ``_``-prefixed ``const()`` (folded into the bytecode, no
+name stored on MicroPython); on CPython the end of the module publishes them
+under their public names (``VERSION``, ``HEADER_SIZE``, ``KIND_*``, ...) for
+the exporter (models_export/tableformat.py) and the tests.
 """
 import struct
 
@@ -15,19 +20,19 @@ except ImportError:  # CPython
     const = lambda x: x  # noqa: E731
 
 MAGIC = b"TCTB"
-VERSION = const(1)
-HEADER_SIZE = const(64)
-NAME_SIZE = const(16)
-MAX_SENSORS = const(24)
-MAX_SEGMENTS = const(32)
-MAX_DEGREE = const(6)
-UNIT_CODE = const(1)  # offsets in 0.01 um, slopes in 0.01 um/m
-REF_FIXED = const(0)  # the model uses the table's reference temperatures
-REF_LATCHED = const(1)  # certified for any reference in the envelope (models fitted on rises from the run start)
+_VERSION = const(1)
+_HEADER_SIZE = const(64)
+_NAME_SIZE = const(16)
+_MAX_SENSORS = const(24)
+_MAX_SEGMENTS = const(32)
+_MAX_DEGREE = const(6)
+_UNIT_CODE = const(1)  # offsets in 0.01 um, slopes in 0.01 um/m
+_REF_FIXED = const(0)  # the model uses the table's reference temperatures
+_REF_LATCHED = const(1)  # certified for any reference in the envelope (models fitted on rises from the run start)
 
-KIND_POLY_SLOPE = const(1)
-KIND_LINEAR_DIRECT = const(2)
-KIND_SCREW_REDUCED = const(3)
+_KIND_POLY_SLOPE = const(1)
+_KIND_LINEAR_DIRECT = const(2)
+_KIND_SCREW_REDUCED = const(3)
 KINDS = {1: "poly_slope", 2: "linear_direct", 3: "screw_reduced"}
 
 REASON_TRUNCATED = "truncated"
@@ -114,13 +119,13 @@ def parse_table(buf, expected_sensors=None):
     magic, version, kind, declared length, CRC-32, unit, field ranges.
     """
     n = len(buf)
-    if n < HEADER_SIZE + 4:
-        raise TableError(REASON_TRUNCATED, "%d bytes, header needs %d" % (n, HEADER_SIZE + 4))
+    if n < _HEADER_SIZE + 4:
+        raise TableError(REASON_TRUNCATED, "%d bytes, header needs %d" % (n, _HEADER_SIZE + 4))
     if bytes(buf[0:4]) != MAGIC:
         raise TableError(REASON_MAGIC, "expected %r" % MAGIC)
     version = buf[4]
-    if version != VERSION:
-        raise TableError(REASON_VERSION, "version %d, this firmware reads %d" % (version, VERSION))
+    if version != _VERSION:
+        raise TableError(REASON_VERSION, "version %d, this firmware reads %d" % (version, _VERSION))
     kind = buf[5]
     if kind not in KINDS:
         raise TableError(REASON_KIND, "kind code %d" % kind)
@@ -135,11 +140,11 @@ def parse_table(buf, expected_sensors=None):
     # Past the CRC every field is as the exporter wrote it; the checks below
     # guard against an exporter/firmware mismatch rather than corruption.
     ns = buf[6]
-    if ns > MAX_SENSORS:
-        raise TableError(REASON_SENSORS, "%d sensors, at most %d" % (ns, MAX_SENSORS))
+    if ns > _MAX_SENSORS:
+        raise TableError(REASON_SENSORS, "%d sensors, at most %d" % (ns, _MAX_SENSORS))
     if expected_sensors is not None and ns != expected_sensors:
         raise TableError(REASON_SENSORS, "table has %d sensors, board has %d" % (ns, expected_sensors))
-    if buf[7] != UNIT_CODE:
+    if buf[7] != _UNIT_CODE:
         raise TableError(REASON_UNIT, "unit code %d" % buf[7])
     nwords = struct.unpack_from("<I", buf, 52)[0]
     if buf[56] > 1:
@@ -147,7 +152,7 @@ def parse_table(buf, expected_sensors=None):
     for i in range(57, 64):
         if buf[i] != 0:
             raise TableError(REASON_FIELD, "reserved byte %d is not zero" % i)
-    payload = HEADER_SIZE + ns * (NAME_SIZE + 12)
+    payload = _HEADER_SIZE + ns * (_NAME_SIZE + 12)
     if payload + 4 * nwords + 4 != n:
         raise TableError(REASON_LENGTH, "%d sensors and %d words need %d bytes, table has %d"
                          % (ns, nwords, payload + 4 * nwords + 4, n))
@@ -162,8 +167,8 @@ def parse_table(buf, expected_sensors=None):
     t.axis = _name(buf, 44, 8)
     t.crc = stored
     for i in range(ns):
-        t.sensors.append(_name(buf, HEADER_SIZE + i * NAME_SIZE, NAME_SIZE))
-    off = HEADER_SIZE + ns * NAME_SIZE
+        t.sensors.append(_name(buf, _HEADER_SIZE + i * _NAME_SIZE, _NAME_SIZE))
+    off = _HEADER_SIZE + ns * _NAME_SIZE
     for i in range(ns):
         lo, hi, ref = struct.unpack_from("<iii", buf, off + 12 * i)
         if lo > hi:
@@ -173,9 +178,9 @@ def parse_table(buf, expected_sensors=None):
         t.ref.append(ref)
     w = _Words(buf, payload, nwords)
     _common(t, w)
-    if kind != KIND_LINEAR_DIRECT:
+    if kind != _KIND_LINEAR_DIRECT:
         _position(t, w)
-    if kind == KIND_SCREW_REDUCED:
+    if kind == _KIND_SCREW_REDUCED:
         _screw(t, w)
     if w.off != w.end:
         raise TableError(REASON_LENGTH, "%d unread payload words" % ((w.end - w.off) // 4))
@@ -195,8 +200,8 @@ def _name(buf, off, size):
     return raw[:end].decode()
 
 
-_SH = 62  # shifts beyond this are exporter bugs; a 31-bit port could not use them
-_SCALE = 1000  # fraction bits of a coefficient (informational, not used by the evaluation)
+_SH = const(62)  # shifts beyond this are exporter bugs; a 31-bit port could not use them
+_SCALE = const(1000)  # fraction bits of a coefficient (informational, not used by the evaluation)
 
 
 def _common(t, w):
@@ -229,7 +234,7 @@ def _position(t, w):
     t.fK = w.take_range("fK", 0, 30)
     t.rK = w.take("rK")
     t.rT = w.take("rT")
-    t.degree = w.take_range("degree", 0, MAX_DEGREE)
+    t.degree = w.take_range("degree", 0, _MAX_DEGREE)
     t.Lg = w.take_range("Lg", 1, 29)
     t.ng = w.take_range("ng", 1, 6)
     t.G = w.take_list("G", t.degree + 1)
@@ -239,7 +244,7 @@ def _position(t, w):
 
 
 def _screw(t, w):
-    m = t.M = w.take_range("M", 1, MAX_SEGMENTS)
+    m = t.M = w.take_range("M", 1, _MAX_SEGMENTS)
     t.dt_ms = w.take_range("dt_ms", 1, 3600000)
     t.fixed_end = w.take("fixed_end")
     t.fmax = w.take_range("fmax", 0, 1 << 20)
@@ -274,3 +279,11 @@ def _screw(t, w):
     t.Lc = w.take_range("Lc", 1, 29)
     t.nc = w.take_range("nc", 1, 6)
     t.shC = w.take_range("shC", -_SH, _SH)
+
+
+try:
+    import micropython  # noqa: F401
+except ImportError:  # CPython: the constants under their public names (see the module docstring)
+    _g = globals()
+    for _k in [k for k in _g if k[:1] == "_" and k[1:2].isupper() and k == k.upper()]:
+        _g[_k[1:]] = _g[_k]
