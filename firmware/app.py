@@ -18,12 +18,21 @@ try:
 except ImportError:  # CPython
     const = lambda x: x  # noqa: E731
 
-from firmware import status as st
 from firmware.channels import Channels
 from firmware.evaluate import Evaluator
 from firmware.safety import Limiter
 from firmware.slots import TableStore
 from firmware.table import TableError, REASON_SENSORS
+
+# status word bits (firmware/status.py; tests/firmware/test_fw_consts.py checks the copies)
+_CLAMPED = const(0x10000)
+_DISABLED = const(0x1000000)
+_FALLBACK = const(0x100000)
+_HELD = const(0x80000)
+_LINK_TIMEOUT = const(0x400000)
+_NO_POSITION = const(0x800000)
+_NO_TABLE = const(0x200000)
+_UPLOADING = const(0x2000000)
 
 VERSION = "0.1.0"  # firmware version, sent in the hello frame
 _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is dropped
@@ -109,8 +118,8 @@ class App:
         self.link = Link(self)
         collect()
         # what the hello frame reports before the first cycle: nothing read yet
-        self.status = (self.channels.faulty_mask() | st.NO_POSITION | st.FALLBACK
-                       | (0 if t is not None else st.NO_TABLE))
+        self.status = (self.channels.faulty_mask() | _NO_POSITION | _FALLBACK
+                       | (0 if t is not None else _NO_TABLE))
         self.link.boot()
 
     # --- table ---------------------------------------------------------------
@@ -224,7 +233,7 @@ class App:
         raw_ref = 0
         raw_slope = 0
         if ev is None or t is None:
-            s |= st.NO_TABLE
+            s |= _NO_TABLE
             usable = False
         else:
             needed = 0
@@ -249,7 +258,7 @@ class App:
                 if never or self.fault_ms >= self.cfg.hold_ms:
                     usable = False
                 else:
-                    s |= st.HELD
+                    s |= _HELD
             else:
                 self.fault_active = False
             ev.update()
@@ -272,7 +281,7 @@ class App:
             raw_ref = ev.ref_offset()
             raw_slope = ev.slope()
             if ev.flags:
-                s |= st.CLAMPED
+                s |= _CLAMPED
         lim = self.limiter
         s |= lim.update(raw_ref, raw_slope, raw_total, raw_prev, usable, dt)
         self.usable = usable
@@ -281,15 +290,15 @@ class App:
         self.ref_out = lim.ref
         self.slope_out = lim.slope
         if not usable:
-            s |= st.FALLBACK
+            s |= _FALLBACK
         if not self.enabled:
-            s |= st.DISABLED
+            s |= _DISABLED
         if not self.have_pos:
-            s |= st.NO_POSITION
+            s |= _NO_POSITION
         if self.link_timeout_ms and self.rx_ms >= self.link_timeout_ms:
-            s |= st.LINK_TIMEOUT
+            s |= _LINK_TIMEOUT
         if self.store.uploading:
-            s |= st.UPLOADING
+            s |= _UPLOADING
         self.status = s
         self.cycles += 1
         self.link.after_cycle(now)

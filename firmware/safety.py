@@ -22,9 +22,17 @@ No floats, no allocation, no tuple returns; integers stay far below 2**30
 (config limits: max_offset_um <= 100000, span <= 100 m).
 """
 
-from firmware import status as st
+try:
+    from micropython import const
+except ImportError:  # CPython
+    const = lambda x: x  # noqa: E731
 
-_MAX_DT_MS = 10000  # a stalled loop must not earn a huge step
+# status word bits (firmware/status.py; tests/firmware/test_fw_consts.py checks the copies)
+_MAG_LIMITED = const(0x40000)
+_RATE_LIMITED = const(0x20000)
+_RECOVERING = const(0x4000000)
+
+_MAX_DT_MS = const(10000)  # a stalled loop must not earn a huge step
 
 
 def _clamp(v, m):
@@ -93,7 +101,7 @@ class Limiter:
         # total: ramp at the previous position, then follow the axis
         if target > m or target < -m:
             target = _clamp(target, m)
-            fl = st.MAG_LIMITED
+            fl = _MAG_LIMITED
         v = self.total
         limited = False
         if target > v + step:
@@ -107,17 +115,17 @@ class Limiter:
         v += moved
         if v > m or v < -m:
             v = _clamp(v, m)
-            fl |= st.MAG_LIMITED
+            fl |= _MAG_LIMITED
         self.total = v
         # pair: move the affine function as a whole within the step budget
         tr = raw_ref
         ts = raw_slope
         if tr > m or tr < -m:
             tr = _clamp(tr, m)
-            fl |= st.MAG_LIMITED
+            fl |= _MAG_LIMITED
         if ts > self.max_s or ts < -self.max_s:
             ts = _clamp(ts, self.max_s)
-            fl |= st.MAG_LIMITED
+            fl |= _MAG_LIMITED
         dr = tr - self.ref
         ds = ts - self.slope
         if dr or ds:
@@ -149,9 +157,9 @@ class Limiter:
                     else:  # moves below one unit: save the budget until one fits
                         self._carry = budget if budget < need else need
         if limited:
-            fl |= st.RATE_LIMITED
+            fl |= _RATE_LIMITED
             if usable and self.recovering:
-                fl |= st.RECOVERING
+                fl |= _RECOVERING
         elif usable:
             self.recovering = False
         self.flags = fl

@@ -2,6 +2,11 @@
 
 Bits 0..15: sensor i (channel order) is faulty and excluded. The flag bits
 above say why the output is what it is. docs/protocol.md lists them.
+
+This module is the reference for the host side and the tests; the firmware
+modules that set bits (app.py, safety.py) keep ``_``-prefixed ``const()``
+copies, which MicroPython folds into the bytecode, so a board does not load
+this module at all (tests/firmware/test_fw_consts.py checks the copies).
 """
 
 try:

@@ -37,6 +37,18 @@ def test_private_copies_match_their_source():
         assert here[name] == getattr(importlib.import_module("firmware." + src), public), (mod, name)
 
 
+def test_status_bit_copies_match_status_py():
+    from firmware import status
+    checked = 0
+    for fn in sorted(os.listdir(FW)):
+        if fn.endswith(".py") and fn != "status.py":
+            for k, v in consts(fn[:-3]).items():
+                if k.startswith("_") and hasattr(status, k[1:]):
+                    assert v == getattr(status, k[1:]), (fn, k)
+                    checked += 1
+    assert checked >= 11  # app.py and safety.py use their own copies
+
+
 def test_cpython_public_names_are_the_folded_values():
     from firmware import evaluate, table
     for mod in (evaluate, table):
