@@ -129,7 +129,9 @@ def run_micropython(script, cwd, path, heap="128K", timeout=120):
 # tools/bench_firmware.py (smallest heap that works). Prints
 # "OK cycles bytes_sent status pos free_delta app_data peak": app_data is the heap
 # the running app holds (table, evaluator, channels, drivers, buffers) after boot
-# and warm-up, peak the largest in-use heap seen (code + fakes + data).
+# and warm-up, peak the largest live heap after a collection at the end of each
+# warm-up cycle (code + fakes + data; transient boot garbage is not in it: the
+# smallest heap that works, which tools/bench_firmware.py searches, covers that).
 HEAPLOCK_SCRIPT = r"""
 import gc, micropython, sys
 # the mode's modules first, as main.py on a board would: each import from a file
@@ -147,6 +149,7 @@ app = App(board)
 for k in range(100):  # warm-up: channels become good, the output ramps up
     app.cycle(); board.clock.t += 100
     board.serial.take()
+    gc.collect()
     a = gc.mem_alloc()
     peak = a if a > peak else peak
 # MicroPython's GC is conservative: a stale word can keep boot garbage alive for
