@@ -194,6 +194,15 @@ def center(err):
     return rnd(-(err[0] + err[1]) / 2)
 
 
+def _obj(value, where):
+    """A document block that must be a JSON object; absent (None) reads as empty."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ExportError("%s must be an object, found %s" % (where, type(value).__name__))
+    return value
+
+
 # ------------------------------------------------------------------ the model, exactly
 class Model:
     """The model document reduced to exact numbers in table units (see docs/table-format.md)."""
@@ -204,14 +213,22 @@ class Model:
         self.kind = "screw_reduced" if kind == "screw" else kind
         if self.kind not in LIMITS_UM:
             raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw)" % (kind,))
-        self.sensors = list(doc.get("sensors") or [])
-        env = doc.get("envelope") or {}
-        tenv = env.get("temperature_C") or {}
-        refs = doc.get("reference_C") or {}
-        thermal = doc.get("thermal") or {}
+        sensors = doc.get("sensors") or []
+        if not isinstance(sensors, list) or not all(isinstance(s, str) for s in sensors):
+            raise ExportError("sensors must be a list of sensor names, found %r" % (sensors,))
+        self.sensors = list(sensors)
+        env = _obj(doc.get("envelope"), "envelope")
+        tenv = _obj(env.get("temperature_C"), "envelope.temperature_C")
+        refs = _obj(doc.get("reference_C"), "reference_C")
+        thermal = _obj(doc.get("thermal"), "thermal")
+        if thermal.get("reference", "fixed") not in ("fixed", "run_start"):
+            raise ExportError("thermal.reference must be 'fixed' or 'run_start', found %r" % (thermal.get("reference"),))
         # "run_start": the firmware may latch the references at a cold start (Evaluator.latch_references),
         # so every integer reference inside the envelope is certified; "fixed": the document's reference_C.
         self.ref_mode = 1 if thermal.get("reference") == "run_start" else 0
+        if kind == "screw" and isinstance(thermal.get("reduced"), dict) and thermal["reduced"].get("base_ref") == "run_start":
+            # The screw model's ambient term is referenced to each run's start: certify latched references too.
+            self.ref_mode = 1
         self.env_lo, self.env_hi, self.ref, self.ref_frac = [], [], [], []
         for s in self.sensors:
             if s not in tenv:
@@ -288,7 +305,9 @@ class Model:
             self.d_lo = [lo - r for lo, r in zip(self.env_lo, self.ref)]
             self.d_hi = [hi - r for hi, r in zip(self.env_hi, self.ref)]
         geo = doc.get("geometric") if self.kind != "linear_direct" else None
-        gc = (geo or {}).get("coefficients_um") or [0.0]
+        gc = _obj(geo, "geometric").get("coefficients_um") or [0.0]
+        if not isinstance(gc, list):
+            raise ExportError("geometric.coefficients_um must be a list of numbers, found %r" % (gc,))
         self.g = [F(_num(c, "geometric.coefficients_um[%d]" % j)) * OU_PER_UM / F(1000) ** j for j, c in enumerate(gc)]
         if len(self.g) - 1 > 6:
             raise ExportError("geometric degree %d: the table holds at most degree 6" % (len(self.g) - 1))

@@ -95,7 +95,9 @@ def test_screw_from_tcomp_fit_matches_host_reduced_model(fitted):
             ev.temps[i] = v
         ev.update()
         P = rng.randint(t.pos_lo, t.pos_hi)
-        rise = (temps[t.sensors.index(base)] / 1000.0 - red["base_ref_C"]) if base else None
+        # A run_start (latched) table holds its reference in whole milli-degC, as the firmware latches it.
+        base_ref = round(red["base_ref_C"] * 1000.0) / 1000.0 if t.ref_mode == 1 else red["base_ref_C"]
+        rise = (temps[t.sensors.index(base)] / 1000.0 - base_ref) if base else None
         host = float(load_model(doc).geometric_um(np.array([P / 1000.0]))[0]
                      + reduced_error_um(red, x, P / 1000.0, base_rise_K=rise))
         assert abs(ref.offset(temps, P) - host) < 1e-9
