@@ -32,6 +32,8 @@ _E_TABLE = const(6)
 _E_OVERFLOW = const(7)
 ERRORS = {1: b"crc", 2: b"syntax", 3: b"unknown", 4: b"range", 5: b"state", 6: b"table", 7: b"overflow"}
 _UPLOAD_CODES = {"range": _E_RANGE, "state": _E_STATE, "table": _E_TABLE}
+_ONE_POSITION = b"PQR"  # commands with one position argument
+_NO_ARGUMENT = b"SVX"
 
 _POS_LIMIT = const(100000000)  # |position| in um accepted from the controller (100 m)
 _FEED_LIMIT = const(1000000)  # mm/min
@@ -79,7 +81,7 @@ class StreamLink:
     def boot(self):
         self.hello()
         for slot, reason in self.app.store.refusals:
-            self.error(_E_TABLE, b"table", slot.encode() + b" " + reason.encode())
+            self.error(_E_TABLE, slot.encode() + b" " + reason.encode())
 
     def hello(self):
         """H,<protocol>,<firmware>,<slot>,<table crc32>,<provenance[:8] hex>,<kind>,<axis>,<channels>."""
@@ -146,11 +148,12 @@ class StreamLink:
             w.text(text)
         w.end()
 
-    def error(self, code, word, detail=None):
+    def error(self, code, detail=None):
+        """E,<code>,<word>[,<detail>] (the word is ERRORS[code])."""
         w = self.w
         w.begin(self.app.status, _E)
         w.int(code)
-        w.text(word)
+        w.text(ERRORS[code])
         if detail is not None:
             w.sep()
             for c in detail:  # keep the frame parseable whatever the detail says
@@ -190,13 +193,13 @@ class StreamLink:
     def _line(self, now):
         r = self.r
         if r.status == fr.LINE_CRC:
-            self.error(_E_CRC, b"crc")
+            self.error(_E_CRC)
             return
         if r.status == fr.LINE_OVERFLOW:
-            self.error(_E_OVERFLOW, b"overflow")
+            self.error(_E_OVERFLOW)
             return
         if r.status != fr.LINE_OK:
-            self.error(_E_SYNTAX, b"syntax")
+            self.error(_E_SYNTAX)
             return
         self.app.link_alive(now)
         self._command(r.letter(0), r.nf)
@@ -204,58 +207,46 @@ class StreamLink:
     def _command(self, c, nf):
         a = self.app
         r = self.r
-        if c == _P:
+        if c == _U:
+            return self._upload(nf)
+        if c in _ONE_POSITION:
             if nf != 2:
-                return self.error(_E_SYNTAX, b"syntax")
+                return self.error(_E_SYNTAX)
             v = r.int(1, -_POS_LIMIT, _POS_LIMIT)
             if v is None:
-                return self.error(_E_RANGE, b"range")
-            a.report_position(v)
-        elif c == _Q:
-            if nf != 2:
-                return self.error(_E_SYNTAX, b"syntax")
-            v = r.int(1, -_POS_LIMIT, _POS_LIMIT)
-            if v is None:
-                return self.error(_E_RANGE, b"range")
-            self.offsets(_Q, v)
-        elif c == _R:
-            if nf != 2:
-                return self.error(_E_SYNTAX, b"syntax")
-            v = r.int(1, -_POS_LIMIT, _POS_LIMIT)
-            if v is None:
-                return self.error(_E_RANGE, b"range")
-            ref = a.set_reference(v)
-            if ref is None:
-                return self.error(_E_STATE, b"state", b"no table")
-            self.ack(_R, 0, ref)
+                return self.error(_E_RANGE)
+            if c == _P:
+                a.report_position(v)
+            elif c == _Q:
+                self.offsets(_Q, v)
+            else:
+                ref = a.set_reference(v)
+                if ref is None:
+                    return self.error(_E_STATE, b"no table")
+                self.ack(_R, 0, ref)
         elif c == _M:
             if nf != 4:
-                return self.error(_E_SYNTAX, b"syntax")
+                return self.error(_E_SYNTAX)
             f = r.int(1, 0, _FEED_LIMIT)
             lo = r.int(2, -_POS_LIMIT, _POS_LIMIT)
             hi = r.int(3, -_POS_LIMIT, _POS_LIMIT)
             if f is None or lo is None or hi is None:
-                return self.error(_E_RANGE, b"range")
+                return self.error(_E_RANGE)
             if not a.set_feed(f, lo, hi):
-                return self.error(_E_STATE, b"state", b"no screw table")
+                return self.error(_E_STATE, b"no screw table")
             self.ack(_M, 0, f)
-        elif c == _S:
+        elif c in _NO_ARGUMENT:
             if nf != 1:
-                return self.error(_E_SYNTAX, b"syntax")
-            self.temperatures()
-        elif c == _V:
-            if nf != 1:
-                return self.error(_E_SYNTAX, b"syntax")
-            self.hello()
-        elif c == _U:
-            self._upload(nf)
-        elif c == _X:
-            if nf != 1:
-                return self.error(_E_SYNTAX, b"syntax")
-            self.ack(_X)
-            a.reset()
+                return self.error(_E_SYNTAX)
+            if c == _S:
+                self.temperatures()
+            elif c == _V:
+                self.hello()
+            else:
+                self.ack(_X)
+                a.reset()
         else:
-            self.error(_E_UNKNOWN, b"unknown")
+            self.error(_E_UNKNOWN)
 
     def _upload(self, nf):
         a = self.app
@@ -266,7 +257,7 @@ class StreamLink:
                 size = r.int(2, 0, 1 << 24)
                 crc = r.hexint(3, 8)
                 if size is None or crc < 0:
-                    return self.error(_E_RANGE, b"range")
+                    return self.error(_E_RANGE)
                 slot = a.store.begin(size, crc)
                 self.ack(_U, _B, None, SLOT_NAMES[slot].encode())
             elif sub == _D and nf == 4:
@@ -274,14 +265,14 @@ class StreamLink:
                 s = r.fs[3]
                 e = r.fe[3]
                 if off is None or (e - s) & 1 or e == s or e - s > 2 * _MAX_CHUNK:
-                    return self.error(_E_RANGE, b"range")
+                    return self.error(_E_RANGE)
                 n = (e - s) >> 1
                 buf = self.chunk
                 for k in range(n):
                     hi = fr._hexval(r.buf[s + 2 * k])
                     lo = fr._hexval(r.buf[s + 2 * k + 1])
                     if hi < 0 or lo < 0:
-                        return self.error(_E_SYNTAX, b"syntax")
+                        return self.error(_E_SYNTAX)
                     buf[k] = (hi << 4) | lo
                 got = a.store.write(off, bytes(buf[:n]))
                 self.ack(_U, _D, got)
@@ -294,11 +285,9 @@ class StreamLink:
                 a.store.abort()
                 self.ack(_U, _X)
             else:
-                self.error(_E_SYNTAX if sub in (_B, _D, _C, _X) else _E_UNKNOWN,
-                           b"syntax" if sub in (_B, _D, _C, _X) else b"unknown")
+                self.error(_E_SYNTAX if sub in b"BDCX" else _E_UNKNOWN)
         except UploadError as e:
-            self.error(_UPLOAD_CODES.get(e.code, _E_STATE), ERRORS[_UPLOAD_CODES.get(e.code, _E_STATE)],
-                       e.detail.encode())
+            self.error(_UPLOAD_CODES.get(e.code, _E_STATE), e.detail.encode())
         except OSError as e:
             a.store.abort()
-            self.error(_E_STATE, b"state", ("flash: %s" % e).encode())
+            self.error(_E_STATE, ("flash: %s" % e).encode())
