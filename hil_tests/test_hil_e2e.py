@@ -2,7 +2,9 @@
 
 Tolerance per answer: the exporter's certified bound (integer table vs
 float model) + the RTD chain bound propagated through the model + half the
-0.1 um resolution of the frame.
+0.1 um resolution of the frame. Answers whose status says RATE_LIMITED are
+not compared (the limiter lags a model that moves faster than the slew limit
+on purpose); at least 85 % of the rows must be compared.
 """
 import os
 
@@ -14,6 +16,7 @@ from hil_tests.rig.boards import export, poly_slope_for_run, rig_config, screw_d
 from hil_tests.rig.play import play, poly_slope_bound_um
 
 pytestmark = pytest.mark.rig
+RATE_LIMITED = 0x20000
 
 
 def _subset(run, hours):
@@ -34,12 +37,17 @@ def test_e2e_poly_slope_matches_host_model(make_rig, demo_run):
     doc = poly_slope_for_run(run, sensors)
     ex = export(doc)
     temps = {s: float(run.temperatures.column(s)[0]) for s in sensors}
-    rig = make_rig(rig_config(sensors), ex.table, temps=temps, noise_uohm=2000)
+    # no resistance noise: the bound is quantisation + conversion, and noise is not either
+    rig = make_rig(rig_config(sensors), ex.table, temps=temps, noise_uohm=0)
     answers = play(rig, run, sensors, motion=False)
     pred = np.asarray(load_model(doc).predict(run))
     cert = ex.report["max_error_um"]
     worst = 0.0
+    compared = 0
     for a, p in zip(answers, pred):
+        if int(a["status"], 16) & RATE_LIMITED:
+            continue  # the model moves faster than the slew limit allows: the output lags on purpose
+        compared += 1
         bound = cert + poly_slope_bound_um(doc, run, sensors, a["position_mm"]) + 0.05 + 1e-9
         err = abs(a["offset_um"] - p)
         worst = max(worst, err / bound)
@@ -47,6 +55,7 @@ def test_e2e_poly_slope_matches_host_model(make_rig, demo_run):
             a["time_s"], a["position_mm"], a["offset_um"], p, bound, a["status"])
         assert not a["held"] and not a["fallback"]
     assert len(answers) == len(run.errors) and worst <= 1.0
+    assert compared >= 0.85 * len(answers), "only %d of %d answers were not rate limited" % (compared, len(answers))
     st = rig.stats()
     for name, c in st["chips"].items():
         assert c["violations"] == 0, c["violation_text"]

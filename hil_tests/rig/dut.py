@@ -9,7 +9,8 @@ The control channel (a unix socket, one JSON object per line) is served
 only while the firmware sleeps past the time the test granted: the firmware
 never sees it. Requests (``op``): ``run`` (grant time up to ``until_ms``,
 ramping sensors linearly to ``temps`` meanwhile; ``gc``: collect and report
-``mem_free``; ``lock``: run under micropython.heap_lock), ``jump`` (step
+``mem_free``; ``lock``: run under micropython.heap_lock), ``ramp`` (head
+linearly for ``temps`` at ``until_ms``, without running), ``jump`` (step
 temperatures now), ``sensor`` (condition ok/open/short/stuck), ``chip``
 (``present``, ``ovuv``, ``force_open``), ``bus`` (inject ``kind`` for
 ``count`` transfers to ``target``), ``stats``, ``quit``. Replies (``ev``):
@@ -91,6 +92,8 @@ class Control:
                 return
             if op == "jump":
                 w.jump(m["temps"])
+            elif op == "ramp":
+                w.ramp(m["until_ms"], m["temps"])
             elif op == "sensor":
                 from hil_tests.sim.stimulus import CONDITIONS
                 w.rtds[m["name"]].set_condition(CONDITIONS[m["condition"]], w.clock.now_ms())

@@ -375,6 +375,10 @@ class Rig:
     def advance(self, ms, **kw):
         return self.run(self.t_ms + ms, **kw)
 
+    def ramp(self, until_ms, temps):
+        """From now on, sensors head linearly for ``temps`` at ``until_ms`` (time does not move)."""
+        self._send({"op": "ramp", "until_ms": int(until_ms), "temps": {k: float(v) for k, v in temps.items()}})
+
     def jump(self, temps):
         self._send({"op": "jump", "temps": {k: float(v) for k, v in temps.items()}})
 

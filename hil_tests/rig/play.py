@@ -50,14 +50,18 @@ def play(rig, run, sensors, warmup_ms=60000, motion=True, on_answer=None, faults
         events.append((spec[0], 3, spec[1]))
     events.sort(key=lambda ev: (ev[0], ev[1]))
     answers = [None] * len(e)
-    pending_temps = first
+    reached = 0  # temperature rows reached so far
     for t, kind, data in events:
         target = t0_ms + int(round(t * 1000))
         if target > rig.t_ms:
             # frames need not be read before a query: only the query's reply is waited for
-            rig.run(target, temps=pending_temps if kind == 1 else None, sync=False)
+            rig.run(target, sync=False)
         if kind == 1:
-            pending_temps = data
+            # at a sample: head for the next one, so that any time in between sees the interpolation
+            reached += 1
+            if reached < len(rows):
+                t_next, temps_next = rows[reached]
+                rig.ramp(t0_ms + int(round(t_next * 1000)), temps_next)
             continue
         if kind == 0:
             f, lo, hi = data
