@@ -42,18 +42,6 @@ _RATE_DT_CAP_MS = const(100000)  # beyond this the last good value says nothing
 _CAP = const(0x20000000)  # elapsed-time counters saturate here (2**29 ms, 6.2 days)
 
 
-def _make_driver(ch, board):
-    bus = board.buses.get(ch.bus)
-    if bus is None:
-        raise ValueError("config channel %s: bus %r is not one of the board's buses %s"
-                         % (ch.name, ch.bus, ", ".join(sorted(board.buses))))
-    if ch.driver == "max31865":
-        from firmware.max31865 import MAX31865
-        return MAX31865(bus, board.pin(ch.cs), ch.rref_mohm, ch.wires, ch.filter_hz)
-    from firmware.ads122c04 import ADS122C04
-    return ADS122C04(bus, ch.address, ch.rref_mohm, ch.wires, ch.idac_ua, ch.filter_hz)
-
-
 class Channels:
     """All sensor channels of a validated board config (``firmware.board.Config``)."""
 
@@ -92,24 +80,33 @@ class Channels:
             self._init_driver(i)
 
     def _init_driver(self, i):
+        """(Re-)initialise channel i's driver; False if the chip did not answer (OSError).
+
+        A driver that exists is re-initialised in place (same object, same pin):
+        a chip that keeps failing must not churn the heap.
+        """
         ch = self.cfg.channels[i]
+        buses = self.board.buses
+        if ch.bus not in buses:
+            raise ValueError("config channel %s: bus %r is not one of the board's buses %s"
+                             % (ch.name, ch.bus, ", ".join(sorted(buses))))
+        d = self.drivers[i]
         try:
-            if self.drivers[i] is None:
-                self.drivers[i] = _make_driver(ch, self.board)
+            if self.kind[i] == _DRV_MAX31865:
+                from firmware.max31865 import MAX31865 as cls
+                args = (buses[ch.bus], self.board.pin(ch.cs) if d is None else d._cs, ch.rref_mohm, ch.wires,
+                        ch.filter_hz)
             else:
-                self.drivers[i].__init__(*self._driver_args(i))
+                from firmware.ads122c04 import ADS122C04 as cls
+                args = (buses[ch.bus], ch.address, ch.rref_mohm, ch.wires, ch.idac_ua, ch.filter_hz)
+            if d is None:
+                self.drivers[i] = cls(*args)
+            else:
+                d.__init__(*args)
             return True
         except OSError:
             self.drivers[i] = None
             return False
-
-    def _driver_args(self, i):
-        ch = self.cfg.channels[i]
-        bus = self.board.buses[ch.bus]
-        if self.kind[i] == _DRV_MAX31865:
-            return (bus, self.board.pin(ch.cs) if self.drivers[i] is None else self.drivers[i]._cs,
-                    ch.rref_mohm, ch.wires, ch.filter_hz)
-        return (bus, ch.address, ch.rref_mohm, ch.wires, ch.idac_ua, ch.filter_hz)
 
     def set_thresholds(self):
         """MAX31865 high/low fault thresholds from the plausible range."""
