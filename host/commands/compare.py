@@ -45,13 +45,19 @@ def _method_options(items, methods):
 
             from host.empirical.regression import ESTIMATORS
 
-            known = [k for k in inspect.signature(ESTIMATORS[method].__init__).parameters if k not in ("self", "fit_intercept")]
+            params = inspect.signature(ESTIMATORS[method].__init__).parameters
+            known = [k for k in params if k not in ("self", "fit_intercept")]
             if key not in known:
                 raise UserError("--option %r: %s has no setting %r (settings: %s)" % (item, method, key, ", ".join(known)))
         try:
             v = json.loads(value)
         except ValueError:
             v = value.strip()
+        if method not in SELECTORS:
+            default = params[key].default
+            numeric = isinstance(default, (int, float)) and not isinstance(default, bool)
+            if numeric and (isinstance(v, bool) or not isinstance(v, (int, float))):
+                raise UserError("--option %r: %s.%s must be a number, got %r" % (item, method, key, value))
         (selector if method in SELECTORS else options).setdefault(method, {})[key] = v
     return options, selector
 
@@ -68,6 +74,9 @@ def run(args):
     bad = [m for m in methods if m not in METHODS]
     if bad:
         raise UserError("--methods: unknown %s (known: %s)" % (", ".join(bad), ", ".join(METHODS)))
+    if not methods:
+        raise UserError("--methods %r: empty method list (known: %s)" % (args.methods, ", ".join(METHODS)))
+    _check_robustness(args)
     check_output(args.json, "--json")
     if args.plots:
         check_output_dir(args.plots, "--plots")
@@ -118,6 +127,18 @@ def run(args):
     if results and len(failed) == len(results):
         raise UserError("every method failed (first: %s: %s); details in %s" % (failed[0]["method"], failed[0]["error"], args.json))
     return 0
+
+
+def _check_robustness(args):
+    import math
+
+    from host.cli import UserError
+
+    if args.repeats < 1:
+        raise UserError("--repeats %d: must be >= 1 (disturbance realisations per test run)" % args.repeats)
+    for flag, v in (("--noise-C", args.noise_C), ("--offset-C", args.offset_C)):
+        if not (math.isfinite(v) and v >= 0):
+            raise UserError("%s %s: must be a finite number >= 0 (degC)" % (flag, v))
 
 
 def _check_split(split_h, runs):

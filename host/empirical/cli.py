@@ -1,5 +1,6 @@
 """``tcomp fit --model mlr|pcr|stepwise`` (arguments defined in host/commands/fit.py)."""
 import json
+import math
 
 from host.empirical import EmpiricalDataError
 
@@ -18,6 +19,8 @@ OPTIONS = {
     "max_sensors": int,  # cv-subset
     "cv_blocks": int,  # cv-subset on one run
 }
+# smallest meaningful value of numeric options whose estimator would otherwise fail obscurely or accept nonsense
+MINIMUM = {"envelope_margin_K": 0.0, "geometric_max_degree": 1, "max_sensors": 1, "n_components": 1, "cv_blocks": 2}
 METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",)}
 
 
@@ -38,6 +41,14 @@ def parse_options(pairs, method):
             out[key] = OPTIONS[key](value.strip())
         except ValueError:
             raise UserError("--option %s=%r: not a valid %s" % (key, value, OPTIONS[key].__name__))
+        if OPTIONS[key] is float and not math.isfinite(out[key]):
+            raise UserError("--option %s=%r: must be a finite number" % (key, value))
+        low = MINIMUM.get(key)
+        if low is not None and out[key] < low:
+            raise UserError("--option %s=%s: must be >= %g" % (key, value.strip(), low))
+    lo, hi = out.get("t_min_s"), out.get("t_max_s")
+    if lo is not None and hi is not None and not lo < hi:
+        raise UserError("--option t_min_s=%g, t_max_s=%g: the training window is empty (t_min_s must be < t_max_s)" % (lo, hi))
     return out
 
 

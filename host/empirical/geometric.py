@@ -34,6 +34,8 @@ class GeometricPolynomial:
         pos, inv = np.unique(P, return_inverse=True)
         err = np.bincount(inv, weights=e) / np.bincount(inv)
         m = pos.size
+        if int(self.max_degree) < 1:
+            raise EmpiricalDataError("geometric: max_degree must be >= 1 (degrees 1..max_degree are compared), got %r" % self.max_degree)
         if m < 4:
             raise EmpiricalDataError("geometric: the cold sweep has %d distinct positions; at least 4 are needed to choose a degree" % m)
         top = min(int(self.max_degree), m - 3)

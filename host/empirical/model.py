@@ -18,6 +18,7 @@ training runs' typical start state.
 ``predict(run)`` returns one value per row of ``run.errors`` in file order;
 rows of other channels than the model's are NaN.
 """
+import math
 from typing import Any
 
 import numpy as np
@@ -107,7 +108,9 @@ class _Base:
             raise ModelFormatError("%s: reference_C has no entry for %s" % (where, ", ".join(missing)))
         bad = [s for s in sensors if not _is_number(ref[s])]
         if bad:
-            raise ModelFormatError("%s: reference_C.%s must be a number, found %r" % (where, bad[0], ref[bad[0]]))
+            raise ModelFormatError("%s: reference_C.%s must be a finite number, found %r" % (where, bad[0], ref[bad[0]]))
+        if doc.get("channel") is not None and not isinstance(doc.get("channel"), str):
+            raise ModelFormatError("%s: field 'channel' must be a channel name (string) or null, found %r" % (where, doc.get("channel")))
         if thermal.get("reference", "fixed") not in REFERENCES:
             raise ModelFormatError("%s: thermal.reference must be one of %s, got %r" % (where, ", ".join(REFERENCES), thermal.get("reference")))
         return thermal, sensors, ref, dict(
@@ -117,7 +120,8 @@ class _Base:
 
 
 def _is_number(v):
-    return isinstance(v, (int, float)) and not isinstance(v, bool)
+    # JSON may carry NaN/Infinity (Python's json writes them); a model with one predicts nothing useful
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
 
 
 def _thermal_terms(doc, thermal, sensors, coef_key, intercept_key):
@@ -136,10 +140,10 @@ def _thermal_terms(doc, thermal, sensors, coef_key, intercept_key):
         raise ModelFormatError("%s model document: thermal.%s has no entry for sensor(s) %s" % (kind, coef_key, ", ".join(missing)))
     for s in sensors:
         if not _is_number(coefs[s]):
-            raise ModelFormatError("%s model document: thermal.%s.%s must be a number, found %r" % (kind, coef_key, s, coefs[s]))
+            raise ModelFormatError("%s model document: thermal.%s.%s must be a finite number, found %r" % (kind, coef_key, s, coefs[s]))
     b0 = thermal.get(intercept_key, 0.0)
     if not _is_number(b0):
-        raise ModelFormatError("%s model document: thermal.%s must be a number, found %r" % (kind, intercept_key, b0))
+        raise ModelFormatError("%s model document: thermal.%s must be a finite number, found %r" % (kind, intercept_key, b0))
     return [coefs[s] for s in sensors], b0
 
 
@@ -216,5 +220,5 @@ class PolySlopeModel(_Base):
         geo = doc.get("geometric") or {"coefficients_um": [0.0]}
         if not isinstance(geo, dict) or not isinstance(geo.get("coefficients_um", [0.0]), list) \
                 or not all(_is_number(c) for c in geo.get("coefficients_um", [0.0])):
-            raise ModelFormatError("poly_slope model document: geometric.coefficients_um must be a list of numbers")
+            raise ModelFormatError("poly_slope model document: geometric.coefficients_um must be a list of finite numbers")
         return cls(sensors, coefs, b0, ref, geometric_coef=geo.get("coefficients_um", [0.0]), **kw)

@@ -506,6 +506,8 @@ class BestSubsetCV(_Linear):
         import itertools
         from math import comb
 
+        if isinstance(self.max_sensors, bool) or not isinstance(self.max_sensors, (int, np.integer)) or self.max_sensors < 1:
+            raise EmpiricalDataError("cv-subset: max_sensors must be an integer >= 1, got %r" % (self.max_sensors,))
         X, y, names = check_xy(X, y, names, 1 + int(self.fit_intercept), "cv-subset")
         n, p = X.shape
         if groups is None:

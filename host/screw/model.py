@@ -387,7 +387,20 @@ class ScrewModel:
 
     @classmethod
     def from_document(cls, doc):
+        from host.models import ModelFormatError
+
         th = doc.get("thermal") or {}
+        for where, block in (("thermal", th), ("thermal.geometry", th.get("geometry") if isinstance(th, dict) else None),
+                             ("thermal.parameters", th.get("parameters") if isinstance(th, dict) else None),
+                             ("geometric", doc.get("geometric"))):
+            if block is not None and not isinstance(block, dict):
+                raise ModelFormatError("screw model document: field '%s' must be an object, found %s" % (where, type(block).__name__))
+        effects_doc = th.get("effects", [])
+        if not isinstance(effects_doc, list) or not all(isinstance(e, dict) and isinstance(e.get("name"), str) for e in effects_doc):
+            raise ModelFormatError("screw model document: thermal.effects must be a list of {name, settings} objects")
+        unknown = [e["name"] for e in effects_doc if e["name"] not in EFFECTS]
+        if unknown:
+            raise ModelFormatError("screw model document: thermal.effects has unknown effect %r (known: %s)" % (unknown[0], ", ".join(EFFECTS)))
         try:
             effects = [EFFECTS[e["name"]].from_document(e.get("settings") or {}) for e in th.get("effects", [])]
             m = cls(segments=int(th["segments"]), dt_s=float(th["dt_s"]), effects=effects, channel=doc.get("channel"),
@@ -409,8 +422,7 @@ class ScrewModel:
             gm = doc.get("geometric") or {"degree": 0, "coefficients_um": []}
             m.geometric_ = [float(c) for c in gm["coefficients_um"]]
             m.geometric_degree_ = int(gm["degree"])
-        except (KeyError, TypeError, ValueError) as exc:
-            from host.models import ModelFormatError
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
             raise ModelFormatError("screw model document: missing or invalid field %s" % exc)
         m.axis_ = doc.get("axis")
         m.envelope_ = doc.get("envelope")

@@ -255,16 +255,54 @@ def test_compare_exits_non_zero_when_every_method_failed(capsys, tmp_path):
 
 @pytest.mark.parametrize("edit, words", [
     (lambda d: d["thermal"].update(coefficients_um_per_mm_per_K="abc"), "thermal.coefficients_um_per_mm_per_K must be an object"),
-    (lambda d: d["thermal"]["coefficients_um_per_mm_per_K"].update(T1="x"), "thermal.coefficients_um_per_mm_per_K.T1 must be a number"),
+    (lambda d: d["thermal"]["coefficients_um_per_mm_per_K"].update(T1="x"), "thermal.coefficients_um_per_mm_per_K.T1 must be a finite number"),
     (lambda d: d.update(kind="linear_direct"), "lacks the field thermal.coefficients_um_per_K (it has thermal.coefficients_um_per_mm_per_K"),
     (lambda d: d.pop("thermal"), "lacks the field 'thermal'"),
     (lambda d: d.update(reference_C=[1, 2]), "field 'reference_C' must be an object"),
-    (lambda d: d["thermal"].update(intercept_um_per_mm="0.1"), "thermal.intercept_um_per_mm must be a number"),
+    (lambda d: d["thermal"].update(intercept_um_per_mm="0.1"), "thermal.intercept_um_per_mm must be a finite number"),
+    (lambda d: d["thermal"]["coefficients_um_per_mm_per_K"].update(T1=float("nan")), "coefficients_um_per_mm_per_K.T1 must be a finite number"),
+    (lambda d: d.update(sensors="T1"), "field 'sensors' must be a list of sensor names"),
+    (lambda d: d.update(channel=5), "field 'channel' must be a channel name"),
+    (lambda d: d.update(geometric=5), "geometric.coefficients_um must be a list of finite numbers"),
+    (lambda d: d["thermal"].update(reference=5), "thermal.reference must be one of"),
 ])
 def test_model_document_errors_name_file_and_field(capsys, tmp_path, model, edit, words):
     path = _edited(model, tmp_path, edit)
     err = _fail(capsys, ["predict", path, RUN, "--out", str(tmp_path / "p.csv")])
     assert path in err and words in err
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda d: d.update(geometric=5), "geometric must be an object, found int"),
+    (lambda d: d.update(thermal="x"), "thermal must be an object, found str"),
+    (lambda d: d.update(envelope=[]), "envelope must be an object, found list"),
+    (lambda d: d["thermal"].update(reference="latched"), "thermal.reference must be 'fixed' or 'run_start'"),
+    (lambda d: d.update(sensors=[1, 2]), "sensors must be a list of sensor names"),
+])
+def test_export_document_errors_name_file_and_field(capsys, tmp_path, model, edit, words):
+    path = _edited(model, tmp_path, edit)
+    err = _fail(capsys, ["export", path, "--out", str(tmp_path / "x.bin")])
+    assert path in err and words in err
+
+
+@pytest.fixture(scope="module")
+def screw_model(tmp_path_factory):
+    path = str(tmp_path_factory.mktemp("screw") / "screw.json")
+    assert main(["fit", "--model", "screw", RUN, "--out", path]) == 0
+    return path
+
+
+@pytest.mark.parametrize("edit, words", [
+    (lambda d: d.update(thermal="x"), "field 'thermal' must be an object, found str"),
+    (lambda d: d["thermal"].update(geometry=[1]), "field 'thermal.geometry' must be an object"),
+    (lambda d: d["thermal"].update(effects="x"), "thermal.effects must be a list"),
+    (lambda d: d["thermal"].update(effects=[{"name": "nope"}]), "thermal.effects has unknown effect 'nope'"),
+    (lambda d: d["thermal"].pop("segments"), "missing or invalid field 'segments'"),
+])
+def test_screw_document_errors_name_file_and_field(capsys, tmp_path, screw_model, edit, words):
+    path = _edited(screw_model, tmp_path, edit)
+    err = _fail(capsys, ["predict", path, RUN, "--out", str(tmp_path / "p.csv")])
+    assert path in err and "screw model document" in err and words in err
 
 
 def test_load_model_prefixes_the_path(tmp_path, model):
@@ -287,6 +325,57 @@ def test_load_model_prefixes_the_path(tmp_path, model):
 def test_an_empty_sensor_list(capsys, tmp_path, argv, empty):
     err = _fail(capsys, [a.format(tmp=tmp_path) for a in argv] + ["--sensors", empty])
     assert "--sensors %r: empty sensor list" % empty in err
+
+
+@pytest.mark.parametrize("option, words", [
+    ("envelope_margin_K=-1", "must be >= 0"),
+    ("geometric_max_degree=0", "must be >= 1"),
+    ("t_min_s=nan", "must be a finite number"),
+    ("t_max_s=inf", "must be a finite number"),
+])
+def test_fit_option_out_of_range(capsys, tmp_path, option, words):
+    err = _fail(capsys, ["fit", "--model", "mlr", RUN, "--sensors", FEW, "--out", str(tmp_path / "m.json"), "--option", option])
+    assert "--option %s" % option.partition("=")[0] in err and words in err
+
+
+def test_fit_empty_training_window(capsys, tmp_path):
+    err = _fail(capsys, ["fit", "--model", "mlr", RUN, "--out", str(tmp_path / "m.json"),
+                         "--option", "t_min_s=5000", "--option", "t_max_s=100"])
+    assert "training window is empty" in err
+
+
+def test_geometric_max_degree_below_one():
+    import numpy as np
+
+    from host.empirical import EmpiricalDataError
+    from host.empirical.geometric import GeometricPolynomial
+
+    with pytest.raises(EmpiricalDataError, match="max_degree must be >= 1"):
+        GeometricPolynomial(0).fit(np.arange(10.0), np.arange(10.0))
+
+
+@pytest.mark.parametrize("extra, words", [
+    (["--repeats", "0"], "--repeats 0: must be >= 1"),
+    (["--noise-C", "-1"], "--noise-C -1.0: must be a finite number >= 0"),
+    (["--offset-C=nan"], "--offset-C nan: must be a finite number >= 0"),
+    (["--methods", ","], "empty method list"),
+    (["--methods", "pcr", "--option", "pcr.variance_threshold=abc"], "pcr.variance_threshold must be a number, got 'abc'"),
+])
+def test_compare_flag_out_of_range(capsys, tmp_path, extra, words):
+    err = _fail(capsys, ["compare", RUN, "--split-h", "3", "--json", str(tmp_path / "c.json")] + extra)
+    assert words in err
+    assert not (tmp_path / "c.json").exists()
+
+
+def test_cv_subset_max_sensors_below_one():
+    import numpy as np
+
+    from host.empirical import EmpiricalDataError
+    from host.empirical.regression import BestSubsetCV
+
+    X = np.random.default_rng(0).normal(size=(20, 3))
+    with pytest.raises(EmpiricalDataError, match="max_sensors must be an integer >= 1, got 0"):
+        BestSubsetCV(max_sensors=0).fit(X, X[:, 0], None, groups=np.repeat([0, 1], 10))
 
 
 @pytest.mark.parametrize("effect", ["ambient_expansion=-5", "speed_dependent_heat=-0.1", "bearing_heat=-1", "sensor_lag=-3"])
