@@ -48,6 +48,9 @@ def _number(value, what, where):
 def _columns(value, key, where):
     """'temperatures'/'errors' as {column: spec}; column names must be strings, specs objects."""
     if isinstance(value, list):
+        dup = sorted({c for c in value if isinstance(c, str) and value.count(c) > 1})
+        if dup:
+            raise ImportError_("%s: '%s' lists column(s) %s more than once" % (where, key, ", ".join(dup)))
         value = {c: {} for c in value} if all(isinstance(c, str) for c in value) else value
     if isinstance(value, list):
         bad = [c for c in value if not isinstance(c, str)]
@@ -81,6 +84,9 @@ def _normalise_mapping(mapping, where):
     meta = mapping.get("meta") or {}
     if not isinstance(meta, dict):
         raise ImportError_("%s: 'meta' must be an object, found %r" % (where, meta))
+    reserved = sorted(set(meta) & {"format", "sensors", "channels", "import"})
+    if reserved:
+        raise ImportError_("%s: 'meta' may not set %s (the importer writes them from the mapping)" % (where, ", ".join(reserved)))
     time_scale = _number(mapping.get("time_scale", 1.0), "time_scale", where)
     if time_scale <= 0:
         raise ImportError_("%s: time_scale must be > 0 (the factor from the time column to seconds), found %g" % (where, time_scale))
@@ -107,11 +113,25 @@ def _normalise_mapping(mapping, where):
     e_out = {}
     for col, spec in errs.items():
         spec = dict(spec or {})
+        channel = spec.get("channel", col)
+        if not isinstance(channel, str) or not channel:
+            raise ImportError_("%s: errors.%s.channel must be a non-empty string, found %r" % (where, col, channel))
         e_out[col] = {
-            "channel": str(spec.get("channel", col)),
+            "channel": channel,
             "position_mm": _number(spec.get("position_mm", 0.0), "errors.%s.position_mm" % col, where),
             "scale": _number(spec.get("scale", 1.0), "errors.%s.scale" % col, where),
         }
+    roles = [("time", mapping["time"])] + [("temperatures", c) for c in t_out] + [("errors", c) for c in e_out]
+    roles += [("spindle", spindle)] if spindle else []
+    roles += [("ignore", c) for c in ignore]
+    cols = [c for _, c in roles]
+    for col in sorted({c for c in cols if cols.count(c) > 1}):
+        raise ImportError_("%s: column %r is mapped more than once (as %s); each source column has one meaning"
+                           % (where, col, " and ".join(r for r, c in roles if c == col)))
+    chans = [e["channel"] for e in e_out.values()]
+    dup = sorted({c for c in chans if chans.count(c) > 1})
+    if dup:
+        raise ImportError_("%s: error channel name(s) used twice: %s" % (where, ", ".join(dup)))
     return {
         "time": mapping["time"],
         "time_scale": time_scale,
@@ -137,6 +157,10 @@ def import_csv(source, mapping, mapping_where="mapping"):
     if not rows:
         raise ImportError_("%s line 1: file is empty" % source)
     header = [h.strip() for h in rows[0]]
+    dup = sorted({h for h in header if header.count(h) > 1})
+    if dup:
+        raise ImportError_("%s line 1: column name(s) %s appear more than once in the header; rename them in the source"
+                           % (source, ", ".join(repr(h) for h in dup)))
     used = [m["time"]] + list(m["temperatures"]) + list(m["errors"]) + ([m["spindle"]] if m["spindle"] else [])
     problems = []
     for col in used + m["ignore"]:

@@ -185,6 +185,31 @@ def test_import_mapping_with_numeric_column_names(capsys, tmp_path):
     assert m in err and "'temperatures'" in err and "must be strings" in err
 
 
+@pytest.mark.parametrize("mapping, words", [
+    ({"time": "time_s", "temperatures": ["a"], "errors": ["time_s"], "ignore": ["b", "c"]}, "column 'time_s' is mapped more than once (as time and errors)"),
+    ({"time": "time_s", "temperatures": ["a"], "errors": ["b"], "spindle": "a", "ignore": ["c"]}, "column 'a' is mapped more than once (as temperatures and spindle)"),
+    ({"time": "time_s", "temperatures": ["a", "a"], "errors": ["b"], "ignore": ["c"]}, "'temperatures' lists column(s) a more than once"),
+    ({"time": "time_s", "temperatures": ["a"], "errors": {"b": {"channel": "x"}, "c": {"channel": "x"}}}, "error channel name(s) used twice: x"),
+    ({"time": "time_s", "temperatures": ["a"], "errors": {"b": {"channel": None}}, "ignore": ["c"]}, "errors.b.channel must be a non-empty string"),
+    ({"time": "time_s", "temperatures": ["a"], "errors": ["b"], "ignore": ["c"], "meta": {"sensors": {}}}, "'meta' may not set sensors"),
+    ({"time": "time_s", "temperatures": ["a"], "errors": ["b"], "ignore": "c"}, "'ignore' must be a list of column names"),
+    ({"time": 0, "temperatures": ["a"], "errors": ["b"], "ignore": ["c"]}, "'time' must be a column name (a string)"),
+    ({"time": "time_s", "temperatures": {"a": "x"}, "errors": ["b"], "ignore": ["c"]}, "temperatures.a must be an object of settings"),
+    ({"time": "time_s", "time_scale": "abc", "temperatures": ["a"], "errors": ["b"], "ignore": ["c"]}, "time_scale must be a number, found 'abc'"),
+])
+def test_import_mapping_mistakes(capsys, tmp_path, mapping, words):
+    m = _mapping(tmp_path, mapping)
+    err = _fail(capsys, ["import", _csv(tmp_path), "--mapping", m, "--out", str(tmp_path / "i")])
+    assert m in err and words in err
+    assert not (tmp_path / "i").exists()
+
+
+def test_import_duplicate_header_column(capsys, tmp_path):
+    src = _csv(tmp_path, b"time_s,a,a,b\n0,20,21,1\n60,21,22,2\n")
+    err = _fail(capsys, ["import", src, "--time", "time_s", "--temp", "a", "--error", "b", "--out", str(tmp_path / "i")])
+    assert src + " line 1" in err and "'a' appear more than once" in err
+
+
 def test_import_error_flag_with_a_text_position(capsys, tmp_path):
     err = _fail(capsys, ["import", _csv(tmp_path), "--time", "time_s", "--temp", "a", "--error", "b=c@abc", "--ignore", "c",
                          "--out", str(tmp_path / "i")])
