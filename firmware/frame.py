@@ -18,14 +18,14 @@ except ImportError:  # CPython
 from firmware.crc16 import crc16_ccitt
 
 _HEX = b"0123456789ABCDEF"
-MAX_LINE = const(200)
-MAX_FIELDS = const(16)
+_MAX_LINE = const(200)
+_MAX_FIELDS = const(16)
 
 
 class FrameWriter:
     """Builds one frame at a time in ``buf`` and writes it to ``serial``."""
 
-    def __init__(self, serial, size=MAX_LINE + 8):
+    def __init__(self, serial, size=_MAX_LINE + 8):
         self.serial = serial
         self.buf = bytearray(size)
         self.n = 0
@@ -135,30 +135,30 @@ class FrameWriter:
 
 
 # LineReader.status values after a complete line
-LINE_OK = const(0)
-LINE_SYNTAX = const(1)  # not "$TC,...*XXXX", bad characters, too many fields
-LINE_CRC = const(2)  # CRC does not match
-LINE_OVERFLOW = const(3)  # longer than MAX_LINE
+_LINE_OK = const(0)
+_LINE_SYNTAX = const(1)  # not "$TC,...*XXXX", bad characters, too many fields
+_LINE_CRC = const(2)  # CRC does not match
+_LINE_OVERFLOW = const(3)  # longer than _MAX_LINE
 
 
 class LineReader:
     """Assembles received bytes into lines and validates them.
 
     ``feed(byte)`` returns True when a line ended; then ``status`` is one of
-    LINE_*, and on LINE_OK ``nf`` fields (the first after ``TC``) are
+    LINE_*, and on _LINE_OK ``nf`` fields (the first after ``TC``) are
     available through ``fs``/``fe`` (start/end offsets into ``buf``).
     Bytes before a ``$`` are ignored, so a reader resynchronises on the next
     frame after garbage.
     """
 
     def __init__(self):
-        self.buf = bytearray(MAX_LINE)
+        self.buf = bytearray(_MAX_LINE)
         self.n = 0
         self.active = False
         self.overflow = False
-        self.status = LINE_OK
-        self.fs = [0] * MAX_FIELDS
-        self.fe = [0] * MAX_FIELDS
+        self.status = _LINE_OK
+        self.fs = [0] * _MAX_FIELDS
+        self.fe = [0] * _MAX_FIELDS
         self.nf = 0
 
     def reset(self):
@@ -173,7 +173,7 @@ class LineReader:
             self.n = 0
             self.overflow = False
             if cut:  # an unfinished line was cut off by this new one: report it as bad
-                self.status = LINE_SYNTAX
+                self.status = _LINE_SYNTAX
                 return True
             return False
         if not self.active:
@@ -192,7 +192,7 @@ class LineReader:
             self.active = False
             self._check()
             return True
-        if self.n >= MAX_LINE:
+        if self.n >= _MAX_LINE:
             self.overflow = True
             return False
         self.buf[self.n] = c
@@ -203,9 +203,9 @@ class LineReader:
         b = self.buf
         n = self.n
         if self.overflow:
-            self.status = LINE_OVERFLOW
+            self.status = _LINE_OVERFLOW
             return
-        self.status = LINE_SYNTAX
+        self.status = _LINE_SYNTAX
         # body "TC,..." then "*XXXX"
         if n < 8 or b[0] != 84 or b[1] != 67 or b[2] != 44 or b[n - 5] != 42:
             return
@@ -220,7 +220,7 @@ class LineReader:
         s = 3
         for i in range(3, end + 1):
             if i == end or b[i] == 44:
-                if nf >= MAX_FIELDS:
+                if nf >= _MAX_FIELDS:
                     return
                 self.fs[nf] = s
                 self.fe[nf] = i
@@ -229,12 +229,12 @@ class LineReader:
             elif b[i] < 32 or b[i] > 126 or b[i] == 42 or b[i] == 36:
                 return
         if crc16_ccitt(b, 0, end) != crc:
-            self.status = LINE_CRC
+            self.status = _LINE_CRC
             return
         self.nf = nf
-        self.status = LINE_OK
+        self.status = _LINE_OK
 
-    # --- field access (valid after LINE_OK) ---------------------------------
+    # --- field access (valid after _LINE_OK) ---------------------------------
     def letter(self, k):
         """The single character of field k, or 0 if it is not one character."""
         s = self.fs[k]

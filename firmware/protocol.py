@@ -20,7 +20,13 @@ except ImportError:  # CPython
 from firmware import frame as fr
 from firmware.slots import UploadError, SLOT_NAMES
 
-PROTOCOL_VERSION = const(1)  # docs/protocol.md
+_PROTOCOL_VERSION = const(1)  # docs/protocol.md
+
+# firmware.frame's (tests/firmware/test_fw_consts.py checks the copies)
+_MAX_LINE = const(200)
+_LINE_OK = const(0)
+_LINE_CRC = const(2)
+_LINE_OVERFLOW = const(3)
 
 # error codes of E frames
 _E_CRC = const(1)
@@ -89,7 +95,7 @@ class StreamLink:
         a = self.app
         w = self.w
         w.begin(a.status, _H)
-        w.int(PROTOCOL_VERSION)
+        w.int(_PROTOCOL_VERSION)
         w.text(VERSION.encode())
         t = a.table
         if t is None:
@@ -159,7 +165,7 @@ class StreamLink:
             for c in detail:  # keep the frame parseable whatever the detail says
                 w.buf[w.n] = c if 32 <= c <= 126 and c not in (44, 42, 36) else 32
                 w.n += 1
-                if w.n > fr.MAX_LINE - 8:
+                if w.n > _MAX_LINE - 8:
                     break
         w.end()
 
@@ -192,13 +198,13 @@ class StreamLink:
 
     def _line(self, now):
         r = self.r
-        if r.status == fr.LINE_CRC:
+        if r.status == _LINE_CRC:
             self.error(_E_CRC)
             return
-        if r.status == fr.LINE_OVERFLOW:
+        if r.status == _LINE_OVERFLOW:
             self.error(_E_OVERFLOW)
             return
-        if r.status != fr.LINE_OK:
+        if r.status != _LINE_OK:
             self.error(_E_SYNTAX)
             return
         self.app.link_alive(now)

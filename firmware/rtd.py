@@ -21,9 +21,9 @@ try:
 except ImportError:  # CPython
     const = lambda x: x  # noqa: E731
 
-RATIO_ONE = const(10000000)  # R/R0 = 1 in the ratio unit
-T_UNDER = const(-999999)  # below -200 degC (shorted RTD or wiring fault)
-T_OVER = const(999999)  # above +850 degC (open RTD)
+_RATIO_ONE = const(10000000)  # R/R0 = 1 in the ratio unit
+_T_UNDER = const(-999999)  # below -200 degC (shorted RTD or wiring fault)
+_T_OVER = const(999999)  # above +850 degC (open RTD)
 _T0_MC = const(-200000)
 _LAST = const(105)  # index of the last node
 
@@ -84,13 +84,13 @@ _NODES, _CURV = _unpack()
 def temperature_mC(r):
     """Temperature in milli-degC of a Pt100 whose R/R0 is ``r`` * 1e-7.
 
-    Returns ``T_UNDER`` / ``T_OVER`` outside -200..+850 degC.
+    Returns -999999 / 999999 (``_T_UNDER`` / ``_T_OVER``) outside -200..+850 degC.
     """
     nodes = _NODES
     if r < nodes[0]:
-        return T_UNDER
+        return _T_UNDER
     if r > nodes[_LAST]:
-        return T_OVER
+        return _T_OVER
     lo = 0
     hi = _LAST
     while hi - lo > 1:  # nodes[lo] <= r <= nodes[hi]

@@ -21,6 +21,10 @@ COPIES = {
     ("evaluate", "_KIND_SCREW_REDUCED"): ("table", "KIND_SCREW_REDUCED"),
     ("evaluate", "_REF_LATCHED"): ("table", "REF_LATCHED"),
     ("app", "_KIND_SCREW_REDUCED"): ("table", "KIND_SCREW_REDUCED"),
+    ("protocol", "_MAX_LINE"): ("frame", "_MAX_LINE"),
+    ("protocol", "_LINE_OK"): ("frame", "_LINE_OK"),
+    ("protocol", "_LINE_CRC"): ("frame", "_LINE_CRC"),
+    ("protocol", "_LINE_OVERFLOW"): ("frame", "_LINE_OVERFLOW"),
 }
 
 

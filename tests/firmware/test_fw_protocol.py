@@ -53,7 +53,7 @@ def test_writer_reader_round_trip(v, dec, status):
     assert int(f[6], 16) == status
     # a device frame is also syntactically a valid line for the reader
     r = parse_one(line)
-    assert r.status == fr.LINE_OK
+    assert r.status == fr._LINE_OK
     assert r.int(3, -10 ** 9, 10 ** 9) == v  # reader fields start after "TC"
 
 
@@ -69,18 +69,18 @@ def test_fixed_formats_small_and_negative():
 
 def test_reader_rejects_bad_lines():
     good = cmd(b"TC,P,100")
-    assert parse_one(good).status == fr.LINE_OK
+    assert parse_one(good).status == fr._LINE_OK
     bad_crc = good.replace(b"100", b"101")
-    assert parse_one(bad_crc).status == fr.LINE_CRC
-    assert parse_one(b"$TC,P,100\r\n").status == fr.LINE_SYNTAX
-    assert parse_one(b"$XX,P,100*0000\r\n").status == fr.LINE_SYNTAX
-    assert parse_one(b"garbage\n").status == fr.LINE_SYNTAX
-    assert parse_one(b"$TC," + b"9" * 300 + b"*0000\n").status == fr.LINE_OVERFLOW
+    assert parse_one(bad_crc).status == fr._LINE_CRC
+    assert parse_one(b"$TC,P,100\r\n").status == fr._LINE_SYNTAX
+    assert parse_one(b"$XX,P,100*0000\r\n").status == fr._LINE_SYNTAX
+    assert parse_one(b"garbage\n").status == fr._LINE_SYNTAX
+    assert parse_one(b"$TC," + b"9" * 300 + b"*0000\n").status == fr._LINE_OVERFLOW
     # a new '$' cuts a line short: the stub is reported, the next line still parses
     r = fr.LineReader()
     ends = [(r.feed(c), r.status) for c in b"$TC,P,1" + good]
-    assert ends[7] == (True, fr.LINE_SYNTAX)
-    assert ends[-1] == (True, fr.LINE_OK)
+    assert ends[7] == (True, fr._LINE_SYNTAX)
+    assert ends[-1] == (True, fr._LINE_OK)
 
 
 def app_out(app, board, data):

@@ -60,9 +60,9 @@ def test_monotonic_and_out_of_range():
         t = rtd.temperature_mC(r)
         assert t >= prev
         prev = t
-    assert rtd.temperature_mC(rtd._NODES[0] - 1) == rtd.T_UNDER
-    assert rtd.temperature_mC(rtd._NODES[-1] + 1) == rtd.T_OVER
-    assert rtd.temperature_mC(0) == rtd.T_UNDER
+    assert rtd.temperature_mC(rtd._NODES[0] - 1) == rtd._T_UNDER
+    assert rtd.temperature_mC(rtd._NODES[-1] + 1) == rtd._T_OVER
+    assert rtd.temperature_mC(0) == rtd._T_UNDER
 
 
 def test_tables_match_relation():
