@@ -46,6 +46,7 @@ def run(args):
     check_output(args.json, "--json")
     if args.plot:
         check_output(args.plot, "--plot")
+        _check_plot_format(args.plot)
     try:
         if args.corr:
             doc = _run_corr(args)
@@ -57,6 +58,19 @@ def run(args):
         json.dump(doc, fh, indent=2, allow_nan=False)
         fh.write("\n")
     return 0
+
+
+def _check_plot_format(path):
+    import os
+
+    from matplotlib.backend_bases import FigureCanvasBase
+
+    from host.cli import UserError
+
+    ext = os.path.splitext(path)[1].lstrip(".").lower()
+    formats = FigureCanvasBase.get_supported_filetypes()
+    if ext and ext not in formats:
+        raise UserError("--plot %s: cannot draw a .%s file (formats: %s)" % (path, ext, ", ".join(sorted(formats))))
 
 
 def _run_corr(args):

@@ -447,3 +447,12 @@ def test_no_traceback_in_a_subprocess(tmp_path, binary):
     assert p.returncode == 2 and "Traceback" not in p.stderr
     assert p.stderr.strip().splitlines() == ["tcomp export: error: %s: not a text file (a binary file? expected a model "
                                              "document, tcomp-model/1 JSON)" % binary]
+
+
+def test_select_plot_in_an_unknown_format(capsys, tmp_path):
+    corr = tmp_path / "c.csv"
+    corr.write_text("a,b\n1,0.5\n0.5,1\n")
+    err = _fail(capsys, ["select", "--method", "maxtree", "--corr", str(corr), "--json", str(tmp_path / "s.json"),
+                         "--plot", str(tmp_path / "p.txt")])
+    assert "--plot %s: cannot draw a .txt file" % (tmp_path / "p.txt") in err and "png" in err
+    assert not (tmp_path / "s.json").exists()
