@@ -40,6 +40,10 @@ def _method_options(items, methods):
             raise UserError("--option %r: unknown method %r (known: %s)" % (item, method, ", ".join(METHODS)))
         if method == "mlr":
             raise UserError("--option %r: mlr has no settings" % item)
+        try:
+            v = json.loads(value)
+        except ValueError:
+            v = value.strip()
         if method not in SELECTORS:
             import inspect
 
@@ -49,11 +53,6 @@ def _method_options(items, methods):
             known = [k for k in params if k not in ("self", "fit_intercept")]
             if key not in known:
                 raise UserError("--option %r: %s has no setting %r (settings: %s)" % (item, method, key, ", ".join(known)))
-        try:
-            v = json.loads(value)
-        except ValueError:
-            v = value.strip()
-        if method not in SELECTORS:
             default = params[key].default
             numeric = isinstance(default, (int, float)) and not isinstance(default, bool)
             if numeric and (isinstance(v, bool) or not isinstance(v, (int, float))):
