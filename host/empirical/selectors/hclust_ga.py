@@ -123,7 +123,8 @@ def select_hclust_ga(arrays, context=None, **params):
     runs = (context or {}).get("runs") or ["run %d" % (i + 1) for i in range(len(arrays))]
     if len(arrays) < 2:
         raise SelectionError(
-            "hclust-ga needs runs to test robustness on: it fits on one run and predicts at least one other (published: two); got %d run" % len(arrays)
+            "hclust-ga needs runs to test robustness on: it fits on one run and predicts at least one other (published: two); got %d run "
+            "(with one long run, cut it into time windows: tcomp select --split 3)" % len(arrays)
         )
     tr = prm["train_run"] = number("hclust-ga", "train_run", prm["train_run"], 0, len(arrays) - 1, integer=True)
     for key in ("population", "generations", "max_clusters", "max_combinations"):
