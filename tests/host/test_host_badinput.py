@@ -456,3 +456,15 @@ def test_select_plot_in_an_unknown_format(capsys, tmp_path):
                          "--plot", str(tmp_path / "p.txt")])
     assert "--plot %s: cannot draw a .txt file" % (tmp_path / "p.txt") in err and "png" in err
     assert not (tmp_path / "s.json").exists()
+
+
+def test_select_hclust_ga_on_one_run_says_how_to_split(capsys, tmp_path):
+    err = _fail(capsys, ["select", "--method", "hclust-ga", RUN, "--json", str(tmp_path / "s.json")])
+    assert "got 1 run" in err and "--split 3" in err
+
+
+def test_compare_plots_onto_a_file(capsys, tmp_path):
+    f = tmp_path / "afile"
+    f.write_text("x")
+    err = _fail(capsys, ["compare", RUN, "--split-h", "3", "--json", str(tmp_path / "c.json"), "--plots", str(f)])
+    assert "--plots %s: exists and is not a folder" % f in err
