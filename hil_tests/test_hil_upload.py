@@ -62,13 +62,13 @@ def test_power_cut_during_upload_leaves_old_or_new_table(make_rig, demo_run):
                     rig.kill()
                     killed = True
                     break
-                a = rig.wait_real(lambda f: f.kind in ("A", "E"), 5.0, k)
+                a = rig.wait_real(lambda f: f.kind in ("A", "E"), 15.0, k)
                 assert a.kind == "A", a.raw
         if killed:
             k = len(rig.frames)
             rig.start()
             rig.run(300)
-            h2 = rig.wait_real(lambda f: f.kind == "H", 5.0, k)  # the boot hello
+            h2 = rig.wait_real(lambda f: f.kind == "H", 15.0, k)  # the boot hello
             boot_hellos += 1
         else:
             h2 = rig.request("V", kinds=("H",))
