@@ -62,6 +62,12 @@ class _Base:
         missing = [s for s in self.sensors if s not in temps.names]
         if missing:
             raise EmpiricalDataError("%s: the model needs sensor(s) %s, not in temperatures.csv" % (run.name, ", ".join(missing)))
+        times = np.atleast_1d(np.asarray(times, dtype=float))
+        if times.size and (times.min() < temps.time_s[0] or times.max() > temps.time_s[-1]):
+            # np.interp would hold the end values: a prediction from temperatures nobody measured
+            bad = times[(times < temps.time_s[0]) | (times > temps.time_s[-1])][0]
+            raise EmpiricalDataError("%s: errors.csv time %g s is outside the temperature log %g..%g s (no extrapolation)"
+                                     % (run.name, bad, temps.time_s[0], temps.time_s[-1]))
         T = temps.at(times, self.sensors)
         if self.reference == "run_start":
             ref = np.array([temps.column(s)[0] for s in self.sensors])

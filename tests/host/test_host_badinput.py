@@ -468,3 +468,15 @@ def test_compare_plots_onto_a_file(capsys, tmp_path):
     f.write_text("x")
     err = _fail(capsys, ["compare", RUN, "--split-h", "3", "--json", str(tmp_path / "c.json"), "--plots", str(f)])
     assert "--plots %s: exists and is not a folder" % f in err
+
+
+def test_predict_outside_the_temperature_log(capsys, tmp_path, model):
+    import shutil
+
+    run = tmp_path / "short"
+    shutil.copytree(RUN, run)
+    with open(os.path.join(RUN, "temperatures.csv")) as fh:
+        lines = fh.read().splitlines()[:5]  # 0..30 s of a 5 h test
+    (run / "temperatures.csv").write_text("\n".join(lines) + "\n")
+    err = _fail(capsys, ["predict", model, str(run), "--out", str(tmp_path / "p.csv")])
+    assert "outside the temperature log 0..30 s (no extrapolation)" in err
