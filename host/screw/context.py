@@ -86,7 +86,13 @@ class RunContext:
         self.nut_sensor = next((s for s in roles["nut"] if s in names), None)
 
     def sensor_at_rows(self, name):
-        return np.interp(self.row_time_s, self.run.temperatures.time_s, self.run.temperatures.column(name))
+        tt = self.run.temperatures
+        late = self.row_time_s[(self.row_time_s < tt.time_s[0]) | (self.row_time_s > tt.time_s[-1])]
+        if late.size:
+            # np.interp would hold the end value: a term driven by a temperature nobody measured
+            raise ValueError("%s: errors.csv time %g s is outside the temperature log %g..%g s (sensor %s; no extrapolation)"
+                             % (self.run_name, late[0], tt.time_s[0], tt.time_s[-1], name))
+        return np.interp(self.row_time_s, tt.time_s, tt.column(name))
 
     def sensor_rise_at_rows(self, name):
         """Sensor temperature at the error rows minus its first reading."""

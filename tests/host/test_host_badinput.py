@@ -470,13 +470,26 @@ def test_compare_plots_onto_a_file(capsys, tmp_path):
     assert "--plots %s: exists and is not a folder" % f in err
 
 
-def test_predict_outside_the_temperature_log(capsys, tmp_path, model):
+@pytest.fixture
+def short_log(tmp_path):
+    """The demo run with its temperature log cut to the first 30 s of a 5 h test."""
     import shutil
 
     run = tmp_path / "short"
     shutil.copytree(RUN, run)
     with open(os.path.join(RUN, "temperatures.csv")) as fh:
-        lines = fh.read().splitlines()[:5]  # 0..30 s of a 5 h test
+        lines = fh.read().splitlines()[:5]
     (run / "temperatures.csv").write_text("\n".join(lines) + "\n")
-    err = _fail(capsys, ["predict", model, str(run), "--out", str(tmp_path / "p.csv")])
+    return str(run)
+
+
+def test_predict_outside_the_temperature_log(capsys, tmp_path, model, screw_model, short_log):
+    err = _fail(capsys, ["predict", model, short_log, "--out", str(tmp_path / "p.csv")])
     assert "outside the temperature log 0..30 s (no extrapolation)" in err
+    err = _fail(capsys, ["predict", screw_model, short_log, "--out", str(tmp_path / "p.csv")])
+    assert "outside the temperature log 0..30 s (sensor T2; no extrapolation)" in err
+
+
+def test_fit_screw_outside_the_temperature_log(capsys, tmp_path, short_log):
+    err = _fail(capsys, ["fit", "--model", "screw", short_log, "--out", str(tmp_path / "m.json")])
+    assert short_log in err and "outside the temperature log 0..30 s" in err
