@@ -15,7 +15,7 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from host.cli import _verbs, main as tcomp  # noqa: E402
+from host.cli import main as tcomp  # noqa: E402
 
 
 def step(title, argv):
@@ -27,39 +27,68 @@ def step(title, argv):
         raise SystemExit("demo step failed: %s" % title)
 
 
+def _rmse(a):
+    import numpy as np
+
+    a = np.asarray(a, dtype=float)
+    a = a[np.isfinite(a)]
+    return float(np.sqrt(np.mean(a ** 2))) if a.size else float("nan")
+
+
+def summarise(run_dir, pred_csv, hil_json, certified_um):
+    """Measured error vs host float model vs firmware integer offsets, on one run."""
+    import csv
+    import json
+
+    import numpy as np
+
+    from host.runs import load_run
+
+    run = load_run(run_dir)
+    with open(pred_csv) as fh:
+        host = np.array([float(r["predicted_um"]) for r in csv.DictReader(fh)])
+    with open(hil_json) as fh:
+        answers = json.load(fh)["answers"]
+    fw = np.array([a["offset_um"] for a in answers], dtype=float)
+    measured = run.errors.error_um
+    print("\n== result on %s (%d laser points; the firmware never saw the errors)" % (os.path.basename(run_dir), measured.size))
+    print("   measured thermal+geometric error, RMS              %7.3f um" % _rmse(measured))
+    print("   residual after host model (float)  RMS             %7.3f um" % _rmse(measured - host))
+    print("   residual after firmware offsets    RMS             %7.3f um" % _rmse(measured - fw))
+    print("   firmware vs host model: max |diff| %.4f um, RMS %.4f um" % (np.nanmax(np.abs(fw - host)), _rmse(fw - host)))
+    print("   (exporter certificate %.4f um; the rest is RTD quantisation and the"
+          " firmware's sampled temperatures vs the host's interpolated ones)" % certified_um)
+
+
 def main():
+    import json
+
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--out", default="out/demo")
     args = ap.parse_args()
     out = args.out
     os.makedirs(out, exist_ok=True)
-    verbs = _verbs()
-    demo_runs = sorted(d for d in glob.glob(os.path.join(ROOT, "data", "demo", "*")) if os.path.isdir(d))
+    demo = os.path.join(ROOT, "data", "demo")
+    demo_runs = sorted(d for d in glob.glob(os.path.join(demo, "*")) if os.path.isdir(d))
     real = os.path.join(ROOT, "data", "fl_thermal")
+    train = os.path.join(demo, "v8000_r210_490")
+    test = os.path.join(demo, "v15000_r210_490")
+    o = lambda name: os.path.join(out, name)  # noqa: E731
     step("check the bundled runs", ["validate"] + demo_runs + [real])
-    missing = [v for v in ("simulate", "fit", "compare", "export", "hil") if v not in verbs]
-    if missing:
-        print("\n(verbs not built yet, skipped: %s)" % ", ".join(missing))
-    if "simulate" in verbs:
-        step("digital twin: one more run with a hidden effect", ["simulate", "--out", os.path.join(out, "twin"), "--seed", "7", "--effects", "bearing_heat"])
-    if not demo_runs:
-        return 0
-    train = demo_runs[0]
-    if "compare" in verbs:
-        step("empirical models and sensor selectors, fitted on one run, predicting the others",
-             ["compare"] + demo_runs + ["--json", os.path.join(out, "compare.json")])
-    step("fit a polynomial-plus-slope MLR model", ["fit", "--model", "mlr", train, "--out", os.path.join(out, "mlr.json")])
-    step("fit the screw heat-transfer model", ["fit", "--model", "screw", train, "--out", os.path.join(out, "screw.json")])
-    for other in demo_runs[1:2]:
-        step("predict another run with the screw model", ["predict", os.path.join(out, "screw.json"), other, "--out", os.path.join(out, "screw_pred.csv")])
-    if "export" in verbs:
-        step("export the MLR model to an integer table", ["export", os.path.join(out, "mlr.json"), "--out", os.path.join(out, "mlr.bin"),
-                                                          "--report", os.path.join(out, "mlr_report.json")])
-        step("export the screw model to an integer table", ["export", os.path.join(out, "screw.json"), "--out", os.path.join(out, "screw.bin"),
-                                                            "--report", os.path.join(out, "screw_report.json")])
-    if "hil" in verbs:
-        step("run the real firmware (MicroPython) on simulated Pt100 chips", ["hil", "--run", demo_runs[1], "--table", os.path.join(out, "screw.bin"),
-                                                                               "--interpreter", "micropython", "--json", os.path.join(out, "hil.json")])
+    step("digital twin: a new run with a hidden bearing-heat effect", ["simulate", "--out", o("twin"), "--seed", "7", "--effects", "bearing_heat"])
+    step("empirical models and sensor selectors: fit on one moving state, predict the others",
+         ["compare"] + demo_runs + ["--json", o("compare.json")])
+    step("fit the screw heat-transfer model on one moving state (8000 mm/min over 210-490 mm)",
+         ["fit", "--model", "screw", train, "--out", o("screw.json"), "--json", o("screw_fit.json")])
+    step("predict an unseen moving state (15000 mm/min) with the host model", ["predict", o("screw.json"), test, "--out", o("screw_pred.csv")])
+    step("which physical effect is the base screw model missing? (held out, leave-one-run-out)",
+         ["discrepancy", os.path.join(demo, "v6500_r210_490"), test, os.path.join(demo, "mixed"), "--json", o("discrepancy.json"), "--report", o("discrepancy")])
+    step("export the screw model to a certified integer table", ["export", o("screw.json"), "--out", o("screw.bin"), "--report", o("screw_report.json")])
+    step("run the real firmware (MicroPython unix port) on simulated MAX31865/ADS122C04 chips, read over a pty",
+         ["hil", "--run", test, "--table", o("screw.bin"), "--interpreter", "micropython", "--json", o("hil.json"), "--print-every", "120"])
+    with open(o("screw_report.json")) as fh:
+        certified = json.load(fh)["max_error_um"]
+    summarise(test, o("screw_pred.csv"), o("hil.json"), certified)
     print("\ndemo outputs in %s" % out)
     return 0
 
