@@ -56,6 +56,8 @@ def summarise(run_dir, pred_csv, hil_json, certified_um):
     print("   residual after host model (float)  RMS             %7.3f um" % _rmse(measured - host))
     print("   residual after firmware offsets    RMS             %7.3f um" % _rmse(measured - fw))
     print("   firmware vs host model: max |diff| %.4f um, RMS %.4f um" % (np.nanmax(np.abs(fw - host)), _rmse(fw - host)))
+    clamped = sum(1 for a in answers if int(a["status"], 16) & (1 << 16))
+    print("   answers with an input clamped to the table's envelope (status bit 16): %d of %d" % (clamped, len(answers)))
     print("   (exporter certificate %.4f um; the rest is RTD quantisation and the"
           " firmware's sampled temperatures vs the host's interpolated ones)" % certified_um)
 
@@ -79,7 +81,9 @@ def main():
     step("empirical models and sensor selectors: fit on one moving state, predict the others",
          ["compare"] + demo_runs + ["--json", o("compare.json")])
     step("fit the screw heat-transfer model on one moving state (8000 mm/min over 210-490 mm)",
-         ["fit", "--model", "screw", train, "--out", o("screw.json"), "--json", o("screw_fit.json")])
+         ["fit", "--model", "screw", train, "--out", o("screw.json"), "--json", o("screw_fit.json"),
+          # the exported envelope must cover every feed the machine will run, not only the training feed
+          "--option", "feed_max_mm_min=20000"])
     step("predict an unseen moving state (15000 mm/min) with the host model", ["predict", o("screw.json"), test, "--out", o("screw_pred.csv")])
     step("which physical effect is the base screw model missing? (held out, leave-one-run-out)",
          ["discrepancy", os.path.join(demo, "v6500_r210_490"), test, os.path.join(demo, "mixed"), "--json", o("discrepancy.json"), "--report", o("discrepancy")])

@@ -34,6 +34,9 @@ def _resolve(name):
     return ALIASES.get(name, name)
 
 
+# Margin (K) added on both sides of the training range of the base sensor in the exported envelope.
+BASE_ENVELOPE_MARGIN_K = 5.0
+
 class ScrewModel:
     """Segment heat-transfer model of a ball screw, identified from runs.
 
@@ -317,11 +320,19 @@ class ScrewModel:
                           "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window}
         feeds = np.concatenate([r.motion.feed_mm_min for r in runs])
         P_all = np.concatenate([P] + [np.r_[r.motion.from_mm, r.motion.to_mm] for r in runs])
-        self.envelope_: dict = {"position_mm": [float(P_all.min()), float(P_all.max())],
+        strokes = [float(r.meta["stroke_mm"]) for r in runs if isinstance(r.meta.get("stroke_mm"), (int, float))]
+        p_lo, p_hi = float(P_all.min()), float(P_all.max())
+        if strokes:  # the firmware is asked for offsets anywhere on the stroke, not only where the laser measured
+            p_lo, p_hi = min(p_lo, 0.0), max(p_hi, min(strokes))
+        self.envelope_: dict = {"position_mm": [p_lo, p_hi],
                           "feed_mm_min": [float(feeds.min()), float(feeds.max())]}
         if self.base_sensor_ is not None:
             tb = np.concatenate([r.temperatures.column(self.base_sensor_) for r in runs])
-            self.envelope_["temperature_C"] = {self.base_sensor_: [float(tb.min()), float(tb.max())]}
+            # E_e is linear in the base temperature (alpha * dT * P), so a margin beyond the training range is
+            # physics, not extrapolation of a regression: BASE_ENVELOPE_MARGIN_K covers a shop's daily swing.
+            self.envelope_["temperature_C"] = {self.base_sensor_: [float(tb.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                   float(tb.max()) + BASE_ENVELOPE_MARGIN_K]}
+            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
         from host.screw.reduced import build_reduced
         self.reduced_ = build_reduced(self, self.reduced_segments, self.reduced_dt_s,
                                       feed_max_mm_min=self.feed_max_mm_min or 1.5 * float(feeds.max()))
