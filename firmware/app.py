@@ -109,6 +109,7 @@ class App:
         self.table = None
         self.slot = None
         self.map = []
+        self.unlatched = False
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
         t, slot = self.store.load()
@@ -146,6 +147,9 @@ class App:
         self.slot = slot
         self.ev = ev
         self.screw = table.kind_code == _KIND_SCREW_REDUCED
+        # A model fitted on rises from the run start takes its reference temperatures at the
+        # first cycle in which every sensor it needs reads good (a cold start; docs/firmware.md).
+        self.unlatched = table.ref_mode == 1
         self.step_ms = 0
         self._span()
 
@@ -261,6 +265,9 @@ class App:
                     s |= _HELD
             else:
                 self.fault_active = False
+                if self.unlatched:
+                    ev.latch_references()
+                    self.unlatched = False
             ev.update()
             if self.screw:
                 dtm = t.dt_ms
