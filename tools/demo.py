@@ -58,8 +58,9 @@ def summarise(run_dir, pred_csv, hil_json, certified_um):
     print("   firmware vs host model: max |diff| %.4f um, RMS %.4f um" % (np.nanmax(np.abs(fw - host)), _rmse(fw - host)))
     clamped = sum(1 for a in answers if int(a["status"], 16) & (1 << 16))
     print("   answers with an input clamped to the table's envelope (status bit 16): %d of %d" % (clamped, len(answers)))
-    print("   (exporter certificate %.4f um; the rest is RTD quantisation and the"
-          " firmware's sampled temperatures vs the host's interpolated ones)" % certified_um)
+    print("   (the integer arithmetic accounts for at most %.4f um, the exporter's certificate; the rest comes"
+          " from what the firmware measures and is told: RTD quantisation of the simulated chips and the"
+          " feed/range motion reports instead of the exact nut path)" % certified_um)
 
 
 def main():
