@@ -15,6 +15,8 @@ def add_arguments(p):
 
 
 def run(args):
+    import sys
+
     from host.cli import UserError
     from host.discrepancy import workflow
     from host.discrepancy.report import write_report
@@ -43,6 +45,12 @@ def run(args):
     min_gain = workflow.MIN_GAIN if args.min_gain is None else args.min_gain
     if not 0 < alpha < 1:
         raise UserError("--alpha must be between 0 and 1 (found %g)" % alpha)
+    if not 0 <= min_gain < 1:
+        raise UserError("--min-gain must be in [0, 1) (found %g)" % min_gain)
+    if args.max_effects is not None and args.max_effects < 1:
+        raise UserError("--max-effects must be at least 1 (found %d)" % args.max_effects)
+    if args.jobs is not None and args.jobs < 1:
+        raise UserError("--jobs must be at least 1 (found %d)" % args.jobs)
     for r in runs:
         if r.screw is None:
             raise UserError("%s: meta.json has no 'screw' block; the screw model needs the screw geometry" % (r.path or r.name))
@@ -61,5 +69,7 @@ def run(args):
     print("named effects: %s" % (", ".join(result.effects) or "none (no catalog effect explains the gap)"))
     print("held-out RMSE %.3f -> %.3f um; report in %s, JSON in %s" % (result.before.rmse(), result.after.rmse(), args.report, args.json))
     if js.get("model_error"):
-        print("warning: final model not written: %s" % js["model_error"])
+        # The findings (JSON, report) stand; the corrected model the user asked for does not.
+        print("tcomp discrepancy: error: final model not written: %s" % js["model_error"], file=sys.stderr)
+        return 1
     return 0

@@ -74,6 +74,10 @@ def run(args):
         raise UserError("%s: %s" % (args.table, exc))
     except TableError as exc:
         raise UserError("%s: not a valid table: %s" % (args.table, exc))
+    if not args.warmup_s >= 0:
+        raise UserError("--warmup-s must be >= 0 (found %g)" % args.warmup_s)
+    if not args.noise_uohm >= 0:
+        raise UserError("--noise-uohm must be >= 0 (found %g)" % args.noise_uohm)
     sensors = list(table.sensors)
     missing = [s for s in sensors if s not in run_.temperatures.names]
     if missing:
@@ -84,6 +88,14 @@ def run(args):
             with open(args.config, encoding="utf-8") as f:
                 cfg = json.load(f)
         except (OSError, json.JSONDecodeError) as exc:
+            raise UserError("%s: %s" % (args.config, exc))
+        # The firmware's own boot-time validator, run here so a bad config is named before the rig starts.
+        from firmware.config import load_config
+        if not isinstance(cfg, dict):
+            raise UserError("%s: a board config is a JSON object (firmware/board.py), found %s" % (args.config, type(cfg).__name__))
+        try:
+            load_config(cfg)
+        except (ValueError, TypeError, AttributeError) as exc:
             raise UserError("%s: %s" % (args.config, exc))
     else:
         cfg = rig_config(sensors, n_ads=1 if len(sensors) > 1 else 0)
