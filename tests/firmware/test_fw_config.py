@@ -3,6 +3,7 @@ import copy
 
 import pytest
 
+from firmware import bootcfg
 from firmware.config import load_config
 from firmware.boards import rp2040, linux
 
@@ -56,6 +57,10 @@ def test_example_boards_are_valid():
 def test_errors_name_the_key(path, value, match):
     with pytest.raises(ValueError, match=match):
         load_config(with_(path, value))
+    # the board's terse check refuses the same config and names the same key
+    key = match.split(":")[0]
+    with pytest.raises(ValueError, match=r"^config (\S*\.)?" + key):
+        bootcfg.load_config(with_(path, value))
 
 
 def test_missing_and_duplicate():
@@ -63,7 +68,34 @@ def test_missing_and_duplicate():
     del d["channels"][0]["bus"]
     with pytest.raises(ValueError, match=r"channels\[0\].bus: missing"):
         load_config(d)
+    with pytest.raises(ValueError, match=r"^config channels\[0\].bus: 'missing'"):
+        bootcfg.load_config(d)
     d = copy.deepcopy(BASE)
     d["channels"].append(dict(d["channels"][0]))
     with pytest.raises(ValueError, match=r"channels\[1\].name: 'T1' used twice"):
         load_config(d)
+    with pytest.raises(ValueError, match=r"^config channels\[1\].name: 'T1'"):
+        bootcfg.load_config(d)
+
+
+@pytest.mark.parametrize("cfg", [BASE, rp2040.CONFIG, linux.CONFIG,
+                                 with_(("channels", 0, "wires"), 2), with_(("serial",), {"mode": "modbus", "address": 7}),
+                                 with_(("plausible_mC",), [-1000, 1000]), with_(("reference_um",), -5000)])
+def test_board_check_gives_the_same_settings(cfg):
+    full, terse = load_config(cfg), bootcfg.load_config(cfg)
+    chans = [vars(c) for c in full.channels], [vars(c) for c in terse.channels]
+    assert chans[0] == chans[1]
+    assert {k: v for k, v in vars(full).items() if k != "channels"} == \
+        {k: v for k, v in vars(terse).items() if k != "channels"}
+
+
+@pytest.mark.parametrize("bad", [None, 3, "x", [], {"channels": [3]}, {"channels": [{"name": 1}]},
+                                 {"channels": [{"name": "T1", "driver": "max31865", "bus": "s", "wires": None}]},
+                                 {"channels": BASE["channels"], "serial": 5},
+                                 {"channels": BASE["channels"], "plausible_mC": ["a", 3]},
+                                 {"channels": BASE["channels"], "table_dir": 7}])
+def test_board_check_refuses_garbage_with_a_value_error(bad):
+    # a corrupt config must stop the boot with a named ValueError, never another exception
+    with pytest.raises(ValueError, match=r"^config "):
+        bootcfg.load_config(bad)
+
