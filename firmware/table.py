@@ -67,48 +67,20 @@ class Table:
     (fo, Lt, nt, S0, fS, b, shb, fb, ...).
     """
 
-    def __init__(self):
-        self.version = 0
-        self.kind_code = 0
-        self.kind = ""
-        self.n_sensors = 0
-        self.unit_code = 0
-        self.ref_mode = 0
-        self.provenance = b""
-        self.axis = ""
-        self.crc = 0
-        self.sensors = []
-        self.env_lo = []
-        self.env_hi = []
-        self.ref = []
-
-
-class _Words:
-    """Sequential reader of the payload's int32 words (parse time only)."""
-
-    def __init__(self, buf, off, count):
-        self.buf = buf
-        self.off = off
-        self.end = off + 4 * count
-
-    def take(self, name):
-        if self.off + 4 > self.end:
-            raise TableError(REASON_LENGTH, "payload too short at field " + name)
-        v = struct.unpack_from("<i", self.buf, self.off)[0]
-        self.off += 4
-        return v
-
-    def take_list(self, name, n):
-        out = []
-        for i in range(n):
-            out.append(self.take("%s[%d]" % (name, i)))
-        return out
-
-    def take_range(self, name, lo, hi):
-        v = self.take(name)
-        if v < lo or v > hi:
-            raise TableError(REASON_FIELD, "%s=%d outside %d..%d" % (name, v, lo, hi))
-        return v
+    # set by parse_table (annotations are for the type checker only, they cost no flash)
+    version: int
+    kind_code: int
+    kind: str
+    n_sensors: int
+    unit_code: int
+    ref_mode: int
+    provenance: bytes
+    axis: str
+    crc: int
+    sensors: list
+    env_lo: list
+    env_hi: list
+    ref: list
 
 
 def parse_table(buf, expected_sensors=None):
@@ -122,18 +94,16 @@ def parse_table(buf, expected_sensors=None):
     if n < _HEADER_SIZE + 4:
         raise TableError(REASON_TRUNCATED, "%d bytes, header needs %d" % (n, _HEADER_SIZE + 4))
     if bytes(buf[0:4]) != MAGIC:
-        raise TableError(REASON_MAGIC, "expected %r" % MAGIC)
+        raise TableError(REASON_MAGIC)
     version = buf[4]
     if version != _VERSION:
-        raise TableError(REASON_VERSION, "version %d, this firmware reads %d" % (version, _VERSION))
+        raise TableError(REASON_VERSION, "%d" % version)
     kind = buf[5]
     if kind not in KINDS:
-        raise TableError(REASON_KIND, "kind code %d" % kind)
+        raise TableError(REASON_KIND, "%d" % kind)
     total = struct.unpack_from("<I", buf, 8)[0]
-    if total > n:
-        raise TableError(REASON_TRUNCATED, "%d bytes, header declares %d" % (n, total))
     if total != n:
-        raise TableError(REASON_LENGTH, "%d bytes, header declares %d" % (n, total))
+        raise TableError(REASON_TRUNCATED if total > n else REASON_LENGTH, "%d bytes, header declares %d" % (n, total))
     stored = struct.unpack_from("<I", buf, n - 4)[0]
     if crc32(memoryview(buf)[0:n - 4]) != stored:
         raise TableError(REASON_CRC, "stored 0x%08x" % stored)
@@ -141,21 +111,18 @@ def parse_table(buf, expected_sensors=None):
     # guard against an exporter/firmware mismatch rather than corruption.
     ns = buf[6]
     if ns > _MAX_SENSORS:
-        raise TableError(REASON_SENSORS, "%d sensors, at most %d" % (ns, _MAX_SENSORS))
+        raise TableError(REASON_SENSORS, "%d > %d" % (ns, _MAX_SENSORS))
     if expected_sensors is not None and ns != expected_sensors:
         raise TableError(REASON_SENSORS, "table has %d sensors, board has %d" % (ns, expected_sensors))
     if buf[7] != _UNIT_CODE:
-        raise TableError(REASON_UNIT, "unit code %d" % buf[7])
+        raise TableError(REASON_UNIT, "%d" % buf[7])
     nwords = struct.unpack_from("<I", buf, 52)[0]
-    if buf[56] > 1:
-        raise TableError(REASON_FIELD, "reference mode %d" % buf[56])
-    for i in range(57, 64):
-        if buf[i] != 0:
-            raise TableError(REASON_FIELD, "reserved byte %d is not zero" % i)
+    for i in range(56, 64):
+        if buf[i] > (i == 56):  # the reference mode (0 or 1), then reserved zeros
+            raise TableError(REASON_FIELD, "header byte %d" % i)
     payload = _HEADER_SIZE + ns * (_NAME_SIZE + 12)
     if payload + 4 * nwords + 4 != n:
-        raise TableError(REASON_LENGTH, "%d sensors and %d words need %d bytes, table has %d"
-                         % (ns, nwords, payload + 4 * nwords + 4, n))
+        raise TableError(REASON_LENGTH, "%d sensors, %d words" % (ns, nwords))
     t = Table()
     t.version = version
     t.kind_code = kind
@@ -166,24 +133,26 @@ def parse_table(buf, expected_sensors=None):
     t.provenance = bytes(buf[12:44])
     t.axis = _name(buf, 44, 8)
     t.crc = stored
+    t.sensors = []
+    t.env_lo = []
+    t.env_hi = []
+    t.ref = []
     for i in range(ns):
         t.sensors.append(_name(buf, _HEADER_SIZE + i * _NAME_SIZE, _NAME_SIZE))
-    off = _HEADER_SIZE + ns * _NAME_SIZE
-    for i in range(ns):
-        lo, hi, ref = struct.unpack_from("<iii", buf, off + 12 * i)
+        lo, hi, ref = struct.unpack_from("<iii", buf, _HEADER_SIZE + ns * _NAME_SIZE + 12 * i)
         if lo > hi:
             raise TableError(REASON_FIELD, "sensor %s envelope %d > %d" % (t.sensors[i], lo, hi))
         t.env_lo.append(lo)
         t.env_hi.append(hi)
         t.ref.append(ref)
-    w = _Words(buf, payload, nwords)
-    _common(t, w)
+    w = [payload, payload + 4 * nwords]  # read offset, end
+    _fields(t, buf, w, _COMMON)
     if kind != _KIND_LINEAR_DIRECT:
-        _position(t, w)
+        _fields(t, buf, w, _POSITION)
     if kind == _KIND_SCREW_REDUCED:
-        _screw(t, w)
-    if w.off != w.end:
-        raise TableError(REASON_LENGTH, "%d unread payload words" % ((w.end - w.off) // 4))
+        _fields(t, buf, w, _SCREW)
+    if w[0] != w[1]:
+        raise TableError(REASON_LENGTH, "%d unread payload words" % ((w[1] - w[0]) // 4))
     return t
 
 
@@ -194,91 +163,73 @@ def _name(buf, off, size):
         end = size
     if end == 0:
         raise TableError(REASON_FIELD, "empty name at byte %d" % off)
-    for c in raw[end:]:
-        if c != 0:
-            raise TableError(REASON_FIELD, "name at byte %d not NUL-padded" % off)
+    if raw[end:] != bytes(size - end):
+        raise TableError(REASON_FIELD, "name at byte %d not NUL-padded" % off)
     return raw[:end].decode()
 
 
 _SH = const(62)  # shifts beyond this are exporter bugs; a 31-bit port could not use them
 _SCALE = const(1000)  # fraction bits of a coefficient (informational, not used by the evaluation)
 
-
-def _common(t, w):
-    t.pos_lo = w.take("pos_lo")
-    t.pos_hi = w.take("pos_hi")
-    t.pos_ref = w.take("pos_ref")
-    if t.pos_lo > t.pos_hi or not t.pos_lo <= t.pos_ref <= t.pos_hi:
-        raise TableError(REASON_FIELD, "position envelope %d..%d, reference %d" % (t.pos_lo, t.pos_hi, t.pos_ref))
-    t.fo = w.take_range("fo", 0, 30)
-    t.Lt = w.take_range("Lt", 1, 29)
-    t.nt = w.take_range("nt", 1, 4)
-    t.S0 = w.take("S0")
-    t.fS = w.take_range("fS", -_SCALE, _SCALE)
-    t.b = []
-    t.shb = []
-    t.fb = []
-    for i in range(t.n_sensors):
-        t.b.append(w.take("b[%d]" % i))
-        t.shb.append(w.take_range("shb[%d]" % i, -_SH, _SH))
-        t.fb.append(w.take_range("fb[%d]" % i, -_SCALE, _SCALE))
-    t.rL = w.take("rL")
+# The payload's fields in order (docs/table-format.md), as data rather than one
+# statement per field (a third of the module's flash). A word is "name",
+# "name:r" (range-checked, r indexes _RANGE_CODES) or "name=n" (a list, n
+# indexes _COUNT_CODES); "|" runs a consistency check on what was read so far;
+# "@" is the per-sensor triple b[i] shb[i] fb[i].
+_RANGE_CODES = "fLn4scdMtFTh"
+_LO = (0, 1, 1, 1, -_SH, -_SCALE, 0, 1, 1, 0, 0, 0)
+_HI = (30, 29, 6, 4, _SH, _SCALE, _MAX_DEGREE, _MAX_SEGMENTS, 3600000, 1 << 20, (1 << 30) - 1, _SH)
+_COUNT_CODES = "DdEQm"  # degree + 1, degree, M + 1, M * M, M
+_COMMON = "pos_lo pos_hi pos_ref | fo:f Lt:L nt:4 S0 fS:c @ rL"
+_POSITION = "Lw:L nw:n shw:s KS shK:s fK:f rK rT degree:d Lg:L ng:n G=D fG=D shg=d rO"
+_SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:f C=Q umax:T Lu:L nu:4 "
+          "B=m shB=m rS=m G2=m shG2=m H shH:s fh:c Lx:L nx:n shX:s KC Lc:L nc:n shC:s")
 
 
-def _position(t, w):
-    t.Lw = w.take_range("Lw", 1, 29)
-    t.nw = w.take_range("nw", 1, 6)
-    t.shw = w.take_range("shw", -_SH, _SH)
-    t.KS = w.take("KS")
-    t.shK = w.take_range("shK", -_SH, _SH)
-    t.fK = w.take_range("fK", 0, 30)
-    t.rK = w.take("rK")
-    t.rT = w.take("rT")
-    t.degree = w.take_range("degree", 0, _MAX_DEGREE)
-    t.Lg = w.take_range("Lg", 1, 29)
-    t.ng = w.take_range("ng", 1, 6)
-    t.G = w.take_list("G", t.degree + 1)
-    t.fG = w.take_list("fG", t.degree + 1)
-    t.shg = w.take_list("shg", t.degree)
-    t.rO = w.take("rO")
+def _take(buf, w, name, r=-1):
+    if w[0] + 4 > w[1]:
+        raise TableError(REASON_LENGTH, "payload too short at field " + name)
+    v = struct.unpack_from("<i", buf, w[0])[0]
+    w[0] += 4
+    if r >= 0 and not _LO[r] <= v <= _HI[r]:
+        raise TableError(REASON_FIELD, "%s=%d outside %d..%d" % (name, v, _LO[r], _HI[r]))
+    return v
 
 
-def _screw(t, w):
-    m = t.M = w.take_range("M", 1, _MAX_SEGMENTS)
-    t.dt_ms = w.take_range("dt_ms", 1, 3600000)
-    t.fixed_end = w.take("fixed_end")
-    t.fmax = w.take_range("fmax", 0, 1 << 20)
-    t.edges = w.take_list("edges", m + 1)
+def _fields(t, buf, w, spec):
+    for f in spec.split():
+        if f == "|":
+            _check(t)
+        elif f == "@":
+            t.b = []
+            t.shb = []
+            t.fb = []
+            for i in range(t.n_sensors):
+                t.b.append(_take(buf, w, "b[%d]" % i))
+                t.shb.append(_take(buf, w, "shb[%d]" % i, 4))
+                t.fb.append(_take(buf, w, "fb[%d]" % i, 5))
+        elif f[-2:-1] == "=":
+            g = getattr(t, "degree", 0)
+            m = getattr(t, "M", 0)
+            name = f[:-2]
+            setattr(t, name, [_take(buf, w, "%s[%d]" % (name, i))
+                              for i in range((g + 1, g, m + 1, m * m, m)[_COUNT_CODES.index(f[-1])])])
+        elif f[-2:-1] == ":":
+            setattr(t, f[:-2], _take(buf, w, f[:-2], _RANGE_CODES.index(f[-1])))
+        else:
+            setattr(t, f, _take(buf, w, f))
+
+
+def _check(t):
+    if not hasattr(t, "M"):
+        if t.pos_lo > t.pos_hi or not t.pos_lo <= t.pos_ref <= t.pos_hi:
+            raise TableError(REASON_FIELD, "position envelope %d..%d, reference %d" % (t.pos_lo, t.pos_hi, t.pos_ref))
+        return
     if t.edges[0] != 0:
         raise TableError(REASON_FIELD, "edges[0]=%d, must be 0" % t.edges[0])
-    for i in range(m):
+    for i in range(t.M):
         if t.edges[i + 1] <= t.edges[i]:
             raise TableError(REASON_FIELD, "edges not ascending at %d" % (i + 1))
-    t.ft = w.take_range("ft", 0, 30)
-    t.Tmax = w.take_range("Tmax", 0, (1 << 30) - 1)
-    t.Ls = w.take_range("Ls", 1, 29)
-    t.ns = w.take_range("ns", 1, 6)
-    t.fc = w.take_range("fc", 0, _SH)
-    t.gs = w.take_range("gs", 0, 30)
-    t.C = w.take_list("C", m * m)
-    t.umax = w.take_range("umax", 0, (1 << 30) - 1)
-    t.Lu = w.take_range("Lu", 1, 29)
-    t.nu = w.take_range("nu", 1, 4)
-    t.B = w.take_list("B", m)
-    t.shB = w.take_list("shB", m)
-    t.rS = w.take_list("rS", m)
-    t.G2 = w.take_list("G2", m)
-    t.shG2 = w.take_list("shG2", m)
-    t.H = w.take("H")
-    t.shH = w.take_range("shH", -_SH, _SH)
-    t.fh = w.take_range("fh", -_SCALE, _SCALE)
-    t.Lx = w.take_range("Lx", 1, 29)
-    t.nx = w.take_range("nx", 1, 6)
-    t.shX = w.take_range("shX", -_SH, _SH)
-    t.KC = w.take("KC")
-    t.Lc = w.take_range("Lc", 1, 29)
-    t.nc = w.take_range("nc", 1, 6)
-    t.shC = w.take_range("shC", -_SH, _SH)
 
 
 try:
