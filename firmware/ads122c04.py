@@ -66,12 +66,18 @@ IDAC_UA = (0, 10, 50, 100, 250, 500, 1000, 1500)  # IDAC[2:0] code -> uA
 _MAX_RATIO_R = const(400000)  # mohm: Pt100 at +850 degC is 390.48 ohm
 
 
+def _bad(arg, v):
+    return ValueError("ADS122C04 %s %r" % (arg, v))
+
+
 class ADS122C04:
     """One ADS122C04 measuring one Pt100 ratiometrically (see module docstring).
 
     ``address`` is the 7-bit I2C address (0x40..0x4F by A0/A1 strapping),
-    ``rref_mohm`` the reference resistor in milliohm, ``idac_ua`` one of
-    10, 50, 100, 250, 500, 1000, 1500. The PGA gain is the largest that keeps a
+    ``rref_mohm`` the reference resistor in milliohm (100000..10000000, and
+    small enough for the ratio arithmetic at the chosen gain), ``idac_ua`` one
+    of 10, 50, 100, 250, 500, 1000, 1500, ``wires`` 2, 3 or 4, ``filter_hz``
+    50 or 60. The PGA gain is the largest that keeps a
     Pt100 at +850 degC below 90 % of full scale. The constructor resets the
     chip, writes and verifies the four configuration registers and starts
     continuous conversion.
@@ -82,16 +88,17 @@ class ADS122C04:
     _b3 = bytearray(3)
 
     def __init__(self, i2c, address=0x40, rref_mohm=1620000, wires=3, idac_ua=250, filter_hz=50):
+        # ValueError("ADS122C04 <argument> <value>"); the allowed values are in the docstring
         if not 0x40 <= address <= 0x4F:
-            raise ValueError("ADS122C04 address 0x%02x outside 0x40..0x4F" % address)
+            raise _bad("address", address)
         if wires not in (2, 3, 4):
-            raise ValueError("ADS122C04 wires must be 2, 3 or 4, got %r" % (wires,))
+            raise _bad("wires", wires)
         if idac_ua not in IDAC_UA[1:]:
-            raise ValueError("ADS122C04 idac_ua %r is not one of 10, 50, 100, 250, 500, 1000, 1500" % (idac_ua,))
+            raise _bad("idac_ua", idac_ua)
         if filter_hz not in (50, 60):
-            raise ValueError("ADS122C04 filter_hz must be 50 or 60, got %r" % (filter_hz,))
+            raise _bad("filter_hz", filter_hz)
         if not 100000 <= rref_mohm <= 10000000:
-            raise ValueError("ADS122C04 rref_mohm %r outside 100000..10000000" % (rref_mohm,))
+            raise _bad("rref_mohm", rref_mohm)
         self._i2c = i2c
         self.address = address
         m = 2 if wires == 3 else 1
@@ -102,7 +109,7 @@ class ADS122C04:
         # R/R0*1e7 = code * k / 2**23 with k = m * rref_mohm * 100 / gain (R0 = 100 ohm)
         k = m * rref_mohm * 100 // gain
         if k >= 1 << 29:
-            raise ValueError("ADS122C04 rref_mohm %r too large for the ratio arithmetic" % (rref_mohm,))
+            raise _bad("rref_mohm", rref_mohm)  # too large for the ratio arithmetic
         self._k1 = k >> 12
         self._k0 = k & 0xFFF
         g = 0

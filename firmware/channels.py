@@ -88,8 +88,7 @@ class Channels:
         ch = self.cfg.channels[i]
         buses = self.board.buses
         if ch.bus not in buses:
-            raise ValueError("config channel %s: bus %r is not one of the board's buses %s"
-                             % (ch.name, ch.bus, ", ".join(sorted(buses))))
+            raise ValueError("config channel %s: no bus %r" % (ch.name, ch.bus))
         d = self.drivers[i]
         try:
             if self.kind[i] == _DRV_MAX31865:

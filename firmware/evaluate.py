@@ -177,7 +177,7 @@ class Evaluator:
         table certified only for its fixed references."""
         t = self.table
         if t.ref_mode != _REF_LATCHED:
-            raise ValueError("table is certified for its fixed reference temperatures only")
+            raise ValueError("ref_mode 0: fixed references")
         for i in range(t.n_sensors):
             v = self.temps[i]
             if v < t.env_lo[i]:

@@ -64,6 +64,10 @@ def decode_faults(status):
     return [name for bit, name in FAULT_NAMES if status & bit]
 
 
+def _bad(arg, v):
+    return ValueError("MAX31865 %s %r" % (arg, v))
+
+
 class MAX31865:
     """One MAX31865 on a shared SPI bus.
 
@@ -82,12 +86,14 @@ class MAX31865:
     _r2 = bytearray(2)
 
     def __init__(self, spi, cs, rref_mohm=430000, wires=3, filter_hz=50):
+        # ValueError("MAX31865 <argument> <value>"): wires 2, 3 or 4, filter_hz 50 or 60,
+        # rref_mohm 100000..10000000
         if wires not in (2, 3, 4):
-            raise ValueError("MAX31865 wires must be 2, 3 or 4, got %r" % (wires,))
+            raise _bad("wires", wires)
         if filter_hz not in (50, 60):
-            raise ValueError("MAX31865 filter_hz must be 50 or 60, got %r" % (filter_hz,))
+            raise _bad("filter_hz", filter_hz)
         if not 100000 <= rref_mohm <= 10000000:
-            raise ValueError("MAX31865 rref_mohm %r outside 100000..10000000" % (rref_mohm,))
+            raise _bad("rref_mohm", rref_mohm)
         self._spi = spi
         self._cs = cs
         self.rref_mohm = rref_mohm
@@ -189,7 +195,7 @@ class MAX31865:
 
     def _write15(self, reg, code):
         if not 0 <= code <= 0x7FFF:
-            raise ValueError("MAX31865 threshold code %r outside 0..32767" % (code,))
+            raise _bad("threshold code", code)  # 0..32767
         self.write_register(reg, (code >> 7) & 0xFF)
         self.write_register(reg + 1, (code << 1) & 0xFF)
 
