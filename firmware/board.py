@@ -80,8 +80,11 @@ container for them):
     A callable that resets the device (``machine.reset``), or None: then the
     ``reset`` command restarts the app in-process (reload table, hello frame).
 
-Bad configuration raises ``ValueError`` (``firmware.config.load_config``); the
-app lets it propagate at start-up so a wrong config never runs.
+Bad configuration raises ``ValueError`` naming the key: on the board
+``firmware.bootcfg.load_config`` (terse, ``config <key>: <value>``), on the
+host ``firmware.config.load_config`` (the same rules with messages that state
+them; ``tcomp flash --config`` and ``tcomp hil --config`` run it); the app lets
+it propagate at start-up so a wrong config never runs.
 """
 
 import time
