@@ -10,7 +10,7 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # CPython-only modules that never go onto a board
-_HOST_ONLY = ("board_linux.py",)
+_HOST_ONLY = ("board_linux.py", "config.py")  # config.py: the host-side friendly validator; the board loads bootcfg.py
 
 
 def add_arguments(p):
