@@ -58,9 +58,11 @@ def summarise(run_dir, pred_csv, hil_json, certified_um):
     print("   firmware vs host model: max |diff| %.4f um, RMS %.4f um" % (np.nanmax(np.abs(fw - host)), _rmse(fw - host)))
     clamped = sum(1 for a in answers if int(a["status"], 16) & (1 << 16))
     print("   answers with an input clamped to the table's envelope (status bit 16): %d of %d" % (clamped, len(answers)))
-    print("   (the integer arithmetic accounts for at most %.4f um, the exporter's certificate; the rest comes"
-          " from what the firmware measures and is told: RTD quantisation of the simulated chips and the"
-          " feed/range motion reports instead of the exact nut path)" % certified_um)
+    print("   (of the firmware-vs-host difference, the integer arithmetic accounts for at most %.4f um, the exporter's"
+          " certificate; the rest is what separates the firmware's inputs and model from the host's: the reduced"
+          " 12-segment recurrence on a 10 s step, feed/range motion reports instead of the exact nut path, and the"
+          " simulated RTD chain. hil_tests/test_hil_e2e.py checks the firmware against the reduced model on the"
+          " same travel within the certificate plus the RTD bound.)" % certified_um)
 
 
 def main():
