@@ -22,15 +22,14 @@ the temperature-sensor mode, burn-out current sources' effect on the reading.
 """
 
 from hil_tests.sim.stimulus import OPEN
+from hil_tests.sim.violations import ViolationLog
 
-_VSLOTS = 8
-_VLEN = 96
 _SPS = (20, 45, 90, 175, 330, 600, 1000)
 _IDAC_UA = (0, 10, 50, 100, 250, 500, 1000, 1500)
 _MAX = 0x7FFFFF
 
 
-class ADS122C04:
+class ADS122C04(ViolationLog):
     def __init__(self, clock, rtd, rref_ohm=1620.0, address=0x40, wires=3, name="ads122c04"):
         self.clock = clock
         self.rtd = rtd
@@ -42,9 +41,7 @@ class ADS122C04:
         self.present = True
         self.conversions = 0
         self.commands = 0
-        self.violation_count = 0
-        self._vbuf = bytearray(_VSLOTS * _VLEN)  # the first violations' texts, preallocated so that
-        # recording one leaves the heap as it was (the soak scenario measures it)
+        self._init_violations()
         self._reset()
 
     def _reset(self):
@@ -55,23 +52,6 @@ class ADS122C04:
         self.running = False
         self.next_us = -1
         self.single = False
-
-    def _violation(self, what):
-        k = self.violation_count
-        self.violation_count = k + 1
-        if k < _VSLOTS:
-            text = ("%s at %d us: %s" % (self.name, self.clock.us, what)).encode()[:_VLEN]
-            o = k * _VLEN
-            for i in range(_VLEN):
-                self._vbuf[o + i] = text[i] if i < len(text) else 0
-
-    @property
-    def violations(self):
-        out = []
-        for k in range(min(self.violation_count, _VSLOTS)):
-            raw = bytes(self._vbuf[k * _VLEN:(k + 1) * _VLEN])
-            out.append(raw.split(b"\0")[0].decode())
-        return out
 
     def power(self, on):
         if on and not self.present:

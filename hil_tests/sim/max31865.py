@@ -39,9 +39,8 @@ on the transfer path, so the firmware's cycle can run under heap_lock.
 """
 
 from hil_tests.sim.stimulus import OPEN
+from hil_tests.sim.violations import ViolationLog
 
-_VSLOTS = 8
-_VLEN = 96
 _T_ONESHOT_US = (52000, 62500)  # index: filter bit D0 (0 = 60 Hz, 1 = 50 Hz)
 _T_AUTO_US = (16667, 20000)
 _T_FAULT_CYCLE_US = 550
@@ -49,7 +48,7 @@ _T_BIAS_SETTLE_US = 1050  # 10.5 time constants of a 100 us input filter
 _FULL = 0x7FFF
 
 
-class MAX31865:
+class MAX31865(ViolationLog):
     def __init__(self, clock, rtd, rref_ohm=430.0, name="max31865"):
         self.clock = clock
         self.rtd = rtd
@@ -65,9 +64,7 @@ class MAX31865:
         self.ignored_clears = 0
         self.ignored_one_shots = 0
         self.transfers = 0
-        self.violation_count = 0
-        self._vbuf = bytearray(_VSLOTS * _VLEN)  # the first violations' texts, preallocated so that
-        # recording one leaves the heap as it was (the soak scenario measures it)  # the first few, as text (allocates: only on a violation)
+        self._init_violations()
         self._por()
         self._sel = False
         self._addr = 0
@@ -85,23 +82,6 @@ class MAX31865:
         self.cycle_end = -1
         self.manual = 0
         self.bias_on_us = -1
-
-    def _violation(self, what):
-        k = self.violation_count
-        self.violation_count = k + 1
-        if k < _VSLOTS:
-            text = ("%s at %d us: %s" % (self.name, self.clock.us, what)).encode()[:_VLEN]
-            o = k * _VLEN
-            for i in range(_VLEN):
-                self._vbuf[o + i] = text[i] if i < len(text) else 0
-
-    @property
-    def violations(self):
-        out = []
-        for k in range(min(self.violation_count, _VSLOTS)):
-            raw = bytes(self._vbuf[k * _VLEN:(k + 1) * _VLEN])
-            out.append(raw.split(b"\0")[0].decode())
-        return out
 
     # --- power ---------------------------------------------------------------
     def power(self, on):
