@@ -33,12 +33,20 @@ _LINK_TIMEOUT = const(0x400000)
 _NO_POSITION = const(0x800000)
 _NO_TABLE = const(0x200000)
 _UPLOADING = const(0x2000000)
+_REF_PENDING = const(0x8000000)
 
 VERSION = "0.1.0"  # firmware version, sent in the hello frame
 _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is dropped
 _POLL_MS = const(5)  # serial polling period while waiting for the next cycle
 _CAP = const(0x20000000)  # elapsed-time counters saturate at 2**29 ms
 _KIND_SCREW_REDUCED = const(3)  # firmware.table's (tests/firmware/test_fw_consts.py checks)
+# ref_state: where the reference temperatures come from (docs/firmware.md); the hello
+# frame sends REF_LETTERS[ref_state]. From 4 on the latch is pending: 4..6 are
+# firmware.slots' REFS_MISSING/CORRUPT/FOREIGN (why the stored ones were not used).
+_REFS_STORED = const(1)
+_REFS_LATCHED = const(2)
+_REFS_UNSAVED = const(3)
+REF_LETTERS = b"-SLUNCO"
 
 
 def _load_config(d):
@@ -111,6 +119,7 @@ class App:
         self.slot = None
         self.map = []
         self.unlatched = False
+        self.ref_state = 0
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
         t, slot = self.store.load()
@@ -121,7 +130,8 @@ class App:
         collect()
         # what the hello frame reports before the first cycle: nothing read yet
         self.status = (self.channels.faulty_mask() | _NO_POSITION | _FALLBACK
-                       | (0 if t is not None else _NO_TABLE))
+                       | (0 if t is not None else _NO_TABLE)
+                       | (_REF_PENDING if self.unlatched else 0))
         self.link.boot()
 
     # --- table ---------------------------------------------------------------
@@ -149,8 +159,18 @@ class App:
         self.ev = ev
         self.screw = table.kind_code == _KIND_SCREW_REDUCED
         # A model fitted on rises from the run start takes its reference temperatures at the
-        # first cycle in which every sensor it needs reads good (a cold start; docs/firmware.md).
-        self.unlatched = table.ref_mode == 1
+        # first cycle in which every sensor it needs reads good (a cold start), unless they
+        # were stored for this very table before a restart (docs/firmware.md).
+        st = 0
+        if table.ref_mode == 1:
+            st = self.store.load_refs(table)
+            if not isinstance(st, int):
+                for i in range(len(st)):
+                    ev.ref[i] = st[i]
+                ev.update()
+                st = _REFS_STORED
+        self.ref_state = st
+        self.unlatched = st > _REFS_UNSAVED
         self.step_ms = 0
         self._span()
 
@@ -162,6 +182,30 @@ class App:
         r = ev.pos_ref
         span = t.pos_hi - r if t.pos_hi - r > r - t.pos_lo else r - t.pos_lo
         self.limiter.configure(self.slew, self.cfg.max_offset_um, span)
+
+    def _latch(self, ev, t):
+        # once per latch, never in the steady state: the flash write allocates
+        ev.latch_references()
+        self.unlatched = False
+        self.ref_state = _REFS_LATCHED if self.store.save_refs(t, ev.ref) else _REFS_UNSAVED
+
+    def relatch(self, check_only=False):
+        """Latch the reference temperatures now (the controller's cold start) and store them.
+
+        Returns None, or why not (bytes; nothing changed): no table, a table with fixed
+        references, or a sensor the table needs not reading good this cycle."""
+        t = self.table
+        ev = self.ev
+        if ev is None or t is None:
+            return b"no table"
+        if t.ref_mode != 1:
+            return b"fixed references"
+        for i in self.map:
+            if not self.channels.good[i]:
+                return b"sensor faulty"
+        if not check_only:
+            self._latch(ev, t)
+        return None
 
     def set_reference(self, pos_um):
         if self.ev is None:
@@ -267,8 +311,7 @@ class App:
             else:
                 self.fault_active = False
                 if self.unlatched:
-                    ev.latch_references()
-                    self.unlatched = False
+                    self._latch(ev, t)
             ev.update()
             if self.screw:
                 dtm = t.dt_ms
@@ -307,6 +350,8 @@ class App:
             s |= _LINK_TIMEOUT
         if self.store.uploading:
             s |= _UPLOADING
+        if self.unlatched:
+            s |= _REF_PENDING
         self.status = s
         self.cycles += 1
         self.link.after_cycle(now)

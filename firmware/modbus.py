@@ -32,6 +32,7 @@ _IR_REFERENCE = const(8)  # int32 um
 _IR_TABLE_CRC = const(10)  # uint32
 _IR_SLOT = const(12)  # 0 none, 1 A, 2 B
 _IR_CHANNELS = const(13)
+_IR_REF_STATE = const(14)  # firmware.app's ref_state: where the reference temperatures come from
 _IR_TEMPS = const(16)  # 16 x int16 0.01 degC, 0x8000 when faulty
 _IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
 _N_INPUT = const(48)
@@ -41,11 +42,13 @@ _HR_SLEW = const(1)  # um/s, 1..10000
 _HR_LINK_TIMEOUT = const(2)  # ms, 0 = off
 _HR_POSITION = const(3)  # int32 um, high word first: writing it is a position report
 _HR_REFERENCE = const(5)  # int32 um
-_N_HOLDING = const(7)
+_HR_LATCH = const(7)  # write 1: latch the reference temperatures now (reads 0)
+_N_HOLDING = const(8)
 
 _EX_ILLEGAL_FUNCTION = const(1)
 _EX_ILLEGAL_ADDRESS = const(2)
 _EX_ILLEGAL_VALUE = const(3)
+_EX_DEVICE_FAILURE = const(4)
 
 _POS_HI_LIMIT = const(1525)  # |high word| so that |position| <= 100 m
 _NO_VALUE = const(-32768)
@@ -75,7 +78,7 @@ class ModbusLink:
         self.last_byte = app.clock.ticks_ms()
         baud = app.cfg.baud
         self.silence_ms = 2 if baud >= 19200 else (38500 + baud - 1) // baud + 1
-        self.hold = [1, app.cfg.slew_um_per_s, app.cfg.link_timeout_ms, 0, 0, 0, 0]
+        self.hold = [1, app.cfg.slew_um_per_s, app.cfg.link_timeout_ms, 0, 0, 0, 0, 0]
         self.vals = [0] * 123  # values of a write, validated before use
         self.frames = 0  # requests answered (diagnostics)
 
@@ -224,6 +227,8 @@ class ModbusLink:
             return 0 if a.slot is None else a.slot + 1
         if r == _IR_CHANNELS:
             return a.channels.n
+        if r == _IR_REF_STATE:
+            return a.ref_state
         ch = a.channels
         if _IR_TEMPS <= r < _IR_TEMPS + 16:
             i = r - _IR_TEMPS
@@ -295,6 +300,11 @@ class ModbusLink:
                 hi = v - 65536 if v > 32767 else v
                 if hi > _POS_HI_LIMIT or hi < -_POS_HI_LIMIT - 1:
                     return _EX_ILLEGAL_VALUE
+            if r == _HR_LATCH and v:
+                if v > 1:
+                    return _EX_ILLEGAL_VALUE
+                if self.app.relatch(True) is not None:
+                    return _EX_DEVICE_FAILURE
         pos = False
         ref = False
         for i in range(qty):
@@ -313,6 +323,9 @@ class ModbusLink:
             a.report_position(self._int32(_HR_POSITION))
         if ref:
             a.set_reference(self._int32(_HR_REFERENCE))
+        if h[_HR_LATCH]:
+            h[_HR_LATCH] = 0
+            a.relatch()
         return 0
 
     def _int32(self, r):

@@ -4,7 +4,8 @@ Frames the device sends (``$TC,<seq>,<status>,<type>,...*CRC``):
 H hello, O periodic offsets, Q answer to a query, T temperatures,
 A acknowledgement, E error. Commands from the controller (``$TC,<cmd>,...*CRC``):
 P position, M feed/range, Q query, R reference, S temperatures, V hello,
-U table upload (B begin, D data, C commit, X abort), X reset.
+U table upload (B begin, D data, C commit, X abort), L latch reference
+temperatures, X reset.
 A line that is corrupt, unknown or out of range is answered with an E frame
 and changes nothing.
 
@@ -39,7 +40,7 @@ _E_OVERFLOW = const(7)
 ERRORS = {1: b"crc", 2: b"syntax", 3: b"unknown", 4: b"range", 5: b"state", 6: b"table", 7: b"overflow"}
 _UPLOAD_CODES = {"range": _E_RANGE, "state": _E_STATE, "table": _E_TABLE}
 _ONE_POSITION = b"PQR"  # commands with one position argument
-_NO_ARGUMENT = b"SVX"
+_NO_ARGUMENT = b"SVXL"
 
 _POS_LIMIT = const(100000000)  # |position| in um accepted from the controller (100 m)
 _FEED_LIMIT = const(1000000)  # mm/min
@@ -64,6 +65,7 @@ _X = const(88)
 _B = const(66)
 _D = const(68)
 _C = const(67)
+_L = const(76)
 
 
 def _round10(v):
@@ -90,8 +92,8 @@ class StreamLink:
             self.error(_E_TABLE, slot.encode() + b" " + reason.encode())
 
     def hello(self):
-        """H,<protocol>,<firmware>,<slot>,<table crc32>,<provenance[:8] hex>,<kind>,<axis>,<channels>."""
-        from firmware.app import VERSION
+        """H,<protocol>,<firmware>,<slot>,<table crc32>,<provenance[:8] hex>,<kind>,<axis>,<channels>,<refs>."""
+        from firmware.app import VERSION, REF_LETTERS
         a = self.app
         w = self.w
         w.begin(a.status, _H)
@@ -107,6 +109,9 @@ class StreamLink:
             w.text(t.kind.encode())
             w.text(t.axis.encode())
         w.int(a.channels.n)
+        w.sep()
+        w.buf[w.n] = REF_LETTERS[a.ref_state]
+        w.n += 1
         w.end()
 
     def offsets(self, kind, pos):
@@ -248,6 +253,12 @@ class StreamLink:
                 self.temperatures()
             elif c == _V:
                 self.hello()
+            elif c == _L:
+                why = a.relatch()
+                if why is not None:
+                    return self.error(_E_STATE, why)
+                from firmware.app import REF_LETTERS
+                self.ack(_L, REF_LETTERS[a.ref_state])
             else:
                 self.ack(_X)
                 a.reset()

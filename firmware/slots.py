@@ -8,15 +8,26 @@ is replaced by write-new-then-rename (atomic on littlefs and POSIX). A power cut
 at any point therefore leaves either the old or the new table in force, never
 a mix. At boot the active slot is loaded; if it is unusable the other one is
 tried, and the reason for each refusal is kept for the hello/error frames.
+
+``refs.bin`` keeps the reference temperatures latched for a run-start table
+(table.ref_mode 1), so that a warm restart does not latch warm ones: b"TR",
+version 1, the table's CRC-32 (little-endian), the sensor count, one int32
+(little-endian, milli-degC) per sensor, and the CRC-16/CCITT-FALSE of all that
+(little-endian). Written once per latch, by the same write-new-then-rename.
 """
 
 import os
 
+from firmware.crc16 import crc16_ccitt
 from firmware.crc32 import crc32
 from firmware.table import parse_table, TableError
 
 SLOT_NAMES = ("A", "B")
 MAX_TABLE = 16384
+# why stored references were not used (App.ref_state codes, docs/firmware.md)
+REFS_MISSING = 4
+REFS_CORRUPT = 5
+REFS_FOREIGN = 6
 
 
 def _exists(path):
@@ -155,16 +166,76 @@ class TableStore:
         except TableError as e:
             self.refusals = [(SLOT_NAMES[slot], str(e))]
             raise UploadError("table", str(e))
-        tmp = self.dir + "/active.new"
-        with open(tmp, "wb") as g:
-            g.write(SLOT_NAMES[slot].encode())
-        try:
-            os.rename(tmp, self.dir + "/active")
-        except OSError:  # FAT cannot rename over a file; 'active.new' is read at boot meanwhile
-            os.remove(self.dir + "/active")
-            os.rename(tmp, self.dir + "/active")
+        self._replace("active", SLOT_NAMES[slot].encode())
         self.active = slot
         return t, slot
+
+    def _replace(self, name, data):
+        # write-new-then-rename; '<name>.new' is read at boot when '<name>' is missing
+        tmp = self.dir + "/" + name + ".new"
+        with open(tmp, "wb") as g:
+            g.write(data)
+        try:
+            os.rename(tmp, self.dir + "/" + name)
+        except OSError:  # FAT cannot rename over a file
+            os.remove(self.dir + "/" + name)
+            os.rename(tmp, self.dir + "/" + name)
+
+    # --- latched reference temperatures -----------------------------------------
+    def load_refs(self, table):
+        """The references stored for ``table`` (list, milli-degC), or why not (a REFS_* code).
+
+        A reference outside the table's envelope counts as corrupt: the latch clamps."""
+        n = table.n_sensors
+        size = 12 + 4 * n
+        why = REFS_MISSING
+        for name in ("refs.bin", "refs.bin.new"):
+            try:
+                with open(self.dir + "/" + name, "rb") as f:
+                    b = f.read(size + 1)
+            except OSError:
+                continue
+            if (len(b) != size or b[0:3] != b"TR\x01" or b[7] != n
+                    or crc16_ccitt(b, 0, size - 2) != b[size - 2] | b[size - 1] << 8):
+                why = REFS_CORRUPT
+                continue
+            if b[3] | b[4] << 8 | b[5] << 16 | b[6] << 24 != table.crc:
+                why = REFS_FOREIGN
+                continue
+            refs = []
+            for i in range(n):
+                k = 8 + 4 * i
+                v = b[k] | b[k + 1] << 8 | b[k + 2] << 16 | b[k + 3] << 24
+                v = v - (1 << 32) if v & 0x80000000 else v
+                if not table.env_lo[i] <= v <= table.env_hi[i]:
+                    break
+                refs.append(v)
+            if len(refs) == n:
+                return refs
+            why = REFS_CORRUPT
+        return why
+
+    def save_refs(self, table, refs):
+        """Store ``refs`` for ``table``; False if the flash refused (the latch stands)."""
+        n = table.n_sensors
+        b = bytearray(12 + 4 * n)
+        b[0:3] = b"TR\x01"
+        c = table.crc
+        for k in range(4):
+            b[3 + k] = (c >> 8 * k) & 0xFF
+        b[7] = n
+        for i in range(n):
+            v = refs[i]
+            for k in range(4):
+                b[8 + 4 * i + k] = (v >> 8 * k) & 0xFF
+        c = crc16_ccitt(b, 0, 10 + 4 * n)
+        b[10 + 4 * n] = c & 0xFF
+        b[11 + 4 * n] = c >> 8
+        try:
+            self._replace("refs.bin", b)
+            return True
+        except OSError:
+            return False
 
     def abort(self):
         if self._up is not None:

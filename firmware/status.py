@@ -26,3 +26,4 @@ NO_POSITION = const(0x800000)  # no position reported yet: the reference positio
 DISABLED = const(0x1000000)  # output disabled by the controller (Modbus holding register 0)
 UPLOADING = const(0x2000000)  # a table upload is open
 RECOVERING = const(0x4000000)  # ramping back from fallback to the model's output
+REF_PENDING = const(0x8000000)  # a run-start table waits for an all-good cycle to latch its reference temperatures

@@ -92,7 +92,7 @@ def test_modbus_reads_stream_offsets_and_answers_bad_requests(make_rig, demo_run
             # illegal data address: input registers end at 48
             bad = client.read_input_registers(40, count=10, device_id=1)
             assert bad.isError() and bad.exception_code == 2
-            bad = client.read_holding_registers(7, count=1, device_id=1)
+            bad = client.read_holding_registers(8, count=1, device_id=1)
             assert bad.isError() and bad.exception_code == 2
             # illegal data value: slew 0 is out of range
             bad = client.write_register(1, 0, device_id=1)

@@ -87,7 +87,9 @@ def test_write_position_and_enable(dev):
     (bytes([1, 5, 0, 0, 0xFF, 0]), 1),  # write coil: illegal function
     (bytes([1, 43, 14, 1, 0]), 1),  # device identification: not implemented
     (bytes([1, 4, 0, 40, 0, 9]), 2),  # beyond the input map
-    (bytes([1, 3, 0, 7, 0, 1]), 2),  # beyond the holding map
+    (bytes([1, 3, 0, 8, 0, 1]), 2),  # beyond the holding map
+    (bytes([1, 6, 0, 7, 0, 2]), 3),  # latch takes 1 (or 0: nothing)
+    (bytes([1, 6, 0, 7, 0, 1]), 4),  # latch: the table has fixed references
     (bytes([1, 6, 0, 9, 0, 1]), 2),
     (bytes([1, 4, 0, 0, 0, 0]), 3),  # zero quantity
     (bytes([1, 4, 0, 0, 0, 126]), 3),  # too many

@@ -103,7 +103,7 @@ def test_hello_at_boot(tmp_path):
     assert h[3] == "H" and h[4] == "1" and h[5] == "0.1.0" and h[6] == "A"
     assert int(h[7], 16) == app.table.crc
     assert h[8] == app.table.provenance[:8].hex().upper()
-    assert h[9:] == ["poly_slope", "X", "11"]
+    assert h[9:] == ["poly_slope", "X", "11", "-"]  # "-": fixed reference temperatures
 
 
 def test_no_table_hello_and_reason(tmp_path):
