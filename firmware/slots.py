@@ -17,6 +17,7 @@ version 1, the table's CRC-32 (little-endian), the sensor count, one int32
 """
 
 import os
+import struct
 
 from firmware.crc16 import crc16_ccitt
 from firmware.crc32 import crc32
@@ -187,7 +188,7 @@ class TableStore:
 
         A reference outside the table's envelope counts as corrupt: the latch clamps."""
         n = table.n_sensors
-        size = 12 + 4 * n
+        size = 10 + 4 * n
         why = REFS_MISSING
         for name in ("refs.bin", "refs.bin.new"):
             try:
@@ -195,44 +196,28 @@ class TableStore:
                     b = f.read(size + 1)
             except OSError:
                 continue
-            if (len(b) != size or b[0:3] != b"TR\x01" or b[7] != n
-                    or crc16_ccitt(b, 0, size - 2) != b[size - 2] | b[size - 1] << 8):
-                why = REFS_CORRUPT
+            why = REFS_CORRUPT
+            if len(b) != size or b[:3] != b"TR\x01" or crc16_ccitt(b, 0, size - 2) != b[-2] | b[-1] << 8:
                 continue
-            if b[3] | b[4] << 8 | b[5] << 16 | b[6] << 24 != table.crc:
+            crc, m = struct.unpack_from("<IB", b, 3)
+            refs = list(struct.unpack_from("<%di" % n, b, 8))
+            if m != n:
+                continue
+            if crc != table.crc:
                 why = REFS_FOREIGN
                 continue
-            refs = []
             for i in range(n):
-                k = 8 + 4 * i
-                v = b[k] | b[k + 1] << 8 | b[k + 2] << 16 | b[k + 3] << 24
-                v = v - (1 << 32) if v & 0x80000000 else v
-                if not table.env_lo[i] <= v <= table.env_hi[i]:
+                if not table.env_lo[i] <= refs[i] <= table.env_hi[i]:
                     break
-                refs.append(v)
-            if len(refs) == n:
+            else:
                 return refs
-            why = REFS_CORRUPT
         return why
 
     def save_refs(self, table, refs):
         """Store ``refs`` for ``table``; False if the flash refused (the latch stands)."""
-        n = table.n_sensors
-        b = bytearray(12 + 4 * n)
-        b[0:3] = b"TR\x01"
-        c = table.crc
-        for k in range(4):
-            b[3 + k] = (c >> 8 * k) & 0xFF
-        b[7] = n
-        for i in range(n):
-            v = refs[i]
-            for k in range(4):
-                b[8 + 4 * i + k] = (v >> 8 * k) & 0xFF
-        c = crc16_ccitt(b, 0, 10 + 4 * n)
-        b[10 + 4 * n] = c & 0xFF
-        b[11 + 4 * n] = c >> 8
+        b = b"TR\x01" + struct.pack("<IB%di" % len(refs), table.crc, len(refs), *refs)
         try:
-            self._replace("refs.bin", b)
+            self._replace("refs.bin", b + struct.pack("<H", crc16_ccitt(b)))
             return True
         except OSError:
             return False

@@ -53,7 +53,7 @@ def _stored(tmp_path):
     b = (tmp_path / "refs.bin").read_bytes()
     assert b[:3] == b"TR\x01"
     crc, n = struct.unpack_from("<IB", b, 3)
-    assert len(b) == 12 + 4 * n
+    assert len(b) == 10 + 4 * n
     assert struct.unpack_from("<H", b, len(b) - 2)[0] == crc16_ccitt(b[:-2])
     return crc, list(struct.unpack_from("<%di" % n, b, 8))
 
