@@ -190,7 +190,9 @@ class TableStore:
         n = table.n_sensors
         size = 10 + 4 * n
         why = REFS_MISSING
-        for name in ("refs.bin", "refs.bin.new"):
+        # a complete refs.bin.new is the newest (a cut before or during the rename); a
+        # partial one fails its CRC and refs.bin is used
+        for name in ("refs.bin.new", "refs.bin"):
             try:
                 with open(self.dir + "/" + name, "rb") as f:
                     b = f.read(size + 1)

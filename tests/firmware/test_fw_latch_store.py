@@ -163,6 +163,26 @@ def test_refs_new_left_by_a_cut_between_remove_and_rename_is_used(tmp_path):
     assert hello[-1] == "S" and app.ev.ref == latched
 
 
+def test_complete_refs_new_is_newer_and_a_partial_one_is_ignored(tmp_path):
+    """A cut after writing refs.bin.new but before the rename: the new file is the latest latch;
+    a cut while writing it leaves a partial file, which fails its CRC."""
+    app, board, _ = _boot(tmp_path, (23.5, 21.0), _table())
+    run_cycles(app, board, 5)
+    old = (tmp_path / "refs.bin").read_bytes()
+    for k in range(1, 31):
+        board.chips[0].set_temperature(23.5 + 0.05 * k)
+        run_cycles(app, board, 10)
+    _send(app, board, cmd(b"TC,L"))
+    newer = list(app.ev.ref)
+    (tmp_path / "refs.bin.new").write_bytes((tmp_path / "refs.bin").read_bytes())
+    (tmp_path / "refs.bin").write_bytes(old)
+    app, board, hello = _boot(tmp_path, (26.0, 22.0))
+    assert hello[-1] == "S" and app.ev.ref == newer
+    (tmp_path / "refs.bin.new").write_bytes(old[:-3])
+    app, board, hello = _boot(tmp_path, (26.0, 22.0))
+    assert hello[-1] == "S" and app.ev.ref == _stored(tmp_path)[1] != newer
+
+
 def test_unwritable_flash_keeps_the_latch_and_says_so(tmp_path):
     app, board, _ = _boot(tmp_path, (23.5, 21.0), _table())
     (tmp_path / "refs.bin.new").mkdir()  # opening the temp file for writing fails
