@@ -55,6 +55,7 @@ send(line(b"TC,S"))
 send(line(b"TC,V"))
 send(b"$TC,P,5*0000\r\n")
 send(line(b"TC,Z,1"))
+send(line(b"TC,L"))  # fixed references: refused
 send(b"\x00\xff garbage\r\n")
 f = open("new.bin", "rb")
 data = f.read()
