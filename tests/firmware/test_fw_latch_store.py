@@ -350,3 +350,21 @@ def test_warm_restart_on_micropython(tmp_path):
     assert _stored(tmp_path)[1] == [l0, l1]
     word, dfree, cycles = out[1].split()
     assert word == "locked" and int(dfree) == 0 and int(cycles) == 120
+
+
+def test_reset_command_restart_keeps_the_stored_references(tmp_path):
+    """`X` (in-process restart, as main() does on a board without a hardware reset)."""
+    from firmware.app import App, Restart
+    app, board, _ = _boot(tmp_path, (23.5, 21.0), _table())
+    run_cycles(app, board, 5)
+    latched = list(app.ev.ref)
+    board.chips[0].set_temperature(23.6)
+    run_cycles(app, board, 5)
+    board.serial.feed(cmd(b"TC,X"))
+    with pytest.raises(Restart):
+        app.link.poll(board.clock.t)
+    app = App(board)
+    out = frames(board.serial.take())
+    assert out[0][3:5] == ["A", "X"] and out[1][3] == "H" and out[1][-1] == "S", out
+    run_cycles(app, board, 5)
+    assert app.ev.ref == latched and _near(app.ev.temps[0], 23.6)
