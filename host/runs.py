@@ -148,7 +148,6 @@ class _Problems:
 
 def _read_csv(path, required, optional, problems, text_columns=()):
     """Parse a numeric CSV strictly. Returns {column: list} or None if unreadable."""
-    fname = os.path.basename(path)
     try:
         # utf-8-sig: spreadsheet programs (Excel) start a UTF-8 CSV with a byte-order mark
         with open(path, newline="", encoding="utf-8-sig") as fh:
@@ -206,7 +205,6 @@ def _read_csv(path, required, optional, problems, text_columns=()):
             data[col].append(v)
     if len(rows) == 1:
         problems.add(path, "no data rows after the header")
-    del fname
     return data
 
 
@@ -378,10 +376,6 @@ def load_runs(folders):
 
 
 # ---------------------------------------------------------------- writing
-
-
-def _fmt(v):
-    return repr(float(v)) if not float(v).is_integer() else "%d" % v if abs(v) < 1e15 else repr(float(v))
 
 
 def _write_csv(path, header, columns, formats):
