@@ -96,7 +96,8 @@ def test_tcomp_monitor_decodes_a_live_pty(tmp_path, demo_run, capsys):
         rig.run(5000)
         result = {}
         th = threading.Thread(target=lambda: result.setdefault("rc", tcomp(
-            ["monitor", "--port", rig.port, "--count", "8", "--csv", str(log), "--hello", "--duration", "20"])))
+            ["monitor", "--port", rig.port, "--count", "8", "--csv", str(log), "--hello", "--duration", "20",
+             "--json", str(tmp_path / "mon.json")])))
         th.start()
         with rig.free_run(chunk_ms=50, pace_s=0.001):
             th.join(timeout=30)
@@ -108,3 +109,6 @@ def test_tcomp_monitor_decodes_a_live_pty(tmp_path, demo_run, capsys):
     assert all(np.isfinite(float(r["total_um"])) for r in o)
     assert [int(r["seq"]) for r in rows] == list(range(int(rows[0]["seq"]), int(rows[0]["seq"]) + 8))
     assert "8 frames, 0 malformed" in capsys.readouterr().out
+    summary = json.loads((tmp_path / "mon.json").read_text())
+    assert summary["frames"] == 8 and summary["malformed"] == 0
+    assert [r["seq"] for r in summary["rows"]] == [int(r["seq"]) for r in rows]

@@ -16,6 +16,7 @@ def add_arguments(p):
     p.add_argument("--count", type=int, default=0, help="stop after this many frames (0: never)")
     p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: never)")
     p.add_argument("--hello", action="store_true", help="ask the board for its hello frame (V) first")
+    p.add_argument("--json", help="write {frames, malformed, rows: [decoded frames], bad: [reasons]} as JSON at the end")
 
 
 def row(f):
@@ -44,6 +45,11 @@ def run(args):
         raise UserError("cannot open %s: %s" % (args.port, exc))
     out = None
     writer = None
+    rows = []
+    bad_reasons = []
+    if args.json:
+        from host.cli import check_output
+        check_output(args.json, "--json")
     if args.csv:
         try:
             out = open(args.csv, "a", newline="", encoding="utf-8")
@@ -76,12 +82,16 @@ def run(args):
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
                 if writer:
                     writer.writerow(r)
+                if args.json:
+                    rows.append(r)
                 n += 1
                 if args.count and n >= args.count:
                     break
             while dec.bad:
                 line, why = dec.bad.pop(0)
                 bad += 1
+                if args.json:
+                    bad_reasons.append(str(why))
                 print("bad frame: %s" % why, file=sys.stderr)
             sys.stdout.flush()
     except KeyboardInterrupt:
@@ -91,4 +101,10 @@ def run(args):
         if out:
             out.close()
     print("%d frames, %d malformed" % (n, bad))
+    if args.json:
+        import json
+
+        from host.cli import open_output
+        with open_output(args.json) as fh:
+            json.dump({"port": args.port, "frames": n, "malformed": bad, "rows": rows, "bad": bad_reasons}, fh, indent=1)
     return 0
