@@ -153,6 +153,17 @@ class _Linear:
             d.update(extra)
         return d
 
+    def _refit_on(self, X, y, sel):
+        """Subset selectors: the final model is a plain MLR on the chosen columns ``sel``."""
+        self.mlr_ = MLR(self.fit_intercept).fit(X[:, sel], y, self.selected_names_)
+        self.coef_ = np.zeros(X.shape[1])
+        self.coef_[sel] = self.mlr_.coef_
+        self.intercept_ = self.mlr_.intercept_
+        self.n_samples_ = X.shape[0]
+        for a in ("rsquared_", "rsquared_adj_", "fvalue_", "f_pvalue_", "resid_std_err_", "df_resid_", "rmse_"):
+            setattr(self, a, getattr(self.mlr_, a))
+        return self
+
 
 class MLR(_Linear):
     """Ordinary least squares with full statistics.
@@ -453,14 +464,7 @@ class Stepwise(_Linear):
         self.support_[sel] = True
         self.history_ = history
         self.names_ = names
-        self.mlr_ = MLR(self.fit_intercept).fit(X[:, sel], y, self.selected_names_)
-        self.coef_ = np.zeros(p)
-        self.coef_[sel] = self.mlr_.coef_
-        self.intercept_ = self.mlr_.intercept_
-        self.n_samples_ = n
-        for a in ("rsquared_", "rsquared_adj_", "fvalue_", "f_pvalue_", "resid_std_err_", "df_resid_", "rmse_"):
-            setattr(self, a, getattr(self.mlr_, a))
-        return self
+        return self._refit_on(X, y, sel)
 
     def statistics(self):
         d = self.mlr_.statistics()
@@ -573,14 +577,7 @@ class BestSubsetCV(_Linear):
         self.selected_names_ = [names[j] for j in sel]
         self.names_ = names
         self.n_groups_ = int(labels.size)
-        self.mlr_ = MLR(self.fit_intercept).fit(X[:, sel], y, self.selected_names_)
-        self.coef_ = np.zeros(p)
-        self.coef_[sel] = self.mlr_.coef_
-        self.intercept_ = self.mlr_.intercept_
-        self.n_samples_ = n
-        for a in ("rsquared_", "rsquared_adj_", "fvalue_", "f_pvalue_", "resid_std_err_", "df_resid_", "rmse_"):
-            setattr(self, a, getattr(self.mlr_, a))
-        return self
+        return self._refit_on(X, y, sel)
 
     def statistics(self):
         d = self.mlr_.statistics()
