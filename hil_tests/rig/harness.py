@@ -164,7 +164,29 @@ class SerialReader(threading.Thread):
             time.sleep(0.0005)
 
 
-class Rig:
+class LinkClient:
+    """The controller's side of the link, shared by every device under test (the rig, a real port):
+    needs ``send``, ``advance`` and ``reader.frames``."""
+
+    request_step_ms = 10
+    request_timeout_s = 10.0
+
+    def request(self, *fields, kinds=("Q", "A", "E", "H", "T"), step_ms=None, timeout=None):
+        """Send a command and return the first reply frame of one of ``kinds`` that follows it."""
+        step_ms = self.request_step_ms if step_ms is None else step_ms
+        timeout = self.request_timeout_s if timeout is None else timeout
+        n0 = len(self.reader.frames)
+        self.send(*fields)
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            self.advance(step_ms)
+            for f in self.reader.frames[n0:]:
+                if f.kind in kinds:
+                    return f
+        raise RigError("no reply to %r within %.1f s (t=%d ms)" % (fields, timeout, self.t_ms))
+
+
+class Rig(LinkClient):
     """One simulated board running the firmware. Use as a context manager."""
 
     def __init__(self, config, table=None, interpreter="micropython", workdir=None, temps=None, noise_uohm=0,
@@ -460,14 +482,3 @@ class Rig:
             self.advance(step_ms)
         raise RigError("no matching frame within %.1f s real time (t=%d ms)" % (timeout, self.t_ms))
 
-    def request(self, *fields, kinds=("Q", "A", "E", "H", "T"), step_ms=10, timeout=10.0):
-        """Send a command and return the first reply frame of one of ``kinds`` that follows it."""
-        n0 = len(self.reader.frames)
-        self.send(*fields)
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            self.advance(step_ms)
-            for f in self.reader.frames[n0:]:
-                if f.kind in kinds:
-                    return f
-        raise RigError("no reply to %r within %.1f s (t=%d ms)" % (fields, timeout, self.t_ms))

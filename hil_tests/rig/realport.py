@@ -4,11 +4,13 @@ import time
 import serial
 
 from hil_tests.rig.frames import command
-from hil_tests.rig.harness import RigError, SerialReader
+from hil_tests.rig.harness import LinkClient, SerialReader
 
 
-class RealDut:
+class RealDut(LinkClient):
     real = True
+    request_step_ms = 20  # wall-clock time on a real board
+    request_timeout_s = 5.0
 
     def __init__(self, port, baud=115200):
         self.ser = serial.Serial(port, baud, timeout=0)
@@ -47,17 +49,6 @@ class RealDut:
 
     def send(self, *fields):
         self.write(command(*fields))
-
-    def request(self, *fields, kinds=("Q", "A", "E", "H", "T"), step_ms=20, timeout=5.0):
-        n0 = len(self.reader.frames)
-        self.send(*fields)
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            self.advance(step_ms)
-            for f in self.reader.frames[n0:]:
-                if f.kind in kinds:
-                    return f
-        raise RigError("no reply to %r from the board" % (fields,))
 
     def close(self):
         self.reader.stop = True
