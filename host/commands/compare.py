@@ -1,5 +1,4 @@
 """tcomp compare RUN... --json OUT [--plots DIR]"""
-HELP = "fit MLR, PCR, stepwise and the sensor selectors on one run, predict the others, with a robustness check"
 
 
 def add_arguments(p):

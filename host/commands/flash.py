@@ -1,5 +1,4 @@
 """tcomp flash --port PORT [--table table.bin] [--config board.json | --board board.py]"""
-HELP = "copy the firmware, a board file and a table onto a MicroPython board with mpremote"
 
 import json
 import os

@@ -1,5 +1,4 @@
 """tcomp hil --run RUN_DIR --table table.bin [--interpreter micropython|cpython] [--json OUT.json]"""
-HELP = "run the firmware on the HIL rig, driven by a run folder; query it at every errors.csv row"
 
 import json
 import re

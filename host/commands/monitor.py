@@ -1,5 +1,4 @@
 """tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S]"""
-HELP = "decode the $TC stream of a board (a real port or a pty) into a table, optionally logged as CSV"
 
 import csv
 import sys

@@ -1,5 +1,4 @@
 """tcomp select --method maxtree|stepwise|hclust-ga RUN... --json OUT  |  tcomp select --method maxtree --corr CORR.csv --json OUT"""
-HELP = "choose temperature sensors (maximal-tree fuzzy clustering, stepwise partial F, hierarchical clustering + GA)"
 
 METHODS = ("maxtree", "stepwise", "hclust-ga")
 
