@@ -24,25 +24,22 @@ def add_arguments(p):
 
 def _method_options(items, methods):
     """--option METHOD.KEY=VALUE list -> (estimator options, selector parameters), values parsed as JSON when possible."""
-    import json
-
     from host.cli import UserError
+    from host.options import json_or_word, split_option
     from host.empirical.compare import METHODS, SELECTORS
 
     options, selector = {}, {}
+    expected = "METHOD.KEY=VALUE, e.g. pcr.variance_threshold=0.9"
     for item in items:
-        lhs, sep, value = item.partition("=")
-        method, dot, key = lhs.strip().partition(".")
-        if not sep or not dot or not key:
-            raise UserError("--option %r: expected METHOD.KEY=VALUE, e.g. pcr.variance_threshold=0.9" % item)
+        lhs, value = split_option(item, expected)
+        method, dot, key = lhs.partition(".")
+        if not dot or not key:
+            raise UserError("--option %r: expected %s" % (item, expected))
         if method not in METHODS:
             raise UserError("--option %r: unknown method %r (known: %s)" % (item, method, ", ".join(METHODS)))
         if method == "mlr":
             raise UserError("--option %r: mlr has no settings" % item)
-        try:
-            v = json.loads(value)
-        except ValueError:
-            v = value.strip()
+        v = json_or_word(value)
         if method not in SELECTORS:
             import inspect
 

@@ -18,24 +18,6 @@ def add_arguments(p):
     p.add_argument("--target-corr", metavar="TCORR.csv", help="with --corr: sensor,r rows (optional header line) for the representatives")
 
 
-def _options(items):
-    import json
-
-    from host.cli import UserError
-
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise UserError("--option %r: expected KEY=VALUE" % item)
-        value = value.strip()
-        try:
-            out[key.strip()] = json.loads(value)
-        except ValueError:
-            out[key.strip()] = value  # plain words such as disturbance=offset
-    return out
-
-
 def run(args):
     import json
 
@@ -102,6 +84,7 @@ def _run_corr(args):
 
 def _run_data(args):
     from host.cli import UserError, sensor_list
+    from host.options import parse_options
     from host.empirical.selectors import select
     from host.runs import RunFormatError, load_runs
 
@@ -114,7 +97,7 @@ def _run_data(args):
     except RunFormatError as exc:
         raise UserError(str(exc))
     sensors = sensor_list(args.sensors)
-    params = _options(args.option)
+    params = parse_options(args.option)
     data = runs if args.split == 1 else _windows(runs, args.split, args.target, args.channel, sensors)
     sel = select(args.method, data, target=args.target, channel=args.channel, sensors=sensors, **params)
     doc = sel.to_json()

@@ -1,26 +1,26 @@
 """``tcomp fit --model mlr|pcr|stepwise`` (arguments defined in host/commands/fit.py)."""
 import json
-import math
 
+from host import options
 from host.empirical import EmpiricalDataError
+from host.options import number
 
-# --option KEY=VALUE settings understood by fit_command, with their parsers
+# --option KEY=VALUE settings understood by fit_command, with their converters (host/options.py); a
+# minimum is the smallest meaningful value, below which the estimator would fail obscurely or accept nonsense
 OPTIONS = {
-    "variance_threshold": float,  # PCR
-    "n_components": int,  # PCR
-    "f_enter": float,  # stepwise
-    "f_remove": float,  # stepwise
-    "envelope_margin_K": float,
+    "variance_threshold": number(float),  # PCR
+    "n_components": number(int, 1),  # PCR
+    "f_enter": number(float),  # stepwise
+    "f_remove": number(float),  # stepwise
+    "envelope_margin_K": number(float, 0.0),
     "reference": str,  # run_start | fixed
-    "geometric_max_degree": int,
+    "geometric_max_degree": number(int, 1),
     "geometric_criterion": str,  # cv | aic
-    "t_min_s": float,  # training window on target time
-    "t_max_s": float,
-    "max_sensors": int,  # cv-subset
-    "cv_blocks": int,  # cv-subset on one run
+    "t_min_s": number(float),  # training window on target time
+    "t_max_s": number(float),
+    "max_sensors": number(int, 1),  # cv-subset
+    "cv_blocks": number(int, 2),  # cv-subset on one run
 }
-# smallest meaningful value of numeric options whose estimator would otherwise fail obscurely or accept nonsense
-MINIMUM = {"envelope_margin_K": 0.0, "geometric_max_degree": 1, "max_sensors": 1, "n_components": 1, "cv_blocks": 2}
 METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",)}
 
 
@@ -28,24 +28,11 @@ def parse_options(pairs, method):
     """--option KEY=VALUE list -> dict, rejecting unknown keys and options of other methods."""
     from host.cli import UserError
 
-    out = {}
-    for item in pairs or []:
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or key not in OPTIONS:
-            raise UserError("--option %r: expected KEY=VALUE with KEY one of %s" % (item, ", ".join(sorted(OPTIONS))))
+    out = options.parse_options(pairs, OPTIONS)
+    for key in out:
         owner = [m for m, keys in METHOD_OPTIONS.items() if key in keys]
         if owner and method not in owner:
             raise UserError("--option %s applies to --model %s, not %s" % (key, owner[0], method))
-        try:
-            out[key] = OPTIONS[key](value.strip())
-        except ValueError:
-            raise UserError("--option %s=%r: not a valid %s" % (key, value, OPTIONS[key].__name__))
-        if OPTIONS[key] is float and not math.isfinite(out[key]):
-            raise UserError("--option %s=%r: must be a finite number" % (key, value))
-        low = MINIMUM.get(key)
-        if low is not None and out[key] < low:
-            raise UserError("--option %s=%s: must be >= %g" % (key, value.strip(), low))
     lo, hi = out.get("t_min_s"), out.get("t_max_s")
     if lo is not None and hi is not None and not lo < hi:
         raise UserError("--option t_min_s=%g, t_max_s=%g: the training window is empty (t_min_s must be < t_max_s)" % (lo, hi))
