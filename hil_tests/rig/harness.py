@@ -11,6 +11,7 @@ decodes $TC frames (or keeps raw bytes in Modbus mode).
 Simulated time only moves inside ``run(until_ms)``; between runs the DUT is
 parked in its clock and the test may change temperatures and inject faults.
 """
+import io
 import json
 import os
 import select
@@ -110,16 +111,31 @@ class SerialReader(threading.Thread):
         self.rx_total = 0
         self.on_frame = None
 
-    def run(self):
-        fd = self.ser.fileno()
-        while not self.stop:
-            r, _, _ = select.select([fd], [], [], 0.05)
-            if not r:
-                continue
+    def _receive(self, fd):
+        """Bytes that arrived within ~50 ms, b'' if none (``busy`` once there are some); OSError when
+        the other side closed."""
+        if fd is None:  # a pySerial URL handler (socket://, loop://, spy://): no descriptor to select on
+            waiting = self.ser.in_waiting
+            if not waiting:
+                time.sleep(0.01)
+                return b""
             self.busy = True
+            return self.ser.read(waiting)
+        r, _, _ = select.select([fd], [], [], 0.05)
+        if not r:
+            return b""
+        self.busy = True
+        return os.read(fd, 65536)
+
+    def run(self):
+        try:
+            fd = self.ser.fileno()
+        except (AttributeError, io.UnsupportedOperation):
+            fd = None
+        while not self.stop:
             try:
-                data = os.read(fd, 65536)
-            except OSError:
+                data = self._receive(fd)
+            except (OSError, serial.SerialException):
                 self.busy = False
                 time.sleep(0.01)  # the DUT's side of the pty closed (process ended or restarting)
                 continue
@@ -232,7 +248,7 @@ class Rig(LinkClient):
         if not self.open_port:
             return  # another client (pymodbus, mpremote) opens self.port
         baud = (self.config.get("serial") or {}).get("baud", 115200)
-        self.ser = serial.Serial(self.port, baud, timeout=0)
+        self.ser = serial.serial_for_url(self.port, baud, timeout=0)
         self.reader = SerialReader(self.ser, self.stream)
         self.reader.start()
 

@@ -1,4 +1,4 @@
-"""A real board on a serial port with the Rig's link-level interface (time is wall-clock time)."""
+"""A real board on a serial port (or any pySerial URL) with the Rig's link-level interface (time is wall-clock time)."""
 import time
 
 import serial
@@ -13,7 +13,7 @@ class RealDut(LinkClient):
     request_timeout_s = 5.0
 
     def __init__(self, port, baud=115200):
-        self.ser = serial.Serial(port, baud, timeout=0)
+        self.ser = serial.serial_for_url(port, baud, timeout=0)  # a device path or a pySerial URL
         self.reader = SerialReader(self.ser, True)
         self.reader.start()
         self.t0 = time.monotonic()

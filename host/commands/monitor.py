@@ -9,7 +9,7 @@ COLUMNS = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_
 
 
 def add_arguments(p):
-    p.add_argument("--port", required=True, help="serial port (e.g. /dev/ttyACM0)")
+    p.add_argument("--port", required=True, help="serial port or pySerial URL (e.g. /dev/ttyACM0, socket://host:port, spy:///dev/ttyACM0, loop://)")
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     p.add_argument("--csv", help="append every decoded frame to this CSV file")
     p.add_argument("--count", type=int, default=0, help="stop after this many frames (0: never)")
@@ -39,8 +39,8 @@ def run(args):
     from hil_tests.rig.frames import StreamDecoder, command
     from host.cli import UserError
     try:
-        ser = serial.Serial(args.port, args.baud, timeout=0.1)
-    except (serial.SerialException, OSError) as exc:
+        ser = serial.serial_for_url(args.port, args.baud, timeout=0.1)
+    except (serial.SerialException, OSError, ValueError) as exc:
         raise UserError("cannot open %s: %s" % (args.port, exc))
     out = None
     writer = None
