@@ -13,7 +13,7 @@ import pytest
 import serial
 
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
-from hil_tests.rig.frames import StreamDecoder, command
+from host.link import StreamDecoder, command
 
 pytestmark = [pytest.mark.rig, pytest.mark.micropython]
 

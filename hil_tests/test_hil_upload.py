@@ -15,7 +15,7 @@ import zlib
 import pytest
 
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
-from hil_tests.rig.frames import command
+from host.link import command
 
 pytestmark = pytest.mark.rig
 TRIALS = 40 if os.environ.get("TCOMP_SLOW") else 8

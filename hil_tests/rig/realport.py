@@ -3,7 +3,7 @@ import time
 
 import serial
 
-from hil_tests.rig.frames import command
+from host.link import command
 from hil_tests.rig.harness import LinkClient, SerialReader
 
 

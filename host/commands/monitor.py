@@ -20,7 +20,7 @@ def add_arguments(p):
 
 def row(f):
     """A decoded frame as the monitor's columns."""
-    from hil_tests.rig.frames import STATUS_BITS
+    from host.link import STATUS_BITS
     flags = [n for bit, n in STATUS_BITS.items() if f.status & bit]
     if f.status & 0xFFFF:
         flags.append("sensors:%04X" % (f.status & 0xFFFF))
@@ -36,7 +36,7 @@ def row(f):
 def run(args):
     import serial
 
-    from hil_tests.rig.frames import StreamDecoder, command
+    from host.link import StreamDecoder, command
     from host.cli import UserError
     try:
         ser = serial.serial_for_url(args.port, args.baud, timeout=0.1)

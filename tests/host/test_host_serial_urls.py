@@ -6,7 +6,7 @@ import threading
 import time
 
 from firmware.board_linux import make_linux_board
-from hil_tests.rig.frames import command
+from host.link import command
 from hil_tests.rig.realport import RealDut
 from host.cli import main
 

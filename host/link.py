@@ -1,7 +1,8 @@
-"""Controller-side codec for the $TC stream (docs/protocol.md), independent of firmware/ code.
+"""The host side of the board link: the $TC frame codec (docs/protocol.md).
 
-CRC-16/CCITT-FALSE comes from ``binascii.crc_hqx`` so a firmware CRC bug
-cannot cancel itself out in the tests.
+Used by ``tcomp monitor`` and by the HIL rig (hil_tests/rig). It is written
+independently of the firmware's frame code: CRC-16/CCITT-FALSE comes from
+``binascii.crc_hqx``, so a firmware CRC bug cannot cancel itself out.
 """
 import binascii
 from dataclasses import dataclass, field
