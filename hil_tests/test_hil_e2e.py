@@ -65,7 +65,7 @@ def test_e2e_poly_slope_matches_host_model(make_rig, demo_run):
 def test_e2e_screw_reduced_matches_reference(make_rig):
     """Axis motion reported by position frames; the float reduced recurrence on the same travel."""
     from firmware.table import parse_table
-    from models_export.reference import Reference
+    from hil_tests.fixtures.reference import Reference
     doc = screw_doc(["T1"])
     ex = export(doc)
     table = parse_table(ex.table)

@@ -3,6 +3,7 @@ import math
 
 from firmware.crc32 import crc32
 from models_export.certify import LIMITS_UM, OU_PER_UM, ExportError, Model
+from models_export.document import document_hash
 from models_export.plan import Planner
 from models_export.tableformat import pack
 
@@ -26,8 +27,6 @@ class Export:
 
 
 def _provenance(doc):
-    from host.models import document_hash
-
     actual = document_hash(doc)
     declared = ((doc.get("provenance") or {}).get("sha256")) or None
     return bytes.fromhex(declared if declared and len(declared) == 64 else actual), declared == actual
