@@ -1,4 +1,9 @@
-"""tcomp hil --run RUN_DIR --table table.bin [--interpreter micropython|cpython] [--json OUT.json]"""
+"""tcomp hil --run RUN_DIR --table table.bin [--interpreter micropython|cpython] [--json OUT.json]
+
+The simulated rig lives with the HIL tests (hil_tests/rig, hil_tests/sim). This verb is the one
+production module that uses it, and it imports it inside run(): no other verb, nor `tcomp --help`,
+loads the rig (tests/test_layers.py holds this exception and nothing else).
+"""
 
 import json
 import re
