@@ -20,10 +20,7 @@ The bus is a ``machine.I2C`` (``writeto``, ``readfrom_mem_into``,
 ``writeto_mem``), created by the board. The hot path allocates nothing.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 # commands
 _CMD_RESET = const(0x06)

@@ -13,10 +13,7 @@ Units inside: temperatures milli-degC, positions um, offsets 0.01 um,
 slopes 0.01 um/m (the evaluator's); the links convert for the wire.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 from firmware.channels import Channels
 from firmware.evaluate import Evaluator

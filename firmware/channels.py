@@ -13,10 +13,7 @@ is configured again.
 ``read_all`` is the hot path: no allocation, integers below 2**30.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 from firmware import rtd
 

@@ -10,10 +10,7 @@ The hot path (``read_rtd``, ``fault_status``, ``clear_fault``, ``ratio``)
 allocates nothing and keeps every integer below 2**30.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 # register read addresses; write address = read address | 0x80
 _REG_CONFIG = const(0x00)

@@ -13,10 +13,7 @@ A request is complete when its function code's length has arrived, or after a
 silence of 3.5 character times (at least 2 ms) for anything else. Allocation-free.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 from firmware.crc16 import crc16_modbus
 

@@ -13,10 +13,7 @@ Periodic frames, position reports and queries allocate nothing; the upload and
 the hello frame may (they are not part of the steady state).
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 from firmware import frame as fr
 from firmware.slots import UploadError, SLOT_NAMES

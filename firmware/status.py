@@ -9,10 +9,7 @@ copies, which MicroPython folds into the bytecode, so a board does not load
 this module at all (tests/firmware/test_fw_consts.py checks the copies).
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 SENSOR_MASK = const(0xFFFF)
 CLAMPED = const(0x10000)  # a model input was clamped to the table's envelope
