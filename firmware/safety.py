@@ -24,7 +24,7 @@ No floats, no allocation, no tuple returns; integers stay far below 2**30
 
 from micropython import const
 
-# status word bits (firmware/status.py; tests/firmware/test_fw_consts.py checks the copies)
+# status word bits (firmware/wire.py; tests/firmware/test_fw_consts.py checks the copies)
 _MAG_LIMITED = const(0x40000)
 _RATE_LIMITED = const(0x20000)
 _RECOVERING = const(0x4000000)

@@ -14,9 +14,9 @@ import pytest
 from hil_tests.conftest import SLOW
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config, screw_doc
 from hil_tests.rig.play import play, poly_slope_bound_um
+from host.link import RATE_LIMITED
 
 pytestmark = pytest.mark.rig
-RATE_LIMITED = 0x20000
 
 
 def _subset(run, hours):

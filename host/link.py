@@ -7,15 +7,13 @@ independently of the firmware's frame code: CRC-16/CCITT-FALSE comes from
 import binascii
 from dataclasses import dataclass, field
 
-STATUS_BITS = {
-    0x10000: "CLAMPED", 0x20000: "RATE_LIMITED", 0x40000: "MAG_LIMITED", 0x80000: "HELD",
-    0x100000: "FALLBACK", 0x200000: "NO_TABLE", 0x400000: "LINK_TIMEOUT", 0x800000: "NO_POSITION",
-    0x1000000: "DISABLED", 0x2000000: "UPLOADING", 0x4000000: "RECOVERING", 0x8000000: "REF_PENDING",
-}
-HELD = 0x80000
-FALLBACK = 0x100000
-RECOVERING = 0x4000000
-SENSOR_MASK = 0xFFFF
+from firmware import wire
+from firmware.wire import FALLBACK, HELD, PROTOCOL_VERSION, RATE_LIMITED, RECOVERING, SENSOR_MASK  # noqa: F401
+
+# {bit: name} of the flag bits above the sensor bits, in bit order, read from the wire contract
+STATUS_BITS = dict(sorted((value, name) for name, value in vars(wire).items()
+                          if name.isupper() and isinstance(value, int) and value > SENSOR_MASK
+                          and value & (value - 1) == 0))
 
 
 def crc16(body):

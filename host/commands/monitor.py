@@ -36,7 +36,7 @@ def row(f):
 def run(args):
     import serial
 
-    from host.link import StreamDecoder, command
+    from host.link import PROTOCOL_VERSION, StreamDecoder, command
     from host.cli import UserError
     try:
         ser = serial.serial_for_url(args.port, args.baud, timeout=0.1)
@@ -75,6 +75,9 @@ def run(args):
             if not data:
                 continue
             for f in dec.feed(data, time.monotonic()):
+                if f.kind == "H" and f.fields[:1] != [str(PROTOCOL_VERSION)]:
+                    raise UserError("%s: the board's hello frame says protocol version %s; this tcomp speaks %d "
+                                    "(docs/protocol.md)" % (args.port, (f.fields or ["(none)"])[0], PROTOCOL_VERSION))
                 r = row(f)
                 print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],

@@ -41,16 +41,43 @@ def test_private_copies_match_their_source():
         assert here[name] == getattr(importlib.import_module("firmware." + src), public), (mod, name)
 
 
-def test_status_bit_copies_match_status_py():
-    from firmware import status
+def test_wire_contract_copies_match_wire_py():
+    from firmware import wire
     checked = 0
     for fn in sorted(os.listdir(FW)):
-        if fn.endswith(".py") and fn != "status.py":
+        if fn.endswith(".py") and fn != "wire.py":
             for k, v in consts(fn[:-3]).items():
-                if k.startswith("_") and hasattr(status, k[1:]):
-                    assert v == getattr(status, k[1:]), (fn, k)
+                if k.startswith("_") and hasattr(wire, k[1:]):
+                    assert v == getattr(wire, k[1:]), (fn, k)
                     checked += 1
-    assert checked >= 11  # app.py and safety.py use their own copies
+    assert checked >= 12  # app.py's and safety.py's status bits, protocol.py's version
+
+
+BYTES_CONST = re.compile(r"^(_[A-Z][A-Z0-9_]*) = const\(b\"([^\"]*)\"\)", re.M)
+
+
+def test_protocol_letters_and_texts_are_the_wire_contract():
+    from firmware import wire
+    with open(os.path.join(FW, "protocol.py")) as f:
+        text = f.read()
+    letters = {k[1:]: v for k, v in consts("protocol").items() if len(k) == 2}
+    # every one-letter const is a frame kind, a command or an upload step, with its own ASCII code
+    assert letters and all(chr(v) == k for k, v in letters.items()), letters
+    assert set(letters) == set(wire.FRAME_KINDS) | set(wire.COMMANDS) | set(wire.UPLOAD_STEPS)
+    texts = dict(BYTES_CONST.findall(text))
+    assert texts["_FIRMWARE_VERSION"].encode() == wire.FIRMWARE_VERSION.encode()
+    assert texts["_REF_LETTERS"].encode() == wire.REF_LETTERS
+    for name in ("_ONE_POSITION", "_NO_ARGUMENT"):  # command groups the parser dispatches on
+        group = re.search(r"^%s = b\"(\w+)\"" % name, text, re.M).group(1)
+        assert set(group) <= set(wire.COMMANDS), name
+
+
+def test_protocol_does_not_import_app():
+    # app.py picks its link (protocol.py or modbus.py); the link takes the contract from wire.py, not app.py
+    for fn in ("protocol.py", "modbus.py"):
+        with open(os.path.join(FW, fn)) as f:
+            assert not re.search(r"^\s*(from firmware\.app import|from firmware import app|import firmware\.app)",
+                                 f.read(), re.M), fn
 
 
 def test_cpython_public_names_are_the_folded_values():

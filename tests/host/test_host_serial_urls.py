@@ -14,23 +14,10 @@ FRAMES = [command(7, "00000000", "O", 1000, 25000, "1.50", "1.20", "3.00"),
           command(8, "00080000", "W", "sensor")]
 
 
-def test_monitor_reads_a_socket_url(tmp_path, capsys):
-    server = socket.socket()
-    server.bind(("127.0.0.1", 0))
-    server.listen(1)
-
-    def board():
-        conn, _ = server.accept()
-        time.sleep(0.3)  # pySerial's socket:// discards what arrives while it opens (reset_input_buffer)
-        conn.sendall(b"".join(FRAMES) + b"$TC,garbage*0000\r\n")
-        time.sleep(0.5)
-        conn.close()
-
-    threading.Thread(target=board, daemon=True).start()
+def test_monitor_reads_a_socket_url(tmp_path):
     out = tmp_path / "m.json"
-    assert main(["monitor", "--port", "socket://127.0.0.1:%d" % server.getsockname()[1], "--count", "2",
-                 "--duration", "5", "--json", str(out)]) == 0
-    server.close()
+    port = _serve(b"".join(FRAMES) + b"$TC,garbage*0000\r\n")
+    assert main(["monitor", "--port", port, "--count", "2", "--duration", "5", "--json", str(out)]) == 0
     doc = json.loads(out.read_text())
     assert [r["seq"] for r in doc["rows"]] == [7, 8]
     assert doc["rows"][0]["total_um"] == "1.50" and doc["rows"][1]["flags"] == "HELD"
@@ -68,3 +55,36 @@ def test_real_port_backend_decodes_from_a_loop_url():
         assert [(f.seq, f.kind) for f in dut.take_frames()] == [(7, "O"), (8, "W")]
     finally:
         dut.close()
+
+
+def _serve(payload):
+    server = socket.socket()
+    server.bind(("127.0.0.1", 0))
+    server.listen(1)
+
+    def board():
+        conn, _ = server.accept()
+        time.sleep(0.3)  # pySerial's socket:// discards what arrives while it opens (reset_input_buffer)
+        conn.sendall(payload)
+        time.sleep(0.5)
+        conn.close()
+        server.close()
+
+    threading.Thread(target=board, daemon=True).start()
+    return "socket://127.0.0.1:%d" % server.getsockname()[1]
+
+
+def test_monitor_refuses_a_hello_with_an_unknown_protocol_version(capsys):
+    from firmware.wire import PROTOCOL_VERSION
+    hello = command(0, "00000000", "H", PROTOCOL_VERSION + 1, "9.9.9", "-", "-", "-", "-", "-", 3, "-")
+    assert main(["monitor", "--port", _serve(hello), "--count", "1", "--duration", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "protocol version %d" % (PROTOCOL_VERSION + 1) in err and "speaks %d" % PROTOCOL_VERSION in err
+
+
+def test_monitor_accepts_a_hello_with_its_protocol_version(tmp_path):
+    from firmware.wire import FIRMWARE_VERSION, PROTOCOL_VERSION
+    hello = command(0, "00200000", "H", PROTOCOL_VERSION, FIRMWARE_VERSION, "-", "-", "-", "-", "-", 3, "-")
+    out = tmp_path / "m.json"
+    assert main(["monitor", "--port", _serve(hello), "--count", "1", "--duration", "5", "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["rows"][0]["flags"] == "NO_TABLE"
