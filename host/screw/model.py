@@ -445,25 +445,17 @@ class ScrewModel:
 def choose_geometric_degree(P, resid, max_degree, n_thermal):
     """Degree 0..max_degree of the cold polynomial for the residual after the thermal part.
 
-    Uses host.empirical.geometric (leave-one-out CV over position-averaged points) when
-    that module is present, else AIC = n·ln(RSS/n) + 2(d+1+n_thermal) here.
-    Returns (degree, scores)."""
+    Uses host.empirical.geometric (leave-one-out CV over position-averaged points); when it
+    refuses the data (e.g. fewer than 4 positions), AIC = n·ln(RSS/n) + 2(d+1+n_thermal) here,
+    and the returned method names why. Returns (degree, scores)."""
+    from host.empirical import EmpiricalDataError
+    from host.empirical.geometric import GeometricPolynomial
+
     try:
-        from host.empirical.geometric import GeometricPolynomial
-    except ImportError:
-        GeometricPolynomial = None
-    if GeometricPolynomial is not None:
-        try:
-            gp = GeometricPolynomial(max_degree=max_degree, criterion="cv").fit(P, resid)
-            deg = getattr(gp, "degree_", None)
-            if deg is not None:
-                return int(deg), {"method": "host.empirical.geometric (cv)", "scores": getattr(gp, "scores_", None)}
-        except Exception as exc:  # the empirical module refuses data we can still handle (e.g. < 4 positions)
-            note = str(exc)
-        else:
-            note = "host.empirical.geometric gave no degree_"
-    else:
-        note = "host.empirical.geometric not available"
+        gp = GeometricPolynomial(max_degree=max_degree, criterion="cv").fit(P, resid)
+        return int(gp.degree_), {"method": "host.empirical.geometric (cv)", "scores": gp.scores_}
+    except EmpiricalDataError as exc:
+        note = str(exc)
     n = P.size
     u = P / max(np.max(np.abs(P)), 1.0)
     scores = []
