@@ -77,7 +77,6 @@ class ModbusLink:
         self.silence_ms = 2 if baud >= 19200 else (38500 + baud - 1) // baud + 1
         self.hold = [1, app.cfg.slew_um_per_s, app.cfg.link_timeout_ms, 0, 0, 0, 0, 0]
         self.vals = [0] * 123  # values of a write, validated before use
-        self.frames = 0  # requests answered (diagnostics)
 
     def boot(self):
         pass
@@ -163,7 +162,6 @@ class ModbusLink:
         t[n] = crc & 0xFF
         t[n + 1] = crc >> 8
         self.serial.write(t, n + 2)
-        self.frames += 1
 
     def _exception(self, fc, code, addr):
         t = self.tx
