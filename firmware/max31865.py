@@ -44,21 +44,7 @@ _FAULT_REFIN_HIGH = const(0x20)  # D5: REFIN- > 0.85 x V_BIAS
 _FAULT_REFIN_LOW_OPEN = const(0x10)  # D4: REFIN- < 0.85 x V_BIAS (FORCE- open)
 _FAULT_RTDIN_LOW_OPEN = const(0x08)  # D3: RTDIN- < 0.85 x V_BIAS (FORCE- open)
 _FAULT_OVUV = const(0x04)  # D2: overvoltage / undervoltage
-FAULT_NAMES = (
-    (_FAULT_HIGH_THRESHOLD, "rtd_high_threshold"),
-    (_FAULT_LOW_THRESHOLD, "rtd_low_threshold"),
-    (_FAULT_REFIN_HIGH, "refin_high"),
-    (_FAULT_REFIN_LOW_OPEN, "refin_low_force_open"),
-    (_FAULT_RTDIN_LOW_OPEN, "rtdin_low_force_open"),
-    (_FAULT_OVUV, "over_under_voltage"),
-)
-
 _FAULT_CYCLE_POLLS = const(100)
-
-
-def decode_faults(status):
-    """Names of the faults set in a fault status byte (allocates: not for the cycle)."""
-    return [name for bit, name in FAULT_NAMES if status & bit]
 
 
 def _bad(arg, v):
@@ -147,23 +133,10 @@ class MAX31865:
         self._conf = value & ~_SELF_CLEARING
         self.write_register(_REG_CONFIG, value)
 
-    def config_bit(self, mask):
-        """True if the configuration bits in ``mask`` (e.g. V_BIAS 0x80) are set on the chip."""
-        return bool(self.configuration & mask)
-
-    def set_config_bit(self, mask, on):
-        """Set or clear configuration bits; one-shot, fault-cycle and fault-clear are never re-written."""
-        c = self._conf
-        self.configuration = (c | mask) if on else (c & ~mask)
-
     @property
     def fault_detection(self):
         """Fault-detection cycle control bits D3:D2 (FAULT_CYCLE_*); 0 when idle."""
         return self.configuration & _CONFIG_FAULT_CYCLE
-
-    def one_shot(self):
-        """Start a single conversion (D5) with V_BIAS already on."""
-        self.write_register(_REG_CONFIG, self._conf | _CONFIG_1SHOT)
 
     def clear_fault(self):
         """Clear the fault status (D1), writing D5, D3 and D2 as 0 as the datasheet requires."""
