@@ -40,7 +40,7 @@ _CAP = const(0x20000000)  # elapsed-time counters saturate here (2**29 ms, 6.2 d
 
 
 class Channels:
-    """All sensor channels of a validated board config (``firmware.board.Config``)."""
+    """All sensor channels of a validated board config (``firmware.bootcfg.Config``)."""
 
     def __init__(self, cfg, board, now):
         n = self.n = len(cfg.channels)
