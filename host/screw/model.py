@@ -346,9 +346,16 @@ class ScrewModel:
     def predict(self, run):
         """Predicted error (µm) at every row of ``run.errors``: the run's own motion and
         base temperature are simulated from a cold (ambient) screw at the run's start."""
+        if not hasattr(self, "geometry_"):
+            raise ValueError("screw model: predict before fit (fit(runs) first, or load a fitted document)")
         check_run(run, self.geometry_, require_nut=False)
         ctx = self._context(run)
-        return self.thermal_context(ctx) + self.geometric_um(ctx.positions_mm)
+        out = self.thermal_context(ctx) + self.geometric_um(ctx.positions_mm)
+        bad = np.flatnonzero(~np.isfinite(out))
+        if bad.size:
+            raise ValueError("%s: the prediction at errors.csv row %d (%g s) is NaN/inf: a temperature the model reads "
+                             "(base sensor %s) is NaN/inf" % (ctx.run_name, bad[0], run.errors.time_s[bad[0]], self.base_sensor_))
+        return out
 
     def predict_grid(self, run, positions_mm, times_s=None):
         """Thermal + geometric error on a time × position grid (default times: the model grid)."""
