@@ -25,6 +25,10 @@ COPIES = {
     ("protocol", "_LINE_OK"): ("frame", "_LINE_OK"),
     ("protocol", "_LINE_CRC"): ("frame", "_LINE_CRC"),
     ("protocol", "_LINE_OVERFLOW"): ("frame", "_LINE_OVERFLOW"),
+    ("channels", "_NO_DATA"): ("drivers", "NO_DATA"),
+    ("channels", "_FAULT"): ("drivers", "FAULT"),
+    ("ads122c04", "_NO_DATA"): ("drivers", "NO_DATA"),
+    ("max31865", "_FAULT"): ("drivers", "FAULT"),
 }
 
 

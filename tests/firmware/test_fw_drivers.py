@@ -48,7 +48,7 @@ def test_max31865_ratio_is_exact_floor_of_product():
 def test_max31865_thresholds_and_fault_decode():
     d, chip, _, _ = max_rig(t=25.0)
     lo, hi = rtd.ratio_of(-20000), rtd.ratio_of(80000)
-    d.set_thresholds_ratio(lo, hi)
+    d.set_limits(lo, hi)
     assert d.low_threshold == d.code_of(lo)
     assert d.high_threshold == d.code_of(hi)
     assert chip.regs[3] == (d.code_of(hi) >> 7) & 0xFF and chip.regs[4] == (d.code_of(hi) << 1) & 0xFF
@@ -116,7 +116,7 @@ def ads_rig(wires=3, rref=1620.0, t=25.0, **kw):
     i2c, dev = FakeI2C(), FakeADS122C04(rref_ohm=rref)
     dev.set_temperature(t)
     i2c.attach(0x41, dev)
-    return ads.ADS122C04(i2c, 0x41, int(rref * 1000), wires, **kw), dev, i2c
+    return ads.ADS122C04(i2c, 0x41, rref_mohm=int(rref * 1000), wires=wires, **kw), dev, i2c
 
 
 def test_ads122c04_registers_for_3_wire():
