@@ -94,7 +94,7 @@ def run(args):
         except (OSError, json.JSONDecodeError) as exc:
             raise UserError("%s: %s" % (args.config, exc))
         # The firmware's own boot-time validator, run here so a bad config is named before the rig starts.
-        from firmware.config import load_config
+        from host.boardconfig import load_config
         if not isinstance(cfg, dict):
             raise UserError("%s: a board config is a JSON object (firmware/board.py), found %s" % (args.config, type(cfg).__name__))
         try:
