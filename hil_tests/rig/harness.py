@@ -76,7 +76,7 @@ def compile_mpy(dest=None):
     for pkg in ("firmware", "hil_tests/sim", "hil_tests/rig", "hil_tests"):
         src_dir = os.path.join(ROOT, pkg)
         for name in os.listdir(src_dir):
-            if not name.endswith(".py") or name in ("board_linux.py", "harness.py", "conftest.py") \
+            if not name.endswith(".py") or name in ("linux_adapters.py", "harness.py", "conftest.py") \
                     or name.startswith("test_"):
                 continue
             out_dir = os.path.join(dest, pkg)

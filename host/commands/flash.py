@@ -9,7 +9,7 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # CPython-only modules that never go onto a board
-_HOST_ONLY = ("board_linux.py",)  # the CPython adapters of a Linux board
+_HOST_ONLY = ("linux_adapters.py",)  # the CPython adapters of a Linux board
 
 
 def add_arguments(p):

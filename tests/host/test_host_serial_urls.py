@@ -5,7 +5,7 @@ import socket
 import threading
 import time
 
-from firmware.board_linux import make_linux_board
+from firmware.linux_adapters import make_linux_board
 from host.link import command
 from hil_tests.rig.realport import RealDut
 from host.cli import main

@@ -2,7 +2,7 @@
 import pytest
 
 from fwfakes import FakeADS122C04
-from firmware.board_linux import SMBusI2C, SerialPort, MonotonicClock, NullPin
+from firmware.linux_adapters import SMBusI2C, SerialPort, MonotonicClock, NullPin
 from firmware import ads122c04 as ads, rtd
 
 
@@ -118,7 +118,7 @@ def test_spidev_adapter_ioctl_layout(monkeypatch):
     import fcntl
     import os
     import struct
-    from firmware import board_linux as bl
+    from firmware import linux_adapters as bl
     calls = []
 
     def ioctl(fd, req, arg):
