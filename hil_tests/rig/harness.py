@@ -24,6 +24,7 @@ import tempfile
 import threading
 import time
 import tty
+from typing import Any
 
 import serial
 
@@ -182,10 +183,29 @@ class SerialReader(threading.Thread):
 
 class LinkClient:
     """The controller's side of the link, shared by every device under test (the rig, a real port):
-    needs ``send``, ``advance`` and ``reader.frames``."""
+    needs ``ser`` (the pyserial port), ``reader`` (its SerialReader), ``advance`` and ``t_ms``."""
 
     request_step_ms = 10
     request_timeout_s = 10.0
+    ser: Any = None
+    reader: Any = None
+
+    def write(self, data):
+        self.ser.write(data)
+        self.ser.flush()
+
+    def send(self, *fields):
+        self.write(command(*fields))
+
+    @property
+    def frames(self):
+        return self.reader.frames
+
+    def take_frames(self):
+        with self.reader.lock:
+            out = list(self.reader.frames)
+            self.reader.frames.clear()
+        return out
 
     def request(self, *fields, kinds=("Q", "A", "E", "H", "T"), step_ms=None, timeout=None):
         """Send a command and return the first reply frame of one of ``kinds`` that follows it."""
@@ -464,24 +484,7 @@ class Rig(LinkClient):
                     raise self.error
         return _Free()
 
-    # --- the serial link ------------------------------------------------------------------
-    def write(self, data):
-        self.ser.write(data)
-        self.ser.flush()
-
-    def send(self, *fields):
-        self.write(command(*fields))
-
-    @property
-    def frames(self):
-        return self.reader.frames
-
-    def take_frames(self):
-        with self.reader.lock:
-            out = list(self.reader.frames)
-            self.reader.frames.clear()
-        return out
-
+    # --- the serial link (write, send, frames, take_frames: LinkClient) ----------------------
     def take_raw(self):
         with self.reader.lock:
             out = bytes(self.reader.raw)

@@ -3,7 +3,6 @@ import time
 
 import serial
 
-from host.link import command
 from hil_tests.rig.harness import LinkClient, SerialReader
 
 
@@ -32,23 +31,6 @@ class RealDut(LinkClient):
     @property
     def alive(self):
         return True
-
-    @property
-    def frames(self):
-        return self.reader.frames
-
-    def take_frames(self):
-        with self.reader.lock:
-            out = list(self.reader.frames)
-            self.reader.frames.clear()
-        return out
-
-    def write(self, data):
-        self.ser.write(data)
-        self.ser.flush()
-
-    def send(self, *fields):
-        self.write(command(*fields))
 
     def close(self):
         self.reader.stop = True
