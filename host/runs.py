@@ -372,6 +372,14 @@ def load_run(folder):
 
 
 def load_runs(folders):
+    """Load several runs; one folder given twice is refused: its samples would count twice and inflate every statistic."""
+    seen = {}
+    for f in folders:
+        key = os.path.realpath(f)
+        if key in seen:
+            raise RunFormatError(["%s: the same run folder as %s, given twice (its samples would count twice "
+                                  "and inflate the statistics)" % (f, seen[key])])
+        seen[key] = f
     return [load_run(f) for f in folders]
 
 
