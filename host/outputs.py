@@ -22,7 +22,7 @@ import tempfile
 
 from host.cli import UserError, check_output, check_output_dir
 
-_PART = ".tcomp-part"
+_PART = ".tcomp-part-"
 
 
 def _real(path):
@@ -134,16 +134,18 @@ class Outputs:
         return t.stage
 
     def _make_stage(self, t):
-        name = os.path.basename(t.real.rstrip(os.sep)) or "out"
+        stem, ext = os.path.splitext(os.path.basename(t.real.rstrip(os.sep)))
+        # Hidden, named after the target, and with the target's extension only (none if it has none):
+        # matplotlib picks the image format from it.
+        prefix = "%s%s-" % (_PART, stem.replace(".", "_"))
         if t.folder:
             # An existing folder stages inside itself (it may be a mount point); a new one in its nearest existing parent.
             anchor = t.real if os.path.isdir(t.real) else os.path.dirname(t.real)
             while not os.path.isdir(anchor):
                 anchor = os.path.dirname(anchor)
-            return tempfile.mkdtemp(prefix="." + name + ".", suffix=_PART, dir=anchor)
-        # The extension stays last: matplotlib picks the image format from it.
+            return tempfile.mkdtemp(prefix=prefix, dir=anchor)
         where = tempfile.gettempdir() if t.device else os.path.dirname(t.real)
-        fd, stage = tempfile.mkstemp(prefix="." + name + ".", suffix=_PART + os.path.splitext(name)[1], dir=where)
+        fd, stage = tempfile.mkstemp(prefix=prefix, suffix=ext, dir=where)
         os.close(fd)
         return stage
 
