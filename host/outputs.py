@@ -97,6 +97,11 @@ class Outputs:
         check_output_dir(path, flag)
         return self._claim(_Target(flag, path, folder=True))
 
+    def log(self, path, flag):
+        """Claim ``path`` as a log the command appends to as it goes (not staged: what was logged stays)."""
+        check_output(path, flag)
+        return self._claim(_Target(flag, path, folder=False))
+
     def _claim(self, t):
         for shown, real in self._inputs:
             if _same(t.real, real):

@@ -121,11 +121,15 @@ def run(args):
     if not (args.table or args.config or args.board or not args.no_firmware):
         raise UserError("nothing to flash: give --table, --config or --board, or drop --no-firmware")
     tmp = tempfile.mkdtemp(prefix="tcomp-flash-")
+    keep = False
     try:
         files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware)
         argv = command(args.port, files, _mpremote(args.mpremote), args.reset)
         if args.dry_run:
+            # The printed command copies these staged files: they stay until the user has used (or dropped) it.
+            keep = True
             print(" ".join(repr(a) if ("\n" in a or " " in a) else a for a in argv))
+            print("tcomp flash: the files of this command are kept in %s; delete it when done" % tmp, file=sys.stderr)
             return 0
         n = sum(len(v) for v in files.values())
         print("flashing %d files to %s (tables in /%s)" % (n, args.port, tdir))
@@ -141,4 +145,5 @@ def run(args):
         print("done: %s" % ", ".join(sorted(os.path.relpath(f, tmp) for v in files.values() for f in v)))
         return 0
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if not keep:
+            shutil.rmtree(tmp, ignore_errors=True)
