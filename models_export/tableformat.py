@@ -46,7 +46,10 @@ def payload_words(f):
 
 
 def _fixed(text, size, what):
-    raw = text.encode("ascii")
+    try:
+        raw = text.encode("ascii")
+    except UnicodeEncodeError:
+        raw = b""  # refused below with the same message as an empty or long name
     if not raw or len(raw) > size or b"\x00" in raw:
         raise ValueError("%s %r must be 1..%d ASCII characters" % (what, text, size))
     return raw + b"\x00" * (size - len(raw))
