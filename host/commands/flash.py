@@ -85,9 +85,12 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
             raise UserError("%s: cannot read the table: %s" % (table, exc))
         try:
             from firmware.table import parse_table
-            parse_table(data)
+            sensors = parse_table(data).sensors
         except Exception as exc:  # firmware.table.TableError or a malformed file
             raise UserError("%s: not a valid coefficient table: %s" % (table, exc))
+        missing = unwired_sensors(sensors, cfg) if cfg is not None else []
+        if missing:
+            raise UserError("%s: table sensor(s) %s have no channel in the board config %s" % (table, ", ".join(missing), config))
         os.makedirs(os.path.join(dest, tdir), exist_ok=True)
         for name, content in (("table_a.bin", data), ("active", b"A")):
             p = os.path.join(dest, tdir, name)
@@ -95,6 +98,16 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
                 f.write(content)
             files.setdefault(tdir, []).append(p)
     return files, tdir
+
+
+def unwired_sensors(table_sensors, cfg):
+    """Table sensors without a channel of the same name in board config ``cfg`` (a dict), in table order.
+
+    The firmware refuses such a table with its generic reason "sensor count mismatch"; checked here first,
+    the user reads which sensor is missing.
+    """
+    wired = {c.get("name") for c in cfg.get("channels") or () if isinstance(c, dict)}
+    return [s for s in table_sensors if s not in wired]
 
 
 def command(port, files, mpremote="mpremote", reset=False):

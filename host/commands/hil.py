@@ -127,6 +127,11 @@ def _hil(args, out):
             load_config(cfg)
         except (ValueError, TypeError, AttributeError) as exc:
             raise UserError("%s: %s" % (args.config, exc))
+        from host.commands.flash import unwired_sensors
+        missing = unwired_sensors(sensors, cfg)
+        if missing:
+            raise UserError("%s: table sensor(s) %s have no channel in the board config %s (channels: %s)" % (
+                args.table, ", ".join(missing), args.config, ", ".join(str(c.get("name")) for c in cfg["channels"])))
     else:
         cfg = rig_config(sensors, n_ads=1 if len(sensors) > 1 else 0)
     faults = _faults(args.fault, sensors, end_s)
