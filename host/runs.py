@@ -184,10 +184,10 @@ def read_records(fh, path):
             start = reader.line_num + 1
     except csv.Error as exc:
         text = str(exc)
-        if "field larger than field limit" in text:
-            why = "a cell is longer than %d characters (128 KiB; a missing line end or a stray '\"'?)" % CELL_LIMIT
-        elif "unexpected end of data" in text:
+        if "unexpected end of data" in text or reader.line_num > start:
             why = "a quote opened on this line is never closed (a stray '\"'?)"
+        elif "field larger than field limit" in text:
+            why = "a cell is longer than %d characters (128 KiB; a missing line end?)" % CELL_LIMIT
         elif "expected after" in text:
             why = "text follows a closing quote in a cell (a stray '\"'?)"
         else:
