@@ -65,7 +65,7 @@ def read_document(path):
         raise ModelFormatError("%s line %d column %d: invalid JSON (%s)" % (path, exc.lineno, exc.colno, exc.msg))
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ModelFormatError("%s: not a tcomp model document (key 'format' must be %r)" % (path, FORMAT))
-    if doc.get("kind") not in KINDS:
+    if not isinstance(doc.get("kind"), str) or doc["kind"] not in KINDS:
         raise ModelFormatError("%s: unknown model kind %r (known: %s)" % (path, doc.get("kind"), ", ".join(KINDS)))
     problem = document_problem(doc)
     if problem:
@@ -113,6 +113,9 @@ def document_problem(doc):
             if extra:
                 return ("thermal.%s has %s, which %s not in sensors (%s); the coefficient would be dropped without a word"
                         % (key, ", ".join(map(str, extra)), "is" if len(extra) == 1 else "are", ", ".join(map(str, sensors))))
+    prov = doc.get("provenance")
+    if prov is not None and (not isinstance(prov, dict) or not isinstance(prov.get("sha256", ""), (str, type(None)))):
+        return "provenance must be an object whose sha256 is a hex string, found %r" % (prov,)
     geo = doc.get("geometric")
     if isinstance(geo, dict) and isinstance(geo.get("coefficients_um"), list):
         n = len(geo["coefficients_um"])

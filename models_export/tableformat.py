@@ -78,6 +78,9 @@ def pack(f):
     for name in sensors:
         out += _fixed(name, NAME_SIZE, "sensor name")
     for i in range(n):
+        for name in ("env_lo", "env_hi", "ref"):
+            if not -(1 << 31) <= f[name][i] < (1 << 31):
+                raise ValueError("sensor %s: %s=%r mC is not a 32-bit integer" % (sensors[i], name, f[name][i]))
         out += struct.pack("<iii", f["env_lo"][i], f["env_hi"][i], f["ref"][i])
     for _, v in words:
         out += struct.pack("<i", v)

@@ -443,3 +443,18 @@ def test_the_compiled_firmware_folder_goes_with_the_process(tmp_path):
     assert p.returncode == 0, p.stderr
     folder = p.stdout.strip()
     assert os.path.basename(folder).startswith("tcomp-hil-mpy-") and not os.path.exists(folder)
+
+
+def test_hil_disk_full_leaves_no_output(capsys, tmp_path, table):
+    from host.runs import Errors, Run, Temperatures, load_run, write_run
+
+    demo = load_run(DEMO_RUN)
+    t, e = demo.temperatures, demo.errors
+    kt, ke = t.time_s <= 900, e.time_s <= 900  # the first 15 minutes: two sweeps, seconds on the rig
+    short = write_run(Run(demo.meta, Temperatures(t.time_s[kt], t.names, t.values[kt]),
+                          Errors(e.time_s[ke], e.position_mm[ke], e.error_um[ke])), str(tmp_path / "short"))
+    listing = _files(str(tmp_path))
+    err = _fail(capsys, ["hil", "--run", short, "--table", table, "--interpreter", "cpython", "--print-every", "0",
+                         "--json", "/dev/full"])
+    assert err.endswith("cannot write /dev/full: No space left on device; no output was written")
+    assert _files(str(tmp_path)) == listing
