@@ -41,7 +41,9 @@ class AxisParams:
     sweep_every_min: float = 15.0
     sweep_duration_min: float = 2.0
     positions_mm: tuple = tuple(float(p) for p in range(0, 701, 50))
+    sweep_trips: float = 1.0  # round trips over the targets per sweep (their heat); 0 = the sweeps heat nothing
     temp_noise_K: float = 0.01
+    sensor_tau_scale: float = 1.0  # multiplies every sensor's own time constant (structure.NODES); 0 = ideal sensors
     # ambient air: seeded warming drift, HVAC ripple, slow wander (optional daily cosine)
     ambient_mean_C: float = 20.0
     ambient_day_amplitude_K: float = 0.0
@@ -88,7 +90,7 @@ class AxisParams:
                 problems.append("%s must be a positive number (found %r)" % (k, v))
         for k in ("friction_J_per_mm", "motor_idle_W", "motor_W_at_ref", "bearing_W_at_ref", "sweep_duration_min",
                   "temp_noise_K", "ambient_wander_K", "nut_length_mm", "ambient_rise_min_K", "ambient_rise_max_K",
-                  "ambient_hold_hours", "ambient_fall_hours", "hvac_ripple_K"):
+                  "ambient_hold_hours", "ambient_fall_hours", "hvac_ripple_K", "sweep_trips", "sensor_tau_scale"):
             v = getattr(self, k)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
                 problems.append("%s must be a number >= 0 (found %r)" % (k, v))

@@ -76,15 +76,16 @@ def geometric_um(positions_mm, params):
 def sweep_travel(sweeps, params, t_end):
     """The sweeps' own motion (s, 5): the nut runs from the first to the last target and back.
 
-    A sweep stops at every target for the laser reading; its heat is that of one
-    round trip spread over the sweep window (an equivalent feed of 2*span/window).
+    A sweep stops at every target for the laser reading; its heat is that of
+    ``sweep_trips`` round trips spread over the sweep window (an equivalent feed
+    of 2*trips*span/window).
     """
     busy = params.sweep_duration_min * 60.0
     pos = np.asarray(params.positions_mm, dtype=float)
     span = pos.max() - pos.min()
-    if busy <= 0 or span <= 0:
+    if busy <= 0 or span <= 0 or params.sweep_trips <= 0:
         return np.zeros((0, 5))
-    feed = 2.0 * span / busy * 60.0
+    feed = 2.0 * params.sweep_trips * span / busy * 60.0
     rows = [(s, min(s + busy, t_end), pos.min(), pos.max(), feed) for s in sweeps if s < t_end]
     return np.asarray(rows, dtype=float).reshape(-1, 5)
 
@@ -148,7 +149,7 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
     T_screw = ScrewIntegrator(grid, dt, params.time_constant_s).run(air.C, screw_W, conv)
     nut_node = dict(power, nut=(1 - params.screw_share) * nut_W)
     nodes = node_temperatures(nut_node, air.C, dt)
-    readings = lagged(nodes, [nd.sensor_s for nd in NODES], dt)
+    readings = lagged(nodes, [params.sensor_tau_scale * nd.sensor_s for nd in NODES], dt)
     readings = lagged(readings, eff.get("sensor_lag", 0.0), dt)
     noisy = readings
     if params.temp_noise_K > 0:

@@ -164,6 +164,9 @@ def test_every_sensor_lags_its_body_with_its_own_time_constant():
     taus = [nd.sensor_s for nd in NODES]
     assert min(taus) > 0 and len(set(taus)) > 1
     np.testing.assert_allclose(sim.readings_true_C, lagged(sim.nodes_true_C, taus, sim.params.dt_s), atol=1e-12)
+    ideal = simulate("v8000_r210_490", None, noise_um=0.0, temp_noise_K=0.0, sensor_tau_scale=0.0)
+    np.testing.assert_array_equal(ideal.readings_true_C, ideal.nodes_true_C)
+    assert np.abs(ideal.readings_true_C - sim.readings_true_C).max() > 0.01
     air = [i for i, nd in enumerate(NODES) if nd.location.startswith("air 0.5 m")][0]
     np.testing.assert_allclose(sim.nodes_true_C[:, air], sim.air_C, atol=1e-12)
     # the air sensor trails the rising air: below it on average, never by more than the warming of one lag
@@ -196,8 +199,11 @@ def test_sweeps_move_the_nut_and_heat_the_screw():
     assert np.sum(sim.power_W["screw"]) * p.dt_s == pytest.approx(expected_J, rel=1e-9)
     assert sim.motion.size == 0  # motion.csv holds the protocol, not the measurement travel
     assert sim.err_thermal_um.max() > 0.05  # small but present
-    off = simulate("idle", None, noise_um=0.0, sweep_duration_min=0.0, **STILL_AIR)
-    np.testing.assert_allclose(off.err_thermal_um, 0.0, atol=1e-9)  # rounding of the step maps only
+    two = simulate("idle", None, noise_um=0.0, sweep_trips=2.0, **STILL_AIR)
+    assert np.sum(two.power_W["screw"]) == pytest.approx(2 * np.sum(sim.power_W["screw"]), rel=1e-9)
+    for off in (simulate("idle", None, noise_um=0.0, sweep_duration_min=0.0, **STILL_AIR),
+                simulate("idle", None, noise_um=0.0, sweep_trips=0.0, **STILL_AIR)):
+        np.testing.assert_allclose(off.err_thermal_um, 0.0, atol=1e-9)  # rounding of the step maps only
 
 
 @pytest.mark.parametrize("protocol", ["idle", "v15000_r210_490"])
