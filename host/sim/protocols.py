@@ -101,6 +101,8 @@ def draw_phases(rng, stroke_mm):
     500) over a range of at least 100 mm inside the stroke (10 mm grid), followed
     by a dwell of 0-15 min (whole minutes, none when 0).
     """
+    if stroke_mm < 100:
+        raise ValueError("protocol 'random' draws ranges of at least 100 mm: the stroke (%g mm) is shorter" % stroke_mm)
     phases, used = [], 0.0
     while used < RANDOM_MOVING_MIN:
         minutes = float(rng.integers(10, 41))

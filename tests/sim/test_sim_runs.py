@@ -94,6 +94,8 @@ def test_cli_single_protocol_writes_into_out(tmp_path):
         (["--set", "h_W_m2K"], "expected KEY=VALUE"),
         (["--set", "stroke_mm=900"], "must cover the stroke"),
         (["--seed", "-2"], "seed must be an integer >= 0"),
+        (["--protocol", "random", "--set", "stroke_mm=50", "--set", "positions_mm=0,50"], "at least 100 mm"),
+        (["--set", "ambient_rise_min_K=3"], "must not exceed ambient_rise_max_K"),
     ],
 )
 def test_cli_bad_input_is_named(tmp_path, capsys, args, message):
