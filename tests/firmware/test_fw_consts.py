@@ -109,3 +109,13 @@ def test_every_cross_module_name_used_on_micropython_is_public():
                 src_text = f.read()
             for n in (x.split()[0] for x in names.split(",")):
                 assert re.search(r"^(class |def )?%s\b" % re.escape(n), src_text, re.M), (fn, src, n)
+
+
+def test_no_module_tells_cpython_by_a_failing_micropython_import():
+    # micropython.py (the CPython shim for const) makes `import micropython` succeed on CPython too:
+    # a module that must know where it runs asks sys.implementation.name
+    for fn in sorted(os.listdir(FW)):
+        if fn.endswith(".py"):
+            with open(os.path.join(FW, fn)) as f:
+                assert not re.search(r"try:\s*\n\s*(import micropython|from micropython import const)\s*\n\s*except",
+                                     f.read()), fn
