@@ -121,7 +121,7 @@ class Evaluator:
             self.da0 = 0
         self.update()
         if self.kind == _KIND_SCREW_REDUCED:
-            self._settle()
+            self.settle()
 
     # -- checking mode ------------------------------------------------------
     def _note(self, slot, v):
@@ -193,7 +193,7 @@ class Evaluator:
             self.ref[i] = v
         self.update()
         if self.kind == _KIND_SCREW_REDUCED:
-            self._settle()  # a latch is a cold start: the screw in equilibrium with the air
+            self.settle()  # a latch is a cold start: the screw in equilibrium with the air
 
     def update(self):
         """Recompute the temperature-dependent terms from ``temps``; flag clamped sensors."""
@@ -507,7 +507,7 @@ class Evaluator:
         self.flags = (self.flags & ~_CLAMP_STATE) | fl
         self._refresh()
 
-    def _settle(self):
+    def settle(self):
         """State = the air's temperature over its reference (equilibrium); no heat stored."""
         t = self.table
         v = 0

@@ -440,7 +440,7 @@ class Planner:
         maxlen = max(b - a for a, b in zip(s["edges_um"], s["edges_um"][1:]))
         rec.note(SLOT_TRAVEL, 0, umax + max(maxlen, umax), "travel")
         rec.mul(SLOT_FEEDMUL, (0, 1 << FEED_W_BITS), (0, umax), FEED_LIMB, 3, FEED_W_BITS, "travel")
-        # the start state (Evaluator._settle): Ka * a ~ a * 2**ft / 1000, clamped to the state box
+        # the start state (Evaluator.settle): Ka * a ~ a * 2**ft / 1000, clamped to the state box
         if s["air"] >= 0:
             Ka, shKa = fit_coef(p2(ft) / 1000, lmd, 0)
             res, k = rec.mul(SLOT_AMUL, (Ka, Ka), d_air, f["Lt"], f["nt"], shKa, "air start state")

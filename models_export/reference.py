@@ -51,10 +51,23 @@ class Reference:
             self.ref = [r / 1000.0 for r in table.ref]  # latched references: whole milli-degC, as the firmware holds them
         geo = doc.get("geometric") or {}
         self.g = [float(v) for v in (geo.get("coefficients_um") or [0.0])]
+        # the firmware's start temperatures (Evaluator.__init__); update() replaces them as the firmware's update() does
+        self.temps_now = [0 if lo <= 0 <= hi else lo for lo, hi in zip(table.env_lo, table.env_hi)]
+        if self.kind == "screw":
+            self.settle()
 
-    def latch(self, refs_mC):
-        """References latched by the firmware (Evaluator.ref), milli-degC."""
+    def update(self, temps_mC):
+        """The temperatures the firmware read last (the air the next step ends at)."""
+        self.temps_now = list(temps_mC)
+
+    def latch(self, refs_mC, temps_mC=None):
+        """References latched by the firmware (Evaluator.ref), milli-degC, at the temperatures ``temps_mC``
+        (a latch is a cold start: the screw state restarts in equilibrium with the air)."""
         self.ref = [r / 1000.0 for r in refs_mC]
+        if temps_mC is not None:
+            self.temps_now = list(temps_mC)
+        if self.kind == "screw":
+            self.settle()
 
     def temps_C(self, temps_mC):
         t = self.t
@@ -119,14 +132,19 @@ class Reference:
 
     def settle(self, temps_mC=None):
         """Start state: in equilibrium with the air (the firmware's construction and latch)."""
-        a = 0.0 if temps_mC is None else self.air_K(temps_mC)
+        if temps_mC is not None:
+            self.temps_now = list(temps_mC)
+        a = self.air_K(self.temps_now)
         self.T = [a] * len(self.B)
         self.a0 = a
 
     def step(self, travel_um, temps_mC=None):
-        """One recurrence step with per-segment travel in um and the temperatures at the step's end."""
+        """One recurrence step with per-segment travel in um and the temperatures at the step's end
+        (default: the last ``update``)."""
         A, B, T = self.A, self.B, self.T
-        a1 = self.a0 if temps_mC is None else self.air_K(temps_mC)
+        if temps_mC is not None:
+            self.temps_now = list(temps_mC)
+        a1 = self.air_K(self.temps_now)
         self.T = [sum(A[i][j] * T[j] for j in range(len(T))) + B[i] * travel_um[i] / 1000.0
                   + self.c0[i] * self.a0 + self.c1[i] * a1 for i in range(len(T))]
         self.a0 = a1
