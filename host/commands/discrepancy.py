@@ -1,4 +1,4 @@
-"""tcomp discrepancy RUN... [--base screw] --json OUT.json --report DIR"""
+"""tcomp discrepancy RUN... [--base screw] --json OUT.json [--report DIR] [--air auto|off]"""
 HELP = "find where the screw model and the measurements disagree, name the missing physical effect(s), refit (held-out evidence)"
 
 
@@ -6,7 +6,9 @@ def add_arguments(p):
     p.add_argument("runs", nargs="+", metavar="RUN", help="run folders (>= 2: leave-one-run-out; 1: two-block time split)")
     p.add_argument("--base", default="screw", choices=("screw",), help="base model: the screw model with E_m only (default)")
     p.add_argument("--json", required=True, help="write the findings as JSON (effects, held-out RMSEs, localization, candidates)")
-    p.add_argument("--report", required=True, metavar="DIR", help="folder for report.md, plots and the final model.json")
+    p.add_argument("--report", metavar="DIR", help="folder for report.md, plots and the final model.json (optional: without it the JSON alone)")
+    p.add_argument("--air", choices=("auto", "off"), default="auto",
+                   help="the screw exchanges heat with the measured air (auto: role ambient, else base; default) or a constant air (off)")
     p.add_argument("--candidates", help="comma-separated catalog effects to test (default: the whole catalog)")
     p.add_argument("--alpha", type=float, default=None, help="family-wise significance level per round (default: host.discrepancy.workflow.ALPHA = 0.01)")
     p.add_argument("--min-gain", type=float, default=None, help="smallest held-out relative RMSE reduction to accept (default: host.discrepancy.workflow.MIN_GAIN = 0.10)")
@@ -34,7 +36,7 @@ def run(args):
     for i, r in enumerate(runs):
         if r.name in dup:
             r.name = "%s#%d" % (r.name, i + 1)
-    family = ScrewFamily()
+    family = ScrewFamily(air=args.air == "auto")
     candidates = None
     if args.candidates:
         candidates = [c.strip() for c in args.candidates.split(",") if c.strip()]
@@ -67,7 +69,10 @@ def run(args):
         raise UserError(str(exc))
     js = write_report(result, family, args.report, json_path=args.json)
     print("named effects: %s" % (", ".join(result.effects) or "none (no catalog effect explains the gap)"))
-    print("held-out RMSE %.3f -> %.3f um; report in %s, JSON in %s" % (result.before.rmse(), result.after.rmse(), args.report, args.json))
+    print("held-out RMSE %.3f -> %.3f um; %sJSON in %s" % (result.before.rmse(), result.after.rmse(),
+                                                            "report in %s, " % args.report if args.report else "", args.json))
+    for d in js.get("unexplained", []):
+        print("unexplained: follows %s (partial r %.2f, %.0f %% of the held-out RMSE)" % (d["signal"], d["partial_r"], 100 * d["rmse_share"]))
     if js.get("model_error"):
         # The findings (JSON, report) stand; the corrected model the user asked for does not.
         print("tcomp discrepancy: error: final model not written: %s" % js["model_error"], file=sys.stderr)

@@ -97,7 +97,7 @@ class Drive:
             t0 = np.interp(0.0, tt.time_s, col)
             self.base_rise = np.interp(e.time_s, tt.time_s, col) - t0
         self.error_um = e.error_um
-        self.air_K, self.air_source = None, "off"
+        self.air_K, self.air_source, self.air_sensor = None, "off", None
         if air:
             names = run.temperatures.names
             amb = [n for n in run.sensors_with_role("ambient") if n in names]
@@ -105,6 +105,7 @@ class Drive:
             name = (amb or fallback or [None])[0]
             self.air_source = ("ambient %s" % name if amb else "base %s (no ambient sensor)" % name) if name else \
                 "constant (no ambient or base sensor)"
+            self.air_sensor = name
             if name is not None:
                 tt = run.temperatures
                 col = tt.column(name)
@@ -179,6 +180,14 @@ class ScrewFamily:
         if key not in self._drives:
             self._drives[key] = (run, Drive(run, self.segments, self.geometric_degree, air=self.air))
         return self._drives[key][1]
+
+    def used_sensors(self, run, effects=()):
+        """The temperature columns the model with ``effects`` reads for ``run``."""
+        d = self.drive(run)
+        used = {d.air_sensor} - {None}
+        if "ambient_expansion" in effects:
+            used.update(run.sensors_with_role("base")[:1])
+        return used
 
     def applicable(self, runs, name):
         why = self.catalog[name].applicable(runs)
