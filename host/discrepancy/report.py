@@ -244,7 +244,8 @@ def findings(result, family, model_path=None, model_error=None):
     diag = residual_diagnostic(result, family)
     return {"model": model_path, "model_error": model_error, "evidence": evidence(result),
             "unexplained": unexplained.summary(diag),
-            "unexplained_all": [{k: d[k] for k in ("signal", "partial_r", "rmse_share", "above_threshold", "where")} for d in diag]}
+            "unexplained_all": [{k: d[k] for k in ("signal", "partial_r", "rmse_share", "rmse_share_heldout", "above_threshold", "where")}
+                                for d in diag]}
 
 
 def write_report(result, family, folder, json_path=None):

@@ -15,21 +15,22 @@ temperature drives an expansion proportional to the distance from the fixed end)
 
 Per signal: ``partial_r``, the correlation of residual and signal after both
 are projected off per-run nuisance columns (a constant and P per run: offsets a
-base model refit would absorb), and ``rmse_share``, the held-out share of the
-residual's RMSE the signal removes: its one coefficient is fitted on the other
-runs (leave-one-run-out; one run: the other half of its sweeps) and applied to
-the held-out one, so a signal that fits noise scores about zero.
-A signal is reported as unexplained structure when |partial_r| >= MIN_PARTIAL_R
-and rmse_share >= MIN_SHARE (how they were chosen: docs/discrepancy.md).
+base model refit would absorb); ``rmse_share`` = 1 - sqrt(1 - partial_r²), the
+share of that residual's RMSE the signal accounts for; ``rmse_share_heldout``
+(in ``unexplained_all`` only), the same with the signal's coefficient fitted on the
+other runs (leave-one-run-out; one run: the other half of its sweeps) — low when
+the gap differs from run to run, as it does when the base model's parameters have
+bent to absorb part of it. A signal is reported as unexplained structure when
+|partial_r| >= MIN_PARTIAL_R (how it was chosen: docs/discrepancy.md).
 """
 import numpy as np
 
 RATE_WINDOW_S = 600.0
 FEED_WINDOW_S = 1800.0
-# Chosen on the null (no hidden effect, correct base model) of tools/bench_discrepancy.py
-# --unexplained: above the largest value any signal reached there (docs/discrepancy.md).
-MIN_PARTIAL_R = 0.35
-MIN_SHARE = 0.05
+# Chosen on the null (no hidden effect, correct base model, twin runs of states 1, 2, 3, 5 at noise
+# 0.3-0.8 um): about twice the largest |partial r| any signal reached there (0.12 over 12 seeds; the
+# bench prints the figure over more, docs/discrepancy.md).
+MIN_PARTIAL_R = 0.25
 
 
 def _air_sensor(run):
@@ -133,9 +134,9 @@ def diagnose(runs, residuals, used_sensors=()):
             tr, te = groups != g, groups == g
             den = float(x_p[tr] @ x_p[tr])
             pred[te] = (float(x_p[tr] @ y_p[tr]) / den if den > 0 else 0.0) * x_p[te]
-        share = max(0.0, 1.0 - float(np.sqrt(np.mean((y_p - pred) ** 2) / base_ms))) if base_ms > 0 else 0.0
-        out.append({"signal": name, "partial_r": r, "rmse_share": share,
-                    "above_threshold": bool(abs(r) >= MIN_PARTIAL_R and share >= MIN_SHARE),
+        held = max(0.0, 1.0 - float(np.sqrt(np.mean((y_p - pred) ** 2) / base_ms))) if base_ms > 0 else 0.0
+        out.append({"signal": name, "partial_r": r, "rmse_share": 1.0 - float(np.sqrt(max(0.0, 1.0 - r * r))),
+                    "rmse_share_heldout": held, "above_threshold": bool(abs(r) >= MIN_PARTIAL_R),
                     "where": _where(runs, keep, x_p * (float(x_p @ y_p) / (sx * sx)))})
     out.sort(key=lambda d: (-d["rmse_share"], -abs(d["partial_r"])))
     return out
@@ -172,14 +173,15 @@ def text(items, rmse_um):
     hits = [d for d in items if d["above_threshold"]]
     if not hits:
         best = items[0] if items else None
-        return ["No signal the model does not use explains the held-out residual (%.2f um) beyond the thresholds "
-                "(|partial r| >= %.2f and held-out RMSE share >= %.0f %%)%s." % (
-                    rmse_um, MIN_PARTIAL_R, 100 * MIN_SHARE,
+        return ["No signal the model does not use explains the held-out residual (%.2f um) beyond the threshold "
+                "(|partial r| >= %.2f)%s." % (
+                    rmse_um, MIN_PARTIAL_R,
                     "; the strongest was %s (partial r %.2f, share %.0f %%)" % (best["signal"], best["partial_r"], 100 * best["rmse_share"])
                     if best else "")]
     lines = []
     for d in hits:
-        lines.append("- %.2f um unexplained: follows %s, partial r %.2f, removes %.0f %% of the held-out RMSE when fitted on "
-                     "the other runs; concentrated %s." % (rmse_um * d["rmse_share"], d["signal"], d["partial_r"],
-                                                          100 * d["rmse_share"], d["where"]))
+        lines.append("- %.2f um of the %.2f um held-out RMSE follows %s: partial r %.2f (%.0f %% of the RMSE; %.0f %% when its "
+                     "coefficient is fitted on the other runs); concentrated %s." % (
+                         rmse_um * d["rmse_share"], rmse_um, d["signal"], d["partial_r"], 100 * d["rmse_share"],
+                         100 * d["rmse_share_heldout"], d["where"]))
     return lines
