@@ -45,7 +45,8 @@ BAD_TAG = 2
 REPLAY = 3
 NOT_STORED = 4
 BUSY = 5
-REASONS = (b"", b"no key", b"bad tag", b"replayed counter", b"counter not stored", b"busy")
+UNSIGNED = 6
+REASONS = (b"", b"no key", b"bad tag", b"replayed counter", b"counter not stored", b"busy", b"unsigned")
 
 
 def hasher():
@@ -72,7 +73,7 @@ class Auth:
         k = None
         self.last = self._load()  # the largest counter used (or skipped)
         self.reserved = self.last  # counters up to this are covered by auth.bin
-        self.why = OK  # the last refusal (Modbus input register 50)
+        self.why = OK if self._ipad is not None else NO_KEY  # the last refusal (Modbus input register 50)
 
     @property
     def keyed(self):
