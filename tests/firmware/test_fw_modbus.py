@@ -2,7 +2,7 @@
 import struct
 
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given, settings, strategies as st
 
 from fwhelpers import modbus_auth_block, rig_app, run_cycles
 from firmware.crc16 import crc16_modbus
@@ -14,6 +14,7 @@ def rtu(body):
     return body + bytes([c & 0xFF, c >> 8])
 
 
+@settings(deadline=None)  # the first example imports pymodbus
 @given(st.binary(max_size=64))
 def test_crc_matches_pymodbus(data):
     from pymodbus.framer import FramerRTU
