@@ -25,20 +25,14 @@ class Export:
         return c_header(self, guard)
 
 
-def _provenance(doc, allow_edited):
-    """The sha256 of the document being exported (what the table names), and whether it is the
-    one recorded when the model was saved. A mismatch (the document was edited since) is refused
-    unless ``allow_edited``: then the table names the actual document and is marked edited."""
+def _provenance(doc):
+    """(sha256 of the document being exported, the recorded one or None). The table names the
+    actual document; a recorded hash that differs means it was edited after it was saved."""
     from host.models import document_hash
 
-    actual = document_hash(doc)
     prov = doc.get("provenance")
     declared = prov.get("sha256") if isinstance(prov, dict) else None
-    verified = declared == actual
-    if declared is not None and not verified and not allow_edited:
-        raise ExportError("provenance.sha256 %.16s... does not match the document (actual %.16s...): it was edited "
-                          "after it was saved; re-save it, or export it marked as edited" % (declared, actual))
-    return bytes.fromhex(actual), verified, declared is not None and not verified
+    return document_hash(doc), declared
 
 
 def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False):
@@ -55,8 +49,10 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False):
     else:
         errs = planner.positional()
     f = planner.f
-    # after the model's own checks, which name the field at fault
-    prov, verified, edited = _provenance(doc, allow_edited)
+    actual, declared = _provenance(doc)
+    verified = declared == actual
+    edited = declared is not None and not verified
+    prov = bytes.fromhex(actual)
     f.update(kind=model.kind, sensors=model.sensors, env_lo=model.env_lo, env_hi=model.env_hi, ref=model.ref, ref_mode=model.ref_mode,
              pos_lo=model.pos_lo, pos_hi=model.pos_hi, pos_ref=model.pos_ref, provenance=prov, edited=edited,
              axis=str(doc.get("axis") or "?"))
@@ -64,6 +60,10 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False):
         table = pack(f)
     except ValueError as exc:
         raise ExportError("table: %s" % exc)
+    if edited and not allow_edited:  # after the model's and the table's own checks, which name the field
+        raise ExportError("provenance.sha256 %.16s... does not match the document (actual %.16s...): it was edited "
+                          "after it was saved; re-save it, or export it marked as edited (--allow-edited)"
+                          % (declared, actual))
     rec = planner.rec
     limit = LIMITS_UM[model.kind] if limit_um is None else limit_um
     fo = f["fo"]
