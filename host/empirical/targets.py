@@ -188,12 +188,22 @@ def common_sensors(runs):
 
 
 class RunArrays:
-    """Design data of one run: unpacks as ``X, y, names``; also has ``time_s`` and ``run``."""
+    """Design data of one run: unpacks as ``X, y, names``; also has ``time_s``, ``run`` and ``start``.
 
-    __slots__ = ("X", "y", "names", "time_s", "run")
+    ``start``: each sensor's first sample of the run (°C) when X holds rises, so
+    ``X + start`` are the measured temperatures (hclust-ga's D_e uses them); None
+    when X already holds measured values.
+    """
 
-    def __init__(self, X, y, names, time_s, run):
-        self.X, self.y, self.names, self.time_s, self.run = X, y, names, time_s, run
+    __slots__ = ("X", "y", "names", "time_s", "run", "start")
+
+    def __init__(self, X, y, names, time_s, run, start=None):
+        self.X, self.y, self.names, self.time_s, self.run, self.start = X, y, names, time_s, run, start
+
+    @property
+    def values(self):
+        """The measured temperatures (rises plus the start temperatures)."""
+        return self.X if self.start is None else self.X + self.start
 
     def __iter__(self):
         return iter((self.X, self.y, self.names))
@@ -236,7 +246,7 @@ def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True,
             if t.size == 0:
                 raise EmpiricalDataError("%s: no %s target in the time window %s..%s s" % (r.name, target, lo, hi))
         X = temperature_features(r, names, t, rise=rise)
-        out.append(RunArrays(X, y, list(names), t, r.name))
+        out.append(RunArrays(X, y, list(names), t, r.name, start_temperatures(r, names) if rise else None))
     return out
 
 
