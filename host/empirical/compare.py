@@ -198,6 +198,8 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
         acc = [res["tests"][k]["accuracy_pct"] for k in keys if res["tests"][k]["accuracy_pct"] is not None]
         res["mean_test_rmse_um"] = float(np.mean(rm))
         res["mean_test_accuracy_pct"] = float(np.mean(acc)) if acc else None
+        cacc = [res["tests"][k]["comprehensive"]["accuracy_pct"] for k in keys if res["tests"][k]["comprehensive"]["accuracy_pct"] is not None]
+        res["mean_test_comprehensive_accuracy_pct"] = float(np.mean(cacc)) if cacc else None
         res["mean_disturbed_rmse_um"] = float(np.mean(dm))
         res["degradation_um"] = res["mean_disturbed_rmse_um"] - res["mean_test_rmse_um"]
         res["seconds"] = time.perf_counter() - t0
@@ -211,6 +213,8 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
 def _mean_metrics(ms):
     """Metrics averaged over disturbance realisations (RMSE as the root of the mean square)."""
     out = dict(ms[0])
+    if "comprehensive" in out:
+        out["comprehensive"] = _mean_metrics([m["comprehensive"] for m in ms])
     out["rmse_um"] = float(np.sqrt(np.mean([m["rmse_um"] ** 2 for m in ms])))
     out["max_residual_um"] = float(max(m["max_residual_um"] for m in ms))
     out["min_residual_um"] = float(min(m["min_residual_um"] for m in ms))

@@ -158,3 +158,27 @@ def test_split_just_after_a_cycle_start_does_not_make_a_tiny_group(make_direct):
     for case in (a, b):
         arrays = training_arrays([run], "direct", "ch1", window=case.window)
         assert np.unique(cv_groups([run], arrays)).size == 3
+
+
+def test_accuracy_is_also_reported_on_the_comprehensive_error(three_runs):
+    from host.empirical.evaluate import evaluate
+    from host.empirical.fitting import fit_model
+
+    model = fit_model(three_runs[:1], "mlr")
+    run = three_runs[1]
+    m = evaluate(model, run)
+    # independent: every non-cold sweep row, whole measured error against geometric + slope * P
+    e = run.errors
+    cold_t = e.time_s.min()
+    rows = np.flatnonzero(e.time_s > cold_t)
+    P = e.position_mm[rows]
+    R = run.temperatures.at(e.time_s[rows], model.sensors) - np.array([model.reference_C[s] for s in model.sensors])
+    pred = np.polynomial.polynomial.polyval(P, model.geometric_coef) + (model.intercept + R @ model.coefficients) * P
+    resid = e.error_um[rows] - pred
+    c = m["comprehensive"]
+    assert c["n"] == m["n"] == rows.size
+    assert c["rmse_um"] == pytest.approx(np.sqrt(np.mean(resid**2)))
+    rms = np.sqrt(np.mean(e.error_um[rows] ** 2))
+    assert c["accuracy_pct"] == pytest.approx(100 * (1 - c["rmse_um"] / rms))
+    # the geometric part is large here (1 µm + 0.01 P), so the whole error's RMS exceeds the thermal one
+    assert c["rms_measured_um"] > m["rms_measured_um"]
