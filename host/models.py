@@ -17,6 +17,7 @@ KINDS = {
     "poly_slope": "host.empirical.model:PolySlopeModel",
     "linear_direct": "host.empirical.model:LinearDirectModel",
     "screw": "host.screw.model:ScrewModel",
+    "ann": "host.empirical.model:NetworkModel",
 }
 
 

@@ -13,6 +13,13 @@ again with disturbed temperatures (robustness). Methods:
 ``maxtree``        maximal-tree fuzzy-clustering selector, then MLR
 ``hclust-ga``      hierarchical-clustering + GA selector, then MLR
 ``cv-subset``      best subset of ≤ 5 sensors by blocked cross-validation, MLR
+``ann``            one-hidden-layer back-propagation network on all candidate
+                   sensors, 3-7 hidden nodes chosen by validation (ann.py)
+``ppr``            projection pursuit regression on all candidate sensors (ppr.py)
+``maxtree-mlr``    the paper's pipeline: maximal-tree selection, then MLR
+                   (the same numbers as ``maxtree``, kept under the old name)
+``maxtree-pcr``    maximal-tree selection, then PCR on the chosen sensors
+``maxtree-ann``    maximal-tree selection, then the network on them
 =================  ==========================================================
 
 Two case builders: :func:`cases_runs` (fit on one run, predict the others, as in
@@ -33,8 +40,10 @@ from host.empirical import EmpiricalDataError
 from host.empirical.evaluate import disturb_run, evaluate
 from host.empirical.fitting import fit_model
 
-METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset")
+METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-mlr", "maxtree-pcr", "maxtree-ann")
 SELECTORS = ("maxtree", "hclust-ga")
+# selector, then estimator on the chosen sensors (estimator settings: --option maxtree-pcr.KEY=V; selection: maxtree.KEY=V)
+PIPELINES = {"maxtree-mlr": ("maxtree", "mlr"), "maxtree-pcr": ("maxtree", "pcr"), "maxtree-ann": ("maxtree", "ann")}
 ROBUSTNESS = {"noise_C": 0.2, "offset_C": 0.5, "seed": 0, "repeats": 5}
 
 
@@ -130,9 +139,10 @@ def _fit(method, case, target, channel, sensors, fit_intercept, options, selecto
 
     info = {}
     opts = dict(options.get(method, {}))
-    if method in SELECTORS:
-        params = dict(selector_params.get(method, {}))
-        if method == "hclust-ga":
+    selector, estimator = PIPELINES.get(method, (method, "mlr") if method in SELECTORS else (None, method))
+    if selector is not None:
+        params = dict(selector_params.get(selector, {}))
+        if selector == "hclust-ga":
             if case.ga_data is None:
                 raise EmpiricalDataError(case.ga_note or "hclust-ga needs several runs or spindle cycles")
             params = {**case.ga_params, **params}
@@ -140,10 +150,10 @@ def _fit(method, case, target, channel, sensors, fit_intercept, options, selecto
             info["note"] = case.ga_note
         else:
             data = training_arrays(case.train, target, channel, sensors, window=case.window)
-        sel = select(method, data, target=target, channel=channel, sensors=sensors, **params)
+        sel = select(selector, data, target=target, channel=channel, sensors=sensors, **params)
         info["selection"] = sel.reason
         info["selection_obj"] = sel
-        model = fit_model(case.train, "mlr", target, channel, sel.sensors, fit_intercept, case.window, reference=reference)
+        model = fit_model(case.train, estimator, target, channel, sel.sensors, fit_intercept, case.window, reference=reference, **opts)
     else:
         model = fit_model(case.train, method, target, channel, sensors, fit_intercept, case.window, reference=reference, **opts)
     return model, info
@@ -178,7 +188,9 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
         res["sensors"] = list(model.sensors)
         res["n_sensors"] = len(model.sensors)
         res["fit"] = {k: st.get(k) for k in ("r2", "r2_adj", "F", "F_p", "residual_std_error", "n_samples")}
-        if method == "pcr":
+        if method in ("ann", "maxtree-ann"):
+            res["fit"].update({k: st.get(k) for k in ("hidden_size", "validation_rmse_by_size", "validation")})
+        if method in ("pcr", "maxtree-pcr"):
             res["fit"]["n_components"] = st.get("n_components")
             res["scree"] = st.get("scree")
         if method in ("stepwise", "cv-subset"):
@@ -187,7 +199,7 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
             res["selection"] = info["selection"]
         if "note" in info:
             res["note"] = info["note"]
-        res["coefficients"] = dict(zip(model.sensors, model.coefficients.tolist()))
+        res["coefficients"] = None if model.coefficients is None else dict(zip(model.sensors, model.coefficients.tolist()))
         res["intercept"] = model.intercept
         res["train"] = evaluate(model, case.train[0], case.window)
         res["tests"] = {label: evaluate(model, r, w) for label, r, w in case.tests}
@@ -288,7 +300,7 @@ def write_plots(results, cases, out_dir, target, channel=None):
             paths.append(plots.plot_curves(m, trun, os.path.join(out_dir, "%s_%s_curves.png" % (stem, r["method"])),
                                            "%s model fitted on %s: measured vs predicted %s on %s" % (
                                                r["method"], case.label, what, tlabel), window=twin))
-            if r["method"] == "pcr":
+            if r["method"] == "pcr" and hasattr(m.estimator_, "scree"):
                 paths.append(plots.plot_scree(m.estimator_, os.path.join(out_dir, "%s_pcr_scree.png" % stem),
                                               "PCR scree: correlation-matrix eigenvalues of %d sensors, training data %s" % (len(m.sensors), case.label)))
             if r.get("_selection") is not None:

@@ -57,7 +57,7 @@ def thermal_pairs(model, run, window=None):
 def _thermal_rows(model, run, window=None):
     """(errors.csv row indices, measured thermal error, predicted thermal error) over the evaluated rows."""
     e = run.errors
-    if model.kind == "poly_slope":
+    if model.target == "slope":
         s = sweep_slopes(run, model.channel)
         cold = {}
         for d, rows in zip(s.direction, s.rows):
@@ -76,11 +76,11 @@ def _thermal_rows(model, run, window=None):
         rows = np.concatenate(idx)
         measured = np.concatenate(meas)
         P = e.position_mm[rows]
-        pred = model.slope(model.rises(run, e.time_s[rows])) * P
+        pred = model.thermal_at(run, e.time_s[rows]) * P
     else:
         rows = model._rows(run)
         measured = e.error_um[rows]
-        pred = model.predict_rises(model.rises(run, e.time_s[rows]))
+        pred = model.thermal_at(run, e.time_s[rows])
     t = e.time_s[rows]
     if window is not None:
         lo, hi = window
@@ -103,7 +103,7 @@ def evaluate(model, run, window=None):
     """
     rows, m, p = _thermal_rows(model, run, window)
     out = metrics(m, p)
-    out["comprehensive"] = metrics(run.errors.error_um[rows], model.predict(run)[rows]) if model.kind == "poly_slope" else dict(metrics(m, p))
+    out["comprehensive"] = metrics(run.errors.error_um[rows], model.predict(run)[rows]) if model.target == "slope" else dict(metrics(m, p))
     return out
 
 

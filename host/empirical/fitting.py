@@ -11,12 +11,13 @@ import numpy as np
 
 from host.empirical import EmpiricalDataError
 from host.empirical.geometric import fit_geometric
-from host.empirical.model import LinearDirectModel, PolySlopeModel
+from host.empirical.model import LinearDirectModel, NetworkModel, PolySlopeModel
 from host.empirical.regression import make_estimator
 from host.empirical.schedule import block_labels, cycles
 from host.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
 
 ENVELOPE_MARGIN_K = 2.0
+NONLINEAR = ("ann", "ppr")  # estimators that are not a linear function of the rises: NetworkModel
 
 
 def _envelope(runs, arrays, sensors, margin, target, channel):
@@ -134,12 +135,15 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     names = arrays[0].names
     X, y = stack(arrays)
     est = make_estimator(method, fit_intercept=fit_intercept, **options)
-    if method == "cv-subset":
+    if method in ("cv-subset", "ann"):
+        # cv-subset cross-validates over the groups; the ann validates on the last one
         groups = cv_groups(runs, arrays, cv_blocks)
         est.fit(X, y, names, groups=groups)
     else:
         est.fit(X, y, names)
-    if hasattr(est, "selected_names_"):
+    if method in NONLINEAR:
+        used, coefs = list(names), None
+    elif hasattr(est, "selected_names_"):
         used = list(est.selected_names_)
         coefs = est.mlr_.coef_
     else:
@@ -161,11 +165,14 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     kw: dict = dict(reference=reference, channel=channel, method=method, axis=runs[0].meta.get("axis"),
               envelope=_envelope(runs, arrays, used, envelope_margin_K, target, channel), statistics=stats, training=training)
     if target == "direct":
-        model = LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
+        model = NetworkModel(used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
     else:
         geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
         stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
-        model = PolySlopeModel(used, coefs, est.intercept_, ref, geometric_coef=geo.coef_, **kw)
+        if method in NONLINEAR:
+            model = NetworkModel(used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
+        else:
+            model = PolySlopeModel(used, coefs, est.intercept_, ref, geometric_coef=geo.coef_, **kw)
         model.geometric_ = geo
     model.estimator_ = est
     model.arrays_ = arrays
