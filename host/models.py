@@ -18,6 +18,7 @@ KINDS = {
     "linear_direct": "host.empirical.model:LinearDirectModel",
     "screw": "host.screw.model:ScrewModel",
     "ann": "host.empirical.model:NetworkModel",
+    "dynamic": "host.empirical.dynamic:DynamicModel",
 }
 
 

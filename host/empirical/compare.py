@@ -20,6 +20,9 @@ again with disturbed temperatures (robustness). Methods:
                    (the same numbers as ``maxtree``, kept under the old name)
 ``maxtree-pcr``    maximal-tree selection, then PCR on the chosen sensors
 ``maxtree-ann``    maximal-tree selection, then the network on them
+``dynamic``        lag-filtered temperatures and spindle speed / feed, ≤ 5
+                   sensors and the time constants chosen by cross-validation
+                   across cycles or runs (dynamic.py)
 =================  ==========================================================
 
 Two case builders: :func:`cases_runs` (fit on one run, predict the others, as in
@@ -40,7 +43,7 @@ from host.empirical import EmpiricalDataError
 from host.empirical.evaluate import disturb_run, evaluate
 from host.empirical.fitting import fit_model
 
-METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-mlr", "maxtree-pcr", "maxtree-ann")
+METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-mlr", "maxtree-pcr", "maxtree-ann", "dynamic")
 SELECTORS = ("maxtree", "hclust-ga")
 # selector, then estimator on the chosen sensors (estimator settings: --option maxtree-pcr.KEY=V; selection: maxtree.KEY=V)
 PIPELINES = {"maxtree-mlr": ("maxtree", "mlr"), "maxtree-pcr": ("maxtree", "pcr"), "maxtree-ann": ("maxtree", "ann")}
@@ -313,3 +316,39 @@ def write_plots(results, cases, out_dir, target, channel=None):
         paths.append(plots.plot_summary(rs, os.path.join(out_dir, "%s_summary.png" % stem),
                                         "Mean held-out RMSE per method (sensors), fitted on %s; clean vs disturbed temperatures" % case.label))
     return paths
+
+
+LOCO_METHODS = ("mlr", "cv-subset", "dynamic")
+
+
+def leave_one_cycle_out(run, channel=None, target="direct", methods=LOCO_METHODS, sensors=None, options=None, progress=None):
+    """Every method fitted with one spindle cycle left out and evaluated on it, for every cycle in turn.
+
+    Returns {"cycles": [...], "methods": {method: {"folds": [metrics per held-out cycle], "rmse_um": pooled RMSE,
+    "n": samples, "sensors": [sensors per fold]}}, "ratio_to_mlr": {method: pooled RMSE / MLR's}}. The pooled RMSE
+    is the root of the mean squared residual over every held-out sample of every fold. Each model's own choices
+    (sensors, time constants, penalty) are made inside its fold, on the other cycles only.
+    """
+    from host.empirical.schedule import cycles
+
+    options = options or {}
+    cyc = cycles(run)
+    if len(cyc) < 3:
+        raise EmpiricalDataError("leave-one-cycle-out needs at least 3 spindle cycles (fit on >= 2), %s has %d" % (run.name, len(cyc)))
+    out = {"cycles": [[c["t_start_s"], c["t_end_s"], c["speeds_rpm"]] for c in cyc], "methods": {}}
+    for m in methods:
+        folds, sens = [], []
+        for k, c in enumerate(cyc):
+            span = (c["t_start_s"] if k else None, c["t_end_s"] if k < len(cyc) - 1 else None)
+            model = fit_model([run], m, target, channel, sensors, True, exclude=span, reference="run_start", **options.get(m, {}))
+            folds.append(evaluate(model, run, span))
+            sens.append(list(model.sensors))
+            if progress:
+                progress("%s %s cycle %d: %.3f um" % (channel, m, k + 1, folds[-1]["rmse_um"]))
+        n = sum(f["n"] for f in folds)
+        rmse = float(np.sqrt(sum(f["n"] * f["rmse_um"] ** 2 for f in folds) / n))
+        out["methods"][m] = {"folds": folds, "rmse_um": rmse, "n": n, "sensors": sens}
+    if "mlr" in out["methods"]:
+        base = out["methods"]["mlr"]["rmse_um"]
+        out["ratio_to_mlr"] = {m: v["rmse_um"] / base for m, v in out["methods"].items()}
+    return out

@@ -218,12 +218,14 @@ class RunArrays:
         return "RunArrays(run=%r, n=%d, sensors=%d)" % (self.run, self.y.size, len(self.names))
 
 
-def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True, window=None):
+def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True, window=None, exclude=None):
     """Per run, the (X, y, names) a regression or selector is fitted on.
 
     ``sensors=None`` uses the sensors common to all runs. ``window=(lo, hi)``
     keeps targets with lo <= time_s < hi (either may be None), e.g. the
-    training part of a single long run; rises stay relative to the run start.
+    training part of a single long run; ``exclude=(lo, hi)`` drops the targets
+    in that span (a held-out cycle in the middle of a run); rises stay relative
+    to the run start.
     Returns a list of :class:`RunArrays`, one per run, in the given order.
     """
     runs = list(runs)
@@ -245,6 +247,12 @@ def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True,
             t, y = t[keep], y[keep]
             if t.size == 0:
                 raise EmpiricalDataError("%s: no %s target in the time window %s..%s s" % (r.name, target, lo, hi))
+        if exclude is not None:
+            lo, hi = exclude
+            keep = ~((t >= (-np.inf if lo is None else lo)) & (t < (np.inf if hi is None else hi)))
+            t, y = t[keep], y[keep]
+            if t.size == 0:
+                raise EmpiricalDataError("%s: no %s target left outside the excluded span %s..%s s" % (r.name, target, lo, hi))
         X = temperature_features(r, names, t, rise=rise)
         out.append(RunArrays(X, y, list(names), t, r.name, start_temperatures(r, names) if rise else None))
     return out
