@@ -10,7 +10,7 @@ def add_arguments(p):
     p.add_argument("--direct", action="store_true", help="direct model of the error at a fixed point (default: slope of each sweep)")
     p.add_argument("--sensors", help="comma-separated candidate sensors (default: all common to the runs)")
     p.add_argument("--methods", default=",".join(("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-pcr",
-                                                  "maxtree-ann")),
+                                                  "maxtree-ann", "dynamic")),
                    help="comma list of methods (default: all but maxtree-mlr, which is maxtree under the paper's name)")
     p.add_argument("--train", default="0", help="index of the training run, a comma list, or 'all' (each in turn); default 0")
     p.add_argument("--split-h", type=float, metavar="HOURS", help="one run: fit on t < HOURS, predict t >= HOURS")
