@@ -1,5 +1,5 @@
 """tcomp compare RUN... --json OUT [--plots DIR]"""
-HELP = "fit MLR, PCR, stepwise and the sensor selectors on one run, predict the others, with a robustness check"
+HELP = "fit MLR, PCR, stepwise, the sensor selectors, ANN, PPR and the dynamic model on one run, predict the others, with a robustness check"
 
 
 def add_arguments(p):
@@ -52,9 +52,11 @@ def _method_options(items, methods):
 
             params = inspect.signature(ESTIMATORS[PIPELINES.get(method, (None, method))[1]].__init__).parameters
             known = [k for k in params if k not in ("self", "fit_intercept")]
+            if method == "dynamic":
+                known += ["taus_s", "use_spindle", "use_feed", "cv_blocks"]  # how fit_model builds the candidate signals
             if key not in known:
                 raise UserError("--option %r: %s has no setting %r (settings: %s)" % (item, method, key, ", ".join(known)))
-            default = params[key].default
+            default = params[key].default if key in params else None
             numeric = isinstance(default, (int, float)) and not isinstance(default, bool)
             if numeric and (isinstance(v, bool) or not isinstance(v, (int, float))):
                 raise UserError("--option %r: %s.%s must be a number, got %r" % (item, method, key, value))
