@@ -122,3 +122,15 @@ def test_real_fl_thermal_dynamic_beats_static_on_the_held_out_cycles():
     mlr = fit_model([run], "mlr", target="direct", channel="ch1", window=(None, split), reference="run_start")
     d, m = evaluate(dyn, run, (split, None))["rmse_um"], evaluate(mlr, run, (split, None))["rmse_um"]
     assert d < 0.8 * m, (d, m)
+
+
+def test_compare_runs_the_dynamic_model_with_its_settings(make_direct, tmp_path):
+    from host.runs import write_run
+
+    folder = write_run(_lagged_run(make_direct), str(tmp_path / "run"))
+    out = str(tmp_path / "cmp.json")
+    base = ["compare", folder, "--split-h", "7", "--direct", "--channel", "ch1", "--methods", "mlr,dynamic", "--repeats", "1", "--json", out]
+    assert main(base + ["--option", "dynamic.taus_s=[0,1800,3600]", "--option", "dynamic.max_sensors=1"]) == 0
+    res = {r["method"]: r for r in json.loads(open(out).read())["results"]}
+    assert res["dynamic"]["n_sensors"] == 1 and res["dynamic"]["mean_test_rmse_um"] < res["mlr"]["mean_test_rmse_um"]
+    assert main(base + ["--option", "dynamic.bogus=1"]) == 2
