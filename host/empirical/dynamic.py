@@ -421,5 +421,8 @@ class DynamicModel:
             geo = _geometric_from_document(doc, "dynamic")
         if doc.get("channel") is not None and not isinstance(doc.get("channel"), str):
             raise ModelFormatError("dynamic model document: field 'channel' must be a channel name (string) or null")
+        for key in ("reference_C", "envelope", "statistics", "training"):
+            if doc.get(key) is not None and not isinstance(doc.get(key), dict):
+                raise ModelFormatError("dynamic model document: field '%s' must be an object or null, found %s" % (key, type(doc.get(key)).__name__))
         return cls(out, coefs, th["intercept"], th["target"], doc.get("channel"), geo, doc.get("method", "dynamic"), doc.get("axis"),
                    doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"))
