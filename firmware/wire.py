@@ -1,5 +1,6 @@
 """The wire contract, one source: status bits, frame kinds, command letters, reference-state
-letters, protocol and firmware versions (docs/protocol.md).
+letters, protocol and firmware versions, the authorised commands' counter and tag sizes
+(docs/protocol.md).
 
 The host decodes with this module (host/link.py, `tcomp monitor`). The firmware modules that use a
 value in the cycle keep a ``_``-prefixed ``const()`` copy, which MicroPython folds into the bytecode,
@@ -35,3 +36,8 @@ REF_LETTERS = b"-SLUNCO"
 FRAME_KINDS = "HOQTAE"  # hello, offsets, query answer, temperatures, acknowledgement, error
 COMMANDS = "PMQRSVULX"  # position, motion, query, reference, temperatures, hello, upload, latch, reset
 UPLOAD_STEPS = "BDCX"  # U,<step>: begin, data, commit, abort
+# Commands that change the output (U,B U,C U,X L X) end with <counter>,<tag> (docs/protocol.md,
+# "Who may change the output"; firmware/auth.py checks, host/linkauth.py signs)
+SIGNED_COMMANDS = "XL"  # besides the upload's begin, commit and abort
+TAG_BYTES = const(16)  # the tag: HMAC-SHA256's first TAG_BYTES bytes, sent as 2 * TAG_BYTES hex digits
+MAX_COUNTER = const(999999999)  # largest counter: a small int on a 32-bit port even after auth's reserve block

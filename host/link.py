@@ -20,10 +20,15 @@ def crc16(body):
     return binascii.crc_hqx(body, 0xFFFF)
 
 
+def body(fields):
+    """``TC,<fields>``: the bytes the CRC covers (and an authorised command's tag, up to its counter)."""
+    return b"TC," + b",".join(f if isinstance(f, bytes) else str(f).encode() for f in fields)
+
+
 def command(*fields):
     """``$TC,<fields>*CRC\\r\\n`` as bytes."""
-    body = b"TC," + b",".join(f if isinstance(f, bytes) else str(f).encode() for f in fields)
-    return b"$" + body + b"*%04X\r\n" % crc16(body)
+    b = body(fields)
+    return b"$" + b + b"*%04X\r\n" % crc16(b)
 
 
 @dataclass

@@ -42,6 +42,26 @@ def number(kind, minimum=None):
     return convert
 
 
+def numbers(kind, minimum=None):
+    """Converter to a list of ``number(kind, minimum)`` values separated by '/' (e.g. 0/1800/7200)."""
+    one = number(kind, minimum)
+
+    def convert(text):
+        try:
+            return [one(x) for x in text.split("/")]
+        except ValueError as exc:
+            raise ValueError("not a valid list of numbers separated by / (%s)" % exc)
+    return convert
+
+
+def boolean(text):
+    """Converter accepting true or false (any case)."""
+    word = text.lower()
+    if word not in ("true", "false"):
+        raise ValueError("not a valid true or false")
+    return word == "true"
+
+
 def choice(*words):
     """Converter accepting one of ``words``."""
     def convert(text):

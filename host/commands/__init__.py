@@ -8,10 +8,10 @@ module here plus one row below.
 
 # verb -> (module, one-line summary); listed alphabetically, as `tcomp --help` shows them
 VERBS = {
-    "compare": ("host.commands.compare", "fit MLR, PCR, stepwise and the sensor selectors on one run, predict the others, with a robustness check"),
+    "compare": ("host.commands.compare", "fit MLR, PCR, stepwise, the sensor selectors, ANN, PPR and the dynamic model on one run, predict the others, with a robustness check"),
     "discrepancy": ("host.commands.discrepancy", "find where the screw model and the measurements disagree, name the missing physical effect(s), refit (held-out evidence)"),
     "export": ("host.commands.export", "quantise a model into the firmware's integer coefficient table, with a certificate of integer safety and accuracy"),
-    "fit": ("host.commands.fit", "fit a thermal-error model (mlr, pcr, stepwise: host/empirical; screw: host/screw) and save it"),
+    "fit": ("host.commands.fit", "fit a thermal-error model (mlr, pcr, stepwise, cv-subset, ann, dynamic: host/empirical; screw: host/screw) and save it"),
     "flash": ("host.commands.flash", "copy the firmware, a board file and a table onto a MicroPython board with mpremote"),
     "hil": ("host.commands.hil", "run the firmware on the HIL rig, driven by a run folder; query it at every errors.csv row"),
     "import": ("host.commands.importlog", "turn a plain CSV log (time, temperatures, displacements, spindle) into a tcomp run folder"),

@@ -1,6 +1,6 @@
 """tcomp fit --model KIND RUN... --out MODEL.json"""
 
-EMPIRICAL = ("mlr", "pcr", "stepwise", "cv-subset")
+EMPIRICAL = ("mlr", "pcr", "stepwise", "cv-subset", "ann", "dynamic")
 
 
 def add_arguments(p):

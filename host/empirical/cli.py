@@ -1,9 +1,9 @@
-"""``tcomp fit --model mlr|pcr|stepwise`` (arguments defined in host/commands/fit.py)."""
+"""``tcomp fit --model mlr|pcr|stepwise|cv-subset|ann|dynamic`` (arguments defined in host/commands/fit.py)."""
 import json
 
 from host import options
 from host.empirical import EmpiricalDataError
-from host.options import number
+from host.options import boolean, number, numbers
 
 # --option KEY=VALUE settings understood by fit_command, with their converters (host/options.py); a
 # minimum is the smallest meaningful value, below which the estimator would fail obscurely or accept nonsense
@@ -18,10 +18,27 @@ OPTIONS = {
     "geometric_criterion": str,  # cv | aic
     "t_min_s": number(float),  # training window on target time
     "t_max_s": number(float),
-    "max_sensors": number(int, 1),  # cv-subset
-    "cv_blocks": number(int, 2),  # cv-subset on one run
+    "max_sensors": number(int, 1),  # cv-subset, dynamic
+    "cv_blocks": number(int, 2),  # cv-subset on one run; ann's validation group
+    "hidden_sizes": numbers(int, 1),  # ann: candidate sizes, e.g. 3/4/5
+    "seed": number(int, 0),  # ann
+    "max_epochs": number(int, 1),  # ann
+    "patience": number(int, 1),  # ann
+    "validation_fraction": number(float),  # ann, random validation
+    "validation": str,  # ann: random | last_group
+    "learning_rate": number(float),  # ann
+    "taus_s": numbers(float),  # dynamic: time-constant grid, e.g. 0/1800/7200
+    "ridge": numbers(float),  # dynamic: penalty grid
+    "max_terms": number(int, 1),  # dynamic
+    "min_gain": number(float, 0.0),  # dynamic
+    "cv_score": str,  # dynamic: worst | pooled
+    "swaps": boolean,  # dynamic
+    "use_spindle": boolean,  # dynamic
+    "use_feed": boolean,  # dynamic
 }
-METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",)}
+METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",),
+                  "dynamic": ("taus_s", "ridge", "max_terms", "min_gain", "cv_score", "swaps", "use_spindle", "use_feed"),
+                  "ann": ("hidden_sizes", "validation", "seed", "max_epochs", "patience", "validation_fraction", "learning_rate")}
 
 
 def parse_options(pairs, method):
@@ -30,7 +47,7 @@ def parse_options(pairs, method):
 
     out = options.parse_options(pairs, OPTIONS)
     for key in out:
-        owner = [m for m, keys in METHOD_OPTIONS.items() if key in keys]
+        owner = [m for m, keys in METHOD_OPTIONS.items() if key in keys] + (["dynamic"] if key == "max_sensors" else [])
         if owner and method not in owner:
             raise UserError("--option %s applies to --model %s, not %s" % (key, owner[0], method))
     lo, hi = out.get("t_min_s"), out.get("t_max_s")
@@ -77,6 +94,15 @@ def fit_command(args, out):
         for k, v in sorted(est.cv_rmse_.items()):
             print("  best %d-sensor subset %s: CV RMSE %.4g" % (k, ",".join(v["sensors"]), v["cv_rmse"]))
         print(est.mlr_.summary())
+    elif args.model == "dynamic":
+        print("  ridge %g chosen by cross-validation over %d groups (%s score %.4g); fit R2=%.4f RMSE=%.4g" % (
+            est.ridge_, est.n_groups_, est.cv_score, est.cv_rmse_, est.rsquared_, est.rmse_))
+        for (sig, tau), c in zip(est.terms_, est.coef_):
+            print("  %+.5g x lag(%s, tau %g s)" % (c, sig, tau))
+    elif args.model == "ann":
+        print("  %d hidden nodes chosen by validation (%s); validation RMSE by size: %s" % (
+            est.hidden_size_, est.validation_, ", ".join("%d: %.4g" % kv for kv in sorted(est.validation_rmse_.items()))))
+        print("  fit on all training samples: R2=%.4f RMSE=%.4g; best epoch %d" % (est.rsquared_, est.rmse_, est.best_epoch_))
     else:
         print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (
             est.n_components_, est.eigenvalues_.size, 100 * est.cumulative_variance_ratio_[est.n_components_ - 1], 100 * est.variance_threshold))

@@ -117,6 +117,23 @@ def ols_statistics(A, y, beta, has_intercept):
     }
 
 
+def check_predict_x(est, X, fitted, n_columns):
+    """``X`` for ``est.predict`` as a 2-D float array. EmpiricalDataError when ``est`` has no attribute
+    ``fitted`` yet (predict before fit), X holds NaN/inf, or its column count is not ``n_columns()``."""
+    if not hasattr(est, fitted):
+        raise EmpiricalDataError("%s: predict before fit (call fit first)" % est.method)
+    X = np.asarray(X, dtype=float)
+    if X.ndim == 1:
+        X = X[:, None]
+    bad = np.argwhere(~np.isfinite(X))
+    if bad.size:
+        raise EmpiricalDataError("%s predict: sample %d column %d is %r (NaN/inf in the temperatures)"
+                                 % (est.method, bad[0][0], bad[0][1], X[tuple(bad[0])]))
+    if X.shape[1] != n_columns():
+        raise EmpiricalDataError("predict: X has %d columns, the model has %d inputs" % (X.shape[1], n_columns()))
+    return X
+
+
 def _f(x):
     x = float(x)
     return x if np.isfinite(x) else None
@@ -130,17 +147,7 @@ class _Linear:
     n_samples_: int
 
     def predict(self, X):
-        if not hasattr(self, "coef_"):
-            raise EmpiricalDataError("%s: predict before fit (call fit(X, y) first)" % self.method)
-        X = np.asarray(X, dtype=float)
-        if X.ndim == 1:
-            X = X[:, None]
-        bad = np.argwhere(~np.isfinite(X))
-        if bad.size:
-            raise EmpiricalDataError("%s predict: sample %d column %d is %r (NaN/inf in the temperatures)"
-                                     % (self.method, bad[0][0], bad[0][1], X[tuple(bad[0])]))
-        if X.shape[1] != self.coef_.size:
-            raise EmpiricalDataError("predict: X has %d columns, the model has %d sensors" % (X.shape[1], self.coef_.size))
+        X = check_predict_x(self, X, "coef_", lambda: self.coef_.size)
         return self.intercept_ + X @ self.coef_
 
     def _stats_dict(self, st, extra=None):
@@ -582,8 +589,15 @@ class BestSubsetCV(_Linear):
         return d
 
 
+# here, at the end: ann.py, dynamic.py and ppr.py use this module's checks
+from host.empirical.ann import ANN  # noqa: E402
+from host.empirical.dynamic import DynamicRegression  # noqa: E402
+from host.empirical.ppr import PPR  # noqa: E402
+
 # method name -> estimator class: the one table behind `tcomp fit --model`, `tcomp compare` and fit_model
-ESTIMATORS = {"mlr": MLR, "pcr": PCR, "stepwise": Stepwise, "cv-subset": BestSubsetCV}
+# (dynamic is fitted through fitting.fit_model, which builds its candidate signals)
+ESTIMATORS = {"mlr": MLR, "pcr": PCR, "stepwise": Stepwise, "cv-subset": BestSubsetCV, "ann": ANN, "ppr": PPR,
+              "dynamic": DynamicRegression}
 
 
 def make_estimator(method, fit_intercept=True, **options):

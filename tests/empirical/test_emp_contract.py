@@ -26,10 +26,22 @@ def _design(n=60, p=4, seed=0):
     return X, y, np.repeat(np.arange(3), n // 3)
 
 
+# settings that keep each fit quick on 60 samples (the defaults are the papers' and search wider)
+SETTINGS = {"stepwise": {"f_enter": 4.0, "f_remove": 2.0}, "ann": {"hidden_sizes": (2,), "max_epochs": 600, "learning_rate": 0.03},
+            "dynamic": {"ridge": 0.0}}
+
+
 def _fit(method, X, y, groups):
-    est = ESTIMATORS[method](**({"f_enter": 4.0, "f_remove": 2.0} if method == "stepwise" else {}))
+    est = ESTIMATORS[method](**SETTINGS.get(method, {}))
     names = ["T%d" % j for j in range(X.shape[1])]
-    return est.fit(X, y, names, groups=groups) if method == "cv-subset" else est.fit(X, y, names)
+    if method == "dynamic":  # its columns are lag-filtered signals, here with time constant 0 (the inputs themselves)
+        return est.fit(X, y, [("T:" + n, 0.0) for n in names], groups)
+    return est.fit(X, y, names, groups=groups) if method in ("cv-subset", "ann") else est.fit(X, y, names)
+
+
+def _columns(method, est, X):
+    # the dynamic estimator predicts from the signals of the terms it selected
+    return X[:, est.selected_] if method == "dynamic" else X
 
 
 @pytest.mark.parametrize("method", sorted(ESTIMATORS))
@@ -47,10 +59,11 @@ def test_estimator_fit_predict_length_order_and_learned_attributes(method):
     assert not [k for k in vars(est) if k.endswith("_")]  # nothing learned before fit
     assert _fit(method, X, y, groups) is not None
     est = _fit(method, X, y, groups)
-    assert hasattr(est, "coef_") and hasattr(est, "intercept_")
+    assert [k for k in vars(est) if k.endswith("_") and not k.startswith("_")]  # what it learned, sklearn-named
+    X = _columns(method, est, X)
     pred = est.predict(X)
     assert pred.shape == (len(y),)
-    assert np.sqrt(np.mean((pred - y) ** 2)) < 0.2  # it learned the linear law, not a constant
+    assert np.sqrt(np.mean((pred - y) ** 2)) < 0.2  # it learned the linear law, not a constant (y's spread is 2.3)
     perm = np.random.default_rng(1).permutation(len(y))
     np.testing.assert_allclose(est.predict(X[perm]), pred[perm], rtol=0, atol=1e-12)
 
@@ -67,14 +80,16 @@ def test_estimator_refuses_nan_in_fit_and_predict(method):
     with pytest.raises(EmpiricalDataError, match="NaN"):
         _fit(method, X, yn, groups)
     est = _fit(method, X, y, groups)
+    Xp = _columns(method, est, X).copy()
+    Xp[5, 0] = np.nan
     with pytest.raises(EmpiricalDataError, match="NaN"):
-        est.predict(Xn)
+        est.predict(Xp)
 
 
 @pytest.mark.parametrize("method", sorted(ESTIMATORS))
 def test_estimator_predict_before_fit_is_a_clear_error(method):
     with pytest.raises(EmpiricalDataError, match="predict before fit"):
-        ESTIMATORS[method]().predict(np.zeros((3, 4)))
+        ESTIMATORS[method](**SETTINGS.get(method, {})).predict(np.zeros((3, 4)))
 
 
 # --- model documents: one fitted model per kind -------------------------------------------------
@@ -90,9 +105,12 @@ def _models():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)
         screw = ScrewModel(segments=10, dt_s=20.0).fit([screw_run])
+    cycles = conf.make_direct_run(name="cycles", n_sensors=3, spindle=True)  # the dynamic model cross-validates across cycles
     return {
         "poly_slope": (fit_model([slope], method="mlr", target="slope"), slope),
         "linear_direct": (fit_model([direct], method="mlr", target="direct", channel="ch1"), direct),
+        "ann": (fit_model([direct], method="ann", target="direct", channel="ch1", hidden_sizes=(2,), max_epochs=300), direct),
+        "dynamic": (fit_model([cycles], method="dynamic", target="direct", channel="ch1", taus_s=(0, 1800)), cycles),
         "screw": (screw, screw_run),
     }
 
@@ -107,7 +125,7 @@ def _model(kind):
 
 
 def test_every_kind_is_covered():
-    assert set(KINDS) == {"poly_slope", "linear_direct", "screw"}
+    assert set(KINDS) == {"poly_slope", "linear_direct", "ann", "dynamic", "screw"}
 
 
 @pytest.mark.parametrize("kind", sorted(KINDS))

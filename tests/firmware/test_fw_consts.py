@@ -29,6 +29,9 @@ COPIES = {
     ("channels", "_FAULT"): ("drivers", "FAULT"),
     ("ads122c04", "_NO_DATA"): ("drivers", "NO_DATA"),
     ("max31865", "_FAULT"): ("drivers", "FAULT"),
+    ("protocol", "_AUTH_BUSY"): ("auth", "BUSY"),
+    ("protocol", "_UNSIGNED"): ("auth", "UNSIGNED"),
+    ("modbus", "_UNSIGNED"): ("auth", "UNSIGNED"),
 }
 
 
@@ -54,7 +57,10 @@ def test_wire_contract_copies_match_wire_py():
                 if k.startswith("_") and hasattr(wire, k[1:]):
                     assert v == getattr(wire, k[1:]), (fn, k)
                     checked += 1
-    assert checked >= 12  # app.py's and safety.py's status bits, protocol.py's version
+    assert checked >= 16  # app.py's and safety.py's status bits, protocol.py's version, tag and counter sizes
+    # the authorisation's sizes are folded where they are used, on both sides of the check
+    for fn in ("auth", "protocol"):
+        assert {"_TAG_BYTES", "_MAX_COUNTER"} <= set(consts(fn)), fn
 
 
 BYTES_CONST = re.compile(r"^(_[A-Z][A-Z0-9_]*) = const\(b\"([^\"]*)\"\)", re.M)
@@ -71,9 +77,18 @@ def test_protocol_letters_and_texts_are_the_wire_contract():
     texts = dict(BYTES_CONST.findall(text))
     assert texts["_FIRMWARE_VERSION"].encode() == wire.FIRMWARE_VERSION.encode()
     assert texts["_REF_LETTERS"].encode() == wire.REF_LETTERS
-    for name in ("_ONE_POSITION", "_NO_ARGUMENT"):  # command groups the parser dispatches on
+    for name in ("_ONE_POSITION", "_NO_ARGUMENT", "_SIGNED"):  # command groups the parser dispatches on
         group = re.search(r"^%s = b\"(\w+)\"" % name, text, re.M).group(1)
         assert set(group) <= set(wire.COMMANDS), name
+        if name == "_SIGNED":
+            assert group == wire.SIGNED_COMMANDS
+
+
+def test_host_signer_sizes_are_the_wire_contract():
+    # the host signs with the sizes the board checks (one source: firmware/wire.py)
+    from firmware import wire
+    from host import linkauth
+    assert (linkauth.TAG_BYTES, linkauth.MAX_COUNTER) == (wire.TAG_BYTES, wire.MAX_COUNTER)
 
 
 def test_protocol_does_not_import_app():
