@@ -248,8 +248,11 @@ def findings(result, family, model_path=None, model_error=None):
                                 for d in diag]}
 
 
-def write_report(result, family, folder, json_path=None):
-    """JSON (``json_path``), model.json, plots and report.md in ``folder`` (None: the JSON alone); returns the JSON dict."""
+def write_report(result, family, folder, json_path=None, shown_folder=None):
+    """JSON (``json_path``), model.json, plots and report.md in ``folder`` (None: the JSON alone); returns the JSON dict.
+
+    ``shown_folder``: the folder's name as recorded in the report, when ``folder`` is a staging place.
+    """
     if folder is None:
         extra = findings(result, family)
         if json_path:
@@ -258,11 +261,11 @@ def write_report(result, family, folder, json_path=None):
         js.update(extra)
         return js
     os.makedirs(folder, exist_ok=True)
-    model_path, model_error = os.path.join(folder, "model.json"), None
+    model_path, model_error = os.path.join(shown_folder or folder, "model.json"), None
     try:
         from host.models import save_model
 
-        save_model(final_model_document(result, result.runs, air=getattr(family, "air", True)), model_path)
+        save_model(final_model_document(result, result.runs, air=getattr(family, "air", True)), os.path.join(folder, "model.json"))
     except Exception as exc:  # the findings stand even when the final document cannot be built
         model_path, model_error = None, "%s: %s" % (type(exc).__name__, exc)
     extra = findings(result, family, model_path, model_error)
