@@ -131,6 +131,7 @@ class App:
         self.slot = None
         self.map = []
         self.unlatched = False
+        self.unsettled = False  # screw state not yet set in equilibrium with a good air reading
         self.ref_state = 0
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
@@ -202,6 +203,8 @@ class App:
                 st = _REFS_STORED
         self.ref_state = st
         self.unlatched = st > _REFS_UNSAVED
+        # the screw state starts in equilibrium with the air at the first cycle every needed sensor reads good
+        self.unsettled = self.screw
         self.step_ms = 0
         self._span()
 
@@ -365,6 +368,9 @@ class App:
                 if self.unlatched:
                     self._latch(ev, t)
             ev.update()
+            if self.unsettled and not needed:
+                self.unsettled = False
+                ev.settle()
             if self.screw:
                 dtm = t.dt_ms
                 self.step_ms += dt

@@ -20,7 +20,7 @@ except ImportError:  # CPython
     const = lambda x: x  # noqa: E731
 
 MAGIC = b"TCTB"
-_VERSION = const(1)
+_VERSION = const(2)  # 2: screw_reduced reads an air channel (issue 11); version 1 tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
 _MAX_SENSORS = const(24)
@@ -104,7 +104,8 @@ def parse_table(buf, expected_sensors=None):
         raise TableError(REASON_MAGIC)
     version = buf[4]
     if version != _VERSION:
-        raise TableError(REASON_VERSION, "%d" % version)
+        raise TableError(REASON_VERSION, "table format version %d is no longer supported; re-export the model "
+                         "with this tcomp (format %d)" % (version, _VERSION) if version < _VERSION else "%d" % version)
     kind = buf[5]
     if kind not in KINDS:
         raise TableError(REASON_KIND, "%d" % kind)
@@ -190,9 +191,9 @@ _SCALE = const(1000)  # fraction bits of a coefficient (informational, not used 
 # "name:r" (range-checked, r indexes _RANGE_CODES) or "name=n" (a list, n
 # indexes _COUNT_CODES); "|" runs a consistency check on what was read so far;
 # "@" is the per-sensor triple b[i] shb[i] fb[i].
-_RANGE_CODES = "fLn4scdMtFTh"
-_LO = (0, 1, 1, 1, -_SH, -_SCALE, 0, 1, 1, 0, 0, 0)
-_HI = (30, 29, 6, 4, _SH, _SCALE, _MAX_DEGREE, _MAX_SEGMENTS, 3600000, 1 << 20, (1 << 30) - 1, _SH)
+_RANGE_CODES = "fLn4scdMtFThaA"
+_LO = (0, 1, 1, 1, -_SH, -_SCALE, 0, 1, 1, 0, 0, 0, -1, -(1 << 30) + 1)
+_HI = (30, 29, 6, 4, _SH, _SCALE, _MAX_DEGREE, _MAX_SEGMENTS, 3600000, 1 << 20, (1 << 30) - 1, _SH, _MAX_SENSORS - 1, 0)
 _COUNT_CODES = "DdEQm"  # degree + 1, degree, M + 1, M * M, M
 _COMMON = "pos_lo pos_hi pos_ref | fo:f Lt:L nt:4 S0 fS:c @ rL"
 _POSITION = "Lw:L nw:n shw:s KS shK:s fK:f rK rT degree:d Lg:L ng:n G=D fG=D shg=d rO"
@@ -200,7 +201,8 @@ _POSITION = "Lw:L nw:n shw:s KS shK:s fK:f rK rT degree:d Lg:L ng:n G=D fG=D shg
 # the exporter proved for every input inside the envelope; the firmware never outputs more
 _CERT = "cert_out:T cert_ref:T cert_slope:T"
 _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:f C=Q umax:T Lu:L nu:4 "
-          "B=m shB=m rS=m G2=m shG2=m H shH:s fh:c Lx:L nx:n shX:s KC Lc:L nc:n shC:s")
+          "B=m shB=m rS=m G2=m shG2=m H shH:s fh:c Lx:L nx:n shX:s KC Lc:L nc:n shC:s "
+          "air:a Tlo:A W0=m shW0=m W1=m shW1=m Ka shKa:s |")
 
 
 def _take(buf, w, name, r=-1):
@@ -238,6 +240,10 @@ def _fields(t, buf, w, spec):
 
 
 def _check(t):
+    if hasattr(t, "Ka"):
+        if t.air >= t.n_sensors:
+            raise TableError(REASON_FIELD, "air channel %d of %d sensors" % (t.air, t.n_sensors))
+        return
     if not hasattr(t, "M"):
         if t.pos_lo > t.pos_hi or not t.pos_lo <= t.pos_ref <= t.pos_hi:
             raise TableError(REASON_FIELD, "position envelope %d..%d, reference %d" % (t.pos_lo, t.pos_hi, t.pos_ref))

@@ -17,6 +17,8 @@ SCREW_HEAD = ("M", "dt_ms", "fixed_end", "fmax")
 SCREW_STATE = ("ft", "Tmax", "Ls", "ns", "fc", "gs")
 SCREW_TRAVEL = ("umax", "Lu", "nu")
 SCREW_TAIL = ("H", "shH", "fh", "Lx", "nx", "shX", "KC", "Lc", "nc", "shC")
+SCREW_AIR_HEAD = ("air", "Tlo")  # format 2: the air channel (-1: none) and the state's lower bound
+SCREW_AIR_TAIL = ("Ka", "shKa")
 
 
 CERTIFICATE = ("cert_out", "cert_ref", "cert_slope")
@@ -49,6 +51,10 @@ def _model_words(f):
     for name in ("B", "shB", "rS", "G2", "shG2"):
         out += [("%s[%d]" % (name, i), v) for i, v in enumerate(f[name])]
     out += [(k, f[k]) for k in SCREW_TAIL]
+    out += [(k, f[k]) for k in SCREW_AIR_HEAD]
+    for name in ("W0", "shW0", "W1", "shW1"):
+        out += [("%s[%d]" % (name, i), v) for i, v in enumerate(f[name])]
+    out += [(k, f[k]) for k in SCREW_AIR_TAIL]
     return out
 
 

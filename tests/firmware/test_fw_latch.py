@@ -23,6 +23,7 @@ def _app(tmp_path, table, base_temp):
     (tmp_path / "table_a.bin").write_bytes(table)
     board = make_rig(2, 0, temps=[base_temp, 21.0], table_dir=str(tmp_path), extra={"frame_ms": 0, "slew_um_per_s": 1000})
     board.config["channels"][0]["name"] = "T_base"
+    board.config["channels"][1]["name"] = "T_air"  # the screw's air channel
     return App(board), board
 
 
