@@ -65,10 +65,10 @@ def _load_config(d):
         # overwrite before removing: a removed dict entry can keep its old value until the
         # slot is reused, and that stale pointer would keep the module's code alive
         if "firmware.bootcfg" in sys.modules:
-            sys.modules["firmware.bootcfg"] = None
+            sys.modules["firmware.bootcfg"] = None  # type: ignore  # MicroPython's sys.modules takes any object
             sys.modules.pop("firmware.bootcfg")
         if hasattr(firmware, "bootcfg"):
-            firmware.bootcfg = None
+            setattr(firmware, "bootcfg", None)
             delattr(firmware, "bootcfg")
     return cfg
 
