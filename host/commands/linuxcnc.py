@@ -80,7 +80,8 @@ def run(args):
         slew = dict((k, d) for k, d, _, _ in TOP)["slew_um_per_s"]
         _log("slew limit: firmware default %g um/s (give --slew-um-per-s if the board's config differs)" % slew)
     bridge = Bridge(link, slew, units=args.units, stale_s=args.stale_ms / 1000.0,
-                    recover_s=args.recover_ms / 1000.0, cold_start=args.cold_start, log=_log)
+                    recover_s=args.recover_ms / 1000.0, cold_start=args.cold_start, log=_log,
+                    max_dt_s=2 * args.period_ms / 1000.0)
     _log("%s on %s (%s), period %d ms" % (args.name, args.port, args.mode, args.period_ms))
     try:
         halcomp.serve(comp, bridge, args.period_ms / 1000.0)

@@ -229,10 +229,12 @@ class Bridge:
     every period, a Modbus board's cycle counter moves every ``cycle_ms``).
     ``recover_s``: a fault ends only after this long without any fault
     reason, then the ramp goes back to the board's value at the slew limit.
+    ``max_dt_s``: a ramp step covers at most this much time (two periods), so
+    a bridge descheduled by a loaded host ramps more slowly, never in a step.
     """
 
     def __init__(self, link, slew_um_per_s, units="mm", stale_s=1.0, recover_s=1.0, cold_start=False,
-                 log=None, latch_retry_s=1.0, latch_tries=10):
+                 log=None, latch_retry_s=1.0, latch_tries=10, max_dt_s=0.1):
         if units not in UM_PER_UNIT:
             raise ValueError("units must be one of %s, got %r" % (", ".join(UM_PER_UNIT), units))
         self.link = link
@@ -241,6 +243,7 @@ class Bridge:
         self.scale = COUNT_UM / self.um_per_unit
         self.stale_s = stale_s
         self.recover_s = recover_s
+        self.max_dt_s = max_dt_s
         self.force_cold = cold_start
         self.log = log or (lambda msg: None)
         self.latch_retry_s = latch_retry_s
@@ -300,7 +303,7 @@ class Bridge:
 
     # --- one period ---------------------------------------------------------------------------
     def step(self, now, inp):
-        dt = 0.0 if self.last_now is None else now - self.last_now
+        dt = 0.0 if self.last_now is None else min(now - self.last_now, self.max_dt_s)
         self.last_now = now
         if self.last_new_s is None:
             self.last_new_s = now
