@@ -25,9 +25,9 @@ COUNT_UM = 0.1  # one eoffset count: the board's offset resolution (docs/protoco
 UM_PER_UNIT = {"mm": 1000.0, "inch": 25400.0}
 
 # fault reasons, bits of the ``fault-code`` pin
-LINK = 1       # the port is gone, or the board does not answer
+LINK = 1       # the port failed, or (Modbus) the board did not answer a request
 STALE = 2      # no new frame (sequence number moving) within stale_s
-CRC = 4        # a malformed frame (bad CRC, bad syntax) within the last recover_s
+CRC = 4        # a malformed frame (bad CRC, bad syntax) arrived
 BOARD = 8      # the board reports FALLBACK: its model cannot be used
 FAULT_NAMES = {LINK: "link", STALE: "stale", CRC: "crc", BOARD: "fallback"}
 
@@ -254,7 +254,6 @@ class Bridge:
         self.last_new_s = None     # when the last new reading arrived
         self.last_seq = None
         self.reading = None
-        self.crc_until = -1.0
         self.fault_since = None
         self.clear_since = None
         self.link_error = ""
@@ -321,7 +320,7 @@ class Bridge:
                 self.log("link: %s" % ex.error)
         self.link_error = ex.error
         if ex.malformed:
-            self.crc_until = now + self.recover_s
+            code |= CRC
             for why in ex.malformed:
                 self.log("malformed frame: %s" % why)
         for r in ex.readings:
@@ -331,8 +330,6 @@ class Bridge:
                 self.reading = r
         if now - self.last_new_s > self.stale_s:
             code |= STALE
-        if now < self.crc_until:
-            code |= CRC
         if self.reading is not None and self.reading.status & FALLBACK:
             code |= BOARD
         if self.reading is None:
