@@ -138,7 +138,10 @@ def parse_table(buf, expected_sensors=None):
     t.env_hi = []
     t.ref = []
     for i in range(ns):
-        t.sensors.append(_name(buf, _HEADER_SIZE + i * _NAME_SIZE, _NAME_SIZE))
+        name = _name(buf, _HEADER_SIZE + i * _NAME_SIZE, _NAME_SIZE)
+        if name in t.sensors:  # one channel would feed two coefficients
+            raise TableError(REASON_FIELD, "sensor %s twice" % name)
+        t.sensors.append(name)
         lo, hi, ref = struct.unpack_from("<iii", buf, _HEADER_SIZE + ns * _NAME_SIZE + 12 * i)
         if lo > hi:
             raise TableError(REASON_FIELD, "sensor %s envelope %d > %d" % (t.sensors[i], lo, hi))

@@ -2,6 +2,8 @@
 ``tcomp monitor`` on a live pty stream, and the user errors of ``tcomp hil`` / ``tcomp flash``."""
 import csv
 import json
+import os
+import shutil
 import threading
 
 import numpy as np
@@ -82,8 +84,12 @@ def test_tcomp_hil_user_errors(tmp_path, short_run, capsys):
     assert tcomp(["flash", "--port", "/dev/null", "--table", str(tmp_path / "bad.bin"), "--dry-run"]) == 2
     assert "not a valid coefficient table" in capsys.readouterr().err
     assert tcomp(["flash", "--port", "/dev/ttyX", "--table", str(tmp_path / "t.bin"), "--dry-run"]) == 0
-    cmd = capsys.readouterr().out
+    captured = capsys.readouterr()
+    cmd = captured.out
     assert "connect /dev/ttyX resume" in cmd and ":tables/" in cmd and ":firmware/" in cmd
+    kept = captured.err.split("kept in ")[1].split(";")[0]  # the printed command's files still exist
+    assert kept in cmd and os.path.isfile(os.path.join(kept, "tables", "table_a.bin"))
+    shutil.rmtree(kept)
 
 
 def test_tcomp_monitor_decodes_a_live_pty(tmp_path, demo_run, capsys):

@@ -20,13 +20,14 @@ Mapping (JSON, or built from command-line flags)::
 ``temperatures`` may also be a list of column names (name = column, role
 ``structure``) and ``errors`` a list (channel = column, position 0).
 """
-import csv
 import math
 import os
+from collections import Counter
 
 import numpy as np
 
-from host.runs import FORMAT, ROLES, Errors, Run, RunFormatError, Spindle, Temperatures, write_run
+from host.runs import (ERROR_LIMIT_UM, FORMAT, ROLES, TEMPERATURE_RANGE_C, CsvSyntaxError, Errors, Run, RunFormatError,
+                       Spindle, Temperatures, parse_number, read_records, write_run)
 
 
 class ImportError_(ValueError):
@@ -143,50 +144,77 @@ def _normalise_mapping(mapping, where):
     }
 
 
+def _check_ranges(source, m, used, data):
+    """The run format's plausibility ranges (host/runs.py), named by source line and column before anything is written."""
+    lo, hi = TEMPERATURE_RANGE_C
+    checks = [(c, 1.0, lo, hi, "degC, the range of a Pt100 (IEC 60751)") for c in m["temperatures"]]
+    checks += [(c, m["errors"][c]["scale"], -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
+               for c in m["errors"]]
+    problems = []
+    for col, scale, lo, hi, why in checks:
+        values = data[:, used.index(col)]
+        for i in np.flatnonzero(~((values * scale >= lo) & (values * scale <= hi)))[:10]:
+            problems.append("%s line %d column %r: %g is outside %g..%g %s (a logger fault or a wrong unit?)"
+                            % (source, i + 2, col, values[i], lo, hi, why))
+    if problems:
+        raise ImportError_("\n".join(problems))
+
+
+def _shortened(header, n=20):
+    return ",".join(header) if len(header) <= n else "%s,... (%d columns)" % (",".join(header[:n]), len(header))
+
+
 def import_csv(source, mapping, mapping_where="mapping"):
     """Read ``source`` (CSV path) with ``mapping``; return a Run (not yet written)."""
     m = _normalise_mapping(mapping, mapping_where)
     try:
         # utf-8-sig: spreadsheet programs (Excel) start a UTF-8 CSV with a byte-order mark
         with open(source, newline="", encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(fh))
+            records = read_records(fh, source)
     except UnicodeDecodeError as exc:
         raise ImportError_("%s: not a UTF-8 text CSV (byte %d cannot be decoded); save the log as CSV (UTF-8)" % (source, exc.start))
     except OSError as exc:
         raise ImportError_("%s: cannot be read (%s)" % (source, exc.strerror or exc))
+    except CsvSyntaxError as exc:
+        raise ImportError_(str(exc))
+    rows = [r for _, r in records]
     if not rows:
         raise ImportError_("%s line 1: file is empty" % source)
     header = [h.strip() for h in rows[0]]
-    dup = sorted({h for h in header if header.count(h) > 1})
+    dup = sorted(c for c, k in Counter(header).items() if k > 1)
     if dup:
         raise ImportError_("%s line 1: column name(s) %s appear more than once in the header; rename them in the source"
                            % (source, ", ".join(repr(h) for h in dup)))
     used = [m["time"]] + list(m["temperatures"]) + list(m["errors"]) + ([m["spindle"]] if m["spindle"] else [])
     problems = []
+    known, named = set(header), set(used + m["ignore"])
     for col in used + m["ignore"]:
-        if col not in header:
-            problems.append("%s line 1: mapped column %r is not in the header (%s)" % (source, col, ",".join(header)))
+        if col not in known:
+            problems.append("%s line 1: mapped column %r is not in the header (%s)" % (source, col, _shortened(header)))
     for col in header:
-        if col not in used and col not in m["ignore"]:
+        if col not in named:
             problems.append("%s line 1: column %r is neither mapped nor listed in 'ignore'" % (source, col))
+            if len(problems) > 50:
+                problems.append("... (stopped after 50 problems)")
+                break
     if problems:
         raise ImportError_("\n".join(problems))
     idx = {c: header.index(c) for c in used}
     data = np.empty((len(rows) - 1, len(used)))
-    for lineno, row in enumerate(rows[1:], start=2):
+    for k, (lineno, row) in enumerate(records[1:]):
         if len(row) != len(header):
             problems.append("%s line %d: has %d cells, header has %d" % (source, lineno, len(row), len(header)))
             continue
         for j, col in enumerate(used):
             cell = row[idx[col]].strip()
             try:
-                v = float(cell)
+                v = parse_number(cell)
             except ValueError:
                 problems.append("%s line %d column %r: not a number: %r" % (source, lineno, col, cell))
                 continue
             if not math.isfinite(v):
                 problems.append("%s line %d column %r: %r is not a finite number" % (source, lineno, col, cell))
-            data[lineno - 2, j] = v
+            data[k, j] = v
         if len(problems) > 50:
             problems.append("... (stopped after 50 problems)")
             break
@@ -200,6 +228,7 @@ def import_csv(source, mapping, mapping_where="mapping"):
         raise ImportError_(
             "\n".join("%s line %d column %r: time goes backwards or repeats (%g after %g)" % (source, i + 3, m["time"], data[i + 1, 0], data[i, 0]) for i in back[:20])
         )
+    _check_ranges(source, m, used, data)
     tcols = list(m["temperatures"])
     tvals = data[:, [used.index(c) for c in tcols]]
     temps = Temperatures(time_s, [m["temperatures"][c]["name"] for c in tcols], tvals)

@@ -9,6 +9,8 @@ import csv
 import json
 import math
 import os
+import re
+from collections import Counter
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -146,18 +148,77 @@ class _Problems:
         return bool(self.items)
 
 
+# A plain decimal number in ASCII. float() also reads '2_0' (as 20) and full-width or Arabic-Indic digits,
+# which no logger writes: such a cell is a typo or a mangled file, not a number.
+_NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-]?(?:nan|inf|infinity)", re.IGNORECASE)
+CELL_LIMIT = csv.field_size_limit()  # 131072 characters (128 KiB), Python's csv default, kept as our limit
+
+
+def parse_number(cell):
+    """float(cell) for a plain ASCII decimal number (nan/inf included, for the caller to name); ValueError otherwise."""
+    if not _NUMBER.fullmatch(cell):
+        raise ValueError("not a number: %r" % cell)
+    return float(cell)
+
+
+class CsvSyntaxError(ValueError):
+    """A CSV file that cannot be split into cells unambiguously; the message names file and line."""
+
+
+def read_records(fh, path):
+    """[(line number, cells)] of an open CSV file, one record per physical line.
+
+    A quote opens a cell that may run over line ends; in a log, that is almost always a stray ``"`` that
+    silently swallows the following rows. So a record spanning lines, a quote never closed, text after a
+    closing quote and a cell over 128 KiB are all CsvSyntaxError naming the file and line.
+    """
+    reader = csv.reader(fh, strict=True)
+    out = []
+    start = 1
+    try:
+        for row in reader:
+            if reader.line_num != start:
+                raise CsvSyntaxError("%s lines %d-%d: one quoted cell runs over %d lines (a stray '\"'? each row "
+                                     "of the log must be one line)" % (path, start, reader.line_num, reader.line_num - start + 1))
+            out.append((start, row))
+            start = reader.line_num + 1
+    except csv.Error as exc:
+        text = str(exc)
+        if "unexpected end of data" in text or reader.line_num > start:
+            why = "a quote opened on this line is never closed (a stray '\"'?)"
+        elif "field larger than field limit" in text:
+            why = "a cell is longer than %d characters (128 KiB; a missing line end?)" % CELL_LIMIT
+        elif "expected after" in text:
+            why = "text follows a closing quote in a cell (a stray '\"'?)"
+        else:
+            why = "not valid CSV (%s)" % text
+        raise CsvSyntaxError("%s line %d: %s" % (path, start, why))
+    return out
+
+
 def _read_csv(path, required, optional, problems, text_columns=()):
     """Parse a numeric CSV strictly. Returns {column: list} or None if unreadable."""
     try:
         # utf-8-sig: spreadsheet programs (Excel) start a UTF-8 CSV with a byte-order mark
         with open(path, newline="", encoding="utf-8-sig") as fh:
-            rows = list(csv.reader(fh))
+            records = read_records(fh, path)
     except FileNotFoundError:
         problems.add(path, "file is missing")
         return None
-    except (OSError, UnicodeDecodeError) as exc:
-        problems.add(path, "cannot be read (%s)" % exc)
+    except IsADirectoryError:
+        problems.add(path, "is a folder, expected a CSV file")
         return None
+    except UnicodeDecodeError as exc:
+        problems.add(path, "not a UTF-8 text CSV (byte %d cannot be decoded)" % exc.start)
+        return None
+    except OSError as exc:
+        problems.add(path, "cannot be read (%s)" % (exc.strerror or exc))
+        return None
+    except CsvSyntaxError as exc:
+        problems.items.append(str(exc))
+        return None
+    rows = [r for _, r in records]
+    lines = [n for n, _ in records]
     if not rows:
         problems.add("%s line 1" % path, "file is empty (expected a header %s)" % ",".join(required))
         return None
@@ -165,7 +226,7 @@ def _read_csv(path, required, optional, problems, text_columns=()):
     missing = [c for c in required if c not in header]
     for c in missing:
         problems.add("%s line 1" % path, "missing column '%s' (header is %s)" % (c, ",".join(header)))
-    dup = sorted({h for h in header if header.count(h) > 1})
+    dup = sorted(c for c, k in Counter(header).items() if k > 1)  # Counter: a wide header stays linear
     for c in dup:
         problems.add("%s line 1" % path, "column '%s' appears more than once" % c)
     empty = [i + 1 for i, h in enumerate(header) if not h]
@@ -180,7 +241,7 @@ def _read_csv(path, required, optional, problems, text_columns=()):
         if extra:
             return None
     data = {h: [] for h in header}
-    for lineno, row in enumerate(rows[1:], start=2):
+    for lineno, row in zip(lines[1:], rows[1:]):
         if not row or all(not c.strip() for c in row):
             problems.add("%s line %d" % (path, lineno), "blank line")
             continue
@@ -195,7 +256,7 @@ def _read_csv(path, required, optional, problems, text_columns=()):
                 data[col].append(cell)
                 continue
             try:
-                v = float(cell)
+                v = parse_number(cell)
             except ValueError:
                 problems.add("%s line %d column '%s'" % (path, lineno, col), "not a number: %r" % cell)
                 v = math.nan
@@ -208,6 +269,22 @@ def _read_csv(path, required, optional, problems, text_columns=()):
     return data
 
 
+# Values no thermal test produces; beyond them a number is a logger fault or a wrong unit, and it would reach the
+# fits as a spike (1e308 degC: "perfectly collinear" and overflow warnings instead of the row at fault).
+TEMPERATURE_RANGE_C = (-200.0, 850.0)  # Pt100 measuring range, IEC 60751
+ERROR_LIMIT_UM = 10000.0  # 10 mm: four times a 20 m steel axis (11.5e-6/K) warming by 10 K
+_SHOWN = 10  # problems of one kind listed one by one; the rest are counted
+
+
+def _check_range(path, data, columns, bounds, what, problems):
+    lo, hi = bounds
+    bad = [(i, c, v) for c in columns for i, v in enumerate(data[c]) if not lo <= v <= hi and math.isfinite(v)]
+    for i, c, v in bad[:_SHOWN]:
+        problems.add("%s line %d column '%s'" % (path, i + 2, c), what % (v, lo, hi))
+    if len(bad) > _SHOWN:
+        problems.add(path, "... and %d more values outside %g..%g" % (len(bad) - _SHOWN, lo, hi))
+
+
 def _check_increasing(path, col, values, problems, strict=True):
     for i in range(1, len(values)):
         a, b = values[i - 1], values[i]
@@ -218,6 +295,11 @@ def _check_increasing(path, col, values, problems, strict=True):
                 "%s line %d column '%s'" % (path, i + 2, col),
                 "time goes backwards or repeats (%g after %g)" % (b, a) if strict else "time goes backwards (%g after %g)" % (b, a),
             )
+
+
+def _positive(v):
+    """A JSON number > 0 and finite: json reads NaN, Infinity and 1e400 (as Infinity) too."""
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
 
 
 def _check_meta(path, meta, problems):
@@ -237,8 +319,8 @@ def _check_meta(path, meta, problems):
             if s.get("role") not in ROLES:
                 problems.add(path, "sensors.%s.role is %r; expected one of %s" % (name, s.get("role"), ", ".join(ROLES)))
     stroke = meta.get("stroke_mm")
-    if stroke is not None and (not isinstance(stroke, (int, float)) or isinstance(stroke, bool) or not stroke > 0):
-        problems.add(path, "key 'stroke_mm' must be a positive number (found %r)" % (stroke,))
+    if stroke is not None and not _positive(stroke):
+        problems.add(path, "key 'stroke_mm' must be a positive finite number (found %r)" % (stroke,))
     screw = meta.get("screw")
     if screw is not None:
         if not isinstance(screw, dict):
@@ -246,11 +328,11 @@ def _check_meta(path, meta, problems):
         else:
             for k in ("length_mm", "diameter_mm", "lead_mm"):
                 v = screw.get(k)
-                if not isinstance(v, (int, float)) or isinstance(v, bool) or not v > 0:
-                    problems.add(path, "screw.%s must be a positive number (found %r)" % (k, v))
+                if not _positive(v):
+                    problems.add(path, "screw.%s must be a positive finite number (found %r)" % (k, v))
             fe = screw.get("fixed_end_mm", 0)
-            if not isinstance(fe, (int, float)) or isinstance(fe, bool):
-                problems.add(path, "screw.fixed_end_mm must be a number (found %r)" % (fe,))
+            if not isinstance(fe, (int, float)) or isinstance(fe, bool) or not math.isfinite(fe):
+                problems.add(path, "screw.fixed_end_mm must be a finite number (found %r)" % (fe,))
 
 
 def load_meta(folder):
@@ -302,9 +384,13 @@ def load_run(folder):
             problems.add("%s line 1" % tpath, "no temperature columns after time_s")
         _check_increasing(tpath, "time_s", tdata["time_s"], problems)
         if meta is not None and isinstance(meta.get("sensors"), dict):
-            for j, n in enumerate(names):
-                if n not in meta["sensors"]:
-                    problems.add("%s line 1 column %d" % (tpath, j + 2), "sensor '%s' is not declared in meta.json 'sensors'" % n)
+            undeclared = [(j, n) for j, n in enumerate(names) if n not in meta["sensors"]]
+            for j, n in undeclared[:_SHOWN]:
+                problems.add("%s line 1 column %d" % (tpath, j + 2), "sensor '%s' is not declared in meta.json 'sensors'" % n)
+            if len(undeclared) > _SHOWN:
+                problems.add("%s line 1" % tpath, "... and %d more undeclared sensor columns (%d in all)" % (len(undeclared) - _SHOWN, len(undeclared)))
+        _check_range(tpath, tdata, names, TEMPERATURE_RANGE_C, "temperature %g degC is outside %g..%g degC, the range of a Pt100 "
+                     "(IEC 60751), the sensor tcomp reads (a logger fault or a wrong unit?)", problems)
         temps = Temperatures(
             np.asarray(tdata["time_s"], dtype=float),
             names,
@@ -317,6 +403,8 @@ def load_run(folder):
     errors = None
     if edata is not None:
         _check_increasing(epath, "time_s", edata["time_s"], problems, strict=False)
+        _check_range(epath, edata, ["error_um"], (-ERROR_LIMIT_UM, ERROR_LIMIT_UM), "error %g um is outside %g..%g um: "
+                     "no feed axis grows that much (a 20 m steel axis warming 10 K grows 2300 um; a wrong unit?)", problems)
         stroke = meta.get("stroke_mm") if meta else None
         if isinstance(stroke, (int, float)) and stroke > 0:
             for i, p in enumerate(edata["position_mm"]):
@@ -372,6 +460,14 @@ def load_run(folder):
 
 
 def load_runs(folders):
+    """Load several runs; one folder given twice is refused: its samples would count twice and inflate every statistic."""
+    seen = {}
+    for f in folders:
+        key = os.path.realpath(f)
+        if key in seen:
+            raise RunFormatError(["%s: the same run folder as %s, given twice (its samples would count twice "
+                                  "and inflate the statistics)" % (f, seen[key])])
+        seen[key] = f
     return [load_run(f) for f in folders]
 
 

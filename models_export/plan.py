@@ -251,6 +251,8 @@ class Planner:
             fixed = float(red["fixed_end_mm"])
             dt = float(red["dt_s"])
             Tmax = float(red["state_max_K"])
+            if not all(math.isfinite(v) for v in [fixed, dt, Tmax] + edges):
+                raise ValueError("fixed_end_mm, dt_s, state_max_K and edges_mm must be finite numbers")
         except (KeyError, TypeError, ValueError) as exc:
             raise ExportError("thermal.reduced: missing or invalid field %s" % exc)
         fmax_f = red.get("feed_max_mm_min")

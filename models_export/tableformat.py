@@ -46,7 +46,10 @@ def payload_words(f):
 
 
 def _fixed(text, size, what):
-    raw = text.encode("ascii")
+    try:
+        raw = text.encode("ascii")
+    except UnicodeEncodeError:
+        raw = b""  # refused below with the same message as an empty or long name
     if not raw or len(raw) > size or b"\x00" in raw:
         raise ValueError("%s %r must be 1..%d ASCII characters" % (what, text, size))
     return raw + b"\x00" * (size - len(raw))
@@ -75,6 +78,9 @@ def pack(f):
     for name in sensors:
         out += _fixed(name, NAME_SIZE, "sensor name")
     for i in range(n):
+        for name in ("env_lo", "env_hi", "ref"):
+            if not -(1 << 31) <= f[name][i] < (1 << 31):
+                raise ValueError("sensor %s: %s=%r mC is not a 32-bit integer" % (sensors[i], name, f[name][i]))
         out += struct.pack("<iii", f["env_lo"][i], f["env_hi"][i], f["ref"][i])
     for _, v in words:
         out += struct.pack("<i", v)

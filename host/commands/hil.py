@@ -25,18 +25,28 @@ def add_arguments(p):
                    help="print every Nth periodic O frame (all other frames are printed); 0: none")
 
 
-def _faults(specs, sensors):
+def _faults(specs, sensors, end_s):
+    """--fault specs -> dicts; a fault starting after the run ends is refused, one ending after it is cut there."""
     from host.cli import UserError
     out = []
     for s in specs:
         m = _FAULT.match(s)
         if not m:
             raise UserError("--fault %r: expected KIND:SENSOR@START-END, e.g. open:T1@600-900" % s)
-        kind, sensor, a, b = m.group(1), m.group(2), float(m.group(3)), float(m.group(4))
+        try:
+            kind, sensor, a, b = m.group(1), m.group(2), float(m.group(3)), float(m.group(4))
+        except ValueError:
+            raise UserError("--fault %r: START and END must be numbers of seconds, e.g. open:T1@600-900" % s)
         if sensor not in sensors:
             raise UserError("--fault %r: sensor %s is not one of the table's %s" % (s, sensor, ", ".join(sensors)))
         if b <= a:
             raise UserError("--fault %r: end %.3g s is not after start %.3g s" % (s, b, a))
+        if a >= end_s:
+            raise UserError("--fault %r: starts at %.6g s, after the run ends at %.6g s (times are run times in s)" % (s, a, end_s))
+        if b > end_s:
+            print("tcomp hil: warning: --fault %r ends at %.6g s, after the run ends at %.6g s: the fault lasts to the "
+                  "end of the run (the rig would otherwise keep simulating until %.6g s)" % (s, b, end_s, b), file=sys.stderr)
+            b = end_s
         out.append({"kind": kind, "sensor": sensor, "start_s": a, "end_s": b})
     return out
 
@@ -55,6 +65,17 @@ def _actions(faults):
 
 
 def run(args):
+    from host.outputs import Outputs
+
+    with Outputs([args.run, args.table, args.config]) as out:
+        if args.json:
+            out.file(args.json, "--json")
+        rc = _hil(args, out)
+        out.commit()
+    return rc
+
+
+def _hil(args, out):
     from firmware.table import TableError, parse_table
     from hil_tests.rig.boards import rig_config
     from hil_tests.rig.harness import Rig, RigError
@@ -62,6 +83,8 @@ def run(args):
     from host.cli import UserError
     from host.runs import RunFormatError, load_run
 
+    if args.print_every < 0:
+        raise UserError("--print-every %d: must be >= 0 (every Nth periodic frame; 0: none)" % args.print_every)
     try:
         run_ = load_run(args.run)
     except RunFormatError as exc:
@@ -76,6 +99,13 @@ def run(args):
         raise UserError("%s: not a valid table: %s" % (args.table, exc))
     if not args.warmup_s >= 0:
         raise UserError("--warmup-s must be >= 0 (found %g)" % args.warmup_s)
+    end_s = max(float(run_.temperatures.time_s[-1]), float(run_.errors.time_s.max()))
+    # The warm-up only lets the firmware's filters settle on the first temperatures; longer than the run
+    # itself (or the 60 s default on a short run) is simulated time nobody asked to see.
+    longest = max(end_s - float(run_.temperatures.time_s[0]), 60.0)
+    if args.warmup_s > longest:
+        raise UserError("--warmup-s %g: longer than the run %s itself (%.6g s); the warm-up only settles the "
+                        "firmware's filters on the first temperatures" % (args.warmup_s, args.run, longest))
     if not args.noise_uohm >= 0:
         raise UserError("--noise-uohm must be >= 0 (found %g)" % args.noise_uohm)
     sensors = list(table.sensors)
@@ -97,9 +127,14 @@ def run(args):
             load_config(cfg)
         except (ValueError, TypeError, AttributeError) as exc:
             raise UserError("%s: %s" % (args.config, exc))
+        from host.commands.flash import unwired_sensors
+        missing = unwired_sensors(sensors, cfg)
+        if missing:
+            raise UserError("%s: table sensor(s) %s have no channel in the board config %s (channels: %s)" % (
+                args.table, ", ".join(missing), args.config, ", ".join(str(c.get("name")) for c in cfg["channels"])))
     else:
         cfg = rig_config(sensors, n_ads=1 if len(sensors) > 1 else 0)
-    faults = _faults(args.fault, sensors)
+    faults = _faults(args.fault, sensors, end_s)
     screw = table.kind == "screw_reduced"
     every = args.print_every
     count = {"O": 0}
@@ -125,14 +160,14 @@ def run(args):
     except RigError as exc:
         raise UserError("the firmware did not survive: %s" % exc)
     wall = time.monotonic() - t0
-    out = {"answers": [{k: a[k] for k in ("time_s", "position_mm", "offset_um", "status")} for a in answers],
+    summary = {"answers": [{k: a[k] for k in ("time_s", "position_mm", "offset_um", "status")} for a in answers],
            "frames": n, "faults": faults, "malformed_frames": bad, "interpreter": args.interpreter,
            "table": {"kind": table.kind, "crc32": "%08X" % table.crc, "sensors": sensors},
            "simulated_s": sim_s, "wall_s": round(wall, 3)}
     print("%s: %d answers, %d frames (%d malformed), %.0f s simulated in %.1f s on %s" % (
         args.run, len(answers), n, bad, sim_s, wall, args.interpreter))
     if args.json:
-        with open(args.json, "w", encoding="utf-8") as f:
-            json.dump(out, f, indent=1)
+        with out.open(args.json) as f:
+            json.dump(summary, f, indent=1)
             f.write("\n")
     return 0 if bad == 0 else 1

@@ -44,14 +44,16 @@ def run(args):
 
     import math
 
-    from host.cli import UserError, check_output, check_output_dir, open_output
+    from host.cli import UserError
     from host.importer import ImportError_, import_to_folder
+    from host.outputs import Outputs
 
     if not (math.isfinite(args.time_scale) and args.time_scale > 0):
         raise UserError("--time-scale %s: must be a positive factor to seconds (60 for minutes)" % args.time_scale)
-    check_output_dir(args.out, "--out")
+    out = Outputs([args.source, args.mapping])
+    out.folder(args.out, "--out")
     if args.json:
-        check_output(args.json, "--json")
+        out.file(args.json, "--json")
     if args.mapping:
         try:
             with open(args.mapping, encoding="utf-8-sig") as fh:
@@ -67,14 +69,22 @@ def run(args):
         mapping, where = _from_flags(args), "command line"
     if args.axis:
         mapping.setdefault("meta", {})["axis"] = args.axis
-    try:
-        run_ = import_to_folder(args.source, mapping, args.out, where)
-    except ImportError_ as exc:
-        raise UserError(str(exc))
+    with out:
+        try:
+            run_ = import_to_folder(args.source, mapping, out.path(args.out), where)
+        except ImportError_ as exc:
+            raise UserError(str(exc))
+        _report(args, run_, out)
+        out.commit()
+    return 0
+
+
+def _report(args, run_, out):
+    import json
+
     t = run_.temperatures
     print("%s -> %s: %d samples, %d temperatures, %d error channels, %.1f h"
           % (args.source, args.out, t.time_s.size, len(t.names), len(run_.errors.channels()), (t.time_s[-1] - t.time_s[0]) / 3600))
     if args.json:
-        with open_output(args.json) as fh:
+        with out.open(args.json) as fh:
             json.dump({"out": args.out, "samples": int(t.time_s.size), "sensors": t.names, "channels": run_.errors.channels()}, fh, indent=2)
-    return 0

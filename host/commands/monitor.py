@@ -35,21 +35,35 @@ def row(f):
 
 
 def run(args):
+    from host.cli import UserError
+    from host.outputs import Outputs
+
+    for flag, value in (("--baud", args.baud), ("--count", args.count), ("--duration", args.duration)):
+        if not value >= (1 if flag == "--baud" else 0):
+            raise UserError("%s %s: must be %s" % (flag, value, "a positive rate in bit/s" if flag == "--baud" else ">= 0 (0: no limit)"))
+    with Outputs([args.port]) as outputs:
+        if args.csv:
+            outputs.log(args.csv, "--csv")
+        if args.json:
+            outputs.file(args.json, "--json")
+        rc = _monitor(args, outputs)
+        outputs.commit()
+    return rc
+
+
+def _monitor(args, outputs):
     import serial
 
     from hil_tests.rig.frames import StreamDecoder, command
     from host.cli import UserError
     try:
         ser = serial.Serial(args.port, args.baud, timeout=0.1)
-    except (serial.SerialException, OSError) as exc:
+    except (serial.SerialException, OSError, ValueError) as exc:
         raise UserError("cannot open %s: %s" % (args.port, exc))
     out = None
     writer = None
     rows = []
     bad_reasons = []
-    if args.json:
-        from host.cli import check_output
-        check_output(args.json, "--json")
     if args.csv:
         try:
             out = open(args.csv, "a", newline="", encoding="utf-8")
@@ -104,7 +118,6 @@ def run(args):
     if args.json:
         import json
 
-        from host.cli import open_output
-        with open_output(args.json) as fh:
+        with outputs.open(args.json) as fh:
             json.dump({"port": args.port, "frames": n, "malformed": bad, "rows": rows, "bad": bad_reasons}, fh, indent=1)
     return 0

@@ -10,17 +10,26 @@ def add_arguments(p):
 
 
 def run(args):
+    from host.outputs import Outputs
+
+    with Outputs([args.model, args.run]) as out:
+        out.file(args.out, "--out")
+        if args.json:
+            out.file(args.json, "--json")
+        _predict(args, out)
+        out.commit()
+    return 0
+
+
+def _predict(args, out):
     import json
 
     import numpy as np
 
-    from host.cli import UserError, check_output, open_output
+    from host.cli import UserError
     from host.models import ModelFormatError, load_model
     from host.runs import RunFormatError, load_run
 
-    check_output(args.out, "--out")
-    if args.json:
-        check_output(args.json, "--json")
     try:
         model = load_model(args.model)
         run_ = load_run(args.run)
@@ -37,7 +46,7 @@ def run(args):
     if pred.shape != (len(e),):
         raise UserError("model returned %s predictions for %d rows of %s" % (pred.shape, len(e), args.run))
     header = ["time_s", "position_mm"] + (["direction"] if e.direction is not None else []) + (["channel"] if e.channel is not None else []) + ["predicted_um"]
-    with open_output(args.out) as fh:
+    with out.open(args.out) as fh:
         fh.write(",".join(header) + "\n")
         for i in range(len(e)):
             cells = ["%.3f" % e.time_s[i], "%.4f" % e.position_mm[i]]
@@ -52,6 +61,5 @@ def run(args):
     rmse = float(np.sqrt(np.mean(resid ** 2))) if resid.size else float("nan")
     print("%s on %s: %d rows, RMSE %.3f um against the measured errors" % (args.model, args.run, len(e), rmse))
     if args.json:
-        with open_output(args.json) as fh:
+        with out.open(args.json) as fh:
             json.dump({"model": args.model, "run": args.run, "rows": int(len(e)), "rmse_um": rmse}, fh, indent=2)
-    return 0

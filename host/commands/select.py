@@ -40,23 +40,26 @@ def _options(items):
 def run(args):
     import json
 
-    from host.cli import check_output, open_output, UserError
+    from host.cli import UserError
     from host.empirical import EmpiricalDataError
+    from host.outputs import Outputs
 
-    check_output(args.json, "--json")
-    if args.plot:
-        check_output(args.plot, "--plot")
-        _check_plot_format(args.plot)
-    try:
-        if args.corr:
-            doc = _run_corr(args)
-        else:
-            doc = _run_data(args)
-    except EmpiricalDataError as exc:
-        raise UserError(str(exc))
-    with open_output(args.json) as fh:
-        json.dump(doc, fh, indent=2, allow_nan=False)
-        fh.write("\n")
+    with Outputs(list(args.runs) + [args.corr, args.target_corr]) as out:
+        out.file(args.json, "--json")
+        if args.plot:
+            out.file(args.plot, "--plot")
+            _check_plot_format(args.plot)
+        try:
+            if args.corr:
+                doc = _run_corr(args, out)
+            else:
+                doc = _run_data(args, out)
+        except EmpiricalDataError as exc:
+            raise UserError(str(exc))
+        with out.open(args.json) as fh:
+            json.dump(doc, fh, indent=2, allow_nan=False)
+            fh.write("\n")
+        out.commit()
     return 0
 
 
@@ -73,7 +76,7 @@ def _check_plot_format(path):
         raise UserError("--plot %s: cannot draw a .%s file (formats: %s)" % (path, ext, ", ".join(sorted(formats))))
 
 
-def _run_corr(args):
+def _run_corr(args, out):
     from host.cli import UserError
     from host.empirical.selectors import maximal_tree
     from host.empirical.selectors.corrcsv import read_corr_csv, read_target_corr_csv
@@ -93,7 +96,7 @@ def _run_corr(args):
     doc = {"method": "maxtree", "source": args.corr}
     doc.update(tree.to_json())
     if args.plot:
-        tree.plot(args.plot, title="Maximal tree of the correlation matrix %s (%d sensors)" % (args.corr, len(names)))
+        tree.plot(out.path(args.plot), title="Maximal tree of the correlation matrix %s (%d sensors)" % (args.corr, len(names)))
     print("maxtree on %s: %d sensors, %d tree edges, %d distinct partitions" % (args.corr, len(names), len(tree.edges), len(tree.partitions)))
     for part in tree.partitions:
         print("  lambda in %s%.4g, %.4g]: %d clusters, representatives %s"
@@ -101,7 +104,7 @@ def _run_corr(args):
     return doc
 
 
-def _run_data(args):
+def _run_data(args, out):
     from host.cli import UserError, sensor_list
     from host.empirical.selectors import select
     from host.runs import RunFormatError, load_runs
@@ -121,7 +124,7 @@ def _run_data(args):
     doc = sel.to_json()
     doc.update({"target": args.target, "channel": args.channel, "runs": list(args.runs), "split": args.split})
     if args.plot:
-        sel.plot(args.plot)
+        sel.plot(out.path(args.plot))
     print("%s on %d run(s): %s" % (args.method, len(runs), ", ".join(sel.sensors)))
     return doc
 

@@ -90,23 +90,32 @@ def _sha256(path):
 
 
 def run(args):
+    from host.outputs import Outputs
+
+    with Outputs() as out:
+        out.folder(args.out, "--out")
+        if args.json:
+            out.file(args.json, "--json")
+        _simulate(args, out)
+        out.commit()
+    return 0
+
+
+def _simulate(args, out):
     import json
     import os
 
     import numpy as np
 
-    from host.cli import UserError, check_output, check_output_dir, open_output
+    from host.cli import UserError
     from host.runs import load_run
     from host.sim import DEFAULT_NOISE_UM, write_runs
 
-    check_output_dir(args.out, "--out")
-    if args.json:
-        check_output(args.json, "--json")
     try:
         effects = parse_effects(args.effects)
         overrides = parse_overrides(args.set)
         noise = DEFAULT_NOISE_UM if args.noise_um is None else args.noise_um
-        written = write_runs(args.out, args.protocol, effects, args.seed, noise, **overrides)
+        written = write_runs(out.path(args.out), args.protocol, effects, args.seed, noise, **overrides)
     except ValueError as exc:
         raise UserError(str(exc))
     summary = {"seed": args.seed, "noise_um": noise, "runs": []}
@@ -116,7 +125,7 @@ def run(args):
         files = sorted(f for f in os.listdir(folder) if f.endswith((".csv", ".json")))
         summary["runs"].append({
             "protocol": name,
-            "folder": folder,
+            "folder": out.shown(folder),
             "effects": run_.meta["simulation"]["effects"],
             "duration_s": float(run_.temperatures.time_s[-1]),
             "temperature_samples": int(run_.temperatures.time_s.size),
@@ -126,9 +135,8 @@ def run(args):
             "sha256": {f: _sha256(os.path.join(folder, f)) for f in files},
         })
         print("%-17s -> %s (%d sweeps, %.1f h, max |error| %.1f um)"
-              % (name, folder, len(e.sweeps()), run_.temperatures.time_s[-1] / 3600.0, np.max(np.abs(e.error_um))))
+              % (name, out.shown(folder), len(e.sweeps()), run_.temperatures.time_s[-1] / 3600.0, np.max(np.abs(e.error_um))))
     if args.json:
-        with open_output(args.json) as fh:
+        with out.open(args.json) as fh:
             json.dump(summary, fh, indent=2)
             fh.write("\n")
-    return 0

@@ -10,13 +10,24 @@ def add_arguments(p):
 def run(args):
     import json
 
-    from host.cli import check_output, open_output
+    from host.outputs import Outputs
+
+    with Outputs(args.runs) as out:
+        if args.json:
+            out.file(args.json, "--json")
+        report = _check(args.runs)
+        if args.json:
+            with out.open(args.json) as fh:
+                json.dump({"runs": [{"run": k, "ok": not v, "problems": v} for k, v in report.items()]}, fh, indent=2)
+        out.commit()
+    return 1 if any(report.values()) else 0
+
+
+def _check(folders):
     from host.runs import check_run
 
-    if args.json:
-        check_output(args.json, "--json")
     report = {}
-    for folder in args.runs:
+    for folder in folders:
         problems = check_run(folder)
         report[folder] = problems
         if problems:
@@ -25,7 +36,4 @@ def run(args):
                 print("  " + p)
         else:
             print("%s: ok" % folder)
-    if args.json:
-        with open_output(args.json) as fh:
-            json.dump({"runs": [{"run": k, "ok": not v, "problems": v} for k, v in report.items()]}, fh, indent=2)
-    return 1 if any(report.values()) else 0
+    return report

@@ -219,14 +219,17 @@ def markdown(result, js, model_path=None, model_error=None):
     return "\n".join(lines) + "\n"
 
 
-def write_report(result, family, folder, json_path=None):
-    """JSON (``json_path``), model.json, plots and report.md in ``folder``; returns the JSON dict."""
+def write_report(result, family, folder, json_path=None, shown_folder=None):
+    """JSON (``json_path``), model.json, plots and report.md in ``folder``; returns the JSON dict.
+
+    ``shown_folder``: the folder's name as recorded in the report, when ``folder`` is a staging place.
+    """
     os.makedirs(folder, exist_ok=True)
-    model_path, model_error = os.path.join(folder, "model.json"), None
+    model_path, model_error = os.path.join(shown_folder or folder, "model.json"), None
     try:
         from host.models import save_model
 
-        save_model(final_model_document(result, result.runs), model_path)
+        save_model(final_model_document(result, result.runs), os.path.join(folder, "model.json"))
     except Exception as exc:  # the findings stand even when the final document cannot be built
         model_path, model_error = None, "%s: %s" % (type(exc).__name__, exc)
     extra = {"model": model_path, "model_error": model_error, "evidence": evidence(result)}

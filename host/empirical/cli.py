@@ -52,8 +52,9 @@ def parse_options(pairs, method):
     return out
 
 
-def fit_command(args):
-    from host.cli import UserError, open_output
+def fit_command(args, out):
+    """Fit, print the report, write ``args.out`` (and ``args.json``) through ``out`` (host.outputs.Outputs)."""
+    from host.cli import UserError
     from host.empirical.fitting import fit_model
     from host.models import save_model
     from host.runs import RunFormatError, load_runs
@@ -74,10 +75,7 @@ def fit_command(args):
         raise UserError(str(exc))
     except TypeError as exc:
         raise UserError("bad --option for %s: %s" % (args.model, exc))
-    try:
-        doc = save_model(model.to_document(), args.out)
-    except OSError as exc:
-        raise UserError("cannot write %s: %s" % (args.out, exc.strerror or exc))
+    doc = save_model(model.to_document(), out.path(args.out))
     est = model.estimator_
     print("%s %s model of %s on %d run(s), %d samples: sensors %s" % (
         args.model, model.kind, args.channel or "the error", len(runs), est.n_samples_, ",".join(model.sensors)))
@@ -98,7 +96,7 @@ def fit_command(args):
         print("  R2=%.4f adj R2=%.4f F=%.4g (p=%.3g) residual std error=%.4g" % (est.rsquared_, est.rsquared_adj_, est.fvalue_, est.f_pvalue_, est.resid_std_err_))
     print("wrote %s" % args.out)
     if args.json:
-        with open_output(args.json) as fh:
+        with out.open(args.json) as fh:
             json.dump({"model": args.out, "kind": doc["kind"], "method": args.model, "sensors": model.sensors,
                        "statistics": doc["statistics"], "training": doc["training"]}, fh, indent=2)
     return 0

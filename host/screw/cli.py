@@ -75,10 +75,11 @@ def format_report(model):
     return "\n".join(lines)
 
 
-def fit_command(args):
-    from host.cli import UserError, open_output
+def fit_command(args, out):
+    """Fit, print the report, write ``args.out`` (and ``args.json``) through ``out`` (host.outputs.Outputs)."""
+    from host.cli import UserError
     from host.models import save_model
-    from host.runs import RunFormatError, load_run
+    from host.runs import RunFormatError, load_runs
     from host.screw.model import ScrewModel
 
     try:
@@ -93,7 +94,7 @@ def fit_command(args):
             raise UserError("--model screw takes one --sensors name: the base sensor of the ambient term (got %s)" % args.sensors)
         kw["base_sensor"] = names[0]
     try:
-        runs = [load_run(f) for f in args.runs]
+        runs = load_runs(args.runs)
     except RunFormatError as exc:
         raise UserError(str(exc))
     model = ScrewModel(channel=args.channel, **kw)
@@ -103,13 +104,10 @@ def fit_command(args):
             model.fit(runs)
     except ValueError as exc:
         raise UserError(str(exc))
-    try:
-        doc = save_model(model.to_document(), args.out)
-    except OSError as exc:
-        raise UserError("cannot write %s: %s" % (args.out, exc.strerror or exc))
+    doc = save_model(model.to_document(), out.path(args.out))
     print(format_report(model))
     print("wrote %s" % args.out)
     if args.json:
-        with open_output(args.json) as fh:
+        with out.open(args.json) as fh:
             json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": model.reduced_["reduction_error_um"]}, fh, indent=2)
     return 0

@@ -414,6 +414,8 @@ class ScrewModel:
             raise ModelFormatError("screw model document: thermal.effects has unknown effect %r (known: %s)" % (unknown[0], ", ".join(EFFECTS)))
         try:
             effects = [EFFECTS[e["name"]].from_document(e.get("settings") or {}) for e in th.get("effects", [])]
+            if not (int(th["segments"]) >= 1 and float(th["dt_s"]) > 0):
+                raise ValueError("thermal.segments must be >= 1 and thermal.dt_s > 0")
             m = cls(segments=int(th["segments"]), dt_s=float(th["dt_s"]), effects=effects, channel=doc.get("channel"),
                     ambient=th.get("base_sensor") is not None, base_ref=th.get("base_ref", "fixed"))
             geo = th["geometry"]

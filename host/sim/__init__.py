@@ -22,11 +22,15 @@ Stable API (other packages and the HIL rig rely on it)::
   names ambient_expansion, speed_dependent_heat, bearing_heat, moving_convection,
   reversal_error, sensor_lag. ``resolve_effects`` normalises a user selection.
 - ``AxisParams`` / ``make_params(**overrides)``: the physical parameters.
-- ``NODES``: the 13 structure temperature points (sensor name, role, location).
+- ``NODES``: the 13 structure temperature points (sensor name, role, location, sensor lag).
+- ``STILL_AIR``: overrides that hold the shop air constant (``simulate(..., **STILL_AIR)``).
 
-The screw physics is host/screw/heat.py (shared with the screw model); the model,
-equations, parameters, protocols and effects are documented in docs/twin.md.
+The screw physics is the twin's own (host/sim/screw.py: finite volumes, Crank-Nicolson,
+absolute temperature); it shares no code with the identified model (host/screw), so a
+test on twin data can find what the model misses. Equations, parameters, protocols and
+effects: docs/twin.md.
 """
+from host.sim.ambient import STILL_AIR
 from host.sim.axis import AxisParams, make_params
 from host.sim.effects import EFFECTS, Effect, resolve_effects
 from host.sim.protocols import LITERATURE_STATES, PROTOCOLS, Phase, Protocol
@@ -36,5 +40,5 @@ from host.sim.twin import DEFAULT_NOISE_UM, DEFAULT_PROTOCOL, Simulation, simula
 __all__ = [
     "AxisParams", "make_params", "EFFECTS", "Effect", "resolve_effects", "LITERATURE_STATES", "PROTOCOLS",
     "Phase", "Protocol", "NODES", "DEFAULT_NOISE_UM", "DEFAULT_PROTOCOL", "Simulation", "simulate",
-    "simulate_run", "write_runs",
+    "simulate_run", "write_runs", "STILL_AIR",
 ]

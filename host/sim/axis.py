@@ -19,7 +19,7 @@ class AxisParams:
     screw_diameter_mm: float = 32.0
     lead_mm: float = 10.0
     fixed_end_mm: float = 0.0
-    segments: int = 80
+    segments: int = 80  # grid intervals of the twin's screw (nodes at both ends: segments + 1)
     density_kg_m3: float = 7850.0
     heat_capacity_J_kgK: float = 460.0
     conductivity_W_mK: float = 45.0
@@ -28,6 +28,7 @@ class AxisParams:
     # nut friction: energy per mm of nut travel (torque * 2*pi / lead), share into the screw
     friction_J_per_mm: float = 0.12
     screw_share: float = 0.35
+    nut_length_mm: float = 90.0  # the nut's friction heat is spread evenly over this length
     feed_ref_mm_min: float = 8000.0
     # other heat sources feeding the structure nodes (W)
     motor_idle_W: float = 3.0
@@ -40,24 +41,24 @@ class AxisParams:
     sweep_every_min: float = 15.0
     sweep_duration_min: float = 2.0
     positions_mm: tuple = tuple(float(p) for p in range(0, 701, 50))
+    sweep_trips: float = 1.0  # round trips over the targets per sweep (their heat); 0 = the sweeps heat nothing
     temp_noise_K: float = 0.01
-    # ambient air: daily cycle plus a seeded slow wander
+    sensor_tau_scale: float = 1.0  # multiplies every sensor's own time constant (structure.NODES); 0 = ideal sensors
+    # ambient air: seeded warming drift, HVAC ripple, slow wander (optional daily cosine)
     ambient_mean_C: float = 20.0
-    ambient_day_amplitude_K: float = 1.5
+    ambient_day_amplitude_K: float = 0.0
     ambient_peak_hour: float = 15.0
-    ambient_wander_K: float = 0.15
+    ambient_wander_K: float = 0.05
+    ambient_rise_min_K: float = 1.6
+    ambient_rise_max_K: float = 2.8
+    ambient_rise_hours: float = 8.0
+    ambient_hold_hours: float = 2.0
+    ambient_fall_hours: float = 8.0
+    hvac_ripple_K: float = 0.15
+    hvac_period_min_min: float = 20.0
+    hvac_period_max_min: float = 45.0
 
     # ---------------------------------------------------------- derived
-
-    @property
-    def segment_mm(self):
-        return self.screw_length_mm / self.segments
-
-    @property
-    def edges_mm(self):
-        """Segment edges in screw coordinate x (mm from the fixed end)."""
-        L = self.screw_length_mm
-        return [L * i / self.segments for i in range(self.segments + 1)]
 
     @property
     def section_m2(self):
@@ -68,44 +69,28 @@ class AxisParams:
         return math.pi * self.screw_diameter_mm * 1e-3
 
     @property
-    def segment_heat_capacity_J_K(self):
-        return self.density_kg_m3 * self.heat_capacity_J_kgK * self.section_m2 * self.segment_mm * 1e-3
-
-    @property
-    def conductance_W_K(self):
-        """Axial conductance between neighbouring segment centres."""
-        return self.conductivity_W_mK * self.section_m2 / (self.segment_mm * 1e-3)
-
-    @property
-    def convection_W_K(self):
-        """Convective conductance of one segment's mantle to the air, at rest."""
-        return self.h_W_m2K * self.perimeter_m * self.segment_mm * 1e-3
-
-    @property
     def time_constant_s(self):
-        """Convective time constant of a uniformly warm screw, rho*c*d/(4*h)."""
-        return self.segment_heat_capacity_J_K / self.convection_W_K
+        """Convective time constant of a uniformly warm screw at rest, rho*c*d/(4*h)."""
+        return self.density_kg_m3 * self.heat_capacity_J_kgK * self.screw_diameter_mm * 1e-3 / (4 * self.h_W_m2K)
 
     def fin_parameter_per_m(self):
         """m = sqrt(h*perimeter/(lambda*A)) of the 1-D fin equation."""
         return math.sqrt(self.h_W_m2K * self.perimeter_m / (self.conductivity_W_mK * self.section_m2))
-
-    def screw_rpm(self, feed_mm_min):
-        return feed_mm_min / self.lead_mm
 
     def validate(self):
         problems = []
         positive = (
             "stroke_mm", "screw_length_mm", "screw_diameter_mm", "lead_mm", "density_kg_m3",
             "heat_capacity_J_kgK", "conductivity_W_mK", "h_W_m2K", "alpha_um_mK", "feed_ref_mm_min",
-            "dt_s", "sweep_every_min",
+            "dt_s", "sweep_every_min", "ambient_rise_hours", "hvac_period_min_min", "hvac_period_max_min",
         )
         for k in positive:
             v = getattr(self, k)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v <= 0:
                 problems.append("%s must be a positive number (found %r)" % (k, v))
         for k in ("friction_J_per_mm", "motor_idle_W", "motor_W_at_ref", "bearing_W_at_ref", "sweep_duration_min",
-                  "temp_noise_K", "ambient_wander_K"):
+                  "temp_noise_K", "ambient_wander_K", "nut_length_mm", "ambient_rise_min_K", "ambient_rise_max_K",
+                  "ambient_hold_hours", "ambient_fall_hours", "hvac_ripple_K", "sweep_trips", "sensor_tau_scale"):
             v = getattr(self, k)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
                 problems.append("%s must be a number >= 0 (found %r)" % (k, v))
@@ -114,6 +99,12 @@ class AxisParams:
         if not 0 <= self.screw_share <= 1:
             problems.append("screw_share must be within 0..1 (found %r)" % (self.screw_share,))
         if not problems:
+            if self.ambient_rise_min_K > self.ambient_rise_max_K:
+                problems.append("ambient_rise_min_K (%g) must not exceed ambient_rise_max_K (%g)"
+                                % (self.ambient_rise_min_K, self.ambient_rise_max_K))
+            if self.hvac_period_min_min > self.hvac_period_max_min:
+                problems.append("hvac_period_min_min (%g) must not exceed hvac_period_max_min (%g)"
+                                % (self.hvac_period_min_min, self.hvac_period_max_min))
             if self.fixed_end_mm > 0 or self.fixed_end_mm + self.screw_length_mm < self.stroke_mm:
                 problems.append(
                     "the screw (axis positions %g..%g mm from fixed_end_mm=%g, screw_length_mm=%g) must cover the stroke 0..%g mm"

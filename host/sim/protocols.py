@@ -9,6 +9,10 @@ is the cold state at t = 0, the last one ends the run.
 The literature states (e.g. the ball-screw tests that fit on 8000 mm/min over
 210-490 mm and predict the other feeds and ranges) are named
 ``v<feed>_r<from>_<to>``: three hours of warm-up then two of cool-down.
+
+``random`` is the random moving state of the ball-screw verification (a
+sequence of states of random feed, range and length with random dwells); its
+phases are drawn from the run's seed by :func:`draw_phases` (``concrete``).
 """
 from dataclasses import dataclass
 
@@ -29,6 +33,7 @@ class Protocol:
     description: str
     phases: tuple
     start_hour: float = 9.0  # wall-clock hour of t = 0, sets the ambient's phase of the day
+    drawn: bool = False  # True: the phases are drawn from the seed (concrete())
 
     @property
     def minutes(self):
@@ -66,6 +71,14 @@ PROTOCOLS = {
             6.0,
         ),
         Protocol(
+            "random",
+            "random moving states drawn from the seed for 240 min (feed 2000-15000 mm/min, range >= 100 mm, "
+            "10-40 min each, 0-15 min dwells), then 60 min cool-down",
+            (Phase(300),),
+            9.0,
+            drawn=True,
+        ),
+        Protocol(
             "idle",
             "no motion for 8 h from 10:00 to 18:00: the ambient's day-to-evening drift alone",
             (Phase(480),),
@@ -75,6 +88,48 @@ PROTOCOLS = {
 }
 
 LITERATURE_STATES = ("v8000_r210_490", "v6500_r210_490", "v15000_r210_490", "v8000_r0_210", "v8000_r0_700")
+
+
+RANDOM_MOVING_MIN = 240.0
+RANDOM_COOL_MIN = 60.0
+
+
+def draw_phases(rng, stroke_mm):
+    """Random moving states for RANDOM_MOVING_MIN minutes, then a cool-down.
+
+    Each state: 10-40 min (whole minutes) at a feed of 2000-15000 mm/min (steps of
+    500) over a range of at least 100 mm inside the stroke (10 mm grid), followed
+    by a dwell of 0-15 min (whole minutes, none when 0).
+    """
+    if stroke_mm < 100:
+        raise ValueError("protocol 'random' draws ranges of at least 100 mm: the stroke (%g mm) is shorter" % stroke_mm)
+    phases, used = [], 0.0
+    while used < RANDOM_MOVING_MIN:
+        minutes = float(rng.integers(10, 41))
+        feed = float(rng.integers(4, 31) * 500)
+        length = float(rng.integers(10, int(stroke_mm // 10) + 1) * 10)
+        length = min(length, stroke_mm)
+        start = float(rng.integers(0, int((stroke_mm - length) // 10) + 1) * 10)
+        dwell = float(rng.integers(0, 16))
+        minutes = min(minutes, RANDOM_MOVING_MIN - used)
+        phases.append(Phase(minutes, feed, start, start + length))
+        used += minutes
+        if dwell > 0 and used < RANDOM_MOVING_MIN:
+            dwell = min(dwell, RANDOM_MOVING_MIN - used)
+            phases.append(Phase(dwell))
+            used += dwell
+    phases.append(Phase(RANDOM_COOL_MIN))
+    return tuple(phases)
+
+
+def concrete(protocol, rng, stroke_mm):
+    """``protocol`` with its phases drawn from ``rng`` (a ``drawn`` template) or unchanged.
+
+    The result keeps ``drawn=True`` so the run records its phases (meta.json).
+    """
+    if not protocol.drawn:
+        return protocol
+    return Protocol(protocol.name, protocol.description, draw_phases(rng, stroke_mm), protocol.start_hour, drawn=True)
 
 
 def check_protocol(protocol, stroke_mm):

@@ -7,10 +7,16 @@ All points share the same few sources, which is what makes the candidates of a
 sensor selection strongly collinear, as on a real machine. Gains (K/W) and time
 constants are set so the steady-state rises match the ranges reported for
 mid-size machining centres (nut 5-15 K, motor 10-20 K, bed < 2 K); see docs/twin.md.
+
+A sensor is a small body of its own on the point it measures (a sheathed Pt100 in
+a bore or a clamp, an air probe): its reading lags the point's temperature with the
+sensor's own time constant ``sensor_s``, exact for a temperature linear between samples.
 """
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.signal import lfilter
 
 SOURCES = ("nut", "motor", "bearing")
 
@@ -23,22 +29,26 @@ class Node:
     tau_min: float  # 0 = follows its drive instantly
     gains: tuple = ()  # ((source, K/W), ...)
     offset_K: float = 0.0
+    sensor_s: float = 60.0  # the sensor's own time constant on its body
 
 
 NODES = (
-    Node("T1", "nut", "ball-screw nut housing", 20.0, (("nut", 1.1),)),
-    Node("T2", "base", "machine bed under the fixed-end bearing block", 150.0, (("motor", 0.03), ("bearing", 0.15))),
-    Node("T3", "ambient", "air 0.5 m beside the axis", 0.0),
-    Node("T4", "bearing", "fixed-end support bearing housing", 25.0, (("bearing", 1.6), ("motor", 0.2))),
-    Node("T5", "motor", "servo motor flange", 35.0, (("motor", 0.6),)),
-    Node("T6", "bearing", "free-end (floating) bearing housing", 40.0, (("nut", 0.15),)),
-    Node("T7", "structure", "table underside above the nut", 45.0, (("nut", 0.45),)),
-    Node("T8", "structure", "column, 0.3 m above the bed", 180.0, (("motor", 0.05), ("nut", 0.04))),
-    Node("T9", "structure", "column, top", 240.0, (("motor", 0.03), ("nut", 0.02)), 0.3),
-    Node("T10", "structure", "bed between the guideways, mid-stroke", 200.0, (("nut", 0.08), ("motor", 0.03))),
-    Node("T11", "structure", "linear guide rail next to the nut range", 60.0, (("nut", 0.3),)),
-    Node("T12", "structure", "motor bracket and coupling housing", 40.0, (("motor", 0.35), ("bearing", 0.4))),
-    Node("T13", "ambient", "air under the machine, near the floor", 10.0, (("nut", 0.03),), -0.4),
+    Node("T1", "nut", "ball-screw nut housing", 20.0, (("nut", 1.1),), sensor_s=45.0),
+    Node("T2", "base", "machine bed under the fixed-end bearing block", 150.0, (("motor", 0.03), ("bearing", 0.15)),
+         sensor_s=90.0),
+    Node("T3", "ambient", "air 0.5 m beside the axis", 0.0, sensor_s=150.0),
+    Node("T4", "bearing", "fixed-end support bearing housing", 25.0, (("bearing", 1.6), ("motor", 0.2)), sensor_s=45.0),
+    Node("T5", "motor", "servo motor flange", 35.0, (("motor", 0.6),), sensor_s=60.0),
+    Node("T6", "bearing", "free-end (floating) bearing housing", 40.0, (("nut", 0.15),), sensor_s=45.0),
+    Node("T7", "structure", "table underside above the nut", 45.0, (("nut", 0.45),), sensor_s=75.0),
+    Node("T8", "structure", "column, 0.3 m above the bed", 180.0, (("motor", 0.05), ("nut", 0.04)), sensor_s=90.0),
+    Node("T9", "structure", "column, top", 240.0, (("motor", 0.03), ("nut", 0.02)), 0.3, sensor_s=90.0),
+    Node("T10", "structure", "bed between the guideways, mid-stroke", 200.0, (("nut", 0.08), ("motor", 0.03)),
+         sensor_s=90.0),
+    Node("T11", "structure", "linear guide rail next to the nut range", 60.0, (("nut", 0.3),), sensor_s=60.0),
+    Node("T12", "structure", "motor bracket and coupling housing", 40.0, (("motor", 0.35), ("bearing", 0.4)),
+         sensor_s=60.0),
+    Node("T13", "ambient", "air under the machine, near the floor", 10.0, (("nut", 0.03),), -0.4, sensor_s=150.0),
 )
 
 
@@ -75,12 +85,17 @@ def node_temperatures(power_W, T_air_edges, dt, nodes=NODES):
 
 
 def lagged(values, tau_s, dt):
-    """First-order lag of sampled ``values`` (n, k) along axis 0 (a sensor with time constant tau_s)."""
-    if tau_s <= 0:
-        return values.copy()
-    a = np.exp(-dt / tau_s)
-    out = np.empty_like(values)
-    out[0] = values[0]
-    for k in range(1, len(values)):
-        out[k] = a * out[k - 1] + (1 - a) * values[k]
+    """First-order lag (time constants ``tau_s``: a number or one per column) of ``values`` (n, k).
+
+    Exact for an input linear between samples: y(k+1) = a*y(k) + (1-a)*u(k) + b*(u(k+1) - u(k)),
+    a = exp(-dt/tau), b = 1 - tau*(1-a)/dt; the reading starts at the first value. tau = 0 passes through.
+    """
+    values = np.asarray(values, dtype=float)
+    tau = np.broadcast_to(np.asarray(tau_s, dtype=float), values.shape[1:])
+    out = values.copy()
+    for j in np.flatnonzero(tau > 0):
+        a = math.exp(-dt / tau[j])
+        b = 1.0 - tau[j] * (1.0 - a) / dt
+        u = values[:, j] - values[0, j]
+        out[:, j] = values[0, j] + lfilter([b, 1.0 - a - b], [1.0, -a], u)
     return out

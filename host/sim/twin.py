@@ -8,35 +8,35 @@ from dataclasses import dataclass
 import numpy as np
 
 from host import runs as _runs
-from host.screw import heat as _heat
-from host.sim.ambient import ambient_C
+from host.sim.ambient import air_C
 from host.sim.axis import AxisParams, make_params
 from host.sim.effects import resolve_effects
-from host.sim.protocols import PROTOCOLS, Protocol, resolve_protocols, schedule
+from host.sim.protocols import PROTOCOLS, Protocol, concrete, resolve_protocols, schedule
+from host.sim.screw import ScrewGrid, ScrewIntegrator, contact_travel, expansion_um
 from host.sim.structure import NODES, lagged, node_temperatures
 
 DEFAULT_PROTOCOL = "v8000_r210_490"
 DEFAULT_NOISE_UM = 0.5
-GENERATOR = "host.sim/1"
+GENERATOR = "host.sim/2"  # 2: own screw core in absolute temperature, drifting air, lagged sensors
 
 
 @dataclass
 class Simulation:
     """Everything the twin computed for one run (true values, before the run-folder rounding)."""
 
-    protocol: Protocol
+    protocol: Protocol  # with the drawn phases for a drawn protocol ("random")
     params: AxisParams
     effects: dict
     seed: int
     noise_um: float
     t_s: np.ndarray  # (n+1,) step edges = temperature sample times
     air_C: np.ndarray  # (n+1,)
-    screw_C: np.ndarray  # (n+1, M) segment temperatures (air + rise)
-    nodes_true_C: np.ndarray  # (n+1, len(NODES))
-    sensors_C: np.ndarray  # (n+1, len(NODES)) what the sensors report (lag, noise)
+    screw_C: np.ndarray  # (n+1, N+1) screw temperature at the grid nodes (screw_x_mm)
+    nodes_true_C: np.ndarray  # (n+1, len(NODES)) temperature of the body each sensor sits on
+    sensors_C: np.ndarray  # (n+1, len(NODES)) what the sensors report (own lag, sensor_lag, noise)
     power_W: dict  # per-step sources: nut (total friction), screw (into the screw), motor, bearing
     conv_mult: np.ndarray  # (n,)
-    motion: np.ndarray  # (k, 5)
+    motion: np.ndarray  # (k, 5) the protocol's moving states (motion.csv)
     sweep_s: np.ndarray
     err_time_s: np.ndarray
     err_position_mm: np.ndarray
@@ -44,6 +44,11 @@ class Simulation:
     err_thermal_um: np.ndarray  # screw expansion + ambient_expansion, no noise
     err_geometric_um: np.ndarray
     err_um: np.ndarray  # what the interferometer reports
+    screw_x_mm: np.ndarray = None  # (N+1,) node coordinates, screw coordinate (fixed end 0)
+    readings_true_C: np.ndarray = None  # (n+1, len(NODES)) the sensor readings before noise
+    sweep_motion: np.ndarray = None  # (s, 5) the sweeps' own travel (heats the axis, not in motion.csv)
+    air_rise_K: float = 0.0  # the seeded warming of the air
+    hvac_period_min: float = 0.0  # the seeded HVAC cycle
 
 
 def _protocol(protocol):
@@ -60,12 +65,54 @@ def _rngs(seed, name):
     # one stream per purpose, so e.g. changing the laser noise leaves the ambient unchanged;
     # the protocol name enters so each state of a suite has its own day
     ss = np.random.SeedSequence([int(seed), zlib.crc32(name.encode())])
-    return [np.random.default_rng(s) for s in ss.spawn(3)]
+    return [np.random.default_rng(s) for s in ss.spawn(4)]
 
 
 def geometric_um(positions_mm, params):
     u = np.asarray(positions_mm, dtype=float) / params.stroke_mm
     return sum(c * u**k for k, c in enumerate(params.geometric_um))
+
+
+def sweep_travel(sweeps, params, t_end):
+    """The sweeps' own motion (s, 5): the nut runs from the first to the last target and back.
+
+    A sweep stops at every target for the laser reading; its heat is that of
+    ``sweep_trips`` round trips spread over the sweep window (an equivalent feed
+    of 2*trips*span/window).
+    """
+    busy = params.sweep_duration_min * 60.0
+    pos = np.asarray(params.positions_mm, dtype=float)
+    span = pos.max() - pos.min()
+    if busy <= 0 or span <= 0 or params.sweep_trips <= 0:
+        return np.zeros((0, 5))
+    feed = 2.0 * params.sweep_trips * span / busy * 60.0
+    rows = [(s, min(s + busy, t_end), pos.min(), pos.max(), feed) for s in sweeps if s < t_end]
+    return np.asarray(rows, dtype=float).reshape(-1, 5)
+
+
+def heat_sources(t, motion, params, eff):
+    """Per-step heat of the axis from its motion rows (k, 5).
+
+    Returns (screw_J (n, N+1) friction energy into each screw volume, speed (n,)
+    mean screw speed / reference, nut_W (n,) total nut friction power, conv (n,)).
+    """
+    dt = np.diff(t)
+    n = len(dt)
+    grid = ScrewGrid(params)
+    screw_J = np.zeros((n, grid.n_nodes))
+    if not len(motion):
+        return screw_J, np.zeros(n), np.zeros(n), np.ones(n)
+    feed = motion[:, 4]
+    duty = _step_overlaps(t, motion[:, 0], motion[:, 1]) / dt[:, None]  # share of each step in each interval
+    m_v = eff.get("speed_dependent_heat", 0.0)
+    e_mm = params.friction_J_per_mm * np.clip((1 - m_v) + m_v * feed / params.feed_ref_mm_min, 0.0, None)
+    speed = duty @ (feed / params.feed_ref_mm_min)
+    nut_W = duty @ (e_mm * feed / 60.0)
+    conv = 1.0 + eff.get("moving_convection", 0.0) * (duty @ (feed / params.feed_ref_mm_min) ** 0.8)
+    for (t0, t1, a, b, f), e in zip(motion, e_mm):
+        travel = contact_travel(grid.bounds_mm + params.fixed_end_mm, t, t0, t1, a, b, f, params.nut_length_mm)
+        screw_J += params.screw_share * e * travel
+    return screw_J, speed, nut_W, conv
 
 
 def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, **overrides):
@@ -75,64 +122,38 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
     eff = resolve_effects(effects)
     if not (isinstance(noise_um, (int, float)) and math.isfinite(noise_um) and noise_um >= 0):
         raise ValueError("noise_um must be a number >= 0 (found %r)" % (noise_um,))
-    rng_air, rng_temp, rng_laser = _rngs(seed, proto.name)
+    rng_air, rng_temp, rng_laser, rng_protocol = _rngs(seed, proto.name)
+    proto = concrete(proto, rng_protocol, params.stroke_mm)
 
     sweeps, motion = schedule(proto, params)
     dt = params.dt_s
     n = int(math.ceil(proto.minutes * 60.0 / dt - 1e-9))
     t = np.arange(n + 1) * dt
-    air = ambient_C(t, proto.start_hour, params, rng_air)
+    air = air_C(t, proto.start_hour, params, rng_air)
 
-    # ---- heat sources per step
-    feed_ref = params.feed_ref_mm_min
-    M = params.segments
-    geometry = _heat.ScrewGeometry(params.screw_length_mm, params.screw_diameter_mm, params.fixed_end_mm, M)
-    material = _heat.ScrewParams(
-        q_J_per_mm=params.screw_share * params.friction_J_per_mm,
-        c_J_kgK=params.heat_capacity_J_kgK,
-        density_kg_m3=params.density_kg_m3,
-        lambda_W_mK=params.conductivity_W_mK,
-        h_W_m2K=params.h_W_m2K,
-        alpha_per_K=params.alpha_um_mK * 1e-6,
-    )
-    heat = np.zeros((n, M))
-    if len(motion):
-        feed = motion[:, 4]
-        duty = _step_overlaps(t, motion[:, 0], motion[:, 1]) / dt  # share of each step spent in each interval
-        m_v = eff.get("speed_dependent_heat", 0.0)
-        e_mm = params.friction_J_per_mm * np.clip((1 - m_v) + m_v * feed / feed_ref, 0.0, None)
-        speed = duty @ (feed / feed_ref)  # mean screw speed over the step / reference speed
-        nut_W = duty @ (e_mm * feed / 60.0)
-        conv = 1.0 + eff.get("moving_convection", 0.0) * (duty @ (feed / feed_ref) ** 0.8)
-        # intervals of one feed share one friction energy per mm: one travel pass per feed
-        for f in np.unique(feed):
-            rows = motion[feed == f]
-            travel = _heat.nut_travel_per_segment(_Intervals(rows), geometry.edges_mm, params.fixed_end_mm, t)
-            heat += params.screw_share * e_mm[feed == f][0] * travel
-    else:
-        speed = np.zeros(n)
-        nut_W = np.zeros(n)
-        conv = np.ones(n)
+    # ---- heat sources per step: the protocol's moving states and the sweeps' own travel
+    sweep_rows = sweep_travel(sweeps, params, t[-1])
+    heat_J, speed, nut_W, conv = heat_sources(t, np.concatenate([motion, sweep_rows]), params, eff)
+    grid = ScrewGrid(params)
+    screw_W = heat_J / dt
     bearing_extra = eff.get("bearing_heat", 0.0) * speed
-    source = None
-    if "bearing_heat" in eff:
-        source = np.zeros((n, M))
-        source[:, 0] = bearing_extra  # segment 0 holds the fixed end (x = 0)
+    screw_W[:, 0] += bearing_extra  # node 0 is the fixed end (x = 0) with the support bearing
     power = {
         "nut": nut_W,
-        "screw": heat.sum(axis=1) / dt + bearing_extra,
+        "screw": screw_W.sum(axis=1),
         "motor": params.motor_idle_W + params.motor_W_at_ref * speed,
         "bearing": params.bearing_W_at_ref * speed + bearing_extra,
     }
 
-    # ---- temperatures: the screw as rises over the air (host/screw/heat.py, shared with the screw model)
-    rises = _heat.simulate_segments(geometry, material, t, heat_J=heat, convection_mult=conv, source_W=source)
-    T_screw = air[:, None] + rises
+    # ---- temperatures: the twin's own screw core (host/sim/screw.py) in absolute temperature
+    T_screw = ScrewIntegrator(grid, dt, params.time_constant_s).run(air.C, screw_W, conv)
     nut_node = dict(power, nut=(1 - params.screw_share) * nut_W)
-    nodes = node_temperatures(nut_node, air, dt)
-    readings = lagged(nodes, eff.get("sensor_lag", 0.0), dt)
+    nodes = node_temperatures(nut_node, air.C, dt)
+    readings = lagged(nodes, [params.sensor_tau_scale * nd.sensor_s for nd in NODES], dt)
+    readings = lagged(readings, eff.get("sensor_lag", 0.0), dt)
+    noisy = readings
     if params.temp_noise_K > 0:
-        readings = readings + rng_temp.normal(0.0, params.temp_noise_K, readings.shape)
+        noisy = readings + rng_temp.normal(0.0, params.temp_noise_K, readings.shape)
 
     # ---- positioning errors at the sweeps
     pos = np.asarray(params.positions_mm, dtype=float)
@@ -145,10 +166,9 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
             rows_p.append(p)
             rows_d.append(np.full(p.size, 1 if d is None else d, dtype=np.int8))
     et, ep, ed = np.concatenate(rows_t), np.concatenate(rows_p), np.concatenate(rows_d)
-    Rs = np.stack([np.interp(sweeps, t, rises[:, i]) for i in range(M)], axis=1)
-    E_sweep = _heat.thermal_error_um(geometry.edges_mm, Rs[:, None, :], pos[None, :], params.fixed_end_mm,
-                                     material.alpha_per_K)  # (n_sweeps, n_pos)
-    # rows are sweep-major in the order built above
+    # the screw grows from its temperature at the cold sweep (t = 0); a sweep is an instant
+    T_sweep = np.stack([np.interp(sweeps, t, T_screw[:, i]) for i in range(grid.n_nodes)], axis=1)
+    E_sweep = expansion_um(grid.x_mm, T_sweep, T_screw[0], pos - params.fixed_end_mm, params.alpha_um_mK)
     per_row = []
     for i in range(len(sweeps)):
         for d in dirs:
@@ -166,16 +186,11 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
         err = err + rng_laser.normal(0.0, noise_um, err.shape)
 
     return Simulation(
-        proto, params, eff, int(seed), float(noise_um), t, air, T_screw, nodes, readings, power, conv, motion,
+        proto, params, eff, int(seed), float(noise_um), t, air.C, T_screw, nodes, noisy, power, conv, motion,
         sweeps, et, ep, ed if "reversal_error" in eff else None, thermal, geo, err,
+        screw_x_mm=grid.x_mm, readings_true_C=readings, sweep_motion=sweep_rows, air_rise_K=air.rise_K,
+        hvac_period_min=air.hvac_period_min,
     )
-
-
-class _Intervals:
-    """motion rows (k, 5) seen as the attribute arrays host.screw.heat expects."""
-
-    def __init__(self, rows):
-        self.t_start_s, self.t_end_s, self.from_mm, self.to_mm, self.feed_mm_min = (rows[:, j] for j in range(5))
 
 
 def _step_overlaps(t_edges, t_start, t_end):
@@ -217,6 +232,9 @@ def to_run(sim):
             "params": {k: _plain(v) for k, v in dataclasses.asdict(p).items()},
         },
     }
+    if sim.protocol.drawn:
+        # the drawn moving states, so the run says what the seed produced
+        meta["simulation"]["phases"] = [dataclasses.asdict(ph) for ph in sim.protocol.phases]
     temps = _runs.Temperatures(sim.t_s.copy(), [nd.name for nd in NODES], sim.sensors_C.copy())
     errors = _runs.Errors(sim.err_time_s.copy(), sim.err_position_mm.copy(), sim.err_um.copy(),
                           None if sim.err_direction is None else sim.err_direction.copy())

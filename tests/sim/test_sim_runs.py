@@ -94,6 +94,8 @@ def test_cli_single_protocol_writes_into_out(tmp_path):
         (["--set", "h_W_m2K"], "expected KEY=VALUE"),
         (["--set", "stroke_mm=900"], "must cover the stroke"),
         (["--seed", "-2"], "seed must be an integer >= 0"),
+        (["--protocol", "random", "--set", "stroke_mm=50", "--set", "positions_mm=0,50"], "at least 100 mm"),
+        (["--set", "ambient_rise_min_K=3"], "must not exceed ambient_rise_max_K"),
     ],
 )
 def test_cli_bad_input_is_named(tmp_path, capsys, args, message):
@@ -130,3 +132,29 @@ def test_bundled_demo_is_reproduced_by_its_documented_command(tmp_path, monkeypa
         np.testing.assert_allclose(a.temperatures.values, b.temperatures.values, atol=2e-4, err_msg=name)
         np.testing.assert_allclose(a.errors.error_um, b.errors.error_um, atol=2e-4, err_msg=name)
         np.testing.assert_array_equal(a.errors.position_mm, b.errors.position_mm)
+
+
+def test_random_protocol_draws_moving_states_from_the_seed(tmp_path):
+    from host.sim import simulate
+    from host.sim.protocols import RANDOM_COOL_MIN, RANDOM_MOVING_MIN
+
+    a, b, c = (simulate("random", None, seed=s) for s in (5, 5, 6))
+    assert a.protocol.phases == b.protocol.phases != c.protocol.phases
+    phases = a.protocol.phases
+    assert sum(ph.minutes for ph in phases) == RANDOM_MOVING_MIN + RANDOM_COOL_MIN
+    assert phases[-1].feed_mm_min == 0 and phases[-1].minutes == RANDOM_COOL_MIN
+    moving = [ph for ph in phases if ph.feed_mm_min > 0]
+    assert len(moving) >= 6 and len({ph.feed_mm_min for ph in moving}) >= 3
+    for ph in moving:
+        assert 2000 <= ph.feed_mm_min <= 15000 and ph.feed_mm_min % 500 == 0
+        assert 0 <= ph.from_mm < ph.to_mm <= 700 and ph.to_mm - ph.from_mm >= 100
+        assert ph.minutes <= 40
+    # motion.csv holds exactly the drawn states (sweep windows cut out) and meta.json records them
+    run = simulate_run("random", None, seed=5)
+    feeds = sorted(set(run.motion.feed_mm_min))
+    assert feeds == sorted({ph.feed_mm_min for ph in moving})
+    assert run.meta["simulation"]["phases"][0]["feed_mm_min"] == phases[0].feed_mm_min
+    assert len(run.meta["simulation"]["phases"]) == len(phases)
+    # the CLI takes it like any protocol
+    assert main(["simulate", "--out", str(tmp_path / "r"), "--protocol", "random", "--seed", "5"]) == 0
+    assert load_run(str(tmp_path / "r")).meta["simulation"]["phases"] == run.meta["simulation"]["phases"]
