@@ -48,7 +48,8 @@ SLEW = 100          # um/s, board config and bridge
 COUNT_MM = 1e-4     # one eoffset count (0.1 um)
 UNSTEADY = 0xFFFF | 0x20000 | 0x80000 | 0x100000 | 0x4000000  # sensor faults, RATE_LIMITED, HELD, FALLBACK, RECOVERING
 STALE_S = RECOVER_S = 1.0  # the bridge's defaults (--stale-ms, --recover-ms)
-JITTER_S = 0.1      # one bridge ramp step covers at most two periods (2 x 50 ms)
+JITTER_S = 0.2      # a bridge ramp step covers up to two periods (0.1 s), plus 0.1 s for motion's
+                    # non-real-time servo thread on a loaded host; a step (the whole offset) is far larger
 PINS = ["joint.0.motor-pos-cmd", "axis.x.pos-cmd", "axis.x.eoffset", "axis.x.eoffset-request",
         "tcomp.offset-um", "tcomp.board-offset-um", "tcomp.tracking", "tcomp.fault", "tcomp.fault-code",
         "tcomp.latch-state"]
@@ -271,21 +272,28 @@ def _check_offsets(board, lc, points):
 def _ramp(lc, seconds):
     rows = lc("sample", pins=["joint.0.motor-pos-cmd", "axis.x.pos-cmd", "tcomp.offset-um", "tcomp.fault"],
               seconds=seconds, dt=0.01)["rows"]
-    return [(r[0], (r[1] - r[2]) * 1000, r[3], r[4]) for r in rows]
+    return [(r[0], (r[1] - r[2]) * 1000, r[3], r[4], r[5]) for r in rows]
+
+
+def _within_slew(rows, value, what):
+    """No change faster than the slew limit: between any two samples, the change is at most the slew
+    times the longest time that can separate the two readings (before the first, after the second)
+    plus JITTER_S (a ramp step covers up to two bridge periods; a loaded, non-real-time host also
+    delays motion's servo thread)."""
+    for i in range(len(rows)):
+        for j in range(i + 1, len(rows)):
+            d = abs(value(rows[j]) - value(rows[i]))
+            assert d <= SLEW * (rows[j][-1] - rows[i][0] + JITTER_S) + 0.1, \
+                "%s: %.2f um between %.3f s and %.3f s (slew %d um/s)" % (what, d, rows[i][0], rows[j][-1], SLEW)
 
 
 def _check_ramp_to_zero(rows, start_um, what):
-    """Applied offset: reaches zero, never faster than the slew limit (over any 0.1 s and more, plus one
-    ramp step of at most two bridge periods, 0.1 s: a loaded host delays samples and bridge steps), and
-    not at once (a ramp takes about |start| / slew)."""
+    """Applied offset: reaches zero, never faster than the slew limit, and not at once (a ramp takes
+    about |start| / slew)."""
     a = [r[1] for r in rows]
     t = [r[0] for r in rows]
     assert abs(a[-1]) <= 0.1 + 1e-6, "%s: offset not ramped to zero: %.2f um" % (what, a[-1])
-    for i in range(len(rows)):
-        for j in range(i + 1, len(rows)):
-            if t[j] - t[i] >= 0.1:
-                assert abs(a[j] - a[i]) <= SLEW * (t[j] - t[i] + JITTER_S) + 0.1, \
-                    "%s: %.2f um in %.3f s (slew %d um/s)" % (what, a[j] - a[i], t[j] - t[i], SLEW)
+    _within_slew(rows, lambda r: r[1], what)
     zero_at = next(t[i] for i in range(len(a)) if abs(a[i]) <= 0.1 + 1e-6)
     assert zero_at >= 0.6 * abs(start_um) / SLEW, "%s: reached zero after %.3f s: a step" % (what, zero_at)
     falling = next(i for i in range(len(a)) if abs(a[i]) < abs(start_um) - 0.5)
@@ -295,15 +303,13 @@ def _check_ramp_to_zero(rows, start_um, what):
 def _fault_cycle(board, lc, x_mm, inject, clear, what):
     lc("mdi", cmd="G0 X%g" % x_mm)
     _, start, _, _ = _settle(board, lc, x_mm)
-    assert abs(start) > 15, "%s: offset %.1f um too small to show a ramp" % (what, start)
+    assert abs(start) > 30, "%s: offset %.1f um too small to show a ramp" % (what, start)
     inject()
     rows = _ramp(lc, STALE_S + abs(start) / SLEW + 0.4)  # stale and link loss show after stale_ms
     clear()
     _check_ramp_to_zero(rows, start, what)
     back = _ramp(lc, RECOVER_S + abs(start) / SLEW + 0.4)  # recover_ms of good frames, then the ramp back
-    a = [r[1] for r in back]
-    for i in range(1, len(a)):
-        assert abs(a[i] - a[i - 1]) <= SLEW * (back[i][0] - back[i - 1][0] + JITTER_S) + 0.1, "%s: step on recovery" % what
+    _within_slew(back, lambda r: r[1], what + ", recovery")
     _, end, _, _ = _settle(board, lc, x_mm)
     assert abs(end - start) <= 0.1 + 1e-6, "%s: not back at %.1f um: %.2f" % (what, start, end)
 
@@ -338,8 +344,7 @@ def test_linuxcnc_stream_offsets_cold_start_and_faults(session):
     lc("machine", on=True)
     rows = lc("sample", pins=["axis.x.eoffset", "tcomp.offset-um"], seconds=abs(start) / SLEW + 1.8, dt=0.01)["rows"]
     assert abs(rows[0][1]) < COUNT_MM and rows[0][2] == 0.0, rows[0]
-    for i in range(1, len(rows)):
-        assert abs(rows[i][1] - rows[i - 1][1]) * 1000 <= SLEW * (rows[i][0] - rows[i - 1][0] + JITTER_S) + 0.1
+    _within_slew(rows, lambda r: r[1] * 1000, "after machine-on")
     assert abs(rows[-1][1] * 1000 - start) <= 0.2 + 1e-6, (rows[-1], start)  # pos-cmd moved by the folded offset
 
 

@@ -5,7 +5,7 @@ When it exits, LinuxCNC shuts down.
 
 Requests: ``start`` (e-stop reset, machine on, home all), ``machine`` {on}, ``mdi`` {cmd} (waits until
 the interpreter is idle), ``get`` {pins}, ``set`` {pin, value}, ``sample`` {pins, seconds, dt} (rows
-``[t, values...]`` taken here, so socket latency does not blur a ramp), ``quit``.
+``[t_before, values..., t_after]`` taken here, so socket latency does not blur a ramp), ``quit``.
 """
 import json
 import os
@@ -76,8 +76,11 @@ class Machine:
         rows = []
         t0 = time.monotonic()
         while True:
+            # the time before and after reading: a process descheduled in between widens the
+            # interval the values may come from instead of misdating them
             t = time.monotonic() - t0
-            rows.append([t] + [hal.get_value(p) for p in pins])
+            values = [hal.get_value(p) for p in pins]
+            rows.append([t] + values + [time.monotonic() - t0])
             if t >= seconds:
                 return {"rows": rows}
             time.sleep(dt)
