@@ -69,7 +69,8 @@ _SLOT_TRAVEL = const(29)
 _SLOT_FEEDMUL = const(30)
 _SLOT_CMUL = const(32)
 _SLOT_DE = const(34)
-_N_SLOTS = const(35)
+_SLOT_AMUL = const(35)
+_N_SLOTS = const(37)
 
 _FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
 _FEED_LIMB = const(10)
@@ -82,7 +83,10 @@ class Evaluator:
     ``set_temperature``, call ``update()``, then ``offset_at(pos_um)``,
     ``ref_offset()`` and ``slope()`` as often as needed. Screw tables also need
     ``advance_position(pos_um)`` on every position report (or ``set_feed``) and
-    ``step()`` once per ``table.dt_ms``.
+    ``step()`` once per ``table.dt_ms``. A screw table with an air channel
+    (``table.air`` >= 0) reads that channel in ``update()``: the screw exchanges
+    heat with it (air at the previous and the current step, linear in between),
+    and the state starts in equilibrium with it (construction, ``latch_references``).
     """
 
     def __init__(self, table, check=False):
@@ -113,9 +117,11 @@ class Evaluator:
             self.F = 0
             self.have_x = False
             self.x = 0
+            self.da = 0  # air over its reference (milli-K, clamped) at the last update() and at the last step
+            self.da0 = 0
         self.update()
         if self.kind == _KIND_SCREW_REDUCED:
-            self._refresh()
+            self.settle()
 
     # -- checking mode ------------------------------------------------------
     def _note(self, slot, v):
@@ -186,6 +192,8 @@ class Evaluator:
                 v = t.env_hi[i]
             self.ref[i] = v
         self.update()
+        if self.kind == _KIND_SCREW_REDUCED:
+            self.settle()  # a latch is a cold start: the screw in equilibrium with the air
 
     def update(self):
         """Recompute the temperature-dependent terms from ``temps``; flag clamped sensors."""
@@ -201,6 +209,7 @@ class Evaluator:
         nt = t.nt
         fl = 0
         s = t.S0
+        air = t.air if self.kind == _KIND_SCREW_REDUCED else -1
         for i in range(t.n_sensors):
             v = temps[i]
             if v < lo[i]:
@@ -212,6 +221,8 @@ class Evaluator:
             d = v - ref[i]
             if chk:
                 self._note(_SLOT_D, d)
+            if i == air:
+                self.da = d
             s += self._mul(_SLOT_SMUL, b[i], d, Lt, nt, shb[i])
             if chk:
                 self._note(_SLOT_S, s)
@@ -414,7 +425,7 @@ class Evaluator:
         self.feed = False
 
     def step(self):
-        """One time step of the segment recurrence T <- T + C*T + B*u (then u = 0)."""
+        """One time step of the segment recurrence T <- T + C*T + B*u + W0*a0 + W1*a1 (then u = 0)."""
         t = self.table
         chk = self.check
         m = t.M
@@ -475,11 +486,16 @@ class Evaluator:
             acc += self._mul(_SLOT_BMUL, B[i], u[i], t.Lu, t.nu, shB[i]) + rS[i]
             if chk:
                 self._note(_SLOT_ROW, acc)
+            if t.air >= 0:
+                acc += self._mul(_SLOT_AMUL, t.W0[i], self.da0, t.Lt, t.nt, t.shW0[i])
+                acc += self._mul(_SLOT_AMUL, t.W1[i], self.da, t.Lt, t.nt, t.shW1[i])
+                if chk:
+                    self._note(_SLOT_ROW, acc)
             v = T[i] + (acc >> gs)
             if chk:
                 self._note(_SLOT_STATE, v)
-            if v < 0:
-                v = 0  # rounding just below zero: the exact state is >= 0, so this only removes error
+            if v < t.Tlo:
+                v = t.Tlo  # the exact state is >= the air's lowest value, so this only removes error
             elif v > Tmax:
                 v = Tmax
                 fl = _CLAMP_STATE
@@ -487,7 +503,25 @@ class Evaluator:
         for i in range(m):
             T[i] = Tn[i]
             u[i] = 0
+        self.da0 = self.da
         self.flags = (self.flags & ~_CLAMP_STATE) | fl
+        self._refresh()
+
+    def settle(self):
+        """State = the air's temperature over its reference (equilibrium); no heat stored."""
+        t = self.table
+        v = 0
+        if t.air >= 0:
+            v = self._mul(_SLOT_AMUL, t.Ka, self.da, t.Lt, t.nt, t.shKa)
+            if v < t.Tlo:
+                v = t.Tlo
+            elif v > t.Tmax:
+                v = t.Tmax
+        if self.check:
+            self._note(_SLOT_STATE, v)
+        for i in range(t.M):
+            self.T[i] = v
+        self.da0 = self.da
         self._refresh()
 
     def _refresh(self):

@@ -13,13 +13,13 @@ assumed arithmetic (gcc, clang, arm-none-eabi, IAR, Keil all do so).
 SCALARS = {
     "all": ("pos_lo", "pos_hi", "pos_ref", "fo", "Lt", "nt", "S0", "rL"),
     "position": ("Lw", "nw", "shw", "KS", "shK", "fK", "rK", "rT", "degree", "Lg", "ng", "rO"),
-    "screw": ("M", "dt_ms", "fixed_end", "fmax", "ft", "Tmax", "Ls", "ns", "fc", "gs", "umax", "Lu", "nu", "H", "shH",
+    "screw": ("M", "dt_ms", "fixed_end", "fmax", "ft", "Tmax", "Tlo", "air", "Ka", "shKa", "Ls", "ns", "fc", "gs", "umax", "Lu", "nu", "H", "shH",
               "Lx", "nx", "shX", "KC", "Lc", "nc", "shC"),
 }
 ARRAYS = {
     "all": ("env_lo", "env_hi", "ref", "b", "shb"),
     "position": ("G", "shg"),
-    "screw": ("edges", "C", "B", "shB", "rS", "G2", "shG2"),
+    "screw": ("edges", "C", "B", "shB", "rS", "G2", "shG2", "W0", "shW0", "W1", "shW1"),
 }
 
 CODE = r"""
@@ -37,6 +37,7 @@ typedef struct {
 #if TCOMP_KIND == 3
     int32_t T[TCOMP_M], Tn[TCOMP_M], u[TCOMP_M], w[TCOMP_M], limbs[TCOMP_M * TCOMP_NS], cum[TCOMP_M + 1], segslope[TCOMP_M];
     int32_t x, F;
+    int32_t da, da0; /* air over its reference (milli-K) at the last update and at the last step */
     int have_x, feed;
 #endif
 } tcomp_eval_t;
@@ -71,10 +72,31 @@ static void tcomp_update(tcomp_eval_t *e)
         if (v < tcomp_env_lo[i]) { v = tcomp_env_lo[i]; fl |= 1u << i; }
         else if (v > tcomp_env_hi[i]) { v = tcomp_env_hi[i]; fl |= 1u << i; }
         s += tcomp_mul(tcomp_b[i], v - e->ref[i], TCOMP_LT, TCOMP_NT, tcomp_shb[i]);
+#if TCOMP_KIND == 3
+        if (i == TCOMP_AIR) e->da = v - e->ref[i];
+#endif
     }
     e->S = s;
     e->flags = (e->flags & ~0xFFFFFFu) | fl;
 }
+
+#if TCOMP_KIND == 3
+static void tcomp_refresh(tcomp_eval_t *e);
+/* start state: in equilibrium with the air (construction, latch) */
+static void tcomp_settle(tcomp_eval_t *e)
+{
+    int32_t v = 0;
+    int i;
+    if (TCOMP_AIR >= 0) {
+        v = tcomp_mul(TCOMP_KA, e->da, TCOMP_LT, TCOMP_NT, TCOMP_SHKA);
+        if (v < TCOMP_TLO) v = TCOMP_TLO;
+        else if (v > TCOMP_TMAX) v = TCOMP_TMAX;
+    }
+    for (i = 0; i < TCOMP_M; i++) e->T[i] = v;
+    e->da0 = e->da;
+    tcomp_refresh(e);
+}
+#endif
 
 #if TCOMP_REF_MODE == 1
 /* models fitted on rises from the run start: latch the current temperatures as references (cold start) */
@@ -86,6 +108,9 @@ static void tcomp_latch_references(tcomp_eval_t *e)
         e->ref[i] = v < tcomp_env_lo[i] ? tcomp_env_lo[i] : (v > tcomp_env_hi[i] ? tcomp_env_hi[i] : v);
     }
     tcomp_update(e);
+#if TCOMP_KIND == 3
+    tcomp_settle(e);
+#endif
 }
 #endif
 
@@ -173,7 +198,7 @@ static void tcomp_set_feed(tcomp_eval_t *e, int32_t feed, int32_t lo_um, int32_t
     e->feed = 1;
 }
 
-/* one step of T <- T + C*T + B*u, every TCOMP_DT_MS milliseconds */
+/* one step of T <- T + C*T + B*u + W0*a0 + W1*a1, every TCOMP_DT_MS milliseconds */
 static void tcomp_step(tcomp_eval_t *e)
 {
     const int32_t mask = (int32_t)((1L << TCOMP_LS) - 1);
@@ -201,12 +226,17 @@ static void tcomp_step(tcomp_eval_t *e)
             sh -= TCOMP_LS;
         }
         acc += tcomp_mul(tcomp_B[i], e->u[i], TCOMP_LU, TCOMP_NU, tcomp_shB[i]) + tcomp_rS[i];
+        if (TCOMP_AIR >= 0) {
+            acc += tcomp_mul(tcomp_W0[i], e->da0, TCOMP_LT, TCOMP_NT, tcomp_shW0[i]);
+            acc += tcomp_mul(tcomp_W1[i], e->da, TCOMP_LT, TCOMP_NT, tcomp_shW1[i]);
+        }
         v = e->T[i] + (acc >> TCOMP_GS);
-        if (v < 0) v = 0;
+        if (v < TCOMP_TLO) v = TCOMP_TLO;
         else if (v > TCOMP_TMAX) { v = TCOMP_TMAX; fl = TCOMP_CLAMP_STATE; }
         e->Tn[i] = v;
     }
     for (i = 0; i < TCOMP_M; i++) { e->T[i] = e->Tn[i]; e->u[i] = 0; }
+    e->da0 = e->da;
     e->flags = (e->flags & ~TCOMP_CLAMP_STATE) | fl;
     tcomp_refresh(e);
 }
@@ -271,11 +301,11 @@ static void tcomp_init(tcomp_eval_t *e)
     e->pos_ref = TCOMP_POS_REF;
 #if TCOMP_KIND == 3
     for (i = 0; i < TCOMP_M; i++) { e->T[i] = 0; e->u[i] = 0; e->w[i] = 0; }
-    e->have_x = 0; e->feed = 0; e->x = 0; e->F = 0;
+    e->have_x = 0; e->feed = 0; e->x = 0; e->F = 0; e->da = 0; e->da0 = 0;
 #endif
     tcomp_update(e);
 #if TCOMP_KIND == 3
-    tcomp_refresh(e);
+    tcomp_settle(e);
 #endif
 }
 """

@@ -11,13 +11,13 @@ from fractions import Fraction as F
 import numpy as np
 
 from firmware.evaluate import (
-    FEED_LIMB, FEED_W_BITS, SLOT_ACC, SLOT_BMUL, SLOT_CMUL, SLOT_CUM, SLOT_CUMMUL, SLOT_D, SLOT_DE, SLOT_FEEDMUL,
+    FEED_LIMB, FEED_W_BITS, SLOT_ACC, SLOT_AMUL, SLOT_BMUL, SLOT_CMUL, SLOT_CUM, SLOT_CUMMUL, SLOT_D, SLOT_DE, SLOT_FEEDMUL,
     SLOT_GEO, SLOT_GEOMUL, SLOT_HMUL, SLOT_KMUL, SLOT_LIMB, SLOT_OUT, SLOT_P, SLOT_ROW, SLOT_ROWMUL, SLOT_S,
     SLOT_SEGMUL, SLOT_SLOPE, SLOT_SMUL, SLOT_STATE, SLOT_THMUL, SLOT_TRAVEL, SLOT_XL,
 )
 from models_export.certify import (
     ACC, OU_PER_UM, PROD, SLOPE_PER_OU_PER_UM, ExportError, Recorder, center, fit_coef, floor_err, frac_bits,
-    int_iv, iv_abs, iv_add, iv_mul, iv_scale, limb_max, narrow_width, p2, rnd, top_limbs_needed,
+    int_iv, iv_abs, iv_add, iv_mul, iv_scale, limb_max, limbs, narrow_width, p2, rnd, top_limbs_needed,
 )
 
 ZERO = (F(0), F(0))
@@ -108,7 +108,9 @@ class Planner:
         rL, err_out = _round_out(eS, fo)
         f["rL"] = rL
         rec.note(SLOT_ACC, S_iv[0] + rL, S_iv[1] + rL, "output")
-        rec.note(SLOT_OUT, (S_iv[0] + rL) >> fo, (S_iv[1] + rL) >> fo, "output")
+        out = ((S_iv[0] + rL) >> fo, (S_iv[1] + rL) >> fo)
+        rec.note(SLOT_OUT, out[0], out[1], "output")
+        f.update(cert_out=_mag(out), cert_ref=_mag(out), cert_slope=0)
         self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
         return {"offset": err_out, "ref_offset": err_out, "slope": ZERO}
 
@@ -158,6 +160,7 @@ class Planner:
         acc = (acc[0] + rO, acc[1] + rO)
         rec.note(SLOT_ACC, acc[0], acc[1], "output")
         rec.note(SLOT_OUT, acc[0] >> fo, acc[1] >> fo, "output")
+        f["cert_out"] = _mag((acc[0] >> fo, acc[1] >> fo))
         self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
         # the pair: thermal offset at the reference position ...
         # certified for any reference position inside the envelope (Evaluator.set_reference), not only pos_ref
@@ -171,6 +174,7 @@ class Planner:
         f["rT"] = rT
         rec.note(SLOT_ACC, acc_ref[0] + rT, acc_ref[1] + rT, "output")
         rec.note(SLOT_OUT, (acc_ref[0] + rT) >> fo, (acc_ref[1] + rT) >> fo, "output")
+        f["cert_ref"] = _mag(((acc_ref[0] + rT) >> fo, (acc_ref[1] + rT) >> fo))
         # ... and the thermal slope in 0.01 um/m
         s_real = m.s_range()
         slope_bound = m.s_bound() * SLOPE_PER_OU_PER_UM
@@ -199,6 +203,7 @@ class Planner:
         f["rK"] = rK
         rec.note(SLOT_SLOPE, sl[0] + rK, sl[1] + rK, "output")
         rec.note(SLOT_OUT, (sl[0] + rK) >> fK, (sl[1] + rK) >> fK, "output")
+        f["cert_slope"] = _mag(((sl[0] + rK) >> fK, (sl[1] + rK) >> fK))
         return {"offset": err_out, "ref_offset": err_ref_out, "slope": err_sl_out}
 
     def horner(self, fo, PM):
@@ -280,10 +285,41 @@ class Planner:
         if max(abs(m.pos_lo - fe), abs(m.pos_hi - fe)) + edges_um[-1] >= PROD:
             raise ExportError("thermal.reduced.fixed_end_mm / edges_mm: screw coordinates too large for the table")
         umax = -(-fmax * dt_ms // 60)
-        self.s = dict(M=M, A=A, B=B, edges=edges, edges_um=edges_um, fixed=fixed, fe=fe, Tmax=F(Tmax), umax=umax)
-        f.update(M=M, dt_ms=dt_ms, fixed_end=fe, fmax=fmax, edges=edges_um, umax=umax)
+        air, c0, c1, d_air = self._screw_air(red, A, M)
+        # the state is the heat response (in [0, state_max_K]) plus the air response, a convex combination of
+        # air readings (A >= 0, c0, c1 >= 0, row sums of [A c0 c1] <= 1, 0 inside the air range): together
+        # [a_min, a_max + state_max_K] (host/screw/reduced.py)
+        Tlo_K = F(d_air[0], 1000)
+        Thi_K = F(Tmax) + F(d_air[1], 1000)
+        self.s = dict(M=M, A=A, B=B, edges=edges, edges_um=edges_um, fixed=fixed, fe=fe, Tmax=Thi_K, Tlo=Tlo_K, umax=umax,
+                      air=air, c0=c0, c1=c1, d_air=d_air)
+        f.update(M=M, dt_ms=dt_ms, fixed_end=fe, fmax=fmax, edges=edges_um, umax=umax, air=air)
         alpha = m.alpha
-        return abs(alpha) * F(Tmax) * F(edges[-1]) * OU_PER_UM * 2  # x2: margin for state errors
+        return abs(alpha) * max(Thi_K, -Tlo_K) * F(edges[-1]) * OU_PER_UM * 2  # x2: margin for state errors
+
+    def _screw_air(self, red, A, M):
+        """(channel index or -1, c0, c1 as Fractions, air range (milli-K) over its reference)."""
+        m = self.m
+        name = red.get("air_sensor")
+        if name is None:
+            return -1, [F(0)] * M, [F(0)] * M, (0, 0)
+        if name not in m.sensors:
+            raise ExportError("thermal.reduced.air_sensor %r is not in sensors %r" % (name, m.sensors))
+        try:
+            c0 = [F(float(v)) for v in red["air_K0"]]
+            c1 = [F(float(v)) for v in red["air_K1"]]
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ExportError("thermal.reduced: missing or invalid air weights %s" % exc)
+        if len(c0) != M or len(c1) != M or not all(math.isfinite(v) and v >= 0 for v in c0 + c1):
+            raise ExportError("thermal.reduced.air_K0/air_K1 must be %d finite non-negative numbers" % M)
+        for i in range(M):
+            if sum(F(float(max(a, 0.0))) for a in A[i]) + c0[i] + c1[i] > 1 + F(1, 10 ** 9):
+                raise ExportError("thermal.reduced row %d: A + air weights sum above 1 (the air would be amplified)" % i)
+        i = m.sensors.index(name)
+        d_air = (m.d_lo[i], m.d_hi[i])
+        if not d_air[0] <= 0 <= d_air[1]:
+            raise ExportError("thermal.reduced.air_ref_C lies outside the air sensor's envelope %r" % (name,))
+        return i, c0, c1, d_air
 
     def screw_state(self, fo):
         """Recurrence, state error certificate, cum/segslope; returns (seg(p) interval, seg(p) error interval).
@@ -316,16 +352,20 @@ class Planner:
     def _screw_state(self, fo, ns):
         m, f, rec, s = self.m, self.f, self.rec, self.s
         M, A = s["M"], s["A"]
-        Tmax = s["Tmax"]
-        ft = frac_bits(Tmax, ACC, cap=30)
+        Tmax, Tlo = s["Tmax"], s["Tlo"]
+        Tabs = max(Tmax, -Tlo)
+        ft = frac_bits(Tabs, ACC, cap=30)
         Tq = math.ceil(Tmax * p2(ft))
-        Ls = max(1, -(-Tq.bit_length() // ns))
-        if Ls * (ns - 1) >= Tq.bit_length() and ns > 2:
+        Tlq = math.floor(Tlo * p2(ft))
+        nbits = max(Tq.bit_length(), (-Tlq).bit_length())
+        Ls = max(1, -(-nbits // ns))
+        if Ls * (ns - 1) >= nbits and ns > 2:
             raise ExportError("state limbs: %d limbs are more than the state needs" % ns)
-        T_iv = (0, Tq)
+        T_iv = (Tlq, Tq)
+        TA = max(Tq, -Tlq)
         lms = limb_max(T_iv, Ls, ns)
-        top = Tq >> (Ls * (ns - 1))
-        rec.note(SLOT_LIMB, 0, top, "state")
+        limb_ivs = limbs(T_iv, Ls, ns)
+        rec.note(SLOT_LIMB, limb_ivs[-1][0], limb_ivs[-1][1], "state")
         Cx = [[F(float(A[i, j])) - (1 if i == j else 0) for j in range(M)] for i in range(M)]
         rowsum = max(sum(abs(c) for c in row) for row in Cx)
         fc = frac_bits(rowsum * lms, PROD, cap=62)
@@ -339,14 +379,18 @@ class Planner:
         Lu = max(1, -(-umax.bit_length() // nu))
         U_iv = (0, umax)
         lmu = limb_max(U_iv, Lu, nu)
-        # guard bits: the row sum |C T| + B u (state units) times 2**gs stays below ACC
+        # guard bits: the row sum |C T| + B u + W a (state units) times 2**gs stays below ACC
         Bmax = max(F(float(b)) for b in s["B"]) / 1000 * p2(ft) * umax
-        gs = max(0, min(20, frac_bits(rowsum * Tq + Bmax + 1, ACC)))
+        d_air = s["d_air"]
+        Dabs = max(-d_air[0], d_air[1])
+        Wmax = max(c0 + c1 for c0, c1 in zip(s["c0"], s["c1"])) / 1000 * p2(ft) * Dabs
+        gs = max(0, min(20, frac_bits(rowsum * TA + Bmax + Wmax + 1, ACC)))
+        lmd = limb_max(d_air, f["Lt"], f["nt"])
+        W0q, shW0, W1q, shW1 = [], [], [], []
         Bq, shB, rS = [], [], []
         rho = []
         parts = []  # per row: (C quantisation, B quantisation + feed rounding), state units per step
         feed_du = (-(F(umax) / p2(FEED_W_BITS) + 4), F(0))  # feed/range mode travel error per segment (um)
-        limb_ivs = [(0, (1 << Ls) - 1)] * (ns - 1) + [(0, top)]
         for i in range(M):
             name = "thermal.reduced.A[%d]" % i
             acc = (0, 0)
@@ -371,7 +415,7 @@ class Planner:
             errC = ZERO
             for j in range(M):
                 dc = F(Cq[i][j]) / p2(fc) - Cx[i][j]
-                errC = iv_add(errC, iv_mul(_c(dc * p2(gs)), (F(0), F(Tq))))
+                errC = iv_add(errC, iv_mul(_c(dc * p2(gs)), (F(Tlq), F(Tq))))
             err = iv_add(err, errC)
             q, sb = fit_coef(F(float(s["B"][i])) / 1000, lmu, ft + gs)
             Bq.append(q)
@@ -381,25 +425,51 @@ class Planner:
             db = bq - F(float(s["B"][i])) / 1000 * p2(ft + gs)
             errB = iv_add(iv_mul(_c(db), (F(0), F(umax))), _hull(ZERO, iv_scale(feed_du, bq)))
             err = iv_add(err, errB, floor_err(k))
-            parts.append((iv_abs(errC) / p2(gs), iv_abs(errB) / p2(gs)))
             acc = iv_add(acc, res)
+            # air at the step's start and end (milli-K over the reference), weights c/1000 K per mK
+            errW = ZERO
+            for c, qs, shs in ((s["c0"][i], W0q, shW0), (s["c1"][i], W1q, shW1)):
+                q, sw = fit_coef(c / 1000, lmd, ft + gs)
+                qs.append(q)
+                shs.append(sw)
+                res, k = rec.mul(SLOT_AMUL, (q, q), d_air, f["Lt"], f["nt"], sw, "thermal.reduced.air_K[%d]" % i)
+                acc = iv_add(acc, res)
+                errW = iv_add(errW, iv_mul(_c(F(q) / p2(sw) - c / 1000 * p2(ft + gs)), (F(d_air[0]), F(d_air[1]))), floor_err(k))
+            err = iv_add(err, errW)
+            parts.append((iv_abs(errC) / p2(gs), (iv_abs(errB) + iv_abs(errW)) / p2(gs)))
             bias, err_state = _round_out(err, gs)  # v = T + (acc + rS) >> gs
             rS.append(bias)
             acc = (acc[0] + bias, acc[1] + bias)
             rec.note(SLOT_ROW, acc[0], acc[1], name)
-            rec.note(SLOT_STATE, acc[0] >> gs, Tq + (acc[1] >> gs), name)
+            rec.note(SLOT_STATE, Tlq + (acc[0] >> gs), Tq + (acc[1] >> gs), name)
             rho.append(max(abs(err_state[0]), abs(err_state[1])))
         # travel accumulators and the feed fallback
         maxlen = max(b - a for a, b in zip(s["edges_um"], s["edges_um"][1:]))
         rec.note(SLOT_TRAVEL, 0, umax + max(maxlen, umax), "travel")
         rec.mul(SLOT_FEEDMUL, (0, 1 << FEED_W_BITS), (0, umax), FEED_LIMB, 3, FEED_W_BITS, "travel")
-        # state error: v >= |A| v + rho, verified exactly
+        # the start state (Evaluator.settle): Ka * a ~ a * 2**ft / 1000, clamped to the state box
+        if s["air"] >= 0:
+            Ka, shKa = fit_coef(p2(ft) / 1000, lmd, 0)
+            res, k = rec.mul(SLOT_AMUL, (Ka, Ka), d_air, f["Lt"], f["nt"], shKa, "air start state")
+            e0 = iv_abs(iv_add(iv_mul(_c(F(Ka) / p2(shKa) - p2(ft) / 1000), (F(d_air[0]), F(d_air[1]))), floor_err(k)))
+        else:
+            Ka, shKa, e0 = 0, 0, F(0)
+        rec.note(SLOT_STATE, Tlq, Tq, "air start state")
+        # state error: v >= |A| v + rho, verified exactly; a start error e0 adds e0 to every component
+        # (|A| has row sums <= 1, so v + e0 is again a supersolution and bounds the error from the start)
         v = _supersolution(A, rho)
         if v is None:
             raise ExportError("thermal.reduced.A: the recurrence is not contracting (|A| has spectral radius >= 1); "
                               "the integer state error cannot be bounded")
-        self.state_cert = {"rho_state_units": [float(r) for r in rho], "v_state_units": [float(x) for x in v], "ft": ft}
-        f.update(ft=ft, Tmax=Tq, Ls=Ls, ns=ns, fc=fc, gs=gs, C=[c for row in Cq for c in row], Lu=Lu, nu=nu, B=Bq, shB=shB, rS=rS)
+        if e0:
+            AF = [[F(float(abs(a))) for a in row] for row in np.asarray(A, dtype=float)]
+            if any(sum(row) > 1 for row in AF):
+                raise ExportError("thermal.reduced.A: a row sum above 1, the start state's error cannot be bounded")
+            v = [x + e0 for x in v]
+        self.state_cert = {"rho_state_units": [float(r) for r in rho], "v_state_units": [float(x) for x in v], "ft": ft,
+                           "start_error_state_units": float(e0)}
+        f.update(ft=ft, Tmax=Tq, Tlo=Tlq, Ls=Ls, ns=ns, fc=fc, gs=gs, C=[c for row in Cq for c in row], Lu=Lu, nu=nu, B=Bq,
+                 shB=shB, rS=rS, W0=W0q, shW0=shW0, W1=W1q, shW1=shW1, Ka=Ka, shKa=shKa)
         # informational split of the certified state error by source: output weight of a unit residual in row i
         W = np.linalg.inv(np.eye(M) - np.abs(np.asarray(A, dtype=float)))
         wout = [float(abs(m.alpha) * (F(s["edges"][j + 1]) - F(s["edges"][j])) * OU_PER_UM) / 2.0 ** ft * 2.0 ** fo for j in range(M)]
@@ -431,23 +501,23 @@ class Planner:
             rec.note(SLOT_CUM, cum[0], cum[1], "thermal.reduced.alpha x edges[%d]" % i)
             gq = F(q) / p2(sh)
             dq = gq - val * p2(fo - ft)
-            ecum = iv_add(ecum, iv_mul(_c(dq), (F(0), F(Tq))), floor_err(k), iv_scale((-v[i], v[i]), abs(gq)))
+            ecum = iv_add(ecum, iv_mul(_c(dq), (F(Tlq), F(Tq))), floor_err(k), iv_scale((-v[i], v[i]), abs(gq)))
             err_cum.append(ecum)
             cum_ivs.append(cum)
-            self.term("thermal.reduced.alpha x edges[%d]" % i, fo - ft + sh, abs(dq) * Tq)
+            self.term("thermal.reduced.alpha x edges[%d]" % i, fo - ft + sh, abs(dq) * TA)
         hval = alpha * F(OU_PER_UM, 1000)  # OU per um per K
-        fh = frac_bits(abs(hval) * (Tmax + 1), ACC)
+        fh = frac_bits(abs(hval) * (Tabs + 1), ACC)
         H, shH = fit_coef(hval, lms, fh - ft)
         hq = F(H) / p2(shH)
         seg_ivs, err_ss = [], []
         for i in range(M):
             res, k = rec.mul(SLOT_HMUL, (H, H), T_iv, Ls, ns, shH, "thermal.reduced.alpha_um_per_mm_per_K")
             seg_ivs.append(res)
-            err_ss.append(iv_add(iv_mul(_c(hq - hval * p2(fh - ft)), (F(0), F(Tq))), floor_err(k),
+            err_ss.append(iv_add(iv_mul(_c(hq - hval * p2(fh - ft)), (F(Tlq), F(Tq))), floor_err(k),
                                  iv_scale((-v[i], v[i]), abs(hq))))
         eu = s["edges_um"]
         LEN = max(b - a for a, b in zip(eu, eu[1:]))
-        self.term("thermal.reduced.alpha_um_per_mm_per_K", fh - ft + shH, abs(hq - hval * p2(fh - ft)) * Tq * LEN / p2(fh - fo))
+        self.term("thermal.reduced.alpha_um_per_mm_per_K", fh - ft + shH, abs(hq - hval * p2(fh - ft)) * TA * LEN / p2(fh - fo))
         Lx = narrow_width(LEN)
         ss_all = _hull(*[(F(a), F(b)) for a, b in seg_ivs])
         ss_int = (int(ss_all[0]), int(ss_all[1]))
@@ -472,7 +542,7 @@ class Planner:
         # the exact lengths), which moves by <= 2 max|d edge|.
         dfe = abs(F(s["fe"]) - F(s["fixed"]) * 1000)
         dedge = max(abs(F(a) - F(b) * 1000) for a, b in zip(eu, edges))
-        geo_um = abs(alpha) * Tmax * (dfe + 2 * dedge) / 1000
+        geo_um = abs(alpha) * Tabs * (dfe + 2 * dedge) / 1000
         e_geo = geo_um * OU_PER_UM * p2(fo)
         seg_iv = _hull(*segs)
         err_seg = iv_add(_hull(*segerr), (-e_geo, e_geo))
@@ -542,3 +612,8 @@ def _supersolution(A, rho):
         if all(v[i] >= sum(AF[i][j] * v[j] for j in range(M)) + rho[i] for i in range(M)):
             return v
     return None
+
+
+def _mag(iv):
+    """The table's certified output bound: the largest |value| of an integer interval."""
+    return int(max(abs(iv[0]), abs(iv[1])))

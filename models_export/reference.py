@@ -3,9 +3,9 @@
 Evaluates a model document in double precision exactly as docs/model-format.md
 defines it, with the firmware's input conventions (temperatures in milli-degC,
 positions in um, clamped to the envelope the table declares) so that tests can
-compare ``integer output x 0.01 um`` with it. Screw: ``ScrewReference`` runs
-the recurrence T <- A T + B u on the same per-step travel (um) the firmware
-accumulated.
+compare ``integer output x 0.01 um`` with it. Screw: ``Reference.step`` runs
+the recurrence T <- A T + B u + c0 a0 + c1 a1 on the same per-step travel (um)
+the firmware accumulated and the air it read.
 """
 
 
@@ -42,14 +42,32 @@ class Reference:
             self.fixed = float(red["fixed_end_mm"])
             self.alpha = float(red["alpha_um_per_mm_per_K"])
             self.T = [0.0] * len(self.B)
+            self.air = red.get("air_sensor")
+            M = len(self.B)
+            self.c0 = [float(v) for v in (red.get("air_K0") or [0.0] * M)]
+            self.c1 = [float(v) for v in (red.get("air_K1") or [0.0] * M)]
+            self.a0 = 0.0
         if getattr(table, "ref_mode", 0) == 1:
             self.ref = [r / 1000.0 for r in table.ref]  # latched references: whole milli-degC, as the firmware holds them
         geo = doc.get("geometric") or {}
         self.g = [float(v) for v in (geo.get("coefficients_um") or [0.0])]
+        # the firmware's start temperatures (Evaluator.__init__); update() replaces them as the firmware's update() does
+        self.temps_now = [0 if lo <= 0 <= hi else lo for lo, hi in zip(table.env_lo, table.env_hi)]
+        if self.kind == "screw":
+            self.settle()
 
-    def latch(self, refs_mC):
-        """References latched by the firmware (Evaluator.ref), milli-degC."""
+    def update(self, temps_mC):
+        """The temperatures the firmware read last (the air the next step ends at)."""
+        self.temps_now = list(temps_mC)
+
+    def latch(self, refs_mC, temps_mC=None):
+        """References latched by the firmware (Evaluator.ref), milli-degC, at the temperatures ``temps_mC``
+        (a latch is a cold start: the screw state restarts in equilibrium with the air)."""
         self.ref = [r / 1000.0 for r in refs_mC]
+        if temps_mC is not None:
+            self.temps_now = list(temps_mC)
+        if self.kind == "screw":
+            self.settle()
 
     def temps_C(self, temps_mC):
         t = self.t
@@ -105,7 +123,28 @@ class Reference:
                 s += (self.segments(hi) - self.segments(lo)) / (hi - lo) * 1000.0
         return s
 
-    def step(self, travel_um):
-        """One recurrence step with per-segment travel in um."""
+    def air_K(self, temps_mC):
+        """The air over its reference (K, clamped to the envelope); 0 without an air sensor."""
+        if not self.air:
+            return 0.0
+        i = self.sensors.index(self.air)
+        return self.temps_C(temps_mC)[i] - self.ref[i]
+
+    def settle(self, temps_mC=None):
+        """Start state: in equilibrium with the air (the firmware's construction and latch)."""
+        if temps_mC is not None:
+            self.temps_now = list(temps_mC)
+        a = self.air_K(self.temps_now)
+        self.T = [a] * len(self.B)
+        self.a0 = a
+
+    def step(self, travel_um, temps_mC=None):
+        """One recurrence step with per-segment travel in um and the temperatures at the step's end
+        (default: the last ``update``)."""
         A, B, T = self.A, self.B, self.T
-        self.T = [sum(A[i][j] * T[j] for j in range(len(T))) + B[i] * travel_um[i] / 1000.0 for i in range(len(T))]
+        if temps_mC is not None:
+            self.temps_now = list(temps_mC)
+        a1 = self.air_K(self.temps_now)
+        self.T = [sum(A[i][j] * T[j] for j in range(len(T))) + B[i] * travel_um[i] / 1000.0
+                  + self.c0[i] * self.a0 + self.c1[i] * a1 for i in range(len(T))]
+        self.a0 = a1

@@ -10,6 +10,11 @@ import random as _random
 from host.models import document_hash
 
 
+def restamp(doc):
+    """Record the document's hash again after a test edited it (as saving it would)."""
+    return _finish(doc)
+
+
 def _finish(doc):
     doc["provenance"] = {"tcomp_version": "test", "created_utc": "2026-01-01T00:00:00Z", "sha256": document_hash(doc)}
     return doc
@@ -57,7 +62,7 @@ def linear_direct_doc(rng=None, n_sensors=None):
     })
 
 
-def screw_doc(rng=None, segments=None, dt_s=None, length_mm=None, feed_max_mm_min=None, base=True, degree=None):
+def screw_doc(rng=None, segments=None, dt_s=None, length_mm=None, feed_max_mm_min=None, base=True, degree=None, air=True):
     import numpy as np
 
     from host.screw import heat
@@ -72,8 +77,10 @@ def screw_doc(rng=None, segments=None, dt_s=None, length_mm=None, feed_max_mm_mi
     params = heat.ScrewParams(q_J_per_mm=rng.uniform(0.02, 0.1), h_W_m2K=rng.uniform(8.0, 30.0))
     edges = [L * i / M for i in range(M + 1)]
     C, G, H = heat.segment_properties(edges, diameter, params)
-    A, _ = heat.Propagator(C, G, H).step(dt, 1.0)
+    prop = heat.Propagator(C, G, H)
+    A, _ = prop.step(dt, 1.0)
     A = np.clip(A, 0.0, None)
+    c0, c1 = (np.clip(c, 0.0, None) for c in prop.air_step(dt, 1.0)) if air else (np.zeros(M), np.zeros(M))
     B = params.q_J_per_mm / C
     fixed = rng.choice([-20.0, 0.0, 15.5])
     red = {
@@ -82,18 +89,21 @@ def screw_doc(rng=None, segments=None, dt_s=None, length_mm=None, feed_max_mm_mi
         "alpha_um_per_mm_per_K": 1e3 * params.alpha_per_K,
         "base_sensor": "T_base" if base else None, "base_ref_C": 20.0 if base else None,
         "feed_max_mm_min": fmax, "state_max_K": state_bound(A, B, fmax / 60.0 * dt),
+        "air_sensor": "T_air" if air else None, "air_ref_C": 21.0 if air else None,
+        "air_K0": [float(c) for c in c0], "air_K1": [float(c) for c in c1],
     }
     d = degree if degree is not None else rng.randint(0, 3)
     stroke = L + fixed - 10.0
     geo = [rng.uniform(-5, 5)] + [rng.uniform(-10, 10) / stroke ** j for j in range(1, d + 1)]
-    sensors = ["T_base"] if base else []
+    sensors = (["T_base"] if base else []) + (["T_air"] if air else [])
+    refs = dict([("T_base", 20.0)] * bool(base) + [("T_air", 21.0)] * bool(air))
     doc = {
         "format": "tcomp-model/1", "kind": "screw", "method": "screw", "axis": "Y", "channel": None,
-        "sensors": sensors, "reference_C": {"T_base": 20.0} if base else {},
+        "sensors": sensors, "reference_C": refs,
         "geometric": {"degree": d, "coefficients_um": geo},
         "thermal": {"reduced": red},
         "envelope": {"position_mm": [max(fixed, 0.0), stroke], "state_K": [0.0, red["state_max_K"]]},
     }
-    if base:
-        doc["envelope"]["temperature_C"] = {"T_base": [10.0, 40.0]}
+    if base or air:
+        doc["envelope"]["temperature_C"] = dict([("T_base", [10.0, 40.0])] * bool(base) + [("T_air", [12.0, 32.0])] * bool(air))
     return _finish(doc)

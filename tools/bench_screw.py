@@ -7,7 +7,10 @@
 2. identification wall time on three bundled runs fitted together (budget: < 20 s
    on a 2-core machine) and on each alone;
 3. reduction error of the firmware recurrence against the full model on every
-   bundled run (RMS and max of E over the stroke, µm).
+   bundled run (RMS and max of E over the stroke, µm);
+4. held-out RMSE on twin runs of the literature states 1, 2, 3, 5 in a drifting air
+   (leave-one-run-out, no hidden effect, three seeds), over the laser noise: the
+   model with the air term (budget <= 1.25) and without it.
 """
 import argparse
 import os
@@ -79,6 +82,30 @@ def bench_reduction(model, runs):
         print("    worst RMS %.3f um (limit 0.5 um)" % max(allrms))
 
 
+def bench_heldout(seeds=(11, 12, 13), noise_um=0.5):
+    try:
+        from host.sim import simulate_run
+    except ImportError:
+        print("held-out on twin runs: host.sim not available, skipped")
+        return
+    states = ("v8000_r210_490", "v6500_r210_490", "v15000_r210_490", "v8000_r0_700")
+    print("held-out RMSE on twin runs of states 1, 2, 3, 5 (drifting air, no hidden effect, noise %.2f um), "
+          "leave-one-run-out, ambient=off:" % noise_um)
+    for air in ("auto", "off"):
+        ratios = []
+        t0 = time.perf_counter()
+        for seed in seeds:
+            runs = [simulate_run(p, seed=seed + i, noise_um=noise_um) for i, p in enumerate(states)]
+            for k, r in enumerate(runs):
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", IdentifiabilityWarning)
+                    m = ScrewModel(ambient=False, air=air).fit([x for j, x in enumerate(runs) if j != k])
+                ratios.append(float(np.sqrt(np.mean((r.errors.error_um - m.predict(r)) ** 2))) / noise_um)
+        print("  air %-4s RMSE / noise: median %.2f, max %.2f over %d held-out runs (%.1f s)%s"
+              % (air, np.median(ratios), np.max(ratios), len(ratios), time.perf_counter() - t0,
+                 "  (budget <= 1.25)" if air == "auto" else "  (the air term removed)"))
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--runs", nargs="*", help="run folders (default: data/demo/)")
@@ -95,6 +122,7 @@ def main(argv=None):
     three = [by_name[n] for n in THREE if n in by_name] or runs[:3]
     model = bench_identification(three)
     bench_reduction(model, runs)
+    bench_heldout()
     return 0
 
 

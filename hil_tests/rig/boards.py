@@ -44,6 +44,8 @@ def _rename(doc, names):
     red = th.get("reduced")
     if red and red.get("base_sensor"):
         red["base_sensor"] = m[red["base_sensor"]]
+    if red and red.get("air_sensor"):
+        red["air_sensor"] = m[red["air_sensor"]]
     return doc
 
 
@@ -62,10 +64,12 @@ def poly_slope_for_run(run, sensors, seed=3, degree=2):
     return _finish(doc)
 
 
-def screw_doc(sensors=("T1",), seed=5):
-    """A screw model document (reduced recurrence) with base sensor ``sensors[0]``."""
+def screw_doc(sensors=("T1", "T2"), seed=5):
+    """A screw model document (reduced recurrence) with base sensor ``sensors[0]`` and air sensor
+    ``sensors[1]`` (none when only one name is given)."""
     from models_export.samples import screw_doc as sample
-    doc = sample(random.Random(seed), segments=8, dt_s=1.0, length_mm=800.0, feed_max_mm_min=12000.0, base=True)
+    doc = sample(random.Random(seed), segments=8, dt_s=1.0, length_mm=800.0, feed_max_mm_min=12000.0, base=True,
+                 air=len(sensors) > 1)
     doc = _rename(doc, list(sensors)[:len(doc["sensors"])])
     return _finish(doc)
 

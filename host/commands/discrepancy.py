@@ -1,4 +1,4 @@
-"""tcomp discrepancy RUN... [--base screw] --json OUT.json --report DIR"""
+"""tcomp discrepancy RUN... [--base screw] --json OUT.json [--report DIR] [--air auto|off]"""
 HELP = "find where the screw model and the measurements disagree, name the missing physical effect(s), refit (held-out evidence)"
 
 
@@ -6,7 +6,9 @@ def add_arguments(p):
     p.add_argument("runs", nargs="+", metavar="RUN", help="run folders (>= 2: leave-one-run-out; 1: two-block time split)")
     p.add_argument("--base", default="screw", choices=("screw",), help="base model: the screw model with E_m only (default)")
     p.add_argument("--json", required=True, help="write the findings as JSON (effects, held-out RMSEs, localization, candidates)")
-    p.add_argument("--report", required=True, metavar="DIR", help="folder for report.md, plots and the final model.json")
+    p.add_argument("--report", metavar="DIR", help="folder for report.md, plots and the final model.json (optional: without it the JSON alone)")
+    p.add_argument("--air", choices=("auto", "off"), default="auto",
+                   help="the screw exchanges heat with the measured air (auto: role ambient, else base; default) or a constant air (off)")
     p.add_argument("--candidates", help="comma-separated catalog effects to test (default: the whole catalog)")
     p.add_argument("--alpha", type=float, default=None, help="family-wise significance level per round (default: host.discrepancy.workflow.ALPHA = 0.01)")
     p.add_argument("--min-gain", type=float, default=None, help="smallest held-out relative RMSE reduction to accept (default: host.discrepancy.workflow.MIN_GAIN = 0.10)")
@@ -19,7 +21,8 @@ def run(args):
 
     with Outputs(args.runs) as out:
         out.file(args.json, "--json")
-        out.folder(args.report, "--report")
+        if args.report:
+            out.folder(args.report, "--report")
         rc = _discrepancy(args, out)
         out.commit()
     return rc
@@ -45,7 +48,7 @@ def _discrepancy(args, out):
     for i, r in enumerate(runs):
         if r.name in dup:
             r.name = "%s#%d" % (r.name, i + 1)
-    family = ScrewFamily()
+    family = ScrewFamily(air=args.air == "auto")
     candidates = None
     if args.candidates:
         candidates = [c.strip() for c in args.candidates.split(",") if c.strip()]
@@ -76,9 +79,12 @@ def _discrepancy(args, out):
                                    max_effects=args.max_effects, jobs=args.jobs, log=print)
     except (ValueError, RuntimeError) as exc:
         raise UserError(str(exc))
-    js = write_report(result, family, out.path(args.report), json_path=out.path(args.json), shown_folder=args.report)
+    js = write_report(result, family, out.path(args.report) if args.report else None, json_path=out.path(args.json), shown_folder=args.report)
     print("named effects: %s" % (", ".join(result.effects) or "none (no catalog effect explains the gap)"))
-    print("held-out RMSE %.3f -> %.3f um; report in %s, JSON in %s" % (result.before.rmse(), result.after.rmse(), args.report, args.json))
+    print("held-out RMSE %.3f -> %.3f um; %sJSON in %s" % (result.before.rmse(), result.after.rmse(),
+                                                            "report in %s, " % args.report if args.report else "", args.json))
+    for d in js.get("unexplained", []):
+        print("unexplained: follows %s (partial r %.2f, %.0f %% of the held-out RMSE)" % (d["signal"], d["partial_r"], 100 * d["rmse_share"]))
     if js.get("model_error"):
         # The findings (JSON, report) stand; the corrected model the user asked for does not.
         print("tcomp discrepancy: error: final model not written: %s" % js["model_error"], file=sys.stderr)

@@ -9,7 +9,7 @@ import numpy as np
 from host.discrepancy.localize import residual_map
 
 
-def final_model_document(result, runs):
+def final_model_document(result, runs, air=True):
     """Fit host/screw's ScrewModel with the named effects on all runs; return its model document.
 
     ``ambient_expansion`` maps to the screw model's own E_e term (base sensor);
@@ -22,7 +22,8 @@ def final_model_document(result, runs):
     effects = [make_effect(n) for n in result.effects if n != "ambient_expansion" and n in SCREW_EFFECTS]
     # 20 segments and 20 s steps: within a fraction of a micrometre of the 40-segment,
     # 10 s default on sweeps 15 min apart, at a quarter of the identification time
-    model = ScrewModel(segments=20, dt_s=20.0, ambient="ambient_expansion" in result.effects, effects=effects, geometric_degree=3)
+    model = ScrewModel(segments=20, dt_s=20.0, ambient="ambient_expansion" in result.effects, effects=effects, geometric_degree=3,
+                       air="auto" if air else "off")
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         # host/screw refuses runs without motion (nothing drives E_m); they carry no screw information
@@ -177,6 +178,12 @@ def markdown(result, js, model_path=None, model_error=None):
     if not js.get("evidence"):
         lines.append("")
         lines.append("No catalog effect passed the test; the base model's gap is not explained by the catalog.")
+    lines.append("")
+    lines.append("## What is left")
+    lines.append("")
+    from host.discrepancy import unexplained
+
+    lines += unexplained.text(js.get("unexplained_all", []), result.after.rmse())
     for k, rnd in enumerate(result.rounds, 1):
         lines.append("")
         lines.append("## Round %d: base + %s (held-out RMSE %.3f um)" % (k, ", ".join(rnd.base_effects) or "nothing", rnd.rmse_before_um))
@@ -219,20 +226,49 @@ def markdown(result, js, model_path=None, model_error=None):
     return "\n".join(lines) + "\n"
 
 
+def residual_diagnostic(result, family):
+    """host.discrepancy.unexplained on the final model's held-out residual (all signals, strongest first)."""
+    from host.discrepancy import unexplained
+
+    used = set()
+    if hasattr(family, "used_sensors"):
+        for r in result.runs:
+            used |= family.used_sensors(r, result.effects)
+    return unexplained.diagnose(result.runs, result.after.residuals, used)
+
+
+def findings(result, family, model_path=None, model_error=None):
+    """The JSON fields beyond ``result.as_json()``: model, model_error, evidence, unexplained, unexplained_all."""
+    from host.discrepancy import unexplained
+
+    diag = residual_diagnostic(result, family)
+    return {"model": model_path, "model_error": model_error, "evidence": evidence(result),
+            "unexplained": unexplained.summary(diag),
+            "unexplained_all": [{k: d[k] for k in ("signal", "partial_r", "rmse_share", "rmse_share_heldout", "above_threshold", "where")}
+                                for d in diag]}
+
+
 def write_report(result, family, folder, json_path=None, shown_folder=None):
-    """JSON (``json_path``), model.json, plots and report.md in ``folder``; returns the JSON dict.
+    """JSON (``json_path``), model.json, plots and report.md in ``folder`` (None: the JSON alone); returns the JSON dict.
 
     ``shown_folder``: the folder's name as recorded in the report, when ``folder`` is a staging place.
     """
+    if folder is None:
+        extra = findings(result, family)
+        if json_path:
+            write_json(result, json_path, extra)
+        js = result.as_json()
+        js.update(extra)
+        return js
     os.makedirs(folder, exist_ok=True)
     model_path, model_error = os.path.join(shown_folder or folder, "model.json"), None
     try:
         from host.models import save_model
 
-        save_model(final_model_document(result, result.runs), os.path.join(folder, "model.json"))
+        save_model(final_model_document(result, result.runs, air=getattr(family, "air", True)), os.path.join(folder, "model.json"))
     except Exception as exc:  # the findings stand even when the final document cannot be built
         model_path, model_error = None, "%s: %s" % (type(exc).__name__, exc)
-    extra = {"model": model_path, "model_error": model_error, "evidence": evidence(result)}
+    extra = findings(result, family, model_path, model_error)
     js = result.as_json()
     js.update(extra)
     if json_path:

@@ -1,7 +1,11 @@
 """The screw heat-transfer model as a family for the discrepancy loop: base E_m plus catalog effects.
 
 Physics: host/screw/heat.py (segments, exact exponential integrator, nut travel,
-E_m). The base model is E = geometric(P) + E_m with the friction heat per mm q,
+E_m). The screw exchanges heat with the measured air (role ``ambient``; the base
+sensor as a fallback, else a constant air: ``Drive.air_source``), so E_m holds the
+screw's lagged expansion with the air; that response does not scale with q and
+enters the linear solve as a fixed offset. The base model is
+E = geometric(P) + E_m with the friction heat per mm q,
 the convection coefficient h and the axial conductivity lambda identified; c, rho
 and alpha are the material values from meta.json (steel by default; q, c and rho
 only enter as q/(c rho) and alpha scales q, so they cannot be identified apart).
@@ -30,12 +34,15 @@ Q_BOUNDS = (0.0, 10.0)  # J/mm
 PRIOR_WEIGHT_UM = 1.0
 LAMBDA_BOUNDS = (5.0, 200.0)  # W/(m K): the axial conduction of the screw (steel ~46)
 LOG_PARAMS = ("h_W_m2K", "lambda_W_mK")
+# Longest simulation step: the air enters linearly between grid points, and the shop's HVAC ripple
+# (periods of 20-45 min) needs about ten points per period; 120 s keeps the hold error below 1 % of it.
+MAX_STEP_S = 120.0
 
 
 class Drive:
     """Everything about one run the fits need, computed once: time grid, nut travel, row mapping."""
 
-    def __init__(self, run, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE):
+    def __init__(self, run, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE, air=True):
         if run.screw is None:
             raise ValueError("run %s: meta.json has no 'screw' block; the screw model needs the screw geometry" % run.name)
         e = run.errors
@@ -51,6 +58,8 @@ class Drive:
         times = [np.array([0.0]), e.time_s]
         if m is not None and len(m):
             times += [m.t_start_s, m.t_end_s]
+        t_end = max(float(np.max(np.concatenate(times))), 0.0)
+        times.append(np.arange(0.0, t_end, MAX_STEP_S))
         t = np.unique(np.concatenate(times))
         t = t[t >= 0]
         self.t = t
@@ -88,12 +97,27 @@ class Drive:
             t0 = np.interp(0.0, tt.time_s, col)
             self.base_rise = np.interp(e.time_s, tt.time_s, col) - t0
         self.error_um = e.error_um
+        self.air_K, self.air_source, self.air_sensor = None, "off", None
+        if air:
+            names = run.temperatures.names
+            amb = [n for n in run.sensors_with_role("ambient") if n in names]
+            fallback = [n for n in run.sensors_with_role("base") if n in names]
+            name = (amb or fallback or [None])[0]
+            self.air_source = ("ambient %s" % name if amb else "base %s (no ambient sensor)" % name) if name else \
+                "constant (no ambient or base sensor)"
+            self.air_sensor = name
+            if name is not None:
+                tt = run.temperatures
+                col = tt.column(name)
+                self.air_K = np.interp(t, tt.time_s, col) - np.interp(0.0, tt.time_s, col)
 
-    def response(self, h, conv, heat_J=None, source_W=None, lam=None):
-        """E_m (um) at the error rows for one heat input, convection h (and conductivity lam) and multiplier conv."""
+    def response(self, h, conv, heat_J=None, source_W=None, lam=None, air_K=None):
+        """E_m (um) at the error rows for one heat input (or the air ``air_K`` on the grid), convection h
+        (and conductivity lam) and multiplier conv."""
         lam = self.material.lambda_W_mK if lam is None else lam
         mat = heat.ScrewParams(1.0, self.material.c_J_kgK, self.material.density_kg_m3, lam, h, self.alpha_per_K)
-        rises = heat.simulate_segments(self.geometry, mat, self.t, heat_J=heat_J, convection_mult=conv, source_W=source_W)
+        rises = heat.simulate_segments(self.geometry, mat, self.t, heat_J=heat_J, convection_mult=conv, source_W=source_W,
+                                       air_K=air_K)
         return 1e3 * self.alpha_per_K * np.einsum("rm,rm->r", rises[self.row_step], self.overlap)
 
 
@@ -142,8 +166,9 @@ def _bounded_lstsq(X, y, lo, hi):
 class ScrewFamily:
     """Base screw model (E_m, no ambient term) plus effects from ``catalog``."""
 
-    def __init__(self, catalog=None, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE, free_lambda=True):
+    def __init__(self, catalog=None, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE, free_lambda=True, air=True):
         self.free_lambda = free_lambda
+        self.air = air
         self.catalog = dict(CATALOG if catalog is None else catalog)
         self.candidates = tuple(self.catalog)
         self.segments = segments
@@ -153,8 +178,16 @@ class ScrewFamily:
     def drive(self, run):
         key = id(run)
         if key not in self._drives:
-            self._drives[key] = (run, Drive(run, self.segments, self.geometric_degree))
+            self._drives[key] = (run, Drive(run, self.segments, self.geometric_degree, air=self.air))
         return self._drives[key][1]
+
+    def used_sensors(self, run, effects=()):
+        """The temperature columns the model with ``effects`` reads for ``run``."""
+        d = self.drive(run)
+        used = {d.air_sensor} - {None}
+        if "ambient_expansion" in effects:
+            used.update(run.sensors_with_role("base")[:1])
+        return used
 
     def applicable(self, runs, name):
         why = self.catalog[name].applicable(runs)
@@ -205,7 +238,9 @@ class ScrewFamily:
         return nl, lin
 
     def _design(self, drive, effects, x, nl_names):
-        """Columns (rows, n_linear) for nonlinear parameter vector x (h in log space)."""
+        """(columns (rows, n_linear), fixed offset (rows,)) for nonlinear parameter vector x (h in log space).
+
+        The offset is the screw's response to the air, which no linear amplitude scales."""
         vals = dict(zip(nl_names, x))
         h = float(np.exp(vals["h_W_m2K"]))
         lam = float(np.exp(vals["lambda_W_mK"])) if "lambda_W_mK" in vals else None
@@ -225,7 +260,8 @@ class ScrewFamily:
                     cols.append(drive.response(h, conv, heat_J=hj, source_W=src, lam=lam))
             elif eff.hook == "output" and eff.columns is not None:
                 cols += list(np.asarray(eff.columns(drive), dtype=float).T)
-        return np.column_stack(cols)
+        offset = 0.0 if drive.air_K is None else drive.response(h, conv, air_K=drive.air_K, lam=lam)
+        return np.column_stack(cols), offset
 
     # ------------------------------------------------------------ fit / predict
 
@@ -265,8 +301,10 @@ class ScrewFamily:
         def solve(x):
             key = tuple(np.round(x, 12))
             if key not in cache:
-                X = np.vstack([self._design(d, effects, x, nl_names)[m] for d, m in used] + [P])
-                yy = np.concatenate([y, np.zeros(P.shape[0])])
+                parts = [(self._design(d, effects, x, nl_names), m) for d, m in used]
+                X = np.vstack([Xd[m] for (Xd, _), m in parts] + [P])
+                off = np.concatenate([np.broadcast_to(o, m.shape)[m] for (_, o), m in parts])
+                yy = np.concatenate([y - off, np.zeros(P.shape[0])])
                 # scale columns so the bounded solver sees a well-conditioned problem
                 s = np.sqrt(np.sum(X ** 2, axis=0))
                 s[s == 0] = 1.0
@@ -286,6 +324,6 @@ class ScrewFamily:
         nl, lin = self._layout(fitted.effects)
         nl_names = [p[0] for p in nl]
         x = np.array([np.log(fitted.nonlinear[n]) if n in LOG_PARAMS else fitted.nonlinear[n] for n in nl_names])
-        X = self._design(self.drive(run), fitted.effects, x, nl_names)
+        X, offset = self._design(self.drive(run), fitted.effects, x, nl_names)
         beta = np.array([fitted.linear[p[0]] for p in lin])
-        return X @ beta
+        return X @ beta + offset

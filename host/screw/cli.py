@@ -3,7 +3,7 @@
 Options (``--option KEY=VALUE``, repeatable): segments, dt_s, free (comma list of
 q,h,lambda,c,alpha), geometric_degree (0..4 or auto), effects (comma list of
 host/screw/effects.py names), nut_weight, reduced_segments, reduced_dt_s,
-feed_max_mm_min, ambient (on/off), base_ref (run_start/fixed), max_nfev,
+feed_max_mm_min, ambient (on/off), air (auto, a sensor name, or off), base_ref (run_start/fixed), max_nfev,
 fit_window (LO:HI seconds, either side may be empty: fit only on error rows in it).  ``--sensors NAME`` picks the base
 sensor of the E_e term; ``--channel`` the errors.csv channel.
 """
@@ -15,7 +15,7 @@ from host.screw.identify import IdentifiabilityWarning
 
 OPTIONS = {
     "segments": int, "dt_s": float, "free": str, "geometric_degree": str, "effects": str, "nut_weight": float,
-    "reduced_segments": int, "reduced_dt_s": float, "feed_max_mm_min": float, "ambient": str, "max_nfev": int, "base_ref": str, "fit_window": str,
+    "reduced_segments": int, "reduced_dt_s": float, "feed_max_mm_min": float, "ambient": str, "air": str, "max_nfev": int, "base_ref": str, "fit_window": str,
 }
 
 
@@ -56,15 +56,17 @@ def parse_options(items):
 
 def format_report(model):
     st = model.statistics_
-    lines = ["screw model: %d segments, dt %g s, geometric degree %d" % (model.geometry_.segments, model.dt_s, model.geometric_degree_)]
+    lines = ["screw model: %d segments, dt %g s, geometric degree %d" % (model.geometry_.segments, model.dt_s, model.geometric_degree_),
+             "  air: %s (%s)" % (model.air_sensor_ or "constant", model.air_source_)]
     for name, p in st["parameters"].items():
         if p.get("fixed"):
             lines.append("  %-22s %12.5g %-10s (fixed)" % (name, p["value"], p["unit"]))
         else:
             lines.append("  %-22s %12.5g %-10s ± %.3g (%.2f %%)" % (name, p["value"], p["unit"], p["std"], 100 * p["rel_std"]))
     for r in st["runs"]:
-        lines.append("  run %s: %d rows, RMSE %.3f um, max |residual| %.3f um, nut rise RMSE %.2f K"
-                     % (r["run"], r["rows"], r["rmse_um"], r["max_abs_residual_um"], r["nut_rise_rmse_K"]))
+        nut = "no nut sensor" if r["nut_rise_rmse_K"] is None else "nut rise RMSE %.2f K" % r["nut_rise_rmse_K"]
+        lines.append("  run %s: %d rows, RMSE %.3f um, max |residual| %.3f um, %s"
+                     % (r["run"], r["rows"], r["rmse_um"], r["max_abs_residual_um"], nut))
     red = model.reduced_
     for run, e in red["reduction_error_um"].items():
         lines.append("  reduced (%d segments, dt %g s) vs full on %s: RMS %.3f um, max %.3f um"

@@ -5,13 +5,19 @@ fixed (axially located) at screw coordinate x = 0, free to grow towards +x.
 Axis positions P map to screw coordinates by ``x = P - fixed_end_mm``.  It is cut
 into M segments (``edges_mm``, M+1 ascending edges, ``edges_mm[0] = 0``).
 
-State: T_i, the temperature rise of segment i over the surrounding air [K].
-Energy balance of segment i (capacity C_i = c·ρ·V_i)::
+State: T_i, the temperature of segment i over a FIXED reference temperature [K]
+(the caller's choice: the air at the start of the run, or a calibration
+temperature).  Energy balance of segment i (capacity C_i = c·ρ·V_i)::
 
     C_i dT_i/dt = q·u_i/dt                               friction heat of the nut
                   - Σ_j G_ij (T_i - T_j)                 axial conduction, G = λ·A/Δx
-                  - g·h·S_i·T_i                          convection, S_i = π·d·L_i
+                  - g·h·S_i·(T_i - a(t))                 convection to the air, S_i = π·d·L_i
                   + p_i                                  extra source (bearing, ...)
+
+a(t) is the air temperature over the same reference (``air_K``; None = the air
+stays at the reference, which is the old "rise over a still air" model).  When
+the air warms at a rate r the screw follows it with a lag r·τ, τ = c·ρ·d/(4h) for a
+solid screw far from the nut.
 
 q [J/mm] is the friction heat released per mm of nut travel; the heat of one nut
 pass over a segment of length L is Q = q·L (so Q depends on the segmentation, q
@@ -24,6 +30,17 @@ zero-order-hold input.  Over a step of length dt with constant power the linear
 system T' = K·T + C⁻¹p is solved exactly::
 
     T[k+1] = e^{K dt} T[k] + K⁻¹(e^{K dt} - I) C⁻¹ p[k]
+
+The air enters as a first-order hold: a(t) linear between the grid values
+a[k] and a[k+1], which the scheme integrates exactly.  Per mode (decay rate λ,
+x = λ·dt) the weights of a[k] and a[k+1] on the convection power g·h·S are::
+
+    Γ1 = ∫_0^dt e^{-λ(dt-s)} s/dt ds = dt·(x - 1 + e^{-x})/x²     (the K⁻² term)
+    Γ0 = ∫_0^dt e^{-λ(dt-s)} ds - Γ1 = (1 - e^{-x})/λ - Γ1         (the K⁻¹ term)
+
+(Γ1 → dt/2 as λ → 0, evaluated by its series there).  Γ0, Γ1 ≥ 0 and, for
+uniform air and no heat, A·1 + (Γ0 + Γ1)-weights·1 = 1 exactly: a screw in
+equilibrium with a still air stays there.
 
 computed through the symmetric form C^{-1/2}(G + g·H)C^{-1/2} = U diag(s) Uᵀ (eigh),
 so e^{K dt} = C^{-1/2} U diag(e^{-s dt}) Uᵀ C^{1/2}.  Every eigenvalue factor
@@ -246,11 +263,31 @@ def friction_heat_J(travel_mm, params):
 # ------------------------------------------------------------------ integration
 
 
+def hold_weights(s, dt):
+    """Modal integrals over a step of length dt for decay rates s [1/s] (array).
+
+    Returns (phi, gamma0, gamma1): phi = ∫_0^dt e^{-s(dt-τ)} dτ (zero-order hold of a
+    constant input), gamma1 = ∫_0^dt e^{-s(dt-τ)} τ/dt dτ (weight of the input's value
+    at the step's end under a first-order hold) and gamma0 = phi - gamma1 (weight of
+    its value at the step's start)."""
+    s = np.asarray(s, dtype=float)
+    x = s * dt
+    small = x < 1e-4
+    safe = np.where(small, 1.0, x)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        phi = np.where(x > 1e-12, -np.expm1(-safe) / safe, 1.0 - x / 2.0) * dt
+        # (x - 1 + e^{-x}) / x²: cancels for small x, so its series there (error < x³/720)
+        g1 = np.where(small, 0.5 - x / 6.0 + x * x / 24.0, (safe + np.expm1(-safe)) / (safe * safe)) * dt
+    return phi, phi - g1, g1
+
+
 class Propagator:
     """Exact step matrices of the segment system for given properties.
 
     ``step(dt, g)`` -> (A, Bp): T[k+1] = A·T[k] + Bp·p[k] with p the (constant) power
-    [W] per segment during the step and g the convection multiplier."""
+    [W] per segment during the step and g the convection multiplier;
+    ``air_step(dt, g)`` -> (c0, c1): the air's contribution c0·a[k] + c1·a[k+1] (air
+    linear within the step)."""
 
     def __init__(self, C, G, H):
         self.C = np.asarray(C, dtype=float)
@@ -304,6 +341,16 @@ class Propagator:
             self._cache[key] = (A, Bp)
         return self._cache[key]
 
+    def air_step(self, dt, g=1.0):
+        gkey = float(g) if np.ndim(g) == 0 else tuple(np.round(np.asarray(g, dtype=float), 12))
+        key = ("air", round(float(dt), 9), gkey)
+        if key not in self._cache:
+            s, U = self.modes(g)
+            _, g0, g1 = hold_weights(s, dt)
+            v = (np.broadcast_to(np.asarray(g, dtype=float), self.H.shape) * self.H * self._rs) @ U  # g·h·S in the modal basis
+            self._cache[key] = (self._rs * (U @ (g0 * v)), self._rs * (U @ (g1 * v)))
+        return self._cache[key]
+
 
 def rows_matmul(X, A, rows=None):
     """X @ A for a tall X, computed in row blocks (default: about 2·10⁵ multiply-adds each).
@@ -354,8 +401,10 @@ def modal_scan(e, W, z0, block=64):
     return Z.reshape(nb * B, M)[:n]
 
 
-def simulate_segments(geometry, params, t_grid, heat_J=None, convection_mult=None, source_W=None, T0=None, edges_mm=None):
-    """Integrate the segment rises over ``t_grid``; returns (n_steps+1, M) in K.
+def simulate_segments(geometry, params, t_grid, heat_J=None, convection_mult=None, source_W=None, T0=None, edges_mm=None,
+                      air_K=None):
+    """Integrate the segment temperatures over ``t_grid``; returns (n_steps+1, M) in K
+    over the reference temperature.
 
     heat_J: (n_steps, M) heat delivered into each segment during each step [J]
       (e.g. ``friction_heat_J(nut_travel_per_segment(...), params)``); None = none.
@@ -363,9 +412,13 @@ def simulate_segments(geometry, params, t_grid, heat_J=None, convection_mult=Non
       and segment: multiplies h·S (the moving_convection effect).
     source_W: None, (M,) constant or (n_steps, M) extra power [W] (bearing heat
       into segment 0, ...).
-    T0: (M,) initial rises (default 0).
+    T0: (M,) initial temperatures (default: in equilibrium with the air, a[0]; 0
+      without air).
     edges_mm: segment edges (default the geometry's uniform segmentation).
-    Exact for piecewise-constant power and multiplier (see module doc)."""
+    air_K: None or (n_steps+1,) air temperature over the reference at the grid
+      times, linear in between.
+    Exact for piecewise-constant power and multiplier and piecewise-linear air (see
+    module doc)."""
     t = np.asarray(t_grid, dtype=float)
     edges = geometry.edges_mm if edges_mm is None else np.asarray(edges_mm, dtype=float)
     M = edges.size - 1
@@ -384,9 +437,16 @@ def simulate_segments(geometry, params, t_grid, heat_J=None, convection_mult=Non
         power += heat_J / dt[:, None]
     if source_W is not None:
         power += np.broadcast_to(np.asarray(source_W, dtype=float), (n, M))
+    air = None
+    if air_K is not None:
+        air = np.asarray(air_K, dtype=float)
+        if air.shape != (n + 1,):
+            raise ValueError("air_K must have shape (n_steps+1,) = (%d,), found %s" % (n + 1, air.shape))
+        if not np.all(np.isfinite(air)):
+            raise ValueError("air_K contains non-finite values")
     prop = Propagator(C, G, H)
     out = np.empty((n + 1, M))
-    out[0] = 0.0 if T0 is None else np.asarray(T0, dtype=float)
+    out[0] = (0.0 if air is None else air[0]) if T0 is None else np.asarray(T0, dtype=float)
     if n == 0:
         return out
     gk = np.ones(n) if convection_mult is None else np.asarray(convection_mult, dtype=float)
@@ -400,6 +460,10 @@ def simulate_segments(geometry, params, t_grid, heat_J=None, convection_mult=Non
         e = np.exp(-s * h)
         phi = np.where(s * h > 1e-12, -np.expm1(-s * h) / np.where(s > 0, s, 1.0), h)
         W = rows_matmul(power * prop._rs, U) * phi
+        if air is not None:
+            _, g0, g1 = hold_weights(s, h)
+            v = (np.broadcast_to(g, (M,)) * H * prop._rs) @ U
+            W += np.outer(air[:-1], g0 * v) + np.outer(air[1:], g1 * v)
         Z = modal_scan(e, W, (out[0] * prop._s) @ U)
         out[1:] = rows_matmul(Z, U.T) * prop._rs
         return out
@@ -419,6 +483,9 @@ def simulate_segments(geometry, params, t_grid, heat_J=None, convection_mult=Non
         As[j] = A
         idx = np.flatnonzero(inv == j)
         drive[idx] = rows_matmul(power[idx], Bp.T)
+        if air is not None:
+            c0, c1 = prop.air_step(row[0], g)
+            drive[idx] += np.outer(air[idx], c0) + np.outer(air[idx + 1], c1)
     T = out[0].copy()
     for k in range(n):
         T = As[inv[k]] @ T + drive[k]

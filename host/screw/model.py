@@ -53,11 +53,15 @@ class ScrewModel:
     (each run's first base reading: every run starts in equilibrium and its cold
     geometric error is the one measured then) or "fixed" (``base_ref_C_``, the first
     training run's start, as a firmware with a fixed calibration temperature does);
-    fit_window: (t_lo, t_hi) in s, fit only on error rows in that window (None = all)."""
+    fit_window: (t_lo, t_hi) in s, fit only on error rows in that window (None = all);
+    air: the air temperature the screw exchanges heat with: "auto" (the first sensor
+    with role 'ambient'; else the base sensor, else a constant air, each fallback
+    warned about in statistics.warnings), a sensor name, or "off" (constant air: the
+    screw as a rise over a still air, the model before the air term)."""
 
     def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient=True,
                  nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200, base_sensor=None,
-                 base_ref="run_start", fit_window=None):
+                 base_ref="run_start", fit_window=None, air="auto"):
         self.segments = segments
         self.dt_s = dt_s
         self.free = free
@@ -73,6 +77,7 @@ class ScrewModel:
         self.base_sensor = base_sensor
         self.base_ref = base_ref
         self.fit_window = fit_window
+        self.air = air
 
     # ------------------------------------------------------------ parameters
 
@@ -102,6 +107,20 @@ class ScrewModel:
     def _context(self, run, rows=None):
         return RunContext(run, self.geometry_, self.dt_s, rows=rows)
 
+    def air_K(self, ctx):
+        """Air temperature over the model's reference on the context's grid (None: constant air).
+
+        The reference is the air at the run's start (base_ref "run_start": the screw starts in
+        equilibrium at 0) or ``air_ref_C_`` (base_ref "fixed": it starts at the air's offset)."""
+        name = getattr(self, "air_sensor_", None)
+        if name is None:
+            return None
+        if name not in ctx.run.temperatures.names:
+            raise ValueError("%s: the model's air sensor %r is not in temperatures.csv" % (ctx.run_name, name))
+        tt = ctx.run.temperatures
+        air = np.interp(ctx.t_grid, tt.time_s, tt.column(name))
+        return air - (float(tt.column(name)[0]) if self.base_ref == "run_start" else self.air_ref_C_)
+
     def simulate_context(self, ctx, allvals=None):
         """Segment rises (n_steps+1, M) on the context's grid."""
         allvals = self.values_ if allvals is None else allvals
@@ -119,7 +138,8 @@ class ScrewModel:
             if hasattr(e, "heat_W"):
                 extra += e.heat_W(ctx, p) * ctx.dt[:, None]
         heat_J = heat.friction_heat_J(ctx.travel_mm, base) * scale[:, None] + extra
-        return heat.simulate_segments(ctx.geometry, base, ctx.t_grid, heat_J, convection_mult=conv, edges_mm=ctx.edges_mm)
+        return heat.simulate_segments(ctx.geometry, base, ctx.t_grid, heat_J, convection_mult=conv, edges_mm=ctx.edges_mm,
+                                      air_K=self.air_K(ctx))
 
     def thermal_context(self, ctx, allvals=None, rises=None):
         """E_m + E_e + effect outputs at the context's rows (µm), without the geometric part."""
@@ -176,6 +196,35 @@ class ScrewModel:
             raise ValueError("%s: channel %r not in errors.csv (channels: %s)" % (run.path or run.name, self.channel, ", ".join(chans)))
         return np.flatnonzero(e.channel == self.channel)
 
+    def _choose_air(self, runs):
+        """(air sensor or None, how it was chosen, warnings) for ``self.air``."""
+        first = runs[0]
+        name0 = first.path or first.name
+        notes = []
+        if self.air == "off":
+            return None, "off", notes
+        if self.air != "auto":
+            if not isinstance(self.air, str) or self.air not in first.temperatures.names:
+                raise ValueError("%s: air sensor %r is not a column of temperatures.csv (columns: %s)"
+                                 % (name0, self.air, ", ".join(first.temperatures.names)))
+            name, source = self.air, "option"
+        else:
+            amb = [n for n in first.sensors_with_role("ambient") if n in first.temperatures.names]
+            base = [n for n in first.sensors_with_role("base") if n in first.temperatures.names]
+            if amb:
+                name, source = amb[0], "role ambient"
+            elif base:
+                name, source = base[0], "base sensor (fallback)"
+                notes.append("no sensor with role 'ambient': the screw exchanges heat with the base sensor %s instead of the air; "
+                             "the lag of the base behind the air is then missing from the model" % name)
+            else:
+                notes.append("no sensor with role 'ambient' or 'base': the air is taken as constant (no air drift in the model)")
+                return None, "constant (no ambient or base sensor)", notes
+        missing = [r.path or r.name for r in runs if name not in r.temperatures.names]
+        if missing:
+            raise ValueError("air sensor %r missing from temperatures.csv of %s" % (name, ", ".join(missing)))
+        return name, source, notes
+
     def _free_names(self, runs, meta_params):
         if self.free is not None:
             names = [_resolve(n.strip()) for n in (self.free.split(",") if isinstance(self.free, str) else self.free) if n.strip()]
@@ -207,7 +256,7 @@ class ScrewModel:
         if geo is None:
             raise ValueError("%s: meta.json has no 'screw' block (length_mm, diameter_mm, lead_mm, fixed_end_mm)" % (runs[0].path or runs[0].name))
         for r in runs:
-            check_run(r, geo)
+            check_run(r, geo, require_nut=self.nut_weight > 0)
             s0, s = runs[0].meta["screw"], r.meta.get("screw") or {}
             for k in ("length_mm", "diameter_mm", "fixed_end_mm"):
                 if float(s.get(k, 0)) != float(s0.get(k, 0)):
@@ -229,7 +278,10 @@ class ScrewModel:
             self.base_ref_C_ = float(runs[0].temperatures.column(self.base_sensor_)[0])
         else:
             self.base_ref_C_ = None
-        self.nut_sensor_ = next(n for n in runs[0].sensors_with_role("nut") if n in runs[0].temperatures.names)
+        # the nut sensor is not a model input: reported against the simulated screw under the nut when present
+        self.nut_sensor_ = next((n for n in runs[0].sensors_with_role("nut") if n in runs[0].temperatures.names), None)
+        self.air_sensor_, self.air_source_, air_notes = self._choose_air(runs)
+        self.air_ref_C_ = float(runs[0].temperatures.column(self.air_sensor_)[0]) if self.air_sensor_ else None
         specs_all = self._specs(meta_params)
         free = self._free_names(runs, meta_params)
         self.free_ = free
@@ -245,6 +297,8 @@ class ScrewModel:
         P = np.concatenate([c.positions_mm for c in ctxs])
         self.p_scale_ = float(max(np.max(np.abs(P)), 1.0))
         nut_meas = [c.nut_rise_measured() for c in ctxs] if self.nut_weight > 0 else None
+        if nut_meas is not None:  # the nut's temperature over the reference, as the state is
+            nut_meas = [m + (self.air_K(c) if self.air_sensor_ else 0.0) for m, c in zip(nut_meas, ctxs)]
 
         def thermal_all(values):
             allv = dict(fixed)
@@ -299,7 +353,8 @@ class ScrewModel:
         self.geometric_degree_ = degree
         pred = f + self.geometric_um(P)
         stats = {"rmse_um": float(np.sqrt(np.mean((y - pred) ** 2))), "max_abs_residual_um": float(np.max(np.abs(y - pred))),
-                 "runs": [], "parameters": {}, "warnings": res["warnings"] if res else [], "flat_directions": res["flat"] if res else [],
+                 "runs": [], "parameters": {}, "warnings": (res["warnings"] if res else []) + air_notes,
+                 "flat_directions": res["flat"] if res else [],
                  "geometric_degree_scores": degree_scores, "nfev": res["nfev"] if res else 0}
         for s, v, sd, rel in zip(specs, values, res["std"] if res else [], res["rel_std"] if res else []):
             stats["parameters"][s.name] = {"value": float(v), "std": float(sd), "rel_std": float(rel), "unit": s.unit}
@@ -311,13 +366,16 @@ class ScrewModel:
             r = y[off:off + c.n_rows] - pred[off:off + c.n_rows]
             off += c.n_rows
             rises = self.simulate_context(c)
-            nut_rmse = float(np.sqrt(np.mean((c.nut_rise_measured() - c.nut_rise_predicted(rises)) ** 2)))
+            nut_rmse = None
+            if c.nut_sensor is not None:
+                air = self.air_K(c)
+                nut_rmse = float(np.sqrt(np.mean((c.nut_rise_measured() + (0.0 if air is None else air) - c.nut_rise_predicted(rises)) ** 2)))
             stats["runs"].append({"run": c.run_name, "rows": int(c.n_rows), "rmse_um": float(np.sqrt(np.mean(r ** 2))),
                                   "max_abs_residual_um": float(np.max(np.abs(r))), "nut_rise_rmse_K": nut_rmse})
         self.statistics_ = stats
         self.training_ = {"runs": [c.run_name for c in ctxs], "free": free, "segments": self.segments, "dt_s": self.dt_s,
                           "geometric_degree": self.geometric_degree, "nut_weight": self.nut_weight, "channel": self.channel,
-                          "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window}
+                          "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window, "air": self.air}
         feeds = np.concatenate([r.motion.feed_mm_min for r in runs])
         P_all = np.concatenate([P] + [np.r_[r.motion.from_mm, r.motion.to_mm] for r in runs])
         strokes = [float(r.meta["stroke_mm"]) for r in runs if isinstance(r.meta.get("stroke_mm"), (int, float))]
@@ -332,6 +390,11 @@ class ScrewModel:
             # physics, not extrapolation of a regression: BASE_ENVELOPE_MARGIN_K covers a shop's daily swing.
             self.envelope_["temperature_C"] = {self.base_sensor_: [float(tb.min()) - BASE_ENVELOPE_MARGIN_K,
                                                                    float(tb.max()) + BASE_ENVELOPE_MARGIN_K]}
+            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+        if self.air_sensor_ is not None and self.air_sensor_ != self.base_sensor_:
+            ta = np.concatenate([r.temperatures.column(self.air_sensor_) for r in runs])
+            self.envelope_.setdefault("temperature_C", {})[self.air_sensor_] = [float(ta.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                                 float(ta.max()) + BASE_ENVELOPE_MARGIN_K]
             self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
         from host.screw.reduced import build_reduced
         self.reduced_ = build_reduced(self, self.reduced_segments, self.reduced_dt_s,
@@ -380,6 +443,9 @@ class ScrewModel:
             "base_ref_C": self.base_ref_C_,
             "base_ref": self.base_ref,
             "nut_sensor": self.nut_sensor_,
+            "air_sensor": self.air_sensor_,
+            "air_ref_C": self.air_ref_C_,
+            "air_source": self.air_source_,
             "reduced": self.reduced_,
         }
         return {
@@ -387,14 +453,22 @@ class ScrewModel:
             "method": "screw",
             "axis": self.axis_,
             "channel": self.channel,
-            "sensors": [self.base_sensor_] if self.base_sensor_ else [],
-            "reference_C": {self.base_sensor_: self.base_ref_C_} if self.base_sensor_ else {},
+            "sensors": self.input_sensors_(),
+            "reference_C": {n: r for n, r in ((self.base_sensor_, self.base_ref_C_), (self.air_sensor_, self.air_ref_C_))
+                            if n is not None},
             "geometric": {"degree": int(self.geometric_degree_), "coefficients_um": [float(c) for c in self.geometric_]},
             "thermal": thermal,
             "envelope": self.envelope_,
             "statistics": self.statistics_,
             "training": self.training_,
         }
+
+    def input_sensors_(self):
+        """The temperatures prediction reads: the base sensor (E_e), then the air sensor."""
+        out = [self.base_sensor_] if self.base_sensor_ else []
+        if self.air_sensor_ and self.air_sensor_ not in out:
+            out.append(self.air_sensor_)
+        return out
 
     @classmethod
     def from_document(cls, doc):
@@ -431,6 +505,13 @@ class ScrewModel:
             m.base_sensor_ = th.get("base_sensor")
             m.base_ref_C_ = th.get("base_ref_C")
             m.nut_sensor_ = th.get("nut_sensor")
+            # documents written before the air term have no air_sensor: their screw ran over a still air
+            m.air_sensor_ = th.get("air_sensor")
+            m.air_ref_C_ = th.get("air_ref_C")
+            m.air_source_ = th.get("air_source", "off" if m.air_sensor_ is None else "document")
+            m.air = "auto" if m.air_sensor_ else "off"
+            if m.air_sensor_ is not None and m.base_ref == "fixed" and not isinstance(m.air_ref_C_, (int, float)):
+                raise KeyError("thermal.air_ref_C")
             m.reduced_ = th.get("reduced")
             gm = doc.get("geometric") or {"degree": 0, "coefficients_um": []}
             m.geometric_ = [float(c) for c in gm["coefficients_um"]]

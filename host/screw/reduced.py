@@ -1,7 +1,7 @@
 """Reduced screw model for the firmware (docs/model-format.md, section ``screw``).
 
 Few segments (default 12 over the whole screw), one fixed step dt, and the
-recurrence ``T[k+1] = A·T[k] + B ∘ u[k]``:
+recurrence ``T[k+1] = A·T[k] + B ∘ u[k] + c0·a[k] + c1·a[k+1]``:
 
 - A = e^{K dt}, the exact step of the conduction + convection system (the same
   Propagator as the full model).  A ≥ 0 element-wise and its row sums are < 1
@@ -11,7 +11,17 @@ recurrence ``T[k+1] = A·T[k] + B ∘ u[k]``:
   diagonal (the contract) costs a delay of at most one step in where the heat
   appears; the measured effect is in the reduction-error figures.
 
-``state_max_K`` is a certified bound: with u_i ≥ 0 and Σ_i u_i ≤ U = feed_max·dt,
+- c0, c1 (``air_K0``, ``air_K1``, K per K): the exact weights of the air
+  temperature a (over the reference) at the start and the end of the step, for
+  air linear within the step (heat.Propagator.air_step).  c0, c1 ≥ 0 and
+  A·1 + c0 + c1 = 1: without heat the state is a convex combination of its start
+  and the air readings, so it stays inside the air's envelope.  A document
+  without an air sensor (or written before the air term) has c0 = c1 = 0.
+
+The state is the heat response plus the air response (the system is linear), so
+it lies in [a_min, a_max + state_max_K] for an air envelope [a_min, a_max]; the
+exporter certifies exactly that interval.  ``state_max_K`` is a certified bound
+of the heat response: with u_i ≥ 0 and Σ_i u_i ≤ U = feed_max·dt,
 T_j[k] ≤ U·Σ_m max_i (A^m)_{ji}·B_i for every input history (A^m ≥ 0), summed
 until the tail is below 1e-9 of the total (geometric tail bound added).
 """
@@ -30,9 +40,12 @@ def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
     p = model.params_
     edges = geo.edges_mm
     C, G, H = heat.segment_properties(edges, geo.diameter_mm, p, geo.bore_mm)
-    A, _ = heat.Propagator(C, G, H).step(dt_s, 1.0)
+    prop = heat.Propagator(C, G, H)
+    A, _ = prop.step(dt_s, 1.0)
     A = np.clip(A, 0.0, None)  # exp of a Metzler matrix is >= 0; clears round-off of order 1e-17
     B = p.q_J_per_mm / C
+    air = getattr(model, "air_sensor_", None)
+    c0, c1 = (np.clip(c, 0.0, None) for c in prop.air_step(dt_s, 1.0)) if air else (np.zeros(B.size), np.zeros(B.size))
     out = {
         "segments": int(segments),
         "dt_s": float(dt_s),
@@ -40,6 +53,10 @@ def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
         "fixed_end_mm": float(geo.fixed_end_mm),
         "A": [[float(v) for v in row] for row in A],
         "B_K_per_mm": [float(b) for b in B],
+        "air_sensor": air,
+        "air_ref_C": getattr(model, "air_ref_C_", None),
+        "air_K0": [float(c) for c in c0],
+        "air_K1": [float(c) for c in c1],
         "alpha_um_per_mm_per_K": float(1e3 * p.alpha_per_K),
         "base_sensor": model.base_sensor_,
         "base_ref_C": model.base_ref_C_,
@@ -78,17 +95,31 @@ def _arr(reduced):
             np.asarray(reduced["edges_mm"], dtype=float))
 
 
-def simulate_reduced(reduced, motion, t0, n_steps, spread=False):
-    """States (n_steps+1, M) of the float recurrence from a cold start at t0.
+def air_weights(reduced):
+    """(c0, c1) of the recurrence; zeros for a document without the air term."""
+    M = int(reduced["segments"])
+    return (np.asarray(reduced.get("air_K0") or np.zeros(M), dtype=float),
+            np.asarray(reduced.get("air_K1") or np.zeros(M), dtype=float))
+
+
+def simulate_reduced(reduced, motion, t0, n_steps, spread=False, air_K=None):
+    """States (n_steps+1, M) of the float recurrence from a cold start at t0
+    (in equilibrium with the air: T = a[0]).
 
     spread: feed the travel as a feed/range state (spread over the range) instead of
-    the exact reciprocation (position reports)."""
+    the exact reciprocation (position reports); air_K: (n_steps+1,) air temperature
+    over the reference at the step times (None: constant air at the reference)."""
     A, B, edges = _arr(reduced)
+    c0, c1 = air_weights(reduced)
     dt = reduced["dt_s"]
     t = t0 + dt * np.arange(n_steps + 1)
     u = heat.nut_travel_per_segment(motion, edges, reduced["fixed_end_mm"], t, spread=spread)
     drive = u * B[None, :]
     T = np.zeros((n_steps + 1, B.size))
+    if air_K is not None:
+        a = np.asarray(air_K, dtype=float)
+        drive = drive + a[:-1, None] * c0[None, :] + a[1:, None] * c1[None, :]
+        T[0] = a[0]
     x = T[0].copy()
     for k in range(n_steps):
         x = A @ x + drive[k]
@@ -121,7 +152,10 @@ def reduction_error(model, run, positions=21, spread=False):
     rises = model.simulate_context(ctx_full)
     t0 = ctx_full.t_grid[0]
     n = int(np.floor((ctx_full.t_grid[-1] - t0) / red["dt_s"] + 1e-9))
-    t, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread)
+    air = model.air_K(ctx_full)
+    if air is not None:
+        air = np.interp(t0 + red["dt_s"] * np.arange(n + 1), ctx_full.t_grid, air)
+    t, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread, air_K=air)
     lo, hi = model.envelope_["position_mm"] if model.envelope_ else (0.0, model.geometry_.length_mm)
     P = np.linspace(lo, hi, positions)
     Rf = heat.interp_rows(t, ctx_full.t_grid, rises)

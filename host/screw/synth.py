@@ -32,7 +32,8 @@ def protocol(feed_mm_min, lo_mm, hi_mm, heat_s=4 * 3600.0, cool_s=2 * 3600.0, sw
 def make_run(feed_mm_min=8000.0, lo_mm=210.0, hi_mm=490.0, params=TRUE, heat_s=4 * 3600.0, cool_s=2 * 3600.0,
              sweep_every_s=900.0, positions_mm=None, noise_um=0.0, base_drift_K=0.8, geometric=(0.0, 2e-3, -4e-6),
              segments=80, dt_s=5.0, seed=0, name=None, meta=None):
-    """One run: motion, temperatures (nut, base, air), errors = geometric + E_m + E_e (+ noise)."""
+    """One run: motion, temperatures (nut, base, air), errors = geometric + E_m + E_e (+ noise); the screw
+    exchanges heat with the drifting air T_air."""
     meta = dict(META if meta is None else meta)
     rng = np.random.default_rng(seed)
     geo = heat.ScrewGeometry.from_meta(meta, segments)
@@ -41,16 +42,17 @@ def make_run(feed_mm_min=8000.0, lo_mm=210.0, hi_mm=490.0, params=TRUE, heat_s=4
     t_end = heat_s + cool_s
     t = np.arange(0.0, t_end + dt_s / 2, dt_s)
     travel = heat.nut_travel_per_segment(motion, geo.edges_mm, geo.fixed_end_mm, t)
-    rises = heat.simulate_segments(geo, params, t, heat.friction_heat_J(travel, params))
+    base = 20.0 + base_drift_K * np.sin(np.pi * t / (t_end * 1.3))
+    air = 20.0 + 1.2 * base_drift_K * np.sin(np.pi * t / (t_end * 1.3) + 0.2)
+    # the screw exchanges heat with the air; its temperature is over the air at the start
+    rises = heat.simulate_segments(geo, params, t, heat.friction_heat_J(travel, params), air_K=air - air[0])
     P = np.arange(0.0, meta["stroke_mm"] + 1e-9, 50.0) if positions_mm is None else np.asarray(positions_mm, dtype=float)
     ts = np.repeat(sweeps, P.size)
     ps = np.tile(P, sweeps.size)
     R = heat.interp_rows(ts, t, rises)
-    base = 20.0 + base_drift_K * np.sin(np.pi * t / (t_end * 1.3))
-    air = 20.0 + 1.2 * base_drift_K * np.sin(np.pi * t / (t_end * 1.3) + 0.2)
     centres = 0.5 * (geo.edges_mm[1:] + geo.edges_mm[:-1]) + geo.fixed_end_mm
     mid = 0.5 * (lo_mm + hi_mm)
-    nut = air + np.array([np.interp(mid, centres, r) for r in rises])
+    nut = air[0] + np.array([np.interp(mid, centres, r) for r in rises])
     e_m = heat.thermal_error_um(geo.edges_mm, R, ps, geo.fixed_end_mm, params.alpha_per_K)
     e_e = 1e3 * params.alpha_per_K * (np.interp(ts, t, base) - base[0]) * ps
     err = np.polynomial.polynomial.polyval(ps, geometric) + e_m + e_e + noise_um * rng.standard_normal(ps.size)

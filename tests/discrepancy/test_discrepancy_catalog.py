@@ -2,8 +2,17 @@ import numpy as np
 import pytest
 
 from host.discrepancy.catalog import CATALOG, FEED_REF_MM_MIN
-from host.discrepancy.screw_family import Drive, ScrewFamily
+import host.sim
+from host.discrepancy.screw_family import Drive
+from host.discrepancy.screw_family import ScrewFamily as Family
 from host.sim import EFFECTS, simulate_run
+
+# the twin's screw follows a drifting air only since the independent twin (see test_discrepancy_twin.py)
+TWIN_AIR = hasattr(host.sim, "STILL_AIR")
+
+
+def ScrewFamily(**kw):  # noqa: N802
+    return Family(air=TWIN_AIR, **kw)
 
 REQUIRED = ("ambient_expansion", "speed_dependent_heat", "bearing_heat", "moving_convection", "reversal_error")
 

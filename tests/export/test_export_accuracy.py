@@ -97,7 +97,7 @@ def _maybe_latch(data, ev, ref):
         for i in range(t.n_sensors):
             ev.temps[i] = data.draw(st.integers(t.env_lo[i] - 1000, t.env_hi[i] + 1000))
         ev.latch_references()
-        ref.latch(ev.ref)
+        ref.latch(ev.ref, ev.temps)
 
 
 def _slots_inside(ex, ev):
@@ -239,6 +239,7 @@ def test_screw_reduced_within_certificate(seed, data):
         for i, v in enumerate(temps):
             ev.temps[i] = v
         ev.update()
+        ref.update(temps)
         _check(ex, ev, ref, temps, data.draw(st.integers(t.pos_lo - 5000, t.pos_hi + 5000)) if k % 10 == 0 else rng.randint(t.pos_lo, t.pos_hi))
         assert not ev.flags & 0x4000000  # the certified state bound is never hit by admissible motion
     assert _slots_inside(ex, ev) > 20

@@ -6,10 +6,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from firmware.evaluate import Evaluator
+from firmware.evaluate import SLOT_AMUL, Evaluator
 from firmware.table import parse_table
 from host.cli import main
-from host.models import load_model, read_document
+from host.models import document_hash, load_model, read_document
 from host.runs import load_run
 from models_export import export_model
 from models_export.reference import Reference
@@ -36,6 +36,7 @@ def test_poly_slope_from_tcomp_fit_matches_host_model(fitted, reference):
     assert doc["kind"] == "poly_slope"
     if reference == "run_start":
         doc["thermal"]["reference"] = "run_start"
+        doc["provenance"]["sha256"] = document_hash(doc)  # as re-saving the edited model would
     ex = export_model(doc)
     t = parse_table(ex.table)
     model = load_model(doc)
@@ -77,23 +78,37 @@ def test_screw_from_tcomp_fit_matches_host_reduced_model(fitted):
     times = run.motion.t_start_s[0] + dt * np.arange(n + 1) if run.motion is not None else dt * np.arange(n + 1)
     u_mm = heat.nut_travel_per_segment(run.motion, np.asarray(red["edges_mm"]), red["fixed_end_mm"], times)
     A, B = np.asarray(red["A"]), np.asarray(red["B_K_per_mm"])
-    x = np.zeros(len(B))
+    c0, c1 = np.asarray(red["air_K0"]), np.asarray(red["air_K1"])
+    assert red["air_sensor"] in t.sensors and t.air == t.sensors.index(red["air_sensor"])
     cert = ex.report["max_error_um"]
     base = red.get("base_sensor")
+    ref.settle(list(ev.temps))
+    ai = t.air
+    air = lambda temps: (temps[ai] - ev.ref[ai]) / 1000.0  # noqa: E731  (in-envelope draws: no clamping)
+    a_prev = air(ev.temps)
+    x = np.full(len(B), a_prev)
+    assert np.allclose(ref.T, x)
     rng = random.Random(2)
+    lo_air, hi_air = t.env_lo[ai], t.env_hi[ai]
+    a_mC = rng.randint(lo_air, hi_air)
     for k in range(n):
         u_um = [int(round(v * 1000.0)) for v in u_mm[k]]
-        # the host recurrence on the same (whole-um) travel the firmware accumulates from position reports
-        x = A @ x + B * (np.array(u_um) / 1000.0)
-        for i, v in enumerate(u_um):
-            ev.u[i] = v
-        ev.step()
-        ref.step(u_um)
-        assert np.allclose(ref.T, x, rtol=1e-12, atol=1e-12)
         temps = [rng.randint(lo, hi) for lo, hi in zip(t.env_lo, t.env_hi)]
+        # the air as a random walk with occasional jumps to its envelope's ends (the certificate covers any history)
+        a_mC = min(max(a_mC + rng.randint(-300, 300), lo_air), hi_air) if k % 50 else rng.choice([lo_air, hi_air])
+        temps[ai] = a_mC
         for i, v in enumerate(temps):
             ev.temps[i] = v
         ev.update()
+        # the host recurrence on the same (whole-um) travel the firmware accumulates from position reports
+        # and the air it read at the step's start and end
+        x = A @ x + B * (np.array(u_um) / 1000.0) + c0 * a_prev + c1 * air(temps)
+        a_prev = air(temps)
+        for i, v in enumerate(u_um):
+            ev.u[i] = v
+        ev.step()
+        ref.step(u_um, temps)
+        assert np.allclose(ref.T, x, rtol=1e-12, atol=1e-12)
         P = rng.randint(t.pos_lo, t.pos_hi)
         # A run_start (latched) table holds its reference in whole milli-degC, as the firmware latches it.
         base_ref = round(red["base_ref_C"] * 1000.0) / 1000.0 if t.ref_mode == 1 else red["base_ref_C"]
@@ -102,5 +117,9 @@ def test_screw_from_tcomp_fit_matches_host_reduced_model(fitted):
                      + reduced_error_um(red, x, P / 1000.0, base_rise_K=rise))
         assert abs(ref.offset(temps, P) - host) < 1e-9
         assert abs(ev.offset_at(P) * 0.01 - host) <= cert + 1e-9
-    assert max(x) > 0.1  # the run heated the screw
+    assert max(x) - a_prev > 0.1  # the run heated the screw above the air
+    assert ev.hi[SLOT_AMUL] > ev.lo[SLOT_AMUL]  # the air terms ran
+    for slot, (lo, hi) in ex.slots.items():  # every observed intermediate inside its certified interval
+        if ev.lo[slot] <= ev.hi[slot]:
+            assert lo <= ev.lo[slot] and ev.hi[slot] <= hi, slot
     assert json.dumps(ex.report)  # the report is plain JSON

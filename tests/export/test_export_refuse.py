@@ -8,7 +8,7 @@ import pytest
 from firmware.table import parse_table
 from host.cli import main
 from models_export import ExportError, export_model
-from models_export.samples import linear_direct_doc, poly_slope_doc, screw_doc
+from models_export.samples import linear_direct_doc, poly_slope_doc, restamp, screw_doc
 
 
 def test_huge_slope_coefficient_is_refused_naming_it():
@@ -33,10 +33,22 @@ def test_geometric_polynomial_that_overflows_is_refused_naming_the_term():
 
 
 def test_non_contracting_screw_recurrence_is_refused():
-    doc = screw_doc(random.Random(3), segments=8)
+    doc = screw_doc(random.Random(3), segments=8, air=False)
     A = doc["thermal"]["reduced"]["A"]
     A[2][2] = 1.001  # a segment that heats itself: no bounded state error
     with pytest.raises(ExportError, match=r"thermal\.reduced\.A"):
+        export_model(doc)
+
+
+def test_air_weights_that_amplify_the_air_are_refused():
+    doc = screw_doc(random.Random(3), segments=8)
+    red = doc["thermal"]["reduced"]
+    red["air_K1"][3] += 0.01  # A + c0 + c1 > 1: the state would leave the air's envelope
+    with pytest.raises(ExportError, match=r"row 3: A \+ air weights sum above 1"):
+        export_model(doc)
+    doc = screw_doc(random.Random(3), segments=8)
+    doc["thermal"]["reduced"]["air_sensor"] = "T_nowhere"
+    with pytest.raises(ExportError, match=r"air_sensor 'T_nowhere' is not in sensors"):
         export_model(doc)
 
 
@@ -110,7 +122,7 @@ def test_c_header_compiles_and_matches_firmware(tmp_path, runner):
         doc = make(random.Random(11))
         if make is poly_slope_doc:
             doc["thermal"]["reference"] = "run_start"
-        ex = export_model(doc)
+        ex = export_model(restamp(doc))
         t = parse_table(ex.table)
         (tmp_path / "table.h").write_text(ex.c_header())
         lines, ops = [], []

@@ -56,7 +56,7 @@ def test_round_trip(exports, kind):
     ex = exports[kind]
     t = parse_table(ex.table, expected_sensors=len(ex.fields["sensors"]))
     f = ex.fields
-    assert t.kind == kind and t.version == 1 and t.unit_code == 1
+    assert t.kind == kind and t.version == 2 and t.unit_code == 1
     assert t.axis == f["axis"] and t.sensors == f["sensors"] and t.provenance == f["provenance"]
     assert (t.env_lo, t.env_hi, t.ref) == (f["env_lo"], f["env_hi"], f["ref"])
     for name, value in payload_words(f):
@@ -105,9 +105,15 @@ def test_specific_reasons(exports):
     buf = exports["poly_slope"].table
     n = len(exports["poly_slope"].fields["sensors"])
     v2 = bytearray(buf)
-    v2[4] = 2
+    v2[4] = 3
     assert reason(bytes(v2)) == REASON_VERSION
     assert reason(refresh_crc(v2)) == REASON_VERSION
+    # a table of format 1 (before the screw's air channel) is refused with a message that says to re-export
+    v1 = bytearray(buf)
+    v1[4] = 1
+    with pytest.raises(TableError, match="table format version 1 is no longer supported; re-export") as exc:
+        parse_table(bytes(refresh_crc(v1)))
+    assert exc.value.reason == REASON_VERSION
     k = bytearray(buf)
     k[5] = 9
     assert reason(refresh_crc(k)) == REASON_KIND

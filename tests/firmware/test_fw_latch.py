@@ -10,10 +10,10 @@ from fwhelpers import run_cycles
 def _table(base_ref):
     pytest.importorskip("models_export.samples")
     from models_export.export import export_model
-    from models_export.samples import screw_doc
+    from models_export.samples import restamp, screw_doc
     doc = screw_doc(random.Random(5), segments=8, dt_s=1.0, length_mm=500.0, feed_max_mm_min=12000.0)
     doc["thermal"]["reduced"]["base_ref"] = base_ref
-    return export_model(doc).table
+    return export_model(restamp(doc)).table
 
 
 def _app(tmp_path, table, base_temp):
@@ -23,6 +23,7 @@ def _app(tmp_path, table, base_temp):
     (tmp_path / "table_a.bin").write_bytes(table)
     board = make_rig(2, 0, temps=[base_temp, 21.0], table_dir=str(tmp_path), extra={"frame_ms": 0, "slew_um_per_s": 1000})
     board.config["channels"][0]["name"] = "T_base"
+    board.config["channels"][1]["name"] = "T_air"  # the screw's air channel
     return App(board), board
 
 

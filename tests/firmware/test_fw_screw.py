@@ -21,6 +21,7 @@ def screw_app(tmp_path, table):
     (tmp_path / "table_a.bin").write_bytes(table)
     board = make_rig(2, 0, table_dir=str(tmp_path), extra={"frame_ms": 0, "slew_um_per_s": 1000})
     board.config["channels"][0]["name"] = "T_base"
+    board.config["channels"][1]["name"] = "T_air"  # the screw's air channel
     return App(board), board
 
 
@@ -32,7 +33,10 @@ def test_position_reports_drive_the_same_state_as_the_evaluator(tmp_path, screw_
     ref = Evaluator(parse_table(screw_table))
     run_cycles(app, board, 5)
     ref.temps[0] = app.ev.temps[0]
+    ref.temps[1] = app.ev.temps[1]
     ref.update()
+    ref.settle()  # the app settled its state on the first good air reading
+    assert app.ev.T == ref.T and app.ev.da == ref.da
     elapsed = app.step_ms  # same step phase as the app
     pos = 20000
     for k in range(1200):  # 2 minutes of 100 ms cycles, axis sweeping 20..480 mm at 6 m/min
@@ -46,7 +50,8 @@ def test_position_reports_drive_the_same_state_as_the_evaluator(tmp_path, screw_
             elapsed -= 1000
         board.clock.t += 100
         board.serial.take()
-    assert max(app.ev.T) > 0  # the screw heated up
+    air_state = app.ev.da * (1 << app.table.ft) // 1000  # the air over its reference, in state units
+    assert max(app.ev.T) > air_state + (1 << app.table.ft) // 100  # the screw heated above the air
     assert app.ev.T == ref.T
     assert app.ev.offset_at(300000) == ref.offset_at(300000)
     assert not app.status & 0x60000  # neither rate nor magnitude limited

@@ -162,3 +162,40 @@ def test_nonnegative_heat_gives_nonnegative_rises(seed, M, dt):
     T = heat.simulate_segments(geo, heat.ScrewParams(), t, rng.uniform(0, 50, (29, M)) * (rng.uniform(size=(29, 1)) > 0.5))
     assert np.all(T >= -1e-9 * max(1.0, T.max()))
     assert np.all(np.isfinite(T))
+
+
+@pytest.mark.parametrize("dt", [10.0, 600.0, 3600.0])
+def test_screw_follows_a_linear_air_ramp_with_the_analytic_lag(dt):
+    # Far from any heat a solid screw is a lumped body: τ dθ/dt = a(t) - θ with τ = c·ρ·d/(4h).
+    # For a(t) = r·t from equilibrium, θ(t) = r·(t - τ·(1 - e^{-t/τ})), so the lag tends to r·τ.
+    # The first-order hold is exact for this input at any step; a zero-order hold (air held at
+    # a[k] over the step) would lag by a further r·dt/2 = 0.17 K at dt = 600 s.
+    geo = heat.ScrewGeometry(800.0, 32.0, segments=16)
+    par = heat.ScrewParams(h_W_m2K=12.0)
+    tau = par.c_J_kgK * par.density_kg_m3 * 0.032 / (4 * par.h_W_m2K)
+    r = 2.0 / 3600.0
+    t = np.arange(0.0, 6 * 3600.0 + 1, dt)
+    exact = r * (t - tau * (1.0 - np.exp(-t / tau)))
+    T = heat.simulate_segments(geo, par, t, air_K=r * t)
+    assert np.max(np.abs(T - exact[:, None])) < 1e-9
+    assert abs((r * t[-1] - T[-1, 0]) - r * tau) < 0.01 * r * tau  # steady lag r·τ after 9 τ
+    # the same exactness on the variable-step path (one propagator per distinct step)
+    tv = np.r_[t[:3], t[3:] + np.linspace(0.0, 1.0, t.size - 3)]
+    Tv = heat.simulate_segments(geo, par, tv, air_K=r * tv)
+    assert np.max(np.abs(Tv - (r * (tv - tau * (1.0 - np.exp(-tv / tau))))[:, None])) < 1e-9
+
+
+def test_air_forcing_keeps_equilibrium_and_superposes_with_heat():
+    geo = heat.ScrewGeometry(600.0, 25.0, segments=12)
+    par = heat.ScrewParams()
+    t = np.linspace(0.0, 7200.0, 121)
+    still = heat.simulate_segments(geo, par, t, air_K=np.full(t.size, 3.0))
+    assert np.max(np.abs(still - 3.0)) < 1e-12  # starts in equilibrium with the air (T0 default a[0]) and stays
+    rng = np.random.default_rng(3)
+    q = rng.uniform(0.0, 20.0, (t.size - 1, 12))
+    air = np.cumsum(rng.normal(0.0, 0.05, t.size))
+    both = heat.simulate_segments(geo, par, t, q, air_K=air)
+    parts = heat.simulate_segments(geo, par, t, q, T0=np.zeros(12)) + heat.simulate_segments(geo, par, t, air_K=air)
+    assert np.max(np.abs(both - parts)) < 1e-10  # linear system: heat and air superpose
+    with pytest.raises(ValueError, match="air_K must have shape"):
+        heat.simulate_segments(geo, par, t, air_K=air[:-1])

@@ -76,7 +76,7 @@ def test_bad_input_is_named(synth_run):
         ScrewModel().fit([_copy(synth_run, motion=empty)])
     meta = dict(synth_run.meta, sensors={k: dict(v, role="structure") if v["role"] == "nut" else v for k, v in synth_run.meta["sensors"].items()})
     with pytest.raises(ValueError, match="no sensor with role 'nut'"):
-        ScrewModel().fit([_copy(synth_run, meta=meta)])
+        ScrewModel(nut_weight=1.0).fit([_copy(synth_run, meta=meta)])  # only the nut residual needs the nut sensor
     meta = dict(synth_run.meta, screw=dict(synth_run.meta["screw"], length_mm=600))
     with pytest.raises(ValueError, match="shorter than the stroke"):
         ScrewModel().fit([_copy(synth_run, meta=meta)])
@@ -102,4 +102,14 @@ def test_nut_sensor_without_a_column_is_named(synth_run):
     r.meta["sensors"]["T_extra_nut"] = {"role": "nut"}
     r.meta["sensors"]["T_nut"]["role"] = "structure"
     with pytest.raises(ValueError, match="T_extra_nut.*no column in temperatures.csv"):
-        ScrewModel().fit([r])
+        ScrewModel(nut_weight=1.0).fit([r])
+
+
+def test_fit_without_a_nut_sensor(synth_run, synth_model):
+    # the nut sensor is not a prediction input (issue 16 item 8): a run without one fits the same model
+    meta = dict(synth_run.meta, sensors={k: v for k, v in synth_run.meta["sensors"].items() if v["role"] != "nut"})
+    m = ScrewModel(free="q,h,lambda,alpha").fit([_copy(synth_run, meta=meta)])
+    assert m.nut_sensor_ is None and m.to_document()["thermal"]["nut_sensor"] is None
+    assert m.statistics_["runs"][0]["nut_rise_rmse_K"] is None
+    ref = ScrewModel(free="q,h,lambda,alpha").fit([synth_run])
+    np.testing.assert_allclose(m.predict(synth_run), ref.predict(synth_run), atol=1e-9)
