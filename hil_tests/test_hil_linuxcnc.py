@@ -58,7 +58,7 @@ PINS = ["joint.0.motor-pos-cmd", "axis.x.pos-cmd", "axis.x.eoffset", "axis.x.eof
 class LinuxCNC:
     """``linuxcnc tcomp-sim.ini`` from a copy of examples/linuxcnc with our DISPLAY and [TCOMP] values."""
 
-    def __init__(self, workdir, port, mode, cold_start):
+    def __init__(self, workdir, port, mode, cold_start, key_file):
         self.dir = os.path.join(workdir, "lcnc")
         shutil.copytree(EXAMPLES, self.dir)
         driver = os.path.join(self.dir, "display.sh")
@@ -68,7 +68,7 @@ class LinuxCNC:
         os.chmod(driver, 0o755)
         ini = os.path.join(self.dir, "tcomp-sim.ini")
         values = {"DISPLAY": driver, "PORT": port, "MODE": mode, "SLEW_UM_PER_S": str(SLEW),
-                  "COLD_START": "1" if cold_start else "0"}
+                  "COLD_START": "1" if cold_start else "0", "KEY": key_file}
         lines = []
         with open(ini) as f:
             for line in f:
@@ -138,8 +138,12 @@ class Board:
 
     def __init__(self, workdir, table, mode):
         cfg = rig_config(SENSORS, mode=mode, slew_um_per_s=SLEW, hold_ms=300)
+        from host.linkauth import generate_key, write_key
+        key = generate_key()  # provisioned into the board's flash, as tcomp flash --key does
+        self.key_file = os.path.join(workdir, "board.key")
+        write_key(self.key_file, key)
         self.rig = Rig(cfg, table, interpreter="micropython", workdir=os.path.join(workdir, "rig"), temps=TEMPS,
-                       open_port=False)
+                       open_port=False, key=key)
         self.rig.start()
         self.lock = threading.Lock()
         self.stop = False
@@ -188,7 +192,7 @@ def session(tmp_path, table):
     def make(mode, cold_start):
         board = Board(str(tmp_path), table, mode)
         opened.append(board)
-        lc = LinuxCNC(str(tmp_path), board.tap.port, mode, cold_start)
+        lc = LinuxCNC(str(tmp_path), board.tap.port, mode, cold_start, board.key_file)
         opened.append(lc)
         lc("start")
         return board, lc
@@ -317,11 +321,13 @@ def _fault_cycle(board, lc, x_mm, inject, clear, what):
 def test_linuxcnc_stream_offsets_cold_start_and_faults(session):
     board, lc = session("stream", cold_start=True)
     # cold start: L sent once the machine was on, and the board's reply reached the latch-state pin
-    sent = [c for _, c in board.tap.commands if c.startswith(b"$TC,L*")]
+    sent = [c for _, c in board.tap.commands if c.startswith(b"$TC,L,")]
     assert sent, "no L sent at a cold start"
     _check_offsets(board, lc, [(TEMPS, [100, 400]), (WARMER, [400, 250])])
     refused = [f for _, f in board.tap.frames if f.kind == "E" and f.fields[:2] == ["5", "state"]]
-    # this table has fixed references: the board refuses L, the bridge reports it (latch-state 3)
+    # L was signed with the board's key (no E,8 auth refusal); this table has fixed references, so the
+    # board refuses it for that reason (E,5,state) and the bridge reports it (latch-state 3)
+    assert not [f for _, f in board.tap.frames if f.kind == "E" and f.fields[:1] == ["8"]]
     assert refused and lc.get("tcomp.latch-state")["tcomp.latch-state"] == 3
 
     tap = board.tap

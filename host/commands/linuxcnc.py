@@ -18,6 +18,8 @@ def add_arguments(p):
                    help="no new frame for this long is a fault (default 1000)")
     p.add_argument("--recover-ms", type=int, default=1000,
                    help="a fault ends after this long without any fault reason (default 1000)")
+    p.add_argument("--key", help="the board's key file (tcomp flash --key): signs L; without it a keyed "
+                                "board refuses L")
     p.add_argument("--cold-start", action="store_true",
                    help="this start is a cold start: send L when the machine is first switched on "
                         "(as the cold-start pin)")
@@ -51,6 +53,13 @@ def run(args):
     from host.linuxcnc.bridge import Bridge, ModbusLink, StreamLink
 
     _check(args)
+    signer = None
+    if args.key:
+        from host.linkauth import KeyFileError, LinkSigner, read_key
+        try:
+            signer = LinkSigner(read_key(args.key))
+        except KeyFileError as exc:
+            raise UserError("--key %s" % exc)
     try:
         comp = halcomp.component(args.name)
     except ImportError as exc:
@@ -65,13 +74,13 @@ def run(args):
             open_port().close()
         except (serial.SerialException, OSError) as exc:
             raise UserError("cannot open %s: %s" % (args.port, exc))
-        link = StreamLink(open_port)
+        link = StreamLink(open_port, signer=signer)
     else:
         from pymodbus.client import ModbusSerialClient
         client = ModbusSerialClient(args.port, baudrate=args.baud, timeout=0.2, retries=0)
         if not client.connect():
             raise UserError("cannot open %s (Modbus RTU)" % args.port)
-        link = ModbusLink(client, args.address)
+        link = ModbusLink(client, args.address, signer)
         if slew is None:
             slew = link.slew_um_per_s()
             if slew is not None:

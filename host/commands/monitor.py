@@ -20,6 +20,8 @@ def add_arguments(p):
     p.add_argument("--latch", action="store_true",
                    help="declare a cold start: send L (re-latch the reference temperatures, docs/protocol.md) and "
                         "report the answer; without --count/--duration stop at the answer (exit 1 if refused)")
+    p.add_argument("--key", help="the board's key file (tcomp flash --key): --latch signs L with it (the board "
+                                "refuses an unsigned L when it has a key)")
     p.add_argument("--json", help="write {frames, malformed, rows: [decoded frames], bad: [reasons]} as JSON at the end")
 
 
@@ -84,11 +86,20 @@ def _monitor(args, outputs):
                                                       "ref_um", "slope", "flags / fields"))
     latch = None  # the board's answer to L: "ok" or "refused"
     until_answer = args.latch and not (args.count or args.duration)
+    signer = None
+    if args.key:
+        from host.linkauth import KeyFileError, LinkSigner, read_key
+        try:
+            signer = LinkSigner(read_key(args.key))
+        except KeyFileError as exc:
+            raise UserError("--key %s" % exc)
+    latch_sent = False
     try:
-        if args.hello:
-            ser.write(command("V"))
-        if args.latch:
+        if args.hello or signer is not None and args.latch:
+            ser.write(command("V"))  # a signed L needs the board's last counter, the hello's last field
+        if args.latch and signer is None:
             ser.write(command("L"))
+            latch_sent = True
         while not (args.count and n >= args.count) and not (args.duration and time.monotonic() - start
                                                                >= args.duration):
             if until_answer and latch:
@@ -106,11 +117,15 @@ def _monitor(args, outputs):
                 print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
-                if args.latch and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]
-                                                     or f.kind == "E" and f.fields[:2] == ["5", "state"]):
+                if args.latch and not latch_sent and f.kind == "H":
+                    signer.observe(f.fields[-1])
+                    ser.write(signer.stream_line("L"))
+                    latch_sent = True
+                if latch_sent and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]
+                                                     or f.kind == "E" and f.fields[:1] in (["5"], ["8"], ["9"])):
                     latch = "ok" if f.kind == "A" else "refused"
                     print("L acknowledged, references %s" % ",".join(f.fields[1:]) if f.kind == "A"
-                          else "L refused: %s" % ",".join(f.fields[2:]))
+                          else "L refused: %s" % ",".join(f.fields[2:] if f.fields[0] == "5" else f.fields[1:]))
                 if writer:
                     writer.writerow(r)
                 if args.json:

@@ -57,10 +57,14 @@ class StreamLink:
     """``$TC`` stream mode: each exchange sends ``P,<pos>`` and ``Q,<pos>`` (the board's offset at this
     position, now) and decodes whatever arrived (Q answers and periodic O frames)."""
 
-    def __init__(self, open_port, reopen_s=1.0, clock=time.monotonic):
+    def __init__(self, open_port, reopen_s=1.0, clock=time.monotonic, signer=None):
         """``open_port()`` returns an open pyserial-like port (timeout 0); it is called again, at most
-        every ``reopen_s``, after the port failed (a USB board unplugged and back)."""
+        every ``reopen_s``, after the port failed (a USB board unplugged and back). ``signer``
+        (host.linkauth.LinkSigner with the board's key) signs ``L``; the board's last counter comes
+        from its hello, asked for (``V``) after every (re)open and after a refused ``L``."""
         self.open_port = open_port
+        self.signer = signer
+        self.want_hello = True
         self.reopen_s = reopen_s
         self.clock = clock
         self.ser = None
@@ -71,8 +75,11 @@ class StreamLink:
     def exchange(self, pos_um, latch=False):
         ex = Exchange()
         out = command("P", pos_um) + command("Q", pos_um)
+        if self.want_hello:
+            out = command("V") + out
+            self.want_hello = False
         if latch:
-            out += command("L")
+            out += self.signer.stream_line("L") if self.signer else command("L")
             self.latch_pending = True
         try:
             if self.ser is None:
@@ -104,11 +111,21 @@ class StreamLink:
         elif f.kind == "A" and f.fields[:1] == ["L"] and self.latch_pending:
             self.latch_pending = False
             ex.latch = "ok:" + (f.fields[1] if len(f.fields) > 1 else "")
-        elif f.kind == "E" and self.latch_pending and f.fields[:2] == ["5", "state"]:
+        elif f.kind == "H" and self.signer is not None and f.fields:
+            try:
+                self.signer.observe(f.fields[-1])
+            except ValueError:
+                pass  # an old firmware's hello ends with the refs letter: no counter
+        elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["5"], ["8"], ["9"]):
+            # 5 state (no table, fixed references, sensor faulty), 8 auth (unsigned, bad tag,
+            # replayed counter...), 9 busy
             self.latch_pending = False
-            ex.latch = "refused:" + ",".join(f.fields[2:])
+            ex.latch = "refused:" + ",".join(f.fields[1:] if f.fields[0] != "5" else f.fields[2:])
+            if f.fields[0] == "8":
+                self.want_hello = True  # the counter may be behind the board's
 
     def close(self):
+        self.want_hello = True  # a board that comes back is asked for its hello (counter)
         if self.ser is not None:
             try:
                 self.ser.close()
@@ -124,9 +141,10 @@ def _s16(v):
 class ModbusLink:
     """Modbus RTU mode (pymodbus master): write the position (holding 3-4), read input 0-9."""
 
-    def __init__(self, client, address=1):
+    def __init__(self, client, address=1, signer=None):
         self.client = client
         self.address = address
+        self.signer = signer
 
     def slew_um_per_s(self):
         """The board's slew limit (holding register 1), or None if it cannot be read."""
@@ -150,6 +168,12 @@ class ModbusLink:
                 pos = pos - (1 << 32) if pos & 0x80000000 else pos
                 ex.readings.append(Reading(_s16(r[3]) / 10.0, pos, r[0] | (r[1] << 16), r[2]))
             if latch:
+                if self.signer is not None:  # the auth block (holding 8..17) for this very write
+                    cr = self.client.read_input_registers(48, count=2, device_id=self.address)
+                    if not cr.isError():
+                        self.signer.observe((cr.registers[0] << 16) | cr.registers[1])
+                    self.client.write_registers(8, self.signer.modbus_auth(self.address, 7, [1]),
+                                                device_id=self.address)
                 lr = self.client.write_register(7, 1, device_id=self.address)
                 ex.latch = ("refused:exception %s" % getattr(lr, "exception_code", "?")) if lr.isError() else "ok:"
         except Exception as exc:  # no answer, CRC error (pymodbus drops the frame), port gone
@@ -294,7 +318,7 @@ class Bridge:
             self.log("L acknowledged (refs %s)" % (reply[3:] or "latched"))
         else:
             why = reply.split(":", 1)[1]
-            retry = "sensor faulty" in why or "exception 4" in why
+            retry = any(w in why for w in ("sensor faulty", "exception 4", "busy", "replayed"))
             if not (retry and self.latch_tries_left):
                 self.latch_tries_left = 0
             self.out.latch_state = LATCH_REFUSED

@@ -238,7 +238,7 @@ def test_stream_link_sends_p_and_q_and_decodes_answers():
     ports = [FakePort(good + bad + ack)]
     link = StreamLink(lambda: ports[-1], reopen_s=0.0)
     ex = link.exchange(250000, latch=True)
-    assert bytes(ports[0].tx) == command("P", 250000) + command("Q", 250000) + command("L")
+    assert bytes(ports[0].tx) == command("V") + command("P", 250000) + command("Q", 250000) + command("L")
     assert ex.readings == [Reading(-12.3, 250000, FALLBACK, 7)]
     assert len(ex.malformed) == 1 and "CRC" in ex.malformed[0]
     assert ex.latch == "ok:L"
@@ -246,8 +246,25 @@ def test_stream_link_sends_p_and_q_and_decodes_answers():
     ex = link.exchange(250000)
     assert ex.error == "device disconnected"
     ports.append(FakePort())
-    ex = link.exchange(250000)  # reopened
-    assert not ex.error and ports[1].tx
+    ex = link.exchange(250000)  # reopened, and the hello asked for again
+    assert not ex.error and bytes(ports[1].tx).startswith(command("V"))
+    ex = link.exchange(250000)
+    assert not bytes(ports[1].tx).count(command("V")) > 1
+
+
+def test_stream_link_signs_l_with_the_board_counter():
+    from host.linkauth import LinkSigner
+    hello = b"TC,0,00000000,H,1,0.1.0,A,0ABCAE5F,0001020304050607,poly_slope,X,3,S,41"
+    port = FakePort(b"$" + hello + b"*%04X\r\n" % crc16(hello))
+    signer = LinkSigner(b"k" * 32)
+    link = StreamLink(lambda: port, signer=signer)
+    link.exchange(0)
+    assert signer.counter == 41
+    refused = b"TC,3,00000000,E,8,auth,replayed counter"
+    port.rx += b"$" + refused + b"*%04X\r\n" % crc16(refused)
+    ex = link.exchange(0, latch=True)
+    assert b"$TC,L,42," in bytes(port.tx) and ex.latch == "refused:auth,replayed counter"
+    assert link.want_hello
 
 
 def test_cli_errors_are_one_line(capsys):
