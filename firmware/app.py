@@ -67,13 +67,8 @@ def _load_config(d):
         cfg = bootcfg.load_config(d)
     finally:
         bootcfg = None
-        # overwrite before removing: a removed dict entry can keep its old value until the
-        # slot is reused, and that stale pointer would keep the module's code alive
-        if "firmware.bootcfg" in sys.modules:
-            sys.modules["firmware.bootcfg"] = None
-            sys.modules.pop("firmware.bootcfg")
+        sys.modules.pop("firmware.bootcfg", None)
         if hasattr(firmware, "bootcfg"):
-            firmware.bootcfg = None
             delattr(firmware, "bootcfg")
     return cfg
 
