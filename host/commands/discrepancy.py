@@ -79,7 +79,8 @@ def _discrepancy(args, out):
                                    max_effects=args.max_effects, jobs=args.jobs, log=print)
     except (ValueError, RuntimeError) as exc:
         raise UserError(str(exc))
-    js = write_report(result, family, out.path(args.report) if args.report else None, json_path=out.path(args.json), shown_folder=args.report)
+    js = write_report(result, family, out.path(args.report) if args.report else None, json_path=out.path(args.json),
+                      shown_folder=args.report)
     print("named effects: %s" % (", ".join(result.effects) or "none (no catalog effect explains the gap)"))
     print("held-out RMSE %.3f -> %.3f um; %sJSON in %s" % (result.before.rmse(), result.after.rmse(),
                                                             "report in %s, " % args.report if args.report else "", args.json))
