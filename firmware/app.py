@@ -62,13 +62,8 @@ def _load_config(d):
         cfg = bootcfg.load_config(d)
     finally:
         bootcfg = None
-        # overwrite before removing: a removed dict entry can keep its old value until the
-        # slot is reused, and that stale pointer would keep the module's code alive
-        if "firmware.bootcfg" in sys.modules:
-            sys.modules["firmware.bootcfg"] = None  # type: ignore  # MicroPython's sys.modules takes any object
-            sys.modules.pop("firmware.bootcfg")
+        sys.modules.pop("firmware.bootcfg", None)
         if hasattr(firmware, "bootcfg"):
-            setattr(firmware, "bootcfg", None)
             delattr(firmware, "bootcfg")
     return cfg
 

@@ -15,6 +15,7 @@ VERBS = {
     "flash": ("host.commands.flash", "copy the firmware, a board file and a table onto a MicroPython board with mpremote"),
     "hil": ("host.commands.hil", "run the firmware on the HIL rig, driven by a run folder; query it at every errors.csv row"),
     "import": ("host.commands.importlog", "turn a plain CSV log (time, temperatures, displacements, spindle) into a tcomp run folder"),
+    "linuxcnc": ("host.commands.linuxcnc", "userspace HAL component: apply the board's offset through LinuxCNC external axis offsets"),
     "monitor": ("host.commands.monitor", "decode the $TC stream of a board (a real port or a pty) into a table, optionally logged as CSV"),
     "predict": ("host.commands.predict", "predict the error at every row of a run's errors.csv with any saved model"),
     "select": ("host.commands.select", "choose temperature sensors (maximal-tree fuzzy clustering, stepwise partial F, hierarchical clustering + GA)"),
