@@ -56,6 +56,17 @@ def read_key(path):
     return key
 
 
+def signer_for_option(path, flag="--key"):
+    """The LinkSigner of a verb's ``--key FILE`` (None without one); a bad file is a UserError naming it."""
+    if not path:
+        return None
+    from host.cli import UserError
+    try:
+        return LinkSigner(read_key(path))
+    except KeyFileError as exc:
+        raise UserError("%s %s" % (flag, exc))
+
+
 def write_key(path, key):
     """Create ``path`` holding ``key`` (mode 0600); an existing file is never replaced."""
     tmp = "%s.tmp-%d" % (path, os.getpid())

@@ -52,13 +52,8 @@ def run(args):
     from host.linuxcnc.bridge import Bridge, ModbusLink, StreamLink
 
     _check(args)
-    signer = None
-    if args.key:
-        from host.linkauth import KeyFileError, LinkSigner, read_key
-        try:
-            signer = LinkSigner(read_key(args.key))
-        except KeyFileError as exc:
-            raise UserError("--key %s" % exc)
+    from host.linkauth import signer_for_option
+    signer = signer_for_option(args.key)
     try:
         comp = halcomp.component(args.name)
     except ImportError as exc:

@@ -85,13 +85,8 @@ def _monitor(args, outputs):
                                                       "ref_um", "slope", "flags / fields"))
     latch = None  # the board's answer to L: "ok" or "refused"
     until_answer = args.latch and not (args.count or args.duration)
-    signer = None
-    if args.key:
-        from host.linkauth import KeyFileError, LinkSigner, read_key
-        try:
-            signer = LinkSigner(read_key(args.key))
-        except KeyFileError as exc:
-            raise UserError("--key %s" % exc)
+    from host.linkauth import signer_for_option
+    signer = signer_for_option(args.key)
     latch_sent = False
     try:
         if args.hello or signer is not None and args.latch:
