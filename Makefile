@@ -5,11 +5,16 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 STUBS := .stubs
 STUBS_STAMP := $(STUBS)/.installed
+# LinuxCNC's Python modules (Debian linuxcnc-uspace, built for the system python3), linked into the venv
+LCNC_PY := /usr/lib/python3/dist-packages
+LCNC_LINKS := $(VENV)/linuxcnc-py
+LCNC_STAMP := $(LCNC_LINKS)/.linked
+APT = if [ "$$(id -u)" = 0 ]; then apt-get $(1); else sudo apt-get $(1); fi
 OUT ?= out/demo
 
 .PHONY: setup demo test test-fast typecheck bench clean
 
-setup: $(STAMP) $(STUBS_STAMP) sysdeps
+setup: $(STAMP) $(STUBS_STAMP) sysdeps $(LCNC_STAMP)
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m venv $(VENV)
@@ -24,11 +29,19 @@ $(STUBS_STAMP): constraints.txt $(STAMP)
 	$(BIN)/pip install -q --target $(STUBS) -c constraints.txt micropython-rp2-stubs micropython-stdlib-stubs
 	touch $@
 
-# socat gives mpremote a pty "board"; installed from Debian when missing.
+# socat gives mpremote a pty "board"; linuxcnc-uspace is the LinuxCNC the bridge is tested in
+# (hil_tests/test_hil_linuxcnc.py; ~80 MB). Installed from Debian when missing.
 sysdeps:
-	@command -v socat >/dev/null 2>&1 || { \
-	  if [ "$$(id -u)" = 0 ]; then apt-get update -qq && apt-get install -y -qq socat >/dev/null; \
-	  else sudo apt-get update -qq && sudo apt-get install -y -qq socat >/dev/null; fi; }
+	@command -v socat >/dev/null 2>&1 && command -v halrun >/dev/null 2>&1 || { \
+	  $(call APT,update -qq) && $(call APT,install -y -qq --no-install-recommends socat linuxcnc-uspace) >/dev/null; }
+
+# Only LinuxCNC's own modules (hal, _hal, linuxcnc) go on the venv's path, not all of dist-packages.
+$(LCNC_STAMP): $(STAMP) | sysdeps
+	rm -rf $(LCNC_LINKS) && mkdir -p $(LCNC_LINKS)
+	ln -s $(LCNC_PY)/hal.py $(LCNC_PY)/_hal.cpython-*.so $(LCNC_PY)/linuxcnc.cpython-*.so $(LCNC_LINKS)/
+	echo "$(abspath $(LCNC_LINKS))" > "$$($(BIN)/python -c 'import sysconfig; print(sysconfig.get_paths()["purelib"])')/tcomp-linuxcnc.pth"
+	$(BIN)/python -c 'import hal, linuxcnc' || { echo "LinuxCNC's modules do not import in $(BIN)/python (needs the system python3's version)"; exit 1; }
+	touch $@
 
 demo: setup
 	$(BIN)/python tools/demo.py --out $(OUT)

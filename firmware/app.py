@@ -18,11 +18,12 @@ try:
 except ImportError:  # CPython
     const = lambda x: x  # noqa: E731
 
+from firmware.auth import Auth
 from firmware.channels import Channels
 from firmware.evaluate import Evaluator
 from firmware.safety import Limiter
 from firmware.slots import TableStore
-from firmware.table import TableError, REASON_SENSORS
+from firmware.table import TableError, REASON_SENSORS, REASON_CERT
 
 # status word bits (firmware/status.py; tests/firmware/test_fw_consts.py checks the copies)
 _CLAMPED = const(0x10000)
@@ -47,6 +48,12 @@ _REFS_STORED = const(1)
 _REFS_LATCHED = const(2)
 _REFS_UNSAVED = const(3)
 REF_LETTERS = b"-SLUNCO"
+# Flash wear (docs/protocol.md, "Flash wear"): every file replacement a command causes (latch,
+# table upload, counter mark) spends a token; _WEAR_CAP tokens, one more every _WEAR_REFILL_MS.
+_WEAR_CAP = const(4)
+_WEAR_REFILL_MS = const(60000)
+BUSY = b"busy"  # relatch()'s answer when the flash budget is used up
+_UPLOAD_IDLE_MS = const(60000)  # an upload without a chunk for this long is abandoned
 
 
 def _load_config(d):
@@ -60,8 +67,13 @@ def _load_config(d):
         cfg = bootcfg.load_config(d)
     finally:
         bootcfg = None
-        sys.modules.pop("firmware.bootcfg", None)
+        # overwrite before removing: a removed dict entry can keep its old value until the
+        # slot is reused, and that stale pointer would keep the module's code alive
+        if "firmware.bootcfg" in sys.modules:
+            sys.modules["firmware.bootcfg"] = None
+            sys.modules.pop("firmware.bootcfg")
         if hasattr(firmware, "bootcfg"):
+            firmware.bootcfg = None
             delattr(firmware, "bootcfg")
     return cfg
 
@@ -123,6 +135,9 @@ class App:
         self.ref_state = 0
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
+        self.wear = _WEAR_CAP  # flash-write tokens (spend_flash)
+        self.wear_ms = 0
+        self.auth = Auth(self.store, self.spend_flash)
         t, slot = self.store.load()
         collect()
         if t is not None:
@@ -141,6 +156,22 @@ class App:
         for s in table.sensors:
             if s not in names:
                 raise TableError(REASON_SENSORS, "table sensor %s has no channel on this board" % s)
+        # The certificate must hold where it is cheap to check: the temperature part at its
+        # largest, its smallest (each sensor at the envelope end its coefficient favours) and at
+        # the references, at both ends of the position envelope and at the reference position.
+        # A table whose coefficients were changed without its certificate fails here.
+        ev = Evaluator(table)
+        for sign in (1, -1, 0):
+            for j in range(table.n_sensors):
+                up = (table.b[j] >= 0) == (sign > 0)
+                ev.temps[j] = table.ref[j] if not sign else (table.env_hi[j] if up else table.env_lo[j])
+            ev.update()
+            for p in (table.pos_lo, table.pos_hi, table.pos_ref):
+                ev.set_reference(p)
+                for v, bound in ((ev.offset_at(p), table.cert_out), (ev.ref_offset(), table.cert_ref),
+                                 (ev.slope(), table.cert_slope)):
+                    if v > bound or v < -bound:
+                        raise TableError(REASON_CERT, "output %d at %d um beyond the certified %d" % (v, p, bound))
 
     def use_table(self, table, slot):
         """Switch to ``table`` (already verified); the limiter ramps from the current output."""
@@ -184,7 +215,7 @@ class App:
             return
         r = ev.pos_ref
         span = t.pos_hi - r if t.pos_hi - r > r - t.pos_lo else r - t.pos_lo
-        self.limiter.configure(self.slew, self.cfg.max_offset_um, span)
+        self.limiter.configure(self.slew, self.cfg.max_offset_um, span, t)
 
     def _latch(self, ev, t):
         # once per latch, never in the steady state: the flash write allocates
@@ -206,9 +237,19 @@ class App:
         for i in self.map:
             if not self.channels.good[i]:
                 return b"sensor faulty"
+        if self.wear <= 0:
+            return BUSY
         if not check_only:
+            self.wear -= 1
             self._latch(ev, t)
         return None
+
+    def spend_flash(self):
+        """Take one flash-write token; False (nothing written) when the budget is used up."""
+        if self.wear <= 0:
+            return False
+        self.wear -= 1
+        return True
 
     def set_reference(self, pos_um):
         if self.ev is None:
@@ -274,6 +315,17 @@ class App:
             dt = _CAP
         v = self.rx_ms + dt
         self.rx_ms = v if v < _CAP else _CAP
+        if self.wear < _WEAR_CAP:
+            v = self.wear_ms + dt
+            if v >= _WEAR_REFILL_MS:
+                v -= _WEAR_REFILL_MS
+                self.wear += 1
+            self.wear_ms = v
+        st = self.store
+        if st.uploading:
+            st.idle_ms += dt
+            if st.idle_ms >= _UPLOAD_IDLE_MS:
+                st.abort()
         self.link.poll(now)
         ch = self.channels
         s = ch.read_all(now, clock)

@@ -6,8 +6,15 @@ function), a register range outside the map 02 (illegal data address), a bad
 quantity, byte count or register value 03 (illegal data value); a multi-register
 write is validated completely before any register changes. Frames with a bad
 CRC-16/MODBUS, or for another slave address, are ignored, as the Modbus
-specification requires (the master times out). Broadcast (address 0) writes
-are executed without a reply.
+specification requires (the master times out). Broadcast (address 0) requests
+change nothing and get no reply.
+
+Writes to the registers that change the output (enable, slew, link timeout,
+latch) need authorisation (firmware/auth.py): the master first writes the
+auth block, holding registers 8..17 (counter, then the 16-byte tag over this
+slave's address, the write's start, count, values and the counter), and the
+next such write is checked against it (exception 04 when refused, the reason
+in input register 50). Position and reference are written as whole int32s.
 
 A request is complete when its function code's length has arrived, or after a
 silence of 3.5 character times (at least 2 ms) for anything else. Allocation-free.
@@ -33,9 +40,12 @@ _IR_TABLE_CRC = const(10)  # uint32
 _IR_SLOT = const(12)  # 0 none, 1 A, 2 B
 _IR_CHANNELS = const(13)
 _IR_REF_STATE = const(14)  # firmware.app's ref_state: where the reference temperatures come from
+_IR_UNMAPPED = const(15)  # the one hole in the map: exception 02
 _IR_TEMPS = const(16)  # 16 x int16 0.01 degC, 0x8000 when faulty
 _IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
-_N_INPUT = const(48)
+_IR_AUTH_COUNTER = const(48)  # uint32: the last counter used (firmware.auth)
+_IR_AUTH_WHY = const(50)  # the last refusal (firmware.auth reason code)
+_N_INPUT = const(51)
 # holding registers
 _HR_ENABLE = const(0)  # 0/1
 _HR_SLEW = const(1)  # um/s, 1..10000
@@ -43,14 +53,19 @@ _HR_LINK_TIMEOUT = const(2)  # ms, 0 = off
 _HR_POSITION = const(3)  # int32 um, high word first: writing it is a position report
 _HR_REFERENCE = const(5)  # int32 um
 _HR_LATCH = const(7)  # write 1: latch the reference temperatures now (reads 0)
-_N_HOLDING = const(8)
+_N_VALUES = const(8)  # registers 0..7 hold values; the auth block reads 0
+_HR_AUTH = const(8)  # 10 registers: counter (uint32), tag (16 bytes); written whole with FC16
+_N_AUTH = const(10)
+_N_HOLDING = const(18)
+_PROTECTED = const(0x87)  # bit r: holding register r needs authorisation (0 enable, 1 slew, 2 timeout, 7 latch)
 
 _EX_ILLEGAL_FUNCTION = const(1)
 _EX_ILLEGAL_ADDRESS = const(2)
 _EX_ILLEGAL_VALUE = const(3)
 _EX_DEVICE_FAILURE = const(4)
+_UNSIGNED = const(6)  # firmware.auth's (tests/firmware/test_fw_consts.py checks the copies)
 
-_POS_HI_LIMIT = const(1525)  # |high word| so that |position| <= 100 m
+_POS_LIMIT = const(100000000)  # |position| in um, as the stream's (100 m)
 _NO_VALUE = const(-32768)
 
 
@@ -80,6 +95,8 @@ class ModbusLink:
         self.silence_ms = 2 if baud >= 19200 else (38500 + baud - 1) // baud + 1
         self.hold = [1, app.cfg.slew_um_per_s, app.cfg.link_timeout_ms, 0, 0, 0, 0, 0]
         self.vals = [0] * 123  # values of a write, validated before use
+        self.armed = False  # an auth block waits for the next protected write
+        self.auth = bytearray(4 + 16)  # its counter (big-endian) and tag
         self.frames = 0  # requests answered (diagnostics)
 
     def boot(self):
@@ -146,8 +163,10 @@ class ModbusLink:
         addr = b[0]
         if addr != self.addr and addr != 0:
             return
-        self.app.link_alive(now)
         fc = b[1]
+        if addr == 0 and (fc == 6 or fc == 16):
+            return  # a broadcast write would change every slave at once, unanswered: refused
+        self.app.link_alive(now)
         if fc == 3 or fc == 4:
             self._read(fc, n, addr)
         elif fc == 6:
@@ -184,7 +203,7 @@ class ModbusLink:
         if qty < 1 or qty > 125:
             return self._exception(fc, _EX_ILLEGAL_VALUE, addr)
         limit = _N_INPUT if fc == 4 else _N_HOLDING
-        if start + qty > limit:
+        if start + qty > limit or (fc == 4 and start <= _IR_UNMAPPED < start + qty):
             return self._exception(fc, _EX_ILLEGAL_ADDRESS, addr)
         if addr == 0:
             return
@@ -194,7 +213,7 @@ class ModbusLink:
         t[2] = 2 * qty
         k = 3
         for r in range(start, start + qty):
-            v = self.input_register(r) if fc == 4 else self.hold[r]
+            v = self.input_register(r) if fc == 4 else (self.hold[r] if r < _N_VALUES else 0)
             v &= 0xFFFF
             t[k] = v >> 8
             t[k + 1] = v & 0xFF
@@ -229,6 +248,12 @@ class ModbusLink:
             return a.channels.n
         if r == _IR_REF_STATE:
             return a.ref_state
+        if r == _IR_AUTH_COUNTER:
+            return a.auth.last >> 16
+        if r == _IR_AUTH_COUNTER + 1:
+            return a.auth.last & 0xFFFF
+        if r == _IR_AUTH_WHY:
+            return a.auth.why
         ch = a.channels
         if _IR_TEMPS <= r < _IR_TEMPS + 16:
             i = r - _IR_TEMPS
@@ -256,6 +281,9 @@ class ModbusLink:
         v = (b[4] << 8) | b[5]
         if r >= _N_HOLDING:
             return self._exception(6, _EX_ILLEGAL_ADDRESS, addr)
+        if _HR_POSITION <= r < _N_VALUES - 1 or r >= _N_VALUES:
+            # half an int32 (it would combine with a stale other half) or part of the auth block
+            return self._exception(6, _EX_ILLEGAL_VALUE, addr)
         self.vals[0] = v
         code = self._apply(r, 1)
         if code:
@@ -276,7 +304,17 @@ class ModbusLink:
             return self._exception(16, _EX_ILLEGAL_ADDRESS, addr)
         for i in range(qty):
             self.vals[i] = (b[7 + 2 * i] << 8) | b[8 + 2 * i]
-        code = self._apply(start, qty)
+        if start + qty > _N_VALUES:
+            if start != _HR_AUTH or qty != _N_AUTH:
+                return self._exception(16, _EX_ILLEGAL_VALUE, addr)  # the auth block is written whole
+            au = self.auth
+            for i in range(_N_AUTH):
+                au[2 * i] = b[7 + 2 * i]
+                au[2 * i + 1] = b[8 + 2 * i]
+            self.armed = True
+            code = 0
+        else:
+            code = self._apply(start, qty)
         if code:
             return self._exception(16, code, addr)
         t = self.tx
@@ -289,22 +327,41 @@ class ModbusLink:
         """Validate ``vals[:qty]`` for registers start.., then store and act; exception code or 0."""
         h = self.hold
         vals = self.vals
+        end = start + qty
+        protect = False
         for i in range(qty):
             r = start + i
             v = vals[i]
+            if (_PROTECTED >> r) & 1:
+                protect = True
             if r == _HR_ENABLE and v > 1:
                 return _EX_ILLEGAL_VALUE
             if r == _HR_SLEW and (v < 1 or v > 10000):
                 return _EX_ILLEGAL_VALUE
             if r == _HR_POSITION or r == _HR_REFERENCE:
+                if r + 1 >= end:
+                    return _EX_ILLEGAL_VALUE  # half an int32
                 hi = v - 65536 if v > 32767 else v
-                if hi > _POS_HI_LIMIT or hi < -_POS_HI_LIMIT - 1:
+                if hi > 1526 or hi < -1527:  # far outside: the value below stays a small int
                     return _EX_ILLEGAL_VALUE
+                p = hi * 65536 + vals[i + 1]
+                if p > _POS_LIMIT or p < -_POS_LIMIT:
+                    return _EX_ILLEGAL_VALUE
+            if (r == _HR_POSITION + 1 or r == _HR_REFERENCE + 1) and r == start:
+                return _EX_ILLEGAL_VALUE  # the low half alone
             if r == _HR_LATCH and v:
                 if v > 1:
                     return _EX_ILLEGAL_VALUE
                 if self.app.relatch(True) is not None:
                     return _EX_DEVICE_FAILURE
+        if protect:
+            armed = self.armed
+            self.armed = False  # an auth block authorises one write
+            if not armed:
+                self.app.auth.why = _UNSIGNED
+                return _EX_DEVICE_FAILURE
+            if self._authorise(start, qty):
+                return _EX_DEVICE_FAILURE
         pos = False
         ref = False
         for i in range(qty):
@@ -327,6 +384,25 @@ class ModbusLink:
             h[_HR_LATCH] = 0
             a.relatch()
         return 0
+
+    def _authorise(self, start, qty):
+        """The auth block's verdict on this write (firmware.auth reason, 0 = authorised)."""
+        au = self.auth
+        msg = bytearray(11 + 2 * qty)
+        msg[0] = 77  # M
+        msg[1] = 66  # B
+        msg[2] = self.addr
+        msg[3] = start >> 8
+        msg[4] = start & 0xFF
+        msg[5] = qty >> 8
+        msg[6] = qty & 0xFF
+        for i in range(qty):
+            msg[7 + 2 * i] = self.vals[i] >> 8
+            msg[8 + 2 * i] = self.vals[i] & 0xFF
+        for i in range(4):
+            msg[7 + 2 * qty + i] = au[i]
+        ctr = (((au[0] << 8) | au[1]) << 16) | (au[2] << 8) | au[3]
+        return self.app.auth.check(ctr, au[4:], msg)
 
     def _int32(self, r):
         hi = self.hold[r]

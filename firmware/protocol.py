@@ -7,7 +7,8 @@ P position, M feed/range, Q query, R reference, S temperatures, V hello,
 U table upload (B begin, D data, C commit, X abort), L latch reference
 temperatures, X reset.
 A line that is corrupt, unknown or out of range is answered with an E frame
-and changes nothing.
+and changes nothing. U,B, U,C, U,X, L and X change what the board outputs:
+they end with ``<counter>,<tag>`` (firmware/auth.py) and are refused without.
 
 Periodic frames, position reports and queries allocate nothing; the upload and
 the hello frame may (they are not part of the steady state).
@@ -22,6 +23,11 @@ from firmware import frame as fr
 from firmware.slots import UploadError, SLOT_NAMES
 
 _PROTOCOL_VERSION = const(1)  # docs/protocol.md
+# firmware.auth's (tests/firmware/test_fw_consts.py checks the copies)
+_TAG_BYTES = const(16)
+_MAX_COUNTER = const(999999999)
+_AUTH_BUSY = const(5)
+_UNSIGNED = const(6)
 
 # firmware.frame's (tests/firmware/test_fw_consts.py checks the copies)
 _MAX_LINE = const(200)
@@ -37,10 +43,14 @@ _E_RANGE = const(4)
 _E_STATE = const(5)
 _E_TABLE = const(6)
 _E_OVERFLOW = const(7)
-ERRORS = {1: b"crc", 2: b"syntax", 3: b"unknown", 4: b"range", 5: b"state", 6: b"table", 7: b"overflow"}
+_E_AUTH = const(8)
+_E_BUSY = const(9)
+ERRORS = {1: b"crc", 2: b"syntax", 3: b"unknown", 4: b"range", 5: b"state", 6: b"table", 7: b"overflow",
+          8: b"auth", 9: b"busy"}
 _UPLOAD_CODES = {"range": _E_RANGE, "state": _E_STATE, "table": _E_TABLE}
 _ONE_POSITION = b"PQR"  # commands with one position argument
-_NO_ARGUMENT = b"SVXL"
+_NO_ARGUMENT = b"SV"
+_SIGNED = b"XL"  # no argument but the counter and the tag
 
 _POS_LIMIT = const(100000000)  # |position| in um accepted from the controller (100 m)
 _FEED_LIMIT = const(1000000)  # mm/min
@@ -112,6 +122,10 @@ class StreamLink:
         w.sep()
         w.buf[w.n] = REF_LETTERS[a.ref_state]
         w.n += 1
+        if a.auth.keyed:  # the last counter used: an authorised command needs a larger one
+            w.int(a.auth.last)
+        else:
+            w.text(b"-")
         w.end()
 
     def offsets(self, kind, pos):
@@ -251,12 +265,15 @@ class StreamLink:
                 return self.error(_E_SYNTAX)
             if c == _S:
                 self.temperatures()
-            elif c == _V:
+            else:
                 self.hello()
-            elif c == _L:
+        elif c in _SIGNED:
+            if not self._authorised(nf, 3):
+                return
+            if c == _L:
                 why = a.relatch()
                 if why is not None:
-                    return self.error(_E_STATE, why)
+                    return self.error(_E_BUSY) if why == b"busy" else self.error(_E_STATE, why)
                 from firmware.app import REF_LETTERS
                 self.ack(_L, REF_LETTERS[a.ref_state])
             else:
@@ -265,16 +282,57 @@ class StreamLink:
         else:
             self.error(_E_UNKNOWN)
 
+    def _authorised(self, nf, want, extra=b""):
+        """Whether the line (``want`` fields, the last two ``<counter>,<tag>``) is authorised;
+        if not, the E frame is sent. The tag covers the line up to the counter, then ``extra``."""
+        from firmware.auth import REASONS
+        if nf == want - 2:
+            self.app.auth.why = _UNSIGNED
+            self.error(_E_AUTH, REASONS[_UNSIGNED])
+            return False
+        if nf != want:
+            self.error(_E_SYNTAX)
+            return False
+        r = self.r
+        k = nf - 1
+        ctr = r.int(k - 1, 1, _MAX_COUNTER)
+        s = r.fs[k]
+        if ctr is None or r.fe[k] - s != 2 * _TAG_BYTES:
+            self.error(_E_RANGE)
+            return False
+        tag = bytearray(_TAG_BYTES)
+        for i in range(_TAG_BYTES):
+            hi = fr._hexval(r.buf[s + 2 * i])
+            lo = fr._hexval(r.buf[s + 2 * i + 1])
+            if hi < 0 or lo < 0:
+                self.error(_E_SYNTAX)
+                return False
+            tag[i] = (hi << 4) | lo
+        why = self.app.auth.check(ctr, tag, memoryview(r.buf)[0:r.fe[k - 1]], extra)
+        if why:
+            if why == _AUTH_BUSY:
+                self.error(_E_BUSY)
+            else:
+                self.error(_E_AUTH, REASONS[why])
+            return False
+        return True
+
     def _upload(self, nf):
         a = self.app
         r = self.r
         sub = r.letter(1) if nf >= 2 else 0
         try:
-            if sub == _B and nf == 4:
+            if sub == _B and nf in (4, 6):
                 size = r.int(2, 0, 1 << 24)
                 crc = r.hexint(3, 8)
                 if size is None or crc < 0:
                     return self.error(_E_RANGE)
+                if not self._authorised(nf, 6):
+                    return
+                if a.store.uploading:  # someone's upload: they finish or abort it, or it times out
+                    return self.error(_E_STATE, b"upload open")
+                if not a.spend_flash():
+                    return self.error(_E_BUSY)
                 slot = a.store.begin(size, crc)
                 self.ack(_U, _B, None, SLOT_NAMES[slot].encode())
             elif sub == _D and nf == 4:
@@ -293,12 +351,17 @@ class StreamLink:
                     buf[k] = (hi << 4) | lo
                 got = a.store.write(off, bytes(buf[:n]))
                 self.ack(_U, _D, got)
-            elif sub == _C and nf == 2:
+            elif sub == _C and nf in (2, 4):
+                # the tag covers the table received (its sha256): a refusal leaves the upload open
+                if not self._authorised(nf, 4, a.store.digest()):
+                    return
                 t, slot = a.store.commit()
                 a.use_table(t, slot)
                 self.ack(_U, _C, None, SLOT_NAMES[slot].encode())
                 self.hello()
-            elif sub == _X and nf == 2:
+            elif sub == _X and nf in (2, 4):
+                if not self._authorised(nf, 4):
+                    return
                 a.store.abort()
                 self.ack(_U, _X)
             else:

@@ -45,7 +45,10 @@ def _div0(x, r):
 
 
 class Limiter:
-    """``slew_um_per_s``, ``max_um``: limits; ``span_um``: largest |P - P_ref| in the envelope."""
+    """``slew_um_per_s``, ``max_um``: limits; ``span_um``: largest |P - P_ref| in the envelope.
+
+    The magnitudes are the config's limit or the table's certified bound, whichever is smaller:
+    a table never drives the output beyond what its exporter proved it can produce."""
 
     def __init__(self, slew_um_per_s, max_um, span_um):
         self.configure(slew_um_per_s, max_um, span_um)
@@ -57,14 +60,23 @@ class Limiter:
         self._acc = 0  # sub-unit remainder of the step budget (exact long-run rate)
         self._carry = 0  # budget left unused while the pair was too coarse to move
 
-    def configure(self, slew_um_per_s, max_um, span_um):
+    def configure(self, slew_um_per_s, max_um, span_um, table=None):
+        """``table``: its certificate caps the magnitudes further (the config can only lower them)."""
         if span_um < 1000:
             span_um = 1000
         self.span_mm = span_um // 1000
         self.rate = slew_um_per_s * 100  # 0.01 um per second
-        self.max = max_um * 100
+        m = max_um * 100
         # the slope whose contribution over the span equals the magnitude limit
-        self.max_s = self.max * 1000 // self.span_mm
+        s = m * 1000 // self.span_mm
+        r = m
+        if table is not None:
+            m = m if m < table.cert_out else table.cert_out
+            r = r if r < table.cert_ref else table.cert_ref
+            s = s if s < table.cert_slope else table.cert_slope
+        self.max = m
+        self.max_ref = r
+        self.max_s = s
 
     def _span_part(self, ds):
         """|ds| * span_mm / 1000: the slope change's effect at the envelope's edge, in 0.01 um."""
@@ -120,8 +132,9 @@ class Limiter:
         # pair: move the affine function as a whole within the step budget
         tr = raw_ref
         ts = raw_slope
-        if tr > m or tr < -m:
-            tr = _clamp(tr, m)
+        rm = self.max_ref
+        if tr > rm or tr < -rm:
+            tr = _clamp(tr, rm)
             fl |= _MAG_LIMITED
         if ts > self.max_s or ts < -self.max_s:
             ts = _clamp(ts, self.max_s)

@@ -22,6 +22,7 @@ import struct
 from firmware.crc16 import crc16_ccitt
 from firmware.crc32 import crc32
 from firmware.table import parse_table, TableError
+from firmware.auth import hasher
 
 SLOT_NAMES = ("A", "B")
 MAX_TABLE = 16384
@@ -57,7 +58,8 @@ class TableStore:
         self._mkdirs()
         self.active = None  # slot index in force, or None
         self.refusals = []  # (slot letter, reason) of tables refused at boot or commit
-        self._up = None  # open upload: [file, size, crc, received, running crc]
+        self._up = None  # open upload: [file, size, crc, received, running crc, sha256 (then its digest)]
+        self.idle_ms = 0  # since the open upload last moved (App.cycle times it out)
 
     def _mkdirs(self):
         path = "/" if self.dir.startswith("/") else ""
@@ -130,9 +132,11 @@ class TableStore:
     def begin(self, size, crc):
         if not 68 <= size <= MAX_TABLE:
             raise UploadError("range", "size %d outside 68..%d" % (size, MAX_TABLE))
-        self.abort()
+        if self._up is not None:  # someone's upload: they finish or abort it, or it times out
+            raise UploadError("state", "upload open")
         f = open(self.path(self.inactive()), "wb")
-        self._up = [f, size, crc, 0, 0]
+        self._up = [f, size, crc, 0, 0, hasher()]
+        self.idle_ms = 0
         return self.inactive()
 
     def write(self, offset, data):
@@ -147,14 +151,27 @@ class TableStore:
         up[0].write(data)
         up[3] += len(data)
         up[4] = crc32(data, up[4])
+        up[5].update(data)
+        self.idle_ms = 0
         return up[3]
+
+    def digest(self):
+        """sha256 of the complete upload (what a commit's tag covers); the upload stays open."""
+        up = self._up
+        if up is None:
+            raise UploadError("state", "no upload open")
+        if up[3] != up[1]:
+            raise UploadError("table", "received %d of %d bytes" % (up[3], up[1]))
+        if not isinstance(up[5], bytes):
+            up[5] = up[5].digest()  # final: no chunk can follow a complete upload
+        return up[5]
 
     def commit(self):
         """Verify and switch to the uploaded table; returns (table, slot)."""
         up = self._up
         if up is None:
             raise UploadError("state", "no upload open")
-        f, size, crc, got, running = up
+        f, size, crc, got, running, _ = up
         self._up = None
         f.close()
         if got != size:
@@ -167,11 +184,11 @@ class TableStore:
         except TableError as e:
             self.refusals = [(SLOT_NAMES[slot], str(e))]
             raise UploadError("table", str(e))
-        self._replace("active", SLOT_NAMES[slot].encode())
+        self.replace_file("active", SLOT_NAMES[slot].encode())
         self.active = slot
         return t, slot
 
-    def _replace(self, name, data):
+    def replace_file(self, name, data):
         # write-new-then-rename; '<name>.new' is read at boot when '<name>' is missing
         tmp = self.dir + "/" + name + ".new"
         with open(tmp, "wb") as g:
@@ -219,7 +236,7 @@ class TableStore:
         """Store ``refs`` for ``table``; False if the flash refused (the latch stands)."""
         b = b"TR\x01" + struct.pack("<IB%di" % len(refs), table.crc, len(refs), *refs)
         try:
-            self._replace("refs.bin", b + struct.pack("<H", crc16_ccitt(b)))
+            self.replace_file("refs.bin", b + struct.pack("<H", crc16_ccitt(b)))
             return True
         except OSError:
             return False

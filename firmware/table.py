@@ -44,6 +44,7 @@ REASON_CRC = "CRC mismatch"
 REASON_SENSORS = "sensor count mismatch"
 REASON_UNIT = "unsupported output unit"
 REASON_FIELD = "invalid field"
+REASON_CERT = "certificate"
 
 
 class TableError(ValueError):
@@ -61,7 +62,9 @@ class Table:
 
     kind (str), kind_code, version, axis (str), sensors (list of str, channel order),
     n_sensors, env_lo/env_hi/ref (lists, milli-degC), ref_mode (0: references fixed,
-    1: certified for references latched anywhere in the envelope), pos_lo/pos_hi/pos_ref (um),
+    1: certified for references latched anywhere in the envelope), edited (1: exported from a
+    model document whose recorded sha256 did not match), pos_lo/pos_hi/pos_ref (um),
+    cert_out/cert_ref/cert_slope (the certified output bounds),
     unit_code, provenance (32 bytes, the model document's sha256), crc,
     and the kind-specific coefficients documented in docs/table-format.md
     (fo, Lt, nt, S0, fS, b, shb, fb, ...).
@@ -74,6 +77,10 @@ class Table:
     n_sensors: int
     unit_code: int
     ref_mode: int
+    edited: int
+    cert_out: int
+    cert_ref: int
+    cert_slope: int
     provenance: bytes
     axis: str
     crc: int
@@ -119,7 +126,7 @@ def parse_table(buf, expected_sensors=None):
         raise TableError(REASON_UNIT, "%d" % buf[7])
     nwords = struct.unpack_from("<I", buf, 52)[0]
     for i in range(56, 64):
-        if buf[i] > (i == 56):  # the reference mode (0 or 1), then reserved zeros
+        if buf[i] > (i < 58):  # the reference mode (0 or 1), the edited mark (0 or 1), then reserved zeros
             raise TableError(REASON_FIELD, "header byte %d" % i)
     payload = _HEADER_SIZE + ns * (_NAME_SIZE + 12)
     if payload + 4 * nwords + 4 != n:
@@ -131,6 +138,7 @@ def parse_table(buf, expected_sensors=None):
     t.n_sensors = ns
     t.unit_code = buf[7]
     t.ref_mode = buf[56]
+    t.edited = buf[57]
     t.provenance = bytes(buf[12:44])
     t.axis = _name(buf, 44, 8)
     t.crc = stored
@@ -155,6 +163,9 @@ def parse_table(buf, expected_sensors=None):
         _fields(t, buf, w, _POSITION)
     if kind == _KIND_SCREW_REDUCED:
         _fields(t, buf, w, _SCREW)
+    if w[0] == w[1]:
+        raise TableError(REASON_CERT, "missing")
+    _fields(t, buf, w, _CERT)
     if w[0] != w[1]:
         raise TableError(REASON_LENGTH, "%d unread payload words" % ((w[1] - w[0]) // 4))
     return t
@@ -186,6 +197,9 @@ _HI = (30, 29, 6, 4, _SH, _SCALE, _MAX_DEGREE, _MAX_SEGMENTS, 3600000, 1 << 20, 
 _COUNT_CODES = "DdEQm"  # degree + 1, degree, M + 1, M * M, M
 _COMMON = "pos_lo pos_hi pos_ref | fo:f Lt:L nt:4 S0 fS:c @ rL"
 _POSITION = "Lw:L nw:n shw:s KS shK:s fK:f rK rT degree:d Lg:L ng:n G=D fG=D shg=d rO"
+# the certificate, last: the largest |offset_at|, |ref_offset| (0.01 um) and |slope| (0.01 um/m)
+# the exporter proved for every input inside the envelope; the firmware never outputs more
+_CERT = "cert_out:T cert_ref:T cert_slope:T"
 _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:f C=Q umax:T Lu:L nu:4 "
           "B=m shB=m rS=m G2=m shG2=m H shH:s fh:c Lx:L nx:n shX:s KC Lc:L nc:n shC:s "
           "air:a Tlo:A W0=m shW0=m W1=m shW1=m Ka shKa:s |")

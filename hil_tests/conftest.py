@@ -16,6 +16,8 @@ SLOW = bool(os.environ.get("TCOMP_SLOW"))
 def pytest_addoption(parser):
     parser.addoption("--port", default=None, help="run the HIL scenarios against a real board on this serial port")
     parser.addoption("--baud", default=115200, type=int, help="baud rate of --port")
+    parser.addoption("--key", default=None, help="the --port board's key file (tcomp flash --key), for the "
+                                                 "scenarios that change its output")
 
 
 def pytest_configure(config):
@@ -76,7 +78,10 @@ def dut(request, make_rig):
         if request.node.callspec.params.get("interpreter") == "cpython":
             pytest.skip("one run against the real port is enough")
         from hil_tests.rig.realport import RealDut
-        d = RealDut(port, request.config.getoption("--baud"))
+        kf = request.config.getoption("--key")
+        if kf:
+            from host.linkauth import read_key
+        d = RealDut(port, request.config.getoption("--baud"), read_key(kf) if kf else None)
         yield d
         d.close()
         return

@@ -118,3 +118,34 @@ def test_tcomp_monitor_decodes_a_live_pty(tmp_path, demo_run, capsys):
     summary = json.loads((tmp_path / "mon.json").read_text())
     assert summary["frames"] == 8 and summary["malformed"] == 0
     assert [r["seq"] for r in summary["rows"]] == [int(r["seq"]) for r in rows]
+
+
+def test_tcomp_monitor_latch_declares_a_cold_start(tmp_path, demo_run, capsys):
+    """``--latch`` sends L (signed with ``--key``) and stops at the answer: acknowledged by a run-start
+    table (exit 0), refused by a table with fixed references or, unsigned, by a keyed board (exit 1)."""
+    from hil_tests.rig.boards import _finish
+    from hil_tests.rig.harness import Rig
+    from host.cli import main as tcomp
+    fixed = poly_slope_for_run(demo_run, SENSORS, seed=3)
+    run_start = json.loads(json.dumps(fixed))
+    run_start["thermal"]["reference"] = "run_start"
+    from host.linkauth import generate_key, write_key
+    key = generate_key()
+    key_file = str(tmp_path / "board.key")
+    write_key(key_file, key)
+    for name, doc, signed, rc, said in (
+            ("runstart", _finish(run_start), True, 0, "L acknowledged, references L"),
+            ("fixed", fixed, True, 1, "L refused: fixed references"),
+            ("unsigned", _finish(run_start), False, 1, "L refused: auth,unsigned")):
+        with Rig(rig_config(SENSORS), export(doc).table, interpreter="cpython", workdir=str(tmp_path / name),
+                 temps={"T1": 23.0, "T2": 24.0, "T4": 22.0}, open_port=False, key=key) as rig:
+            rig.run(3000)
+            result = {}
+            argv = ["monitor", "--port", rig.port, "--latch"] + (["--key", key_file] if signed else [])
+            th = threading.Thread(target=lambda: result.setdefault("rc", tcomp(argv)))
+            th.start()
+            with rig.free_run(chunk_ms=50, pace_s=0.001):
+                th.join(timeout=30)
+        assert result.get("rc") == rc, name
+        out = capsys.readouterr().out
+        assert said in out, out

@@ -32,7 +32,7 @@ def _frames(ser, decoder, seconds, want=None):
     return out
 
 
-def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run):
+def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run, capfd):
     from hil_tests.rig.harness import micropython_path
     from hil_tests.rig.socatboard import SocatBoard
     from host.cli import main as tcomp
@@ -49,8 +49,14 @@ def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run):
     link = str(tmp_path / "ttyBOARD")
     with SocatBoard(str(flash), link):
         rc = tcomp(["flash", "--port", link, "--table", str(tmp_path / "table.bin"),
-                    "--config", str(tmp_path / "board.json")])
+                    "--config", str(tmp_path / "board.json"), "--key", str(tmp_path / "board.key")])
         assert rc == 0
+    from host.linkauth import LinkSigner, read_key
+    key = read_key(str(tmp_path / "board.key"))  # created by tcomp flash, readable by its owner only
+    assert os.stat(tmp_path / "board.key").st_mode & 0o777 == 0o600
+    assert (flash / "tables" / "key.bin").read_bytes() == key
+    out, err = capfd.readouterr()
+    assert key.hex() not in (out + err).lower() and "board key: " in err  # named, never printed
     for rel in ("main.py", "tcomp_board.py", "firmware/app.py", "firmware/boards/rp2040.py", "tables/table_a.bin"):
         assert (flash / rel).is_file(), rel
     assert (flash / "tables" / "table_a.bin").read_bytes() == table
@@ -66,6 +72,13 @@ def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run):
                                                            for f in fr) >= 2)
             ser.write(command("V"))
             frames += _frames(ser, dec, 5.0, lambda fr: any(f.kind == "H" for f in fr))
+            # the provisioned key authorises; without it the same command is refused
+            signer = LinkSigner(key)
+            signer.observe([f for f in frames if f.kind == "H"][-1].fields[-1])
+            ser.write(command("U", "X"))
+            ser.write(signer.stream_line("U", "X"))
+            replies = _frames(ser, dec, 5.0, lambda fr: sum(f.kind in ("A", "E") for f in fr) >= 2)
+            assert [(f.kind, f.fields[0]) for f in replies if f.kind in ("A", "E")] == [("E", "8"), ("A", "U")]
     assert not dec.bad, dec.bad[:3]
     hello = [f for f in frames if f.kind == "H"][-1]
     assert hello.fields[2] == "A" and hello.fields[3] == "%08X" % zlib.crc32(table[:-4]), hello.raw

@@ -42,7 +42,7 @@ def test_steady_state_cycle_allocates_nothing(tmp_path, demo_run, mode):
         else:
             import serial
             from hil_tests.test_hil_modbus import crc_modbus
-            req = bytes((1, 4, 0, 0, 0, 48))
+            req = bytes((1, 4, 0, 16, 0, 35))  # temperatures, faults, authorisation state
             with serial.Serial(rig.port, 115200, timeout=0) as s:
                 for _ in range(5):
                     s.write(req + crc_modbus(req))
@@ -51,6 +51,6 @@ def test_steady_state_cycle_allocates_nothing(tmp_path, demo_run, mode):
                 import time
                 time.sleep(0.2)
                 ans = s.read(4096)
-            assert len(ans) == 5 * (3 + 96 + 2) and ans[:3] == bytes((1, 4, 96))
+            assert len(ans) == 5 * (3 + 70 + 2) and ans[:3] == bytes((1, 4, 70))
         st = rig.stats()
         assert st["impl"] == "micropython" and all(c["violations"] == 0 for c in st["chips"].values())

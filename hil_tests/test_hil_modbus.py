@@ -80,7 +80,7 @@ def test_modbus_reads_stream_offsets_and_answers_bad_requests(make_rig, demo_run
             assert not w.isError(), w
         rig.run(150000)
         with rig.free_run():
-            rr = client.read_input_registers(0, count=16, device_id=1)
+            rr = client.read_input_registers(0, count=15, device_id=1)
             assert not rr.isError(), rr
             regs = rr.registers
             assert (regs[6] << 16 | regs[7]) == POS
@@ -89,14 +89,33 @@ def test_modbus_reads_stream_offsets_and_answers_bad_requests(make_rig, demo_run
             assert abs(_s16(regs[3]) - round(o.total_um * 10)) <= 1, (regs[3], o.raw)
             assert abs(_s16(regs[4]) - round(float(o.fields[3]) * 10)) <= 1, (regs[4], o.raw)
             assert abs(_s16(regs[5]) - round(float(o.fields[4]) * 100)) <= 2, (regs[5], o.raw)
-            # illegal data address: input registers end at 48
-            bad = client.read_input_registers(40, count=10, device_id=1)
+            # illegal data address: input registers end at 51, and 15 is a hole
+            bad = client.read_input_registers(45, count=10, device_id=1)
             assert bad.isError() and bad.exception_code == 2
-            bad = client.read_holding_registers(8, count=1, device_id=1)
+            bad = client.read_input_registers(15, count=1, device_id=1)
             assert bad.isError() and bad.exception_code == 2
-            # illegal data value: slew 0 is out of range
+            bad = client.read_holding_registers(18, count=1, device_id=1)
+            assert bad.isError() and bad.exception_code == 2
+            # illegal data value: slew 0 is out of range; half of the position
             bad = client.write_register(1, 0, device_id=1)
             assert bad.isError() and bad.exception_code == 3
+            bad = client.write_register(4, 5, device_id=1)
+            assert bad.isError() and bad.exception_code == 3
+            # changing the output needs the board's key: refused without, accepted with the auth block
+            bad = client.write_register(1, 50, device_id=1)
+            assert bad.isError() and bad.exception_code == 4
+            why = client.read_input_registers(48, count=3, device_id=1).registers
+            assert why == [0, 0, 6]  # no counter used; the last refusal: unsigned
+            block = rig.signer.modbus_auth(1, 1, [50])
+            assert not client.write_registers(8, block, device_id=1).isError()
+            assert not client.write_register(1, 50, device_id=1).isError()
+            assert client.read_holding_registers(1, count=1, device_id=1).registers == [50]
+            assert client.read_input_registers(48, count=3, device_id=1).registers == [0, 1, 0]
+            # the same block again (replayed): refused
+            assert not client.write_registers(8, block, device_id=1).isError()
+            bad = client.write_register(1, 50, device_id=1)
+            assert bad.isError() and bad.exception_code == 4
+            assert client.read_input_registers(50, count=1, device_id=1).registers == [3]
         client.close()
         with rig.free_run():
             # illegal function (read coils)

@@ -18,6 +18,8 @@ KINDS = {
     "poly_slope": "host.empirical.model:PolySlopeModel",
     "linear_direct": "host.empirical.model:LinearDirectModel",
     "screw": "host.screw.model:ScrewModel",
+    "ann": "host.empirical.model:NetworkModel",
+    "dynamic": "host.empirical.dynamic:DynamicModel",
 }
 
 

@@ -26,15 +26,20 @@ class Export:
 
 
 def _provenance(doc):
+    """(sha256 of the document being exported, the recorded one or None). The table names the
+    actual document; a recorded hash that differs means it was edited after it was saved."""
     from host.models import document_hash
 
-    actual = document_hash(doc)
-    declared = ((doc.get("provenance") or {}).get("sha256")) or None
-    return bytes.fromhex(declared if declared and len(declared) == 64 else actual), declared == actual
+    prov = doc.get("provenance")
+    declared = prov.get("sha256") if isinstance(prov, dict) else None
+    return document_hash(doc), declared
 
 
-def export_model(doc, ref_position_mm=None, limit_um=None):
-    """Quantise and certify ``doc`` (a tcomp-model/1 dict). Raises ExportError."""
+def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False):
+    """Quantise and certify ``doc`` (a tcomp-model/1 dict). Raises ExportError.
+
+    A document whose recorded ``provenance.sha256`` does not match its content is refused,
+    unless ``allow_edited``: the table then carries the actual hash and the edited mark."""
     if not isinstance(doc, dict):
         raise ExportError("model document must be a JSON object")
     model = Model(doc, ref_position_mm)
@@ -44,14 +49,21 @@ def export_model(doc, ref_position_mm=None, limit_um=None):
     else:
         errs = planner.positional()
     f = planner.f
-    prov, verified = _provenance(doc)
+    actual, declared = _provenance(doc)
+    verified = declared == actual
+    edited = declared is not None and not verified
+    prov = bytes.fromhex(actual)
     f.update(kind=model.kind, sensors=model.sensors, env_lo=model.env_lo, env_hi=model.env_hi, ref=model.ref, ref_mode=model.ref_mode,
-             pos_lo=model.pos_lo, pos_hi=model.pos_hi, pos_ref=model.pos_ref, provenance=prov,
+             pos_lo=model.pos_lo, pos_hi=model.pos_hi, pos_ref=model.pos_ref, provenance=prov, edited=edited,
              axis=str(doc.get("axis") or "?"))
     try:
         table = pack(f)
     except ValueError as exc:
         raise ExportError("table: %s" % exc)
+    if edited and not allow_edited:  # after the model's and the table's own checks, which name the field
+        raise ExportError("provenance.sha256 %.16s... does not match the document (actual %.16s...): it was edited "
+                          "after it was saved; re-save it, or export it marked as edited (--allow-edited)"
+                          % (declared, actual))
     rec = planner.rec
     limit = LIMITS_UM[model.kind] if limit_um is None else limit_um
     fo = f["fo"]
@@ -89,6 +101,9 @@ def export_model(doc, ref_position_mm=None, limit_um=None):
         "envelope": envelope,
         "provenance_sha256": prov.hex(),
         "provenance_verified": verified,
+        "provenance_edited": edited,
+        "certified_bounds": {"offset_um": f["cert_out"] / OU_PER_UM, "ref_offset_um": f["cert_ref"] / OU_PER_UM,
+                             "slope_um_per_m": f["cert_slope"] / 100.0},
     }
     if model.kind == "screw_reduced":
         sc = planner.state_cert

@@ -108,7 +108,9 @@ class Planner:
         rL, err_out = _round_out(eS, fo)
         f["rL"] = rL
         rec.note(SLOT_ACC, S_iv[0] + rL, S_iv[1] + rL, "output")
-        rec.note(SLOT_OUT, (S_iv[0] + rL) >> fo, (S_iv[1] + rL) >> fo, "output")
+        out = ((S_iv[0] + rL) >> fo, (S_iv[1] + rL) >> fo)
+        rec.note(SLOT_OUT, out[0], out[1], "output")
+        f.update(cert_out=_mag(out), cert_ref=_mag(out), cert_slope=0)
         self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
         return {"offset": err_out, "ref_offset": err_out, "slope": ZERO}
 
@@ -158,6 +160,7 @@ class Planner:
         acc = (acc[0] + rO, acc[1] + rO)
         rec.note(SLOT_ACC, acc[0], acc[1], "output")
         rec.note(SLOT_OUT, acc[0] >> fo, acc[1] >> fo, "output")
+        f["cert_out"] = _mag((acc[0] >> fo, acc[1] >> fo))
         self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
         # the pair: thermal offset at the reference position ...
         # certified for any reference position inside the envelope (Evaluator.set_reference), not only pos_ref
@@ -171,6 +174,7 @@ class Planner:
         f["rT"] = rT
         rec.note(SLOT_ACC, acc_ref[0] + rT, acc_ref[1] + rT, "output")
         rec.note(SLOT_OUT, (acc_ref[0] + rT) >> fo, (acc_ref[1] + rT) >> fo, "output")
+        f["cert_ref"] = _mag(((acc_ref[0] + rT) >> fo, (acc_ref[1] + rT) >> fo))
         # ... and the thermal slope in 0.01 um/m
         s_real = m.s_range()
         slope_bound = m.s_bound() * SLOPE_PER_OU_PER_UM
@@ -199,6 +203,7 @@ class Planner:
         f["rK"] = rK
         rec.note(SLOT_SLOPE, sl[0] + rK, sl[1] + rK, "output")
         rec.note(SLOT_OUT, (sl[0] + rK) >> fK, (sl[1] + rK) >> fK, "output")
+        f["cert_slope"] = _mag(((sl[0] + rK) >> fK, (sl[1] + rK) >> fK))
         return {"offset": err_out, "ref_offset": err_ref_out, "slope": err_sl_out}
 
     def horner(self, fo, PM):
@@ -607,3 +612,8 @@ def _supersolution(A, rho):
         if all(v[i] >= sum(AF[i][j] * v[j] for j in range(M)) + rho[i] for i in range(M)):
             return v
     return None
+
+
+def _mag(iv):
+    """The table's certified output bound: the largest |value| of an integer interval."""
+    return int(max(abs(iv[0]), abs(iv[1])))

@@ -21,8 +21,15 @@ SCREW_AIR_HEAD = ("air", "Tlo")  # format 2: the air channel (-1: none) and the 
 SCREW_AIR_TAIL = ("Ka", "shKa")
 
 
+CERTIFICATE = ("cert_out", "cert_ref", "cert_slope")
+
+
 def payload_words(f):
-    """The payload as a list of (name, int) in table order."""
+    """The payload as a list of (name, int) in table order; the certificate closes it."""
+    return _model_words(f) + [(k, f[k]) for k in CERTIFICATE]
+
+
+def _model_words(f):
     out = [(k, f[k]) for k in COMMON]
     for i in range(len(f["sensors"])):
         out += [("b[%d]" % i, f["b"][i]), ("shb[%d]" % i, f["shb"][i]), ("fb[%d]" % i, f["fb"][i])]
@@ -79,8 +86,8 @@ def pack(f):
     out += prov
     out += _fixed(f["axis"], 8, "axis name")
     out += struct.pack("<I", len(words))
-    out += struct.pack("<B", f.get("ref_mode", 0))
-    out += b"\x00" * 7
+    out += struct.pack("<BB", f.get("ref_mode", 0), 1 if f.get("edited") else 0)
+    out += b"\x00" * 6
     for name in sensors:
         out += _fixed(name, NAME_SIZE, "sensor name")
     for i in range(n):

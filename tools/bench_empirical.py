@@ -6,6 +6,9 @@ Runs the real command line in a fresh process (interpreter start and imports
 included), as a user would, and prints the wall time of each repetition, the
 best and the median, plus the time each method took inside the comparison
 (from the JSON it writes) and the same for `--train all` (every run in turn).
+Then the wall time of `tcomp fit --model ann|dynamic` on the real FL_THERMAL
+record (channel ch1, 11 115 samples, 16 candidate sensors), the two fits whose
+cost grows with the data (training epochs; the lag-filter search).
 """
 import argparse
 import glob
@@ -55,6 +58,12 @@ def main(argv=None):
             print("  best %.2f s, median %.2f s -> %s the %.0f s budget" % (
                 min(times), statistics.median(times), "within" if statistics.median(times) < BUDGET_S else "OVER", BUDGET_S))
             print("  time inside the comparison per method (last repetition): " + ", ".join("%s %.2f s" % kv for kv in per.items()))
+        fl = os.path.join(ROOT, "data", "fl_thermal")
+        if os.path.isdir(fl):
+            print("\nreal record %s, channel ch1" % os.path.relpath(fl, ROOT))
+            for model in ("ann", "dynamic"):
+                t = timed(["fit", "--model", model, "--direct", "--channel", "ch1", fl, "--out", os.path.join(tmp, model + ".json")])
+                print("  tcomp fit --model %s: %.2f s wall" % (model, t))
     return 0
 
 

@@ -169,10 +169,31 @@ class SerialReader(threading.Thread):
 
 class LinkClient:
     """The controller's side of the link, shared by every device under test (the rig, a real port):
-    needs ``send``, ``advance`` and ``reader.frames``."""
+    needs ``send``, ``advance``, ``reader.frames`` and, for commands that change the output,
+    ``signer`` (host.linkauth.LinkSigner with the board's key)."""
 
     request_step_ms = 10
     request_timeout_s = 10.0
+    signer = None
+
+    def _observe_counter(self):
+        # the board's last counter is the last field of its newest hello (boot, V, table switch)
+        for f in reversed(self.reader.frames):
+            if f.kind == "H":
+                self.signer.observe(f.fields[-1])
+                return
+
+    def signed_line(self, *fields, extra=b""):
+        """A command that changes the output, authorised with the board's key."""
+        self._observe_counter()
+        return self.signer.stream_line(*fields, extra=extra)
+
+    def upload_lines(self, table):
+        self._observe_counter()
+        return self.signer.upload_lines(table)
+
+    def send_signed(self, *fields, extra=b""):
+        self.write(self.signed_line(*fields, extra=extra))
 
     def request(self, *fields, kinds=("Q", "A", "E", "H", "T"), step_ms=None, timeout=None):
         """Send a command and return the first reply frame of one of ``kinds`` that follows it."""
@@ -193,7 +214,9 @@ class Rig(LinkClient):
     """One simulated board running the firmware. Use as a context manager."""
 
     def __init__(self, config, table=None, interpreter="micropython", workdir=None, temps=None, noise_uohm=0,
-                 seed=1, start_ms=0, heap=HEAP, slot="A", use_mpy=True, open_port=True):
+                 seed=1, start_ms=0, heap=HEAP, slot="A", use_mpy=True, open_port=True, key=None):
+        """``key``: the board key provisioned into its flash (as tcomp flash does); a random one by
+        default, b"" for a board nobody provisioned."""
         self.config = json.loads(json.dumps(config))
         self.interpreter = interpreter
         self.own_dir = workdir is None
@@ -207,6 +230,12 @@ class Rig(LinkClient):
                 f.write(table)
             with open(os.path.join(tdir, "active"), "w") as f:
                 f.write(slot)
+        from host.linkauth import LinkSigner, generate_key
+        key = generate_key() if key is None else key
+        self.signer = LinkSigner(key) if key else None
+        if key:
+            with open(os.path.join(tdir, "key.bin"), "wb") as f:
+                f.write(key)
         self.spec = {"config": self.config, "ctl": os.path.join(self.workdir, "ctl.sock"), "temps": temps or {},
                      "noise_uohm": noise_uohm, "seed": seed, "start_ms": start_ms}
         self.heap = heap

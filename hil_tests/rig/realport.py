@@ -12,7 +12,11 @@ class RealDut(LinkClient):
     request_step_ms = 20  # wall-clock time on a real board
     request_timeout_s = 5.0
 
-    def __init__(self, port, baud=115200):
+    def __init__(self, port, baud=115200, key=None):
+        """``key``: the board's key (host.linkauth.read_key), for commands that change the output."""
+        if key:
+            from host.linkauth import LinkSigner
+            self.signer = LinkSigner(key)
         self.ser = serial.Serial(port, baud, timeout=0)
         self.reader = SerialReader(self.ser, True)
         self.reader.start()

@@ -1,5 +1,5 @@
 """tcomp compare RUN... --json OUT [--plots DIR]"""
-HELP = "fit MLR, PCR, stepwise and the sensor selectors on one run, predict the others, with a robustness check"
+HELP = "fit MLR, PCR, stepwise, the sensor selectors, ANN, PPR and the dynamic model on one run, predict the others, with a robustness check"
 
 
 def add_arguments(p):
@@ -9,8 +9,9 @@ def add_arguments(p):
     p.add_argument("--channel", help="errors.csv channel to model (multi-channel runs)")
     p.add_argument("--direct", action="store_true", help="direct model of the error at a fixed point (default: slope of each sweep)")
     p.add_argument("--sensors", help="comma-separated candidate sensors (default: all common to the runs)")
-    p.add_argument("--methods", default=",".join(("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset")),
-                   help="comma list of methods (default: all)")
+    p.add_argument("--methods", default=",".join(("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-pcr",
+                                                  "maxtree-ann", "dynamic")),
+                   help="comma list of methods (default: all but maxtree-mlr, which is maxtree under the paper's name)")
     p.add_argument("--train", default="0", help="index of the training run, a comma list, or 'all' (each in turn); default 0")
     p.add_argument("--split-h", type=float, metavar="HOURS", help="one run: fit on t < HOURS, predict t >= HOURS")
     p.add_argument("--noise-C", type=float, default=0.2, help="robustness: temperature noise, standard deviation (default 0.2 °C)")
@@ -28,7 +29,7 @@ def _method_options(items, methods):
     import json
 
     from host.cli import UserError
-    from host.empirical.compare import METHODS, SELECTORS
+    from host.empirical.compare import METHODS, PIPELINES, SELECTORS
 
     options, selector = {}, {}
     for item in items:
@@ -38,8 +39,8 @@ def _method_options(items, methods):
             raise UserError("--option %r: expected METHOD.KEY=VALUE, e.g. pcr.variance_threshold=0.9" % item)
         if method not in METHODS:
             raise UserError("--option %r: unknown method %r (known: %s)" % (item, method, ", ".join(METHODS)))
-        if method == "mlr":
-            raise UserError("--option %r: mlr has no settings" % item)
+        if method in ("mlr", "maxtree-mlr"):
+            raise UserError("--option %r: %s has no settings" % (item, method))
         try:
             v = json.loads(value)
         except ValueError:
@@ -49,11 +50,13 @@ def _method_options(items, methods):
 
             from host.empirical.regression import ESTIMATORS
 
-            params = inspect.signature(ESTIMATORS[method].__init__).parameters
+            params = inspect.signature(ESTIMATORS[PIPELINES.get(method, (None, method))[1]].__init__).parameters
             known = [k for k in params if k not in ("self", "fit_intercept")]
+            if method == "dynamic":
+                known += ["taus_s", "use_spindle", "use_feed", "cv_blocks"]  # how fit_model builds the candidate signals
             if key not in known:
                 raise UserError("--option %r: %s has no setting %r (settings: %s)" % (item, method, key, ", ".join(known)))
-            default = params[key].default
+            default = params[key].default if key in params else None
             numeric = isinstance(default, (int, float)) and not isinstance(default, bool)
             if numeric and (isinstance(v, bool) or not isinstance(v, (int, float))):
                 raise UserError("--option %r: %s.%s must be a number, got %r" % (item, method, key, value))

@@ -1,4 +1,4 @@
-"""tcomp export MODEL.json --out table.bin [--report report.json] [--json summary.json] [--c-header table.h]"""
+"""tcomp export MODEL.json --out table.bin [--report report.json] [--json summary.json] [--c-header table.h] [--allow-edited]"""
 HELP = "quantise a model into the firmware's integer coefficient table, with a certificate of integer safety and accuracy"
 
 
@@ -11,6 +11,9 @@ def add_arguments(p):
     p.add_argument("--c-header", dest="c_header", help="also write the table and its integer evaluation as a C header")
     p.add_argument("--ref-position-mm", dest="ref_position_mm", type=float,
                    help="reference position of the offset/slope pair (default: 0 if inside the envelope, else its low end)")
+    p.add_argument("--allow-edited", dest="allow_edited", action="store_true",
+                   help="export a model whose recorded provenance.sha256 does not match its content (edited after "
+                        "it was saved): the table names the actual document and is marked edited")
 
 
 def run(args):
@@ -45,7 +48,7 @@ def _export(args):
     except ModelFormatError as exc:
         raise UserError(str(exc))
     try:
-        ex = export_model(doc, ref_position_mm=args.ref_position_mm)
+        ex = export_model(doc, ref_position_mm=args.ref_position_mm, allow_edited=args.allow_edited)
     except ExportError as exc:
         raise UserError("%s: %s" % (args.model, exc))
     return ex

@@ -1,7 +1,7 @@
 """tcomp fit --model KIND RUN... --out MODEL.json"""
-HELP = "fit a thermal-error model (mlr, pcr, stepwise: host/empirical; screw: host/screw) and save it"
+HELP = "fit a thermal-error model (mlr, pcr, stepwise, cv-subset, ann, dynamic: host/empirical; screw: host/screw) and save it"
 
-EMPIRICAL = ("mlr", "pcr", "stepwise", "cv-subset")
+EMPIRICAL = ("mlr", "pcr", "stepwise", "cv-subset", "ann", "dynamic")
 
 
 def add_arguments(p):

@@ -1,4 +1,4 @@
-"""tcomp flash --port PORT [--table table.bin] [--config board.json | --board board.py]"""
+"""tcomp flash --port PORT [--table table.bin] [--config board.json | --board board.py] [--key board.key]"""
 HELP = "copy the firmware, a board file and a table onto a MicroPython board with mpremote"
 
 import json
@@ -26,6 +26,11 @@ def add_arguments(p):
                                                         "(not for a unix-port board: it would exit)")
     p.add_argument("--mpremote", default=None, help="mpremote executable (default: the one next to this Python)")
     p.add_argument("--dry-run", action="store_true", help="print the mpremote command instead of running it")
+    p.add_argument("--key", metavar="FILE",
+                   help="the board's key (64 hex digits, host/linkauth.py), written to the board's table directory "
+                        "as key.bin; a new random key is created in FILE (mode 0600) when FILE does not exist. "
+                        "Without a key the board refuses every command that changes its output (table upload, "
+                        "L, X, Modbus enable/slew/timeout/latch). The key is never printed")
 
 
 def _mpremote(explicit):
@@ -35,8 +40,9 @@ def _mpremote(explicit):
     return here if os.path.exists(here) else (shutil.which("mpremote") or "mpremote")
 
 
-def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=True):
-    """Lay out the board's flash under ``dest``; returns {remote dir: [local files]} and the table dir."""
+def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=True, key=None):
+    """Lay out the board's flash under ``dest``; returns {remote dir: [local files]} and the table dir.
+    ``key``: the board key (bytes), staged as ``<table dir>/key.bin`` (mode 0600)."""
     from host.cli import UserError
     files = {}
     if firmware:
@@ -97,7 +103,31 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
             with open(p, "wb") as f:
                 f.write(content)
             files.setdefault(tdir, []).append(p)
+    if key is not None:
+        os.makedirs(os.path.join(dest, tdir), exist_ok=True)
+        p = os.path.join(dest, tdir, "key.bin")
+        fd = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as f:
+            f.write(key)
+        files.setdefault(tdir, []).append(p)
     return files, tdir
+
+
+def board_key(path):
+    """The key in ``path``, created there first when the file does not exist; (key, created)."""
+    from host.cli import UserError
+    from host.linkauth import KeyFileError, generate_key, read_key, write_key
+    created = False
+    if not os.path.lexists(path):
+        try:
+            write_key(path, generate_key())
+        except OSError as exc:
+            raise UserError("--key %s: cannot create the key file: %s" % (path, exc.strerror or exc))
+        created = True
+    try:
+        return read_key(path), created
+    except KeyFileError as exc:
+        raise UserError(str(exc))
 
 
 def unwired_sensors(table_sensors, cfg):
@@ -131,12 +161,16 @@ def _parents(d):
 
 def run(args):
     from host.cli import UserError
-    if not (args.table or args.config or args.board or not args.no_firmware):
-        raise UserError("nothing to flash: give --table, --config or --board, or drop --no-firmware")
+    if not (args.table or args.config or args.board or args.key or not args.no_firmware):
+        raise UserError("nothing to flash: give --table, --config, --board or --key, or drop --no-firmware")
+    key = None
+    if args.key:
+        key, created = board_key(args.key)
+        print("board key: %s (%s)" % (args.key, "new" if created else "existing"), file=sys.stderr)
     tmp = tempfile.mkdtemp(prefix="tcomp-flash-")
     keep = False
     try:
-        files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware)
+        files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware, key)
         argv = command(args.port, files, _mpremote(args.mpremote), args.reset)
         if args.dry_run:
             # The printed command copies these staged files: they stay until the user has used (or dropped) it.

@@ -1,10 +1,11 @@
-"""tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S]"""
+"""tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch]"""
 HELP = "decode the $TC stream of a board (a real port or a pty) into a table, optionally logged as CSV"
 
 import csv
 import sys
 import time
 
+LATCH_WAIT_S = 5.0  # the firmware answers L within one cycle (cycle_ms, 100 ms by default)
 COLUMNS = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_offset_um", "slope_um_per_m",
            "fields")
 
@@ -16,6 +17,11 @@ def add_arguments(p):
     p.add_argument("--count", type=int, default=0, help="stop after this many frames (0: never)")
     p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: never)")
     p.add_argument("--hello", action="store_true", help="ask the board for its hello frame (V) first")
+    p.add_argument("--latch", action="store_true",
+                   help="declare a cold start: send L (re-latch the reference temperatures, docs/protocol.md) and "
+                        "report the answer; without --count/--duration stop at the answer (exit 1 if refused)")
+    p.add_argument("--key", help="the board's key file (tcomp flash --key): --latch signs L with it (the board "
+                                "refuses an unsigned L when it has a key)")
     p.add_argument("--json", help="write {frames, malformed, rows: [decoded frames], bad: [reasons]} as JSON at the end")
 
 
@@ -78,11 +84,28 @@ def _monitor(args, outputs):
     start = time.monotonic()
     print("%6s %1s %8s %10s %10s %9s %9s %9s  %s" % ("seq", "", "status", "t_ms", "pos_um", "total_um",
                                                       "ref_um", "slope", "flags / fields"))
+    latch = None  # the board's answer to L: "ok" or "refused"
+    until_answer = args.latch and not (args.count or args.duration)
+    signer = None
+    if args.key:
+        from host.linkauth import KeyFileError, LinkSigner, read_key
+        try:
+            signer = LinkSigner(read_key(args.key))
+        except KeyFileError as exc:
+            raise UserError("--key %s" % exc)
+    latch_sent = False
     try:
-        if args.hello:
-            ser.write(command("V"))
+        if args.hello or signer is not None and args.latch:
+            ser.write(command("V"))  # a signed L needs the board's last counter, the hello's last field
+        if args.latch and signer is None:
+            ser.write(command("L"))
+            latch_sent = True
         while not (args.count and n >= args.count) and not (args.duration and time.monotonic() - start
                                                                >= args.duration):
+            if until_answer and latch:
+                break
+            if until_answer and time.monotonic() - start >= LATCH_WAIT_S:
+                raise UserError("%s: no answer to L within %g s" % (args.port, LATCH_WAIT_S))
             try:
                 data = ser.read(4096)
             except serial.SerialException as exc:
@@ -94,12 +117,21 @@ def _monitor(args, outputs):
                 print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
+                if args.latch and not latch_sent and f.kind == "H":
+                    signer.observe(f.fields[-1])
+                    ser.write(signer.stream_line("L"))
+                    latch_sent = True
+                if latch_sent and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]
+                                                     or f.kind == "E" and f.fields[:1] in (["5"], ["8"], ["9"])):
+                    latch = "ok" if f.kind == "A" else "refused"
+                    print("L acknowledged, references %s" % ",".join(f.fields[1:]) if f.kind == "A"
+                          else "L refused: %s" % ",".join(f.fields[2:] if f.fields[0] == "5" else f.fields[1:]))
                 if writer:
                     writer.writerow(r)
                 if args.json:
                     rows.append(r)
                 n += 1
-                if args.count and n >= args.count:
+                if args.count and n >= args.count or until_answer and latch:
                     break
             while dec.bad:
                 line, why = dec.bad.pop(0)
@@ -120,4 +152,4 @@ def _monitor(args, outputs):
 
         with outputs.open(args.json) as fh:
             json.dump({"port": args.port, "frames": n, "malformed": bad, "rows": rows, "bad": bad_reasons}, fh, indent=1)
-    return 0
+    return 1 if latch == "refused" else 0

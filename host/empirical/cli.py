@@ -1,4 +1,4 @@
-"""``tcomp fit --model mlr|pcr|stepwise`` (arguments defined in host/commands/fit.py)."""
+"""``tcomp fit --model mlr|pcr|stepwise|cv-subset|ann|dynamic`` (arguments defined in host/commands/fit.py)."""
 import json
 import math
 
@@ -17,11 +17,31 @@ OPTIONS = {
     "t_min_s": float,  # training window on target time
     "t_max_s": float,
     "max_sensors": int,  # cv-subset
-    "cv_blocks": int,  # cv-subset on one run
+    "cv_blocks": int,  # cv-subset on one run; ann's validation group
+    "hidden_sizes": lambda v: [int(h) for h in v.split("/")],  # ann: candidate sizes, e.g. 3/4/5
+    "seed": int,  # ann
+    "max_epochs": int,  # ann
+    "patience": int,  # ann
+    "validation_fraction": float,  # ann, random validation
+    "validation": str,  # ann: random | last_group
+    "learning_rate": float,  # ann
+    "taus_s": lambda v: [float(x) for x in v.split("/")],  # dynamic: time-constant grid, e.g. 0/1800/7200
+    "ridge": lambda v: [float(x) for x in v.split("/")],  # dynamic: penalty grid
+    "max_terms": int,  # dynamic
+    "min_gain": float,  # dynamic
+    "cv_score": str,  # dynamic: worst | pooled
+    "swaps": lambda v: {"true": True, "false": False}[v.lower()],  # dynamic
+    "use_spindle": lambda v: {"true": True, "false": False}[v.lower()],  # dynamic
+    "use_feed": lambda v: {"true": True, "false": False}[v.lower()],  # dynamic
 }
+LIST_OPTIONS = ("hidden_sizes", "taus_s", "ridge")
+BOOL_OPTIONS = ("swaps", "use_spindle", "use_feed")
 # smallest meaningful value of numeric options whose estimator would otherwise fail obscurely or accept nonsense
-MINIMUM = {"envelope_margin_K": 0.0, "geometric_max_degree": 1, "max_sensors": 1, "n_components": 1, "cv_blocks": 2}
-METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",)}
+MINIMUM = {"envelope_margin_K": 0.0, "geometric_max_degree": 1, "max_sensors": 1, "n_components": 1, "cv_blocks": 2, "seed": 0, "max_epochs": 1,
+           "patience": 1, "max_terms": 1, "min_gain": 0.0}
+METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",),
+                  "dynamic": ("taus_s", "ridge", "max_terms", "min_gain", "cv_score", "swaps", "use_spindle", "use_feed"),
+                  "ann": ("hidden_sizes", "validation", "seed", "max_epochs", "patience", "validation_fraction", "learning_rate")}
 
 
 def parse_options(pairs, method):
@@ -34,13 +54,15 @@ def parse_options(pairs, method):
         key = key.strip()
         if not sep or key not in OPTIONS:
             raise UserError("--option %r: expected KEY=VALUE with KEY one of %s" % (item, ", ".join(sorted(OPTIONS))))
-        owner = [m for m, keys in METHOD_OPTIONS.items() if key in keys]
+        owner = [m for m, keys in METHOD_OPTIONS.items() if key in keys] + (["dynamic"] if key == "max_sensors" else [])
         if owner and method not in owner:
             raise UserError("--option %s applies to --model %s, not %s" % (key, owner[0], method))
         try:
             out[key] = OPTIONS[key](value.strip())
-        except ValueError:
-            raise UserError("--option %s=%r: not a valid %s" % (key, value, OPTIONS[key].__name__))
+        except (ValueError, KeyError):
+            kind = ("list of numbers separated by /" if key in LIST_OPTIONS else "true or false" if key in BOOL_OPTIONS
+                    else OPTIONS[key].__name__)
+            raise UserError("--option %s=%r: not a valid %s" % (key, value, kind))
         if OPTIONS[key] is float and not math.isfinite(out[key]):
             raise UserError("--option %s=%r: must be a finite number" % (key, value))
         low = MINIMUM.get(key)
@@ -90,6 +112,15 @@ def fit_command(args, out):
         for k, v in sorted(est.cv_rmse_.items()):
             print("  best %d-sensor subset %s: CV RMSE %.4g" % (k, ",".join(v["sensors"]), v["cv_rmse"]))
         print(est.mlr_.summary())
+    elif args.model == "dynamic":
+        print("  ridge %g chosen by cross-validation over %d groups (%s score %.4g); fit R2=%.4f RMSE=%.4g" % (
+            est.ridge_, est.n_groups_, est.cv_score, est.cv_rmse_, est.rsquared_, est.rmse_))
+        for (sig, tau), c in zip(est.terms_, est.coef_):
+            print("  %+.5g x lag(%s, tau %g s)" % (c, sig, tau))
+    elif args.model == "ann":
+        print("  %d hidden nodes chosen by validation (%s); validation RMSE by size: %s" % (
+            est.hidden_size_, est.validation_, ", ".join("%d: %.4g" % kv for kv in sorted(est.validation_rmse_.items()))))
+        print("  fit on all training samples: R2=%.4f RMSE=%.4g; best epoch %d" % (est.rsquared_, est.rmse_, est.best_epoch_))
     else:
         print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (
             est.n_components_, est.eigenvalues_.size, 100 * est.cumulative_variance_ratio_[est.n_components_ - 1], 100 * est.variance_threshold))

@@ -13,6 +13,16 @@ again with disturbed temperatures (robustness). Methods:
 ``maxtree``        maximal-tree fuzzy-clustering selector, then MLR
 ``hclust-ga``      hierarchical-clustering + GA selector, then MLR
 ``cv-subset``      best subset of ≤ 5 sensors by blocked cross-validation, MLR
+``ann``            one-hidden-layer back-propagation network on all candidate
+                   sensors, 3-7 hidden nodes chosen by validation (ann.py)
+``ppr``            projection pursuit regression on all candidate sensors (ppr.py)
+``maxtree-mlr``    the paper's pipeline: maximal-tree selection, then MLR
+                   (the same numbers as ``maxtree``, kept under the old name)
+``maxtree-pcr``    maximal-tree selection, then PCR on the chosen sensors
+``maxtree-ann``    maximal-tree selection, then the network on them
+``dynamic``        lag-filtered temperatures and spindle speed / feed, ≤ 5
+                   sensors and the time constants chosen by cross-validation
+                   across cycles or runs (dynamic.py)
 =================  ==========================================================
 
 Two case builders: :func:`cases_runs` (fit on one run, predict the others, as in
@@ -33,8 +43,10 @@ from host.empirical import EmpiricalDataError
 from host.empirical.evaluate import disturb_run, evaluate
 from host.empirical.fitting import fit_model
 
-METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset")
+METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-mlr", "maxtree-pcr", "maxtree-ann", "dynamic")
 SELECTORS = ("maxtree", "hclust-ga")
+# selector, then estimator on the chosen sensors (estimator settings: --option maxtree-pcr.KEY=V; selection: maxtree.KEY=V)
+PIPELINES = {"maxtree-mlr": ("maxtree", "mlr"), "maxtree-pcr": ("maxtree", "pcr"), "maxtree-ann": ("maxtree", "ann")}
 ROBUSTNESS = {"noise_C": 0.2, "offset_C": 0.5, "seed": 0, "repeats": 5}
 
 
@@ -130,9 +142,10 @@ def _fit(method, case, target, channel, sensors, fit_intercept, options, selecto
 
     info = {}
     opts = dict(options.get(method, {}))
-    if method in SELECTORS:
-        params = dict(selector_params.get(method, {}))
-        if method == "hclust-ga":
+    selector, estimator = PIPELINES.get(method, (method, "mlr") if method in SELECTORS else (None, method))
+    if selector is not None:
+        params = dict(selector_params.get(selector, {}))
+        if selector == "hclust-ga":
             if case.ga_data is None:
                 raise EmpiricalDataError(case.ga_note or "hclust-ga needs several runs or spindle cycles")
             params = {**case.ga_params, **params}
@@ -140,10 +153,10 @@ def _fit(method, case, target, channel, sensors, fit_intercept, options, selecto
             info["note"] = case.ga_note
         else:
             data = training_arrays(case.train, target, channel, sensors, window=case.window)
-        sel = select(method, data, target=target, channel=channel, sensors=sensors, **params)
+        sel = select(selector, data, target=target, channel=channel, sensors=sensors, **params)
         info["selection"] = sel.reason
         info["selection_obj"] = sel
-        model = fit_model(case.train, "mlr", target, channel, sel.sensors, fit_intercept, case.window, reference=reference)
+        model = fit_model(case.train, estimator, target, channel, sel.sensors, fit_intercept, case.window, reference=reference, **opts)
     else:
         model = fit_model(case.train, method, target, channel, sensors, fit_intercept, case.window, reference=reference, **opts)
     return model, info
@@ -178,7 +191,9 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
         res["sensors"] = list(model.sensors)
         res["n_sensors"] = len(model.sensors)
         res["fit"] = {k: st.get(k) for k in ("r2", "r2_adj", "F", "F_p", "residual_std_error", "n_samples")}
-        if method == "pcr":
+        if method in ("ann", "maxtree-ann"):
+            res["fit"].update({k: st.get(k) for k in ("hidden_size", "validation_rmse_by_size", "validation")})
+        if method in ("pcr", "maxtree-pcr"):
             res["fit"]["n_components"] = st.get("n_components")
             res["scree"] = st.get("scree")
         if method in ("stepwise", "cv-subset"):
@@ -187,7 +202,7 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
             res["selection"] = info["selection"]
         if "note" in info:
             res["note"] = info["note"]
-        res["coefficients"] = dict(zip(model.sensors, model.coefficients.tolist()))
+        res["coefficients"] = None if model.coefficients is None else dict(zip(model.sensors, model.coefficients.tolist()))
         res["intercept"] = model.intercept
         res["train"] = evaluate(model, case.train[0], case.window)
         res["tests"] = {label: evaluate(model, r, w) for label, r, w in case.tests}
@@ -198,6 +213,8 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
         acc = [res["tests"][k]["accuracy_pct"] for k in keys if res["tests"][k]["accuracy_pct"] is not None]
         res["mean_test_rmse_um"] = float(np.mean(rm))
         res["mean_test_accuracy_pct"] = float(np.mean(acc)) if acc else None
+        cacc = [res["tests"][k]["comprehensive"]["accuracy_pct"] for k in keys if res["tests"][k]["comprehensive"]["accuracy_pct"] is not None]
+        res["mean_test_comprehensive_accuracy_pct"] = float(np.mean(cacc)) if cacc else None
         res["mean_disturbed_rmse_um"] = float(np.mean(dm))
         res["degradation_um"] = res["mean_disturbed_rmse_um"] - res["mean_test_rmse_um"]
         res["seconds"] = time.perf_counter() - t0
@@ -211,6 +228,8 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
 def _mean_metrics(ms):
     """Metrics averaged over disturbance realisations (RMSE as the root of the mean square)."""
     out = dict(ms[0])
+    if "comprehensive" in out:
+        out["comprehensive"] = _mean_metrics([m["comprehensive"] for m in ms])
     out["rmse_um"] = float(np.sqrt(np.mean([m["rmse_um"] ** 2 for m in ms])))
     out["max_residual_um"] = float(max(m["max_residual_um"] for m in ms))
     out["min_residual_um"] = float(min(m["min_residual_um"] for m in ms))
@@ -284,7 +303,7 @@ def write_plots(results, cases, out_dir, target, channel=None):
             paths.append(plots.plot_curves(m, trun, os.path.join(out_dir, "%s_%s_curves.png" % (stem, r["method"])),
                                            "%s model fitted on %s: measured vs predicted %s on %s" % (
                                                r["method"], case.label, what, tlabel), window=twin))
-            if r["method"] == "pcr":
+            if r["method"] == "pcr" and hasattr(m.estimator_, "scree"):
                 paths.append(plots.plot_scree(m.estimator_, os.path.join(out_dir, "%s_pcr_scree.png" % stem),
                                               "PCR scree: correlation-matrix eigenvalues of %d sensors, training data %s" % (len(m.sensors), case.label)))
             if r.get("_selection") is not None:
@@ -297,3 +316,39 @@ def write_plots(results, cases, out_dir, target, channel=None):
         paths.append(plots.plot_summary(rs, os.path.join(out_dir, "%s_summary.png" % stem),
                                         "Mean held-out RMSE per method (sensors), fitted on %s; clean vs disturbed temperatures" % case.label))
     return paths
+
+
+LOCO_METHODS = ("mlr", "cv-subset", "dynamic")
+
+
+def leave_one_cycle_out(run, channel=None, target="direct", methods=LOCO_METHODS, sensors=None, options=None, progress=None):
+    """Every method fitted with one spindle cycle left out and evaluated on it, for every cycle in turn.
+
+    Returns {"cycles": [...], "methods": {method: {"folds": [metrics per held-out cycle], "rmse_um": pooled RMSE,
+    "n": samples, "sensors": [sensors per fold]}}, "ratio_to_mlr": {method: pooled RMSE / MLR's}}. The pooled RMSE
+    is the root of the mean squared residual over every held-out sample of every fold. Each model's own choices
+    (sensors, time constants, penalty) are made inside its fold, on the other cycles only.
+    """
+    from host.empirical.schedule import cycles
+
+    options = options or {}
+    cyc = cycles(run)
+    if len(cyc) < 3:
+        raise EmpiricalDataError("leave-one-cycle-out needs at least 3 spindle cycles (fit on >= 2), %s has %d" % (run.name, len(cyc)))
+    out = {"cycles": [[c["t_start_s"], c["t_end_s"], c["speeds_rpm"]] for c in cyc], "methods": {}}
+    for m in methods:
+        folds, sens = [], []
+        for k, c in enumerate(cyc):
+            span = (c["t_start_s"] if k else None, c["t_end_s"] if k < len(cyc) - 1 else None)
+            model = fit_model([run], m, target, channel, sensors, True, exclude=span, reference="run_start", **options.get(m, {}))
+            folds.append(evaluate(model, run, span))
+            sens.append(list(model.sensors))
+            if progress:
+                progress("%s %s cycle %d: %.3f um" % (channel, m, k + 1, folds[-1]["rmse_um"]))
+        n = sum(f["n"] for f in folds)
+        rmse = float(np.sqrt(sum(f["n"] * f["rmse_um"] ** 2 for f in folds) / n))
+        out["methods"][m] = {"folds": folds, "rmse_um": rmse, "n": n, "sensors": sens}
+    if "mlr" in out["methods"]:
+        base = out["methods"]["mlr"]["rmse_um"]
+        out["ratio_to_mlr"] = {m: v["rmse_um"] / base for m, v in out["methods"].items()}
+    return out

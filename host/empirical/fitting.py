@@ -11,12 +11,13 @@ import numpy as np
 
 from host.empirical import EmpiricalDataError
 from host.empirical.geometric import fit_geometric
-from host.empirical.model import LinearDirectModel, PolySlopeModel
+from host.empirical.model import LinearDirectModel, NetworkModel, PolySlopeModel
 from host.empirical.regression import make_estimator
 from host.empirical.schedule import block_labels, cycles
 from host.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
 
 ENVELOPE_MARGIN_K = 2.0
+NONLINEAR = ("ann", "ppr")  # estimators that are not a linear function of the rises: NetworkModel
 
 
 def _envelope(runs, arrays, sensors, margin, target, channel):
@@ -64,7 +65,7 @@ def select_columns(arrays, sensors):
         if missing:
             raise EmpiricalDataError("%s: sensor(s) %s not available (have %s)" % (a.run, ", ".join(missing), ", ".join(a.names)))
         idx = [a.names.index(s) for s in sensors]
-        out.append(RunArrays(a.X[:, idx], a.y, list(sensors), a.time_s, a.run))
+        out.append(RunArrays(a.X[:, idx], a.y, list(sensors), a.time_s, a.run, None if a.start is None else a.start[idx]))
     return out
 
 
@@ -115,7 +116,7 @@ def cv_groups(runs, arrays, cv_blocks=None):
 
 def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
               reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
-              cv_blocks=None, **options):
+              cv_blocks=None, exclude=None, **options):
     """Fit ``method`` (mlr|pcr|stepwise) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
@@ -126,20 +127,27 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     then says so in thermal.reference). Training always uses each training
     run's own rises, so with one training run both give the same model.
     ``cv_blocks``: cross-validation groups of ``cv-subset`` (see :func:`cv_groups`).
+    ``exclude=(lo, hi)``: targets in that span are left out of the fit (leave-one-cycle-out).
     """
     runs = list(runs)
     if not runs:
         raise EmpiricalDataError("fit: no training run given")
-    arrays = training_arrays(runs, target=target, channel=channel, sensors=sensors, window=window)
+    arrays = training_arrays(runs, target=target, channel=channel, sensors=sensors, window=window, exclude=exclude)
     names = arrays[0].names
     X, y = stack(arrays)
+    if method == "dynamic":
+        return _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K, geometric_max_degree,
+                            geometric_criterion, cv_blocks, options)
     est = make_estimator(method, fit_intercept=fit_intercept, **options)
-    if method == "cv-subset":
+    if method in ("cv-subset", "ann"):
+        # cv-subset cross-validates over the groups; the ann validates on the last one
         groups = cv_groups(runs, arrays, cv_blocks)
         est.fit(X, y, names, groups=groups)
     else:
         est.fit(X, y, names)
-    if hasattr(est, "selected_names_"):
+    if method in NONLINEAR:
+        used, coefs = list(names), None
+    elif hasattr(est, "selected_names_"):
         used = list(est.selected_names_)
         coefs = est.mlr_.coef_
     else:
@@ -152,6 +160,7 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
         "runs": [r.path or r.name for r in runs],
         "target": target,
         "window_s": list(window) if window is not None else None,
+        "excluded_s": list(exclude) if exclude is not None else None,
         "n_samples": int(y.size),
         "rises": True,
         "fit_intercept": bool(fit_intercept),
@@ -161,12 +170,54 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     kw: dict = dict(reference=reference, channel=channel, method=method, axis=runs[0].meta.get("axis"),
               envelope=_envelope(runs, arrays, used, envelope_margin_K, target, channel), statistics=stats, training=training)
     if target == "direct":
-        model = LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
+        model = NetworkModel(used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
     else:
         geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
         stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
-        model = PolySlopeModel(used, coefs, est.intercept_, ref, geometric_coef=geo.coef_, **kw)
+        if method in NONLINEAR:
+            model = NetworkModel(used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
+        else:
+            model = PolySlopeModel(used, coefs, est.intercept_, ref, geometric_coef=geo.coef_, **kw)
         model.geometric_ = geo
     model.estimator_ = est
     model.arrays_ = arrays
+    return model
+
+
+def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric_max_degree, geometric_criterion, cv_blocks, options):
+    """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/empirical/dynamic.py)."""
+    from host.empirical.dynamic import TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
+
+    opts = dict(options)
+    taus = tuple(float(v) for v in opts.pop("taus_s", TAUS_S))
+    if not taus or any(not np.isfinite(v) or v < 0 for v in taus):
+        raise EmpiricalDataError("dynamic: taus_s must be time constants >= 0 s, got %r" % (taus,))
+    use_spindle = bool(opts.pop("use_spindle", True))
+    use_feed = bool(opts.pop("use_feed", True))
+    names = arrays[0].names
+    F, terms = candidate_matrix(runs, [a.time_s for a in arrays], names, taus, use_spindle, use_feed)
+    groups = cv_groups(runs, arrays, cv_blocks)
+    try:
+        est = DynamicRegression(fit_intercept=fit_intercept, **opts).fit(F, y, terms, groups)
+    except TypeError as exc:
+        raise EmpiricalDataError("dynamic: %s" % exc)
+    stats = est.statistics()
+    used = [n[2:] for n, _ in est.terms_ if n.startswith("T:")]
+    used = list(dict.fromkeys(used))
+    start = np.mean([start_temperatures(r, used) for r in runs], axis=0) if used else []
+    training = {
+        "runs": [r.path or r.name for r in runs], "target": target, "window_s": list(window) if window is not None else None,
+        "n_samples": int(y.size), "rises": True, "fit_intercept": bool(fit_intercept), "candidate_sensors": list(names),
+        "taus_s": list(taus), "signals": sorted({n for n, _ in terms}), "options": {k: v for k, v in options.items()},
+    }
+    geo = None
+    if target == "slope":
+        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
+        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+    model = DynamicModel(est.terms_, est.coef_, est.intercept_, target, channel, geo.coef_ if geo is not None else (0.0,), "dynamic",
+                         runs[0].meta.get("axis"), dict(zip(used, np.atleast_1d(start).tolist())),
+                         _envelope(runs, arrays, used, margin, target, channel) if used else {}, stats, training)
+    model.estimator_ = est
+    model.arrays_ = arrays
+    model.geometric_ = geo
     return model

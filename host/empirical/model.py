@@ -31,7 +31,11 @@ REFERENCES = ("run_start", "fixed")
 
 
 class _Base:
+    """Shared inputs and document fields. Subclasses give ``target`` ("slope": the thermal part
+    is a slope in µm/mm multiplied by P; "direct": an error in µm) and ``thermal(R)`` of rises R."""
+
     kind = None
+    target = None
     # set by host.empirical.fitting.fit_model (the fitted estimator and its data), absent on loaded documents
     estimator_: Any = None
     arrays_: Any = None
@@ -40,8 +44,9 @@ class _Base:
     def __init__(self, sensors, coefficients, intercept, reference_C, reference="fixed", channel=None, method="mlr", axis=None,
                  envelope=None, statistics=None, training=None):
         self.sensors = list(sensors)
-        self.coefficients = np.asarray(coefficients, dtype=float)
-        if self.coefficients.shape != (len(self.sensors),):
+        # None: a model that is not a linear function of the rises (ann)
+        self.coefficients = None if coefficients is None else np.asarray(coefficients, dtype=float)
+        if self.coefficients is not None and self.coefficients.shape != (len(self.sensors),):
             raise EmpiricalDataError("%d coefficients for %d sensors" % (self.coefficients.size, len(self.sensors)))
         self.intercept = float(intercept)
         self.reference_C = {s: float(reference_C[s]) for s in self.sensors}
@@ -74,6 +79,25 @@ class _Base:
         else:
             ref = np.array([self.reference_C[s] for s in self.sensors])
         return T - ref
+
+    def thermal_at(self, run, times):
+        """The thermal part at ``times`` of ``run``: slope in µm/mm (target "slope") or error in µm."""
+        return self.thermal(self.rises(run, times))
+
+    def geometric(self, P):
+        return np.zeros(np.shape(P))
+
+    def predict(self, run):
+        e = run.errors
+        out = np.full(len(e), np.nan)
+        rows = self._rows(run)
+        th = self.thermal_at(run, e.time_s[rows])
+        if self.target == "slope":
+            P = e.position_mm[rows]
+            out[rows] = self.geometric(P) + th * P
+        else:
+            out[rows] = th
+        return out
 
     def _rows(self, run):
         if self.channel is None and run.errors.channel is not None and len(run.errors.channels()) > 1:
@@ -157,16 +181,12 @@ class LinearDirectModel(_Base):
     """δ(T) = intercept + Σ coefficients·(T − ref), µm, for one channel at a fixed point."""
 
     kind = "linear_direct"
+    target = "direct"
 
     def predict_rises(self, R):
         return self.intercept + np.asarray(R, dtype=float) @ self.coefficients
 
-    def predict(self, run):
-        e = run.errors
-        out = np.full(len(e), np.nan)
-        rows = self._rows(run)
-        out[rows] = self.predict_rises(self.rises(run, e.time_s[rows]))
-        return out
+    thermal = predict_rises
 
     def to_document(self):
         doc = self._common_doc()
@@ -189,6 +209,7 @@ class PolySlopeModel(_Base):
     """δ(P, T) = geometric(P) + (intercept + Σ coefficients·(T − ref))·P, µm."""
 
     kind = "poly_slope"
+    target = "slope"
 
     def __init__(self, sensors, coefficients, intercept, reference_C, geometric_coef=(0.0,), **kw):
         super().__init__(sensors, coefficients, intercept, reference_C, **kw)
@@ -198,16 +219,10 @@ class PolySlopeModel(_Base):
         """Thermal slope s(T) in µm/mm for rises R (n, p)."""
         return self.intercept + np.asarray(R, dtype=float) @ self.coefficients
 
+    thermal = slope
+
     def geometric(self, P):
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
-
-    def predict(self, run):
-        e = run.errors
-        out = np.full(len(e), np.nan)
-        rows = self._rows(run)
-        P = e.position_mm[rows]
-        out[rows] = self.geometric(P) + self.slope(self.rises(run, e.time_s[rows])) * P
-        return out
 
     def to_document(self):
         doc = self._common_doc()
@@ -223,8 +238,81 @@ class PolySlopeModel(_Base):
     def from_document(cls, doc):
         thermal, sensors, ref, kw = cls._common_args(doc)
         coefs, b0 = _thermal_terms(doc, thermal, sensors, "coefficients_um_per_mm_per_K", "intercept_um_per_mm")
-        geo = doc.get("geometric") or {"coefficients_um": [0.0]}
-        if not isinstance(geo, dict) or not isinstance(geo.get("coefficients_um", [0.0]), list) \
-                or not all(_is_number(c) for c in geo.get("coefficients_um", [0.0])):
-            raise ModelFormatError("poly_slope model document: geometric.coefficients_um must be a list of finite numbers")
-        return cls(sensors, coefs, b0, ref, geometric_coef=geo.get("coefficients_um", [0.0]), **kw)
+        return cls(sensors, coefs, b0, ref, geometric_coef=_geometric_from_document(doc, "poly_slope"), **kw)
+
+
+def _geometric_from_document(doc, kind):
+    geo = doc.get("geometric") or {"coefficients_um": [0.0]}
+    if not isinstance(geo, dict) or not isinstance(geo.get("coefficients_um", [0.0]), list) \
+            or not all(_is_number(c) for c in geo.get("coefficients_um", [0.0])):
+        raise ModelFormatError("%s model document: geometric.coefficients_um must be a list of finite numbers" % kind)
+    return geo.get("coefficients_um", [0.0])
+
+
+class NetworkModel(_Base):
+    """An estimator that is not linear in the rises (ann, ppr): thermal part = estimator.predict(R).
+
+    ``target`` "slope": δ(P, T) = geometric(P) + f(R)·P; "direct": δ(T) = f(R).
+    Only the ann has a document (kind ``ann``); other estimators live in memory
+    for ``tcomp compare``.
+    """
+
+    kind = "ann"
+
+    def __init__(self, sensors, estimator, reference_C, target="direct", geometric_coef=(0.0,), **kw):
+        super().__init__(sensors, None, 0.0, reference_C, **kw)
+        if target not in ("slope", "direct"):
+            raise EmpiricalDataError("target must be slope or direct, got %r" % (target,))
+        self.target = target
+        self.estimator_ = estimator
+        self.geometric_coef = np.asarray(geometric_coef, dtype=float)
+
+    def thermal(self, R):
+        return self.estimator_.predict(np.asarray(R, dtype=float).reshape(-1, len(self.sensors)))
+
+    def geometric(self, P):
+        return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
+
+    def to_document(self):
+        if not hasattr(self.estimator_, "network"):
+            raise ModelFormatError("a %s model has no document form (only ann networks are saved)" % self.method)
+        doc = self._common_doc()
+        doc["geometric"] = (None if self.target == "direct"
+                            else {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]})
+        doc["thermal"] = {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": self.reference,
+                          "network": self.estimator_.network()}
+        return doc
+
+    @classmethod
+    def from_document(cls, doc):
+        from host.empirical.ann import ANN
+
+        thermal, sensors, ref, kw = cls._common_args(doc)
+        target = thermal.get("target")
+        if target not in ("slope", "direct"):
+            raise ModelFormatError("ann model document: thermal.target must be 'slope' or 'direct', found %r" % (target,))
+        net = thermal.get("network")
+        if not isinstance(net, dict):
+            raise ModelFormatError("ann model document lacks the object thermal.network")
+        if net.get("activation") != "tanh":
+            raise ModelFormatError("ann model document: thermal.network.activation must be 'tanh', found %r" % (net.get("activation"),))
+        p = len(sensors)
+        vec = {"input_offset": p, "input_scale": p, "hidden_bias": None, "output_weights": None}
+        for key, size in vec.items():
+            v = net.get(key)
+            if not isinstance(v, list) or not all(_is_number(x) for x in v) or (size is not None and len(v) != size):
+                raise ModelFormatError("ann model document: thermal.network.%s must be a list of %s finite numbers"
+                                       % (key, size if size is not None else "hidden-size"))
+        h = len(net["hidden_bias"])
+        W = net.get("hidden_weights")
+        if not isinstance(W, list) or len(W) != h or not all(isinstance(r, list) and len(r) == p and all(_is_number(x) for x in r) for r in W):
+            raise ModelFormatError("ann model document: thermal.network.hidden_weights must be %d rows of %d finite numbers" % (h, p))
+        if len(net["output_weights"]) != h:
+            raise ModelFormatError("ann model document: thermal.network.output_weights needs %d numbers (one per hidden node)" % h)
+        if any(x <= 0 for x in net["input_scale"]):
+            raise ModelFormatError("ann model document: thermal.network.input_scale values must be > 0")
+        for key in ("output_bias", "output_offset", "output_scale"):
+            if not _is_number(net.get(key)):
+                raise ModelFormatError("ann model document: thermal.network.%s must be a finite number, found %r" % (key, net.get(key)))
+        geo = _geometric_from_document(doc, "ann") if target == "slope" else (0.0,)
+        return cls(sensors, ANN.from_network(net), ref, target=target, geometric_coef=geo, **kw)

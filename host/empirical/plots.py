@@ -18,7 +18,7 @@ def plot_curves(model, run, path, title, window=None, max_sweeps=12):
     plt = _plt()
     t, P, m, p = thermal_pairs(model, run, window)
     fig, ax = plt.subplots(figsize=(8, 4.8))
-    if model.kind == "poly_slope":
+    if model.target == "slope":
         times = np.unique(t)
         pick = times[np.linspace(0, times.size - 1, min(max_sweeps, times.size)).round().astype(int)]
         cmap = plt.get_cmap("viridis")

@@ -587,3 +587,17 @@ class BestSubsetCV(_Linear):
 
 
 ESTIMATORS["cv-subset"] = BestSubsetCV
+
+
+def _register_nonlinear():
+    # here, not at the top: ann.py and ppr.py use this module's checks
+    from host.empirical.ann import ANN
+    from host.empirical.dynamic import DynamicRegression
+    from host.empirical.ppr import PPR
+
+    ESTIMATORS["ann"] = ANN
+    ESTIMATORS["ppr"] = PPR
+    ESTIMATORS["dynamic"] = DynamicRegression  # fitted through fitting.fit_model, which builds its candidate signals
+
+
+_register_nonlinear()

@@ -188,12 +188,22 @@ def common_sensors(runs):
 
 
 class RunArrays:
-    """Design data of one run: unpacks as ``X, y, names``; also has ``time_s`` and ``run``."""
+    """Design data of one run: unpacks as ``X, y, names``; also has ``time_s``, ``run`` and ``start``.
 
-    __slots__ = ("X", "y", "names", "time_s", "run")
+    ``start``: each sensor's first sample of the run (°C) when X holds rises, so
+    ``X + start`` are the measured temperatures (hclust-ga's D_e uses them); None
+    when X already holds measured values.
+    """
 
-    def __init__(self, X, y, names, time_s, run):
-        self.X, self.y, self.names, self.time_s, self.run = X, y, names, time_s, run
+    __slots__ = ("X", "y", "names", "time_s", "run", "start")
+
+    def __init__(self, X, y, names, time_s, run, start=None):
+        self.X, self.y, self.names, self.time_s, self.run, self.start = X, y, names, time_s, run, start
+
+    @property
+    def values(self):
+        """The measured temperatures (rises plus the start temperatures)."""
+        return self.X if self.start is None else self.X + self.start
 
     def __iter__(self):
         return iter((self.X, self.y, self.names))
@@ -208,12 +218,14 @@ class RunArrays:
         return "RunArrays(run=%r, n=%d, sensors=%d)" % (self.run, self.y.size, len(self.names))
 
 
-def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True, window=None):
+def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True, window=None, exclude=None):
     """Per run, the (X, y, names) a regression or selector is fitted on.
 
     ``sensors=None`` uses the sensors common to all runs. ``window=(lo, hi)``
     keeps targets with lo <= time_s < hi (either may be None), e.g. the
-    training part of a single long run; rises stay relative to the run start.
+    training part of a single long run; ``exclude=(lo, hi)`` drops the targets
+    in that span (a held-out cycle in the middle of a run); rises stay relative
+    to the run start.
     Returns a list of :class:`RunArrays`, one per run, in the given order.
     """
     runs = list(runs)
@@ -235,8 +247,14 @@ def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True,
             t, y = t[keep], y[keep]
             if t.size == 0:
                 raise EmpiricalDataError("%s: no %s target in the time window %s..%s s" % (r.name, target, lo, hi))
+        if exclude is not None:
+            lo, hi = exclude
+            keep = ~((t >= (-np.inf if lo is None else lo)) & (t < (np.inf if hi is None else hi)))
+            t, y = t[keep], y[keep]
+            if t.size == 0:
+                raise EmpiricalDataError("%s: no %s target left outside the excluded span %s..%s s" % (r.name, target, lo, hi))
         X = temperature_features(r, names, t, rise=rise)
-        out.append(RunArrays(X, y, list(names), t, r.name))
+        out.append(RunArrays(X, y, list(names), t, r.name, start_temperatures(r, names) if rise else None))
     return out
 
 

@@ -158,3 +158,42 @@ def test_split_just_after_a_cycle_start_does_not_make_a_tiny_group(make_direct):
     for case in (a, b):
         arrays = training_arrays([run], "direct", "ch1", window=case.window)
         assert np.unique(cv_groups([run], arrays)).size == 3
+
+
+def test_accuracy_is_also_reported_on_the_comprehensive_error(three_runs):
+    from host.empirical.evaluate import evaluate
+    from host.empirical.fitting import fit_model
+
+    model = fit_model(three_runs[:1], "mlr")
+    run = three_runs[1]
+    m = evaluate(model, run)
+    # independent: every non-cold sweep row, whole measured error against geometric + slope * P
+    e = run.errors
+    cold_t = e.time_s.min()
+    rows = np.flatnonzero(e.time_s > cold_t)
+    P = e.position_mm[rows]
+    R = run.temperatures.at(e.time_s[rows], model.sensors) - np.array([model.reference_C[s] for s in model.sensors])
+    pred = np.polynomial.polynomial.polyval(P, model.geometric_coef) + (model.intercept + R @ model.coefficients) * P
+    resid = e.error_um[rows] - pred
+    c = m["comprehensive"]
+    assert c["n"] == m["n"] == rows.size
+    assert c["rmse_um"] == pytest.approx(np.sqrt(np.mean(resid**2)))
+    rms = np.sqrt(np.mean(e.error_um[rows] ** 2))
+    assert c["accuracy_pct"] == pytest.approx(100 * (1 - c["rmse_um"] / rms))
+    # the geometric part is large here (1 µm + 0.01 P), so the whole error's RMS exceeds the thermal one
+    assert c["rms_measured_um"] > m["rms_measured_um"]
+
+
+def test_paper_pipelines_select_then_fit_each_model(three_runs):
+    cases = cases_runs(three_runs, train=[0])
+    res = {r["method"]: r for r in run_case(cases[0], ("maxtree", "maxtree-mlr", "maxtree-pcr", "maxtree-ann", "ann", "ppr"),
+                                            options={"maxtree-ann": {"max_epochs": 300}, "ann": {"max_epochs": 300}}, robustness={"repeats": 1})}
+    assert not any(r.get("error") for r in res.values()), {m: r.get("error") for m, r in res.items()}
+    chosen = res["maxtree"]["sensors"]
+    for m in ("maxtree-mlr", "maxtree-pcr", "maxtree-ann"):
+        assert res[m]["sensors"] == chosen and res[m]["selection"]["chosen_partition"] == res["maxtree"]["selection"]["chosen_partition"]
+    assert res["maxtree-mlr"]["tests"] == res["maxtree"]["tests"]  # the same pipeline under the paper's name
+    assert res["maxtree-ann"]["coefficients"] is None and res["maxtree-ann"]["fit"]["hidden_size"] in (3, 4, 5, 6, 7)
+    assert res["ann"]["n_sensors"] == len(three_runs[0].temperatures.names)
+    for r in res.values():
+        assert r["mean_test_rmse_um"] >= 0 and r["mean_test_comprehensive_accuracy_pct"] is not None

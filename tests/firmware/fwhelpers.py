@@ -11,6 +11,7 @@ import pytest
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
 MICROPYTHON = os.path.join(ROOT, ".venv", "bin", "micropython")
+CERT_NONE = (1 << 30) - 1
 
 
 def table_fields(kind="linear_direct", sensors=("T1", "T2"), b=None, shb=4, S0=0, pos=(0, 500000, 0),
@@ -23,6 +24,8 @@ def table_fields(kind="linear_direct", sensors=("T1", "T2"), b=None, shb=4, S0=0
         "pos_lo": pos[0], "pos_hi": pos[1], "pos_ref": pos[2],
         "fo": 0, "Lt": 29, "nt": 1, "S0": S0, "fS": 0,
         "b": list(b) if b is not None else [1] * n, "shb": [shb] * n, "fb": [0] * n, "rL": 0,
+        # a certificate that bounds nothing these small tables can reach (the exporter proves real ones)
+        "cert_out": CERT_NONE, "cert_ref": CERT_NONE, "cert_slope": CERT_NONE,
     }
     if kind != "linear_direct":
         f.update({"Lw": 10, "nw": 2, "shw": 18, "KS": 1, "shK": 0, "fK": 0, "rK": 0, "rT": 0,
@@ -47,6 +50,33 @@ def cmd(body):
     return b"$" + body + b"*%04X\r\n" % crc16_ccitt(body)
 
 
+TEST_KEY = bytes(range(100, 132))  # the board key the firmware tests provision
+
+
+def provision(table_dir, key=TEST_KEY):
+    """Write the board key where tcomp flash puts it (firmware/auth.py)."""
+    with open(os.path.join(str(table_dir), "key.bin"), "wb") as f:
+        f.write(key)
+
+
+def scmd(app, *fields, extra=b"", key=TEST_KEY, counter=None):
+    """An authorised command line for ``app``: the next counter after its last one (host/linkauth.py)."""
+    from host.linkauth import LinkSigner
+    return LinkSigner(key, app.auth.last if counter is None else counter - 1).stream_line(*fields, extra=extra)
+
+
+def modbus_auth_block(app, req, key=TEST_KEY):
+    """The FC16 request (slave 1, no CRC) writing the auth block that authorises the write ``req``."""
+    from host.linkauth import LinkSigner
+    start = req[2] << 8 | req[3]
+    if req[1] == 6:
+        values = [req[4] << 8 | req[5]]
+    else:
+        values = [req[7 + 2 * i] << 8 | req[8 + 2 * i] for i in range(req[5])]
+    regs = LinkSigner(key, app.auth.last).modbus_auth(1, start, values)
+    return bytes([1, 16, 0, 8, 0, 10, 20]) + b"".join(v.to_bytes(2, "big") for v in regs)
+
+
 def frames(data):
     """Split device output into frames, checking each CRC; returns lists of str fields."""
     from firmware.crc16 import crc16_ccitt
@@ -62,8 +92,8 @@ def frames(data):
 
 
 def rig_app(tmp_path, kind="poly_slope", n_max=9, n_ads=2, table=True, extra=None, serial_mode="stream",
-            table_kw=None):
-    """An App on fakes with a table in slot A; returns (app, board)."""
+            table_kw=None, key=TEST_KEY):
+    """An App on fakes with a table in slot A and the board key ``key`` (None: none); returns (app, board)."""
     from fwfakes import make_rig
     from firmware.app import App
     names = ["T%d" % i for i in range(1, n_max + n_ads + 1)]
@@ -71,6 +101,8 @@ def rig_app(tmp_path, kind="poly_slope", n_max=9, n_ads=2, table=True, extra=Non
         kw = {"kind": kind, "sensors": names}
         kw.update(table_kw or {})
         (tmp_path / "table_a.bin").write_bytes(make_table(**kw))
+    if key is not None:
+        provision(tmp_path, key)
     board = make_rig(n_max, n_ads, table_dir=str(tmp_path), extra=extra, serial_mode=serial_mode,
                      serial_size=1 << 20)
     return App(board), board
@@ -168,7 +200,8 @@ def rtu(body):
 if MODE == "stream":
     msgs = [line(b"TC,P,%d" % (1000 * k)) for k in range(10)] + [line(b"TC,Q,250000")]
 else:
-    msgs = [rtu(bytes([1, 16, 0, 3, 0, 2, 4, 0, 0, 0x30, k])) for k in range(10)] + [rtu(bytes([1, 4, 0, 0, 0, 48]))]
+    msgs = [rtu(bytes([1, 16, 0, 3, 0, 2, 4, 0, 0, 0x30, k])) for k in range(10)] + [
+        rtu(bytes([1, 4, 0, 0, 0, 15])), rtu(bytes([1, 4, 0, 16, 0, 35]))]
 sent = 0
 err = None
 free1 = 0  # every global exists before the lock: a new one could grow the module dict

@@ -25,6 +25,11 @@ COPIES = {
     ("protocol", "_LINE_OK"): ("frame", "_LINE_OK"),
     ("protocol", "_LINE_CRC"): ("frame", "_LINE_CRC"),
     ("protocol", "_LINE_OVERFLOW"): ("frame", "_LINE_OVERFLOW"),
+    ("protocol", "_TAG_BYTES"): ("auth", "TAG_BYTES"),
+    ("protocol", "_MAX_COUNTER"): ("auth", "MAX_COUNTER"),
+    ("protocol", "_AUTH_BUSY"): ("auth", "BUSY"),
+    ("protocol", "_UNSIGNED"): ("auth", "UNSIGNED"),
+    ("modbus", "_UNSIGNED"): ("auth", "UNSIGNED"),
 }
 
 

@@ -11,7 +11,10 @@ import zlib
 
 import pytest
 
-from fwhelpers import cmd, compile_mpy, frames, run_cycles, run_micropython, table_fields, HERE
+import hashlib
+
+from fwhelpers import (cmd, compile_mpy, frames, modbus_auth_block, provision, run_cycles, run_micropython, scmd,
+                       table_fields, HERE)
 
 NAMES = ("T1", "T2")
 
@@ -34,6 +37,7 @@ def _boot(tmp_path, temps, table=None, mode="stream"):
     from firmware.app import App
     if table is not None:
         (tmp_path / "table_a.bin").write_bytes(table)
+    provision(tmp_path)
     board = _board(tmp_path, temps, mode)
     app = App(board)
     out = board.serial.take()
@@ -64,7 +68,7 @@ def _near(v, deg_c):
 
 def test_warm_restart_keeps_the_stored_references(tmp_path):
     app, board, hello = _boot(tmp_path, (23.5, 21.0), _table())
-    assert hello[-1] == "N"  # nothing stored yet: latch pending
+    assert hello[-2] == "N"  # nothing stored yet: latch pending
     assert int(hello[2], 16) & 0x8000000  # REF_PENDING in the boot status
     saves = []
     save = app.store.save_refs
@@ -76,10 +80,10 @@ def test_warm_restart_keeps_the_stored_references(tmp_path):
     assert not app.status & 0x8000000 and app.ref_state == 2
     assert _stored(tmp_path) == (app.table.crc, latched)
     hello = _send(app, board, cmd(b"TC,V"))[0]
-    assert hello[-1] == "L"
+    assert hello[-2] == "L"
     # watchdog reset mid-shift: the machine has warmed by 1.5 K
     app, board, hello = _boot(tmp_path, (25.0, 22.5))
-    assert hello[-1] == "S" and not int(hello[2], 16) & 0x8000000
+    assert hello[-2] == "S" and not int(hello[2], 16) & 0x8000000
     assert app.ev.ref == latched
     app.store.save_refs = lambda t, r: pytest.fail("stored references are not written again")
     run_cycles(app, board, 20)
@@ -132,7 +136,7 @@ def test_missing_corrupt_or_foreign_file_latches_anew(tmp_path, content, letter)
     elif content is not None:
         (tmp_path / "refs.bin").write_bytes(content)
     app, board, hello = _boot(tmp_path, (24.0, 21.0), table)
-    assert hello[-1] == letter and app.unlatched
+    assert hello[-2] == letter and app.unlatched
     assert app.ev.ref == [20000, 20000]  # the table's own until the latch
     run_cycles(app, board, 5)
     assert _near(app.ev.ref[0], 24.0) and app.ref_state == 2
@@ -160,7 +164,7 @@ def test_refs_new_left_by_a_cut_between_remove_and_rename_is_used(tmp_path):
     latched = list(app.ev.ref)
     os.rename(tmp_path / "refs.bin", tmp_path / "refs.bin.new")
     app, board, hello = _boot(tmp_path, (26.0, 22.0))
-    assert hello[-1] == "S" and app.ev.ref == latched
+    assert hello[-2] == "S" and app.ev.ref == latched
 
 
 def test_complete_refs_new_is_newer_and_a_partial_one_is_ignored(tmp_path):
@@ -172,15 +176,15 @@ def test_complete_refs_new_is_newer_and_a_partial_one_is_ignored(tmp_path):
     for k in range(1, 31):
         board.chips[0].set_temperature(23.5 + 0.05 * k)
         run_cycles(app, board, 10)
-    _send(app, board, cmd(b"TC,L"))
+    _send(app, board, scmd(app, "L"))
     newer = list(app.ev.ref)
     (tmp_path / "refs.bin.new").write_bytes((tmp_path / "refs.bin").read_bytes())
     (tmp_path / "refs.bin").write_bytes(old)
     app, board, hello = _boot(tmp_path, (26.0, 22.0))
-    assert hello[-1] == "S" and app.ev.ref == newer
+    assert hello[-2] == "S" and app.ev.ref == newer
     (tmp_path / "refs.bin.new").write_bytes(old[:-3])
     app, board, hello = _boot(tmp_path, (26.0, 22.0))
-    assert hello[-1] == "S" and app.ev.ref == _stored(tmp_path)[1] != newer
+    assert hello[-2] == "S" and app.ev.ref == _stored(tmp_path)[1] != newer
 
 
 def test_unwritable_flash_keeps_the_latch_and_says_so(tmp_path):
@@ -188,7 +192,7 @@ def test_unwritable_flash_keeps_the_latch_and_says_so(tmp_path):
     (tmp_path / "refs.bin.new").mkdir()  # opening the temp file for writing fails
     run_cycles(app, board, 5)
     assert _near(app.ev.ref[0], 23.5) and not app.unlatched
-    assert app.ref_state == 3 and _send(app, board, cmd(b"TC,V"))[0][-1] == "U"
+    assert app.ref_state == 3 and _send(app, board, cmd(b"TC,V"))[0][-2] == "U"
 
 
 def test_L_relatches_and_persists(tmp_path):
@@ -198,18 +202,18 @@ def test_L_relatches_and_persists(tmp_path):
         board.chips[0].set_temperature(23.5 + 0.05 * k)
         run_cycles(app, board, 10)
     assert _near(app.ev.ref[0], 23.5)
-    out = _send(app, board, cmd(b"TC,L"))
+    out = _send(app, board, scmd(app, "L"))
     assert out[0][3:6] == ["A", "L", "L"], out
     assert _near(app.ev.ref[0], 25.0) and app.ev.temps == app.ev.ref
     assert _stored(tmp_path) == (app.table.crc, app.ev.ref)
     relatched = list(app.ev.ref)
     app, board, hello = _boot(tmp_path, (25.0, 21.0))  # and it survives a restart
-    assert hello[-1] == "S" and app.ev.ref == relatched
+    assert hello[-2] == "S" and app.ev.ref == relatched
 
 
 def test_L_latches_a_pending_table_at_once(tmp_path):
     app, board, _ = _boot(tmp_path, (23.5, 21.0), _table())
-    out = _send(app, board, cmd(b"TC,L"))  # before the first cycle nothing has read good
+    out = _send(app, board, scmd(app, "L"))  # before the first cycle nothing has read good
     assert out[0][3:7] == ["E", "5", "state", "sensor faulty"], out
     assert app.unlatched and not (tmp_path / "refs.bin").exists()
 
@@ -227,24 +231,24 @@ def test_L_with_a_needed_sensor_faulty_is_refused_and_changes_nothing(tmp_path):
     run_cycles(app, board, 2)
     assert app.status & 0x2
     before = _state(app, tmp_path)
-    out = _send(app, board, cmd(b"TC,L"))
+    out = _send(app, board, scmd(app, "L"))
     assert out[0][3:7] == ["E", "5", "state", "sensor faulty"], out
     assert _state(app, tmp_path) == before
 
 
 def test_L_with_fixed_references_or_no_table_is_refused(tmp_path):
     app, board, hello = _boot(tmp_path, (23.5, 21.0), _table(ref_mode=0))
-    assert hello[-1] == "-"
+    assert hello[-2] == "-"
     run_cycles(app, board, 5)
     before = _state(app, tmp_path)
-    out = _send(app, board, cmd(b"TC,L"))
+    out = _send(app, board, scmd(app, "L"))
     assert out[0][3:7] == ["E", "5", "state", "fixed references"], out
     assert _state(app, tmp_path) == before and before[3] is None
     (tmp_path / "table_a.bin").unlink()
     app, board, hello = _boot(tmp_path, (23.5, 21.0))
-    assert hello[-1] == "-" and app.table is None
+    assert hello[-2] == "-" and app.table is None
     run_cycles(app, board, 2)
-    out = _send(app, board, cmd(b"TC,L"))
+    out = _send(app, board, scmd(app, "L"))
     assert out[0][3:7] == ["E", "5", "state", "no table"], out
     assert _send(app, board, cmd(b"TC,L,1"))[0][3:5] == ["E", "2"]  # L takes no argument
 
@@ -257,12 +261,12 @@ def test_new_table_upload_latches_anew(tmp_path):
         board.chips[0].set_temperature(23.5 + 0.05 * k)
         run_cycles(app, board, 10)
     new = _table(S0=55)
-    out = _send(app, board, cmd(b"TC,U,B,%d,%08X" % (len(new), zlib.crc32(new))))
+    out = _send(app, board, scmd(app, "U", "B", len(new), "%08X" % zlib.crc32(new)))
     for off in range(0, len(new), 48):
         out = _send(app, board, cmd(b"TC,U,D,%d,%s" % (off, new[off:off + 48].hex().upper().encode())))
-    out = _send(app, board, cmd(b"TC,U,C"))
+    out = _send(app, board, scmd(app, "U", "C", extra=hashlib.sha256(new).digest()))
     assert out[0][3:7] == ["A", "U", "C", "B"] and out[1][3] == "H"
-    assert out[1][-1] == "O" and app.unlatched  # the stored references belong to the old table
+    assert out[1][-2] == "O" and app.unlatched  # the stored references belong to the old table
     assert _stored(tmp_path) == old
     run_cycles(app, board, 2)
     assert _near(app.ev.ref[0], 25.0)
@@ -283,6 +287,13 @@ def _ask(app, board, req):
     return board.serial.take()
 
 
+def _signed(app, board, req):
+    """Write the auth block for the write ``req``, then send it."""
+    block = modbus_auth_block(app, req)
+    assert _ask(app, board, block) == _rtu(block[:6])
+    return _ask(app, board, req)
+
+
 def test_modbus_latch_register(tmp_path):
     app, board, _ = _boot(tmp_path, (23.5, 21.0), _table(), mode="modbus")
     read_state = bytes([1, 4, 0, 14, 0, 1])
@@ -294,16 +305,17 @@ def test_modbus_latch_register(tmp_path):
         board.chips[0].set_temperature(23.5 + 0.05 * k)
         run_cycles(app, board, 10)
     write = bytes([1, 6, 0, 7, 0, 1])
-    assert _ask(app, board, write) == _rtu(write)
+    assert _ask(app, board, write) == _rtu(bytes([1, 0x86, 4]))  # not authorised
+    assert _signed(app, board, write) == _rtu(write)
     assert _near(app.ev.ref[0], 25.0) and _stored(tmp_path) == (app.table.crc, app.ev.ref)
     assert _ask(app, board, bytes([1, 3, 0, 7, 0, 1])) == _rtu(bytes([1, 3, 2, 0, 0]))  # reads 0
     # a needed sensor faulty: exception 04, nothing changes (a multi-write neither)
     board.chips[1].set_ohm(400.0)
     run_cycles(app, board, 2)
     before = (_state(app, tmp_path), list(app.link.hold))
-    assert _ask(app, board, write) == _rtu(bytes([1, 0x86, 4]))
-    multi = bytes([1, 16, 0, 6, 0, 2, 4, 0, 9, 0, 1])  # reference low word + latch
-    assert _ask(app, board, multi) == _rtu(bytes([1, 0x90, 4]))
+    assert _signed(app, board, write) == _rtu(bytes([1, 0x86, 4]))
+    multi = bytes([1, 16, 0, 5, 0, 3, 6, 0, 0, 0, 9, 0, 1])  # reference + latch
+    assert _signed(app, board, multi) == _rtu(bytes([1, 0x90, 4]))
     assert (_state(app, tmp_path), list(app.link.hold)) == before
     app, board, _ = _boot(tmp_path, (26.0, 21.0), mode="modbus")  # restart: stored ones kept
     assert _ask(app, board, read_state) == _rtu(bytes([1, 4, 2, 0, 1]))
@@ -360,11 +372,11 @@ def test_reset_command_restart_keeps_the_stored_references(tmp_path):
     latched = list(app.ev.ref)
     board.chips[0].set_temperature(23.6)
     run_cycles(app, board, 5)
-    board.serial.feed(cmd(b"TC,X"))
+    board.serial.feed(scmd(app, "X"))
     with pytest.raises(Restart):
         app.link.poll(board.clock.t)
     app = App(board)
     out = frames(board.serial.take())
-    assert out[0][3:5] == ["A", "X"] and out[1][3] == "H" and out[1][-1] == "S", out
+    assert out[0][3:5] == ["A", "X"] and out[1][3] == "H" and out[1][-2] == "S", out
     run_cycles(app, board, 5)
     assert app.ev.ref == latched and _near(app.ev.temps[0], 23.6)

@@ -2,8 +2,10 @@
 
 The scenario boots an 11-channel board on fakes, runs cycles, sends position
 reports, queries, temperature and hello requests, corrupt and unknown commands,
-uploads a new table over the link (two-slot switch on the filesystem), changes
-temperatures and injects a sensor fault; every byte the firmware writes to its
+commands that change the output without authorisation, with a wrong key and
+replayed, uploads a new table over the link with authorisation (two-slot
+switch on the filesystem), changes temperatures and injects a sensor fault;
+every byte the firmware writes to its
 serial port, and the RTD conversion over a grid, must match between the two
 interpreters bit for bit.
 """
@@ -13,7 +15,7 @@ import sys
 
 import pytest
 
-from fwhelpers import compile_mpy, run_micropython, make_table, HERE, ROOT
+from fwhelpers import compile_mpy, run_micropython, make_table, provision, HERE, ROOT
 
 SCENARIO = r"""
 import binascii
@@ -29,7 +31,7 @@ def drain():
     state[0] = crc32(b, state[0])
     state[1] += len(b)
     state[2] += b.count(b"$TC,")
-    for key in (b",E,", b",Q,", b",T,", b",H,", b",A,U,C"):
+    for key in (b",E,", b",Q,", b",T,", b",H,", b",A,U,C", b",A,L"):
         k = b.find(key)
         if k >= 0 and len(samples) < 40:
             e = b.find(b"\r\n", k)
@@ -55,15 +57,27 @@ send(line(b"TC,S"))
 send(line(b"TC,V"))
 send(b"$TC,P,5*0000\r\n")
 send(line(b"TC,Z,1"))
-send(line(b"TC,L"))  # fixed references: refused
 send(b"\x00\xff garbage\r\n")
 f = open("new.bin", "rb")
 data = f.read()
 f.close()
-send(line(b"TC,U,B,%d,%08X" % (len(data), crc32(data))))
+f = open("signed.txt", "rb")  # lines signed on the host (host/linkauth.py)
+signed = [x + b"\r\n" for x in f.read().split(b"\n")]
+f.close()
+# without authorisation: refused, nothing changes
+for cmd in (b"TC,L", b"TC,X", b"TC,U,X", b"TC,U,B,%d,%08X" % (len(data), crc32(data))):
+    send(line(cmd))
+print("UNSIGNED", app.slot, app.store.uploading, app.auth.last)
+send(signed[0])  # U,B
 for off in range(0, len(data), 40):
     send(line(b"TC,U,D,%d," % off + binascii.hexlify(data[off:off + 40]).upper()))
-send(line(b"TC,U,C"))
+send(signed[1])  # U,C over another table's sha256: refused, the upload stays open
+send(signed[2])  # U,C
+send(signed[2])  # replayed: nothing is open to commit
+send(signed[3])  # L with a wrong key
+send(signed[4])  # L: fixed references, refused after authorisation
+send(signed[4])  # replayed
+send(signed[5])  # a stale counter
 cycles(40)
 board.chips[3].open_circuit = True
 cycles(40)
@@ -78,8 +92,23 @@ print("OUT", "%08X" % state[0], state[1], state[2])
 acc = 0
 for r in range(1852008, 39048112, 9973):
     acc = (acc * 31 + rtd.temperature_mC(r)) & 0xFFFFFFF
-print(acc, app.slot, app.cycles, "%08X" % app.status)
+print(acc, app.slot, app.cycles, "%08X" % app.status, app.auth.last)
 """
+
+
+def _signed_lines(new, other):
+    import hashlib
+    import zlib
+    from fwhelpers import TEST_KEY
+    from host.linkauth import LinkSigner
+    s = LinkSigner(TEST_KEY)
+    lines = [s.stream_line("U", "B", len(new), "%08X" % zlib.crc32(new)),
+             s.stream_line("U", "C", extra=hashlib.sha256(other).digest()),
+             s.stream_line("U", "C", extra=hashlib.sha256(new).digest())]
+    lines.append(LinkSigner(bytes(32), s.counter).stream_line("L"))
+    lines.append(s.stream_line("L"))
+    lines.append(LinkSigner(TEST_KEY, 1).stream_line("L"))
+    return b"\n".join(x.rstrip(b"\r\n") for x in lines)
 
 
 @pytest.mark.micropython
@@ -89,7 +118,10 @@ def test_same_bytes_on_cpython_and_micropython(tmp_path_factory):
     for interp in ("cpython", "micropython"):
         d = tmp_path_factory.mktemp(interp)
         (d / "table_a.bin").write_bytes(make_table(kind="poly_slope", sensors=names))
-        (d / "new.bin").write_bytes(make_table(kind="linear_direct", sensors=names, S0=777))
+        new = make_table(kind="linear_direct", sensors=names, S0=777)
+        (d / "new.bin").write_bytes(new)
+        (d / "signed.txt").write_bytes(_signed_lines(new, make_table(kind="linear_direct", sensors=names, S0=1)))
+        provision(d)
         if interp == "cpython":
             env = dict(os.environ, PYTHONPATH=ROOT + os.pathsep + HERE)
             p = subprocess.run([sys.executable, "-c", SCENARIO], cwd=d, env=env, capture_output=True,
@@ -98,13 +130,19 @@ def test_same_bytes_on_cpython_and_micropython(tmp_path_factory):
             results.append(p.stdout)
         else:
             mpy = compile_mpy(str(tmp_path_factory.mktemp("mpy")), [os.path.join(HERE, "fwfakes.py")])
-            # 112 kB is the smallest that works (boot, upload, faults; 64-bit port: see test_fw_heaplock.py)
-            results.append(run_micropython(SCENARIO, str(d), mpy, "120K"))
+            # 148 kB is the smallest that works (boot, authorised upload, faults; 64-bit port: see test_fw_heaplock.py)
+            results.append(run_micropython(SCENARIO, str(d), mpy, "156K"))
     cpy, mpy = results
     assert cpy == mpy
     lines = cpy.splitlines()
     out = lines[-2].split()
     assert out[0] == "OUT" and int(out[3]) > 20  # frames written, all bytes hashed
     assert lines[-1].split()[1] == "1"  # the uploaded table is in slot B on both
+    assert lines[-1].split()[4] == "4"  # counters 1..4 used; the refused and replayed ones were not
     text = "\n".join(lines)
     assert ",E,1,crc" in text and ",E,3,unknown" in text and ",A,U,C,B" in text
+    assert "UNSIGNED 0 False 0" in text  # refused, and nothing changed
+    assert text.count(",E,8,auth,unsigned") == 4
+    assert text.count(",E,8,auth,bad tag") == 2  # another table's sha256; a wrong key
+    assert text.count(",E,8,auth,replayed counter") == 2  # L replayed, a stale counter
+    assert ",E,5,state,fixed references" in text

@@ -2,9 +2,9 @@
 import struct
 
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given, settings, strategies as st
 
-from fwhelpers import rig_app, run_cycles
+from fwhelpers import modbus_auth_block, rig_app, run_cycles
 from firmware.crc16 import crc16_modbus
 from firmware import status as stw
 
@@ -14,6 +14,7 @@ def rtu(body):
     return body + bytes([c & 0xFF, c >> 8])
 
 
+@settings(deadline=None)  # the first example imports pymodbus
 @given(st.binary(max_size=64))
 def test_crc_matches_pymodbus(data):
     from pymodbus.framer import FramerRTU
@@ -41,6 +42,13 @@ def ask(app, board, req, wait=True):
     return out
 
 
+def signed(app, board, req):
+    """``req`` (no CRC) preceded by the auth block that authorises it; the reply to ``req``."""
+    block = modbus_auth_block(app, req)
+    assert ask(app, board, rtu(block)) == rtu(block[:6])
+    return ask(app, board, rtu(req))
+
+
 def regs(out):
     n = out[2] // 2
     return list(struct.unpack(">%dH" % n, out[3:3 + 2 * n]))
@@ -52,9 +60,9 @@ def s16(v):
 
 def test_read_input_registers(dev):
     app, board = dev
-    out = ask(app, board, rtu(bytes([1, 4, 0, 0, 0, 48])))
-    assert out[:3] == bytes([1, 4, 96])
-    r = regs(out)
+    out = ask(app, board, rtu(bytes([1, 4, 0, 0, 0, 15])))
+    assert out[:3] == bytes([1, 4, 30])
+    r = regs(out) + [None] + regs(ask(app, board, rtu(bytes([1, 4, 0, 16, 0, 35]))))
     assert r[0] == app.status & 0xFFFF and r[1] == app.status >> 16
     assert r[2] == app.cycles & 0xFFFF
     assert s16(r[3]) == round(app.total / 10) and s16(r[4]) == round(app.ref_out / 10)
@@ -63,6 +71,7 @@ def test_read_input_registers(dev):
     for i in range(11):
         assert abs(s16(r[16 + i]) - (2000 + 100 * i)) <= 4  # 0.01 degC
     assert r[27:32] == [0x8000] * 5  # unused channels read as "no value"
+    assert r[48:51] == [0, 0, 0]  # authorisation: last counter 0, no refusal yet
 
 
 def test_write_position_and_enable(dev):
@@ -74,29 +83,45 @@ def test_write_position_and_enable(dev):
     assert app.pos == pos and app.have_pos
     r = regs(ask(app, board, rtu(bytes([1, 3, 0, 0, 0, 7]))))
     assert r[:5] == [1, 5, 0, hi, lo]
-    out = ask(app, board, rtu(bytes([1, 6, 0, 0, 0, 0])))
+    out = signed(app, board, bytes([1, 6, 0, 0, 0, 0]))
     assert out == rtu(bytes([1, 6, 0, 0, 0, 0]))
     assert not app.enabled
     run_cycles(app, board, 1)
     assert app.status & stw.DISABLED
-    ask(app, board, rtu(bytes([1, 6, 0, 1, 0, 50])))
+    assert signed(app, board, bytes([1, 6, 0, 1, 0, 50])) == rtu(bytes([1, 6, 0, 1, 0, 50]))
     assert app.limiter.rate == 5000
+    assert regs(ask(app, board, rtu(bytes([1, 4, 0, 48, 0, 3])))) == [0, 2, 0]  # two counters used
 
 
 @pytest.mark.parametrize("req, code", [
     (bytes([1, 5, 0, 0, 0xFF, 0]), 1),  # write coil: illegal function
     (bytes([1, 43, 14, 1, 0]), 1),  # device identification: not implemented
-    (bytes([1, 4, 0, 40, 0, 9]), 2),  # beyond the input map
-    (bytes([1, 3, 0, 8, 0, 1]), 2),  # beyond the holding map
+    (bytes([1, 4, 0, 45, 0, 9]), 2),  # beyond the input map
+    (bytes([1, 4, 0, 15, 0, 1]), 2),  # the unmapped input register
+    (bytes([1, 4, 0, 10, 0, 6]), 2),  # a range over it
+    (bytes([1, 3, 0, 18, 0, 1]), 2),  # beyond the holding map
     (bytes([1, 6, 0, 7, 0, 2]), 3),  # latch takes 1 (or 0: nothing)
     (bytes([1, 6, 0, 7, 0, 1]), 4),  # latch: the table has fixed references
-    (bytes([1, 6, 0, 9, 0, 1]), 2),
+    (bytes([1, 6, 0, 18, 0, 1]), 2),
+    (bytes([1, 6, 0, 9, 0, 1]), 3),  # the auth block is written whole
+    (bytes([1, 16, 0, 8, 0, 2, 4, 0, 0, 0, 1]), 3),
+    (bytes([1, 6, 0, 3, 0, 5]), 3),  # half of the position: never combined with a stale half
+    (bytes([1, 6, 0, 4, 0, 5]), 3),
+    (bytes([1, 6, 0, 5, 0, 5]), 3),  # half of the reference
+    (bytes([1, 16, 0, 4, 0, 1, 2, 0, 5]), 3),
+    (bytes([1, 16, 0, 4, 0, 2, 4, 0, 5, 0, 0]), 3),  # position low half + reference high half
+    (bytes([1, 6, 0, 0, 0, 0]), 4),  # disable: not authorised
+    (bytes([1, 6, 0, 1, 0, 50]), 4),  # slew: not authorised
+    (bytes([1, 6, 0, 2, 0, 50]), 4),  # link timeout: not authorised
+    (bytes([1, 16, 0, 0, 0, 2, 4, 0, 1, 0, 50]), 4),
     (bytes([1, 4, 0, 0, 0, 0]), 3),  # zero quantity
     (bytes([1, 4, 0, 0, 0, 126]), 3),  # too many
     (bytes([1, 6, 0, 0, 0, 2]), 3),  # enable must be 0/1
     (bytes([1, 6, 0, 1, 0, 0]), 3),  # slew 0
     (bytes([1, 16, 0, 0, 0, 2, 3, 0, 1, 0]), 3),  # byte count mismatch
     (bytes([1, 16, 0, 3, 0, 2, 4, 0x7F, 0, 0, 0]), 3),  # position beyond 100 m
+    (bytes([1, 16, 0, 3, 0, 2, 4]) + struct.pack(">i", 100000001), 3),  # the stream's limit, + 1 um
+    (bytes([1, 16, 0, 5, 0, 2, 4]) + struct.pack(">i", -100000001), 3),
 ])
 def test_exceptions(dev, req, code):
     app, board = dev
@@ -105,6 +130,13 @@ def test_exceptions(dev, req, code):
     assert out == rtu(bytes([1, req[1] | 0x80, code]))
     assert (list(app.link.hold), app.pos, app.enabled, app.slew) == before
 
+
+@pytest.mark.parametrize("pos", [100000000, -100000000, 0, -1, 65535, -65536])
+def test_position_range_is_the_streams(dev, pos):
+    app, board = dev
+    req = bytes([1, 16, 0, 3, 0, 2, 4]) + struct.pack(">i", pos)
+    assert ask(app, board, rtu(req)) == rtu(req[:6])
+    assert app.pos == pos
 
 def test_multi_write_is_atomic(dev):
     app, board = dev
@@ -119,8 +151,13 @@ def test_bad_crc_other_address_and_broadcast(dev):
     req[-1] ^= 0xFF
     assert ask(app, board, bytes(req)) == b""  # bad CRC: no reply (Modbus spec)
     assert ask(app, board, rtu(bytes([7, 4, 0, 0, 0, 2]))) == b""  # not us
-    assert ask(app, board, rtu(bytes([0, 6, 0, 0, 0, 0]))) == b""  # broadcast: acts silently
-    assert not app.enabled
+    before = (list(app.link.hold), app.pos, app.enabled, app.slew)
+    assert ask(app, board, rtu(bytes([0, 6, 0, 0, 0, 0]))) == b""  # broadcast write: refused, silently
+    assert ask(app, board, rtu(bytes([0, 16, 0, 3, 0, 2, 4, 0, 0, 0, 9]))) == b""
+    block = modbus_auth_block(app, bytes([1, 6, 0, 0, 0, 0]))
+    assert ask(app, board, rtu(bytes([0]) + block[1:])) == b""  # even with a valid auth block
+    assert ask(app, board, rtu(bytes([0, 6, 0, 0, 0, 0]))) == b""
+    assert (list(app.link.hold), app.pos, app.enabled, app.slew) == before
     # after garbage the next good request is still answered
     assert ask(app, board, rtu(bytes([1, 4, 0, 2, 0, 1])))[:3] == bytes([1, 4, 2])
 

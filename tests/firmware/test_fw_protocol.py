@@ -4,7 +4,9 @@ import zlib
 import pytest
 from hypothesis import given, settings, strategies as st, HealthCheck
 
-from fwhelpers import cmd, frames, rig_app, run_cycles, make_table
+import hashlib
+
+from fwhelpers import cmd, frames, rig_app, run_cycles, make_table, scmd
 from fwfakes import FakeSerial
 from firmware import frame as fr
 from firmware.crc16 import crc16_ccitt, crc16_modbus
@@ -103,7 +105,8 @@ def test_hello_at_boot(tmp_path):
     assert h[3] == "H" and h[4] == "1" and h[5] == "0.1.0" and h[6] == "A"
     assert int(h[7], 16) == app.table.crc
     assert h[8] == app.table.provenance[:8].hex().upper()
-    assert h[9:] == ["poly_slope", "X", "11", "-"]  # "-": fixed reference temperatures
+    # "-": fixed reference temperatures; "0": the last authorisation counter (a key is provisioned)
+    assert h[9:] == ["poly_slope", "X", "11", "-", "0"]
 
 
 def test_no_table_hello_and_reason(tmp_path):
@@ -208,7 +211,7 @@ def test_fuzz_never_crashes_and_only_valid_commands_act(tmp_path_factory, chunks
 
 
 def upload(app, board, data, chunk=48, cut=None):
-    out = app_out(app, board, cmd(b"TC,U,B,%d,%08X" % (len(data), zlib.crc32(data))))
+    out = app_out(app, board, scmd(app, "U", "B", len(data), "%08X" % zlib.crc32(data)))
     assert out[-1][3:5] == ["A", "U"], out
     for off in range(0, len(data), chunk):
         if cut is not None and off >= cut:
@@ -216,7 +219,7 @@ def upload(app, board, data, chunk=48, cut=None):
         out = app_out(app, board, cmd(b"TC,U,D,%d,%s" % (off, data[off:off + chunk].hex().upper().encode())))
         assert out[-1][3:6] == ["A", "U", "D"], out
         assert int(out[-1][6]) == min(off + chunk, len(data))
-    return app_out(app, board, cmd(b"TC,U,C"))
+    return app_out(app, board, scmd(app, "U", "C", extra=hashlib.sha256(data).digest()))
 
 
 def test_table_upload_switches_slot(tmp_path):
@@ -265,17 +268,17 @@ def test_corrupt_upload_refused_with_reason(tmp_path):
 def test_upload_chunk_out_of_order_rejected(tmp_path):
     app, board = rig_app(tmp_path)
     data = make_table(kind="linear_direct", sensors=["T1"])
-    app_out(app, board, cmd(b"TC,U,B,%d,%08X" % (len(data), zlib.crc32(data))))
+    app_out(app, board, scmd(app, "U", "B", len(data), "%08X" % zlib.crc32(data)))
     out = app_out(app, board, cmd(b"TC,U,D,10,%s" % data[10:20].hex().encode()))
     assert out[0][3] == "E" and out[0][5] == "state"
-    out = app_out(app, board, cmd(b"TC,U,X"))
+    out = app_out(app, board, scmd(app, "U", "X"))
     assert out[0][3:6] == ["A", "U", "X"] and not app.store.uploading
 
 
 def test_reset_command_restarts(tmp_path):
     from firmware.app import Restart
     app, board = rig_app(tmp_path)
-    board.serial.feed(cmd(b"TC,X"))
+    board.serial.feed(scmd(app, "X"))
     with pytest.raises(Restart):
         app.link.poll(board.clock.t)
     assert frames(board.serial.take())[-1][3:5] == ["A", "X"]

@@ -138,9 +138,12 @@ def test_library_on_runs_and_run_arrays_names_the_runs(twin_runs):
     assert via_runs.sensors == via_arrays.sensors
     assert via_runs.reason["train_run"] == PROTOCOLS[0]
     assert via_arrays.reason["test_runs"] == list(PROTOCOLS[1:])
-    # the same arrays as plain tuples give the same choice (labels differ only)
+    # plain tuples carry no start temperatures, so they are clustered as given (rises here):
+    # the same choice as the runs clustered on rises (labels differ only)
     plain = select("hclust-ga", [tuple(a) for a in training_arrays(runs)], seed=5, population=8, generations=3)
-    assert plain.sensors == via_runs.sensors and plain.reason["test_runs"] == ["run 2", "run 3"]
+    on_rises = select("hclust-ga", runs, seed=5, population=8, generations=3, distance_on="rises")
+    assert plain.sensors == on_rises.sensors and plain.reason["test_runs"] == ["run 2", "run 3"]
+    assert plain.reason["distance_on"].startswith("values as given") and via_runs.reason["distance_on"] == "values"
 
 
 def test_split_one_long_run_into_windows(twin_runs, tmp_path):

@@ -51,8 +51,13 @@ def test_merged_cluster_distance_uses_mean_series():
     De = np.sqrt(((X[:, :, None] - X[:, None, :]) ** 2).sum(axis=0))
     off = De[~np.eye(6, dtype=bool)]
     ma, mb = X[:, list(a)].mean(axis=1), X[:, list(b)].mean(axis=1)
-    expect = (np.linalg.norm(ma - mb) - off.min()) / (off.max() - off.min())
-    assert d == pytest.approx(expect)
+    # default (Eq. 5): divided by the largest pair distance; "minmax" is the earlier form
+    assert d == pytest.approx(np.linalg.norm(ma - mb) / off.max())
+    a, b, d = agglomerate(X, 1.0, normalisation="minmax").merges[-1]
+    ma, mb = X[:, list(a)].mean(axis=1), X[:, list(b)].mean(axis=1)
+    assert d == pytest.approx((np.linalg.norm(ma - mb) - off.min()) / (off.max() - off.min()))
+    with pytest.raises(ValueError, match="normalisation"):
+        agglomerate(X, 1.0, normalisation="z")
 
 
 def test_ga_finds_onemax_and_is_reproducible():
@@ -82,8 +87,9 @@ def test_hclust_ga_reproducible_and_seed_matters(arrays3):
     assert len(set(others + [a.reason["ga"]["genome"]])) > 1
 
 
-def test_hclust_ga_returns_the_best_combination_of_its_partition(arrays3):
-    sel = select("hclust-ga", arrays3, seed=0)
+@pytest.mark.parametrize("intercept", [False, True])
+def test_hclust_ga_returns_the_best_combination_of_its_partition(arrays3, intercept):
+    sel = select("hclust-ga", arrays3, seed=0, intercept=intercept)
     r = sel.reason
     names = arrays3[0][2]
     clusters = [[names.index(s) for s in c] for c in r["clusters"]]
@@ -95,8 +101,8 @@ def test_hclust_ga_returns_the_best_combination_of_its_partition(arrays3):
     # reported disturbed RMSE identify it), every combination no better than the chosen one
     best = None
     for combo in itertools.product(*clusters):
-        A = np.column_stack([np.ones(len(ytr)), Xtr[:, combo]])
-        coef = np.linalg.lstsq(A, ytr, rcond=None)[0]
+        A = np.column_stack([np.ones(len(ytr)), Xtr[:, combo]]) if intercept else np.column_stack([np.zeros(len(ytr)), Xtr[:, combo]])
+        coef = np.linalg.lstsq(A, ytr, rcond=None)[0]  # without intercept the zero column gets the minimum-norm 0
         clean = np.mean([np.sqrt(np.mean((coef[0] + X[:, combo] @ coef[1:] - y) ** 2)) for X, y, _ in arrays3[1:]])
         if sorted(names[j] for j in combo) == sorted(sel.sensors):
             best = clean
@@ -105,6 +111,40 @@ def test_hclust_ga_returns_the_best_combination_of_its_partition(arrays3):
     assert r["fitness_rmse"] == pytest.approx(np.mean(list(r["rmse_disturbed"].values())))
     assert r["ga"]["model_evaluations"] >= r["combinations_in_partition"]
     assert "fallback" not in r
+    assert (r["model"]["intercept"] == 0.0) is (not intercept) and r["intercept"] is intercept
+
+
+def test_comparison_groups_fix_alpha_and_k(arrays3):
+    fixed_a = select("hclust-ga", arrays3, alpha=1, seed=0, **SMALL_GA)
+    assert fixed_a.reason["alpha"] == 1.0 and fixed_a.reason["fixed"] == {"alpha": 1.0}
+    fixed_k = select("hclust-ga", arrays3, k=3, seed=0, **SMALL_GA)
+    assert fixed_k.reason["clusters_k"] == 3 and len(fixed_k.sensors) == 3
+    single = select("hclust-ga", arrays3, alpha=0, k=1)
+    assert len(single.sensors) == 1 and single.reason["ga"] is None and single.reason["alpha"] == 0.0
+    with pytest.raises(SelectionError, match="alpha must be"):
+        select("hclust-ga", arrays3, alpha=1.5)
+    with pytest.raises(SelectionError, match="k must be"):
+        select("hclust-ga", arrays3, k=0)
+    with pytest.raises(SelectionError, match="distance_on"):
+        select("hclust-ga", arrays3, distance_on="kelvin")
+
+
+def test_euclidean_distance_on_measured_values_sees_the_level():
+    """Two sensor pairs rise identically; one pair sits 6 K warmer. On rises the Euclidean
+    distance cannot tell the pairs apart, on measured values it separates them."""
+    from host.empirical.targets import RunArrays
+
+    t = np.linspace(0, 1, 30)
+    runs = []
+    for r in range(3):
+        a = (1 + 0.2 * r) * (1 - np.exp(-3 * t))
+        rises = np.column_stack([a, a * 1.001, a * 0.999, a * 1.002])
+        start = np.array([20.0, 20.1, 26.0, 26.1])
+        runs.append(RunArrays(rises, 2 * a + 0.01 * np.sin(7 * t + r), ["W1", "W2", "H1", "H2"], t, "r%d" % r, start))
+    on_values = select("hclust-ga", runs, alpha=1, k=2)
+    on_rises = select("hclust-ga", runs, alpha=1, k=2, distance_on="rises")
+    assert on_values.reason["clusters"] == [["W1", "W2"], ["H1", "H2"]]
+    assert on_rises.reason["clusters"] != on_values.reason["clusters"]
 
 
 def test_offset_disturbance_penalises_coefficient_sum(arrays3):

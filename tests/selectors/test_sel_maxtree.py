@@ -151,8 +151,44 @@ def test_bad_target_correlations():
         maximal_tree(C5, NAMES, [0.1, 0.2, 0.3, 0.4, 1.5])
 
 
-def test_selection_follows_the_published_criterion(arrays3):
+def test_paper_criterion_adds_sensors_only_for_a_significant_r2_gain(arrays3):
+    from scipy import stats
+
     sel = select("maxtree", arrays3)
+    r = sel.reason
+    assert r["criterion_name"] == "paper"
+    n = r["samples"]
+    ok = sorted([row for row in r["partitions"] if "skipped" not in row and row["p_F"] < 0.05], key=lambda row: len(row["representatives"]))
+    # independent replay: partial F of the R² change, textbook form
+    cur, examined = ok[0], [ok[0]["partition"]]
+    for row in ok[1:]:
+        examined.append(row["partition"])
+        k0, k1 = len(cur["representatives"]), len(row["representatives"])
+        F = ((row["r2"] - cur["r2"]) / (k1 - k0)) / ((1 - row["r2"]) / (n - k1 - 1))
+        if row["r2"] <= cur["r2"] or stats.f.sf(F, k1 - k0, n - k1 - 1) >= 0.05:
+            break
+        cur = row
+    assert r["chosen_partition"] == cur["partition"]
+    assert [st["partition"] for st in r["steps"]] == examined
+
+
+def test_one_dominant_sensor_is_kept_alone_by_the_paper_criterion():
+    rng = np.random.default_rng(5)
+    n = 60
+    base = np.cumsum(rng.normal(size=n))
+    X = np.column_stack([base + 0.3 * rng.normal(size=n) for _ in range(4)] + [rng.normal(size=n) for _ in range(3)])
+    y = 2.0 * X[:, 0] + 0.5 * rng.normal(size=n)
+    names = ["S%d" % (j + 1) for j in range(X.shape[1])]
+    paper = select("maxtree", (X, y, names))
+    loose = select("maxtree", (X, y, names), criterion="tolerance")
+    assert len(paper.sensors) <= len(loose.sensors)
+    assert "S1" in paper.sensors
+    with pytest.raises(SelectionError, match="criterion must be one of"):
+        select("maxtree", (X, y, names), criterion="best")
+
+
+def test_tolerance_criterion_is_kept_as_an_option(arrays3):
+    sel = select("maxtree", arrays3, criterion="tolerance")
     r = sel.reason
     evaluated = [row for row in r["partitions"] if "skipped" not in row and row["p_F"] < 0.05]
     best = max(row["r2"] for row in evaluated)
@@ -175,10 +211,10 @@ def test_selection_follows_the_published_criterion(arrays3):
 
 
 def test_zero_tolerance_is_pure_r2(arrays3):
-    sel = select("maxtree", arrays3, r2_tolerance=0.0)
+    sel = select("maxtree", arrays3, criterion="tolerance", r2_tolerance=0.0)
     ok = [row for row in sel.reason["partitions"] if "skipped" not in row and row["p_F"] < 0.05]
     assert sel.reason["r2"] == max(row["r2"] for row in ok)
-    capped = select("maxtree", arrays3, r2_tolerance=0.0, max_sensors=2)
+    capped = select("maxtree", arrays3, criterion="tolerance", r2_tolerance=0.0, max_sensors=2)
     assert len(capped.sensors) <= 2
 
 

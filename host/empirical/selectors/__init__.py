@@ -22,9 +22,10 @@ Methods (docs/selection.md has the criteria and thresholds):
 
 ``"maxtree"``
     fuzzy clustering by the maximal-tree method on the pooled runs; params
-    ``alpha=0.05`` (F-test level), ``r2_tolerance=0.01`` (R² slack before F
-    decides), ``max_sensors=None``, ``absolute=True`` (similarity |r| rather
-    than r).  :func:`maximal_tree` is the same method on a precomputed
+    ``alpha=0.05`` (F-test level), ``criterion="paper"`` (R² gains accepted by
+    the F test, coarse to fine) or ``"tolerance"`` (with ``r2_tolerance=0.01``:
+    R² slack before F decides), ``max_sensors=None``, ``absolute=True``
+    (similarity |r| rather than r).  :func:`maximal_tree` is the same method on a precomputed
     correlation matrix.
 ``"stepwise"``
     stepwise regression with partial F on the pooled runs (the estimator of
@@ -37,7 +38,10 @@ Methods (docs/selection.md has the criteria and thresholds):
     other run (``reason["fallback"]`` says so); 1 run raises.  Params
     ``seed=0``, ``population=20``, ``crossover=0.8``, ``mutation=0.005``,
     ``generations=20``, ``disturbance_C=0.5``, ``disturbance="uniform"``,
-    ``train_run=0``, ``max_clusters=10``, ``max_combinations=20000``.
+    ``train_run=0``, ``max_clusters=10``, ``max_combinations=20000``,
+    ``alpha=None``/``k=None`` (fix the distance weight / cluster count: the
+    paper's comparison groups), ``distance_on="values"`` (or ``"rises"``),
+    ``normalisation="max"`` (or ``"minmax"``), ``intercept=False`` (Eq. 16).
 
 Errors in the data (NaN, a constant sensor, fewer samples than parameters, too
 few runs, unknown method or parameter) raise :class:`SelectionError` with a

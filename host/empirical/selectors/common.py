@@ -76,7 +76,7 @@ def as_arrays(data, target="slope", channel=None, sensors=None):
         labels = [a.run if isinstance(getattr(a, "run", None), str) else "run %d" % (i + 1) for i, a in enumerate(data)]
         if sensors is not None:
             arrays = [_subset(a, sensors, labels[i]) for i, a in enumerate(arrays)]
-    checked = [check_arrays(a, labels[i]) for i, a in enumerate(arrays)]
+    checked = [_keep_start(check_arrays(a, labels[i]), a) for i, a in enumerate(arrays)]
     names = checked[0][2]
     for (_, _, other), label in zip(checked[1:], labels[1:]):
         if other != names:
@@ -91,7 +91,19 @@ def _subset(arr, sensors, label):
     if missing:
         raise SelectionError("%s has no sensor %s (has %s)" % (label, ", ".join(missing), ",".join(names)))
     idx = [names.index(s) for s in sensors]
-    return np.asarray(X, dtype=float)[:, idx], y, list(sensors)
+    start = getattr(arr, "start", None)
+    return _keep_start((np.asarray(X, dtype=float)[:, idx], y, list(sensors)), arr, None if start is None else np.asarray(start)[idx])
+
+
+def _keep_start(checked, original, start=None):
+    """``checked`` (X, y, names) keeps the start temperatures of a RunArrays (rises -> measured values)."""
+    from host.empirical.targets import RunArrays
+
+    start = getattr(original, "start", None) if start is None else start
+    if start is None:
+        return checked
+    X, y, names = checked
+    return RunArrays(X, y, names, getattr(original, "time_s", None), getattr(original, "run", None), np.asarray(start, dtype=float))
 
 
 def check_arrays(arr, label="data"):

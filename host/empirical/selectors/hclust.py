@@ -1,7 +1,10 @@
 """Agglomerative clustering of sensor series on D = a*D_e + (1 - a)*D_r.
 
-D_e is the Euclidean distance between two series, min-max normalised over all
-sensor pairs of the data (so it lies in [0, 1] like D_r); D_r = 1 - |r|. Each
+D_e is the Euclidean distance between two series, normalised over all sensor
+pairs of the data so it lies in [0, 1] like D_r: divided by the largest pair
+distance (``normalisation="max"``, Eq. 5 of the paper as we read it: zero
+distance stays zero) or min-max (``"minmax"``, this project's earlier form);
+D_r = 1 - |r|. Each
 merge joins the closest pair and represents the new cluster by the mean series
 of its members; its distances to the other clusters are recomputed from that
 mean with the same normalisation constants, so D_e keeps one scale through the
@@ -72,11 +75,17 @@ class Agglomeration:
         return np.asarray(rows, dtype=float).reshape(-1, 4)
 
 
-def agglomerate(X, alpha, moments=None):
+NORMALISATIONS = ("max", "minmax")
+
+
+def agglomerate(X, alpha, moments=None, normalisation="max"):
     """Cluster the columns of X (n, p) on the combined distance with weight ``alpha`` on D_e.
 
     ``moments``: a precomputed :class:`Moments` of X (reused across alphas by the GA).
+    ``normalisation``: D_e / max over pairs ("max") or (D_e − min) / (max − min) ("minmax").
     """
+    if normalisation not in NORMALISATIONS:
+        raise ValueError("normalisation must be one of %s, got %r" % (", ".join(NORMALISATIONS), normalisation))
     mom = moments if moments is not None else Moments(X)
     p = mom.p
     dM = np.diag(mom.M)
@@ -86,6 +95,8 @@ def agglomerate(X, alpha, moments=None):
         R = np.nan_to_num(np.abs(np.clip(mom.C / np.sqrt(np.outer(dC, dC)), -1.0, 1.0)), nan=0.0)
     off = De[~np.eye(p, dtype=bool)]
     lo, hi = (float(off.min()), float(off.max())) if off.size else (0.0, 1.0)
+    if normalisation == "max":
+        lo = 0.0
     span = hi - lo if hi > lo else 1.0
     D = alpha * (De - lo) / span + (1.0 - alpha) * (1.0 - R)
     np.fill_diagonal(D, np.inf)

@@ -1,5 +1,14 @@
 """Sensor selection by hierarchical clustering with GA-optimised weight and cluster count.
 
+Clustering data: the measured temperatures (``distance_on="values"``, default: the
+paper argues that value gaps reflect where a sensor sits, which rises discard) or
+the rises (``"rises"``). The robustness model is always fitted on rises, without
+intercept (Eq. 16; ``intercept=True`` adds one).
+
+Comparison groups of the paper: ``alpha`` fixed (1: Euclidean only, 0:
+correlation only) and/or ``k`` fixed (``k=1``: a single sensor); the GA then
+searches only what is left free (both fixed: one evaluation, no GA).
+
 Genome: ``ALPHA_BITS`` bits for the distance weight a in [0, 1] (step 1/255) and
 enough bits for the number of clusters k in 1..k_max (k_max = min(max_clusters,
 sensors, training samples - 2), mapped linearly and rounded). Cost of a genome =
@@ -37,7 +46,13 @@ DEFAULTS = {
     "train_run": 0,
     "max_clusters": 10,
     "max_combinations": 20000,
+    "alpha": None,  # fixed distance weight (None: the GA chooses)
+    "k": None,  # fixed number of clusters (None: the GA chooses)
+    "distance_on": "values",  # values | rises
+    "normalisation": "max",  # max (Eq. 5) | minmax
+    "intercept": False,  # Eq. 16 has none
 }
+DISTANCE_ON = ("values", "rises")
 
 
 def combinations(clusters, score, max_combinations):
@@ -63,13 +78,14 @@ def combinations(clusters, score, max_combinations):
 class RobustnessProblem:
     """Everything the GA cost needs, with caches of agglomerations and partitions."""
 
-    def __init__(self, train, tests, disturbance_C, disturbance, seed, max_combinations):
+    def __init__(self, train, tests, disturbance_C, disturbance, seed, max_combinations, cluster_X=None, normalisation="max", intercept=False):
         Xtr, ytr, names = train
         self.names = names
-        self.X = Xtr
+        self.X = Xtr if cluster_X is None else cluster_X  # what the distances are computed on
         self.y = ytr
+        self.normalisation = normalisation
         p = Xtr.shape[1]
-        self.fitter = SubsetFitter(Xtr, ytr)
+        self.fitter = SubsetFitter(Xtr, ytr, intercept=intercept)
         self.tests = []
         for r, (X, y, _) in enumerate(tests):
             if disturbance == "uniform":
@@ -85,14 +101,14 @@ class RobustnessProblem:
         self.scorers = [SubsetScorer(Xd, y) for _, Xd, y in self.tests]
         self.score = np.abs([np.corrcoef(Xtr[:, j], ytr)[0, 1] for j in range(p)])
         self.max_combinations = int(max_combinations)
-        self.moments = Moments(Xtr)
+        self.moments = Moments(self.X)
         self._agg = {}
         self._part = {}
         self.evaluations = 0  # subset models fitted and scored
 
     def agglomeration(self, alpha):
         if alpha not in self._agg:
-            self._agg[alpha] = agglomerate(self.X, alpha, self.moments)
+            self._agg[alpha] = agglomerate(self.X, alpha, self.moments, self.normalisation)
         return self._agg[alpha]
 
     def evaluate(self, clusters):
@@ -135,27 +151,42 @@ def select_hclust_ga(arrays, context=None, **params):
         prm[key] = number("hclust-ga", key, prm[key], 0.0, 1.0)
     prm["disturbance_C"] = number("hclust-ga", "disturbance_C", prm["disturbance_C"], 0.0)
     prm["seed"] = number("hclust-ga", "seed", prm["seed"], 0, integer=True)
+    prm["alpha"] = number("hclust-ga", "alpha", prm["alpha"], 0.0, 1.0, allow_none=True)
+    if prm["distance_on"] not in DISTANCE_ON:
+        raise SelectionError("hclust-ga: distance_on must be one of %s, got %r" % (", ".join(DISTANCE_ON), prm["distance_on"]))
+    if prm["normalisation"] not in ("max", "minmax"):
+        raise SelectionError("hclust-ga: normalisation must be max or minmax, got %r" % (prm["normalisation"],))
+    if not isinstance(prm["intercept"], bool):
+        raise SelectionError("hclust-ga: intercept must be true or false, got %r" % (prm["intercept"],))
     train = arrays[tr]
     tests = [a for i, a in enumerate(arrays) if i != tr]
     test_names = [r for i, r in enumerate(runs) if i != tr]
     Xtr, ytr, names = train
     n, p = Xtr.shape
     k_max = min(prm["max_clusters"], p, n - 2)  # >= 1: check_arrays guarantees n >= 3
-    prob = RobustnessProblem(train, tests, float(prm["disturbance_C"]), prm["disturbance"], prm["seed"], prm["max_combinations"])
+    prm["k"] = number("hclust-ga", "k", prm["k"], 1, min(p, n - 2), integer=True, allow_none=True)
+    # tuples without start temperatures are clustered as given; RunArrays of rises get their start back
+    cluster_X = getattr(train, "values", Xtr) if prm["distance_on"] == "values" else Xtr
+    prob = RobustnessProblem(train, tests, float(prm["disturbance_C"]), prm["disturbance"], prm["seed"], prm["max_combinations"],
+                             cluster_X=cluster_X, normalisation=prm["normalisation"], intercept=prm["intercept"])
     k_bits = max(1, math.ceil(math.log2(k_max))) if k_max > 1 else 1
 
     def decode(genome):
         alpha = decode_uint(genome[:ALPHA_BITS]) / (2 ** ALPHA_BITS - 1)
         v = decode_uint(genome[ALPHA_BITS:])
         k = 1 + int(round(v * (k_max - 1) / (2 ** k_bits - 1))) if k_max > 1 else 1
-        return alpha, k
+        return (alpha if prm["alpha"] is None else prm["alpha"]), (k if prm["k"] is None else prm["k"])
 
     def cost(genome):
         alpha, k = decode(genome)
         return prob.evaluate(prob.agglomeration(alpha).partition(k))["cost"]
 
-    ga = binary_ga(cost, ALPHA_BITS + k_bits, prm["population"], float(prm["crossover"]), float(prm["mutation"]), prm["generations"], prm["seed"])
-    alpha, k = decode(ga.best_genome)
+    if prm["alpha"] is not None and prm["k"] is not None:
+        ga = None  # nothing left to search
+        alpha, k = prm["alpha"], prm["k"]
+    else:
+        ga = binary_ga(cost, ALPHA_BITS + k_bits, prm["population"], float(prm["crossover"]), float(prm["mutation"]), prm["generations"], prm["seed"])
+        alpha, k = decode(ga.best_genome)
     agg = prob.agglomeration(alpha)
     clusters = agg.partition(k)
     best = prob.evaluate(clusters)
@@ -170,6 +201,10 @@ def select_hclust_ga(arrays, context=None, **params):
         "fitness_rmse": best["cost"],
         "alpha": alpha,
         "clusters_k": k,
+        "fixed": {key: prm[key] for key in ("alpha", "k") if prm[key] is not None},
+        "distance_on": prm["distance_on"] if cluster_X is not Xtr or prm["distance_on"] == "rises" else "values as given (no start temperatures)",
+        "normalisation": prm["normalisation"],
+        "intercept": prm["intercept"],
         "clusters": [[names[j] for j in c] for c in clusters],
         "model": {"sensors": [names[j] for j in order], "intercept": best["intercept"], "coefficients": best["coefficients"]},
         "train_run": runs[tr],
@@ -179,7 +214,7 @@ def select_hclust_ga(arrays, context=None, **params):
         "rmse_train": train_rmse,
         "combinations_in_partition": best["combinations"],
         "trimmed_clusters": None if best["trimmed"] is None else [[names[j] for j in c] for c in best["trimmed"]],
-        "ga": {
+        "ga": None if ga is None else {
             "seed": prm["seed"],
             "population": prm["population"],
             "crossover": float(prm["crossover"]),
@@ -201,7 +236,7 @@ def select_hclust_ga(arrays, context=None, **params):
     label = data_label(context, n)
 
     def plotter(path):
-        _plot(path, agg, clusters, chosen, names, ga.history, reason, label)
+        _plot(path, agg, clusters, chosen, names, [] if ga is None else ga.history, reason, label)
 
     return Selection(sensors, "hclust-ga", reason, plotter)
 
@@ -230,7 +265,7 @@ def _plot(path, agg, clusters, chosen, names, history, reason, label):
     a2.set_xlabel("generation")
     a2.set_ylabel("mean disturbed RMSE on the other runs")
     a2.legend(fontsize=8)
-    a2.set_title("GA robustness fitness (seed %s)" % reason["ga"]["seed"], fontsize=9)
+    a2.set_title("GA robustness fitness (seed %s)" % reason["ga"]["seed"] if reason["ga"] else "alpha and k fixed: no GA", fontsize=9)
     fig.suptitle("Hierarchical clustering + GA sensor selection: %s; fitness %.4g" % (label, reason["fitness_rmse"]), fontsize=10)
     fig.tight_layout()
     fig.savefig(path, dpi=110)

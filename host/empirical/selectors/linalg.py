@@ -53,16 +53,22 @@ def ols_stats(X, y):
 
 
 class SubsetFitter:
-    """Fits ``y ~ 1 + X[:, subset]`` for a whole batch of equally sized subsets at once."""
+    """Fits ``y ~ 1 + X[:, subset]`` (or ``y ~ X[:, subset]`` with ``intercept=False``) for a
+    whole batch of equally sized subsets at once.
 
-    def __init__(self, X, y):
+    Without intercept the columns are scaled by their root mean square instead of
+    centred and scaled, and the intercepts returned are zero.
+    """
+
+    def __init__(self, X, y, intercept=True):
         X = np.asarray(X, dtype=float)
         y = np.asarray(y, dtype=float)
-        self.mean_ = X.mean(axis=0)
-        self.scale_ = X.std(axis=0)
+        self.intercept = bool(intercept)
+        self.mean_ = X.mean(axis=0) if intercept else np.zeros(X.shape[1])
+        self.scale_ = np.sqrt(((X - self.mean_) ** 2).mean(axis=0))
         self.scale_[self.scale_ == 0] = 1.0
         Z = (X - self.mean_) / self.scale_
-        self.y_mean_ = float(y.mean())
+        self.y_mean_ = float(y.mean()) if intercept else 0.0
         yc = y - self.y_mean_
         self.gram_ = Z.T @ Z  # (p, p)
         self.cross_ = Z.T @ yc  # (p,)

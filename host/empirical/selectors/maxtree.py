@@ -237,20 +237,66 @@ def _representative(cluster, names, S, t):
 
 # ---------------------------------------------------------------- selection on data
 
-DEFAULTS = {"alpha": 0.05, "r2_tolerance": 0.01, "max_sensors": None, "absolute": True}
+DEFAULTS = {"alpha": 0.05, "criterion": "paper", "r2_tolerance": 0.01, "max_sensors": None, "absolute": True}
+CRITERIA = ("paper", "tolerance")
+
+
+def r2_change_test(r2_small, k_small, r2_large, k_large, n):
+    """F test of the R² gain from k_small to k_large regressors (with intercept) -> (F, p).
+
+    F = ((R²_L − R²_S)/(k_L − k_S)) / ((1 − R²_L)/(n − k_L − 1)), F(k_L − k_S, n − k_L − 1)
+    under "the extra regressors add nothing". No gain (or no residual degree of
+    freedom) gives (0, 1): nothing to accept.
+    """
+    from scipy import stats
+
+    dk, df = k_large - k_small, n - k_large - 1
+    gain = r2_large - r2_small
+    if dk <= 0 or df <= 0 or gain <= 0:
+        return 0.0, 1.0
+    if r2_large >= 1.0:
+        return float("inf"), 0.0
+    F = (gain / dk) / ((1.0 - r2_large) / df)
+    return float(F), float(stats.f.sf(F, dk, df))
+
+
+def _choose_paper(ok, alpha, n):
+    """The paper's reading: the first set is the coarsest whose regression is significant at ``alpha``;
+    going to finer partitions, each next representative set must raise R² significantly over the
+    current one (F test of the R² change at ``alpha``); the first that does not ends the search,
+    as in forward selection with an F-to-enter. Returns (chosen row, steps)."""
+    ok = sorted(ok, key=lambda r: (len(r["representatives"]), r["partition"]))
+    cur = ok[0]
+    steps = [{"partition": cur["partition"], "sensors": len(cur["representatives"]), "r2": cur["r2"], "accepted": True,
+              "why": "coarsest partition whose regression is significant (p_F %.3g < alpha)" % cur["p_F"]}]
+    for row in ok[1:]:
+        F, p = r2_change_test(cur["r2"], len(cur["representatives"]), row["r2"], len(row["representatives"]), n)
+        steps.append({"partition": row["partition"], "sensors": len(row["representatives"]), "r2": row["r2"], "against": cur["partition"],
+                      "F_change": F, "p_change": p, "accepted": p < alpha})
+        if p >= alpha:
+            break
+        cur = row
+    return cur, steps
 
 
 def select_maxtree(arrays, context=None, **params):
     """Choose the partition whose representatives regress best on the target.
 
-    Published criterion: the sample R² and the regression's F significance, fit
-    first. Among partitions whose F test rejects "all coefficients zero" at
-    ``alpha``, those within ``r2_tolerance`` of the best R² compete on F (the
-    larger F wins: as much fit from as few sensors as possible); equal F goes to
-    fewer sensors. ``r2_tolerance=0`` is pure R² maximisation.
+    ``criterion="paper"`` (default): the sample R² of the representatives' regression
+    and F tests at ``alpha`` (0.05). The candidates are the partitions whose
+    regression F test is significant; from the coarsest of them towards finer ones,
+    a finer set replaces the current choice only when its R² gain over the current
+    set is significant (F test of the R² change at ``alpha``); the first finer set
+    that is not significantly better ends the search. So R² says what is better and
+    the F test whether it is better by more than chance.
+    ``criterion="tolerance"`` (this project's earlier rule, kept for comparison):
+    among significant partitions, those within ``r2_tolerance`` of the best R²
+    compete on F (the larger F wins); equal F goes to fewer sensors.
     """
     prm = check_params("maxtree", params, DEFAULTS)
     prm["alpha"] = number("maxtree", "alpha", prm["alpha"], 0.0, 1.0)
+    if prm["criterion"] not in CRITERIA:
+        raise SelectionError("maxtree: criterion must be one of %s, got %r" % (", ".join(CRITERIA), prm["criterion"]))
     prm["r2_tolerance"] = number("maxtree", "r2_tolerance", prm["r2_tolerance"], 0.0, 1.0)
     prm["max_sensors"] = number("maxtree", "max_sensors", prm["max_sensors"], 1, integer=True, allow_none=True)
     if not isinstance(prm["absolute"], bool):
@@ -281,14 +327,21 @@ def select_maxtree(arrays, context=None, **params):
             % (prm["alpha"], n, len(names))
         )
     best_r2 = max(r["r2"] for r in ok)
-    cands = [r for r in ok if r["r2"] >= best_r2 - prm["r2_tolerance"]]
-    chosen = max(cands, key=lambda r: (r["F"], -len(r["representatives"]), -r["partition"]))
+    reason = {"criterion_name": prm["criterion"]}
+    if prm["criterion"] == "paper":
+        chosen, steps = _choose_paper(ok, prm["alpha"], n)
+        reason["criterion"] = ("regression F test p < alpha; from the coarsest significant partition, a finer one replaces the choice "
+                               "only if its R2 gain is significant (F test of the R2 change, p < alpha); the first refusal stops")
+        reason["steps"] = steps
+    else:
+        cands = [r for r in ok if r["r2"] >= best_r2 - prm["r2_tolerance"]]
+        chosen = max(cands, key=lambda r: (r["F"], -len(r["representatives"]), -r["partition"]))
+        reason["criterion"] = "F test p < alpha; R2 within r2_tolerance of the best; then largest F"
+        reason["r2_tolerance"] = prm["r2_tolerance"]
     part = tree.partitions[chosen["partition"]]
     sensors = [s for s in names if s in part.representatives]
-    reason = {
-        "criterion": "F test p < alpha; R2 within r2_tolerance of the best; then largest F",
+    reason.update({
         "alpha": prm["alpha"],
-        "r2_tolerance": prm["r2_tolerance"],
         "best_r2": best_r2,
         "chosen_partition": chosen["partition"],
         "chosen_lambda": [part.lambda_low, part.lambda_high],
@@ -299,7 +352,7 @@ def select_maxtree(arrays, context=None, **params):
         "partitions": rows,
         "tree": tree.to_json(),
         "samples": int(n),
-    }
+    })
     label = data_label(context, n)
 
     def plotter(path):

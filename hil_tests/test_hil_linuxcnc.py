@@ -1,0 +1,362 @@
+"""The LinuxCNC bridge in a real LinuxCNC (Debian linuxcnc-uspace, headless), fed by the firmware on the rig.
+
+The chain: firmware (MicroPython, simulated chips, simulated time paced to the
+wall clock) -> pty -> LinkTap (records, and breaks the line on request) -> pty
+-> ``tcomp linuxcnc`` loaded by examples/linuxcnc/tcomp.hal -> motion's
+external offsets on axis X of examples/linuxcnc/tcomp-sim.ini. A DISPLAY
+program (hil_tests/lcnc/driver.py) drives the machine and reads pins.
+
+Checked:
+- at several positions and temperatures, joint.0.motor-pos-cmd equals the
+  program position plus the total the board sent for that position (read by
+  the tap, not by the bridge) within one count (0.1 um), in stream and in
+  Modbus mode;
+- with cold-start set the bridge sends L at the first machine-on; without it, never;
+- on a bad CRC, stale (replayed) frames, link loss and the board's FALLBACK
+  the applied offset ramps to zero no faster than the slew limit (and not
+  much slower: no step, no freeze), then ramps back; with the machine
+  switched off during a fault the bridge's offset is zero at once and motion
+  starts from zero when the machine comes back on.
+
+Every LinuxCNC test lives in this one file: only one HAL session runs at a time
+and ``--dist loadfile`` keeps a file on one worker.
+"""
+import json
+import os
+import shutil
+import socket
+import subprocess
+import tempfile
+import threading
+import time
+
+import pytest
+
+from hil_tests.lcnc.tap import LinkTap
+from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
+from hil_tests.rig.harness import Rig
+
+pytestmark = pytest.mark.rig
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+EXAMPLES = os.path.join(ROOT, "examples", "linuxcnc")
+VENV_BIN = os.path.join(ROOT, ".venv", "bin")
+SENSORS = ["T1", "T2", "T4"]
+TEMPS = {"T1": 24.0, "T2": 25.5, "T4": 23.0}
+WARMER = {"T1": 26.0, "T2": 27.5, "T4": 24.5}
+SLEW = 100          # um/s, board config and bridge
+COUNT_MM = 1e-4     # one eoffset count (0.1 um)
+UNSTEADY = 0xFFFF | 0x20000 | 0x80000 | 0x100000 | 0x4000000  # sensor faults, RATE_LIMITED, HELD, FALLBACK, RECOVERING
+STALE_S = RECOVER_S = 1.0  # the bridge's defaults (--stale-ms, --recover-ms)
+JITTER_S = 0.2      # a bridge ramp step covers up to two periods (0.1 s), plus 0.1 s for motion's
+                    # non-real-time servo thread on a loaded host; a step (the whole offset) is far larger
+PINS = ["joint.0.motor-pos-cmd", "axis.x.pos-cmd", "axis.x.eoffset", "axis.x.eoffset-request",
+        "tcomp.offset-um", "tcomp.board-offset-um", "tcomp.tracking", "tcomp.fault", "tcomp.fault-code",
+        "tcomp.latch-state"]
+
+
+class LinuxCNC:
+    """``linuxcnc tcomp-sim.ini`` from a copy of examples/linuxcnc with our DISPLAY and [TCOMP] values."""
+
+    def __init__(self, workdir, port, mode, cold_start, key_file):
+        self.dir = os.path.join(workdir, "lcnc")
+        shutil.copytree(EXAMPLES, self.dir)
+        driver = os.path.join(self.dir, "display.sh")
+        with open(driver, "w") as f:
+            f.write("#!/bin/sh\nexec %s %s \"$@\"\n" % (os.path.join(VENV_BIN, "python"),
+                                                      os.path.join(ROOT, "hil_tests", "lcnc", "driver.py")))
+        os.chmod(driver, 0o755)
+        ini = os.path.join(self.dir, "tcomp-sim.ini")
+        values = {"DISPLAY": driver, "PORT": port, "MODE": mode, "SLEW_UM_PER_S": str(SLEW),
+                  "COLD_START": "1" if cold_start else "0", "KEY": key_file}
+        lines = []
+        with open(ini) as f:
+            for line in f:
+                key = line.split("=", 1)[0].strip()
+                lines.append("%s = %s\n" % (key, values[key]) if "=" in line and key in values else line)
+        with open(ini, "w") as f:
+            f.writelines(lines)
+        self.rtapi = tempfile.mkdtemp(prefix="tcomp-rtapi-")
+        os.chmod(self.rtapi, 0o1777)
+        ctl = os.path.join(self.rtapi, "ctl.sock")
+        self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+        self.listener.bind(ctl)
+        self.listener.listen(1)
+        env = dict(os.environ, RTAPI_UID=str(os.getuid() or 1000), RTAPI_FIFO_PATH=os.path.join(self.rtapi, "fifo"),
+                   RUNTESTS="1", HOME=self.dir, TCOMP_LCNC_CTL=ctl, PATH=VENV_BIN + os.pathsep + os.environ["PATH"])
+        env.pop("DISPLAY", None)
+        self.log_path = os.path.join(self.dir, "linuxcnc.log")
+        self.log = open(self.log_path, "wb")
+        self.proc = subprocess.Popen(["linuxcnc", ini], cwd=self.dir, env=env, stdout=self.log,
+                                     stderr=subprocess.STDOUT, start_new_session=True)
+        self.listener.settimeout(60)
+        try:
+            self.conn, _ = self.listener.accept()
+        except socket.timeout:
+            self.close()
+            raise AssertionError("LinuxCNC did not start its display:\n" + self.output())
+        self.conn.settimeout(60)
+        self.f = self.conn.makefile("rwb")
+
+    def output(self):
+        with open(self.log_path, "rb") as f:
+            return f.read().decode(errors="replace")[-4000:]
+
+    def __call__(self, op, **kw):
+        kw["op"] = op
+        self.f.write((json.dumps(kw) + "\n").encode())
+        self.f.flush()
+        line = self.f.readline()
+        if not line:
+            raise AssertionError("LinuxCNC's display exited during %r:\n%s" % (op, self.output()))
+        ans = json.loads(line)
+        if not ans.pop("ok"):
+            raise AssertionError("%s %r: %s\n%s" % (op, kw, ans["error"], self.output()))
+        return ans
+
+    def get(self, *pins):
+        return self("get", pins=list(pins))["values"]
+
+    def close(self):
+        try:
+            self.f.write(b'{"op": "quit"}\n')
+            self.f.flush()
+        except (OSError, AttributeError, ValueError):
+            pass
+        try:
+            self.proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.proc.pid, 9)
+            self.proc.wait()
+        self.log.close()
+        self.listener.close()
+        shutil.rmtree(self.rtapi, ignore_errors=True)
+
+
+class Board:
+    """The firmware on the rig with simulated time paced to the wall clock, behind a LinkTap."""
+
+    def __init__(self, workdir, table, mode):
+        cfg = rig_config(SENSORS, mode=mode, slew_um_per_s=SLEW, hold_ms=300)
+        from host.linkauth import generate_key, write_key
+        key = generate_key()  # provisioned into the board's flash, as tcomp flash --key does
+        self.key_file = os.path.join(workdir, "board.key")
+        write_key(self.key_file, key)
+        self.rig = Rig(cfg, table, interpreter="micropython", workdir=os.path.join(workdir, "rig"), temps=TEMPS,
+                       open_port=False, key=key)
+        self.rig.start()
+        self.lock = threading.Lock()
+        self.stop = False
+        self.error = None
+        self.pacer = threading.Thread(target=self._pace, daemon=True)
+        self.pacer.start()
+        self.tap = LinkTap(self.rig.port, stream=mode == "stream")
+        self.tap.start()
+
+    def _pace(self):
+        t0, s0 = time.monotonic(), self.rig.t_ms
+        try:
+            while not self.stop:
+                target = s0 + int((time.monotonic() - t0) * 1000)
+                if target > self.rig.t_ms:
+                    with self.lock:
+                        self.rig.run(target, sync=False)
+                time.sleep(0.005)
+        except Exception as exc:  # surfaced by the test through check()
+            self.error = exc
+
+    def control(self, fn, *args):
+        with self.lock:
+            fn(*args)
+
+    def check(self):
+        assert self.error is None, "the rig stopped: %r" % self.error
+
+    def close(self):
+        self.stop = True
+        self.pacer.join(timeout=5)
+        self.tap.close()
+        self.rig.close()
+
+
+@pytest.fixture(scope="module")
+def table(demo_run):
+    return export(poly_slope_for_run(demo_run, SENSORS, seed=21)).table
+
+
+@pytest.fixture
+def session(tmp_path, table):
+    """``session(mode, cold_start)`` -> (board, linuxcnc) with the machine on and homed."""
+    opened = []
+
+    def make(mode, cold_start):
+        board = Board(str(tmp_path), table, mode)
+        opened.append(board)
+        lc = LinuxCNC(str(tmp_path), board.tap.port, mode, cold_start, board.key_file)
+        opened.append(lc)
+        lc("start")
+        return board, lc
+
+    yield make
+    for o in reversed(opened):
+        o.close()
+
+
+def _crc_modbus(data):
+    crc = 0xFFFF
+    for b in data:
+        crc ^= b
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0xA001 if crc & 1 else crc >> 1
+    return crc
+
+
+def _board_total(board, pos_um, since):
+    """The board's latest total (um) for ``pos_um``, read off the line (stream: sent after ``since``)."""
+    tap = board.tap
+    with tap.lock:
+        if tap.stream:
+            for t, f in reversed(tap.frames):
+                if t >= since and f.kind in ("O", "Q") and f.pos_um == pos_um:
+                    return f.total_um, f.status
+            return None
+        raw = bytes(tap.board_raw)
+    i = len(raw)
+    while True:  # the last CRC-valid answer to "read input registers 0..9"
+        i = raw.rfind(b"\x01\x04\x14", 0, i)
+        if i < 0:
+            return None
+        frame = raw[i:i + 25]
+        if len(frame) == 25 and _crc_modbus(frame[:23]) == frame[23] | frame[24] << 8:
+            regs = [frame[3 + 2 * k] << 8 | frame[4 + 2 * k] for k in range(10)]
+            pos = regs[6] << 16 | regs[7]
+            total = regs[3] - 0x10000 if regs[3] & 0x8000 else regs[3]
+            if pos == pos_um:
+                return total / 10.0, regs[0] | regs[1] << 16
+            return None
+
+
+def _settle(board, lc, x_mm, timeout=15.0):
+    """Wait until the board's total at x is steady (two answers 0.3 s apart agree), the bridge tracks it
+    and motion has applied it; return (program position, applied offset um, board total um)."""
+    pos_um = int(round(x_mm * 1000))
+    end = time.monotonic() + timeout
+    prev = None
+    while time.monotonic() < end:
+        board.check()
+        t = time.monotonic()
+        answer = _board_total(board, pos_um, t - 0.2)
+        total = answer and answer[0]
+        v = lc.get(*PINS)
+        if answer is not None and not answer[1] & UNSTEADY and prev == total and v["tcomp.tracking"] \
+                and abs(v["axis.x.eoffset"] - v["axis.x.eoffset-request"]) < COUNT_MM / 100:
+            return v["axis.x.pos-cmd"], (v["joint.0.motor-pos-cmd"] - v["axis.x.pos-cmd"]) * 1000, total, v
+        prev = total
+        time.sleep(0.3)
+    raise AssertionError("no steady, tracked offset at X%g within %g s: %r" % (x_mm, timeout, v))
+
+
+def _check_offsets(board, lc, points):
+    seen = []
+    for temps, xs in points:
+        # 1.5 K/s at most: a jump would be flagged as faster than physics (max_rate_mC_per_s) and held
+        board.control(board.rig.ramp, board.rig.t_ms + 1400, temps)
+        time.sleep(1.4)
+        for x in xs:
+            lc("mdi", cmd="G0 X%g" % x)
+            prog, applied, total, v = _settle(board, lc, x)
+            assert abs(prog - x) < 1e-9
+            assert abs(applied - total) <= COUNT_MM * 1000 + 1e-6, \
+                "X%g %r: applied %.4f um, board %.1f um" % (x, temps, applied, total)
+            seen.append(total)
+    # the points must exercise the link: distinct, non-trivial offsets
+    assert len(set(seen)) == len(seen) and max(abs(s) for s in seen) > 20, seen
+
+
+def _ramp(lc, seconds):
+    rows = lc("sample", pins=["joint.0.motor-pos-cmd", "axis.x.pos-cmd", "tcomp.offset-um", "tcomp.fault"],
+              seconds=seconds, dt=0.01)["rows"]
+    return [(r[0], (r[1] - r[2]) * 1000, r[3], r[4], r[5]) for r in rows]
+
+
+def _within_slew(rows, value, what):
+    """No change faster than the slew limit: between any two samples, the change is at most the slew
+    times the longest time that can separate the two readings (before the first, after the second)
+    plus JITTER_S (a ramp step covers up to two bridge periods; a loaded, non-real-time host also
+    delays motion's servo thread)."""
+    for i in range(len(rows)):
+        for j in range(i + 1, len(rows)):
+            d = abs(value(rows[j]) - value(rows[i]))
+            assert d <= SLEW * (rows[j][-1] - rows[i][0] + JITTER_S) + 0.1, \
+                "%s: %.2f um between %.3f s and %.3f s (slew %d um/s)" % (what, d, rows[i][0], rows[j][-1], SLEW)
+
+
+def _check_ramp_to_zero(rows, start_um, what):
+    """Applied offset: reaches zero, never faster than the slew limit, and not at once (a ramp takes
+    about |start| / slew)."""
+    a = [r[1] for r in rows]
+    t = [r[0] for r in rows]
+    assert abs(a[-1]) <= 0.1 + 1e-6, "%s: offset not ramped to zero: %.2f um" % (what, a[-1])
+    _within_slew(rows, lambda r: r[1], what)
+    zero_at = next(t[i] for i in range(len(a)) if abs(a[i]) <= 0.1 + 1e-6)
+    assert zero_at >= 0.6 * abs(start_um) / SLEW, "%s: reached zero after %.3f s: a step" % (what, zero_at)
+    falling = next(i for i in range(len(a)) if abs(a[i]) < abs(start_um) - 0.5)
+    assert all(r[3] for r in rows[falling:]), "%s: ramp without the fault pin set" % what
+
+
+def _fault_cycle(board, lc, x_mm, inject, clear, what):
+    lc("mdi", cmd="G0 X%g" % x_mm)
+    _, start, _, _ = _settle(board, lc, x_mm)
+    assert abs(start) > 30, "%s: offset %.1f um too small to show a ramp" % (what, start)
+    inject()
+    rows = _ramp(lc, STALE_S + abs(start) / SLEW + 0.4)  # stale and link loss show after stale_ms
+    clear()
+    _check_ramp_to_zero(rows, start, what)
+    back = _ramp(lc, RECOVER_S + abs(start) / SLEW + 0.4)  # recover_ms of good frames, then the ramp back
+    _within_slew(back, lambda r: r[1], what + ", recovery")
+    _, end, _, _ = _settle(board, lc, x_mm)
+    assert abs(end - start) <= 0.1 + 1e-6, "%s: not back at %.1f um: %.2f" % (what, start, end)
+
+
+def test_linuxcnc_stream_offsets_cold_start_and_faults(session):
+    board, lc = session("stream", cold_start=True)
+    # cold start: L sent once the machine was on, and the board's reply reached the latch-state pin
+    sent = [c for _, c in board.tap.commands if c.startswith(b"$TC,L,")]
+    assert sent, "no L sent at a cold start"
+    _check_offsets(board, lc, [(TEMPS, [100, 400]), (WARMER, [400, 250])])
+    refused = [f for _, f in board.tap.frames if f.kind == "E" and f.fields[:2] == ["5", "state"]]
+    # L was signed with the board's key (no E,8 auth refusal); this table has fixed references, so the
+    # board refuses it for that reason (E,5,state) and the bridge reports it (latch-state 3)
+    assert not [f for _, f in board.tap.frames if f.kind == "E" and f.fields[:1] == ["8"]]
+    assert refused and lc.get("tcomp.latch-state")["tcomp.latch-state"] == 3
+
+    tap = board.tap
+    _fault_cycle(board, lc, 250, lambda: tap.set_mode("corrupt"), lambda: tap.set_mode("pass"), "bad CRC")
+    _fault_cycle(board, lc, 250, lambda: tap.set_mode("replay"), lambda: tap.set_mode("pass"), "stale frames")
+    _fault_cycle(board, lc, 250, lambda: tap.set_mode("drop"), lambda: tap.set_mode("pass"), "link loss")
+    _fault_cycle(board, lc, 250, lambda: board.control(board.rig.sensor, "T1", "open"),
+                 lambda: board.control(board.rig.sensor, "T1", "ok"), "board FALLBACK")
+
+    # machine switched off during a link loss: the bridge's offset is zero at once, not frozen; motion
+    # starts from zero at machine-on and the offset ramps up again at the slew limit
+    _, start, _, _ = _settle(board, lc, 250)
+    tap.set_mode("drop")
+    lc("machine", on=False)
+    assert lc.get("tcomp.offset-um")["tcomp.offset-um"] == 0.0
+    time.sleep(STALE_S + 0.2)
+    v = lc.get(*PINS)
+    assert v["tcomp.offset-um"] == 0.0 and v["tcomp.fault"], v
+    tap.set_mode("pass")
+    lc("machine", on=True)
+    rows = lc("sample", pins=["axis.x.eoffset", "tcomp.offset-um"], seconds=abs(start) / SLEW + 1.8, dt=0.01)["rows"]
+    assert abs(rows[0][1]) < COUNT_MM and rows[0][2] == 0.0, rows[0]
+    _within_slew(rows, lambda r: r[1] * 1000, "after machine-on")
+    assert abs(rows[-1][1] * 1000 - start) <= 0.2 + 1e-6, (rows[-1], start)  # pos-cmd moved by the folded offset
+
+
+def test_linuxcnc_modbus_offsets_no_latch_without_cold_start(session):
+    board, lc = session("modbus", cold_start=False)
+    _check_offsets(board, lc, [(TEMPS, [120, 380]), (WARMER, [380])])
+    # function 06 to holding register 7 (latch) never sent: this was not a cold start
+    assert b"\x01\x06\x00\x07" not in bytes(board.tap.bridge_raw)
+    assert lc.get("tcomp.latch-state")["tcomp.latch-state"] == 0
