@@ -20,10 +20,7 @@ The bus is a ``machine.I2C`` (``writeto``, ``readfrom_mem_into``,
 ``writeto_mem``), created by the board. The hot path allocates nothing.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 # commands
 _CMD_RESET = const(0x06)
@@ -64,6 +61,7 @@ _IMUX_AIN3 = const(4)
 
 IDAC_UA = (0, 10, 50, 100, 250, 500, 1000, 1500)  # IDAC[2:0] code -> uA
 _MAX_RATIO_R = const(400000)  # mohm: Pt100 at +850 degC is 390.48 ohm
+_NO_DATA = const(-0x1000000)  # firmware.drivers.NO_DATA (tests/firmware/test_fw_consts.py checks)
 
 
 def _bad(arg, v):
@@ -87,7 +85,10 @@ class ADS122C04:
     _b1 = bytearray(1)
     _b3 = bytearray(3)
 
-    def __init__(self, i2c, address=0x40, rref_mohm=1620000, wires=3, idac_ua=250, filter_hz=50):
+    SPI = False  # ``select`` is the I2C address (firmware/drivers.py)
+    OPTIONS = ("rref_mohm", "wires", "idac_ua", "filter_hz")
+
+    def __init__(self, i2c, address=0x40, *, rref_mohm=1620000, wires=3, idac_ua=250, filter_hz=50):
         # ValueError("ADS122C04 <argument> <value>"); the allowed values are in the docstring
         if not 0x40 <= address <= 0x4F:
             raise _bad("address", address)
@@ -178,6 +179,15 @@ class ADS122C04:
         if v & 0x800000:
             v -= 0x1000000
         return v
+
+    def sample(self):
+        """The newest conversion result, or NO_DATA when none arrived since the last one."""
+        if not self.data_ready:
+            return _NO_DATA
+        return self.read_data()
+
+    def set_limits(self, low_ratio, high_ratio):
+        """No fault comparator on this chip: the plausible-range check in firmware/channels.py does it."""
 
     def ratio(self, code):
         """R/R0 * 1e7 of a conversion result for a Pt100 (R0 = 100 ohm); 0 if not positive."""

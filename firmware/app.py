@@ -13,10 +13,7 @@ Units inside: temperatures milli-degC, positions um, offsets 0.01 um,
 slopes 0.01 um/m (the evaluator's); the links convert for the wire.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 from firmware.auth import Auth
 from firmware.channels import Channels
@@ -25,7 +22,7 @@ from firmware.safety import Limiter
 from firmware.slots import TableStore
 from firmware.table import TableError, REASON_SENSORS, REASON_CERT
 
-# status word bits (firmware/status.py; tests/firmware/test_fw_consts.py checks the copies)
+# status word bits (firmware/wire.py; tests/firmware/test_fw_consts.py checks the copies)
 _CLAMPED = const(0x10000)
 _DISABLED = const(0x1000000)
 _FALLBACK = const(0x100000)
@@ -36,18 +33,16 @@ _NO_TABLE = const(0x200000)
 _UPLOADING = const(0x2000000)
 _REF_PENDING = const(0x8000000)
 
-VERSION = "0.1.0"  # firmware version, sent in the hello frame
 _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is dropped
 _POLL_MS = const(5)  # serial polling period while waiting for the next cycle
 _CAP = const(0x20000000)  # elapsed-time counters saturate at 2**29 ms
 _KIND_SCREW_REDUCED = const(3)  # firmware.table's (tests/firmware/test_fw_consts.py checks)
 # ref_state: where the reference temperatures come from (docs/firmware.md); the hello
-# frame sends REF_LETTERS[ref_state]. From 4 on the latch is pending: 4..6 are
+# frame sends firmware.wire.REF_LETTERS[ref_state]. From 4 on the latch is pending: 4..6 are
 # firmware.slots' REFS_MISSING/CORRUPT/FOREIGN (why the stored ones were not used).
 _REFS_STORED = const(1)
 _REFS_LATCHED = const(2)
 _REFS_UNSAVED = const(3)
-REF_LETTERS = b"-SLUNCO"
 # Flash wear (docs/protocol.md, "Flash wear"): every file replacement a command causes (latch,
 # table upload, counter mark) spends a token; _WEAR_CAP tokens, one more every _WEAR_REFILL_MS.
 _WEAR_CAP = const(4)

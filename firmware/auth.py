@@ -21,10 +21,7 @@ spends one token of the App's flash budget (``spend``).
 
 import struct
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 try:
     from hashlib import sha256
@@ -33,8 +30,9 @@ except ImportError:  # a port built without hashlib
 
 from firmware.crc16 import crc16_ccitt
 
-TAG_BYTES = 16
-MAX_COUNTER = 999999999  # small int on a 32-bit port even after + _BLOCK
+# firmware.wire's (tests/firmware/test_fw_consts.py checks the copies)
+_TAG_BYTES = const(16)
+_MAX_COUNTER = const(999999999)
 _BLOCK = const(64)  # counters reserved per flash write
 _KEY_BYTES = const(32)
 
@@ -92,14 +90,14 @@ class Auth:
         return 0
 
     def mac(self, msg, extra=b""):
-        """The tag of ``msg`` + ``extra``: HMAC-SHA256 (RFC 2104) truncated to TAG_BYTES."""
+        """The tag of ``msg`` + ``extra``: HMAC-SHA256 (RFC 2104) truncated to _TAG_BYTES."""
         h = sha256(self._ipad)
         h.update(msg)
         if extra:
             h.update(extra)
         o = sha256(self._opad)
         o.update(h.digest())
-        return o.digest()[:TAG_BYTES]
+        return o.digest()[:_TAG_BYTES]
 
     def check(self, counter, tag, msg, extra=b""):
         """OK if ``tag`` authorises ``msg`` + ``extra`` with a fresh ``counter`` (now used up),
@@ -112,13 +110,13 @@ class Auth:
         if self._ipad is None:
             return NO_KEY
         m = self.mac(msg, extra)
-        d = len(tag) ^ TAG_BYTES
+        d = len(tag) ^ _TAG_BYTES
         if not d:
-            for i in range(TAG_BYTES):  # every byte, whatever the first difference: no timing hint
+            for i in range(_TAG_BYTES):  # every byte, whatever the first difference: no timing hint
                 d |= m[i] ^ tag[i]
         if d:
             return BAD_TAG
-        if not self.last < counter <= MAX_COUNTER:
+        if not self.last < counter <= _MAX_COUNTER:
             return REPLAY
         if counter > self.reserved:
             if not self.spend():

@@ -53,7 +53,7 @@ container for them):
     ``write_readinto(wbuf, rbuf)`` (mode 1 or 3, at most 5 MHz for the
     MAX31865); I2C buses with the ``machine.I2C`` methods ``writeto(addr, buf)``,
     ``readfrom_mem_into(addr, memaddr, buf)`` and ``writeto_mem(addr, memaddr, buf)``.
-    On CPython, ``firmware.board_linux`` adapts ``smbus2.SMBus`` and Linux
+    On CPython, ``firmware.linux_adapters`` adapts ``smbus2.SMBus`` and Linux
     spidev to these signatures. Any bus failure must raise ``OSError``.
 
 ``pin(id)`` -> pin
@@ -65,12 +65,12 @@ container for them):
     preallocated bytearray and returns the count (0 or None when nothing is
     waiting, never blocks); ``write(buf, n)`` sends the first ``n`` bytes of
     ``buf`` (MicroPython streams, e.g. ``machine.UART``, accept exactly this;
-    ``board_linux.SerialPort`` adapts pyserial).
+    ``linux_adapters.SerialPort`` adapts pyserial).
 
 ``clock``
     ``ticks_ms()``, ``ticks_diff(a, b)`` (a - b, wrap-safe as in MicroPython's
     ``time``) and ``sleep_ms(ms)``. The HIL rig supplies simulated time here.
-    ``SystemClock`` below is MicroPython's; ``board_linux.MonotonicClock`` CPython's.
+    ``SystemClock`` below is MicroPython's; ``linux_adapters.MonotonicClock`` CPython's.
 
 ``watchdog``
     An object with ``feed()`` (``machine.WDT``), or None. The app feeds it only
@@ -82,7 +82,7 @@ container for them):
 
 Bad configuration raises ``ValueError`` naming the key: on the board
 ``firmware.bootcfg.load_config`` (terse, ``config <key>: <value>``), on the
-host ``firmware.config.load_config`` (the same rules with messages that state
+host ``host.boardconfig.load_config`` (the same rules with messages that state
 them; ``tcomp flash --config`` and ``tcomp hil --config`` run it); the app lets
 it propagate at start-up so a wrong config never runs.
 """
@@ -91,7 +91,7 @@ import time
 
 
 class SystemClock:
-    """MicroPython's millisecond tick clock (``board_linux.MonotonicClock`` on CPython)."""
+    """MicroPython's millisecond tick clock (``linux_adapters.MonotonicClock`` on CPython)."""
 
     def ticks_ms(self):
         return time.ticks_ms()

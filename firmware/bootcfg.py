@@ -1,14 +1,16 @@
-"""The board's boot-time config check: every rule of firmware/config.py, terse messages.
+"""The board's boot-time config check: every rule of host/boardconfig.py, terse messages.
 
-The friendly validator (``firmware.config.load_config``: messages that state
+The friendly validator (``host.boardconfig.load_config``: messages that state
 the rule) runs on the host, in ``tcomp flash --config`` and ``tcomp hil
 --config``; the board imports only this module (and drops it after boot), so
 its flash and RAM do not pay for the explanations. It still refuses every bad
 config the friendly one refuses, with ``ValueError("config <key>: <value>")``
 naming the key (tests/firmware/test_fw_config.py holds both to the same
 cases), so a corrupt config never crashes the firmware nor yields an offset.
-The key tables are shared: firmware/config.py imports them from here.
+The key tables are shared: host/boardconfig.py imports them from here, and the
+driver names come from the driver table, firmware/drivers.py.
 """
+from firmware.drivers import DRIVERS
 
 # (key, default, lo, hi)
 TOP = (
@@ -34,7 +36,6 @@ CHAN = (
 SERIAL = (("baud", 115200, 1200, 4000000), ("address", 1, 1, 247))
 TOP_MORE = ("channels", "serial", "plausible_mC", "reference_um", "table_dir")
 CHAN_MORE = ("name", "driver", "bus", "cs")
-DRIVERS = ("max31865", "ads122c04")
 MODES = ("stream", "modbus")
 PLAUSIBLE = (-20000, 80000)
 PLAUSIBLE_LIMIT = 850000  # |plausible_mC| bound (the -200..850 degC of IEC 60751)

@@ -13,23 +13,22 @@ is configured again.
 ``read_all`` is the hot path: no allocation, integers below 2**30.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 from firmware import rtd
+from firmware.drivers import driver_class
 
-_DRV_MAX31865 = const(1)
-_DRV_ADS122C04 = const(2)
+# firmware.drivers' sample() results (tests/firmware/test_fw_consts.py checks the copies)
+_NO_DATA = const(-0x1000000)
+_FAULT = const(-0x1000001)
 
 # per-channel fault reasons (``Channels.fault``)
-_F_CHIP = const(0x01)  # MAX31865 fault bit (details in ``chip_status``)
+_F_CHIP = const(0x01)  # the chip flags a fault (MAX31865: its fault byte in ``chip_status``)
 _F_RANGE = const(0x02)  # outside the plausible range
 _F_RATE = const(0x04)  # jump faster than max_rate_mC_per_s
 _F_STUCK = const(0x08)  # identical raw code for stuck_ms
 _F_BUS = const(0x10)  # bus error (OSError) or chip absent
-_F_STALE = const(0x20)  # ADS122C04 delivered no new conversion
+_F_STALE = const(0x20)  # no new conversion for _STALE_MS (ADS122C04)
 _F_NEVER = const(0x40)  # no good reading since start-up
 FAULT_NAMES = ((_F_CHIP, "chip"), (_F_RANGE, "range"), (_F_RATE, "rate"), (_F_STUCK, "stuck"),
                (_F_BUS, "bus"), (_F_STALE, "stale"), (_F_NEVER, "never"))
@@ -43,14 +42,14 @@ _CAP = const(0x20000000)  # elapsed-time counters saturate here (2**29 ms, 6.2 d
 
 
 class Channels:
-    """All sensor channels of a validated board config (``firmware.board.Config``)."""
+    """All sensor channels of a validated board config (``firmware.bootcfg.Config``)."""
 
     def __init__(self, cfg, board, now):
         n = self.n = len(cfg.channels)
         self.cfg = cfg
         self.board = board
         self.names = [c.name for c in cfg.channels]
-        self.kind = [_DRV_MAX31865 if c.driver == "max31865" else _DRV_ADS122C04 for c in cfg.channels]
+        self.driver_class = [driver_class(c.driver) for c in cfg.channels]  # the table in firmware/drivers.py
         self.lead = [c.lead_mohm * 100 for c in cfg.channels]  # ratio units (R0 = 100 ohm)
         self.cal = [c.cal_mC for c in cfg.channels]
         self.lo = cfg.plausible_lo_mC
@@ -76,6 +75,7 @@ class Channels:
         self.reinit_ms = [0] * n  # since the last (re-)initialisation attempt
         self.last_now = now
         self.drivers: list = [None] * n
+        self.pins: list = [None] * n  # chip-select pins of SPI chips, made once
         for i in range(n):
             self._init_driver(i)
 
@@ -90,32 +90,35 @@ class Channels:
         if ch.bus not in buses:
             raise ValueError("config channel %s: no bus %r" % (ch.name, ch.bus))
         d = self.drivers[i]
+        cls = self.driver_class[i]
+        if cls.SPI:
+            if self.pins[i] is None:
+                self.pins[i] = self.board.pin(ch.cs)
+            select = self.pins[i]
+        else:
+            select = ch.address
+        options = {}
+        for k in cls.OPTIONS:
+            options[k] = getattr(ch, k)
         try:
-            if self.kind[i] == _DRV_MAX31865:
-                from firmware.max31865 import MAX31865 as cls
-                args = (buses[ch.bus], self.board.pin(ch.cs) if d is None else d._cs, ch.rref_mohm, ch.wires,
-                        ch.filter_hz)
-            else:
-                from firmware.ads122c04 import ADS122C04 as cls
-                args = (buses[ch.bus], ch.address, ch.rref_mohm, ch.wires, ch.idac_ua, ch.filter_hz)
             if d is None:
-                self.drivers[i] = cls(*args)
+                self.drivers[i] = cls(buses[ch.bus], select, **options)
             else:
-                d.__init__(*args)
+                d.__init__(buses[ch.bus], select, **options)
             return True
         except OSError:
             self.drivers[i] = None
             return False
 
     def set_thresholds(self):
-        """MAX31865 high/low fault thresholds from the plausible range."""
+        """The chips' own fault thresholds (where they have them) from the plausible range."""
         lo = rtd.ratio_of(self.lo)
         hi = rtd.ratio_of(self.hi)
         for i in range(self.n):
             d = self.drivers[i]
-            if self.kind[i] == _DRV_MAX31865 and d is not None:
+            if d is not None:
                 try:
-                    d.set_thresholds_ratio(lo + self.lead[i], hi + self.lead[i])
+                    d.set_limits(lo + self.lead[i], hi + self.lead[i])
                 except OSError:
                     pass
 
@@ -167,21 +170,14 @@ class Channels:
         if d is None:
             return _F_BUS
         try:
-            if self.kind[i] == _DRV_MAX31865:
-                raw = d.read_rtd()
-                if raw & 1:
-                    self.chip_status[i] = d.fault_status
-                    d.clear_fault()
-                    return _F_CHIP
-                code = raw >> 1
-            else:
+            code = d.sample()
+            if code == _FAULT:
+                self.chip_status[i] = d.last_fault
+                return _F_CHIP
+            if code == _NO_DATA:
                 v = self.data_ms[i] + dt
                 self.data_ms[i] = v if v < _CAP else _CAP
-                if not d.data_ready:
-                    if self.data_ms[i] >= _STALE_MS:
-                        return _F_STALE
-                    return -1
-                code = d.read_data()
+                return _F_STALE if v >= _STALE_MS else -1
             r = d.ratio(code)
         except OSError:
             return _F_BUS

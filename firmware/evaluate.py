@@ -23,10 +23,9 @@ and a name each, ~0.6 kB of .mpy here). On CPython the end of this module
 publishes each under its public name (``SLOT_D``, ``FEED_W_BITS``, ``CLAMP_*``,
 ...) for the exporter (models_export/plan.py) and the tests.
 """
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+import sys
+
+from micropython import const
 
 # table format values (docs/table-format.md, firmware/table.py), as local consts:
 # folded into the bytecode (tests/firmware/test_fw_consts.py checks they agree)
@@ -545,9 +544,7 @@ class Evaluator:
         cum[t.M] = c
 
 
-try:
-    import micropython  # noqa: F401
-except ImportError:  # CPython: the constants under their public names (see the module docstring)
+if sys.implementation.name != "micropython":  # CPython: the constants under their public names (see the module docstring)
     _g = globals()
     for _k in [k for k in _g if k[:1] == "_" and k[1:2].isupper() and k == k.upper()]:
         _g[_k[1:]] = _g[_k]

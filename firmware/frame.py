@@ -10,10 +10,7 @@ collects bytes into a fixed line buffer, checks syntax and CRC and records the
 field boundaries, so commands are parsed in place.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 from firmware.crc16 import crc16_ccitt
 

@@ -10,10 +10,7 @@ The hot path (``read_rtd``, ``fault_status``, ``clear_fault``, ``ratio``)
 allocates nothing and keeps every integer below 2**30.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 # register read addresses; write address = read address | 0x80
 _REG_CONFIG = const(0x00)
@@ -47,21 +44,8 @@ _FAULT_REFIN_HIGH = const(0x20)  # D5: REFIN- > 0.85 x V_BIAS
 _FAULT_REFIN_LOW_OPEN = const(0x10)  # D4: REFIN- < 0.85 x V_BIAS (FORCE- open)
 _FAULT_RTDIN_LOW_OPEN = const(0x08)  # D3: RTDIN- < 0.85 x V_BIAS (FORCE- open)
 _FAULT_OVUV = const(0x04)  # D2: overvoltage / undervoltage
-FAULT_NAMES = (
-    (_FAULT_HIGH_THRESHOLD, "rtd_high_threshold"),
-    (_FAULT_LOW_THRESHOLD, "rtd_low_threshold"),
-    (_FAULT_REFIN_HIGH, "refin_high"),
-    (_FAULT_REFIN_LOW_OPEN, "refin_low_force_open"),
-    (_FAULT_RTDIN_LOW_OPEN, "rtdin_low_force_open"),
-    (_FAULT_OVUV, "over_under_voltage"),
-)
-
 _FAULT_CYCLE_POLLS = const(100)
-
-
-def decode_faults(status):
-    """Names of the faults set in a fault status byte (allocates: not for the cycle)."""
-    return [name for bit, name in FAULT_NAMES if status & bit]
+_FAULT = const(-0x1000001)  # firmware.drivers.FAULT (tests/firmware/test_fw_consts.py checks)
 
 
 def _bad(arg, v):
@@ -85,7 +69,10 @@ class MAX31865:
     _t2 = bytearray(2)
     _r2 = bytearray(2)
 
-    def __init__(self, spi, cs, rref_mohm=430000, wires=3, filter_hz=50):
+    SPI = True  # ``select`` is the chip-select pin (firmware/drivers.py)
+    OPTIONS = ("rref_mohm", "wires", "filter_hz")
+
+    def __init__(self, spi, cs, *, rref_mohm=430000, wires=3, filter_hz=50):
         # ValueError("MAX31865 <argument> <value>"): wires 2, 3 or 4, filter_hz 50 or 60,
         # rref_mohm 100000..10000000
         if wires not in (2, 3, 4):
@@ -97,6 +84,7 @@ class MAX31865:
         self._spi = spi
         self._cs = cs
         self.rref_mohm = rref_mohm
+        self.last_fault = 0  # fault status byte of the last FAULT sample()
         # R/R0*1e7 = code * rref_mohm * 100 / 2**15 (R0 = 100 ohm), split so
         # that no product reaches 2**30
         k = rref_mohm * 100
@@ -112,28 +100,30 @@ class MAX31865:
         self.configuration = base | _CONFIG_AUTO
 
     # --- register access -------------------------------------------------
+    def _transfer(self, tx, rx):
+        """One chip-select frame: write ``tx``, reading into ``rx`` unless it is None."""
+        cs = self._cs
+        cs.value(0)
+        try:
+            if rx is None:
+                self._spi.write(tx)
+            else:
+                self._spi.write_readinto(tx, rx)
+        finally:
+            cs.value(1)
+
     def read_register(self, reg):
         """One register's value (reg is the read address 0x00..0x07)."""
         self._t2[0] = reg
         self._t2[1] = 0
-        cs = self._cs
-        cs.value(0)
-        try:
-            self._spi.write_readinto(self._t2, self._r2)
-        finally:
-            cs.value(1)
+        self._transfer(self._t2, self._r2)
         return self._r2[1]
 
     def write_register(self, reg, value):
         tx = self._t2
         tx[0] = reg | _WRITE
         tx[1] = value
-        cs = self._cs
-        cs.value(0)
-        try:
-            self._spi.write(tx)
-        finally:
-            cs.value(1)
+        self._transfer(tx, None)
 
     # --- configuration (datasheet names) ---------------------------------
     # Every configuration write is built from ``_conf``, the configuration the
@@ -150,23 +140,10 @@ class MAX31865:
         self._conf = value & ~_SELF_CLEARING
         self.write_register(_REG_CONFIG, value)
 
-    def config_bit(self, mask):
-        """True if the configuration bits in ``mask`` (e.g. V_BIAS 0x80) are set on the chip."""
-        return bool(self.configuration & mask)
-
-    def set_config_bit(self, mask, on):
-        """Set or clear configuration bits; one-shot, fault-cycle and fault-clear are never re-written."""
-        c = self._conf
-        self.configuration = (c | mask) if on else (c & ~mask)
-
     @property
     def fault_detection(self):
         """Fault-detection cycle control bits D3:D2 (FAULT_CYCLE_*); 0 when idle."""
         return self.configuration & _CONFIG_FAULT_CYCLE
-
-    def one_shot(self):
-        """Start a single conversion (D5) with V_BIAS already on."""
-        self.write_register(_REG_CONFIG, self._conf | _CONFIG_1SHOT)
 
     def clear_fault(self):
         """Clear the fault status (D1), writing D5, D3 and D2 as 0 as the datasheet requires."""
@@ -222,7 +199,7 @@ class MAX31865:
         code = (ratio * 32768 + self.rref_mohm * 50) // (self.rref_mohm * 100)
         return 0 if code < 0 else (0x7FFF if code > 0x7FFF else code)
 
-    def set_thresholds_ratio(self, low_ratio, high_ratio):
+    def set_limits(self, low_ratio, high_ratio):
         """Fault thresholds from R/R0*1e7 ratios (e.g. ``rtd.ratio_of`` of the plausible range)."""
         self.low_threshold = self.code_of(low_ratio)
         self.high_threshold = self.code_of(high_ratio)
@@ -234,14 +211,18 @@ class MAX31865:
         tx[0] = _REG_RTD_MSB
         tx[1] = 0
         tx[2] = 0
-        cs = self._cs
-        cs.value(0)
-        try:
-            self._spi.write_readinto(tx, self._rx)
-        finally:
-            cs.value(1)
+        self._transfer(tx, self._rx)
         rx = self._rx
         return (rx[1] << 8) | rx[2]
+
+    def sample(self):
+        """15-bit ratio code, or FAULT with the fault status byte in ``last_fault`` (cleared on the chip)."""
+        raw = self.read_rtd()
+        if raw & 1:
+            self.last_fault = self.fault_status
+            self.clear_fault()
+            return _FAULT
+        return raw >> 1
 
     @property
     def rtd(self):

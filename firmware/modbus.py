@@ -20,10 +20,7 @@ A request is complete when its function code's length has arrived, or after a
 silence of 3.5 character times (at least 2 ms) for anything else. Allocation-free.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 from firmware.crc16 import crc16_modbus
 
@@ -97,7 +94,6 @@ class ModbusLink:
         self.vals = [0] * 123  # values of a write, validated before use
         self.armed = False  # an auth block waits for the next protected write
         self.auth = bytearray(4 + 16)  # its counter (big-endian) and tag
-        self.frames = 0  # requests answered (diagnostics)
 
     def boot(self):
         pass
@@ -185,7 +181,6 @@ class ModbusLink:
         t[n] = crc & 0xFF
         t[n + 1] = crc >> 8
         self.serial.write(t, n + 2)
-        self.frames += 1
 
     def _exception(self, fc, code, addr):
         t = self.tx

@@ -14,18 +14,18 @@ Periodic frames, position reports and queries allocate nothing; the upload and
 the hello frame may (they are not part of the steady state).
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 from firmware import frame as fr
 from firmware.slots import UploadError, SLOT_NAMES
 
-_PROTOCOL_VERSION = const(1)  # docs/protocol.md
-# firmware.auth's (tests/firmware/test_fw_consts.py checks the copies)
+# wire contract values (firmware/wire.py), as folded copies (tests/firmware/test_fw_consts.py checks)
+_PROTOCOL_VERSION = const(1)
+_FIRMWARE_VERSION = const(b"0.1.0")
+_REF_LETTERS = const(b"-SLUNCO")
 _TAG_BYTES = const(16)
 _MAX_COUNTER = const(999999999)
+# firmware.auth's (tests/firmware/test_fw_consts.py checks the copies)
 _AUTH_BUSY = const(5)
 _UNSIGNED = const(6)
 
@@ -58,7 +58,8 @@ _MAX_CHUNK = const(64)  # bytes of table data per U,D frame
 _RX_CHUNK = const(64)
 _MAX_READS = const(8)
 
-# frame types and command letters (ASCII)
+# frame kinds, command letters and upload steps as ASCII codes (firmware/wire.py FRAME_KINDS, COMMANDS,
+# UPLOAD_STEPS; folded copies, checked by tests/firmware/test_fw_consts.py)
 _H = const(72)
 _O = const(79)
 _Q = const(81)
@@ -103,12 +104,11 @@ class StreamLink:
 
     def hello(self):
         """H,<protocol>,<firmware>,<slot>,<table crc32>,<provenance[:8] hex>,<kind>,<axis>,<channels>,<refs>."""
-        from firmware.app import VERSION, REF_LETTERS
         a = self.app
         w = self.w
         w.begin(a.status, _H)
         w.int(_PROTOCOL_VERSION)
-        w.text(VERSION.encode())
+        w.text(_FIRMWARE_VERSION)
         t = a.table
         if t is None:
             w.text(b"-,-,-,-,-")
@@ -120,7 +120,7 @@ class StreamLink:
             w.text(t.axis.encode())
         w.int(a.channels.n)
         w.sep()
-        w.buf[w.n] = REF_LETTERS[a.ref_state]
+        w.buf[w.n] = _REF_LETTERS[a.ref_state]
         w.n += 1
         if a.auth.keyed:  # the last counter used: an authorised command needs a larger one
             w.int(a.auth.last)
@@ -274,8 +274,7 @@ class StreamLink:
                 why = a.relatch()
                 if why is not None:
                     return self.error(_E_BUSY) if why == b"busy" else self.error(_E_STATE, why)
-                from firmware.app import REF_LETTERS
-                self.ack(_L, REF_LETTERS[a.ref_state])
+                self.ack(_L, _REF_LETTERS[a.ref_state])
             else:
                 self.ack(_X)
                 a.reset()

@@ -16,10 +16,7 @@ The tables were generated from the floating-point relation;
 tests/firmware/test_fw_rtd.py recomputes and checks every entry.
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 _RATIO_ONE = const(10000000)  # R/R0 = 1 in the ratio unit
 _T_UNDER = const(-999999)  # below -200 degC (shorted RTD or wiring fault)

@@ -22,12 +22,9 @@ No floats, no allocation, no tuple returns; integers stay far below 2**30
 (config limits: max_offset_um <= 100000, span <= 100 m).
 """
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
-# status word bits (firmware/status.py; tests/firmware/test_fw_consts.py checks the copies)
+# status word bits (firmware/wire.py; tests/firmware/test_fw_consts.py checks the copies)
 _MAG_LIMITED = const(0x40000)
 _RATE_LIMITED = const(0x20000)
 _RECOVERING = const(0x4000000)

@@ -11,13 +11,11 @@ under their public names (``VERSION``, ``HEADER_SIZE``, ``KIND_*``, ...) for
 the exporter (models_export/tableformat.py) and the tests.
 """
 import struct
+import sys
 
 from firmware.crc32 import crc32
 
-try:
-    from micropython import const
-except ImportError:  # CPython
-    const = lambda x: x  # noqa: E731
+from micropython import const
 
 MAGIC = b"TCTB"
 _VERSION = const(2)  # 2: screw_reduced reads an air channel (issue 11); version 1 tables are refused
@@ -255,9 +253,7 @@ def _check(t):
             raise TableError(REASON_FIELD, "edges not ascending at %d" % (i + 1))
 
 
-try:
-    import micropython  # noqa: F401
-except ImportError:  # CPython: the constants under their public names (see the module docstring)
+if sys.implementation.name != "micropython":  # CPython: the constants under their public names (see the module docstring)
     _g = globals()
     for _k in [k for k in _g if k[:1] == "_" and k[1:2].isupper() and k == k.upper()]:
         _g[_k[1:]] = _g[_k]

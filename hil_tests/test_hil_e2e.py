@@ -14,9 +14,9 @@ import pytest
 from hil_tests.conftest import SLOW
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config, screw_doc
 from hil_tests.rig.play import play, poly_slope_bound_um
+from host.link import RATE_LIMITED
 
 pytestmark = pytest.mark.rig
-RATE_LIMITED = 0x20000
 
 
 def _subset(run, hours):
@@ -65,7 +65,7 @@ def test_e2e_poly_slope_matches_host_model(make_rig, demo_run):
 def test_e2e_screw_reduced_matches_reference(make_rig):
     """Axis motion reported by position frames; the float reduced recurrence on the same travel."""
     from firmware.table import parse_table
-    from models_export.reference import Reference
+    from hil_tests.fixtures.reference import Reference
     doc = screw_doc(["T1", "T2"])  # T1 base sensor, T2 the air the screw exchanges heat with
     ex = export(doc)
     table = parse_table(ex.table)

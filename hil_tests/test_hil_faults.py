@@ -12,9 +12,8 @@ import zlib
 import pytest
 
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
-from hil_tests.rig.frames import FALLBACK, HELD, RECOVERING
+from host.link import FALLBACK, HELD, RATE_LIMITED, RECOVERING
 
-RATE_LIMITED = 0x20000
 
 pytestmark = pytest.mark.rig
 

@@ -13,7 +13,7 @@ import pytest
 import serial
 
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
-from hil_tests.rig.frames import StreamDecoder, command
+from host.link import StreamDecoder, command
 
 pytestmark = [pytest.mark.rig, pytest.mark.micropython]
 
@@ -62,7 +62,7 @@ def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run, capfd):
     assert (flash / "tables" / "table_a.bin").read_bytes() == table
     assert (flash / "firmware" / "app.py").read_bytes() == open(os.path.join(
         os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "firmware", "app.py"), "rb").read()
-    assert not (flash / "firmware" / "board_linux.py").exists()
+    assert not (flash / "firmware" / "linux_adapters.py").exists()
     spec = tmp_path / "world.json"
     spec.write_text(json.dumps({"config": cfg, "temps": {"T1": 23.0, "T2": 24.0, "T4": 22.0}}))
     with SocatBoard(str(flash), link, script="main.py", world_spec=str(spec)):  # power on: boot main.py

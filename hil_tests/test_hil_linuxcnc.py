@@ -35,6 +35,7 @@ import pytest
 from hil_tests.lcnc.tap import LinkTap
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
 from hil_tests.rig.harness import Rig
+from host.link import FALLBACK, HELD, RATE_LIMITED, RECOVERING, SENSOR_MASK
 
 pytestmark = pytest.mark.rig
 
@@ -46,7 +47,7 @@ TEMPS = {"T1": 24.0, "T2": 25.5, "T4": 23.0}
 WARMER = {"T1": 26.0, "T2": 27.5, "T4": 24.5}
 SLEW = 100          # um/s, board config and bridge
 COUNT_MM = 1e-4     # one eoffset count (0.1 um)
-UNSTEADY = 0xFFFF | 0x20000 | 0x80000 | 0x100000 | 0x4000000  # sensor faults, RATE_LIMITED, HELD, FALLBACK, RECOVERING
+UNSTEADY = SENSOR_MASK | RATE_LIMITED | HELD | FALLBACK | RECOVERING  # firmware/wire.py's status bits
 STALE_S = RECOVER_S = 1.0  # the bridge's defaults (--stale-ms, --recover-ms)
 JITTER_S = 0.2      # a bridge ramp step covers up to two periods (0.1 s), plus 0.1 s for motion's
                     # non-real-time servo thread on a loaded host; a step (the whole offset) is far larger

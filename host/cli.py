@@ -1,10 +1,9 @@
-"""The ``tcomp`` console command: discovers one verb per module in host.commands."""
+"""The ``tcomp`` console command: the verbs come from the registry in host.commands, imported lazily."""
 import argparse
 import importlib
-import pkgutil
 import sys
 
-from host import commands as _commands
+from host.commands import VERBS
 
 
 class UserError(Exception):
@@ -63,27 +62,34 @@ def open_output(path, mode="w", **kwargs):
         raise UserError("cannot write %s: %s" % (path, _reason(exc)))
 
 
-def _verbs():
-    names = sorted(m.name for m in pkgutil.iter_modules(_commands.__path__) if not m.name.startswith("_"))
-    return {name.rstrip("_").replace("_", "-"): importlib.import_module("host.commands." + name) for name in names}
+def _chosen_verb(argv):
+    """The verb named on the command line (its first word not starting with '-'), or None."""
+    for word in argv:
+        if not word.startswith("-"):
+            return word if word in VERBS else None
+    return None
 
 
-def build_parser():
+def build_parser(verb=None):
+    """The ``tcomp`` parser; only ``verb``'s module is imported (for its arguments), the others stay unloaded."""
     parser = argparse.ArgumentParser(
         prog="tcomp",
         description="Thermal-error compensation for CNC feed axes: simulate, fit, export, run the firmware.",
     )
     sub = parser.add_subparsers(dest="verb", metavar="VERB")
     sub.required = True
-    for verb, module in _verbs().items():
-        p = sub.add_parser(verb, help=module.HELP, description=module.HELP)
-        module.add_arguments(p)
-        p.set_defaults(_run=module.run)
+    for name, (module_name, summary) in VERBS.items():
+        p = sub.add_parser(name, help=summary, description=summary)
+        if name == verb:
+            module = importlib.import_module(module_name)
+            module.add_arguments(p)
+            p.set_defaults(_run=module.run)
     return parser
 
 
 def main(argv=None):
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(_chosen_verb(argv))
     args = parser.parse_args(argv)
     try:
         return int(args._run(args) or 0)

@@ -25,9 +25,10 @@ import hmac
 import os
 import struct
 
+from firmware.wire import MAX_COUNTER, TAG_BYTES  # the board checks the same sizes
+from host.link import body as stream_body, command
+
 KEY_BYTES = 32
-TAG_BYTES = 16
-MAX_COUNTER = 999999999
 UPLOAD_CHUNK = 48  # table bytes per U,D line (at most 64)
 
 
@@ -55,6 +56,17 @@ def read_key(path):
     return key
 
 
+def signer_for_option(path, flag="--key"):
+    """The LinkSigner of a verb's ``--key FILE`` (None without one); a bad file is a UserError naming it."""
+    if not path:
+        return None
+    from host.cli import UserError
+    try:
+        return LinkSigner(read_key(path))
+    except KeyFileError as exc:
+        raise UserError("%s %s" % (flag, exc))
+
+
 def write_key(path, key):
     """Create ``path`` holding ``key`` (mode 0600); an existing file is never replaced."""
     tmp = "%s.tmp-%d" % (path, os.getpid())
@@ -67,18 +79,9 @@ def write_key(path, key):
         os.unlink(tmp)
 
 
-def _field(f):
-    return f if isinstance(f, bytes) else str(f).encode()
-
-
-def stream_body(fields):
-    return b"TC," + b",".join(_field(f) for f in fields)
-
-
 def stream_line(fields):
-    """``$TC,<fields>*CRC\\r\\n`` (CRC-16/CCITT-FALSE)."""
-    body = stream_body(fields)
-    return b"$" + body + b"*%04X\r\n" % binascii.crc_hqx(body, 0xFFFF)
+    """``$TC,<fields>*CRC\\r\\n`` (host/link.py's codec)."""
+    return command(*fields)
 
 
 class LinkSigner:

@@ -5,13 +5,13 @@ Each kind's class lives with the code that fits it; this module only maps
 Every class has ``from_document(doc)``, ``to_document()`` and ``predict(run)``
 (one predicted error in µm per row of ``run.errors``, in file order).
 """
-import hashlib
 import importlib
 import json
 import math
 import time
 
 from host import __version__
+from models_export.document import document_hash
 
 FORMAT = "tcomp-model/1"
 KINDS = {
@@ -25,16 +25,6 @@ KINDS = {
 
 class ModelFormatError(ValueError):
     pass
-
-
-def _canonical(doc):
-    body = {k: v for k, v in doc.items() if k != "provenance"}
-    return json.dumps(body, sort_keys=True, separators=(",", ":")).encode()
-
-
-def document_hash(doc):
-    """sha256 hex of the document without its provenance block."""
-    return hashlib.sha256(_canonical(doc)).hexdigest()
 
 
 def save_model(doc, path):

@@ -3,6 +3,7 @@ import math
 
 from firmware.crc32 import crc32
 from models_export.certify import LIMITS_UM, OU_PER_UM, ExportError, Model
+from models_export.document import document_hash
 from models_export.plan import Planner
 from models_export.tableformat import pack
 
@@ -28,8 +29,6 @@ class Export:
 def _provenance(doc):
     """(sha256 of the document being exported, the recorded one or None). The table names the
     actual document; a recorded hash that differs means it was edited after it was saved."""
-    from host.models import document_hash
-
     prov = doc.get("provenance")
     declared = prov.get("sha256") if isinstance(prov, dict) else None
     return document_hash(doc), declared

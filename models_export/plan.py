@@ -1,9 +1,10 @@
 """Choose scales, quantise and certify, kind by kind, in the firmware's evaluation order.
 
-``plan(model)`` returns (fields, certificate). ``fields`` are the table fields
-(models_export.tableformat.pack); ``certificate`` carries the error interval of
-every output, per-term scales/headroom/error contributions and the slot
-intervals (models_export.certify explains the argument).
+``Planner(model)`` then ``linear_direct()`` or ``positional()`` returns the error
+interval of every output; afterwards ``f`` holds the table fields
+(models_export.tableformat.pack), ``terms`` the per-term scales and error
+contributions and ``rec`` (a certify.Recorder) the slot intervals and headroom
+(models_export.certify explains the argument).
 """
 import math
 from fractions import Fraction as F

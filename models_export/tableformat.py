@@ -7,9 +7,9 @@ firmware/table.py consumes them in.
 import struct
 
 from firmware.crc32 import crc32
-from firmware.table import HEADER_SIZE, MAGIC, NAME_SIZE, UNIT_CODE, VERSION
+from firmware.table import HEADER_SIZE, KINDS, MAGIC, NAME_SIZE, UNIT_CODE, VERSION
 
-KIND_CODES = {"poly_slope": 1, "linear_direct": 2, "screw_reduced": 3}
+KIND_CODES = {name: code for code, name in KINDS.items()}  # the firmware's table owns the codes
 
 COMMON = ("pos_lo", "pos_hi", "pos_ref", "fo", "Lt", "nt", "S0", "fS")
 POSITION = ("Lw", "nw", "shw", "KS", "shK", "fK", "rK", "rT", "degree", "Lg", "ng")

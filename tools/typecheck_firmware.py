@@ -3,7 +3,7 @@
 The Makefile installs micropython-rp2-stubs and micropython-stdlib-stubs into
 .stubs/; the latter carries a MicroPython typeshed (.stubs/stdlib) that
 replaces CPython's, so a call that exists only on CPython is an error here.
-board_linux.py is CPython-only (fcntl, ctypes, pyserial, smbus2) and is
+linux_adapters.py is CPython-only (fcntl, ctypes, pyserial, smbus2) and is
 checked separately against the ordinary CPython typeshed.
 
 Exit status: 0 when pyright reports no errors, 1 otherwise (2 if the stubs
@@ -18,7 +18,7 @@ import tempfile
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STUBS = os.path.join(ROOT, ".stubs")
 PYRIGHT = os.path.join(ROOT, ".venv", "bin", "pyright")
-CPYTHON_ONLY = ["firmware/board_linux.py", "firmware/boards/linux.py"]
+CPYTHON_ONLY = ["firmware/linux_adapters.py", "firmware/boards/linux.py"]
 
 
 def _rel(config, d):

@@ -27,5 +27,5 @@ PORT = "/dev/ttyUSB0"
 
 
 def make_board(config=CONFIG, port=PORT):
-    from firmware.board_linux import make_linux_board
+    from firmware.linux_adapters import make_linux_board
     return make_linux_board(config, port)

@@ -15,7 +15,7 @@ import threading
 import time
 import tty
 
-from hil_tests.rig.frames import FrameError, parse_line
+from host.link import FrameError, parse_line
 
 
 class LinkTap(threading.Thread):

@@ -51,7 +51,7 @@ def _rename(doc, names):
 
 def poly_slope_for_run(run, sensors, seed=3, degree=2):
     """A poly_slope model document over ``sensors`` of ``run`` whose envelope covers the run."""
-    from models_export.samples import poly_slope_doc
+    from hil_tests.fixtures.samples import poly_slope_doc
     stroke = float(run.stroke_mm or 700.0)
     doc = _rename(poly_slope_doc(random.Random(seed), n_sensors=len(sensors), stroke_mm=stroke, degree=degree),
                   sensors)
@@ -67,7 +67,7 @@ def poly_slope_for_run(run, sensors, seed=3, degree=2):
 def screw_doc(sensors=("T1", "T2"), seed=5):
     """A screw model document (reduced recurrence) with base sensor ``sensors[0]`` and air sensor
     ``sensors[1]`` (none when only one name is given)."""
-    from models_export.samples import screw_doc as sample
+    from hil_tests.fixtures.samples import screw_doc as sample
     doc = sample(random.Random(seed), segments=8, dt_s=1.0, length_mm=800.0, feed_max_mm_min=12000.0, base=True,
                  air=len(sensors) > 1)
     doc = _rename(doc, list(sensors)[:len(doc["sensors"])])

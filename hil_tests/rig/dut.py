@@ -150,7 +150,7 @@ def make_board(world, config):
         def pin(cs):
             return machine.Pin(cs, machine.Pin.OUT, value=1)
     else:
-        from firmware.board_linux import SMBusI2C
+        from firmware.linux_adapters import SMBusI2C
         from hil_tests.sim.buses import SMBus
         for name in names:
             b = world.buses[name]

@@ -12,6 +12,7 @@ Simulated time only moves inside ``run(until_ms)``; between runs the DUT is
 parked in its clock and the test may change temperatures and inject faults.
 """
 import atexit
+import io
 import json
 import os
 import select
@@ -24,10 +25,11 @@ import tempfile
 import threading
 import time
 import tty
+from typing import Any
 
 import serial
 
-from hil_tests.rig.frames import StreamDecoder, command
+from host.link import StreamDecoder, command
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MP_DIR = os.path.join(ROOT, "hil_tests", "mp")
@@ -78,7 +80,7 @@ def compile_mpy(dest=None):
     for pkg in ("firmware", "hil_tests/sim", "hil_tests/rig", "hil_tests"):
         src_dir = os.path.join(ROOT, pkg)
         for name in os.listdir(src_dir):
-            if not name.endswith(".py") or name in ("board_linux.py", "harness.py", "frames.py", "conftest.py") \
+            if not name.endswith(".py") or name in ("linux_adapters.py", "harness.py", "conftest.py") \
                     or name.startswith("test_"):
                 continue
             out_dir = os.path.join(dest, pkg)
@@ -113,16 +115,31 @@ class SerialReader(threading.Thread):
         self.rx_total = 0
         self.on_frame = None
 
-    def run(self):
-        fd = self.ser.fileno()
-        while not self.stop:
-            r, _, _ = select.select([fd], [], [], 0.05)
-            if not r:
-                continue
+    def _receive(self, fd):
+        """Bytes that arrived within ~50 ms, b'' if none (``busy`` once there are some); OSError when
+        the other side closed."""
+        if fd is None:  # a pySerial URL handler (socket://, loop://, spy://): no descriptor to select on
+            waiting = self.ser.in_waiting
+            if not waiting:
+                time.sleep(0.01)
+                return b""
             self.busy = True
+            return self.ser.read(waiting)
+        r, _, _ = select.select([fd], [], [], 0.05)
+        if not r:
+            return b""
+        self.busy = True
+        return os.read(fd, 65536)
+
+    def run(self):
+        try:
+            fd = self.ser.fileno()
+        except (AttributeError, io.UnsupportedOperation):
+            fd = None
+        while not self.stop:
             try:
-                data = os.read(fd, 65536)
-            except OSError:
+                data = self._receive(fd)
+            except (OSError, serial.SerialException):
                 self.busy = False
                 time.sleep(0.01)  # the DUT's side of the pty closed (process ended or restarting)
                 continue
@@ -169,12 +186,31 @@ class SerialReader(threading.Thread):
 
 class LinkClient:
     """The controller's side of the link, shared by every device under test (the rig, a real port):
-    needs ``send``, ``advance``, ``reader.frames`` and, for commands that change the output,
-    ``signer`` (host.linkauth.LinkSigner with the board's key)."""
+    needs ``ser`` (the pyserial port), ``reader`` (its SerialReader), ``advance``, ``t_ms`` and, for
+    commands that change the output, ``signer`` (host.linkauth.LinkSigner with the board's key)."""
 
     request_step_ms = 10
     request_timeout_s = 10.0
-    signer = None
+    ser: Any = None
+    reader: Any = None
+    signer: Any = None
+
+    def write(self, data):
+        self.ser.write(data)
+        self.ser.flush()
+
+    def send(self, *fields):
+        self.write(command(*fields))
+
+    @property
+    def frames(self):
+        return self.reader.frames
+
+    def take_frames(self):
+        with self.reader.lock:
+            out = list(self.reader.frames)
+            self.reader.frames.clear()
+        return out
 
     def _observe_counter(self):
         # the board's last counter is the last field of its newest hello (boot, V, table switch)
@@ -264,7 +300,7 @@ class Rig(LinkClient):
         if not self.open_port:
             return  # another client (pymodbus, mpremote) opens self.port
         baud = (self.config.get("serial") or {}).get("baud", 115200)
-        self.ser = serial.Serial(self.port, baud, timeout=0)
+        self.ser = serial.serial_for_url(self.port, baud, timeout=0)
         self.reader = SerialReader(self.ser, self.stream)
         self.reader.start()
 
@@ -480,24 +516,7 @@ class Rig(LinkClient):
                     raise self.error
         return _Free()
 
-    # --- the serial link ------------------------------------------------------------------
-    def write(self, data):
-        self.ser.write(data)
-        self.ser.flush()
-
-    def send(self, *fields):
-        self.write(command(*fields))
-
-    @property
-    def frames(self):
-        return self.reader.frames
-
-    def take_frames(self):
-        with self.reader.lock:
-            out = list(self.reader.frames)
-            self.reader.frames.clear()
-        return out
-
+    # --- the serial link (write, send, frames, take_frames: LinkClient) ----------------------
     def take_raw(self):
         with self.reader.lock:
             out = bytes(self.reader.raw)

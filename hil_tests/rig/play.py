@@ -6,7 +6,7 @@ limiter settles on the run's first temperatures before t = 0).
 """
 import math
 
-from hil_tests.rig.frames import FALLBACK, HELD, RECOVERING
+from host.link import FALLBACK, HELD, RECOVERING
 
 
 def sensor_rows(run, sensors):

@@ -1,9 +1,8 @@
-"""A real board on a serial port with the Rig's link-level interface (time is wall-clock time)."""
+"""A real board on a serial port (or any pySerial URL) with the Rig's link-level interface (time is wall-clock time)."""
 import time
 
 import serial
 
-from hil_tests.rig.frames import command
 from hil_tests.rig.harness import LinkClient, SerialReader
 
 
@@ -17,7 +16,7 @@ class RealDut(LinkClient):
         if key:
             from host.linkauth import LinkSigner
             self.signer = LinkSigner(key)
-        self.ser = serial.Serial(port, baud, timeout=0)
+        self.ser = serial.serial_for_url(port, baud, timeout=0)  # a device path or a pySerial URL
         self.reader = SerialReader(self.ser, True)
         self.reader.start()
         self.t0 = time.monotonic()
@@ -36,23 +35,6 @@ class RealDut(LinkClient):
     @property
     def alive(self):
         return True
-
-    @property
-    def frames(self):
-        return self.reader.frames
-
-    def take_frames(self):
-        with self.reader.lock:
-            out = list(self.reader.frames)
-            self.reader.frames.clear()
-        return out
-
-    def write(self, data):
-        self.ser.write(data)
-        self.ser.flush()
-
-    def send(self, *fields):
-        self.write(command(*fields))
 
     def close(self):
         self.reader.stop = True

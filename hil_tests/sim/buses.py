@@ -2,7 +2,7 @@
 
 ``SPIBus`` and ``Pin`` have the ``machine.SPI`` / ``machine.Pin`` methods;
 ``I2CBus`` the ``machine.I2C`` ones; ``SMBus`` the ``smbus2.SMBus`` ones the
-CPython board adapter (firmware.board_linux.SMBusI2C) uses. Chips are found
+CPython board adapter (firmware.linux_adapters.SMBusI2C) uses. Chips are found
 by chip-select (SPI: every chip whose CS pin is low takes part; two at once
 is bus contention, MISO reads the AND of both) or by 7-bit address (I2C).
 

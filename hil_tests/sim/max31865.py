@@ -231,7 +231,3 @@ class MAX31865(ViolationLog):
         if a == 2:
             return (r[2] & 0xFE) | (1 if r[7] else 0)
         return r[a]
-
-    # --- test side ---------------------------------------------------------------
-    def resistance_of(self, code):
-        return code * (self.rref_uohm / 1e6) / 32768.0

@@ -1,6 +1,24 @@
-"""One module per ``tcomp`` verb.
+"""The ``tcomp`` verbs: a registry read by host/cli.py (pip's commands dict).
 
-Each module defines ``HELP`` (one line), ``add_arguments(parser)`` and
-``run(args) -> int``. Keep module-level imports light: ``tcomp --help`` imports
-every module here, so heavy imports (scipy, matplotlib) go inside ``run``.
+Each verb maps to the module that implements it and a one-line summary. ``tcomp --help``
+reads only this table; a verb's module (``add_arguments(parser)``, ``run(args) -> int``) is
+imported when that verb is run, so heavy imports never slow the help text down. A new verb is one
+module here plus one row below.
 """
+
+# verb -> (module, one-line summary); listed alphabetically, as `tcomp --help` shows them
+VERBS = {
+    "compare": ("host.commands.compare", "fit MLR, PCR, stepwise, the sensor selectors, ANN, PPR and the dynamic model on one run, predict the others, with a robustness check"),
+    "discrepancy": ("host.commands.discrepancy", "find where the screw model and the measurements disagree, name the missing physical effect(s), refit (held-out evidence)"),
+    "export": ("host.commands.export", "quantise a model into the firmware's integer coefficient table, with a certificate of integer safety and accuracy"),
+    "fit": ("host.commands.fit", "fit a thermal-error model (mlr, pcr, stepwise, cv-subset, ann, dynamic: host/empirical; screw: host/screw) and save it"),
+    "flash": ("host.commands.flash", "copy the firmware, a board file and a table onto a MicroPython board with mpremote"),
+    "hil": ("host.commands.hil", "run the firmware on the HIL rig, driven by a run folder; query it at every errors.csv row"),
+    "import": ("host.commands.importlog", "turn a plain CSV log (time, temperatures, displacements, spindle) into a tcomp run folder"),
+    "linuxcnc": ("host.commands.linuxcnc", "userspace HAL component: apply the board's offset through LinuxCNC external axis offsets"),
+    "monitor": ("host.commands.monitor", "decode the $TC stream of a board (a real port or a pty) into a table, optionally logged as CSV"),
+    "predict": ("host.commands.predict", "predict the error at every row of a run's errors.csv with any saved model"),
+    "select": ("host.commands.select", "choose temperature sensors (maximal-tree fuzzy clustering, stepwise partial F, hierarchical clustering + GA)"),
+    "simulate": ("host.commands.simulate", "simulate thermal tests of a feed axis with the digital twin and write run folders"),
+    "validate": ("host.commands.validate", "check run folders against the tcomp-run/1 format and print every problem (exit 1 if any)"),
+}

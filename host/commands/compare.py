@@ -1,5 +1,4 @@
 """tcomp compare RUN... --json OUT [--plots DIR]"""
-HELP = "fit MLR, PCR, stepwise, the sensor selectors, ANN, PPR and the dynamic model on one run, predict the others, with a robustness check"
 
 
 def add_arguments(p):
@@ -26,25 +25,22 @@ def add_arguments(p):
 
 def _method_options(items, methods):
     """--option METHOD.KEY=VALUE list -> (estimator options, selector parameters), values parsed as JSON when possible."""
-    import json
-
     from host.cli import UserError
+    from host.options import json_or_word, split_option
     from host.empirical.compare import METHODS, PIPELINES, SELECTORS
 
     options, selector = {}, {}
+    expected = "METHOD.KEY=VALUE, e.g. pcr.variance_threshold=0.9"
     for item in items:
-        lhs, sep, value = item.partition("=")
-        method, dot, key = lhs.strip().partition(".")
-        if not sep or not dot or not key:
-            raise UserError("--option %r: expected METHOD.KEY=VALUE, e.g. pcr.variance_threshold=0.9" % item)
+        lhs, value = split_option(item, expected)
+        method, dot, key = lhs.partition(".")
+        if not dot or not key:
+            raise UserError("--option %r: expected %s" % (item, expected))
         if method not in METHODS:
             raise UserError("--option %r: unknown method %r (known: %s)" % (item, method, ", ".join(METHODS)))
         if method in ("mlr", "maxtree-mlr"):
             raise UserError("--option %r: %s has no settings" % (item, method))
-        try:
-            v = json.loads(value)
-        except ValueError:
-            v = value.strip()
+        v = json_or_word(value)
         if method not in SELECTORS:
             import inspect
 

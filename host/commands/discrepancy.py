@@ -1,5 +1,4 @@
 """tcomp discrepancy RUN... [--base screw] --json OUT.json [--report DIR] [--air auto|off]"""
-HELP = "find where the screw model and the measurements disagree, name the missing physical effect(s), refit (held-out evidence)"
 
 
 def add_arguments(p):

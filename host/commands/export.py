@@ -1,5 +1,4 @@
 """tcomp export MODEL.json --out table.bin [--report report.json] [--json summary.json] [--c-header table.h] [--allow-edited]"""
-HELP = "quantise a model into the firmware's integer coefficient table, with a certificate of integer safety and accuracy"
 
 
 def add_arguments(p):

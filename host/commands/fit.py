@@ -1,5 +1,4 @@
 """tcomp fit --model KIND RUN... --out MODEL.json"""
-HELP = "fit a thermal-error model (mlr, pcr, stepwise, cv-subset, ann, dynamic: host/empirical; screw: host/screw) and save it"
 
 EMPIRICAL = ("mlr", "pcr", "stepwise", "cv-subset", "ann", "dynamic")
 

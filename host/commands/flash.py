@@ -1,5 +1,4 @@
 """tcomp flash --port PORT [--table table.bin] [--config board.json | --board board.py] [--key board.key]"""
-HELP = "copy the firmware, a board file and a table onto a MicroPython board with mpremote"
 
 import json
 import os
@@ -10,7 +9,7 @@ import tempfile
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 # CPython-only modules that never go onto a board
-_HOST_ONLY = ("board_linux.py", "config.py")  # config.py: the host-side friendly validator; the board loads bootcfg.py
+_HOST_ONLY = ("linux_adapters.py",)  # the CPython adapters of a Linux board
 
 
 def add_arguments(p):
@@ -64,7 +63,7 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
         except (OSError, json.JSONDecodeError) as exc:
             raise UserError("%s: cannot read the board config: %s" % (config, exc))
         try:
-            from firmware.config import load_config
+            from host.boardconfig import load_config
             load_config(cfg)
         except ValueError as exc:
             raise UserError("%s: %s" % (config, exc))

@@ -1,5 +1,9 @@
-"""tcomp hil --run RUN_DIR --table table.bin [--interpreter micropython|cpython] [--json OUT.json]"""
-HELP = "run the firmware on the HIL rig, driven by a run folder; query it at every errors.csv row"
+"""tcomp hil --run RUN_DIR --table table.bin [--interpreter micropython|cpython] [--json OUT.json]
+
+The simulated rig lives with the HIL tests (hil_tests/rig, hil_tests/sim). This verb is the one
+production module that uses it, and it imports it inside run(): no other verb, nor `tcomp --help`,
+loads the rig (tests/test_layers.py holds this exception and nothing else).
+"""
 
 import json
 import re
@@ -120,7 +124,7 @@ def _hil(args, out):
         except (OSError, json.JSONDecodeError) as exc:
             raise UserError("%s: %s" % (args.config, exc))
         # The firmware's own boot-time validator, run here so a bad config is named before the rig starts.
-        from firmware.config import load_config
+        from host.boardconfig import load_config
         if not isinstance(cfg, dict):
             raise UserError("%s: a board config is a JSON object (firmware/board.py), found %s" % (args.config, type(cfg).__name__))
         try:

@@ -1,5 +1,4 @@
 """tcomp linuxcnc --port PORT [--mode stream|modbus] ...: the LinuxCNC bridge (docs/linuxcnc.md)."""
-HELP = "userspace HAL component: apply the board's offset through LinuxCNC external axis offsets"
 
 
 def add_arguments(p):
@@ -53,13 +52,8 @@ def run(args):
     from host.linuxcnc.bridge import Bridge, ModbusLink, StreamLink
 
     _check(args)
-    signer = None
-    if args.key:
-        from host.linkauth import KeyFileError, LinkSigner, read_key
-        try:
-            signer = LinkSigner(read_key(args.key))
-        except KeyFileError as exc:
-            raise UserError("--key %s" % exc)
+    from host.linkauth import signer_for_option
+    signer = signer_for_option(args.key)
     try:
         comp = halcomp.component(args.name)
     except ImportError as exc:
@@ -69,7 +63,7 @@ def run(args):
     slew = args.slew_um_per_s
     if args.mode == "stream":
         def open_port():
-            return serial.Serial(args.port, args.baud, timeout=0, write_timeout=0.5)
+            return serial.serial_for_url(args.port, args.baud, timeout=0, write_timeout=0.5)  # a device path or a pySerial URL
         try:
             open_port().close()
         except (serial.SerialException, OSError) as exc:

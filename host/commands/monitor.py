@@ -1,5 +1,4 @@
 """tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch]"""
-HELP = "decode the $TC stream of a board (a real port or a pty) into a table, optionally logged as CSV"
 
 import csv
 import sys
@@ -11,7 +10,7 @@ COLUMNS = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_
 
 
 def add_arguments(p):
-    p.add_argument("--port", required=True, help="serial port (e.g. /dev/ttyACM0)")
+    p.add_argument("--port", required=True, help="serial port or pySerial URL (e.g. /dev/ttyACM0, socket://host:port, spy:///dev/ttyACM0, loop://)")
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     p.add_argument("--csv", help="append every decoded frame to this CSV file")
     p.add_argument("--count", type=int, default=0, help="stop after this many frames (0: never)")
@@ -27,7 +26,7 @@ def add_arguments(p):
 
 def row(f):
     """A decoded frame as the monitor's columns."""
-    from hil_tests.rig.frames import STATUS_BITS
+    from host.link import STATUS_BITS
     flags = [n for bit, n in STATUS_BITS.items() if f.status & bit]
     if f.status & 0xFFFF:
         flags.append("sensors:%04X" % (f.status & 0xFFFF))
@@ -60,10 +59,10 @@ def run(args):
 def _monitor(args, outputs):
     import serial
 
-    from hil_tests.rig.frames import StreamDecoder, command
+    from host.link import PROTOCOL_VERSION, StreamDecoder, command
     from host.cli import UserError
     try:
-        ser = serial.Serial(args.port, args.baud, timeout=0.1)
+        ser = serial.serial_for_url(args.port, args.baud, timeout=0.1)
     except (serial.SerialException, OSError, ValueError) as exc:
         raise UserError("cannot open %s: %s" % (args.port, exc))
     out = None
@@ -86,13 +85,8 @@ def _monitor(args, outputs):
                                                       "ref_um", "slope", "flags / fields"))
     latch = None  # the board's answer to L: "ok" or "refused"
     until_answer = args.latch and not (args.count or args.duration)
-    signer = None
-    if args.key:
-        from host.linkauth import KeyFileError, LinkSigner, read_key
-        try:
-            signer = LinkSigner(read_key(args.key))
-        except KeyFileError as exc:
-            raise UserError("--key %s" % exc)
+    from host.linkauth import signer_for_option
+    signer = signer_for_option(args.key)
     latch_sent = False
     try:
         if args.hello or signer is not None and args.latch:
@@ -113,6 +107,9 @@ def _monitor(args, outputs):
             if not data:
                 continue
             for f in dec.feed(data, time.monotonic()):
+                if f.kind == "H" and f.fields[:1] != [str(PROTOCOL_VERSION)]:
+                    raise UserError("%s: the board's hello frame says protocol version %s; this tcomp speaks %d "
+                                    "(docs/protocol.md)" % (args.port, (f.fields or ["(none)"])[0], PROTOCOL_VERSION))
                 r = row(f)
                 print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],

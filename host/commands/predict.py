@@ -1,5 +1,4 @@
 """tcomp predict MODEL.json RUN --out PRED.csv"""
-HELP = "predict the error at every row of a run's errors.csv with any saved model"
 
 
 def add_arguments(p):

@@ -1,5 +1,4 @@
 """tcomp select --method maxtree|stepwise|hclust-ga RUN... --json OUT  |  tcomp select --method maxtree --corr CORR.csv --json OUT"""
-HELP = "choose temperature sensors (maximal-tree fuzzy clustering, stepwise partial F, hierarchical clustering + GA)"
 
 METHODS = ("maxtree", "stepwise", "hclust-ga")
 
@@ -17,24 +16,6 @@ def add_arguments(p):
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", help="method parameter, e.g. seed=3, f_enter=50, alpha=0.01 (repeatable)")
     p.add_argument("--corr", metavar="CORR.csv", help="maxtree on a precomputed correlation matrix (header of names, square matrix)")
     p.add_argument("--target-corr", metavar="TCORR.csv", help="with --corr: sensor,r rows (optional header line) for the representatives")
-
-
-def _options(items):
-    import json
-
-    from host.cli import UserError
-
-    out = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip():
-            raise UserError("--option %r: expected KEY=VALUE" % item)
-        value = value.strip()
-        try:
-            out[key.strip()] = json.loads(value)
-        except ValueError:
-            out[key.strip()] = value  # plain words such as disturbance=offset
-    return out
 
 
 def run(args):
@@ -106,6 +87,7 @@ def _run_corr(args, out):
 
 def _run_data(args, out):
     from host.cli import UserError, sensor_list
+    from host.options import parse_options
     from host.empirical.selectors import select
     from host.runs import RunFormatError, load_runs
 
@@ -118,7 +100,7 @@ def _run_data(args, out):
     except RunFormatError as exc:
         raise UserError(str(exc))
     sensors = sensor_list(args.sensors)
-    params = _options(args.option)
+    params = parse_options(args.option)
     data = runs if args.split == 1 else _windows(runs, args.split, args.target, args.channel, sensors)
     sel = select(args.method, data, target=args.target, channel=args.channel, sensors=sensors, **params)
     doc = sel.to_json()

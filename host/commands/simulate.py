@@ -1,5 +1,4 @@
 """tcomp simulate --out DIR [--protocol NAME] [--effects a,b=2] [--seed N]"""
-HELP = "simulate thermal tests of a feed axis with the digital twin and write run folders"
 
 
 def _epilog():

@@ -1,5 +1,4 @@
 """tcomp validate RUN..."""
-HELP = "check run folders against the tcomp-run/1 format and print every problem (exit 1 if any)"
 
 
 def add_arguments(p):

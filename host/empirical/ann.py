@@ -164,11 +164,9 @@ class ANN:
         return (W, b, v, float(c)), best[0], epoch, best[2]
 
     def predict(self, X):
-        X = np.asarray(X, dtype=float)
-        if X.ndim == 1:
-            X = X[:, None]
-        if X.shape[1] != self.W_.shape[1]:
-            raise EmpiricalDataError("predict: X has %d columns, the network has %d inputs" % (X.shape[1], self.W_.shape[1]))
+        from host.empirical.regression import check_predict_x
+
+        X = check_predict_x(self, X, "W_", lambda: self.W_.shape[1])
         Z = (X - self.x_mean_) / self.x_scale_
         return self.y_mean_ + self.y_scale_ * (np.tanh(Z @ self.W_.T + self.b_) @ self.v_ + self.c_)
 

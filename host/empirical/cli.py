@@ -1,44 +1,41 @@
 """``tcomp fit --model mlr|pcr|stepwise|cv-subset|ann|dynamic`` (arguments defined in host/commands/fit.py)."""
 import json
-import math
 
+from host import options
 from host.empirical import EmpiricalDataError
+from host.options import boolean, number, numbers
 
-# --option KEY=VALUE settings understood by fit_command, with their parsers
+# --option KEY=VALUE settings understood by fit_command, with their converters (host/options.py); a
+# minimum is the smallest meaningful value, below which the estimator would fail obscurely or accept nonsense
 OPTIONS = {
-    "variance_threshold": float,  # PCR
-    "n_components": int,  # PCR
-    "f_enter": float,  # stepwise
-    "f_remove": float,  # stepwise
-    "envelope_margin_K": float,
+    "variance_threshold": number(float),  # PCR
+    "n_components": number(int, 1),  # PCR
+    "f_enter": number(float),  # stepwise
+    "f_remove": number(float),  # stepwise
+    "envelope_margin_K": number(float, 0.0),
     "reference": str,  # run_start | fixed
-    "geometric_max_degree": int,
+    "geometric_max_degree": number(int, 1),
     "geometric_criterion": str,  # cv | aic
-    "t_min_s": float,  # training window on target time
-    "t_max_s": float,
-    "max_sensors": int,  # cv-subset
-    "cv_blocks": int,  # cv-subset on one run; ann's validation group
-    "hidden_sizes": lambda v: [int(h) for h in v.split("/")],  # ann: candidate sizes, e.g. 3/4/5
-    "seed": int,  # ann
-    "max_epochs": int,  # ann
-    "patience": int,  # ann
-    "validation_fraction": float,  # ann, random validation
+    "t_min_s": number(float),  # training window on target time
+    "t_max_s": number(float),
+    "max_sensors": number(int, 1),  # cv-subset, dynamic
+    "cv_blocks": number(int, 2),  # cv-subset on one run; ann's validation group
+    "hidden_sizes": numbers(int, 1),  # ann: candidate sizes, e.g. 3/4/5
+    "seed": number(int, 0),  # ann
+    "max_epochs": number(int, 1),  # ann
+    "patience": number(int, 1),  # ann
+    "validation_fraction": number(float),  # ann, random validation
     "validation": str,  # ann: random | last_group
-    "learning_rate": float,  # ann
-    "taus_s": lambda v: [float(x) for x in v.split("/")],  # dynamic: time-constant grid, e.g. 0/1800/7200
-    "ridge": lambda v: [float(x) for x in v.split("/")],  # dynamic: penalty grid
-    "max_terms": int,  # dynamic
-    "min_gain": float,  # dynamic
+    "learning_rate": number(float),  # ann
+    "taus_s": numbers(float),  # dynamic: time-constant grid, e.g. 0/1800/7200
+    "ridge": numbers(float),  # dynamic: penalty grid
+    "max_terms": number(int, 1),  # dynamic
+    "min_gain": number(float, 0.0),  # dynamic
     "cv_score": str,  # dynamic: worst | pooled
-    "swaps": lambda v: {"true": True, "false": False}[v.lower()],  # dynamic
-    "use_spindle": lambda v: {"true": True, "false": False}[v.lower()],  # dynamic
-    "use_feed": lambda v: {"true": True, "false": False}[v.lower()],  # dynamic
+    "swaps": boolean,  # dynamic
+    "use_spindle": boolean,  # dynamic
+    "use_feed": boolean,  # dynamic
 }
-LIST_OPTIONS = ("hidden_sizes", "taus_s", "ridge")
-BOOL_OPTIONS = ("swaps", "use_spindle", "use_feed")
-# smallest meaningful value of numeric options whose estimator would otherwise fail obscurely or accept nonsense
-MINIMUM = {"envelope_margin_K": 0.0, "geometric_max_degree": 1, "max_sensors": 1, "n_components": 1, "cv_blocks": 2, "seed": 0, "max_epochs": 1,
-           "patience": 1, "max_terms": 1, "min_gain": 0.0}
 METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",),
                   "dynamic": ("taus_s", "ridge", "max_terms", "min_gain", "cv_score", "swaps", "use_spindle", "use_feed"),
                   "ann": ("hidden_sizes", "validation", "seed", "max_epochs", "patience", "validation_fraction", "learning_rate")}
@@ -48,26 +45,11 @@ def parse_options(pairs, method):
     """--option KEY=VALUE list -> dict, rejecting unknown keys and options of other methods."""
     from host.cli import UserError
 
-    out = {}
-    for item in pairs or []:
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or key not in OPTIONS:
-            raise UserError("--option %r: expected KEY=VALUE with KEY one of %s" % (item, ", ".join(sorted(OPTIONS))))
+    out = options.parse_options(pairs, OPTIONS)
+    for key in out:
         owner = [m for m, keys in METHOD_OPTIONS.items() if key in keys] + (["dynamic"] if key == "max_sensors" else [])
         if owner and method not in owner:
             raise UserError("--option %s applies to --model %s, not %s" % (key, owner[0], method))
-        try:
-            out[key] = OPTIONS[key](value.strip())
-        except (ValueError, KeyError):
-            kind = ("list of numbers separated by /" if key in LIST_OPTIONS else "true or false" if key in BOOL_OPTIONS
-                    else OPTIONS[key].__name__)
-            raise UserError("--option %s=%r: not a valid %s" % (key, value, kind))
-        if OPTIONS[key] is float and not math.isfinite(out[key]):
-            raise UserError("--option %s=%r: must be a finite number" % (key, value))
-        low = MINIMUM.get(key)
-        if low is not None and out[key] < low:
-            raise UserError("--option %s=%s: must be >= %g" % (key, value.strip(), low))
     lo, hi = out.get("t_min_s"), out.get("t_max_s")
     if lo is not None and hi is not None and not lo < hi:
         raise UserError("--option t_min_s=%g, t_max_s=%g: the training window is empty (t_min_s must be < t_max_s)" % (lo, hi))

@@ -120,6 +120,9 @@ def features(run, terms, times):
         if name not in sig:
             what = "spindle.csv" if name in SPINDLE else "motion.csv" if name == FEED else "temperatures.csv"
             raise EmpiricalDataError("%s: the dynamic model needs the signal %s (from %s), which the run lacks" % (run.name, name, what))
+        bad = np.flatnonzero(~np.isfinite(sig[name]))
+        if bad.size:  # a filter carries a NaN into every later output: refuse, as the static models do
+            raise EmpiricalDataError("%s: signal %s reads NaN/inf at %g s; no prediction from it" % (run.name, name, t[bad[0]]))
         key = (name, float(tau))
         if key not in cache:
             cache[key] = np.interp(times, t, _lag_filter_fast(t, sig[name], float(tau)))
@@ -215,7 +218,7 @@ class DynamicRegression:
         if labels.size < 2:
             raise EmpiricalDataError("dynamic: cross-validation needs at least 2 groups (runs or spindle cycles), got %d" % labels.size)
         if not np.isfinite(F).all() or not np.isfinite(y).all():
-            raise EmpiricalDataError("dynamic: non-finite values in the signals or the target")
+            raise EmpiricalDataError("dynamic: NaN/inf in the signals or the target")
         o = int(bool(self.fit_intercept))
         A = np.column_stack([np.ones(len(y)), F]) if o else F
         # scale columns so the Gram matrices are well conditioned (krpm² and K live on different scales)
@@ -301,7 +304,11 @@ class DynamicRegression:
                 "history_": history, "n_samples_": n_all, "n_groups_": int(labels.size), "ridge_": ridge}
 
     def predict(self, F):
-        return self.intercept_ + np.asarray(F, dtype=float) @ self.coef_
+        """``F``: the selected terms' signals, one column per ``terms_`` entry."""
+        from host.empirical.regression import check_predict_x
+
+        F = check_predict_x(self, F, "coef_", lambda: self.coef_.size)
+        return self.intercept_ + F @ self.coef_
 
     def statistics(self):
         from host.empirical.regression import _f

@@ -78,7 +78,13 @@ class _Base:
             ref = np.array([temps.column(s)[0] for s in self.sensors])
         else:
             ref = np.array([self.reference_C[s] for s in self.sensors])
-        return T - ref
+        R = T - ref
+        bad = np.argwhere(~np.isfinite(R))
+        if bad.size:
+            i, j = bad[0]
+            raise EmpiricalDataError("%s: sensor %s reads NaN/inf at %g s (temperatures.csv); no prediction from it"
+                                     % (run.name, self.sensors[j], times[i]))
+        return R
 
     def thermal_at(self, run, times):
         """The thermal part at ``times`` of ``run``: slope in µm/mm (target "slope") or error in µm."""

@@ -123,11 +123,9 @@ class PPR:
         return self
 
     def predict(self, X):
-        X = np.asarray(X, dtype=float)
-        if X.ndim == 1:
-            X = X[:, None]
-        if X.shape[1] != self.x_mean_.size:
-            raise EmpiricalDataError("predict: X has %d columns, the model has %d sensors" % (X.shape[1], self.x_mean_.size))
+        from host.empirical.regression import check_predict_x
+
+        X = check_predict_x(self, X, "terms_", lambda: self.x_mean_.size)
         Z = (X - self.x_mean_) / self.x_scale_
         return self.y_mean_ + sum(t(Z) for t in self.terms_)
 

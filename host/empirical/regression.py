@@ -117,6 +117,23 @@ def ols_statistics(A, y, beta, has_intercept):
     }
 
 
+def check_predict_x(est, X, fitted, n_columns):
+    """``X`` for ``est.predict`` as a 2-D float array. EmpiricalDataError when ``est`` has no attribute
+    ``fitted`` yet (predict before fit), X holds NaN/inf, or its column count is not ``n_columns()``."""
+    if not hasattr(est, fitted):
+        raise EmpiricalDataError("%s: predict before fit (call fit first)" % est.method)
+    X = np.asarray(X, dtype=float)
+    if X.ndim == 1:
+        X = X[:, None]
+    bad = np.argwhere(~np.isfinite(X))
+    if bad.size:
+        raise EmpiricalDataError("%s predict: sample %d column %d is %r (NaN/inf in the temperatures)"
+                                 % (est.method, bad[0][0], bad[0][1], X[tuple(bad[0])]))
+    if X.shape[1] != n_columns():
+        raise EmpiricalDataError("predict: X has %d columns, the model has %d inputs" % (X.shape[1], n_columns()))
+    return X
+
+
 def _f(x):
     x = float(x)
     return x if np.isfinite(x) else None
@@ -130,11 +147,7 @@ class _Linear:
     n_samples_: int
 
     def predict(self, X):
-        X = np.asarray(X, dtype=float)
-        if X.ndim == 1:
-            X = X[:, None]
-        if X.shape[1] != self.coef_.size:
-            raise EmpiricalDataError("predict: X has %d columns, the model has %d sensors" % (X.shape[1], self.coef_.size))
+        X = check_predict_x(self, X, "coef_", lambda: self.coef_.size)
         return self.intercept_ + X @ self.coef_
 
     def _stats_dict(self, st, extra=None):
@@ -155,7 +168,7 @@ class _Linear:
 
     def _refit_on(self, X, y, sel):
         """Subset selectors: the final model is a plain MLR on the chosen columns ``sel``."""
-        self.mlr_ = MLR(self.fit_intercept).fit(X[:, sel], y, self.selected_names_)
+        self.mlr_ = MLR(fit_intercept=self.fit_intercept).fit(X[:, sel], y, self.selected_names_)
         self.coef_ = np.zeros(X.shape[1])
         self.coef_[sel] = self.mlr_.coef_
         self.intercept_ = self.mlr_.intercept_
@@ -177,7 +190,7 @@ class MLR(_Linear):
 
     method = "mlr"
 
-    def __init__(self, fit_intercept=True):
+    def __init__(self, *, fit_intercept=True):
         self.fit_intercept = fit_intercept
 
     def fit(self, X, y, names=None):
@@ -266,7 +279,7 @@ class PCR(_Linear):
 
     method = "pcr"
 
-    def __init__(self, variance_threshold=0.85, n_components=None, fit_intercept=True):
+    def __init__(self, *, variance_threshold=0.85, n_components=None, fit_intercept=True):
         self.variance_threshold = variance_threshold
         self.n_components = n_components
         self.fit_intercept = fit_intercept
@@ -376,7 +389,7 @@ class Stepwise(_Linear):
 
     method = "stepwise"
 
-    def __init__(self, f_enter=100.0, f_remove=50.0, fit_intercept=True, max_steps=None):
+    def __init__(self, *, f_enter=100.0, f_remove=50.0, fit_intercept=True, max_steps=None):
         self.f_enter = f_enter
         self.f_remove = f_remove
         self.fit_intercept = fit_intercept
@@ -472,16 +485,6 @@ class Stepwise(_Linear):
         return d
 
 
-ESTIMATORS = {"mlr": MLR, "pcr": PCR, "stepwise": Stepwise}
-
-
-def make_estimator(method, fit_intercept=True, **options):
-    """Estimator for ``method`` in ESTIMATORS with method-specific options (e.g. f_enter=100)."""
-    if method not in ESTIMATORS:
-        raise EmpiricalDataError("unknown regression method %r (known: %s)" % (method, ", ".join(ESTIMATORS)))
-    return ESTIMATORS[method](fit_intercept=fit_intercept, **options)
-
-
 class BestSubsetCV(_Linear):
     """Exhaustive best subset of at most ``max_sensors`` sensors by blocked cross-validation.
 
@@ -501,7 +504,7 @@ class BestSubsetCV(_Linear):
 
     method = "cv-subset"
 
-    def __init__(self, max_sensors=5, fit_intercept=True, max_combinations=200000):
+    def __init__(self, *, max_sensors=5, fit_intercept=True, max_combinations=200000):
         self.max_sensors = max_sensors
         self.fit_intercept = fit_intercept
         self.max_combinations = max_combinations
@@ -586,18 +589,19 @@ class BestSubsetCV(_Linear):
         return d
 
 
-ESTIMATORS["cv-subset"] = BestSubsetCV
+# here, at the end: ann.py, dynamic.py and ppr.py use this module's checks
+from host.empirical.ann import ANN  # noqa: E402
+from host.empirical.dynamic import DynamicRegression  # noqa: E402
+from host.empirical.ppr import PPR  # noqa: E402
+
+# method name -> estimator class: the one table behind `tcomp fit --model`, `tcomp compare` and fit_model
+# (dynamic is fitted through fitting.fit_model, which builds its candidate signals)
+ESTIMATORS = {"mlr": MLR, "pcr": PCR, "stepwise": Stepwise, "cv-subset": BestSubsetCV, "ann": ANN, "ppr": PPR,
+              "dynamic": DynamicRegression}
 
 
-def _register_nonlinear():
-    # here, not at the top: ann.py and ppr.py use this module's checks
-    from host.empirical.ann import ANN
-    from host.empirical.dynamic import DynamicRegression
-    from host.empirical.ppr import PPR
-
-    ESTIMATORS["ann"] = ANN
-    ESTIMATORS["ppr"] = PPR
-    ESTIMATORS["dynamic"] = DynamicRegression  # fitted through fitting.fit_model, which builds its candidate signals
-
-
-_register_nonlinear()
+def make_estimator(method, fit_intercept=True, **options):
+    """Estimator for ``method`` in ESTIMATORS with method-specific options (e.g. f_enter=100)."""
+    if method not in ESTIMATORS:
+        raise EmpiricalDataError("unknown regression method %r (known: %s)" % (method, ", ".join(ESTIMATORS)))
+    return ESTIMATORS[method](fit_intercept=fit_intercept, **options)

@@ -19,7 +19,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
-from hil_tests.rig.frames import FALLBACK, StreamDecoder, command
+from host.link import FALLBACK, StreamDecoder, command
 
 COUNT_UM = 0.1  # one eoffset count: the board's offset resolution (docs/protocol.md, 0.1 um)
 UM_PER_UNIT = {"mm": 1000.0, "inch": 25400.0}

@@ -10,48 +10,46 @@ sensor of the E_e term; ``--channel`` the errors.csv channel.
 import json
 import warnings
 
+from host import options
+from host.options import choice, number
 from host.screw.effects import make_effect
 from host.screw.identify import IdentifiabilityWarning
 
+
+def _geometric_degree(text):
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise ValueError("expected 0..4 or auto")
+
+
+def _fit_window(text):
+    lo, colon, hi = text.partition(":")
+    try:
+        if not colon:
+            raise ValueError
+        return (float(lo) if lo.strip() else None, float(hi) if hi.strip() else None)
+    except ValueError:
+        raise ValueError("expected LO:HI in seconds (e.g. 0:10800 or :10800)")
+
+
+def _on_off(text):
+    return choice("on", "off")(text) == "on"
+
+
+def _effects(text):
+    return [make_effect(n.strip()) for n in text.split(",") if n.strip()]
+
+
+# --option KEY=VALUE settings of ScrewModel, with their converters (host/options.py)
 OPTIONS = {
-    "segments": int, "dt_s": float, "free": str, "geometric_degree": str, "effects": str, "nut_weight": float,
-    "reduced_segments": int, "reduced_dt_s": float, "feed_max_mm_min": float, "ambient": str, "air": str, "max_nfev": int, "base_ref": str, "fit_window": str,
+    "segments": number(int), "dt_s": number(float), "free": str, "geometric_degree": _geometric_degree,
+    "effects": _effects, "nut_weight": number(float), "reduced_segments": number(int), "reduced_dt_s": number(float),
+    "feed_max_mm_min": number(float), "ambient": _on_off, "air": str,  # air: auto, a sensor name, or off
+    "max_nfev": number(int), "base_ref": str, "fit_window": _fit_window,
 }
-
-
-def parse_options(items):
-    """['KEY=VALUE', ...] -> ScrewModel keyword arguments; ValueError naming the bad item."""
-    kw = {}
-    for item in items or []:
-        key, sep, value = item.partition("=")
-        key = key.strip()
-        if not sep or key not in OPTIONS:
-            raise ValueError("--option %r: expected KEY=VALUE with KEY one of %s" % (item, ", ".join(OPTIONS)))
-        try:
-            v = OPTIONS[key](value.strip())
-        except ValueError:
-            raise ValueError("--option %s: %r is not a valid %s" % (key, value, OPTIONS[key].__name__))
-        if key == "geometric_degree" and v != "auto":
-            try:
-                v = int(v)
-            except ValueError:
-                raise ValueError("--option geometric_degree: expected 0..4 or auto, got %r" % value)
-        if key == "ambient":
-            if v not in ("on", "off"):
-                raise ValueError("--option ambient: expected on or off, got %r" % value)
-            v = v == "on"
-        if key == "fit_window":
-            lo, colon, hi = v.partition(":")
-            try:
-                if not colon:
-                    raise ValueError
-                v = (float(lo) if lo.strip() else None, float(hi) if hi.strip() else None)
-            except ValueError:
-                raise ValueError("--option fit_window: expected LO:HI in seconds (e.g. 0:10800 or :10800), got %r" % value)
-        if key == "effects":
-            v = [make_effect(n.strip()) for n in v.split(",") if n.strip()]
-        kw[key] = v
-    return kw
 
 
 def format_report(model):
@@ -84,10 +82,7 @@ def fit_command(args, out):
     from host.runs import RunFormatError, load_runs
     from host.screw.model import ScrewModel
 
-    try:
-        kw = parse_options(args.option)
-    except ValueError as exc:
-        raise UserError(str(exc))
+    kw = options.parse_options(args.option, OPTIONS)
     if getattr(args, "direct", False) or getattr(args, "no_intercept", False):
         raise UserError("--direct/--no-intercept apply to the empirical models, not to --model screw")
     if args.sensors:

@@ -409,9 +409,16 @@ class ScrewModel:
     def predict(self, run):
         """Predicted error (µm) at every row of ``run.errors``: the run's own motion and
         base temperature are simulated from a cold (ambient) screw at the run's start."""
+        if not hasattr(self, "geometry_"):
+            raise ValueError("screw model: predict before fit (fit(runs) first, or load a fitted document)")
         check_run(run, self.geometry_, require_nut=False)
         ctx = self._context(run)
-        return self.thermal_context(ctx) + self.geometric_um(ctx.positions_mm)
+        out = self.thermal_context(ctx) + self.geometric_um(ctx.positions_mm)
+        bad = np.flatnonzero(~np.isfinite(out))
+        if bad.size:
+            raise ValueError("%s: the prediction at errors.csv row %d (%g s) is NaN/inf: a temperature the model reads "
+                             "(base sensor %s) is NaN/inf" % (ctx.run_name, bad[0], run.errors.time_s[bad[0]], self.base_sensor_))
+        return out
 
     def predict_grid(self, run, positions_mm, times_s=None):
         """Thermal + geometric error on a time × position grid (default times: the model grid)."""
@@ -528,25 +535,17 @@ class ScrewModel:
 def choose_geometric_degree(P, resid, max_degree, n_thermal):
     """Degree 0..max_degree of the cold polynomial for the residual after the thermal part.
 
-    Uses host.empirical.geometric (leave-one-out CV over position-averaged points) when
-    that module is present, else AIC = n·ln(RSS/n) + 2(d+1+n_thermal) here.
-    Returns (degree, scores)."""
+    Uses host.empirical.geometric (leave-one-out CV over position-averaged points); when it
+    refuses the data (e.g. fewer than 4 positions), AIC = n·ln(RSS/n) + 2(d+1+n_thermal) here,
+    and the returned method names why. Returns (degree, scores)."""
+    from host.empirical import EmpiricalDataError
+    from host.empirical.geometric import GeometricPolynomial
+
     try:
-        from host.empirical.geometric import GeometricPolynomial
-    except ImportError:
-        GeometricPolynomial = None
-    if GeometricPolynomial is not None:
-        try:
-            gp = GeometricPolynomial(max_degree=max_degree, criterion="cv").fit(P, resid)
-            deg = getattr(gp, "degree_", None)
-            if deg is not None:
-                return int(deg), {"method": "host.empirical.geometric (cv)", "scores": getattr(gp, "scores_", None)}
-        except Exception as exc:  # the empirical module refuses data we can still handle (e.g. < 4 positions)
-            note = str(exc)
-        else:
-            note = "host.empirical.geometric gave no degree_"
-    else:
-        note = "host.empirical.geometric not available"
+        gp = GeometricPolynomial(max_degree=max_degree, criterion="cv").fit(P, resid)
+        return int(gp.degree_), {"method": "host.empirical.geometric (cv)", "scores": gp.scores_}
+    except EmpiricalDataError as exc:
+        note = str(exc)
     n = P.size
     u = P / max(np.max(np.abs(P)), 1.0)
     scores = []

@@ -16,8 +16,8 @@ from firmware.evaluate import Evaluator
 from firmware.table import parse_table
 from host.models import document_hash
 from models_export import export_model
-from models_export.reference import Reference
-from models_export.samples import screw_doc
+from hil_tests.fixtures.reference import Reference
+from hil_tests.fixtures.samples import screw_doc
 
 SLOW = os.environ.get("TCOMP_SLOW") == "1"  # full-size runs; the default is the reduced form
 
@@ -159,7 +159,7 @@ def test_extreme_corners_poly_slope():
     import itertools
 
     rng = random.Random(11)
-    from models_export.samples import poly_slope_doc
+    from hil_tests.fixtures.samples import poly_slope_doc
 
     for seed in range(5):
         doc = poly_slope_doc(random.Random(seed), n_sensors=4, degree=3)

@@ -12,7 +12,7 @@ from host.cli import main
 from host.models import document_hash, load_model, read_document
 from host.runs import load_run
 from models_export import export_model
-from models_export.reference import Reference
+from hil_tests.fixtures.reference import Reference
 
 RUN = Path(__file__).resolve().parents[2] / "data" / "demo" / "v8000_r0_700"
 

@@ -10,7 +10,7 @@ import pytest
 
 from firmware.table import TableError, parse_table
 from models_export import export_model
-from models_export.samples import linear_direct_doc, poly_slope_doc, restamp, screw_doc
+from hil_tests.fixtures.samples import linear_direct_doc, poly_slope_doc, restamp, screw_doc
 
 SLOW = os.environ.get("TCOMP_SLOW") == "1"  # full-size runs; the default is the reduced form
 

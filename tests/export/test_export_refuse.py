@@ -8,7 +8,7 @@ import pytest
 from firmware.table import parse_table
 from host.cli import main
 from models_export import ExportError, export_model
-from models_export.samples import linear_direct_doc, poly_slope_doc, restamp, screw_doc
+from hil_tests.fixtures.samples import linear_direct_doc, poly_slope_doc, restamp, screw_doc
 
 
 def test_huge_slope_coefficient_is_refused_naming_it():

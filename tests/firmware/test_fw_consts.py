@@ -25,8 +25,10 @@ COPIES = {
     ("protocol", "_LINE_OK"): ("frame", "_LINE_OK"),
     ("protocol", "_LINE_CRC"): ("frame", "_LINE_CRC"),
     ("protocol", "_LINE_OVERFLOW"): ("frame", "_LINE_OVERFLOW"),
-    ("protocol", "_TAG_BYTES"): ("auth", "TAG_BYTES"),
-    ("protocol", "_MAX_COUNTER"): ("auth", "MAX_COUNTER"),
+    ("channels", "_NO_DATA"): ("drivers", "NO_DATA"),
+    ("channels", "_FAULT"): ("drivers", "FAULT"),
+    ("ads122c04", "_NO_DATA"): ("drivers", "NO_DATA"),
+    ("max31865", "_FAULT"): ("drivers", "FAULT"),
     ("protocol", "_AUTH_BUSY"): ("auth", "BUSY"),
     ("protocol", "_UNSIGNED"): ("auth", "UNSIGNED"),
     ("modbus", "_UNSIGNED"): ("auth", "UNSIGNED"),
@@ -46,16 +48,55 @@ def test_private_copies_match_their_source():
         assert here[name] == getattr(importlib.import_module("firmware." + src), public), (mod, name)
 
 
-def test_status_bit_copies_match_status_py():
-    from firmware import status
+def test_wire_contract_copies_match_wire_py():
+    from firmware import wire
     checked = 0
     for fn in sorted(os.listdir(FW)):
-        if fn.endswith(".py") and fn != "status.py":
+        if fn.endswith(".py") and fn != "wire.py":
             for k, v in consts(fn[:-3]).items():
-                if k.startswith("_") and hasattr(status, k[1:]):
-                    assert v == getattr(status, k[1:]), (fn, k)
+                if k.startswith("_") and hasattr(wire, k[1:]):
+                    assert v == getattr(wire, k[1:]), (fn, k)
                     checked += 1
-    assert checked >= 11  # app.py and safety.py use their own copies
+    assert checked >= 16  # app.py's and safety.py's status bits, protocol.py's version, tag and counter sizes
+    # the authorisation's sizes are folded where they are used, on both sides of the check
+    for fn in ("auth", "protocol"):
+        assert {"_TAG_BYTES", "_MAX_COUNTER"} <= set(consts(fn)), fn
+
+
+BYTES_CONST = re.compile(r"^(_[A-Z][A-Z0-9_]*) = const\(b\"([^\"]*)\"\)", re.M)
+
+
+def test_protocol_letters_and_texts_are_the_wire_contract():
+    from firmware import wire
+    with open(os.path.join(FW, "protocol.py")) as f:
+        text = f.read()
+    letters = {k[1:]: v for k, v in consts("protocol").items() if len(k) == 2}
+    # every one-letter const is a frame kind, a command or an upload step, with its own ASCII code
+    assert letters and all(chr(v) == k for k, v in letters.items()), letters
+    assert set(letters) == set(wire.FRAME_KINDS) | set(wire.COMMANDS) | set(wire.UPLOAD_STEPS)
+    texts = dict(BYTES_CONST.findall(text))
+    assert texts["_FIRMWARE_VERSION"].encode() == wire.FIRMWARE_VERSION.encode()
+    assert texts["_REF_LETTERS"].encode() == wire.REF_LETTERS
+    for name in ("_ONE_POSITION", "_NO_ARGUMENT", "_SIGNED"):  # command groups the parser dispatches on
+        group = re.search(r"^%s = b\"(\w+)\"" % name, text, re.M).group(1)
+        assert set(group) <= set(wire.COMMANDS), name
+        if name == "_SIGNED":
+            assert group == wire.SIGNED_COMMANDS
+
+
+def test_host_signer_sizes_are_the_wire_contract():
+    # the host signs with the sizes the board checks (one source: firmware/wire.py)
+    from firmware import wire
+    from host import linkauth
+    assert (linkauth.TAG_BYTES, linkauth.MAX_COUNTER) == (wire.TAG_BYTES, wire.MAX_COUNTER)
+
+
+def test_protocol_does_not_import_app():
+    # app.py picks its link (protocol.py or modbus.py); the link takes the contract from wire.py, not app.py
+    for fn in ("protocol.py", "modbus.py"):
+        with open(os.path.join(FW, fn)) as f:
+            assert not re.search(r"^\s*(from firmware\.app import|from firmware import app|import firmware\.app)",
+                                 f.read(), re.M), fn
 
 
 def test_cpython_public_names_are_the_folded_values():
@@ -72,7 +113,7 @@ def test_every_cross_module_name_used_on_micropython_is_public():
     # a module imported by firmware code on the board must still define each name it is asked for
     imp = re.compile(r"^\s*from firmware\.(\w+) import ([\w, ]+)$", re.M)
     for fn in os.listdir(FW):
-        if not fn.endswith(".py") or fn == "board_linux.py":
+        if not fn.endswith(".py") or fn == "linux_adapters.py":
             continue
         with open(os.path.join(FW, fn)) as f:
             text = f.read()
@@ -83,3 +124,13 @@ def test_every_cross_module_name_used_on_micropython_is_public():
                 src_text = f.read()
             for n in (x.split()[0] for x in names.split(",")):
                 assert re.search(r"^(class |def )?%s\b" % re.escape(n), src_text, re.M), (fn, src, n)
+
+
+def test_no_module_tells_cpython_by_a_failing_micropython_import():
+    # micropython.py (the CPython shim for const) makes `import micropython` succeed on CPython too:
+    # a module that must know where it runs asks sys.implementation.name
+    for fn in sorted(os.listdir(FW)):
+        if fn.endswith(".py"):
+            with open(os.path.join(FW, fn)) as f:
+                assert not re.search(r"try:\s*\n\s*(import micropython|from micropython import const)\s*\n\s*except",
+                                     f.read()), fn

@@ -2,6 +2,7 @@
 import pytest
 
 from fwfakes import FakeSPI, FakePin, FakeMAX31865, FakeI2C, FakeADS122C04, pt100_ohm
+from fwmax31865 import config_bit, decode_faults, set_config_bit
 from firmware import max31865 as mx, ads122c04 as ads, rtd
 
 
@@ -21,8 +22,8 @@ def test_max31865_configuration_bits():
     assert pin.v == 1  # chip deselected between transfers
     d2, chip2, _, _ = max_rig(wires=4, filter_hz=60)
     assert chip2.regs[0] & (mx._CONFIG_3WIRE | mx._CONFIG_FILTER_50HZ) == 0
-    assert d2.config_bit(mx._CONFIG_VBIAS)
-    d2.set_config_bit(mx._CONFIG_FILTER_50HZ, True)
+    assert config_bit(d2, mx._CONFIG_VBIAS)
+    set_config_bit(d2, mx._CONFIG_FILTER_50HZ, True)
     assert chip2.regs[0] & mx._CONFIG_FILTER_50HZ
 
 
@@ -47,7 +48,7 @@ def test_max31865_ratio_is_exact_floor_of_product():
 def test_max31865_thresholds_and_fault_decode():
     d, chip, _, _ = max_rig(t=25.0)
     lo, hi = rtd.ratio_of(-20000), rtd.ratio_of(80000)
-    d.set_thresholds_ratio(lo, hi)
+    d.set_limits(lo, hi)
     assert d.low_threshold == d.code_of(lo)
     assert d.high_threshold == d.code_of(hi)
     assert chip.regs[3] == (d.code_of(hi) >> 7) & 0xFF and chip.regs[4] == (d.code_of(hi) << 1) & 0xFF
@@ -56,12 +57,12 @@ def test_max31865_thresholds_and_fault_decode():
     assert d.read_rtd() & 1 == 1
     status = d.fault_status
     assert status & mx._FAULT_HIGH_THRESHOLD
-    assert mx.decode_faults(status) == ["rtd_high_threshold"]
+    assert decode_faults(status) == ["rtd_high_threshold"]
     chip.set_temperature(25.0)
     d.clear_fault()
     assert chip.regs[7] == 0
     assert d.read_rtd() & 1 == 0
-    assert mx.decode_faults(0xFC) == ["rtd_high_threshold", "rtd_low_threshold", "refin_high",
+    assert decode_faults(0xFC) == ["rtd_high_threshold", "rtd_low_threshold", "refin_high",
                                       "refin_low_force_open", "rtdin_low_force_open", "over_under_voltage"]
 
 
@@ -115,7 +116,7 @@ def ads_rig(wires=3, rref=1620.0, t=25.0, **kw):
     i2c, dev = FakeI2C(), FakeADS122C04(rref_ohm=rref)
     dev.set_temperature(t)
     i2c.attach(0x41, dev)
-    return ads.ADS122C04(i2c, 0x41, int(rref * 1000), wires, **kw), dev, i2c
+    return ads.ADS122C04(i2c, 0x41, rref_mohm=int(rref * 1000), wires=wires, **kw), dev, i2c
 
 
 def test_ads122c04_registers_for_3_wire():

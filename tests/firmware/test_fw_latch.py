@@ -8,9 +8,9 @@ from fwhelpers import run_cycles
 
 
 def _table(base_ref):
-    pytest.importorskip("models_export.samples")
+    pytest.importorskip("hil_tests.fixtures.samples")
     from models_export.export import export_model
-    from models_export.samples import restamp, screw_doc
+    from hil_tests.fixtures.samples import restamp, screw_doc
     doc = screw_doc(random.Random(5), segments=8, dt_s=1.0, length_mm=500.0, feed_max_mm_min=12000.0)
     doc["thermal"]["reduced"]["base_ref"] = base_ref
     return export_model(restamp(doc)).table

@@ -8,6 +8,7 @@ fault-detection cycle or sets a bit.
 import pytest
 
 from fwfakes import FakeSPI, FakePin, FakeMAX31865
+from fwmax31865 import one_shot, set_config_bit
 from firmware import max31865 as mx
 
 
@@ -54,11 +55,11 @@ def test_fault_clear_one_shot_and_bit_set_ignore_corrupted_readback(wires, filte
     assert d.configuration == garbage  # the corruption really reaches the driver
     d.clear_fault()
     assert chip.writes[-1] == want | mx._CONFIG_FAULT_CLEAR  # D5, D3, D2 zero, the rest as configured
-    d.one_shot()
+    one_shot(d)
     assert chip.writes[-1] == want | mx._CONFIG_1SHOT
-    d.set_config_bit(mx._CONFIG_AUTO, False)
+    set_config_bit(d, mx._CONFIG_AUTO, False)
     assert chip.writes[-1] == want & ~mx._CONFIG_AUTO
-    d.set_config_bit(mx._CONFIG_AUTO, True)
+    set_config_bit(d, mx._CONFIG_AUTO, True)
     assert chip.writes[-1] == want
     assert chip.regs[0] == want  # the chip ends as configured: V_BIAS on, wiring and filter unchanged
 

@@ -6,7 +6,7 @@ from hypothesis import given, settings, strategies as st
 
 from fwhelpers import modbus_auth_block, rig_app, run_cycles
 from firmware.crc16 import crc16_modbus
-from firmware import status as stw
+from firmware import wire as stw
 
 
 def rtu(body):

@@ -2,7 +2,7 @@
 import pytest
 
 from fwhelpers import rig_app, run_cycles, frames
-from firmware import status as st
+from firmware import wire as st
 from firmware.safety import Limiter
 
 

@@ -339,7 +339,7 @@ def test_model_documents_that_say_something_else_than_what_is_used(capsys, tmp_p
 def test_export_of_a_screw_model_with_a_nan_fixed_end(capsys, tmp_path, field):
     import random
 
-    from models_export.samples import screw_doc
+    from hil_tests.fixtures.samples import screw_doc
 
     doc = screw_doc(random.Random(3), segments=8)
     doc.setdefault("thermal", {}).setdefault(field, {})["fixed_end_mm"] = float("nan")
@@ -354,7 +354,7 @@ def test_export_plan_names_a_nan_fixed_end_when_called_as_a_library():
     import random
 
     from models_export import ExportError, export_model
-    from models_export.samples import screw_doc
+    from hil_tests.fixtures.samples import screw_doc
 
     doc = screw_doc(random.Random(3), segments=8)
     doc["thermal"]["reduced"]["fixed_end_mm"] = float("nan")

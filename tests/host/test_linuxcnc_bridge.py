@@ -3,7 +3,7 @@ counts loop against a motion model, cold-start rule. The same bridge in a real L
 hil_tests/test_hil_linuxcnc.py."""
 import pytest
 
-from hil_tests.rig.frames import FALLBACK, command, crc16
+from host.link import FALLBACK, command, crc16
 from host.cli import main
 from host.linuxcnc.bridge import (BOARD, CRC, LATCH_DONE, LATCH_NONE, LATCH_REFUSED, LINK, STALE, Bridge, Exchange,
                                   Inputs, OffsetRamp, Reading, StreamLink)

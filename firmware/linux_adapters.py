@@ -9,7 +9,8 @@ listed in ``firmware.board``; these small classes map them onto Linux:
   ``machine.SPI`` (no extra package needed);
 - ``SysfsPin(n)``: a GPIO output through /sys/class/gpio, for boards that wire
   MAX31865 chip-selects to GPIOs; ``NullPin`` when the kernel drives CS;
-- ``SerialPort(serial.Serial)``: pyserial as the non-blocking ``serial``.
+- ``SerialPort(serial.Serial)``: pyserial as the non-blocking ``serial`` (a device path or any
+  pySerial URL: ``socket://``, ``spy://``, ``loop://``).
 
 CPython only (not part of the MicroPython image).
 """
@@ -135,7 +136,7 @@ class SysfsPin:
 
 
 class SerialPort:
-    """pyserial ``Serial`` (opened with ``timeout=0``) as the board's serial."""
+    """pyserial port (``serial_for_url(..., timeout=0)``) as the board's serial."""
 
     def __init__(self, ser):
         self._s = ser
@@ -167,5 +168,5 @@ def make_linux_board(config, port):
         return NullPin() if cs is None else SysfsPin(cs)
 
     baud = (config.get("serial") or {}).get("baud", 115200)
-    ser = SerialPort(serial.Serial(port, baud, timeout=0))
+    ser = SerialPort(serial.serial_for_url(port, baud, timeout=0))  # a device path or a pySerial URL
     return Board(config, buses, pin, ser, clock=MonotonicClock(), watchdog=None, reset=None)

@@ -2,7 +2,7 @@
 import pytest
 
 from fwfakes import FakeADS122C04
-from firmware.board_linux import SMBusI2C, SerialPort, MonotonicClock, NullPin
+from firmware.linux_adapters import SMBusI2C, SerialPort, MonotonicClock, NullPin
 from firmware import ads122c04 as ads, rtd
 
 
@@ -42,7 +42,7 @@ def test_ads122c04_through_smbus_adapter():
     dev = FakeADS122C04()
     dev.set_temperature(42.0)
     bus = FakeSMBus(dev)
-    d = ads.ADS122C04(SMBusI2C(bus), 0x40, 1620000, 3, 500)
+    d = ads.ADS122C04(SMBusI2C(bus), 0x40, rref_mohm=1620000, wires=3, idac_ua=500)
     assert dev.started and {"write_byte", "write_byte_data", "read_i2c_block_data"} <= set(bus.calls)
     assert d.data_ready
     assert abs(rtd.temperature_mC(d.ratio(d.read_data())) - 42000) <= 3
@@ -118,7 +118,7 @@ def test_spidev_adapter_ioctl_layout(monkeypatch):
     import fcntl
     import os
     import struct
-    from firmware import board_linux as bl
+    from firmware import linux_adapters as bl
     calls = []
 
     def ioctl(fd, req, arg):

@@ -1,30 +1,34 @@
-"""Controller-side codec for the $TC stream (docs/protocol.md), independent of firmware/ code.
+"""The host side of the board link: the $TC frame codec (docs/protocol.md).
 
-CRC-16/CCITT-FALSE comes from ``binascii.crc_hqx`` so a firmware CRC bug
-cannot cancel itself out in the tests.
+Used by ``tcomp monitor`` and by the HIL rig (hil_tests/rig). It is written
+independently of the firmware's frame code: CRC-16/CCITT-FALSE comes from
+``binascii.crc_hqx``, so a firmware CRC bug cannot cancel itself out.
 """
 import binascii
 from dataclasses import dataclass, field
 
-STATUS_BITS = {
-    0x10000: "CLAMPED", 0x20000: "RATE_LIMITED", 0x40000: "MAG_LIMITED", 0x80000: "HELD",
-    0x100000: "FALLBACK", 0x200000: "NO_TABLE", 0x400000: "LINK_TIMEOUT", 0x800000: "NO_POSITION",
-    0x1000000: "DISABLED", 0x2000000: "UPLOADING", 0x4000000: "RECOVERING", 0x8000000: "REF_PENDING",
-}
-HELD = 0x80000
-FALLBACK = 0x100000
-RECOVERING = 0x4000000
-SENSOR_MASK = 0xFFFF
+from firmware import wire
+from firmware.wire import FALLBACK, HELD, PROTOCOL_VERSION, RATE_LIMITED, RECOVERING, SENSOR_MASK  # noqa: F401
+
+# {bit: name} of the flag bits above the sensor bits, in bit order, read from the wire contract
+STATUS_BITS = dict(sorted((value, name) for name, value in vars(wire).items()
+                          if name.isupper() and isinstance(value, int) and value > SENSOR_MASK
+                          and value & (value - 1) == 0))
 
 
 def crc16(body):
     return binascii.crc_hqx(body, 0xFFFF)
 
 
+def body(fields):
+    """``TC,<fields>``: the bytes the CRC covers (and an authorised command's tag, up to its counter)."""
+    return b"TC," + b",".join(f if isinstance(f, bytes) else str(f).encode() for f in fields)
+
+
 def command(*fields):
     """``$TC,<fields>*CRC\\r\\n`` as bytes."""
-    body = b"TC," + b",".join(f if isinstance(f, bytes) else str(f).encode() for f in fields)
-    return b"$" + body + b"*%04X\r\n" % crc16(body)
+    b = body(fields)
+    return b"$" + b + b"*%04X\r\n" % crc16(b)
 
 
 @dataclass

@@ -6,7 +6,8 @@ values, or raises ValueError naming the key, e.g.
 a typo never silently falls back to a default.
 
 This is the friendly validator, run on the host (``tcomp flash --config``,
-``tcomp hil --config``) and by the tests. The board runs firmware/bootcfg.py
+``tcomp hil --config``) and by the tests, so it lives in host/ (it was
+firmware/config.py, a name too close to bootcfg.py). The board runs firmware/bootcfg.py
 instead: the same keys, ranges and rules with terse messages (``config
 <key>: <value>``), 0.5 kB less .mpy than this module was with the tables;
 the key tables live there, so both read the same ranges.

@@ -1,5 +1,4 @@
 """tcomp import CSV --out DIR (--mapping MAP.json | --time COL --temp COL... --error COL...)"""
-HELP = "turn a plain CSV log (time, temperatures, displacements, spindle) into a tcomp run folder"
 
 
 def add_arguments(p):

@@ -1,0 +1,88 @@
+"""The one parser of the repeatable ``--option KEY=VALUE`` flag (tcomp fit, select, compare).
+
+A verb passes a table ``{key: converter}``; a converter turns the text after ``=`` into a value or
+raises ValueError with the reason, which becomes "--option KEY='TEXT': reason". Without a table
+any key is accepted and the value is read as JSON (numbers, true/false, lists) or kept as a word.
+"""
+import json
+import math
+
+from host.cli import UserError
+
+
+def split_option(item, expected="KEY=VALUE", flag="--option"):
+    """'KEY=VALUE' -> (KEY, VALUE) stripped; UserError when the '=' or the key is missing."""
+    key, sep, value = item.partition("=")
+    key = key.strip()
+    if not sep or not key:
+        raise UserError("%s %r: expected %s" % (flag, item, expected))
+    return key, value.strip()
+
+
+def json_or_word(text):
+    """A value read as JSON when it is JSON (3, 0.5, true, [1,2]), else the plain word (offset)."""
+    try:
+        return json.loads(text)
+    except ValueError:
+        return text
+
+
+def number(kind, minimum=None):
+    """Converter to a finite ``kind`` (int or float), at least ``minimum`` when given."""
+    def convert(text):
+        try:
+            value = kind(text)
+        except ValueError:
+            raise ValueError("not a valid %s" % kind.__name__)
+        if not math.isfinite(value):
+            raise ValueError("must be a finite number")
+        if minimum is not None and value < minimum:
+            raise ValueError("must be >= %g" % minimum)
+        return value
+    return convert
+
+
+def numbers(kind, minimum=None):
+    """Converter to a list of ``number(kind, minimum)`` values separated by '/' (e.g. 0/1800/7200)."""
+    one = number(kind, minimum)
+
+    def convert(text):
+        try:
+            return [one(x) for x in text.split("/")]
+        except ValueError as exc:
+            raise ValueError("not a valid list of numbers separated by / (%s)" % exc)
+    return convert
+
+
+def boolean(text):
+    """Converter accepting true or false (any case)."""
+    word = text.lower()
+    if word not in ("true", "false"):
+        raise ValueError("not a valid true or false")
+    return word == "true"
+
+
+def choice(*words):
+    """Converter accepting one of ``words``."""
+    def convert(text):
+        if text not in words:
+            raise ValueError("expected %s" % " or ".join(words))
+        return text
+    return convert
+
+
+def parse_options(items, converters=None, flag="--option"):
+    """``--option`` items -> {key: value}; a bad item is a UserError naming it and the reason."""
+    out = {}
+    for item in items or ():
+        key, text = split_option(item, flag=flag)
+        if converters is None:
+            out[key] = json_or_word(text)
+            continue
+        if key not in converters:
+            raise UserError("%s %r: expected KEY=VALUE with KEY one of %s" % (flag, item, ", ".join(sorted(converters))))
+        try:
+            out[key] = converters[key](text)
+        except ValueError as exc:
+            raise UserError("%s %s=%r: %s" % (flag, key, text, exc))
+    return out
