@@ -99,6 +99,7 @@ class Evaluator:
             lo, hi = table.env_lo[i], table.env_hi[i]
             self.temps[i] = 0 if lo <= 0 <= hi else lo
         self.flags = 0
+        self.extrap = 0  # bit i: sensor i is evaluated outside the table's training range (inside the envelope or clamped to it)
         self.S = t.S0
         self.pos_ref = t.pos_ref
         self.lo = [_MAXV] * _N_SLOTS
@@ -195,12 +196,16 @@ class Evaluator:
             self.settle()  # a latch is a cold start: the screw in equilibrium with the air
 
     def update(self):
-        """Recompute the temperature-dependent terms from ``temps``; flag clamped sensors."""
+        """Recompute the temperature-dependent terms from ``temps``; flag clamped sensors (``flags``)
+        and sensors evaluated outside the training range (``extrap``)."""
         t = self.table
         chk = self.check
         temps = self.temps
         lo = t.env_lo
         hi = t.env_hi
+        tlo = t.train_lo
+        thi = t.train_hi
+        ex = 0
         ref = self.ref
         b = t.b
         shb = t.shb
@@ -217,6 +222,8 @@ class Evaluator:
             elif v > hi[i]:
                 v = hi[i]
                 fl |= 1 << i
+            if v < tlo[i] or v > thi[i]:
+                ex |= 1 << i
             d = v - ref[i]
             if chk:
                 self._note(_SLOT_D, d)
@@ -227,6 +234,7 @@ class Evaluator:
                 self._note(_SLOT_S, s)
         self.S = s
         self.flags = (self.flags & ~_SENSOR_BITS) | fl
+        self.extrap = ex
 
     # -- outputs --------------------------------------------------------------
     def _clamp_pos(self, pos):
