@@ -49,6 +49,9 @@ _REFS_UNSAVED = const(3)
 _WEAR_CAP = const(4)
 _WEAR_REFILL_MS = const(60000)
 BUSY = b"busy"  # relatch()'s answer when the flash budget is used up
+# The screw state is written to heat.bin every _HEAT_SAVE_MS (docs/firmware.md, "Warm restarts": the
+# wear figure), at every latch (zeroed) and before an X reset (one flash token).
+_HEAT_SAVE_MS = const(600000)
 _UPLOAD_IDLE_MS = const(60000)  # an upload without a chunk for this long is abandoned
 
 
@@ -124,6 +127,9 @@ class App:
         self.unlatched = False
         self.unsettled = False  # screw state not yet set in equilibrium with a good air reading
         self.ref_state = 0
+        self.heat = None  # firmware.warmstate.HeatStore of a screw table with latched references
+        self.heat_ms = 0  # since the last state write
+        self.warm = False  # the screw state was restored from heat.bin (not settled at the first good cycle)
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
         self.wear = _WEAR_CAP  # flash-write tokens (spend_flash)
@@ -194,10 +200,30 @@ class App:
                 st = _REFS_STORED
         self.ref_state = st
         self.unlatched = st > _REFS_UNSAVED
-        # the screw state starts in equilibrium with the air at the first cycle every needed sensor reads good
+        # the screw state starts in equilibrium with the air at the first cycle every needed sensor reads good,
+        # unless this is a warm restart: the stored references are in use and heat.bin holds a state for them
         self.unsettled = self.screw
+        self.warm = False
         self.step_ms = 0
+        self._open_heat(table, ev, st == _REFS_STORED)
         self._span()
+
+    def _open_heat(self, table, ev, restore):
+        if self.heat is not None:
+            self.heat.close()
+            self.heat = None
+        if not self.screw or table.ref_mode != 1:
+            return
+        from firmware.warmstate import HeatStore, ref_tag
+        h = HeatStore(self.store.dir, table, ref_tag(ev.ref))
+        T = h.load() if restore else None
+        if T is not None:
+            ev.T[:] = T
+            ev.settle_restored()
+            self.warm = True
+        if h.open():
+            self.heat = h
+        self.heat_ms = 0
 
     def _span(self):
         t = self.table
@@ -213,6 +239,14 @@ class App:
         ev.latch_references()
         self.unlatched = False
         self.ref_state = _REFS_LATCHED if self.store.save_refs(t, ev.ref) else _REFS_UNSAVED
+        h = self.heat
+        if h is not None:  # a latch is a cold start: the settled state, stored under the new references
+            from firmware.warmstate import ref_tag
+            self.warm = False
+            self.unsettled = False
+            h.retag(ref_tag(ev.ref))
+            h.save(ev.T)
+            self.heat_ms = 0
 
     def relatch(self, check_only=False):
         """Latch the reference temperatures now (the controller's cold start) and store them.
@@ -361,7 +395,10 @@ class App:
             ev.update()
             if self.unsettled and not needed:
                 self.unsettled = False
-                ev.settle()
+                if self.warm:
+                    ev.da0 = ev.da  # the restored state keeps its heat; the air steps on from now
+                else:
+                    ev.settle()
             if self.screw:
                 dtm = t.dt_ms
                 self.step_ms += dt
@@ -373,6 +410,13 @@ class App:
                     if k >= _MAX_CATCHUP:  # after a stall: drop the time rather than burst
                         self.step_ms = 0
                         break
+                h = self.heat
+                if h is not None and not self.unsettled:
+                    v = self.heat_ms + dt
+                    if v >= _HEAT_SAVE_MS:
+                        v = 0
+                        h.save(ev.T)  # allocation-free (firmware/warmstate.py)
+                    self.heat_ms = v
             pos = self.pos if self.have_pos else ev.pos_ref
             # the model at last cycle's position too: the limiter tells motion from drift
             raw_prev = ev.offset_at(self.pos_used)
@@ -430,6 +474,9 @@ class App:
             self.wait(start)
 
     def reset(self):
+        h = self.heat
+        if h is not None and not self.unsettled and self.spend_flash():
+            h.save(self.ev.T)  # the restart resumes from the state of this very moment
         self.store.abort()
         r = self.board.reset
         if r is not None:
