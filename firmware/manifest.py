@@ -12,10 +12,15 @@
 #            which is what `tcomp flash` ships (the board file may pick either mode)
 #   drivers  sensor driver names of firmware/drivers.py DRIVERS: only those chips' modules;
 #            unset: every driver
+#   boards   example board files of firmware/boards/ to ship (names in BOARD_FILES); unset:
+#            rp2040, main.py's fallback and the board `tcomp flash --config` generates around
 
 metadata(description="tcomp firmware: thermal-error compensation on the board", version="0.1.0", license="MIT")
 
-options.defaults(serial=None, drivers=None)
+# the example board files that run on MicroPython (boards/linux.py runs under CPython: NOT_ON_BOARD)
+BOARD_FILES = ("rp2040",)
+
+options.defaults(serial=None, drivers=None, boards=("rp2040",))
 
 if options.serial not in (None, "stream", "modbus"):
     raise ValueError("serial must be stream or modbus, got %r" % (options.serial,))
@@ -25,8 +30,12 @@ if options.serial not in (None, "stream", "modbus"):
 package("firmware", files=(
     "main.py", "board.py", "bootcfg.py", "app.py", "channels.py", "drivers.py", "rtd.py",
     "evaluate.py", "table.py", "crc32.py", "slots.py", "safety.py", "auth.py", "sha256.py", "crc16.py",
-    "boards/__init__.py", "boards/rp2040.py",  # main.py's fallback and tcomp flash --config's board
+    "boards/__init__.py",
 ), base_path="..")
+for board in options.boards:
+    if board not in BOARD_FILES:
+        raise ValueError("boards: %r is not one of %s" % (board, ", ".join(BOARD_FILES)))
+    package("firmware", files=("boards/%s.py" % board,), base_path="..")
 
 # the serial link: app.py imports one of them, by the config's serial mode
 if options.serial in (None, "stream"):

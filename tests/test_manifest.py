@@ -20,7 +20,8 @@ def unlisted(fw_dir):
     """Files of ``fw_dir`` (a firmware/ folder) that its manifest neither lists nor leaves off on
     purpose, and NOT_ON_BOARD entries that name no file or a listed one."""
     manifest = os.path.join(fw_dir, "manifest.py")
-    listed = {e.target[len("firmware/"):] for e in load_manifest(manifest).entries}
+    boards = load_manifest(manifest).names[os.path.abspath(manifest)]["BOARD_FILES"]
+    listed = {e.target[len("firmware/"):] for e in load_manifest(manifest, boards=boards).entries}
     excluded = set(not_on_board(manifest))
     present = set()
     for folder, dirs, names in os.walk(fw_dir):
@@ -43,6 +44,11 @@ def test_the_unlisted_check_catches_a_new_module(tmp_path):
     (fw / "boards" / "stm32.py").write_text("X = 1\n")
     os.remove(fw / "wire.py")  # a left-off file that no longer exists is a stale entry
     assert unlisted(str(fw)) == (["boards/stm32.py", "newdriver.py"], ["wire.py"])
+    # a board file is listed by naming it in BOARD_FILES (shipped when the boards option asks for it)
+    text = (fw / "manifest.py").read_text().replace('BOARD_FILES = ("rp2040",)', 'BOARD_FILES = ("rp2040", "stm32")')
+    (fw / "manifest.py").write_text(text)
+    assert unlisted(str(fw)) == (["newdriver.py"], ["wire.py"])
+    assert "firmware/boards/stm32.py" in {e.target for e in load_manifest(str(fw / "manifest.py"), boards=("stm32",)).entries}
 
 
 def test_the_manifest_is_not_board_code():
@@ -78,6 +84,9 @@ def test_serial_modes_and_drivers_select_modules():
     # the manifest's default drivers are the firmware's driver table (drivers.py: module per name)
     from firmware.drivers import DRIVERS
     assert {t for t in every if t[len("firmware/"):-3] in DRIVERS} == {"firmware/%s.py" % d for d in DRIVERS}
+    assert "firmware/boards/rp2040.py" in every and "firmware/boards/rp2040.py" not in targets(boards=())
+    with pytest.raises(BuildError, match="boards: 'pico' is not one of rp2040"):
+        load_manifest(BOARD_MANIFEST, boards=("pico",))
     with pytest.raises(BuildError, match="serial must be stream or modbus"):
         load_manifest(BOARD_MANIFEST, serial="rtu")
     with pytest.raises(BuildError, match="firmware/pt1000.py: listed in .* does not exist"):
