@@ -22,14 +22,14 @@ import os
 
 import pytest
 
-from fwhelpers import compile_mpy, run_micropython, make_table, HERE, HEAPLOCK_SCRIPT
+from fwhelpers import compile_mpy, run_micropython, make_table, HEAPLOCK_SCRIPT
 
 HEAP = {"stream": "138K", "modbus": "132K"}
 
 
 @pytest.fixture(scope="module")
-def mpy_dir(tmp_path_factory):
-    return str(compile_mpy(str(tmp_path_factory.mktemp("mpy")), [os.path.join(HERE, "fwfakes.py")]))
+def mpy_dir():
+    return str(compile_mpy(fakes=True))
 
 
 @pytest.mark.micropython
