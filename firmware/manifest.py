@@ -29,7 +29,7 @@ if options.serial not in (None, "stream", "modbus"):
 # sha256.py is loaded only where the port has no hashlib; it is shipped because that is not known here.
 package("firmware", files=(
     "main.py", "board.py", "bootcfg.py", "app.py", "channels.py", "drivers.py", "rtd.py",
-    "evaluate.py", "table.py", "crc32.py", "slots.py", "safety.py", "auth.py", "sha256.py", "crc16.py",
+    "evaluate.py", "table.py", "crc32.py", "slots.py", "warmstate.py", "safety.py", "auth.py", "sha256.py", "crc16.py",
     "boards/__init__.py",
 ), base_path="..")
 for board in options.boards:
