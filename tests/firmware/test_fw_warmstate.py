@@ -10,7 +10,7 @@ import struct
 
 import pytest
 
-from fwhelpers import HERE, compile_mpy, frames, provision, run_cycles, run_micropython, scmd
+from fwhelpers import compile_mpy, frames, provision, run_cycles, run_micropython, scmd
 
 SAVE_MS = 600000
 TEMPS = (22.0, 23.0)  # T1 base sensor, T2 the air
@@ -225,7 +225,7 @@ for k in CUTS:
 
 @pytest.mark.micropython
 def test_state_writes_in_the_heap_locked_cycle_and_power_cuts_on_micropython(tmp_path, screw_table):
-    mpy = compile_mpy(str(tmp_path / "mpy"), [os.path.join(HERE, "fwfakes.py")])
+    mpy = compile_mpy(fakes=True)
     (tmp_path / "table_a.bin").write_bytes(screw_table)
     n = 18 + 4 * 8
     cuts = sorted(random.Random(13).sample(range(1, n), 5)) + [n]
