@@ -49,9 +49,6 @@ _REFS_UNSAVED = const(3)
 _WEAR_CAP = const(4)
 _WEAR_REFILL_MS = const(60000)
 BUSY = b"busy"  # relatch()'s answer when the flash budget is used up
-# The screw state is written to heat.bin every _HEAT_SAVE_MS (docs/firmware.md, "Warm restarts": the
-# wear figure), at every latch (zeroed) and before an X reset (one flash token).
-_HEAT_SAVE_MS = const(600000)
 _UPLOAD_IDLE_MS = const(60000)  # an upload without a chunk for this long is abandoned
 
 
@@ -128,7 +125,6 @@ class App:
         self.unsettled = False  # screw state not yet set in equilibrium with a good air reading
         self.ref_state = 0
         self.heat = None  # firmware.warmstate.HeatStore of a screw table with latched references
-        self.heat_ms = 0  # since the last state write
         self.warm = False  # the screw state was restored from heat.bin (not settled at the first good cycle)
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
@@ -208,6 +204,14 @@ class App:
         self._open_heat(table, ev, st == _REFS_STORED)
         self._span()
 
+    def _settle(self, ev):
+        # the first cycle in which every sensor the table needs reads good
+        self.unsettled = False
+        if self.warm:
+            ev.da0 = ev.da  # the restored state keeps its heat; the air steps on from now
+        else:
+            ev.settle()
+
     def _open_heat(self, table, ev, restore):
         if self.heat is not None:
             self.heat.close()
@@ -223,7 +227,6 @@ class App:
             self.warm = True
         if h.open():
             self.heat = h
-        self.heat_ms = 0
 
     def _span(self):
         t = self.table
@@ -246,7 +249,6 @@ class App:
             self.unsettled = False
             h.retag(ref_tag(ev.ref))
             h.save(ev.T)
-            self.heat_ms = 0
 
     def relatch(self, check_only=False):
         """Latch the reference temperatures now (the controller's cold start) and store them.
@@ -394,11 +396,7 @@ class App:
                     self._latch(ev, t)
             ev.update()
             if self.unsettled and not needed:
-                self.unsettled = False
-                if self.warm:
-                    ev.da0 = ev.da  # the restored state keeps its heat; the air steps on from now
-                else:
-                    ev.settle()
+                self._settle(ev)
             if self.screw:
                 dtm = t.dt_ms
                 self.step_ms += dt
@@ -410,13 +408,8 @@ class App:
                     if k >= _MAX_CATCHUP:  # after a stall: drop the time rather than burst
                         self.step_ms = 0
                         break
-                h = self.heat
-                if h is not None and not self.unsettled:
-                    v = self.heat_ms + dt
-                    if v >= _HEAT_SAVE_MS:
-                        v = 0
-                        h.save(ev.T)  # allocation-free (firmware/warmstate.py)
-                    self.heat_ms = v
+                if self.heat is not None and not self.unsettled:
+                    self.heat.tick(dt, ev.T)  # allocation-free (firmware/warmstate.py)
             pos = self.pos if self.have_pos else ev.pos_ref
             # the model at last cycle's position too: the limiter tells motion from drift
             raw_prev = ev.offset_at(self.pos_used)

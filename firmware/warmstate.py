@@ -22,6 +22,9 @@ from firmware.crc16 import crc16_ccitt
 
 _HEAD = const(16)
 _SEQ_MAX = const(0x3FFFFFFF)  # a small int on a 32-bit port; at one write per 10 min, 20 000 years
+# Written every _SAVE_MS of cycle time (docs/firmware.md, "Warm restarts of the screw state": the
+# wear figure), at every latch (zeroed) and before an X reset (firmware/app.py).
+_SAVE_MS = const(600000)
 
 
 def ref_tag(refs):
@@ -42,6 +45,7 @@ class HeatStore:
         self.buf = bytearray(self.size)
         self.seq = 0
         self.f = None
+        self.ms = 0  # cycle time since the last write
         self.retag(tag)
 
     def retag(self, tag):
@@ -105,6 +109,14 @@ class HeatStore:
             self.f = None
             return False
 
+    def tick(self, dt, T):
+        """``dt`` ms of cycle time passed: write ``T`` when _SAVE_MS have since the last write."""
+        v = self.ms + dt
+        if v >= _SAVE_MS:
+            self.save(T)
+            v = 0
+        self.ms = v
+
     def save(self, T):
         """Write ``T`` into the slot after the last record's (no allocation); False if the flash refused."""
         f = self.f
@@ -127,6 +139,7 @@ class HeatStore:
         c = crc16_ccitt(b, 0, o)
         b[o] = c & 0xFF
         b[o + 1] = c >> 8
+        self.ms = 0
         try:
             f.seek(self.size if s & 1 else 0)
             f.write(b)

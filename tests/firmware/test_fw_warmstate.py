@@ -202,7 +202,7 @@ for k in CUTS:
     t_old = HeatStore(".", app.table, h.tag).load()
     view = memoryview(h.buf)[:k]
     h.f = Cut(real, view)
-    app.heat_ms = 600000 - 1000  # the next cycle writes
+    h.ms = 600000 - 1000  # the next cycle writes
     gc.collect()
     free = gc.mem_free()
     micropython.heap_lock()
