@@ -1,10 +1,12 @@
 """Scenario 7: the steady-state cycle runs under micropython.heap_lock() on the real interpreter.
 
-The whole rig process runs locked between two control-channel gates: the
+The rig process runs locked between two control-channel gates: the
 firmware's cycles (chip reads over the simulated buses, conversion,
 evaluation, limiting, $TC frames, parsing position reports and queries
-from the pty) and the simulation around them. Any allocation raises
-MemoryError inside the firmware and the DUT reports a crash.
+from the pty) and the simulated clock and serial port. Only the simulated
+chips' own work inside a transfer runs unlocked (hil_tests/sim/buses.py: they
+stand for hardware; on the 32-bit port their integers pass 2**30). Any
+allocation raises MemoryError inside the firmware and the DUT reports a crash.
 """
 import os
 

@@ -153,7 +153,11 @@ def test_the_build_does_not_depend_on_where_the_checkout_is(tmp_path):
     for (t, p), (t2, p2) in zip(here.files, there.files):
         data = open(p, "rb").read()
         assert t == t2 and data == open(p2, "rb").read() and ROOT.encode() not in data
+    # one option set: no manifest of ours overrides it for a file
     assert fwbuild.MPY_CROSS_ARGS == ("-O3",)
+    for manifest in (BOARD_MANIFEST, os.path.join(ROOT, "hil_tests", "manifest.py"),
+                     os.path.join(ROOT, "tests", "firmware", "manifest.py")):
+        assert [e.target for e in load_manifest(manifest).entries if e.opt is not None] == []
 
 
 def test_flash_tests_and_rig_get_the_same_firmware_bytes(tmp_path):

@@ -27,6 +27,9 @@
 #define MICROPY_PY_SYS_STDIO_BUFFER         (1)
 #define MICROPY_PYEXEC_ENABLE_EXIT_CODE_HANDLING (1)
 #define MICROPY_PY_MICROPYTHON_HEAP_LOCKED  (1)
+// tracebacks of exceptions raised under heap_lock (a MemoryError in the cycle names its line)
+#define MICROPY_ENABLE_EMERGENCY_EXCEPTION_BUF (1)
+#define MICROPY_EMERGENCY_EXCEPTION_BUF_SIZE (512)
 #define MICROPY_EPOCH_IS_1970               (1)
 #define MICROPY_PERSISTENT_CODE_LOAD        (1)
 #define MICROPY_EMIT_X86                    (0)  // bytecode only, as the .mpy files we load

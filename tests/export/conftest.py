@@ -38,15 +38,15 @@ def mpy_root(tmp_path_factory):
     return "%s:%s" % (root, build().root)
 
 
-def run_micropython(root, script, args=(), heapsize="64K", timeout=120, interp=None):
+def run_micropython(path, script, args=(), heapsize="64K", timeout=120, interp=None):
     """Run ``script`` (path) on MicroPython (``interp``, default the chosen one: TCOMP_MICROPYTHON,
-    hil_tests/rig/interpreters.py) with MICROPYPATH=root; returns stdout. A missing interpreter fails."""
+    hil_tests/rig/interpreters.py) with MICROPYPATH=path; returns stdout. A missing interpreter fails."""
     from hil_tests.rig import interpreters
     try:
         argv = (interp or interpreters.get()).argv(heapsize)
     except interpreters.InterpreterMissing as e:
         pytest.fail(str(e))
-    env = dict(os.environ, MICROPYPATH=str(root))
+    env = dict(os.environ, MICROPYPATH=str(path))
     proc = subprocess.run(argv + [str(script)] + [str(a) for a in args],
                           capture_output=True, text=True, env=env, timeout=timeout)
     if proc.returncode != 0:

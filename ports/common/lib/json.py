@@ -1,6 +1,7 @@
 """json for tcomp's MicroPython ports (the core has no json module without extmod).
 
-``dumps``/``dump`` write compact JSON (``separators`` as CPython's default: ", " and ": ");
+``dumps``/``dump`` write JSON (``separators`` as CPython's default: ", " and ": "; in C when
+the port has ``_json``, ports/common/modjson_dumps.c);
 ``loads``/``load`` parse what CPython's json writes. Enough for the HIL rig's control
 channel and the DUT's spec file; not a validating parser.
 """
@@ -58,10 +59,18 @@ def _dump(o, parts, item_sep, key_sep):
 
 
 def dumps(obj, separators=None):
+    if separators is None and _cdumps is not None:
+        return _cdumps(obj)
     item_sep, key_sep = separators or (", ", ": ")
     parts = []
     _dump(obj, parts, item_sep, key_sep)
     return "".join(parts)
+
+
+try:
+    from _json import dumps as _cdumps  # ports/common/modjson_dumps.c: the core's JSON printers
+except ImportError:
+    _cdumps = None
 
 
 def dump(obj, stream, separators=None):
