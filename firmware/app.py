@@ -468,8 +468,9 @@ class App:
 
     def reset(self):
         h = self.heat
-        if h is not None and not self.unsettled and self.spend_flash():
-            h.save(self.ev.T)  # the restart resumes from the state of this very moment
+        ev = self.ev
+        if h is not None and ev is not None and not self.unsettled and self.spend_flash():
+            h.save(ev.T)  # the restart resumes from the state of this very moment
         self.store.abort()
         r = self.board.reset
         if r is not None:
