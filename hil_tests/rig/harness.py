@@ -43,7 +43,10 @@ class RigError(RuntimeError):
 
 def micropython_path():
     """The chosen MicroPython (hil_tests/rig/interpreters.py: TCOMP_MICROPYTHON), None when it is not there."""
-    it = interpreters.get()
+    try:
+        it = interpreters.get()
+    except interpreters.InterpreterMissing:
+        return None
     return it.path if it.exists() else None
 
 

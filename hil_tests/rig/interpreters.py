@@ -38,7 +38,8 @@ class Interpreter:
 
     def require(self):
         if not self.exists():
-            raise InterpreterMissing("MicroPython (%s) not found at %s: %s" % (self.kind, self.path, self.about))
+            raise InterpreterMissing("MicroPython (%s) not found at %s: %s; or set %s to a MicroPython executable"
+                                     % (self.kind, self.path, self.about, ENV))
         return self
 
     def argv(self, heap=None):
