@@ -67,9 +67,10 @@ HEAPS = {
     "fw_heaplock_modbus": {32: "92K", 64: "132K"},
     # tests/firmware/test_fw_micropython.py: boot, authorised upload, faults (smallest 100 kB on 32 bits)
     "fw_scenario": {32: "112K", 64: "156K"},
-    # the HIL rig's DUT: firmware + simulated chips + control channel, run from .mpy (every MicroPython
-    # HIL scenario passes at 120 kB on 32 bits; 160 kB worked on 64 bits)
-    "rig": {32: "128K", 64: "192K"},
+    # the HIL rig's DUT: firmware + simulated chips + control channel, run from .mpy. On 32 bits every
+    # MicroPython scenario passed at 112, 120 and 128 kB, but the 90-min soak once ran out at 116 kB
+    # (a fragmented heap: not monotonic), so 20 % over 120 kB; 160 kB worked on 64 bits
+    "rig": {32: "144K", 64: "192K"},
 }
 
 
