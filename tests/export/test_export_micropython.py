@@ -168,7 +168,7 @@ def test_loader_verdicts_match_cpython(tmp_path, mp):
     path.write_text(json.dumps([b.hex() for b in bufs]))
     script = tmp_path / "loader.py"
     script.write_text(LOADER_SCRIPT % dict(path=str(path)))
-    # the 32-bit port parses JSON in Python (ports/linux32/build/lib/json.py): 163 format-3 tables need > 256K
+    # 163 format-3 tables as hex in JSON: 256K ran out on the 32-bit port while its json was pure Python
     got = mp.run(script, heapsize="512K").split("\n")[:-1]
     cp = []
     for b in bufs:
