@@ -21,12 +21,13 @@ FEW = "T1,T2"
 
 
 def _fail(capsys, argv):
-    """Run ``tcomp argv``; assert exit status 2 and one error line (the first line of a listing); return it."""
+    """Run ``tcomp argv``; assert exit status 2 and one error line; return it."""
     rc = main(argv)
     err = capsys.readouterr().err.strip()
     assert rc == 2, err
     assert err.startswith("tcomp %s: error: " % argv[0]), err
     assert "Traceback" not in err
+    assert "\n" not in err, err  # one line: no warning or listing around it
     return err
 
 
