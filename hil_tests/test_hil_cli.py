@@ -9,6 +9,7 @@ import threading
 import numpy as np
 import pytest
 
+from firmware.wire import RATE_LIMITED
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
 from hil_tests.rig.play import poly_slope_bound_um
 
@@ -50,7 +51,7 @@ def test_tcomp_hil_answers_every_errors_row(tmp_path, short_run, interpreter, ca
     assert set(ans[0]) == {"time_s", "position_mm", "offset_um", "status"}
     pred = load_model(doc).predict(run)
     for a, p in zip(ans, pred):
-        if int(a["status"], 16) & 0x20000:
+        if int(a["status"], 16) & RATE_LIMITED:
             continue  # rate limited: lags the model on purpose
         bound = ex.report["max_error_um"] + poly_slope_bound_um(doc, run, SENSORS, a["position_mm"]) + 0.05 + 1e-9
         assert abs(a["offset_um"] - p) <= bound, (a, p, bound)

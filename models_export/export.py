@@ -5,7 +5,7 @@ from firmware.crc32 import crc32
 from models_export.certify import DEFAULT_ENVELOPE_MARGIN_K, LIMITS_UM, OU_PER_UM, ExportError, Model
 from models_export.document import document_hash
 from models_export.plan import Planner
-from models_export.tableformat import pack
+from models_export.tableformat import VERSION, pack
 
 
 class Export:
@@ -99,7 +99,7 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
         envelope["reference_position_um"] = model.pos_ref
     report = {
         "model_kind": model.kind,
-        "table_format": 1,
+        "table_format": VERSION,  # the version byte of the table written (firmware/table.py owns it)
         "table_bytes": len(table),
         "crc32": "%08x" % crc32(table[:-4]),
         "units": {"offset": "0.01 um", "slope": "0.01 um/m", "temperature": "milli-degC", "position": "um"},

@@ -42,6 +42,21 @@ def scenario(seed, effects, noise, protocols=PROTOCOLS):
     return [simulate_run(p, effects=effects, seed=seed, noise_um=noise) for p in protocols]
 
 
+def _cpu_s():
+    """CPU seconds of this process and its reaped children (discover's worker pool is shut down before it returns)."""
+    t = os.times()
+    return t.user + t.system + t.children_user + t.children_system
+
+
+def timed_discover(runs, family, jobs, times, cpu):
+    """One workflow on already simulated runs; appends its wall and CPU seconds (the twin's own time excluded)."""
+    t0, c0 = time.perf_counter(), _cpu_s()
+    res = discover(runs, family, jobs=jobs)
+    times.append(time.perf_counter() - t0)
+    cpu.append(_cpu_s() - c0)
+    return res
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--seeds", type=int, default=40)
@@ -58,16 +73,14 @@ def main(argv=None):
     null_ratio, null_r, null_flagged = [], [], 0
     hits = {e: [0, 0] for e in effects}  # named first, halved
     floor = {e: [] for e in effects}  # held-out RMSE after / laser noise
-    times = []
+    times, cpu = [], []
     for k in range(args.seeds):
         seed = args.first_seed + k
         rng = np.random.default_rng(seed)
         noise = float(rng.uniform(0.3, 1.0))
-        t0 = time.perf_counter()
         null_effects = {"reversal_error": 0.0} if k % 2 else None
         fam = ScrewFamily()
-        res = discover(scenario(seed, null_effects, noise, protocols), fam, jobs=args.jobs)
-        null_times.append(time.perf_counter() - t0)
+        res = timed_discover(scenario(seed, null_effects, noise, protocols), fam, args.jobs, null_times, cpu)
         null_false += bool(res.effects)
         null_ratio.append(res.before.rmse() / noise)
         diag = residual_diagnostic(res, fam)
@@ -79,9 +92,7 @@ def main(argv=None):
             seed, noise, " (bidirectional)" if null_effects else "", ",".join(res.effects) or "-", 100 * best, null_ratio[-1], null_r[-1])]
         for e in effects:
             mag = EFFECTS[e].default * float(rng.uniform(0.5, 1.5))
-            t0 = time.perf_counter()
-            res = discover(scenario(seed, {e: mag}, noise, protocols), ScrewFamily(), jobs=args.jobs)
-            times.append(time.perf_counter() - t0)
+            res = timed_discover(scenario(seed, {e: mag}, noise, protocols), ScrewFamily(), args.jobs, times, cpu)
             first = res.effects[:1] == [e]
             halved = res.after.rmse() <= 0.5 * res.before.rmse()
             hits[e][0] += first
@@ -91,9 +102,7 @@ def main(argv=None):
         if not args.no_pairs:
             pair = PAIRS[k % len(PAIRS)]
             mags = {e: EFFECTS[e].default * float(rng.uniform(0.7, 1.3)) for e in pair}
-            t0 = time.perf_counter()
-            res = discover(scenario(seed, mags, noise, protocols), ScrewFamily(), jobs=args.jobs)
-            times.append(time.perf_counter() - t0)
+            res = timed_discover(scenario(seed, mags, noise, protocols), ScrewFamily(), args.jobs, times, cpu)
             pair_n += 1
             pair_hits += set(res.effects) >= set(pair)
             line.append("pair %s: %s %.2f->%.2f" % ("+".join(pair), ",".join(res.effects) or "-", res.before.rmse(), res.after.rmse()))
@@ -112,6 +121,12 @@ def main(argv=None):
         print("two effects hidden: both named %d/%d" % (pair_hits, pair_n))
     allt = np.array(null_times + times)
     print("workflow wall time on %d runs (jobs=%d): median %.2f s, max %.2f s (budget 60 s)" % (len(protocols), args.jobs, np.median(allt), allt.max()))
+    # CPU seconds (all processes) hardly grow with other jobs on a shared machine, wall seconds do: on idle
+    # cores the wall time lies between CPU / jobs (all of it parallel) and CPU (none of it)
+    allc = np.array(cpu)
+    print("workflow CPU time on %d runs (all processes): median %.2f s, max %.2f s; / %d cores: median %.2f s, max %.2f s; "
+          "load average %.1f at the end" % (len(protocols), np.median(allc), allc.max(), args.jobs,
+                                           np.median(allc) / args.jobs, allc.max() / args.jobs, os.getloadavg()[0]))
 
 
 if __name__ == "__main__":

@@ -31,4 +31,5 @@ def run(args):
             from host.screw.cli import fit_command
         rc = fit_command(args, out)
         out.commit()
+    print("wrote %s" % args.out)  # after the commit: a failed --json leaves no model, so none is announced
     return rc

@@ -107,7 +107,6 @@ def fit_command(args, out):
         print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (
             est.n_components_, est.eigenvalues_.size, 100 * est.cumulative_variance_ratio_[est.n_components_ - 1], 100 * est.variance_threshold))
         print("  R2=%.4f adj R2=%.4f F=%.4g (p=%.3g) residual std error=%.4g" % (est.rsquared_, est.rsquared_adj_, est.fvalue_, est.f_pvalue_, est.resid_std_err_))
-    print("wrote %s" % args.out)
     if args.json:
         with out.open(args.json) as fh:
             json.dump({"model": args.out, "kind": doc["kind"], "method": args.model, "sensors": model.sensors,

@@ -26,7 +26,7 @@ import copy
 import numpy as np
 
 from host.empirical import EmpiricalDataError
-from host.empirical.targets import sweep_slopes
+from host.empirical.targets import in_window, sweep_slopes
 
 
 def metrics(measured, predicted):
@@ -83,14 +83,9 @@ def _thermal_rows(model, run, window=None):
         pred = model.thermal_at(run, e.time_s[rows])
     t = e.time_s[rows]
     if window is not None:
-        lo, hi = window
-        keep = np.ones(t.size, bool)
-        if lo is not None:
-            keep &= t >= lo
-        if hi is not None:
-            keep &= t < hi
+        keep = in_window(t, window)
         if not keep.any():
-            raise EmpiricalDataError("%s: no row in the evaluation window %s..%s s" % (run.name, lo, hi))
+            raise EmpiricalDataError("%s: no row in the evaluation window %s..%s s" % ((run.name,) + tuple(window)))
         rows, measured, pred = rows[keep], measured[keep], pred[keep]
     return rows, measured, pred
 

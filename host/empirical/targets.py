@@ -218,6 +218,17 @@ class RunArrays:
         return "RunArrays(run=%r, n=%d, sensors=%d)" % (self.run, self.y.size, len(self.names))
 
 
+def in_window(t, window):
+    """Mask of the times with lo <= t < hi for ``window`` = (lo, hi); either end may be None (unbounded)."""
+    lo, hi = window
+    keep = np.ones(np.shape(t), bool)
+    if lo is not None:
+        keep &= t >= lo
+    if hi is not None:
+        keep &= t < hi
+    return keep
+
+
 def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True, window=None, exclude=None):
     """Per run, the (X, y, names) a regression or selector is fitted on.
 
@@ -238,18 +249,13 @@ def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True,
     for r in runs:
         t, y = targets(r, target, channel)
         if window is not None:
-            lo, hi = window
-            keep = np.ones(t.size, bool)
-            if lo is not None:
-                keep &= t >= lo
-            if hi is not None:
-                keep &= t < hi
+            keep = in_window(t, window)
             t, y = t[keep], y[keep]
             if t.size == 0:
-                raise EmpiricalDataError("%s: no %s target in the time window %s..%s s" % (r.name, target, lo, hi))
+                raise EmpiricalDataError("%s: no %s target in the time window %s..%s s" % ((r.name, target) + tuple(window)))
         if exclude is not None:
             lo, hi = exclude
-            keep = ~((t >= (-np.inf if lo is None else lo)) & (t < (np.inf if hi is None else hi)))
+            keep = ~in_window(t, exclude)
             t, y = t[keep], y[keep]
             if t.size == 0:
                 raise EmpiricalDataError("%s: no %s target left outside the excluded span %s..%s s" % (r.name, target, lo, hi))

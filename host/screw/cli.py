@@ -103,7 +103,6 @@ def fit_command(args, out):
         raise UserError(str(exc))
     doc = save_model(model.to_document(), out.path(args.out))
     print(format_report(model))
-    print("wrote %s" % args.out)
     if args.json:
         with out.open(args.json) as fh:
             json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": model.reduced_["reduction_error_um"]}, fh, indent=2)

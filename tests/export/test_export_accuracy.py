@@ -12,7 +12,7 @@ import pytest
 from hypothesis import HealthCheck, Phase, given, settings
 from hypothesis import strategies as st
 
-from firmware.evaluate import Evaluator
+from firmware.evaluate import CLAMP_POSITION, CLAMP_STATE, CLAMP_TRAVEL, Evaluator
 from firmware.table import parse_table
 from host.models import document_hash
 from models_export import export_model
@@ -129,7 +129,7 @@ def test_poly_slope_within_certificate(doc, data):
             ev.temps[i] = v
         ev.update()
         _check(ex, ev, ref, temps, pos)
-        assert bool(ev.flags & 0x1000000) == (not t.pos_lo <= pos <= t.pos_hi)
+        assert bool(ev.flags & CLAMP_POSITION) == (not t.pos_lo <= pos <= t.pos_hi)
     assert _slots_inside(ex, ev) > 5
 
 
@@ -241,7 +241,7 @@ def test_screw_reduced_within_certificate(seed, data):
         ev.update()
         ref.update(temps)
         _check(ex, ev, ref, temps, data.draw(st.integers(t.pos_lo - 5000, t.pos_hi + 5000)) if k % 10 == 0 else rng.randint(t.pos_lo, t.pos_hi))
-        assert not ev.flags & 0x4000000  # the certified state bound is never hit by admissible motion
+        assert not ev.flags & CLAMP_STATE  # the certified state bound is never hit by admissible motion
     assert _slots_inside(ex, ev) > 20
 
 
@@ -300,7 +300,7 @@ def test_travel_accumulation_and_feed_weights(seed, data):
                         flagged = True
         prev = x
     assert list(ev.u) == want
-    assert bool(ev.flags & 0x2000000) == flagged
+    assert bool(ev.flags & CLAMP_TRAVEL) == flagged
     a, b = data.draw(st.integers(lo, hi)), data.draw(st.integers(lo, hi))
     ev.set_feed(data.draw(st.integers(-t.fmax, t.fmax)), a, b)
     xa, xb = sorted((min(max(a, t.pos_lo), t.pos_hi) - t.fixed_end, min(max(b, t.pos_lo), t.pos_hi) - t.fixed_end))

@@ -154,3 +154,34 @@ def test_c_header_compiles_and_matches_firmware(tmp_path, runner):
         got = subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout.split("\n")[:-1]
         want, _ = runner.run_case(ex.table, ops)
         assert got == ["%d %d %d %d" % tuple(r) for r in want], t.kind
+
+
+def test_an_edited_document_is_refused_or_exported_marked_with_the_hash_it_has(tmp_path, capsys):
+    # issue 14: export hashes the document it actually exports; a recorded provenance.sha256 that does not
+    # match is refused, or with --allow-edited the table carries the actual hash and the edited mark
+    from firmware.table import VERSION
+    from models_export.document import document_hash
+
+    doc = poly_slope_doc(random.Random(7), n_sensors=4)
+    out, rep = tmp_path / "t.bin", tmp_path / "r.json"
+    model = tmp_path / "model.json"
+    model.write_text(json.dumps(doc))
+    assert main(["export", str(model), "--out", str(out), "--report", str(rep)]) == 0
+    t, r = parse_table(out.read_bytes()), json.loads(rep.read_text())
+    assert t.provenance == bytes.fromhex(doc["provenance"]["sha256"]) and t.edited == 0
+    assert r["provenance_edited"] is False and r["table_format"] == VERSION == t.version
+    out.unlink()
+    rep.unlink()
+    edited = json.loads(json.dumps(doc))
+    edited["thermal"]["intercept_um_per_mm"] += 0.001  # by hand, after it was saved: the recorded hash is stale
+    model.write_text(json.dumps(edited))
+    capsys.readouterr()
+    assert main(["export", str(model), "--out", str(out), "--report", str(rep)]) == 2
+    err = capsys.readouterr().err
+    assert "provenance.sha256" in err and "does not match the document" in err and "--allow-edited" in err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["model.json"]
+    assert main(["export", str(model), "--out", str(out), "--report", str(rep), "--allow-edited"]) == 0
+    t, r = parse_table(out.read_bytes()), json.loads(rep.read_text())
+    actual = bytes.fromhex(document_hash(edited))
+    assert t.provenance == actual != bytes.fromhex(doc["provenance"]["sha256"]) and t.edited == 1
+    assert r["provenance_verified"] is False and r["provenance_edited"] is True and r["provenance_sha256"] == actual.hex()

@@ -10,6 +10,7 @@ import zlib
 import pytest
 from hypothesis import given, settings, strategies as st
 
+from firmware.wire import UPLOADING
 from fwhelpers import (cmd, compile_mpy, frames, make_table, provision, rig_app, run_cycles, run_micropython,
                        scmd, table_fields, TEST_KEY)
 
@@ -142,9 +143,9 @@ def test_second_begin_does_not_restart_an_open_upload_and_idle_upload_times_out(
     assert _upload_head(app, board, data)[0][3:7] == ["E", "5", "state", "upload open"]
     assert app.store._up[3] == 48  # the open upload kept its bytes
     run_cycles(app, board, 2)
-    assert app.status & 0x2000000  # UPLOADING
+    assert app.status & UPLOADING
     run_cycles(app, board, 600)  # 60 s without a chunk
-    assert not app.store.uploading and not app.status & 0x2000000
+    assert not app.store.uploading and not app.status & UPLOADING
     assert _upload_head(app, board, data)[0][3:6] == ["A", "U", "B"]
 
 

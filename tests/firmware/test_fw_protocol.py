@@ -10,6 +10,7 @@ from fwhelpers import cmd, frames, rig_app, run_cycles, make_table, scmd
 from fwfakes import FakeSerial
 from firmware import frame as fr
 from firmware.crc16 import crc16_ccitt, crc16_modbus
+from firmware.wire import NO_TABLE
 
 
 def test_crc16_check_values():
@@ -116,7 +117,7 @@ def test_no_table_hello_and_reason(tmp_path):
     assert f[0][6:11] == ["-"] * 5
     assert f[1][3] == "E" and f[1][5] == "table" and f[1][6].startswith("A ")
     run_cycles(app, board, 3)
-    assert app.status & 0x200000 and app.total == 0  # NO_TABLE, zero output
+    assert app.status & NO_TABLE and app.total == 0  # zero output
 
 
 def test_periodic_offset_frames_and_sequence(tmp_path):

@@ -26,6 +26,7 @@ def _fail(capsys, argv):
     assert rc == 2, err
     assert err.startswith("tcomp %s: error: " % argv[0]), err
     assert "Traceback" not in err
+    assert "\n" not in err, err  # one line
     return err
 
 

@@ -69,12 +69,16 @@ def _verbs(d):
         "compare": (["compare", run, "--split-h", "1", "--methods", "mlr", "--sensors", "T1,T2", "--repeats", "1", "--json", out + "/c.json"], ["c.json"]),
         "hil": (["hil", "--run", run, "--table", table, "--interpreter", "cpython", "--json", out + "/h.json"], ["h.json"]),
         "flash": (["flash", "--port", "/dev/null", "--table", table, "--no-firmware", "--mpremote", "/bin/true"], []),
+        # the small run has no motion.csv, so discrepancy always refuses it: what is fuzzed is how it reads the
+        # run (meta.json's screw block, the CSVs) before that refusal, not the workflow (tests/discrepancy/)
+        "discrepancy": (["discrepancy", run, "--json", out + "/d.json", "--report", out + "/rep"], ["d.json", "rep"]),
     }
 
 
 # which inputs each verb reads (a mutation elsewhere changes nothing for it)
 READS = {"validate": RUN_FILES, "import": ("log.csv",), "fit": RUN_FILES, "predict": RUN_FILES + ("m.json",),
-         "export": ("m.json",), "select": RUN_FILES, "compare": RUN_FILES, "hil": RUN_FILES + ("t.bin",), "flash": ("t.bin",)}
+         "export": ("m.json",), "select": RUN_FILES, "compare": RUN_FILES, "hil": RUN_FILES + ("t.bin",), "flash": ("t.bin",),
+         "discrepancy": RUN_FILES}
 
 
 @st.composite

@@ -209,3 +209,38 @@ def test_validation_script_writes_table_json_and_plot(tmp_path):
     rep = json.loads((out / "validation.json").read_text())
     assert {r["model"] for r in rep["rows"]} >= {"screw (base sensor + motion)", "MLR slope (nut+base)"}
     assert (out / "validation.png").stat().st_size > 10000
+
+
+def _with_roles(run, **new_roles):
+    """The run with some sensors' roles changed in meta.json (the columns stay)."""
+    sensors = {k: dict(v) for k, v in run.meta["sensors"].items()}
+    for name, role in new_roles.items():
+        sensors[name]["role"] = role
+    run.meta = dict(run.meta, sensors=sensors)
+    return run
+
+
+def test_air_falls_back_to_the_base_sensor_then_to_a_constant_air_and_says_so():
+    # docs/screw-model.md: no 'ambient' sensor -> the first 'base' sensor, else a constant air; each fallback
+    # is a warning in statistics.warnings and thermal.air_source records the choice
+    import warnings as _w
+
+    from host.screw.identify import IdentifiabilityWarning
+    from host.sim import simulate_run
+
+    run = simulate_run("v8000_r210_490", seed=5, noise_um=0.3)
+    ambient, base = run.sensors_with_role("ambient"), run.sensors_with_role("base")
+    no_air = {n: "structure" for n in ambient}
+    cases = [({}, ambient[0], "role ambient", None),
+             (no_air, base[0], "base sensor (fallback)", "no sensor with role 'ambient'"),
+             (dict(no_air, **{n: "structure" for n in base}), None, "constant (no ambient or base sensor)",
+              "the air is taken as constant")]
+    for roles, sensor, source, warning in cases:
+        r = _with_roles(simulate_run("v8000_r210_490", seed=5, noise_um=0.3), **roles)
+        with _w.catch_warnings():
+            _w.simplefilter("ignore", IdentifiabilityWarning)
+            m = ScrewModel(segments=12, dt_s=30.0).fit([r])
+        doc = m.to_document()
+        assert (m.air_sensor_, m.air_source_, doc["thermal"]["air_source"]) == (sensor, source, source), roles
+        notes = " ".join(m.statistics_["warnings"])
+        assert (warning in notes) if warning else "role 'ambient'" not in notes, notes
