@@ -427,6 +427,7 @@ class Evaluator:
         A = t.A
         shA = t.shA
         rA = t.rA
+        gA = t.gA
         fy = t.fy
         Ylo = t.Ylo
         Yhi = t.Yhi
@@ -440,7 +441,12 @@ class Evaluator:
                 x = (U0[j] << fy[j]) - Y[j]
                 if chk:
                     self._note(_SLOT_DX, x)
-                v = Y[j] + self._mul(_SLOT_DMUL, A[j], x, LX, nX, shA[j]) + rA[j]
+                # the increment is formed gA[j] guard bits finer and rounded once (rA[j] centres it)
+                g = gA[j]
+                v = self._mul(_SLOT_DMUL, A[j], x, LX, nX, shA[j] - g) + rA[j]
+                if chk:
+                    self._note(_SLOT_DMUL + 1, v)
+                v = Y[j] + (v >> g)
                 if chk:
                     self._note(_SLOT_Y, v)
                 if v < Ylo[j]:  # the exact state lies in the box (a convex combination of inputs and 0):

@@ -208,7 +208,7 @@ _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:
           "air:a Tlo:A W0=m shW0=m W1=m shW1=m Ka shKa:s |")
 # dynamic: first-order lags of temperature rises, spindle speed (and its square) and feed (docs/table-format.md)
 _DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F LX:L nX:4 LY:L nY:4 nf:N "
-            "src=j A=j shA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j |")
+            "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j |")
 
 
 def _take(buf, w, name, r=-1):

@@ -357,6 +357,12 @@ class Model:
         self.smax = top("spindle_rpm", any(s in ("spindle_krpm", "spindle_krpm2") for s in signals))
         self.fmax = top("feed_mm_min", "feed_m_min" in signals)
         self.shq = max(0, (self.smax * self.smax).bit_length() - DYN_SQUARE_BITS)
+        # the square's limbs (firmware Evaluator._inputs); its integer interval as the firmware's mul bounds it
+        self.Lq = max(1, min(29, narrow_width(max(self.smax, 1))))
+        self.nq = top_limbs_needed((0, self.smax), self.Lq, max(self.smax, 1)) or 0
+        if not 1 <= self.nq <= 4:
+            raise ExportError("envelope.spindle_rpm: %d rpm cannot be squared in small-int limbs" % self.smax)
+        self.q_iv = Recorder().mul(0, (0, self.smax), (0, self.smax), self.Lq, self.nq, self.shq, "spindle speed squared")
         self.dyn = []
         for j, t in enumerate(terms):
             where = "thermal.terms[%d]" % j
@@ -377,7 +383,7 @@ class Model:
                 if src == -1:
                     u, per = (0, self.smax), F(1, 1000)  # rpm -> krpm
                 elif src == -2:
-                    u, per = (0, -(-self.smax * self.smax // (1 << self.shq))), p2(self.shq) / 10 ** 6  # rpm**2/2**shq -> krpm**2
+                    u, per = (0, max(-(-self.smax * self.smax // (1 << self.shq)), self.q_iv[0][1])), p2(self.shq) / 10 ** 6  # rpm**2/2**shq -> krpm**2
                 else:
                     u, per = (0, self.fmax), F(1, 1000)  # mm/min -> m/min
             else:

@@ -119,13 +119,10 @@ class Planner:
         nY = 2
         big = max([max(-lo, hi) for lo, hi in zip(m.d_lo[len(m.sensors):], m.d_hi[len(m.sensors):])] + [1])
         LY = max(1, -(-big.bit_length() // nY))
-        Lq = max(1, min(29, narrow_width(max(m.smax, 1))))
-        nq = top_limbs_needed((0, m.smax), Lq, max(m.smax, 1)) or 0
-        if not nq or nq > 4:
-            raise ExportError("envelope.spindle_rpm: %d rpm cannot be squared in small-int limbs" % m.smax)
+        Lq, nq = m.Lq, m.nq
         q_iv, kq = rec.mul(SLOT_QMUL, (0, m.smax), (0, m.smax), Lq, nq, m.shq, "spindle speed squared")
         f.update(positional=0 if m.direct else 1, dt_ms=m.dt_ms, smax=m.smax, Lq=Lq, nq=nq, shq=m.shq, fmax=m.fmax,
-                 LX=LX, nX=nX, LY=LY, nY=nY, nf=len(terms), src=[], A=[], shA=[], rA=[], fy=[], Ylo=[], Yhi=[])
+                 LX=LX, nX=nX, LY=LY, nY=nY, nf=len(terms), src=[], A=[], shA=[], gA=[], rA=[], fy=[], Ylo=[], Yhi=[])
         out = []
         self.dyn_cert = []
         for t in terms:
@@ -144,6 +141,7 @@ class Planner:
             if a == 0:  # tau = 0: the state is the input itself, exactly
                 f["A"].append(0)
                 f["shA"].append(0)
+                f["gA"].append(0)
                 f["rA"].append(0)
                 out.append(ein)
                 self.dyn_cert.append({"term": t["name"], "a": 0.0, "state_error_units": 0.0})
@@ -153,16 +151,20 @@ class Planner:
             q, sh = fit_coef(a, limb_max(X, LX, nX), 0)
             if q <= 0:
                 raise ExportError("%s: the step %d ms is too small against the time constant for the table" % (t["name"], m.dt_ms))
-            res, k = rec.mul(SLOT_DMUL, (q, q), X, LX, nX, sh, t["name"])
             aq = F(q) / p2(sh)
-            rA = center(floor_err(k))
-            rho = abs(aq - a) * (Yhi - Ylo) + max(abs(F(rA - k)), abs(F(rA)))
-            rec.note(SLOT_Y, Ylo + res[0] + rA, Yhi + res[1] + rA, t["name"])
+            # guard bits: the increment a*X (at most aq*|X|) is summed g bits finer, then rounded once
+            g = max(0, min(sh, 24, frac_bits(aq * (Yhi - Ylo) + 1, ACC)))
+            res, k = rec.mul(SLOT_DMUL, (q, q), X, LX, nX, sh - g, t["name"])
+            rA, e_inc = _round_out(floor_err(k), g)
+            rec.note(SLOT_DMUL + 1, res[0] + rA, res[1] + rA, t["name"])
+            rho = abs(aq - a) * (Yhi - Ylo) + iv_abs(e_inc)
+            rec.note(SLOT_Y, Ylo + ((res[0] + rA) >> g), Yhi + ((res[1] + rA) >> g), t["name"])
             v = _supersolution(np.array([[1.0 - float(a)]]), [rho])
             if v is None or not v[0] >= (1 - a) * v[0] + rho:
                 raise ExportError("%s: the filter's state error cannot be bounded" % t["name"])
             f["A"].append(q)
             f["shA"].append(sh)
+            f["gA"].append(g)
             f["rA"].append(rA)
             out.append(iv_add((-v[0], v[0]), ein))
             self.dyn_cert.append({"term": t["name"], "a": float(a), "a_quantised": float(aq), "per_step_residual_units": float(rho),

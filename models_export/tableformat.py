@@ -22,7 +22,7 @@ SCREW_AIR_TAIL = ("Ka", "shKa")
 
 
 DYNAMIC_HEAD = ("positional", "dt_ms", "smax", "Lq", "nq", "shq", "fmax", "LX", "nX", "LY", "nY", "nf")
-DYNAMIC_LISTS = ("src", "A", "shA", "rA", "fy", "Ylo", "Yhi", "bY", "shY")  # nf entries each
+DYNAMIC_LISTS = ("src", "A", "shA", "gA", "rA", "fy", "Ylo", "Yhi", "bY", "shY")  # nf entries each
 
 CERTIFICATE = ("cert_out", "cert_ref", "cert_slope")
 
