@@ -24,6 +24,7 @@ from firmware.table import TableError, REASON_SENSORS, REASON_CERT
 
 # status word bits (firmware/wire.py; tests/firmware/test_fw_consts.py checks the copies)
 _CLAMPED = const(0x10000)
+_EXTRAPOLATING = const(0x10000000)
 _DISABLED = const(0x1000000)
 _FALLBACK = const(0x100000)
 _HELD = const(0x80000)
@@ -381,6 +382,8 @@ class App:
             raw_slope = ev.slope()
             if ev.flags:
                 s |= _CLAMPED
+            if ev.extrap:
+                s |= _EXTRAPOLATING
         lim = self.limiter
         s |= lim.update(raw_ref, raw_slope, raw_total, raw_prev, usable, dt)
         self.usable = usable

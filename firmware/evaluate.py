@@ -106,6 +106,7 @@ class Evaluator:
             lo, hi = table.env_lo[i], table.env_hi[i]
             self.temps[i] = 0 if lo <= 0 <= hi else lo
         self.flags = 0
+        self.extrap = 0  # bit i: sensor i is evaluated outside the table's training range (inside the envelope or clamped to it)
         self.S = t.S0
         self.pos_ref = t.pos_ref
         self.direct = table.kind_code == _KIND_LINEAR_DIRECT or (table.kind_code == _KIND_DYNAMIC and not t.positional)
@@ -215,12 +216,16 @@ class Evaluator:
             self.rest()  # a latch is a cold start: every filter at rest
 
     def update(self):
-        """Recompute the temperature-dependent terms from ``temps``; flag clamped sensors."""
+        """Recompute the temperature-dependent terms from ``temps``; flag clamped sensors (``flags``)
+        and sensors evaluated outside the training range (``extrap``)."""
         t = self.table
         chk = self.check
         temps = self.temps
         lo = t.env_lo
         hi = t.env_hi
+        tlo = t.train_lo
+        thi = t.train_hi
+        ex = 0
         ref = self.ref
         b = t.b
         shb = t.shb
@@ -238,6 +243,8 @@ class Evaluator:
             elif v > hi[i]:
                 v = hi[i]
                 fl |= 1 << i
+            if v < tlo[i] or v > thi[i]:
+                ex |= 1 << i
             d = v - ref[i]
             if chk:
                 self._note(_SLOT_D, d)
@@ -254,6 +261,7 @@ class Evaluator:
             s = self._dsum(s)
         self.S = s
         self.flags = (self.flags & ~(_SENSOR_BITS | _CLAMP_INPUT)) | fl
+        self.extrap = ex
 
     # -- outputs --------------------------------------------------------------
     def _clamp_pos(self, pos):

@@ -18,9 +18,10 @@ from firmware.crc32 import crc32
 from micropython import const
 
 MAGIC = b"TCTB"
-_VERSION = const(2)  # 2: screw_reduced reads an air channel (issue 11); version 1 tables are refused
+_VERSION = const(3)  # 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
+_SENSOR_SIZE = const(20)  # per sensor: envelope lo, hi, reference, training lo, hi (int32 milli-degC)
 _MAX_SENSORS = const(24)
 _MAX_SEGMENTS = const(32)
 _MAX_DEGREE = const(6)
@@ -61,7 +62,9 @@ class Table:
     positions in um; scales are fraction bits):
 
     kind (str), kind_code, version, axis (str), sensors (list of str, channel order),
-    n_sensors, env_lo/env_hi/ref (lists, milli-degC), ref_mode (0: references fixed,
+    n_sensors, env_lo/env_hi/ref (lists, milli-degC; env_* is the certified envelope, inputs beyond
+    it are clamped), train_lo/train_hi (lists, milli-degC: the range the model was fitted over,
+    inside the envelope; beyond it the model extrapolates), ref_mode (0: references fixed,
     1: certified for references latched anywhere in the envelope), edited (1: exported from a
     model document whose recorded sha256 did not match), pos_lo/pos_hi/pos_ref (um),
     cert_out/cert_ref/cert_slope (the certified output bounds),
@@ -88,6 +91,8 @@ class Table:
     env_lo: list
     env_hi: list
     ref: list
+    train_lo: list
+    train_hi: list
 
 
 def parse_table(buf, expected_sensors=None):
@@ -128,7 +133,7 @@ def parse_table(buf, expected_sensors=None):
     for i in range(56, 64):
         if buf[i] > (i < 58):  # the reference mode (0 or 1), the edited mark (0 or 1), then reserved zeros
             raise TableError(REASON_FIELD, "header byte %d" % i)
-    payload = _HEADER_SIZE + ns * (_NAME_SIZE + 12)
+    payload = _HEADER_SIZE + ns * (_NAME_SIZE + _SENSOR_SIZE)
     if payload + 4 * nwords + 4 != n:
         raise TableError(REASON_LENGTH, "%d sensors, %d words" % (ns, nwords))
     t = Table()
@@ -146,14 +151,21 @@ def parse_table(buf, expected_sensors=None):
     t.env_lo = []
     t.env_hi = []
     t.ref = []
+    t.train_lo = []
+    t.train_hi = []
     for i in range(ns):
         name = _name(buf, _HEADER_SIZE + i * _NAME_SIZE, _NAME_SIZE)
         if name in t.sensors:  # one channel would feed two coefficients
             raise TableError(REASON_FIELD, "sensor %s twice" % name)
         t.sensors.append(name)
-        lo, hi, ref = struct.unpack_from("<iii", buf, _HEADER_SIZE + ns * _NAME_SIZE + 12 * i)
+        lo, hi, ref, tlo, thi = struct.unpack_from("<iiiii", buf, _HEADER_SIZE + ns * _NAME_SIZE + _SENSOR_SIZE * i)
         if lo > hi:
             raise TableError(REASON_FIELD, "sensor %s envelope %d > %d" % (t.sensors[i], lo, hi))
+        if not lo <= tlo <= thi <= hi:
+            raise TableError(REASON_FIELD, "sensor %s training range %d..%d not inside the envelope %d..%d"
+                             % (t.sensors[i], tlo, thi, lo, hi))
+        t.train_lo.append(tlo)
+        t.train_hi.append(thi)
         t.env_lo.append(lo)
         t.env_hi.append(hi)
         t.ref.append(ref)

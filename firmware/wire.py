@@ -15,7 +15,7 @@ Every single-bit constant above SENSOR_MASK here is a status flag (host/link.py 
 from micropython import const
 
 SENSOR_MASK = const(0xFFFF)
-CLAMPED = const(0x10000)  # a model input was clamped to the table's envelope
+CLAMPED = const(0x10000)  # a model input was clamped to the table's certified envelope (beyond the machine's operating range)
 RATE_LIMITED = const(0x20000)  # an output moved at the slew limit this cycle
 MAG_LIMITED = const(0x40000)  # an output is held at the maximum magnitude
 HELD = const(0x80000)  # a sensor the model needs is faulty: its last good value is used
@@ -27,6 +27,7 @@ DISABLED = const(0x1000000)  # output disabled by the controller (Modbus holding
 UPLOADING = const(0x2000000)  # a table upload is open
 RECOVERING = const(0x4000000)  # ramping back from fallback to the model's output
 REF_PENDING = const(0x8000000)  # a run-start table waits for an all-good cycle to latch its reference temperatures
+EXTRAPOLATING = const(0x10000000)  # a temperature is outside the model's training range (inside the certified envelope it is evaluated, not clamped): informational, not a fault
 
 PROTOCOL_VERSION = const(1)  # first field of the hello frame; `tcomp monitor` refuses any other
 FIRMWARE_VERSION = "0.1.0"  # second field of the hello frame

@@ -124,7 +124,7 @@ def _tampered(table):
     from firmware.table import parse_table
     t = parse_table(table)
     b = bytearray(table)
-    words = 64 + 28 * t.n_sensors
+    words = 64 + 36 * t.n_sensors
     off = words + 4 * 8  # pos_lo pos_hi pos_ref fo Lt nt S0 fS, then b[0]
     for i in range(t.n_sensors):
         v = struct.unpack_from("<i", b, off + 12 * i)[0]

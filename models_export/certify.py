@@ -41,6 +41,11 @@ LIMITS_UM = {"poly_slope": 0.05, "linear_direct": 0.05, "screw_reduced": 0.1, "d
 # dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
 DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
 DYN_SQUARE_BITS = 24  # the spindle speed squared is held as rpm**2 / 2**shq < 2**24
+# The certified envelope's default (docs/firmware.md, "Operating envelope"): the training range (the
+# document's envelope.temperature_C) widened by this much on both sides. A thermal test never covers
+# every condition a machine sees (a faster feed, a hot afternoon); inside the certified envelope the
+# firmware evaluates the model and reports EXTRAPOLATING, beyond it it clamps and reports CLAMPED.
+DEFAULT_ENVELOPE_MARGIN_K = 15.0
 
 
 class ExportError(ValueError):
@@ -210,7 +215,9 @@ def _obj(value, where):
 class Model:
     """The model document reduced to exact numbers in table units (see docs/table-format.md)."""
 
-    def __init__(self, doc, ref_position_mm=None):
+    def __init__(self, doc, ref_position_mm=None, envelope=None, margin_K=DEFAULT_ENVELOPE_MARGIN_K):
+        """``envelope``: {sensor: (lo_C, hi_C)}, the certified envelope for those sensors (it must
+        contain the training range); the others get the training range widened by ``margin_K``."""
         kind = doc.get("kind")
         self.doc_kind = kind
         self.kind = "screw_reduced" if kind == "screw" else kind
@@ -237,6 +244,14 @@ class Model:
             # The screw model's ambient term is referenced to each run's start: certify latched references too.
             self.ref_mode = 1
         self.env_lo, self.env_hi, self.ref, self.ref_frac = [], [], [], []
+        self.train_lo, self.train_hi, self.env_source = [], [], []
+        envelope = dict(envelope or {})
+        unknown = [s for s in envelope if s not in self.sensors]
+        if unknown:
+            raise ExportError("envelope for sensor %s: not an input of this model (its sensors: %s)"
+                              % (unknown[0], ", ".join(self.sensors) or "none"))
+        if not (isinstance(margin_K, (int, float)) and math.isfinite(margin_K) and margin_K >= 0):
+            raise ExportError("envelope margin %r K: must be a finite number >= 0" % (margin_K,))
         for s in self.sensors:
             if s not in tenv:
                 raise ExportError("envelope.temperature_C has no range for sensor %r" % s)
@@ -247,6 +262,29 @@ class Model:
             lo_m, hi_m = math.ceil(F(lo) * 1000), math.floor(F(hi) * 1000)
             if lo_m > hi_m:
                 raise ExportError("envelope.temperature_C.%s: empty range %r" % (s, [lo, hi]))
+            # the document's envelope is the range the model was fitted over (the training range);
+            # the certified envelope is the operating range around it
+            self.train_lo.append(lo_m)
+            self.train_hi.append(hi_m)
+            if s in envelope:
+                elo, ehi = envelope[s]
+                for v in (elo, ehi):
+                    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                        raise ExportError("envelope for sensor %s: %r is not a finite temperature in degC" % (s, v))
+                if not elo < ehi:
+                    raise ExportError("envelope for sensor %s: low end %g degC must be below the high end %g degC"
+                                      % (s, elo, ehi))
+                e_lo, e_hi = math.ceil(F(elo) * 1000), math.floor(F(ehi) * 1000)
+                if not e_lo <= lo_m <= hi_m <= e_hi:
+                    raise ExportError("envelope for sensor %s: %g..%g degC does not contain the training range "
+                                      "%.3f..%.3f degC (the model's envelope.temperature_C)"
+                                      % (s, elo, ehi, lo_m / 1000.0, hi_m / 1000.0))
+                self.env_source.append("set")
+            else:
+                pad = math.floor(F(margin_K) * 1000)
+                e_lo, e_hi = lo_m - pad, hi_m + pad
+                self.env_source.append("default")
+            lo_m, hi_m = e_lo, e_hi
             self.env_lo.append(lo_m)
             self.env_hi.append(hi_m)
             ri = min(max(rnd(r), lo_m), hi_m) if self.ref_mode else rnd(r)

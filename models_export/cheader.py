@@ -17,7 +17,7 @@ SCALARS = {
               "Lx", "nx", "shX", "KC", "Lc", "nc", "shC"),
 }
 ARRAYS = {
-    "all": ("env_lo", "env_hi", "ref", "b", "shb"),
+    "all": ("env_lo", "env_hi", "ref", "train_lo", "train_hi", "b", "shb"),
     "position": ("G", "shg"),
     "screw": ("edges", "C", "B", "shB", "rS", "G2", "shG2", "W0", "shW0", "W1", "shW1"),
 }
@@ -33,6 +33,7 @@ typedef struct {
     int32_t ref[TCOMP_N_SENSORS_ALLOC]; /* reference temperatures (tcomp_latch_references when TCOMP_REF_MODE == 1) */
     int32_t S;
     uint32_t flags; /* bit i: sensor i clamped; TCOMP_CLAMP_* */
+    uint32_t extrap; /* bit i: sensor i evaluated outside the training range (status EXTRAPOLATING) */
     int32_t pos_ref;
 #if TCOMP_KIND == 3
     int32_t T[TCOMP_M], Tn[TCOMP_M], u[TCOMP_M], w[TCOMP_M], limbs[TCOMP_M * TCOMP_NS], cum[TCOMP_M + 1], segslope[TCOMP_M];
@@ -64,13 +65,14 @@ static int32_t tcomp_mul(int32_t c, int32_t x, int L, int n, int sh)
 
 static void tcomp_update(tcomp_eval_t *e)
 {
-    uint32_t fl = 0;
+    uint32_t fl = 0, ex = 0;
     int32_t s = TCOMP_S0;
     int i;
     for (i = 0; i < TCOMP_N_SENSORS; i++) {
         int32_t v = e->temps[i];
         if (v < tcomp_env_lo[i]) { v = tcomp_env_lo[i]; fl |= 1u << i; }
         else if (v > tcomp_env_hi[i]) { v = tcomp_env_hi[i]; fl |= 1u << i; }
+        if (v < tcomp_train_lo[i] || v > tcomp_train_hi[i]) ex |= 1u << i;
         s += tcomp_mul(tcomp_b[i], v - e->ref[i], TCOMP_LT, TCOMP_NT, tcomp_shb[i]);
 #if TCOMP_KIND == 3
         if (i == TCOMP_AIR) e->da = v - e->ref[i];
@@ -78,6 +80,7 @@ static void tcomp_update(tcomp_eval_t *e)
     }
     e->S = s;
     e->flags = (e->flags & ~0xFFFFFFu) | fl;
+    e->extrap = ex;
 }
 
 #if TCOMP_KIND == 3

@@ -2,7 +2,7 @@
 import math
 
 from firmware.crc32 import crc32
-from models_export.certify import LIMITS_UM, OU_PER_UM, ExportError, Model
+from models_export.certify import DEFAULT_ENVELOPE_MARGIN_K, LIMITS_UM, OU_PER_UM, ExportError, Model
 from models_export.document import document_hash
 from models_export.plan import Planner
 from models_export.tableformat import pack
@@ -34,14 +34,19 @@ def _provenance(doc):
     return document_hash(doc), declared
 
 
-def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False):
+def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, envelope=None,
+                 margin_K=DEFAULT_ENVELOPE_MARGIN_K):
     """Quantise and certify ``doc`` (a tcomp-model/1 dict). Raises ExportError.
+
+    The certified temperature envelope (docs/firmware.md, "Operating envelope") is ``envelope``
+    ({sensor: (lo_C, hi_C)}) where given, else the training range (the document's
+    envelope.temperature_C) widened by ``margin_K`` on both sides.
 
     A document whose recorded ``provenance.sha256`` does not match its content is refused,
     unless ``allow_edited``: the table then carries the actual hash and the edited mark."""
     if not isinstance(doc, dict):
         raise ExportError("model document must be a JSON object")
-    model = Model(doc, ref_position_mm)
+    model = Model(doc, ref_position_mm, envelope=envelope, margin_K=margin_K)
     planner = Planner(model)
     if model.direct:
         errs = planner.linear_direct()
@@ -52,7 +57,8 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False):
     verified = declared == actual
     edited = declared is not None and not verified
     prov = bytes.fromhex(actual)
-    f.update(kind=model.kind, sensors=model.sensors, env_lo=model.env_lo, env_hi=model.env_hi, ref=model.ref, ref_mode=model.ref_mode,
+    f.update(kind=model.kind, sensors=model.sensors, env_lo=model.env_lo, env_hi=model.env_hi, ref=model.ref,
+             train_lo=model.train_lo, train_hi=model.train_hi, ref_mode=model.ref_mode,
              pos_lo=model.pos_lo, pos_hi=model.pos_hi, pos_ref=model.pos_ref, provenance=prov, edited=edited,
              axis=str(doc.get("axis") or "?"))
     try:
@@ -80,6 +86,12 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False):
     envelope = {
         "temperature_mC": {s: [lo, hi] for s, lo, hi in zip(model.sensors, model.env_lo, model.env_hi)},
         "reference_mC": dict(zip(model.sensors, model.ref)),
+        # the certified envelope above is the operating range; the model was fitted over this one: between the two
+        # the firmware evaluates the model and reports EXTRAPOLATING, beyond the envelope it clamps (CLAMPED)
+        "training_temperature_mC": {s: [lo, hi] for s, lo, hi in zip(model.sensors, model.train_lo, model.train_hi)},
+        "temperature_source": {s: ("--envelope" if src == "set" else "training range +- %g K" % margin_K)
+                               for s, src in zip(model.sensors, model.env_source)},
+        "temperature_margin_K": margin_K,
         "reference_mode": "latched (any reference inside the envelope)" if model.ref_mode else "fixed",
     }
     if not model.direct:

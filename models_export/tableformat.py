@@ -7,7 +7,7 @@ firmware/table.py consumes them in.
 import struct
 
 from firmware.crc32 import crc32
-from firmware.table import HEADER_SIZE, KINDS, MAGIC, NAME_SIZE, UNIT_CODE, VERSION
+from firmware.table import HEADER_SIZE, KINDS, MAGIC, NAME_SIZE, SENSOR_SIZE, UNIT_CODE, VERSION
 
 KIND_CODES = {name: code for code, name in KINDS.items()}  # the firmware's table owns the codes
 
@@ -85,7 +85,7 @@ def pack(f):
             raise ValueError("table field %s=%r is not a 32-bit integer" % (name, v))
     sensors = f["sensors"]
     n = len(sensors)
-    total = HEADER_SIZE + n * (NAME_SIZE + 12) + 4 * len(words) + 4
+    total = HEADER_SIZE + n * (NAME_SIZE + SENSOR_SIZE) + 4 * len(words) + 4
     prov = bytes(f["provenance"])
     if len(prov) != 32:
         raise ValueError("provenance must be 32 bytes (sha256), got %d" % len(prov))
@@ -99,11 +99,19 @@ def pack(f):
     out += b"\x00" * 6
     for name in sensors:
         out += _fixed(name, NAME_SIZE, "sensor name")
+    # the training range (format 3) defaults to the envelope: nothing extrapolates
+    train = {"train_lo": f.get("train_lo") or f["env_lo"], "train_hi": f.get("train_hi") or f["env_hi"]}
     for i in range(n):
-        for name in ("env_lo", "env_hi", "ref"):
-            if not -(1 << 31) <= f[name][i] < (1 << 31):
-                raise ValueError("sensor %s: %s=%r mC is not a 32-bit integer" % (sensors[i], name, f[name][i]))
-        out += struct.pack("<iii", f["env_lo"][i], f["env_hi"][i], f["ref"][i])
+        row = []
+        for name in ("env_lo", "env_hi", "ref", "train_lo", "train_hi"):
+            v = train[name][i] if name in train else f[name][i]
+            if not -(1 << 31) <= v < (1 << 31):
+                raise ValueError("sensor %s: %s=%r mC is not a 32-bit integer" % (sensors[i], name, v))
+            row.append(v)
+        if not row[0] <= row[3] <= row[4] <= row[1]:
+            raise ValueError("sensor %s: training range %d..%d mC is not inside the envelope %d..%d mC"
+                             % (sensors[i], row[3], row[4], row[0], row[1]))
+        out += struct.pack("<iiiii", *row)
     for _, v in words:
         out += struct.pack("<i", v)
     out += struct.pack("<I", crc32(bytes(out)))

@@ -1,4 +1,5 @@
-"""tcomp export MODEL.json --out table.bin [--report report.json] [--json summary.json] [--c-header table.h] [--allow-edited]"""
+"""tcomp export MODEL.json --out table.bin [--report report.json] [--json summary.json] [--c-header table.h] [--allow-edited]
+    [--envelope SENSOR=LO:HI[,SENSOR=LO:HI...]]... [--envelope-margin K]"""
 
 
 def add_arguments(p):
@@ -13,6 +14,14 @@ def add_arguments(p):
     p.add_argument("--allow-edited", dest="allow_edited", action="store_true",
                    help="export a model whose recorded provenance.sha256 does not match its content (edited after "
                         "it was saved): the table names the actual document and is marked edited")
+    p.add_argument("--envelope", action="append", default=[], metavar="SENSOR=LO:HI",
+                   help="certified temperature envelope of a sensor in degC (the machine's operating range; repeat "
+                        "or comma-separate, e.g. T1=10:60,T2=15:45). Must contain the model's training range. Inside "
+                        "it the firmware evaluates the model (EXTRAPOLATING outside the training range); beyond it "
+                        "it clamps (CLAMPED). Default: the training range widened by --envelope-margin")
+    p.add_argument("--envelope-margin", dest="envelope_margin", type=float, default=None, metavar="K",
+                   help="widen the training range by this many K on both sides for sensors without --envelope "
+                        "(default 15, docs/firmware.md \"Operating envelope\")")
 
 
 def run(args):
@@ -37,7 +46,37 @@ def run(args):
     return 0
 
 
+def parse_envelope(values):
+    """``--envelope`` values ("T1=10:60", "T1=10:60,T2=15:45", repeatable) -> {sensor: (lo, hi)} in degC."""
+    import math
+
+    from host.cli import UserError
+
+    out = {}
+    for value in values:
+        for item in value.split(","):
+            name, eq, rng = item.strip().partition("=")
+            lo, colon, hi = rng.partition(":")
+            if not eq or not colon or not name.strip():
+                raise UserError("--envelope %r: expected SENSOR=LO:HI in degC (e.g. T1=10:60)" % item)
+            try:
+                lo, hi = float(lo), float(hi)
+            except ValueError:
+                raise UserError("--envelope %s: %r is not a pair of temperatures in degC" % (item, rng))
+            if not (math.isfinite(lo) and math.isfinite(hi)):
+                raise UserError("--envelope %s: temperatures must be finite numbers" % item)
+            if lo >= hi:
+                raise UserError("--envelope %s: the low end %g degC must be below the high end %g degC" % (item, lo, hi))
+            name = name.strip()
+            if name in out:
+                raise UserError("--envelope: sensor %s given twice" % name)
+            out[name] = (lo, hi)
+    return out
+
+
 def _export(args):
+    import math
+
     from host.cli import UserError
     from host.models import ModelFormatError, read_document
     from models_export import ExportError, export_model
@@ -46,8 +85,15 @@ def _export(args):
         doc = read_document(args.model)
     except ModelFormatError as exc:
         raise UserError(str(exc))
+    from models_export.certify import DEFAULT_ENVELOPE_MARGIN_K
+
+    envelope = parse_envelope(args.envelope)
+    margin = DEFAULT_ENVELOPE_MARGIN_K if args.envelope_margin is None else args.envelope_margin
+    if not (math.isfinite(margin) and margin >= 0):
+        raise UserError("--envelope-margin %s: must be a finite number of K >= 0" % args.envelope_margin)
     try:
-        ex = export_model(doc, ref_position_mm=args.ref_position_mm, allow_edited=args.allow_edited)
+        ex = export_model(doc, ref_position_mm=args.ref_position_mm, allow_edited=args.allow_edited,
+                          envelope=envelope, margin_K=margin)
     except ExportError as exc:
         raise UserError("%s: %s" % (args.model, exc))
     return ex

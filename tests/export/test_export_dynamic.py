@@ -182,7 +182,8 @@ def test_loader_refuses_a_filter_reading_a_missing_sensor():
     assert t.kind == "dynamic" and t.src == [0, -1]
     b = bytearray(ex.table)
     # the first src word follows COMMON (8 + 3 per sensor + rL) and the 12-word dynamic head
-    off = 64 + 28 * t.n_sensors + 4 * (8 + 3 * t.n_sensors + 1 + 12)
+    from firmware.table import HEADER_SIZE, NAME_SIZE, SENSOR_SIZE
+    off = HEADER_SIZE + (NAME_SIZE + SENSOR_SIZE) * t.n_sensors + 4 * (8 + 3 * t.n_sensors + 1 + 12)
     assert struct.unpack_from("<i", b, off)[0] == 0
     struct.pack_into("<i", b, off, t.n_sensors)
     struct.pack_into("<I", b, len(b) - 4, zlib.crc32(bytes(b[:-4])))

@@ -56,9 +56,13 @@ def test_round_trip(exports, kind):
     ex = exports[kind]
     t = parse_table(ex.table, expected_sensors=len(ex.fields["sensors"]))
     f = ex.fields
-    assert t.kind == kind and t.version == 2 and t.unit_code == 1
+    assert t.kind == kind and t.version == 3 and t.unit_code == 1
     assert t.axis == f["axis"] and t.sensors == f["sensors"] and t.provenance == f["provenance"]
     assert (t.env_lo, t.env_hi, t.ref) == (f["env_lo"], f["env_hi"], f["ref"])
+    assert (t.train_lo, t.train_hi) == (f["train_lo"], f["train_hi"])
+    # the certified envelope is the training range widened by the default margin (15 K) on both sides
+    assert all(lo == tlo - 15000 and hi == thi + 15000
+               for lo, hi, tlo, thi in zip(t.env_lo, t.env_hi, t.train_lo, t.train_hi))
     for name, value in payload_words(f):
         base, _, idx = name.partition("[")
         got = getattr(t, base)
@@ -105,15 +109,24 @@ def test_specific_reasons(exports):
     buf = exports["poly_slope"].table
     n = len(exports["poly_slope"].fields["sensors"])
     v2 = bytearray(buf)
-    v2[4] = 3
+    v2[4] = 4
     assert reason(bytes(v2)) == REASON_VERSION
     assert reason(refresh_crc(v2)) == REASON_VERSION
-    # a table of format 1 (before the screw's air channel) is refused with a message that says to re-export
-    v1 = bytearray(buf)
-    v1[4] = 1
-    with pytest.raises(TableError, match="table format version 1 is no longer supported; re-export") as exc:
-        parse_table(bytes(refresh_crc(v1)))
-    assert exc.value.reason == REASON_VERSION
+    # tables of format 1 (before the screw's air channel) and 2 (before the training range) are refused
+    # with a message that says to re-export
+    for old in (1, 2):
+        v1 = bytearray(buf)
+        v1[4] = old
+        with pytest.raises(TableError, match="table format version %d is no longer supported; re-export the model "
+                                             "with this tcomp \\(format 3\\)" % old) as exc:
+            parse_table(bytes(refresh_crc(v1)))
+        assert exc.value.reason == REASON_VERSION
+    # a training range outside the envelope is an exporter/firmware mismatch
+    tr = bytearray(buf)
+    struct.pack_into("<i", tr, 64 + 16 * n + 12, struct.unpack_from("<i", tr, 64 + 16 * n)[0] - 1)
+    with pytest.raises(TableError, match="training range") as exc:
+        parse_table(refresh_crc(tr))
+    assert exc.value.reason == REASON_FIELD
     k = bytearray(buf)
     k[5] = 9
     assert reason(refresh_crc(k)) == REASON_KIND

@@ -166,7 +166,7 @@ def _tampered(table, factor=1000):
     from firmware.table import parse_table
     t = parse_table(table)
     b = bytearray(table)
-    off = 64 + 28 * t.n_sensors + 4 * 8  # payload: 8 words, then b[0] shb[0] fb[0] ...
+    off = 64 + 36 * t.n_sensors + 4 * 8  # payload: 8 words, then b[0] shb[0] fb[0] ...
     for i in range(t.n_sensors):
         v = struct.unpack_from("<i", b, off + 12 * i)[0]
         struct.pack_into("<i", b, off + 12 * i, max(-(1 << 31), min((1 << 31) - 1, v * factor)))

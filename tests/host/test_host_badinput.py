@@ -493,3 +493,56 @@ def test_predict_outside_the_temperature_log(capsys, tmp_path, model, screw_mode
 def test_fit_screw_outside_the_temperature_log(capsys, tmp_path, short_log):
     err = _fail(capsys, ["fit", "--model", "screw", short_log, "--out", str(tmp_path / "m.json")])
     assert short_log in err and "outside the temperature log 0..30 s" in err
+
+
+# ------------------------------------------------------------ export --envelope (issue 13)
+
+@pytest.mark.parametrize("value, words", [
+    ("T9=10:60", "sensor T9: not an input of this model (its sensors: T1, T2, T3, T4, T5)"),
+    ("T1=60:10", "T1=60:10: the low end 60 degC must be below the high end 10 degC"),
+    ("T1=20:20", "the low end 20 degC must be below the high end 20 degC"),
+    ("T1=nan:60", "T1=nan:60: temperatures must be finite numbers"),
+    ("T1=10:inf", "temperatures must be finite numbers"),
+    ("T1=ten:60", "is not a pair of temperatures in degC"),
+    ("T1", "expected SENSOR=LO:HI in degC"),
+    ("T1=10", "expected SENSOR=LO:HI in degC"),
+    ("T1=10:60,T1=5:70", "sensor T1 given twice"),
+    ("T1=25:26", "does not contain the training range"),
+])
+def test_export_envelope_errors_are_one_line(capsys, tmp_path, model, value, words):
+    out = tmp_path / "x.bin"
+    err = _fail(capsys, ["export", model, "--out", str(out), "--envelope", value])
+    assert "--envelope" in err or "envelope for sensor" in err, err
+    assert words in err, err
+    assert not out.exists() and os.listdir(tmp_path) == []
+
+
+@pytest.mark.parametrize("value", ["nan", "-1", "inf"])
+def test_export_envelope_margin_must_be_finite_and_not_negative(capsys, tmp_path, model, value):
+    err = _fail(capsys, ["export", model, "--out", str(tmp_path / "x.bin"), "--envelope-margin=" + value])
+    assert "--envelope-margin" in err
+
+
+def test_export_envelope_is_set_per_sensor_and_reported(capsys, tmp_path, model):
+    import json
+    from firmware.table import parse_table
+    with open(model) as fh:
+        train = json.load(fh)["envelope"]["temperature_C"]
+    j = tmp_path / "r.json"
+    out = tmp_path / "x.bin"
+    assert main(["export", model, "--out", str(out), "--json", str(j), "--envelope", "T1=10:60",
+                 "--envelope", "T2=5:45,T3=0:50"]) == 0
+    r = json.loads(j.read_text())["envelope"]
+    t = parse_table(out.read_bytes())
+    assert r["temperature_mC"]["T1"] == [10000, 60000] and r["temperature_mC"]["T3"] == [0, 50000]
+    assert r["temperature_source"]["T1"] == "--envelope" and r["temperature_source"]["T4"] == "training range +- 15 K"
+    for i, s in enumerate(t.sensors):
+        lo, hi = train[s]
+        assert r["training_temperature_mC"][s] == [t.train_lo[i], t.train_hi[i]]
+        assert abs(t.train_lo[i] - lo * 1000) <= 1 and abs(t.train_hi[i] - hi * 1000) <= 1
+        assert r["temperature_mC"][s] == [t.env_lo[i], t.env_hi[i]]
+    i4 = t.sensors.index("T4")
+    assert (t.env_lo[i4], t.env_hi[i4]) == (t.train_lo[i4] - 15000, t.train_hi[i4] + 15000)
+    assert main(["export", model, "--out", str(out), "--json", str(j), "--envelope-margin", "0"]) == 0
+    t = parse_table(out.read_bytes())
+    assert (t.env_lo, t.env_hi) == (t.train_lo, t.train_hi)

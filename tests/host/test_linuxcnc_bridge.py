@@ -273,3 +273,17 @@ def test_cli_errors_are_one_line(capsys):
     err = capsys.readouterr().err.strip().splitlines()
     assert err == ["tcomp linuxcnc: error: --period-ms 0: must be 1..1000",
                    "tcomp linuxcnc: error: --slew-um-per-s 0: must be in (0, 10000] (the firmware's range)"]
+
+
+def test_extrapolating_and_clamped_are_not_faults():
+    """EXTRAPOLATING (a temperature outside the training range, inside the certified envelope) and
+    CLAMPED are informational: the bridge keeps applying the board's offset; only FALLBACK ramps to zero."""
+    from firmware.wire import CLAMPED, EXTRAPOLATING
+    run = Run()
+    run.step(80)
+    run.link.status = EXTRAPOLATING | CLAMPED
+    rows = run.step(60)
+    assert rows[-1][1] == pytest.approx(25.0) and rows[-1][2] == 0
+    run.link.status = EXTRAPOLATING | FALLBACK
+    rows = run.step(60)
+    assert rows[-1][1] == pytest.approx(0.0, abs=1e-9) and rows[-1][2] & BOARD
