@@ -81,6 +81,7 @@ class Table:
     unit_code: int
     ref_mode: int
     edited: int
+    positional: int  # dynamic tables: 1 when the position block follows (slope target)
     cert_out: int
     cert_ref: int
     cert_slope: int
