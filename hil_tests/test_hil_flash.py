@@ -33,11 +33,12 @@ def _frames(ser, decoder, seconds, want=None):
 
 
 def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run, capfd):
-    from hil_tests.rig.harness import micropython_path
+    from hil_tests.rig import interpreters
     from hil_tests.rig.socatboard import SocatBoard
     from host.cli import main as tcomp
-    if shutil.which("socat") is None or micropython_path() is None:
-        pytest.skip("socat and the MicroPython unix port are needed")
+    interpreters.get().require()  # not there: the test fails (never skips)
+    if shutil.which("socat") is None:
+        pytest.skip("socat is needed (make setup installs it)")
     sensors = ["T1", "T2", "T4"]
     table = export(poly_slope_for_run(demo_run, sensors, seed=41)).table
     (tmp_path / "table.bin").write_bytes(table)

@@ -5,7 +5,7 @@
 Export: wall time of export_model per model kind (sample documents from
 hil_tests.fixtures.samples), table size, certified error. Evaluation: microseconds
 per call of update / offset_at / ref_offset+slope / step on CPython and on the
-MicroPython unix port (firmware modules compiled with mpy-cross, 64 kB heap),
+MicroPython TCOMP_MICROPYTHON chooses (firmware modules compiled with mpy-cross, 64 kB heap),
 instructions per call under valgrind/callgrind (stable on a loaded machine),
 best of several repetitions (the machine may be shared),
 and the .mpy size of the three firmware modules for armv6m (RP2040).
@@ -29,6 +29,8 @@ from models_export import export_model  # noqa: E402
 from hil_tests.fixtures.samples import linear_direct_doc, poly_slope_doc, screw_doc  # noqa: E402
 
 BIN = REPO / ".venv" / "bin"
+from hil_tests.rig import interpreters  # noqa: E402
+MICROPYTHON = Path(interpreters.get().path)  # the one TCOMP_MICROPYTHON chooses (default: the 32-bit port)
 
 MP_SCRIPT = """
 import time
@@ -102,7 +104,7 @@ def callgrind_per_call(tmp, table_path, stmt, n1=50, n2=250):
         script = tmp / "cg.py"
         script.write_text(CG_SCRIPT % dict(path=str(table_path), stmt=stmt, n=n))
         out = tmp / "cg.out"
-        proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=%s" % out, str(BIN / "micropython"),
+        proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=%s" % out, str(MICROPYTHON),
                                "-X", "heapsize=64K", str(script)], capture_output=True, text=True,
                               env=dict(os.environ, MICROPYPATH=str(tmp)))
         if proc.returncode != 0:
@@ -124,7 +126,7 @@ def main():
         ("screw, 12 segments, base sensor", screw_doc(random.Random(3), segments=12, dt_s=10.0, degree=2)),
         ("screw, 16 segments, dt 1 s", screw_doc(random.Random(4), segments=16, dt_s=1.0, degree=2)),
     ]
-    mp_ok = (BIN / "micropython").exists() and (BIN / "mpy-cross").exists()
+    mp_ok = MICROPYTHON.exists() and (BIN / "mpy-cross").exists()
     tmp = Path(tempfile.mkdtemp(prefix="bench_export_"))
     if mp_ok:
         (tmp / "firmware").mkdir()
@@ -157,7 +159,7 @@ def main():
             script.write_text(MP_SCRIPT % dict(path=str(path), n=args.n, screw=screw, pos=pos))
             runs = []
             for _ in range(3):  # best of three runs, as for CPython
-                out = subprocess.run([str(BIN / "micropython"), "-X", "heapsize=64K", str(script)], capture_output=True, text=True,
+                out = subprocess.run([str(MICROPYTHON), "-X", "heapsize=64K", str(script)], capture_output=True, text=True,
                                      env=dict(os.environ, MICROPYPATH=str(tmp)), check=True).stdout.split()
                 runs.append([int(v) for v in out])
             us = [min(col) for col in zip(*runs)]
@@ -166,7 +168,8 @@ def main():
             vals = [us[0] / args.n - loop, us[1] / args.n - loop, us[2] / args.n - loop, us[3] / ns if screw else float("nan")]
             print("  %-36s MicroPython %7.2f | %7.2f | %7.2f | %8.1f" % ("", *vals))
     if mp_ok and not args.no_valgrind and shutil.which("valgrind"):
-        print("\ninstructions per call on the MicroPython unix port (valgrind --tool=callgrind, x86-64):")
+        it = interpreters.get()
+        print("\ninstructions per call on MicroPython %s (%d-bit; valgrind --tool=callgrind):" % (it.kind, it.bits))
         for label, ex in tables:
             t = parse_table(ex.table)
             path = tmp / "table.bin"

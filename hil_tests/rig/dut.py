@@ -21,6 +21,8 @@ import gc
 import json
 import sys
 
+from hil_tests.sim.buses import HEAP_LOCKED
+
 try:
     import micropython
 except ImportError:
@@ -66,6 +68,7 @@ class Control:
     def gate(self):
         """Time reached the grant: report, then obey requests until the next ``run``."""
         if self.locked:
+            HEAP_LOCKED[0] = False
             micropython.heap_unlock()
             self.locked = False
         self.gates += 1
@@ -89,6 +92,7 @@ class Control:
                     gc.collect()
                     micropython.heap_lock()
                     self.locked = True
+                    HEAP_LOCKED[0] = True  # the simulated chips work unlocked (hil_tests/sim/buses.py)
                 return
             if op == "jump":
                 w.jump(m["temps"])
@@ -182,6 +186,7 @@ def main(spec_path):
         raise SystemExit(3)
     except Exception as e:
         if ctl.locked:
+            HEAP_LOCKED[0] = False
             micropython.heap_unlock()
             ctl.locked = False
         if MICRO:

@@ -29,13 +29,13 @@ from typing import Any
 
 import serial
 
+from hil_tests.rig import interpreters
 from host.link import StreamDecoder, command
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MP_DIR = os.path.join(ROOT, "hil_tests", "mp")
 DUT = os.path.join(ROOT, "hil_tests", "rig", "dut.py")
 VENV_BIN = os.path.join(ROOT, ".venv", "bin")
-HEAP = os.environ.get("TCOMP_HIL_HEAP", "192K")  # 64-bit unix port: ~2x a 32-bit MCU (docs/hil.md)
 
 
 class RigError(RuntimeError):
@@ -43,16 +43,22 @@ class RigError(RuntimeError):
 
 
 def micropython_path():
-    p = os.path.join(VENV_BIN, "micropython")
-    return p if os.path.exists(p) else shutil.which("micropython")
+    """The chosen MicroPython (hil_tests/rig/interpreters.py: TCOMP_MICROPYTHON), None when it is not there."""
+    it = interpreters.get()
+    return it.path if it.exists() else None
 
 
-def interpreter_cmd(name, heap=HEAP):
+def rig_heap():
+    """The DUT's -X heapsize: TCOMP_HIL_HEAP, else the measured one for the chosen interpreter's word size."""
+    return os.environ.get("TCOMP_HIL_HEAP") or interpreters.heap("rig")
+
+
+def interpreter_cmd(name, heap=None):
     if name == "micropython":
-        mp = micropython_path()
-        if mp is None:
-            raise RigError("MicroPython unix port not found (.venv/bin/micropython)")
-        return [mp, "-X", "heapsize=" + heap]
+        try:
+            return interpreters.get().argv(heap or rig_heap())
+        except interpreters.InterpreterMissing as e:
+            raise RigError(str(e))
     if name == "cpython":
         return [sys.executable, "-u"]
     raise RigError("interpreter must be micropython or cpython, got %r" % (name,))
@@ -250,7 +256,7 @@ class Rig(LinkClient):
     """One simulated board running the firmware. Use as a context manager."""
 
     def __init__(self, config, table=None, interpreter="micropython", workdir=None, temps=None, noise_uohm=0,
-                 seed=1, start_ms=0, heap=HEAP, slot="A", use_mpy=True, open_port=True, key=None):
+                 seed=1, start_ms=0, heap=None, slot="A", use_mpy=True, open_port=True, key=None):
         """``key``: the board key provisioned into its flash (as tcomp flash does); a random one by
         default, b"" for a board nobody provisioned."""
         self.config = json.loads(json.dumps(config))

