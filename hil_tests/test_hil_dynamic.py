@@ -56,7 +56,9 @@ def test_dynamic_table_on_the_rig_matches_host_model(make_rig):
     ex = export(doc)
     assert ex.report["dynamic"]["dt_ms"] == 15000
     temps = {s: float(run.temperatures.column(s)[0]) for s in sensors}
-    rig = make_rig(rig_config(sensors), ex.table, temps=temps, noise_uohm=0)
+    from hil_tests.rig import interpreters
+    heap = os.environ.get("TCOMP_HIL_HEAP") or interpreters.heap("rig_dynamic")
+    rig = make_rig(rig_config(sensors), ex.table, temps=temps, noise_uohm=0, heap=heap)
     answers = play(rig, run, sensors, motion=False, spindle=True, latch=True, query_delay_ms=200)
     model = load_model(doc)
     pred = np.asarray(model.predict(run))
