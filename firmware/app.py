@@ -128,6 +128,8 @@ class App:
         self.unlatched = False
         self.unsettled = False  # screw state not yet set in equilibrium with a good air reading
         self.ref_state = 0
+        self.heat = None  # firmware.warmstate.HeatStore of a screw table with latched references
+        self.warm = False  # the screw state was restored from heat.bin (not settled at the first good cycle)
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
         self.wear = _WEAR_CAP  # flash-write tokens (spend_flash)
@@ -206,10 +208,37 @@ class App:
                 st = _REFS_STORED
         self.ref_state = st
         self.unlatched = st > _REFS_UNSAVED
-        # the screw state starts in equilibrium with the air at the first cycle every needed sensor reads good
+        # the screw state starts in equilibrium with the air at the first cycle every needed sensor reads good,
+        # unless this is a warm restart: the stored references are in use and heat.bin holds a state for them
         self.unsettled = self.screw
+        self.warm = False
         self.step_ms = 0
+        self._open_heat(table, ev, st == _REFS_STORED)
         self._span()
+
+    def _settle(self, ev):
+        # the first cycle in which every sensor the table needs reads good
+        self.unsettled = False
+        if self.warm:
+            ev.da0 = ev.da  # the restored state keeps its heat; the air steps on from now
+        else:
+            ev.settle()
+
+    def _open_heat(self, table, ev, restore):
+        if self.heat is not None:
+            self.heat.close()
+            self.heat = None
+        if not self.screw or table.ref_mode != 1:
+            return
+        from firmware.warmstate import HeatStore, ref_tag
+        h = HeatStore(self.store.dir, table, ref_tag(ev.ref))
+        T = h.load() if restore else None
+        if T is not None:
+            ev.T[:] = T
+            ev.settle_restored()
+            self.warm = True
+        if h.open():
+            self.heat = h
 
     def _span(self):
         t = self.table
@@ -227,6 +256,13 @@ class App:
             self.step_ms = 0  # the filters step at dt_ms from the cold start, as the host's from the run's first sample
         self.unlatched = False
         self.ref_state = _REFS_LATCHED if self.store.save_refs(t, ev.ref) else _REFS_UNSAVED
+        h = self.heat
+        if h is not None:  # a latch is a cold start: the settled state, stored under the new references
+            from firmware.warmstate import ref_tag
+            self.warm = False
+            self.unsettled = False
+            h.retag(ref_tag(ev.ref))
+            h.save(ev.T)
 
     def relatch(self, check_only=False):
         """Latch the reference temperatures now (the controller's cold start) and store them.
@@ -384,8 +420,7 @@ class App:
                     self._latch(ev, t)
             ev.update()
             if self.unsettled and not needed:
-                self.unsettled = False
-                ev.settle()
+                self._settle(ev)
             if self.screw or self.dyn:
                 dtm = t.dt_ms
                 self.step_ms += dt
@@ -397,6 +432,8 @@ class App:
                     if k >= _MAX_CATCHUP:  # after a stall: drop the time rather than burst
                         self.step_ms = 0
                         break
+                if self.heat is not None and not self.unsettled:
+                    self.heat.tick(dt, ev.T)  # allocation-free (firmware/warmstate.py)
             pos = self.pos if self.have_pos else ev.pos_ref
             # the model at last cycle's position too: the limiter tells motion from drift
             raw_prev = ev.offset_at(self.pos_used)
@@ -454,6 +491,10 @@ class App:
             self.wait(start)
 
     def reset(self):
+        h = self.heat
+        ev = self.ev
+        if h is not None and ev is not None and not self.unsettled and self.spend_flash():
+            h.save(ev.T)  # the restart resumes from the state of this very moment
         self.store.abort()
         r = self.board.reset
         if r is not None:

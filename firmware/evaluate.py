@@ -667,6 +667,11 @@ class Evaluator:
         self.da0 = self.da
         self._refresh()
 
+    def settle_restored(self):
+        """The state ``T`` was written from a stored one (a warm restart): refresh what depends on it."""
+        self.da0 = self.da
+        self._refresh()
+
     def _refresh(self):
         """Per-step precomputation of the piecewise-linear elongation profile."""
         t = self.table

@@ -22,7 +22,7 @@ from firmware.wire import CLAMPED, EXTRAPOLATING
 pytestmark = pytest.mark.rig
 
 SENSORS = ["T1", "T4", "T5"]  # nut, and two structure sensors that also leave the training range at 15000 mm/min
-WINDOW_H = (1.0, 2.5)  # hours of the hot run played (the nut is above the training range from 0.64 h on)
+WINDOW_H = (1.0, 2.0)  # hours of the hot run played (the nut is above the training range from 0.64 h on)
 
 
 def _window(run, h0, h1):

@@ -125,3 +125,25 @@ def test_sim_noise_is_xorshift32_and_allocation_free_on_32_bit():
                        env=dict(os.environ, MICROPYPATH=root))
     assert p.returncode == 0, p.stdout + p.stderr
     assert [int(v) for v in p.stdout.split()] == want
+
+
+def test_json_round_trips_with_cpython(tmp_path):
+    """The rig's control channel: what CPython's json writes, the chosen MicroPython reads and writes
+    back unchanged (the 32-bit port's json is ours: ports/common/modjson.c, lib/json.py)."""
+    import json
+    docs = [{"op": "run", "until_ms": 123456789, "temps": {"T1": 23.5, "T2": -0.00125, "T4": 1e-05}, "gc": False,
+             "lock": True},
+            {"ev": "stats", "chips": {"T1": {"violations": 0, "violation_text": "a \"quoted\" \\ line\n\u00e9"}},
+             "uart": [1, 2], "wdt_feeds": None, "big": 2 ** 40, "neg": -(2 ** 31)},
+            [], {}, "\u00b0C \U0001f600"]
+    src = tmp_path / "in.json"
+    src.write_text("\n".join(json.dumps(d) for d in docs) + "\n")
+    script = ("import json\nf = open(%r)\nfor line in f:\n    print(json.dumps(json.loads(line)))\nf.close()\n"
+              % str(src))
+    it = interpreters.get().require()
+    p = subprocess.run(it.argv("64K") + ["-c", script], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stdout + p.stderr
+    assert [json.loads(line) for line in p.stdout.splitlines()] == docs
+    bad = subprocess.run(it.argv("64K") + ["-c", "import json\njson.loads('{\"a\": [1,]}')"],
+                         capture_output=True, text=True, timeout=60)
+    assert bad.returncode == 1 and "ValueError" in bad.stderr

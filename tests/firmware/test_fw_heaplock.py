@@ -22,7 +22,7 @@ import os
 
 import pytest
 
-from fwhelpers import compile_mpy, run_micropython, make_table, HERE, HEAPLOCK_SCRIPT
+from fwhelpers import compile_mpy, run_micropython, make_table, HEAPLOCK_SCRIPT
 
 def heap(mode, kind="poly_slope"):
     """The test heap for the chosen interpreter's word size (hil_tests/rig/interpreters.py HEAPS); a dynamic
@@ -32,8 +32,8 @@ def heap(mode, kind="poly_slope"):
 
 
 @pytest.fixture(scope="module")
-def mpy_dir(tmp_path_factory):
-    return str(compile_mpy(str(tmp_path_factory.mktemp("mpy")), [os.path.join(HERE, "fwfakes.py")]))
+def mpy_dir():
+    return str(compile_mpy(fakes=True))
 
 
 @pytest.mark.micropython
