@@ -38,6 +38,7 @@ _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is
 _POLL_MS = const(5)  # serial polling period while waiting for the next cycle
 _CAP = const(0x20000000)  # elapsed-time counters saturate at 2**29 ms
 _KIND_SCREW_REDUCED = const(3)  # firmware.table's (tests/firmware/test_fw_consts.py checks)
+_KIND_DYNAMIC = const(4)
 # ref_state: where the reference temperatures come from (docs/firmware.md); the hello
 # frame sends firmware.wire.REF_LETTERS[ref_state]. From 4 on the latch is pending: 4..6 are
 # firmware.slots' REFS_MISSING/CORRUPT/FOREIGN (why the stored ones were not used).
@@ -104,6 +105,9 @@ class App:
         self.pos = 0  # last reported position
         self.pos_used = 0  # position the last cycle's total was evaluated at
         self.have_pos = False
+        self.spindle = 0  # last reported spindle speed (rpm) and feed (mm/min): the dynamic table's inputs
+        self.feed = 0
+        self.dyn = False  # the table in use is a dynamic one
         # elapsed-time counters (ms, saturating) rather than timestamps: ticks wrap
         self.rx_ms = 0  # since the last valid controller traffic
         self.fault_active = False
@@ -159,6 +163,8 @@ class App:
                 up = (table.b[j] >= 0) == (sign > 0)
                 ev.temps[j] = table.ref[j] if not sign else (table.env_hi[j] if up else table.env_lo[j])
             ev.update()
+            if table.kind_code == _KIND_DYNAMIC:
+                ev.extreme(sign)  # the filter states at the ends of their boxes
             for p in (table.pos_lo, table.pos_hi, table.pos_ref):
                 ev.set_reference(p)
                 for v, bound in ((ev.offset_at(p), table.cert_out), (ev.ref_offset(), table.cert_ref),
@@ -178,7 +184,13 @@ class App:
         ref = self.cfg.reference_um
         if ref is not None:
             ev.set_reference(ref)
+        self.dyn = table.kind_code == _KIND_DYNAMIC
+        if self.dyn:
+            ev.set_spindle(self.spindle)
+            ev.set_feed_rate(self.feed)
         ev.update()
+        if self.dyn:
+            ev.rest()
         self.table = table
         self.slot = slot
         self.ev = ev
@@ -240,6 +252,8 @@ class App:
     def _latch(self, ev, t):
         # once per latch, never in the steady state: the flash write allocates
         ev.latch_references()
+        if self.dyn:
+            self.step_ms = 0  # the filters step at dt_ms from the cold start, as the host's from the run's first sample
         self.unlatched = False
         self.ref_state = _REFS_LATCHED if self.store.save_refs(t, ev.ref) else _REFS_UNSAVED
         h = self.heat
@@ -301,7 +315,17 @@ class App:
                 self.ev.clear_feed()
             self.ev.advance_position(pos_um)
 
+    def report_spindle(self, rpm):
+        """Spindle speed from the controller (rpm, either sign): an input of dynamic tables, like the position."""
+        self.spindle = rpm
+        if self.ev is not None and self.dyn:
+            self.ev.set_spindle(rpm)
+
     def set_feed(self, feed_mm_min, lo_um, hi_um):
+        self.feed = feed_mm_min
+        if self.ev is not None and self.dyn:
+            self.ev.set_feed_rate(feed_mm_min)
+            return True
         if self.ev is None or not self.screw:
             return False
         if feed_mm_min == 0:
@@ -397,7 +421,7 @@ class App:
             ev.update()
             if self.unsettled and not needed:
                 self._settle(ev)
-            if self.screw:
+            if self.screw or self.dyn:
                 dtm = t.dt_ms
                 self.step_ms += dt
                 k = 0

@@ -1,4 +1,4 @@
-"""Integer evaluation of a coefficient table (poly_slope, linear_direct, screw_reduced).
+"""Integer evaluation of a coefficient table (poly_slope, linear_direct, screw_reduced, dynamic).
 
 This is the evaluation order the exporter certifies (models_export/certify.py
 mirrors it operation by operation): change one, change the other. Only integer
@@ -31,6 +31,7 @@ from micropython import const
 # folded into the bytecode (tests/firmware/test_fw_consts.py checks they agree)
 _KIND_LINEAR_DIRECT = const(2)
 _KIND_SCREW_REDUCED = const(3)
+_KIND_DYNAMIC = const(4)
 _REF_LATCHED = const(1)
 
 _MAXV = const(0x3FFFFFFF)  # |intermediate| must stay <= 2**30 - 1
@@ -40,6 +41,7 @@ _SENSOR_BITS = const(0xFFFFFF)
 _CLAMP_POSITION = const(0x1000000)  # the last position given was outside the envelope
 _CLAMP_TRAVEL = const(0x2000000)  # nut travel or feed beyond the table's bound (screw)
 _CLAMP_STATE = const(0x4000000)  # a segment state hit the table's state bound (screw)
+_CLAMP_INPUT = const(0x8000000)  # spindle speed or feed beyond the table's envelope (dynamic)
 
 # Check-mode slots: a _mul call site uses slot s for its limb products and s+1
 # for its shifted terms and partial sums.
@@ -69,7 +71,12 @@ _SLOT_FEEDMUL = const(30)
 _SLOT_CMUL = const(32)
 _SLOT_DE = const(34)
 _SLOT_AMUL = const(35)
-_N_SLOTS = const(37)
+_SLOT_QMUL = const(37)  # dynamic: the spindle speed squared
+_SLOT_DX = const(39)  # dynamic: input minus filter state
+_SLOT_DMUL = const(40)  # dynamic: the filter increment
+_SLOT_Y = const(42)  # dynamic: filter states
+_SLOT_YMUL = const(43)  # dynamic: coefficient x filter state
+_N_SLOTS = const(45)
 
 _FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
 _FEED_LIMB = const(10)
@@ -102,6 +109,7 @@ class Evaluator:
         self.extrap = 0  # bit i: sensor i is evaluated outside the table's training range (inside the envelope or clamped to it)
         self.S = t.S0
         self.pos_ref = t.pos_ref
+        self.direct = table.kind_code == _KIND_LINEAR_DIRECT or (table.kind_code == _KIND_DYNAMIC and not t.positional)
         self.lo = [_MAXV] * _N_SLOTS
         self.hi = [-_MAXV] * _N_SLOTS
         if self.kind == _KIND_SCREW_REDUCED:
@@ -119,9 +127,19 @@ class Evaluator:
             self.x = 0
             self.da = 0  # air over its reference (milli-K, clamped) at the last update() and at the last step
             self.da0 = 0
+        if self.kind == _KIND_DYNAMIC:
+            self.d = [0] * n  # clamped temperature minus reference, per sensor (the rises the filters read)
+            self.Y = [0] * t.nf  # filter states, 2**-fy[j] input units
+            self.U0 = [0] * t.nf  # each filter's input at the last step (held over the step, as the host's)
+            self.Uc = [0] * t.nf  # each filter's input now
+            self.spin = 0  # spindle speed (rpm) and feed (mm/min) as the controller reported them
+            self.fin = 0
+            self.Slin = t.S0
         self.update()
         if self.kind == _KIND_SCREW_REDUCED:
             self.settle()
+        elif self.kind == _KIND_DYNAMIC:
+            self.rest()
 
     # -- checking mode ------------------------------------------------------
     def _note(self, slot, v):
@@ -194,6 +212,8 @@ class Evaluator:
         self.update()
         if self.kind == _KIND_SCREW_REDUCED:
             self.settle()  # a latch is a cold start: the screw in equilibrium with the air
+        elif self.kind == _KIND_DYNAMIC:
+            self.rest()  # a latch is a cold start: every filter at rest
 
     def update(self):
         """Recompute the temperature-dependent terms from ``temps``; flag clamped sensors (``flags``)
@@ -214,6 +234,7 @@ class Evaluator:
         fl = 0
         s = t.S0
         air = t.air if self.kind == _KIND_SCREW_REDUCED else -1
+        dyn = self.kind == _KIND_DYNAMIC
         for i in range(t.n_sensors):
             v = temps[i]
             if v < lo[i]:
@@ -229,11 +250,17 @@ class Evaluator:
                 self._note(_SLOT_D, d)
             if i == air:
                 self.da = d
+            if dyn:
+                self.d[i] = d
             s += self._mul(_SLOT_SMUL, b[i], d, Lt, nt, shb[i])
             if chk:
                 self._note(_SLOT_S, s)
+        if dyn:
+            self.Slin = s
+            fl |= self._inputs()
+            s = self._dsum(s)
         self.S = s
-        self.flags = (self.flags & ~_SENSOR_BITS) | fl
+        self.flags = (self.flags & ~(_SENSOR_BITS | _CLAMP_INPUT)) | fl
         self.extrap = ex
 
     # -- outputs --------------------------------------------------------------
@@ -252,7 +279,7 @@ class Evaluator:
         """Total model offset (geometric + thermal) at ``pos_um``, in 0.01 um."""
         t = self.table
         chk = self.check
-        if self.kind == _KIND_LINEAR_DIRECT:
+        if self.direct:
             v = (self.S + t.rL) >> t.fo
             if chk:
                 self._note(_SLOT_ACC, self.S + t.rL)
@@ -298,7 +325,7 @@ class Evaluator:
         """
         t = self.table
         chk = self.check
-        if self.kind == _KIND_LINEAR_DIRECT:
+        if self.direct:
             return self.offset_at(0)
         p = self.pos_ref
         acc = self._mul(_SLOT_THMUL, p, self.S, t.Lw, t.nw, t.shw)
@@ -316,7 +343,7 @@ class Evaluator:
         """Thermal slope d(offset)/dP in 0.01 um/m (0 for linear_direct)."""
         t = self.table
         chk = self.check
-        if self.kind == _KIND_LINEAR_DIRECT:
+        if self.direct:
             return 0
         acc = self._mul(_SLOT_KMUL, t.KS, self.S, t.Lw, t.nw, t.shK)
         if self.kind == _KIND_SCREW_REDUCED:
@@ -331,6 +358,112 @@ class Evaluator:
         if chk:
             self._note(_SLOT_OUT, v)
         return v
+
+    # -- dynamic ----------------------------------------------------------------
+    def set_spindle(self, rpm):
+        """Spindle speed as the controller reports it (rpm; the sign, the direction, is dropped). Read at update()."""
+        self.spin = rpm if rpm >= 0 else -rpm
+
+    def set_feed_rate(self, feed_mm_min):
+        """Axis feed while it moves, 0 when idle (mm/min). Read at update()."""
+        self.fin = feed_mm_min if feed_mm_min >= 0 else -feed_mm_min
+
+    def _inputs(self):
+        """Each filter's input now into Uc (clamped to the envelope; returns the flag); tau = 0 terms follow it."""
+        t = self.table
+        fl = 0
+        r = self.spin
+        if r > t.smax:
+            r = t.smax
+            fl = _CLAMP_INPUT
+        f = self.fin
+        if f > t.fmax:
+            f = t.fmax
+            fl = _CLAMP_INPUT
+        q = self._mul(_SLOT_QMUL, r, r, t.Lq, t.nq, t.shq)  # rpm**2 / 2**shq
+        src = t.src
+        A = t.A
+        fy = t.fy
+        Uc = self.Uc
+        for j in range(t.nf):
+            k = src[j]
+            v = self.d[k] if k >= 0 else (r if k == -1 else (q if k == -2 else f))
+            Uc[j] = v
+            if A[j] == 0:
+                v <<= fy[j]
+                if self.check:
+                    self._note(_SLOT_Y, v)
+                self.Y[j] = v
+        return fl
+
+    def _dsum(self, s):
+        """S plus every coefficient x filter state."""
+        t = self.table
+        bY = t.bY
+        shY = t.shY
+        Y = self.Y
+        LY = t.LY
+        nY = t.nY
+        for j in range(t.nf):
+            s += self._mul(_SLOT_YMUL, bY[j], Y[j], LY, nY, shY[j])
+            if self.check:
+                self._note(_SLOT_S, s)
+        return s
+
+    def rest(self):
+        """Every filter at rest (state 0) with the present inputs as the last step's: a cold start."""
+        t = self.table
+        for j in range(t.nf):
+            if t.A[j]:
+                self.Y[j] = 0
+            self.U0[j] = self.Uc[j]
+        self.S = self._dsum(self.Slin)
+
+    def extreme(self, sign):
+        """Every filter state at the end of its box that drives S up (sign > 0), down (< 0), or 0 (the firmware's
+        cheap certificate check at table acceptance)."""
+        t = self.table
+        for j in range(t.nf):
+            up = (t.bY[j] >= 0) == (sign > 0)
+            self.Y[j] = 0 if not sign else (t.Yhi[j] if up else t.Ylo[j])
+        self.S = self._dsum(self.Slin)
+
+    def _dstep(self):
+        """One step of every lag filter: Y <- Y + a (U0 << fy - Y), the input held over the step (zero-order hold)."""
+        t = self.table
+        chk = self.check
+        A = t.A
+        shA = t.shA
+        rA = t.rA
+        gA = t.gA
+        fy = t.fy
+        Ylo = t.Ylo
+        Yhi = t.Yhi
+        Y = self.Y
+        U0 = self.U0
+        Uc = self.Uc
+        LX = t.LX
+        nX = t.nX
+        for j in range(t.nf):
+            if A[j]:
+                x = (U0[j] << fy[j]) - Y[j]
+                if chk:
+                    self._note(_SLOT_DX, x)
+                # the increment is formed gA[j] guard bits finer and rounded once (rA[j] centres it)
+                g = gA[j]
+                v = self._mul(_SLOT_DMUL, A[j], x, LX, nX, shA[j] - g) + rA[j]
+                if chk:
+                    self._note(_SLOT_DMUL + 1, v)
+                v = Y[j] + (v >> g)
+                if chk:
+                    self._note(_SLOT_Y, v)
+                if v < Ylo[j]:  # the exact state lies in the box (a convex combination of inputs and 0):
+                    v = Ylo[j]  # clamping only removes error
+                elif v > Yhi[j]:
+                    v = Yhi[j]
+                Y[j] = v
+            U0[j] = Uc[j]
+        self.S = self._dsum(self.Slin)
 
     # -- screw_reduced ----------------------------------------------------------
     def _seg(self, p):
@@ -432,7 +565,10 @@ class Evaluator:
         self.feed = False
 
     def step(self):
-        """One time step of the segment recurrence T <- T + C*T + B*u + W0*a0 + W1*a1 (then u = 0)."""
+        """One time step (every ``table.dt_ms``): the dynamic table's filters, or the screw's segment recurrence
+        T <- T + C*T + B*u + W0*a0 + W1*a1 (then u = 0)."""
+        if self.kind == _KIND_DYNAMIC:
+            return self._dstep()
         t = self.table
         chk = self.check
         m = t.M

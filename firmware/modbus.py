@@ -14,7 +14,9 @@ latch) need authorisation (firmware/auth.py): the master first writes the
 auth block, holding registers 8..17 (counter, then the 16-byte tag over this
 slave's address, the write's start, count, values and the counter), and the
 next such write is checked against it (exception 04 when refused, the reason
-in input register 50). Position and reference are written as whole int32s.
+in input register 50). Position, reference and spindle speed are written as whole int32s; the
+spindle speed (holding registers 18-19, rpm, an input of dynamic tables like the position) needs no
+authorisation, as the position does not.
 
 A request is complete when its function code's length has arrived, or after a
 silence of 3.5 character times (at least 2 ms) for anything else. Allocation-free.
@@ -53,7 +55,8 @@ _HR_LATCH = const(7)  # write 1: latch the reference temperatures now (reads 0)
 _N_VALUES = const(8)  # registers 0..7 hold values; the auth block reads 0
 _HR_AUTH = const(8)  # 10 registers: counter (uint32), tag (16 bytes); written whole with FC16
 _N_AUTH = const(10)
-_N_HOLDING = const(18)
+_HR_SPINDLE = const(18)  # int32 rpm, high word first, written whole with FC16: a spindle speed report
+_N_HOLDING = const(20)
 _PROTECTED = const(0x87)  # bit r: holding register r needs authorisation (0 enable, 1 slew, 2 timeout, 7 latch)
 
 _EX_ILLEGAL_FUNCTION = const(1)
@@ -63,6 +66,7 @@ _EX_DEVICE_FAILURE = const(4)
 _UNSIGNED = const(6)  # firmware.auth's (tests/firmware/test_fw_consts.py checks the copies)
 
 _POS_LIMIT = const(100000000)  # |position| in um, as the stream's (100 m)
+_SPINDLE_LIMIT = const(1000000)  # |spindle speed| in rpm, as the stream's
 _NO_VALUE = const(-32768)
 
 
@@ -90,7 +94,8 @@ class ModbusLink:
         self.last_byte = app.clock.ticks_ms()
         baud = app.cfg.baud
         self.silence_ms = 2 if baud >= 19200 else (38500 + baud - 1) // baud + 1
-        self.hold = [1, app.cfg.slew_um_per_s, app.cfg.link_timeout_ms, 0, 0, 0, 0, 0]
+        # values 0..7, the auth block 8..17 (reads 0, not stored here), the spindle speed 18..19
+        self.hold = [1, app.cfg.slew_um_per_s, app.cfg.link_timeout_ms, 0, 0, 0, 0, 0] + [0] * (_N_HOLDING - _N_VALUES)
         self.vals = [0] * 123  # values of a write, validated before use
         self.armed = False  # an auth block waits for the next protected write
         self.auth = bytearray(4 + 16)  # its counter (big-endian) and tag
@@ -215,7 +220,7 @@ class ModbusLink:
         t[2] = 2 * qty
         k = 3
         for r in range(start, start + qty):
-            v = self.input_register(r) if fc == 4 else (self.hold[r] if r < _N_VALUES else 0)
+            v = self.input_register(r) if fc == 4 else (self.hold[r] if r < _N_VALUES or r >= _HR_SPINDLE else 0)
             v &= 0xFFFF
             t[k] = v >> 8
             t[k + 1] = v & 0xFF
@@ -312,9 +317,11 @@ class ModbusLink:
             return self._exception(16, _EX_ILLEGAL_ADDRESS, addr)
         for i in range(qty):
             self.vals[i] = (b[7 + 2 * i] << 8) | b[8 + 2 * i]
-        if start + qty > _N_VALUES:
+        if start == _HR_SPINDLE and qty == 2:
+            code = self._spindle()
+        elif start + qty > _N_VALUES:
             if start != _HR_AUTH or qty != _N_AUTH:
-                return self._exception(16, _EX_ILLEGAL_VALUE, addr)  # the auth block is written whole
+                return self._exception(16, _EX_ILLEGAL_VALUE, addr)  # the auth block and the speed are written whole
             au = self.auth
             for i in range(_N_AUTH):
                 au[2 * i] = b[7 + 2 * i]
@@ -391,6 +398,20 @@ class ModbusLink:
         if h[_HR_LATCH]:
             h[_HR_LATCH] = 0
             a.relatch()
+        return 0
+
+    def _spindle(self):
+        """The spindle speed pair in ``vals[:2]``: validate, store, report; exception code or 0."""
+        vals = self.vals
+        hi = vals[0] - 65536 if vals[0] > 32767 else vals[0]
+        if hi > 16 or hi < -17:  # far outside: the value below stays a small int
+            return _EX_ILLEGAL_VALUE
+        v = hi * 65536 + vals[1]
+        if v > _SPINDLE_LIMIT or v < -_SPINDLE_LIMIT:
+            return _EX_ILLEGAL_VALUE
+        self.hold[_HR_SPINDLE] = vals[0]
+        self.hold[_HR_SPINDLE + 1] = vals[1]
+        self.app.report_spindle(v)
         return 0
 
     def _authorise(self, start, qty):

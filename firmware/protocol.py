@@ -3,7 +3,7 @@
 Frames the device sends (``$TC,<seq>,<status>,<type>,...*CRC``):
 H hello, O periodic offsets, Q answer to a query, T temperatures,
 A acknowledgement, E error. Commands from the controller (``$TC,<cmd>,...*CRC``):
-P position, M feed/range, Q query, R reference, S temperatures, V hello,
+P position (and spindle speed), M feed/range, Q query, R reference, S temperatures, V hello,
 U table upload (B begin, D data, C commit, X abort), L latch reference
 temperatures, X reset.
 A line that is corrupt, unknown or out of range is answered with an E frame
@@ -54,6 +54,7 @@ _SIGNED = b"XL"  # no argument but the counter and the tag
 
 _POS_LIMIT = const(100000000)  # |position| in um accepted from the controller (100 m)
 _FEED_LIMIT = const(1000000)  # mm/min
+_SPINDLE_LIMIT = const(1000000)  # |spindle speed| in rpm accepted from the controller
 _MAX_CHUNK = const(64)  # bytes of table data per U,D frame
 _RX_CHUNK = const(64)
 _MAX_READS = const(8)
@@ -235,13 +236,17 @@ class StreamLink:
         if c == _U:
             return self._upload(nf)
         if c in _ONE_POSITION:
-            if nf != 2:
+            # P,<pos> or P,<pos>,<spindle rpm>: the speed is an input like the position (unsigned, as P is)
+            if nf != 2 and not (nf == 3 and c == _P):
                 return self.error(_E_SYNTAX)
             v = r.int(1, -_POS_LIMIT, _POS_LIMIT)
-            if v is None:
+            rpm = r.int(2, -_SPINDLE_LIMIT, _SPINDLE_LIMIT) if nf == 3 else 0
+            if v is None or rpm is None:
                 return self.error(_E_RANGE)
             if c == _P:
                 a.report_position(v)
+                if nf == 3:
+                    a.report_spindle(rpm)
             elif c == _Q:
                 self.offsets(_Q, v)
             else:
@@ -258,7 +263,7 @@ class StreamLink:
             if f is None or lo is None or hi is None:
                 return self.error(_E_RANGE)
             if not a.set_feed(f, lo, hi):
-                return self.error(_E_STATE, b"no screw table")
+                return self.error(_E_STATE, b"no screw or dynamic table")
             self.ack(_M, 0, f)
         elif c in _NO_ARGUMENT:
             if nf != 1:

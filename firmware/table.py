@@ -32,7 +32,9 @@ _REF_LATCHED = const(1)  # certified for any reference in the envelope (models f
 _KIND_POLY_SLOPE = const(1)
 _KIND_LINEAR_DIRECT = const(2)
 _KIND_SCREW_REDUCED = const(3)
-KINDS = {1: "poly_slope", 2: "linear_direct", 3: "screw_reduced"}
+_KIND_DYNAMIC = const(4)
+KINDS = {1: "poly_slope", 2: "linear_direct", 3: "screw_reduced", 4: "dynamic"}
+_MAX_FILTERS = const(8)  # dynamic: lag-filtered terms (host/empirical/dynamic.py max_terms)
 
 REASON_TRUNCATED = "truncated"
 REASON_MAGIC = "bad magic"
@@ -79,6 +81,7 @@ class Table:
     unit_code: int
     ref_mode: int
     edited: int
+    positional: int  # dynamic tables: 1 when the position block follows (slope target)
     cert_out: int
     cert_ref: int
     cert_slope: int
@@ -169,7 +172,9 @@ def parse_table(buf, expected_sensors=None):
         t.ref.append(ref)
     w = [payload, payload + 4 * nwords]  # read offset, end
     _fields(t, buf, w, _COMMON)
-    if kind != _KIND_LINEAR_DIRECT:
+    if kind == _KIND_DYNAMIC:
+        _fields(t, buf, w, _DYNAMIC)
+    if kind != _KIND_LINEAR_DIRECT and (kind != _KIND_DYNAMIC or t.positional):
         _fields(t, buf, w, _POSITION)
     if kind == _KIND_SCREW_REDUCED:
         _fields(t, buf, w, _SCREW)
@@ -201,10 +206,11 @@ _SCALE = const(1000)  # fraction bits of a coefficient (informational, not used 
 # "name:r" (range-checked, r indexes _RANGE_CODES) or "name=n" (a list, n
 # indexes _COUNT_CODES); "|" runs a consistency check on what was read so far;
 # "@" is the per-sensor triple b[i] shb[i] fb[i].
-_RANGE_CODES = "fLn4scdMtFThaA"
-_LO = (0, 1, 1, 1, -_SH, -_SCALE, 0, 1, 1, 0, 0, 0, -1, -(1 << 30) + 1)
-_HI = (30, 29, 6, 4, _SH, _SCALE, _MAX_DEGREE, _MAX_SEGMENTS, 3600000, 1 << 20, (1 << 30) - 1, _SH, _MAX_SENSORS - 1, 0)
-_COUNT_CODES = "DdEQm"  # degree + 1, degree, M + 1, M * M, M
+_RANGE_CODES = "fLn4scdMtFThaAPN"
+_LO = (0, 1, 1, 1, -_SH, -_SCALE, 0, 1, 1, 0, 0, 0, -1, -(1 << 30) + 1, 0, 1)
+_HI = (30, 29, 6, 4, _SH, _SCALE, _MAX_DEGREE, _MAX_SEGMENTS, 3600000, 1 << 20, (1 << 30) - 1, _SH, _MAX_SENSORS - 1, 0, 1,
+       _MAX_FILTERS)
+_COUNT_CODES = "DdEQmj"  # degree + 1, degree, M + 1, M * M, M, nf
 _COMMON = "pos_lo pos_hi pos_ref | fo:f Lt:L nt:4 S0 fS:c @ rL"
 _POSITION = "Lw:L nw:n shw:s KS shK:s fK:f rK rT degree:d Lg:L ng:n G=D fG=D shg=d rO"
 # the certificate, last: the largest |offset_at|, |ref_offset| (0.01 um) and |slope| (0.01 um/m)
@@ -213,6 +219,9 @@ _CERT = "cert_out:T cert_ref:T cert_slope:T"
 _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:f C=Q umax:T Lu:L nu:4 "
           "B=m shB=m rS=m G2=m shG2=m H shH:s fh:c Lx:L nx:n shX:s KC Lc:L nc:n shC:s "
           "air:a Tlo:A W0=m shW0=m W1=m shW1=m Ka shKa:s |")
+# dynamic: first-order lags of temperature rises, spindle speed (and its square) and feed (docs/table-format.md)
+_DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F LX:L nX:4 LY:L nY:4 nf:N "
+            "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j |")
 
 
 def _take(buf, w, name, r=-1):
@@ -242,7 +251,7 @@ def _fields(t, buf, w, spec):
             m = getattr(t, "M", 0)
             name = f[:-2]
             setattr(t, name, [_take(buf, w, "%s[%d]" % (name, i))
-                              for i in range((g + 1, g, m + 1, m * m, m)[_COUNT_CODES.index(f[-1])])])
+                              for i in range((g + 1, g, m + 1, m * m, m, getattr(t, "nf", 0))[_COUNT_CODES.index(f[-1])])])
         elif f[-2:-1] == ":":
             setattr(t, f[:-2], _take(buf, w, f[:-2], _RANGE_CODES.index(f[-1])))
         else:
@@ -250,6 +259,13 @@ def _fields(t, buf, w, spec):
 
 
 def _check(t):
+    if hasattr(t, "nf"):
+        for j in range(t.nf):
+            if not -3 <= t.src[j] < t.n_sensors:
+                raise TableError(REASON_FIELD, "filter %d reads source %d" % (j, t.src[j]))
+            if t.Ylo[j] > 0 or t.Yhi[j] < 0 or t.fy[j] < 0 or t.fy[j] > 28 or t.A[j] < 0:
+                raise TableError(REASON_FIELD, "filter %d state box %d..%d" % (j, t.Ylo[j], t.Yhi[j]))
+        return
     if hasattr(t, "Ka"):
         if t.air >= t.n_sensors:
             raise TableError(REASON_FIELD, "air channel %d of %d sensors" % (t.air, t.n_sensors))

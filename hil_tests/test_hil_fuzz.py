@@ -39,7 +39,7 @@ def _bad(draw):
     if kind == "unknown":
         return kind, command(draw(st.sampled_from(["Z", "K", "PP", "q", "1"])), 5)
     if kind == "fields":
-        return kind, command("P", 1, 2)
+        return kind, command("P", 1, 2, 3)  # P takes <pos>[,<spindle rpm>]
     if kind == "number":
         return kind, command("Q", draw(st.sampled_from(["12a", "", "-", "1.5", "0x10", "--3"])))
     return kind, b"$TC,P," + b"1" * draw(st.integers(200, 300)) + b"*0000\r\n"

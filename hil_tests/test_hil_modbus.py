@@ -94,7 +94,7 @@ def test_modbus_reads_stream_offsets_and_answers_bad_requests(make_rig, demo_run
             assert bad.isError() and bad.exception_code == 2
             bad = client.read_input_registers(15, count=1, device_id=1)
             assert bad.isError() and bad.exception_code == 2
-            bad = client.read_holding_registers(18, count=1, device_id=1)
+            bad = client.read_holding_registers(20, count=1, device_id=1)  # 18-19: the spindle speed
             assert bad.isError() and bad.exception_code == 2
             # illegal data value: slew 0 is out of range; half of the position
             bad = client.write_register(1, 0, device_id=1)

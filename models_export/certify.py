@@ -37,7 +37,10 @@ MAX_FRAC = 60
 OU_PER_UM = 100  # output unit 0.01 um
 SLOPE_PER_OU_PER_UM = 10 ** 6  # 1 OU/um = 0.01 um/um = 10**6 x 0.01 um/m
 FLOAT_MARGIN_UM = 1e-9  # the float model's own rounding (double precision, |values| < 1e5 um)
-LIMITS_UM = {"poly_slope": 0.05, "linear_direct": 0.05, "screw_reduced": 0.1}
+LIMITS_UM = {"poly_slope": 0.05, "linear_direct": 0.05, "screw_reduced": 0.1, "dynamic": 0.1}
+# dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
+DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
+DYN_SQUARE_BITS = 24  # the spindle speed squared is held as rpm**2 / 2**shq < 2**24
 # The certified envelope's default (docs/firmware.md, "Operating envelope"): the training range (the
 # document's envelope.temperature_C) widened by this much on both sides. A thermal test never covers
 # every condition a machine sees (a faster feed, a hot afternoon); inside the certified envelope the
@@ -219,7 +222,7 @@ class Model:
         self.doc_kind = kind
         self.kind = "screw_reduced" if kind == "screw" else kind
         if self.kind not in LIMITS_UM:
-            raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw)" % (kind,))
+            raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw, dynamic)" % (kind,))
         sensors = doc.get("sensors") or []
         if not isinstance(sensors, list) or not all(isinstance(s, str) for s in sensors):
             raise ExportError("sensors must be a list of sensor names, found %r" % (sensors,))
@@ -228,6 +231,10 @@ class Model:
         tenv = _obj(env.get("temperature_C"), "envelope.temperature_C")
         refs = _obj(doc.get("reference_C"), "reference_C")
         thermal = _obj(doc.get("thermal"), "thermal")
+        # direct: the offset does not depend on the position (linear_direct, dynamic with target "direct")
+        self.direct = self.kind == "linear_direct" or (self.kind == "dynamic" and thermal.get("target") == "direct")
+        if self.kind == "dynamic" and thermal.get("target") not in ("direct", "slope"):
+            raise ExportError("thermal.target must be 'direct' or 'slope', found %r" % (thermal.get("target"),))
         if thermal.get("reference", "fixed") not in ("fixed", "run_start"):
             raise ExportError("thermal.reference must be 'fixed' or 'run_start', found %r" % (thermal.get("reference"),))
         # "run_start": the firmware may latch the references at a cold start (Evaluator.latch_references),
@@ -284,7 +291,7 @@ class Model:
             self.ref.append(ri)
             # fixed references: the fraction is folded into the intercept so d = t - ref stays an exact int
             self.ref_frac.append(0 if self.ref_mode else r - ri)
-        if self.kind == "linear_direct":
+        if self.direct:
             self.pos_lo = self.pos_hi = self.pos_ref = 0
         else:
             lo, hi = _pair(env.get("position_mm"), "envelope.position_mm")
@@ -309,6 +316,12 @@ class Model:
             self.b_names = ["thermal.coefficients_um_per_mm_per_K.%s" % s for s in self.sensors]
             self.b = [F(_num(_get(coefs, s, "thermal.coefficients_um_per_mm_per_K"), self.b_names[i])) * per_mc
                       for i, s in enumerate(self.sensors)]
+        elif self.kind == "dynamic":
+            # the temperature-linear part is empty: every term reads a filter state (dyn_terms, after the sensors)
+            unit = OU_PER_UM if self.direct else F(OU_PER_UM, 1000)  # um -> OU, or um/mm -> OU/um
+            self.b0 = F(_num(thermal.get("intercept", 0.0), "thermal.intercept")) * unit
+            self.b_names = ["sensor %s (read by the filters only)" % s for s in self.sensors]
+            self.b = [F(0)] * len(self.sensors)
         elif self.kind == "linear_direct":
             coefs = thermal.get("coefficients_um_per_K")
             self.b0 = F(_num(thermal.get("intercept_um", 0.0), "thermal.intercept_um")) * OU_PER_UM
@@ -342,13 +355,89 @@ class Model:
         else:
             self.d_lo = [lo - r for lo, r in zip(self.env_lo, self.ref)]
             self.d_hi = [hi - r for hi, r in zip(self.env_hi, self.ref)]
-        geo = doc.get("geometric") if self.kind != "linear_direct" else None
+        if self.kind == "dynamic":
+            self._dyn_terms(doc, thermal, env, unit)
+        geo = doc.get("geometric") if not self.direct else None
         gc = _obj(geo, "geometric").get("coefficients_um") or [0.0]
         if not isinstance(gc, list):
             raise ExportError("geometric.coefficients_um must be a list of numbers, found %r" % (gc,))
         self.g = [F(_num(c, "geometric.coefficients_um[%d]" % j)) * OU_PER_UM / F(1000) ** j for j, c in enumerate(gc)]
         if len(self.g) - 1 > 6:
             raise ExportError("geometric degree %d: the table holds at most degree 6" % (len(self.g) - 1))
+
+    def _dyn_terms(self, doc, thermal, env, unit):
+        """The filters in table units; their coefficients and state boxes are appended to b, d_lo, d_hi, b_names
+        (after the sensors, whose own coefficients are 0), so S's ranges include them."""
+        dt = thermal.get("dt_s")
+        if not isinstance(dt, (int, float)) or isinstance(dt, bool) or not dt > 0 or not math.isfinite(dt):
+            raise ExportError("thermal.dt_s must be the filters' step in seconds (> 0), found %r; re-fit the model with "
+                              "this tcomp" % (dt,))
+        self.dt_ms = rnd(F(dt) * 1000)
+        if abs(F(dt) * 1000 - self.dt_ms) > F(1, 10 ** 6) or not 1 <= self.dt_ms <= 3600000:
+            raise ExportError("thermal.dt_s=%r is not a whole number of milliseconds in 0.001..3600 s" % (dt,))
+        terms = thermal.get("terms")
+        if not isinstance(terms, list) or not 1 <= len(terms) <= 8:
+            raise ExportError("thermal.terms must list 1..8 terms, found %r" % (terms,))
+
+        def top(key, needed):
+            if not needed:
+                return 0
+            v = env.get(key)
+            lo, hi = _pair(v, "envelope.%s" % key) if v is not None else (None, None)
+            if v is None or lo != 0 or not hi >= 0:
+                raise ExportError("envelope.%s must be [0, max] for a model reading %s; re-fit the model with this tcomp"
+                                  % (key, key.split("_")[0]))
+            if hi > (1 << 20):
+                raise ExportError("envelope.%s: %r is beyond what the table holds (%d)" % (key, hi, 1 << 20))
+            return math.ceil(F(hi))
+
+        signals = [t.get("signal") if isinstance(t, dict) else None for t in terms]
+        self.smax = top("spindle_rpm", any(s in ("spindle_krpm", "spindle_krpm2") for s in signals))
+        self.fmax = top("feed_mm_min", "feed_m_min" in signals)
+        self.shq = max(0, (self.smax * self.smax).bit_length() - DYN_SQUARE_BITS)
+        # the square's limbs (firmware Evaluator._inputs); its integer interval as the firmware's mul bounds it
+        self.Lq = max(1, min(29, narrow_width(max(self.smax, 1))))
+        self.nq = top_limbs_needed((0, self.smax), self.Lq, max(self.smax, 1)) or 0
+        if not 1 <= self.nq <= 4:
+            raise ExportError("envelope.spindle_rpm: %d rpm cannot be squared in small-int limbs" % self.smax)
+        self.q_iv = Recorder().mul(0, (0, self.smax), (0, self.smax), self.Lq, self.nq, self.shq, "spindle speed squared")
+        self.dyn = []
+        for j, t in enumerate(terms):
+            where = "thermal.terms[%d]" % j
+            if not isinstance(t, dict):
+                raise ExportError("%s must be an object" % where)
+            sig = t.get("signal")
+            tau = F(_num(t.get("tau_s"), where + ".tau_s"))
+            coef = F(_num(t.get("coefficient"), where + ".coefficient"))
+            if tau < 0:
+                raise ExportError("%s.tau_s must be >= 0, found %r" % (where, t.get("tau_s")))
+            if isinstance(sig, str) and sig.startswith("T:"):
+                if sig[2:] not in self.sensors:
+                    raise ExportError("%s.signal %r: sensor %r is not in sensors %r" % (where, sig, sig[2:], self.sensors))
+                i = self.sensors.index(sig[2:])
+                src, u, per = i, (self.d_lo[i], self.d_hi[i]), F(1, 1000)  # mK -> K
+            elif sig in DYN_SOURCES:
+                src = DYN_SOURCES[sig]
+                if src == -1:
+                    u, per = (0, self.smax), F(1, 1000)  # rpm -> krpm
+                elif src == -2:
+                    u, per = (0, max(-(-self.smax * self.smax // (1 << self.shq)), self.q_iv[0][1])), p2(self.shq) / 10 ** 6  # rpm**2/2**shq -> krpm**2
+                else:
+                    u, per = (0, self.fmax), F(1, 1000)  # mm/min -> m/min
+            else:
+                raise ExportError("%s.signal must be 'T:<sensor>' or one of %s, found %r" % (where, ", ".join(DYN_SOURCES), sig))
+            if not u[0] <= 0 <= u[1]:
+                raise ExportError("%s: the input range %r does not hold the rest state 0" % (where, u))
+            fy = max(0, frac_bits(max(u[1] - u[0], 1), ACC, cap=28))
+            # the host's discrete lag (host/empirical/dynamic.py): a = 1 - exp(-dt/tau) in doubles, exactly
+            import numpy as np
+            a = F(float(1.0 - np.exp(-(self.dt_ms / 1000.0) / float(tau)))) if tau > 0 else F(0)
+            name = "thermal.terms[%d] (%s, tau %g s)" % (j, sig, float(tau))
+            self.dyn.append(dict(src=src, u=u, fy=fy, a=a, name=name, tau=tau))
+            self.b.append(coef * unit * per / p2(fy))  # output scale per state unit
+            self.d_lo.append(u[0] << fy)
+            self.d_hi.append(u[1] << fy)
+            self.b_names.append(name)
 
     # real ranges ----------------------------------------------------------
     def s_range(self):

@@ -324,6 +324,9 @@ def c_header(ex, guard="TCOMP_TABLE_H"):
     f = ex.fields
     r = ex.report
     kind = f["kind"]
+    if kind == "dynamic":
+        from models_export.certify import ExportError
+        raise ExportError("--c-header: dynamic tables have no C evaluator yet; export the table only")
     code = {"poly_slope": 1, "linear_direct": 2, "screw_reduced": 3}[kind]
     groups = ["all"] + (["position"] if kind != "linear_direct" else []) + (["screw"] if kind == "screw_reduced" else [])
     out = []

@@ -48,7 +48,7 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
         raise ExportError("model document must be a JSON object")
     model = Model(doc, ref_position_mm, envelope=envelope, margin_K=margin_K)
     planner = Planner(model)
-    if model.kind == "linear_direct":
+    if model.direct:
         errs = planner.linear_direct()
     else:
         errs = planner.positional()
@@ -94,7 +94,7 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
         "temperature_margin_K": margin_K,
         "reference_mode": "latched (any reference inside the envelope)" if model.ref_mode else "fixed",
     }
-    if model.kind != "linear_direct":
+    if not model.direct:
         envelope["position_um"] = [model.pos_lo, model.pos_hi]
         envelope["reference_position_um"] = model.pos_ref
     report = {
@@ -127,6 +127,13 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
             "state_error_bound_K": max(sc["v_state_units"]) / (1 << f["ft"]),
             "per_step_residual_K": max(sc["rho_state_units"]) / (1 << f["ft"]),
             "horizon": "unbounded (steady state): |e| <= v with v >= |A| v + rho verified exactly",
+        }
+    if model.kind == "dynamic":
+        envelope["spindle_rpm"] = [0, f["smax"]]
+        envelope["feed_mm_min"] = [0, f["fmax"]]
+        report["dynamic"] = {
+            "dt_ms": f["dt_ms"], "positional": bool(f["positional"]), "filters": planner.dyn_cert,
+            "horizon": "unbounded (steady state) from the cold start (latch): |e| <= v with v >= (1 - a) v + rho verified exactly",
         }
     slots = {k: v for k, v in rec.slots.items() if k >= 0}
     return Export(f, table, report, slots, errs)

@@ -15,6 +15,7 @@ from firmware.evaluate import (
     FEED_LIMB, FEED_W_BITS, SLOT_ACC, SLOT_AMUL, SLOT_BMUL, SLOT_CMUL, SLOT_CUM, SLOT_CUMMUL, SLOT_D, SLOT_DE, SLOT_FEEDMUL,
     SLOT_GEO, SLOT_GEOMUL, SLOT_HMUL, SLOT_KMUL, SLOT_LIMB, SLOT_OUT, SLOT_P, SLOT_ROW, SLOT_ROWMUL, SLOT_S,
     SLOT_SEGMUL, SLOT_SLOPE, SLOT_SMUL, SLOT_STATE, SLOT_THMUL, SLOT_TRAVEL, SLOT_XL,
+    SLOT_DMUL, SLOT_DX, SLOT_QMUL, SLOT_Y, SLOT_YMUL,
 )
 from models_export.certify import (
     ACC, OU_PER_UM, PROD, SLOPE_PER_OU_PER_UM, ExportError, Recorder, center, fit_coef, floor_err, frac_bits,
@@ -61,13 +62,16 @@ class Planner:
         """Temperature-linear accumulator at scale 2**fS; out_factor converts its error to output units."""
         m, rec, f = self.m, self.rec, self.f
         n = len(m.sensors)
-        dmax = max([max(abs(a), abs(b)) for a, b in zip(m.d_lo, m.d_hi)] + [1])
+        dmax = max([max(abs(a), abs(b)) for a, b in zip(m.d_lo[:n], m.d_hi[:n])] + [1])
         nt = 1 if dmax.bit_length() <= 10 else 2
         Lt = max(1, min(29, -(-dmax.bit_length() // nt)))
         f.update(Lt=Lt, nt=nt, fS=fS, b=[], shb=[], fb=[])
         err = ZERO
-        res_sum = (0, 0)
         parts = []
+        if m.kind == "dynamic":
+            y_err = self.dyn_filters()
+            self.dyn_coefficients(fS, y_err, out_factor, parts)
+            err = iv_add(err, *[e for _, _, _, _, e in parts])
         for i in range(n):
             d = (m.d_lo[i], m.d_hi[i])
             rec.note(SLOT_D, d[0], d[1], "temperatures")
@@ -79,23 +83,111 @@ class Planner:
             res, k = rec.mul(SLOT_SMUL, (q, q), d, Lt, nt, sh, m.b_names[i])
             quant = iv_scale((F(d[0]), F(d[1])), F(q) / p2(sh) - m.b[i] * p2(fS))
             err = iv_add(err, quant, floor_err(k))
-            parts.append((res, m.b_names[i], fS + sh, iv_abs(quant)))
+            parts.insert(i, (res, m.b_names[i], fS + sh, iv_abs(quant), ZERO))
             self.term(m.b_names[i], fS + sh, iv_abs(quant) * out_factor)
         bias = center(err)
         S0 = rnd(m.b0 * p2(fS)) + bias
         f["S0"] = S0
         e0 = F(S0) - m.b0 * p2(fS)
         eS = iv_add(err, _c(e0))
-        self.term("S0 (%s)" % ("intercept_um" if m.kind == "linear_direct" else "intercept_um_per_mm"), fS,
+        self.term("S0 (%s)" % ("intercept_um" if m.direct else "intercept_um_per_mm"), fS,
                   abs(e0 - bias) * out_factor, key="S0")
         rec.note(-1, S0, S0, "S0")  # slot -1: constants (no firmware slot)
         acc = (S0, S0)
-        for res, name, _, _ in parts:
+        for res, name, _, _, _ in parts:
             acc = iv_add(acc, res)
             rec.note(SLOT_S, acc[0], acc[1], name)
         s_real = m.s_range()
         S_iv = _meet(acc, int_iv((s_real[0] * p2(fS), s_real[1] * p2(fS)), eS))
         return S_iv, eS
+
+    # ------------------------------------------------------------ dynamic
+    def dyn_filters(self):
+        """Quantise every lag filter and certify its state; returns the per-term error interval of the integer state
+        against the exact recurrence on the exact inputs (state units).
+
+        The state error obeys e[k+1] = (1 - a) e[k] + r[k] with |r| <= rho: the quantisation of a times
+        |U0 << fy - Y| (both in the state box, so at most its width) and the increment's floors, centred by rA.
+        Clamping to the box, which holds the exact state (a convex combination of the inputs and the rest
+        state 0), cannot increase |e|. A v with v >= (1 - a) v + rho (the screw's _supersolution, verified
+        exactly) bounds |e| at every step from the cold start (e = 0): over an unbounded horizon."""
+        m, f, rec = self.m, self.f, self.rec
+        terms = m.dyn
+        R = max([(t["u"][1] - t["u"][0]) << t["fy"] for t in terms] + [1])
+        nX = 3
+        LX = max(1, -(-R.bit_length() // nX))
+        nY = 2
+        big = max([max(-lo, hi) for lo, hi in zip(m.d_lo[len(m.sensors):], m.d_hi[len(m.sensors):])] + [1])
+        LY = max(1, -(-big.bit_length() // nY))
+        Lq, nq = m.Lq, m.nq
+        q_iv, kq = rec.mul(SLOT_QMUL, (0, m.smax), (0, m.smax), Lq, nq, m.shq, "spindle speed squared")
+        f.update(positional=0 if m.direct else 1, dt_ms=m.dt_ms, smax=m.smax, Lq=Lq, nq=nq, shq=m.shq, fmax=m.fmax,
+                 LX=LX, nX=nX, LY=LY, nY=nY, nf=len(terms), src=[], A=[], shA=[], gA=[], rA=[], fy=[], Ylo=[], Yhi=[])
+        out = []
+        self.dyn_cert = []
+        for t in terms:
+            fy, a = t["fy"], t["a"]
+            Ylo, Yhi = t["u"][0] << fy, t["u"][1] << fy
+            rec.note(SLOT_Y, Ylo, Yhi, t["name"])
+            ein = ZERO
+            if t["src"] == -2:  # rpm**2 floored limb by limb: the input is low by less than kq units
+                ein = (F(-kq) * p2(fy), F(0))
+                if q_iv[1] > t["u"][1]:
+                    raise ExportError("%s: the squared speed exceeds its box" % t["name"])
+            f["src"].append(t["src"])
+            f["fy"].append(fy)
+            f["Ylo"].append(Ylo)
+            f["Yhi"].append(Yhi)
+            if a == 0:  # tau = 0: the state is the input itself, exactly
+                f["A"].append(0)
+                f["shA"].append(0)
+                f["gA"].append(0)
+                f["rA"].append(0)
+                out.append(ein)
+                self.dyn_cert.append({"term": t["name"], "a": 0.0, "state_error_units": 0.0})
+                continue
+            X = (Ylo - Yhi, Yhi - Ylo)
+            rec.note(SLOT_DX, X[0], X[1], t["name"])
+            q, sh = fit_coef(a, limb_max(X, LX, nX), 0)
+            if q <= 0:
+                raise ExportError("%s: the step %d ms is too small against the time constant for the table" % (t["name"], m.dt_ms))
+            aq = F(q) / p2(sh)
+            # guard bits: the increment a*X (at most aq*|X|) is summed g bits finer, then rounded once
+            g = max(0, min(sh, 24, frac_bits(aq * (Yhi - Ylo) + 1, ACC)))
+            res, k = rec.mul(SLOT_DMUL, (q, q), X, LX, nX, sh - g, t["name"])
+            rA, e_inc = _round_out(floor_err(k), g)
+            rec.note(SLOT_DMUL + 1, res[0] + rA, res[1] + rA, t["name"])
+            rho = abs(aq - a) * (Yhi - Ylo) + iv_abs(e_inc)
+            rec.note(SLOT_Y, Ylo + ((res[0] + rA) >> g), Yhi + ((res[1] + rA) >> g), t["name"])
+            v = _supersolution(np.array([[1.0 - float(a)]]), [rho])
+            if v is None or not v[0] >= (1 - a) * v[0] + rho:
+                raise ExportError("%s: the filter's state error cannot be bounded" % t["name"])
+            f["A"].append(q)
+            f["shA"].append(sh)
+            f["gA"].append(g)
+            f["rA"].append(rA)
+            out.append(iv_add((-v[0], v[0]), ein))
+            self.dyn_cert.append({"term": t["name"], "a": float(a), "a_quantised": float(aq), "per_step_residual_units": float(rho),
+                                  "state_error_units": float(v[0]), "state_frac_bits": fy})
+        return out
+
+    def dyn_coefficients(self, fS, y_err, out_factor, parts):
+        """bY[j] x Y[j] into S (scale 2**fS); parts gets (result, name, scale, |quantisation|, error interval)."""
+        m, f, rec = self.m, self.f, self.rec
+        n = len(m.sensors)
+        f.update(bY=[], shY=[])
+        for j, t in enumerate(m.dyn):
+            B = m.b[n + j]
+            Yiv = (m.d_lo[n + j], m.d_hi[n + j])
+            q, sh = fit_coef(B, limb_max(Yiv, f["LY"], f["nY"]), fS)
+            f["bY"].append(q)
+            f["shY"].append(sh)
+            res, k = rec.mul(SLOT_YMUL, (q, q), Yiv, f["LY"], f["nY"], sh, t["name"])
+            qv = F(q) / p2(sh)
+            quant = iv_scale((F(Yiv[0]), F(Yiv[1])), qv - B * p2(fS))
+            err = iv_add(quant, iv_scale(y_err[j], qv), floor_err(k))
+            parts.append((res, t["name"], fS + sh, iv_abs(quant), err))
+            self.term(t["name"], fS + sh, (iv_abs(quant) + iv_abs(iv_scale(y_err[j], qv))) * out_factor)
 
     # ------------------------------------------------------------ kinds
     def linear_direct(self):
@@ -590,7 +682,7 @@ def _largest(m, PM=1, seg_bound=0):
     """Name of the term with the largest contribution to the output range (for refusals)."""
     cands = [(abs(m.b0) * PM, "thermal intercept")]
     cands += [(abs(b) * max(abs(lo), abs(hi)) * PM, n) for b, lo, hi, n in zip(m.b, m.d_lo, m.d_hi, m.b_names)]
-    if m.kind != "linear_direct":
+    if not m.direct:
         cands += [(abs(g) * F(PM) ** j, "geometric.coefficients_um[%d]" % j) for j, g in enumerate(m.g)]
         cands.append((F(seg_bound), "thermal.reduced (segment elongation)"))
     return max(cands, key=lambda c: c[0])[1]

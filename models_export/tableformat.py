@@ -21,6 +21,9 @@ SCREW_AIR_HEAD = ("air", "Tlo")  # format 2: the air channel (-1: none) and the 
 SCREW_AIR_TAIL = ("Ka", "shKa")
 
 
+DYNAMIC_HEAD = ("positional", "dt_ms", "smax", "Lq", "nq", "shq", "fmax", "LX", "nX", "LY", "nY", "nf")
+DYNAMIC_LISTS = ("src", "A", "shA", "gA", "rA", "fy", "Ylo", "Yhi", "bY", "shY")  # nf entries each
+
 CERTIFICATE = ("cert_out", "cert_ref", "cert_slope")
 
 
@@ -34,6 +37,12 @@ def _model_words(f):
     for i in range(len(f["sensors"])):
         out += [("b[%d]" % i, f["b"][i]), ("shb[%d]" % i, f["shb"][i]), ("fb[%d]" % i, f["fb"][i])]
     out.append(("rL", f["rL"]))
+    if f["kind"] == "dynamic":
+        out += [(k, f[k]) for k in DYNAMIC_HEAD]
+        for name in DYNAMIC_LISTS:
+            out += [("%s[%d]" % (name, j), v) for j, v in enumerate(f[name])]
+        if not f["positional"]:
+            return out
     if f["kind"] == "linear_direct":
         return out
     out += [(k, f[k]) for k in POSITION]

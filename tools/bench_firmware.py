@@ -33,6 +33,14 @@ Prints
   tests/firmware/test_fw_heaplock.py, fwhelpers.HEAPLOCK_SCRIPT).
 The fakes' own cost is included in cycle time and instructions, and measured
 separately (a cycle of the bare fakes) so it can be subtracted.
+- evaluation cost per table kind (``--eval-only`` prints only this): the
+  evaluator alone (no channels, no link), 11 sensors, on the unix port from
+  -O3 .mpy: microseconds per ``update()``, per ``step()`` and per
+  ``offset_at()`` (mean over N calls, wall clock), and callgrind instructions
+  per ``update() + step() + offset_at()`` (difference of two runs). The
+  dynamic table is the FL_THERMAL ch1 model (hil_tests/fixtures/
+  dynamic_fl_thermal_ch1.json: 7 lag filters, 3 sensors) and a 6-filter
+  table over all 11 channels; poly_slope for comparison.
 """
 import argparse
 import os
@@ -85,6 +93,81 @@ for k in range(FAKEN):
 fakes = time.ticks_diff(time.ticks_us(), a) * 1000 // FAKEN
 print("RESULT", total // N, worst, fakes // 1000)
 """
+
+
+EVAL_SCRIPT = r"""
+import time
+from firmware.table import parse_table
+from firmware.evaluate import Evaluator
+f = open("TABLE", "rb"); buf = f.read(); f.close()
+ev = Evaluator(parse_table(buf))
+n = len(ev.temps)
+dyn = ev.kind == 4
+if ev.table.ref_mode == 1:
+    ev.latch_references()
+N = NCYC
+def run(N):
+    for k in range(N):
+        for i in range(n):
+            ev.temps[i] = ev.table.ref[i] + (k * 37 + i * 11) % 3000
+        if dyn:
+            ev.set_spindle((k * 53) % 6000)
+        ev.update()
+        ev.step() if dyn else None
+        ev.offset_at((k * 997) % 500000)
+run(N)
+t = [0, 0, 0]
+for k in range(N):
+    for i in range(n):
+        ev.temps[i] = ev.table.ref[i] + (k * 37 + i * 11) % 3000
+    a = time.ticks_us(); ev.update(); b = time.ticks_us()
+    if dyn:
+        ev.step()
+    c = time.ticks_us(); ev.offset_at((k * 997) % 500000); d = time.ticks_us()
+    t[0] += time.ticks_diff(b, a); t[1] += time.ticks_diff(c, b); t[2] += time.ticks_diff(d, c)
+print("RESULT", t[0] * 1000 // N, t[1] * 1000 // N, t[2] * 1000 // N)
+"""
+
+
+def eval_tables(work):
+    """(label, path) of the tables the evaluation-cost section measures."""
+    import json
+    from fwhelpers import dynamic_table, make_table
+    from models_export import export_model
+    names = ["T%d" % i for i in range(1, 12)]
+    out = []
+    with open(os.path.join(ROOT, "hil_tests", "fixtures", "dynamic_fl_thermal_ch1.json")) as fh:
+        doc = json.load(fh)
+    for label, table in (("poly_slope, 11 sensors", make_table(kind="poly_slope", sensors=names)),
+                         ("dynamic, FL_THERMAL ch1 (7 filters, 3 sensors, 15 s step)", export_model(doc).table),
+                         ("dynamic, 6 filters over 11 sensors (1 s step)", dynamic_table(names))):
+        path = os.path.join(work, "eval%d.bin" % len(out))
+        with open(path, "wb") as fh:
+            fh.write(table)
+        out.append((label, path))
+    return out
+
+
+def eval_cost(work, mpy, n, valgrind):
+    for label, path in eval_tables(work):
+        script = EVAL_SCRIPT.replace("TABLE", path)
+        p = run_mp(work, mpy, n, script=script)
+        upd, stp, off = [int(x) / 1000.0 for x in p.stdout.split("RESULT")[1].split()]
+        line = "  %s: update %.1f us, step %.1f us, offset_at %.1f us (mean over %d calls)" % (label, upd, stp, off, n)
+        if valgrind:
+            a, b = 100, 600
+            ir = []
+            for k in (a, b):
+                out = os.path.join(work, "cge.out")
+                q = run_mp(work, mpy, k, ["valgrind", "--tool=callgrind", "--callgrind-out-file=" + out], script=script)
+                m = re.search(r"Collected\s*:\s*(\d+)", q.stderr)
+                if not m:
+                    with open(out) as fh:
+                        m = re.search(r"^summary:\s*(\d+)", fh.read(), re.M)
+                ir.append(int(m.group(1)))
+            # each run does N warm-up and N timed iterations: 2 (b - a) iterations apart
+            line += "; %d instructions per update + step + offset_at (callgrind)" % ((ir[1] - ir[0]) // (2 * (b - a)))
+        print(line)
 
 
 def board_sizes(opt_args=None, **options):
@@ -204,6 +287,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--cycles", type=int, default=2000)
     ap.add_argument("--no-valgrind", action="store_true")
+    ap.add_argument("--eval-only", action="store_true", help="only the evaluation cost per table kind")
     ap.add_argument("--interpreter", default=None, help="a kind (linux32, unix64) or a path; default TCOMP_MICROPYTHON")
     ap.add_argument("--heaps-only", action="store_true", help="only the heap figures")
     args = ap.parse_args()
@@ -220,6 +304,12 @@ def main():
         prepare(work)
         if args.heaps_only:
             print_heaps(work, mpy, it)
+            return
+        valgrind = not args.no_valgrind and bool(shutil.which("valgrind"))
+        print("evaluation cost per table kind (MicroPython %s %s, %d-bit, -O3 .mpy; timings are "
+              "wall clock, so they vary with load):" % (_mp_version(), it.kind, it.bits))
+        eval_cost(work, mpy, args.cycles, valgrind)
+        if args.eval_only:
             return
         sizes = {0: board_sizes(["-O0"]), 3: board_sizes()}
 

@@ -1,5 +1,7 @@
-"""Play a run folder into the rig: temperatures ramp sample to sample, motion is reported, and at
-every row of errors.csv the firmware is asked for the offset at that time and position (Q).
+"""Play a run folder into the rig: temperatures ramp sample to sample, motion is reported (M: feed
+and range), the spindle speed too (``spindle=True``: P,<position>,<rpm> at every change of
+spindle.csv), and at every row of errors.csv the firmware is asked for the offset at that time and
+position (Q).
 
 Simulated time = run time + ``warmup_ms`` (the firmware boots and its
 limiter settles on the run's first temperatures before t = 0).
@@ -30,14 +32,45 @@ def motion_events(run):
     return out
 
 
-def play(rig, run, sensors, warmup_ms=60000, motion=True, on_answer=None, faults=None):
-    """Returns a list of answers (dict per errors.csv row, in file order)."""
+def spindle_events(run):
+    """(time_s, rpm) at the first row of spindle.csv and wherever the speed changes."""
+    out = []
+    sp = run.spindle
+    if sp is None:
+        return out
+    last = None
+    for t, rpm in zip(sp.time_s, sp.rpm):
+        v = int(round(float(rpm)))
+        if v != last:
+            out.append((float(t), v))
+            last = v
+    return out
+
+
+def play(rig, run, sensors, warmup_ms=60000, motion=True, on_answer=None, faults=None, spindle=False, latch=False,
+         query_delay_ms=0):
+    """Returns a list of answers (dict per errors.csv row, in file order).
+
+    ``latch``: send the signed L at the run's start (its cold start: the reference temperatures, and a
+    dynamic table's filters start there, as the host's do at the run's first sample). ``query_delay_ms``:
+    ask each Q that much after its row's time (after a dynamic table's filter step at that sample)."""
     rows = list(sensor_rows(run, sensors))
     t0_ms = warmup_ms
     first = rows[0][1]
     rig.jump(first)
+    if latch:  # just before t = 0, so the latch (at the board's next poll) is in place at the run's start
+        rig.run(t0_ms - 50)
+        n0 = len(rig.frames)
+        rig.send_signed("L")
+        rig.run(t0_ms)
+        if not any(f.kind == "A" and f.fields[:1] == ["L"] for f in rig.frames[n0:]):
+            raise RuntimeError("the board did not acknowledge the latch: %r" % (rig.frames[n0:],))
     rig.run(t0_ms)
+    pos_um = int(round(float(run.errors.position_mm[0]) * 1000)) if len(run.errors) else 0
     events = []
+    if spindle:
+        for t, rpm in spindle_events(run):
+            events.append((t, 0, ("spindle", rpm)))
     for t, temps in rows:
         events.append((t, 1, temps))
     if motion:
@@ -45,7 +78,7 @@ def play(rig, run, sensors, warmup_ms=60000, motion=True, on_answer=None, faults
             events.append((t, 0, (f, lo, hi)))
     e = run.errors
     for i in range(len(e)):
-        events.append((float(e.time_s[i]), 2, i))
+        events.append((float(e.time_s[i]) + query_delay_ms / 1000.0, 2, i))
     for spec in faults or []:
         events.append((spec[0], 3, spec[1]))
     events.sort(key=lambda ev: (ev[0], ev[1]))
@@ -63,7 +96,9 @@ def play(rig, run, sensors, warmup_ms=60000, motion=True, on_answer=None, faults
                 t_next, temps_next = rows[reached]
                 rig.ramp(t0_ms + int(round(t_next * 1000)), temps_next)
             continue
-        if kind == 0:
+        if kind == 0 and data[0] == "spindle":
+            rig.send("P", pos_um, data[1])
+        elif kind == 0:
             f, lo, hi = data
             rig.send("M", int(round(f)), int(round(lo * 1000)), int(round(hi * 1000)))
         elif kind == 3:

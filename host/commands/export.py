@@ -3,7 +3,7 @@
 
 
 def add_arguments(p):
-    p.add_argument("model", help="model document (tcomp-model/1 JSON: poly_slope, linear_direct or screw)")
+    p.add_argument("model", help="model document (tcomp-model/1 JSON: poly_slope, linear_direct, screw or dynamic)")
     p.add_argument("--out", required=True, help="table file to write (docs/table-format.md)")
     p.add_argument("--report", help="write the certificate as JSON (max_error_um, min_headroom_bits, terms, envelope)")
     p.add_argument("--json", metavar="PATH",

@@ -140,6 +140,7 @@ def _hil(args, out):
         cfg = rig_config(sensors, n_ads=1 if len(sensors) > 1 else 0)
     faults = _faults(args.fault, sensors, end_s)
     screw = table.kind == "screw_reduced"
+    dyn = table.kind == "dynamic"  # its inputs: the run's spindle speed (P) and feed (M); filters from the run's start (L)
     every = args.print_every
     count = {"O": 0}
 
@@ -156,8 +157,9 @@ def _hil(args, out):
     try:
         with Rig(cfg, data, interpreter=args.interpreter, temps=temps, noise_uohm=args.noise_uohm) as rig:
             rig.reader.on_frame = show
-            answers = play(rig, run_, sensors, warmup_ms=int(args.warmup_s * 1000), motion=screw,
-                           faults=_actions(faults))
+            answers = play(rig, run_, sensors, warmup_ms=int(args.warmup_s * 1000), motion=screw or dyn,
+                           faults=_actions(faults), spindle=dyn, latch=dyn and rig.signer is not None,
+                           query_delay_ms=200 if dyn else 0)
             n = len(rig.frames)
             bad = len(rig.reader.decoder.bad)
             sim_s = rig.t_ms / 1000.0

@@ -337,7 +337,8 @@ class DynamicModel:
     intercept = 0.0
 
     def __init__(self, terms, coefficients, intercept, target="direct", channel=None, geometric_coef=(0.0,), method="dynamic", axis=None,
-                 reference_C=None, envelope=None, statistics=None, training=None):
+                 reference_C=None, envelope=None, statistics=None, training=None, dt_s=None):
+        self.dt_s = dt_s  # the filters' step on the board (the training runs' sample interval); None: not recorded
         self.terms = [(str(n), float(tau)) for n, tau in terms]
         self.term_coefficients = np.asarray(coefficients, dtype=float)
         self.intercept = float(intercept)
@@ -380,7 +381,7 @@ class DynamicModel:
             "geometric": None if self.target == "direct" else {"degree": int(self.geometric_coef.size - 1),
                                                                "coefficients_um": [float(c) for c in self.geometric_coef]},
             "thermal": {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": "run_start",
-                        "intercept": self.intercept,
+                        "intercept": self.intercept, **({"dt_s": self.dt_s} if self.dt_s is not None else {}),
                         "terms": [{"signal": n, "tau_s": tau, "coefficient": float(c)} for (n, tau), c in zip(self.terms, self.term_coefficients)]},
             "envelope": self.envelope, "statistics": self.statistics, "training": self.training,
         }
@@ -431,5 +432,7 @@ class DynamicModel:
         for key in ("reference_C", "envelope", "statistics", "training"):
             if doc.get(key) is not None and not isinstance(doc.get(key), dict):
                 raise ModelFormatError("dynamic model document: field '%s' must be an object or null, found %s" % (key, type(doc.get(key)).__name__))
+        if th.get("dt_s") is not None and not (num(th["dt_s"]) and th["dt_s"] > 0):
+            raise ModelFormatError("dynamic model document: thermal.dt_s must be a number > 0 (seconds), found %r" % (th.get("dt_s"),))
         return cls(out, coefs, th["intercept"], th["target"], doc.get("channel"), geo, doc.get("method", "dynamic"), doc.get("axis"),
-                   doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"))
+                   doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"), th.get("dt_s"))

@@ -184,6 +184,33 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     return model
 
 
+INPUT_MARGIN = 1.25  # spindle speed and feed envelopes: the training maximum x this (the board clamps beyond)
+
+
+def _input_envelope(runs, terms):
+    """Envelopes of the controller's inputs a dynamic model reads: [0, training maximum x INPUT_MARGIN],
+    rounded up to 100 rpm / 100 mm/min (the exporter certifies the table over them)."""
+    sig = {n for n, _ in terms}
+    out = {}
+    if sig & {"spindle_krpm", "spindle_krpm2"}:
+        top = max([float(np.max(np.abs(r.spindle.rpm))) for r in runs if r.spindle is not None and r.spindle.rpm.size] + [0.0])
+        out["spindle_rpm"] = [0, float(100 * np.ceil(top * INPUT_MARGIN / 100))]
+    if "feed_m_min" in sig:
+        top = max([float(np.max(np.abs(r.motion.feed_mm_min))) for r in runs if r.motion is not None and len(r.motion)] + [0.0])
+        out["feed_mm_min"] = [0, float(100 * np.ceil(top * INPUT_MARGIN / 100))]
+    if out:
+        out["input_rule"] = "spindle speed and feed: [0, training maximum x %g], rounded up to 100" % INPUT_MARGIN
+    return out
+
+
+def _sample_interval(runs):
+    """The training runs' temperature sample interval (median, whole ms): the board's filter step, at which
+    its recurrence is the host's (host/empirical/dynamic.py filters at each run's own sample times)."""
+    dts = np.concatenate([np.diff(np.asarray(r.temperatures.time_s, dtype=float)) for r in runs])
+    dts = dts[dts > 0]
+    return float(np.round(np.median(dts) * 1000) / 1000) if dts.size else None
+
+
 def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric_max_degree, geometric_criterion, cv_blocks, options):
     """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/empirical/dynamic.py)."""
     from host.empirical.dynamic import TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
@@ -214,9 +241,11 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     if target == "slope":
         geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
         stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+    env = _envelope(runs, arrays, used, margin, target, channel) if used else {}
+    env.update(_input_envelope(runs, est.terms_))
     model = DynamicModel(est.terms_, est.coef_, est.intercept_, target, channel, geo.coef_ if geo is not None else (0.0,), "dynamic",
-                         runs[0].meta.get("axis"), dict(zip(used, np.atleast_1d(start).tolist())),
-                         _envelope(runs, arrays, used, margin, target, channel) if used else {}, stats, training)
+                         runs[0].meta.get("axis"), dict(zip(used, np.atleast_1d(start).tolist())), env, stats, training,
+                         _sample_interval(runs))
     model.estimator_ = est
     model.arrays_ = arrays
     model.geometric_ = geo

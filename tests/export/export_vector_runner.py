@@ -8,6 +8,8 @@ A case is a table (hex) and a list of operations:
   ["c"]                     clear_feed
   ["r", um]                 set_reference
   ["l"]                     latch_references (tables certified for latched references)
+  ["n", rpm]                set_spindle (dynamic)
+  ["g", mm_min]             set_feed_rate (dynamic)
   ["e", um]                 record [offset_at(um), ref_offset(), slope(), flags]
 Usage on MicroPython: micropython export_vector_runner.py CASES.jsonl  -> prints one JSON result line per case.
 """
@@ -42,6 +44,10 @@ def run_case(table, ops, check=False):
             ev.set_reference(op[1])
         elif k == "l":
             ev.latch_references()
+        elif k == "n":
+            ev.set_spindle(op[1])
+        elif k == "g":
+            ev.set_feed_rate(op[1])
         elif k == "e":
             out.append([ev.offset_at(op[1]), ev.ref_offset(), ev.slope(), ev.flags])
     return out, ev

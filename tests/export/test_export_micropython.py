@@ -12,7 +12,7 @@ import pytest
 
 from firmware.table import TableError, parse_table
 from models_export import export_model
-from hil_tests.fixtures.samples import linear_direct_doc, poly_slope_doc, restamp, screw_doc
+from hil_tests.fixtures.samples import dynamic_doc, linear_direct_doc, poly_slope_doc, restamp, screw_doc
 
 SLOW = os.environ.get("TCOMP_SLOW") == "1"  # full-size runs; the default is the reduced form
 
@@ -34,6 +34,13 @@ def _vectors(ex, rng, n):
             for _ in range(rng.randint(0, 3)):
                 x = rng.randint(t.pos_lo - 1000, t.pos_hi + 1000)
                 ops.append(["p", x])
+            ops.append(["s"])
+        if t.kind == "dynamic":
+            if k % 5 == 0:
+                ops.append(["n", rng.choice([0, t.smax, rng.randint(-t.smax - 1000, t.smax + 1000)])])
+            if k % 9 == 0:
+                ops.append(["g", rng.choice([0, rng.randint(0, t.fmax + 1000)])])
+            ops.append(["t", temps])
             ops.append(["s"])
         if k % 40 == 0:
             ops.append(["r", rng.randint(t.pos_lo, t.pos_hi)])
@@ -57,6 +64,7 @@ def test_bit_identical_to_cpython(tmp_path, mp, runner, word):
         cases.append((export_model(restamp(doc)).table, None))
         cases.append((export_model(linear_direct_doc(random.Random(seed))).table, None))
         cases.append((export_model(screw_doc(random.Random(seed))).table, None))
+        cases.append((export_model(dynamic_doc(random.Random(seed), "direct" if seed != 1 else "slope")).table, None))
     cases = [(tb, _vectors(_FakeEx(tb), rng, n)) for tb, _ in cases]
     path = tmp_path / "cases.jsonl"
     path.write_text("".join(json.dumps({"table": tb.hex(), "ops": ops}) + "\n" for tb, ops in cases))
@@ -69,7 +77,7 @@ def test_bit_identical_to_cpython(tmp_path, mp, runner, word):
         assert mp == cp
         total += len(cp)
         assert len(set(tuple(r) for r in cp)) > len(cp) // 4  # the vectors exercise many distinct outputs
-    assert total == 9 * n
+    assert total == 12 * n
 
 
 class _FakeEx:
@@ -86,6 +94,7 @@ buf = f.read()
 f.close()
 ev = Evaluator(parse_table(buf))
 screw = %(screw)s
+dyn = %(dyn)s
 temps = %(temps)r
 positions = %(positions)r
 out = [0, 0, 0, 0]
@@ -100,6 +109,11 @@ def cycle(ev, n):
             ev.advance_position(p)
             if k %% 4 == 0:
                 ev.step()
+        if dyn:
+            ev.set_spindle(positions[k %% len(positions)] %% 7000)
+            ev.set_feed_rate(k * 37 %% 9000)
+            ev.update()
+            ev.step()
         out[0] = ev.offset_at(p)
         out[1] = ev.ref_offset()
         out[2] = ev.slope()
@@ -118,7 +132,7 @@ print('steady', out[0], out[1], out[2], out[3])
 """
 
 
-@pytest.mark.parametrize("make", [poly_slope_doc, linear_direct_doc, screw_doc], ids=lambda f: f.__name__)
+@pytest.mark.parametrize("make", [poly_slope_doc, linear_direct_doc, screw_doc, dynamic_doc], ids=lambda f: f.__name__)
 def test_steady_state_allocates_nothing(tmp_path, mp, make):
     ex = export_model(make(random.Random(4)))
     t = parse_table(ex.table)
@@ -128,7 +142,7 @@ def test_steady_state_allocates_nothing(tmp_path, mp, make):
     temps = [rng.randint(min(t.env_lo + [0]), max(t.env_hi + [1])) for _ in range(7)]
     positions = [rng.randint(t.pos_lo, t.pos_hi) for _ in range(5)]
     script = tmp_path / "heap.py"
-    script.write_text(HEAP_SCRIPT % dict(path=str(path), screw=t.kind == "screw_reduced", temps=temps, positions=positions, n=200))
+    script.write_text(HEAP_SCRIPT % dict(path=str(path), screw=t.kind == "screw_reduced", dyn=t.kind == "dynamic", temps=temps, positions=positions, n=200))
     out = mp.run(script, heapsize="64K")
     assert out.startswith("steady ")  # a MemoryError under heap_lock would have failed the run
 

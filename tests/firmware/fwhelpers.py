@@ -34,7 +34,23 @@ def table_fields(kind="linear_direct", sensors=("T1", "T2"), b=None, shb=4, S0=0
 
 def make_table(**kw):
     from models_export.tableformat import pack
+    if kw.get("kind") == "dynamic":
+        return dynamic_table(kw["sensors"])
     return pack(table_fields(**kw))
+
+
+def dynamic_table(sensors, dt_s=1.0, seed=3):
+    """An exported, certified dynamic table over ``sensors`` reading every kind of signal; 1 s filter step."""
+    import random
+    from hil_tests.fixtures.samples import dynamic_doc
+    from models_export import export_model
+    sig = ["T:" + s for s in sensors[:3]] + ["spindle_krpm", "spindle_krpm2", "feed_m_min"]
+    doc = dynamic_doc(random.Random(seed), "direct", dt_s=dt_s, signals=sig, names=list(sensors))
+    for t, tau in zip(doc["thermal"]["terms"], (0.0, 900.0, 3600.0, 600.0, 1800.0, 300.0)):
+        t["tau_s"] = tau
+    doc["envelope"]["spindle_rpm"] = [0, 12000]
+    from hil_tests.fixtures.samples import restamp
+    return export_model(restamp(doc)).table
 
 
 def need_micropython():
@@ -188,11 +204,19 @@ def line(body):
 def rtu(body):
     c = crc16_modbus(body)
     return body + bytes([c & 0xFF, c >> 8])
+try:
+    DYN  # the prefix may say the table is a dynamic one: the spindle speed and feed are reported too
+except NameError:
+    DYN = False
 if MODE == "stream":
     msgs = [line(b"TC,P,%d" % (1000 * k)) for k in range(10)] + [line(b"TC,Q,250000")]
+    if DYN:
+        msgs = [line(b"TC,M,%d,0,0" % (1500 * k)) for k in range(3)] + [line(b"TC,P,%d,%d" % (1000 * (k + 1), 900 * k)) for k in range(10)] + msgs
 else:
     msgs = [rtu(bytes([1, 16, 0, 3, 0, 2, 4, 0, 0, 0x30, k])) for k in range(10)] + [
         rtu(bytes([1, 4, 0, 0, 0, 15])), rtu(bytes([1, 4, 0, 16, 0, 35]))]
+    if DYN:
+        msgs += [rtu(bytes([1, 16, 0, 18, 0, 2, 4, 0, 0, 0x10 + k, 0])) for k in range(5)]
 sent = 0
 err = None
 free1 = 0  # every global exists before the lock: a new one could grow the module dict

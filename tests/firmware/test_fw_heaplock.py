@@ -24,10 +24,11 @@ import pytest
 
 from fwhelpers import compile_mpy, run_micropython, make_table, HEAPLOCK_SCRIPT
 
-def heap(mode):
-    """The test heap for the chosen interpreter's word size (hil_tests/rig/interpreters.py HEAPS)."""
+def heap(mode, kind="poly_slope"):
+    """The test heap for the chosen interpreter's word size (hil_tests/rig/interpreters.py HEAPS); a dynamic
+    table (6 filters) has its own entries."""
     from hil_tests.rig import interpreters
-    return interpreters.heap("fw_heaplock_" + mode)
+    return interpreters.heap("fw_heaplock_" + ("dynamic_" if kind == "dynamic" else "") + mode)
 
 
 @pytest.fixture(scope="module")
@@ -36,13 +37,15 @@ def mpy_dir():
 
 
 @pytest.mark.micropython
+@pytest.mark.parametrize("kind", ["poly_slope", "dynamic"])
 @pytest.mark.parametrize("mode", ["stream", "modbus"])
-def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode):
+def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode, kind):
+    """The dynamic table (1 s filter step: a step every 10 cycles) with spindle speed and feed reports."""
     names = ["T%d" % i for i in range(1, 12)]
-    (tmp_path / "table_a.bin").write_bytes(make_table(kind="poly_slope", sensors=names))
+    (tmp_path / "table_a.bin").write_bytes(make_table(kind=kind, sensors=names))
     n = 2000 if os.environ.get("TCOMP_SLOW") else 300
-    out = run_micropython("MODE = %r\nN = %d\n" % (mode, n) + HEAPLOCK_SCRIPT, str(tmp_path), mpy_dir,
-                          heap(mode))
+    out = run_micropython("MODE = %r\nN = %d\nDYN = %r\n" % (mode, n, kind == "dynamic") + HEAPLOCK_SCRIPT, str(tmp_path),
+                          mpy_dir, heap(mode, kind))
     ok, cycles, sent, status, pos, dfree, data, peak = out.split()
     assert ok == "OK" and int(cycles) == 100 + n
     assert int(sent) > 0  # frames / replies really went out under the lock
@@ -53,4 +56,4 @@ def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode):
     # noticed: on 32 bits the firmware's target (< 16 kB), on 64 bits objects are twice the size
     from hil_tests.rig import interpreters
     assert 0 < int(data) < (16 if interpreters.get().bits == 32 else 24) * 1024, data
-    print("heap %s: app data %s B, largest live %s B of %s" % (mode, data, peak, heap(mode)))
+    print("heap %s %s: app data %s B, largest live %s B of %s" % (mode, kind, data, peak, heap(mode, kind)))

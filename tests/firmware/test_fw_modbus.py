@@ -99,10 +99,11 @@ def test_write_position_and_enable(dev):
     (bytes([1, 4, 0, 45, 0, 9]), 2),  # beyond the input map
     (bytes([1, 4, 0, 15, 0, 1]), 2),  # the unmapped input register
     (bytes([1, 4, 0, 10, 0, 6]), 2),  # a range over it
-    (bytes([1, 3, 0, 18, 0, 1]), 2),  # beyond the holding map
+    (bytes([1, 3, 0, 20, 0, 1]), 2),  # beyond the holding map (18-19: the spindle speed)
     (bytes([1, 6, 0, 7, 0, 2]), 3),  # latch takes 1 (or 0: nothing)
     (bytes([1, 6, 0, 7, 0, 1]), 4),  # latch: the table has fixed references
-    (bytes([1, 6, 0, 18, 0, 1]), 2),
+    (bytes([1, 6, 0, 20, 0, 1]), 2),
+    (bytes([1, 6, 0, 18, 0, 1]), 3),  # half of the spindle speed
     (bytes([1, 6, 0, 9, 0, 1]), 3),  # the auth block is written whole
     (bytes([1, 16, 0, 8, 0, 2, 4, 0, 0, 0, 1]), 3),
     (bytes([1, 6, 0, 3, 0, 5]), 3),  # half of the position: never combined with a stale half

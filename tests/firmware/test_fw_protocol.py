@@ -159,7 +159,7 @@ BAD = [
     cmd(b"TC,Z"),  # unknown command
     cmd(b"TC,PP,100"),  # unknown (two letters)
     cmd(b"TC,P"),  # missing field
-    cmd(b"TC,P,1,2"),  # extra field
+    cmd(b"TC,P,1,2,3"),  # extra field (P,<pos>,<rpm> is the longest P)
     cmd(b"TC,P,abc"),  # not a number
     cmd(b"TC,P,--5"),
     cmd(b"TC,P,99999999999"),  # out of range

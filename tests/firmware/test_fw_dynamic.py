@@ -1,0 +1,129 @@
+"""The board with a dynamic table: spindle speed and feed reach the filters from the stream (P, M)
+and from Modbus (holding registers 18-19), the filters step on the table's dt_ms from the cold
+start, and the inputs need no authorisation, as the position does not."""
+import pytest
+
+from fwhelpers import cmd, frames, rig_app, run_cycles
+from firmware.crc16 import crc16_modbus
+
+
+def _dyn_app(tmp_path, mode="stream"):
+    app, board = rig_app(tmp_path, kind="dynamic", serial_mode=mode, extra={"frame_ms": 0})
+    run_cycles(app, board, 30)  # channels good, references latched
+    board.serial.take()
+    assert app.table.kind == "dynamic" and app.ref_state != 0 and not app.unlatched
+    return app, board
+
+
+def _send(app, board, line):
+    board.serial.feed(line)
+    app.link.poll(board.clock.t)
+    return frames(board.serial.take())
+
+
+def test_stream_p_carries_the_spindle_speed(tmp_path):
+    app, board = _dyn_app(tmp_path)
+    assert _send(app, board, cmd(b"TC,P,125000,8000")) == []  # like P: no answer
+    assert app.pos == 125000 and app.spindle == 8000 and app.ev.spin == 8000
+    assert _send(app, board, cmd(b"TC,P,126000")) == []  # the old line: the speed stays
+    assert app.pos == 126000 and app.spindle == 8000
+    _send(app, board, cmd(b"TC,P,126000,-3000"))  # M4: the magnitude is the heat source
+    assert app.ev.spin == 3000
+    for bad, code in ((b"TC,P,1,1000001", "4"), (b"TC,P,1,x", "4"), (b"TC,Q,1,5", "2"), (b"TC,P,1,2,3", "2")):
+        out = _send(app, board, cmd(bad))
+        assert out and out[0][3] == "E" and out[0][4] == code, (bad, out)
+    assert app.spindle == -3000
+
+
+def test_spindle_speed_moves_the_output_through_the_filters(tmp_path):
+    """Two boards, the same temperatures: one reports the spindle running. The filters (1 s step) take it in."""
+    outs = []
+    for rpm, sub in ((0, "a"), (12000, "b")):
+        (tmp_path / sub).mkdir()
+        app, board = _dyn_app(tmp_path / sub)
+        _send(app, board, cmd(b"TC,P,0,%d" % rpm))
+        _send(app, board, cmd(b"TC,M,4000,0,0"))
+        y0 = list(app.ev.Y)
+        run_cycles(app, board, 600)  # 60 s: 60 filter steps
+        steps = [y != y0j for y, y0j in zip(app.ev.Y, y0)]
+        outs.append((app.ev.offset_at(0), steps, app.ev.fin))
+    assert outs[0][2] == outs[1][2] == 4000
+    assert outs[0][0] != outs[1][0]
+    assert outs[1][1][3] and outs[1][1][4]  # the spindle terms' states moved
+
+
+def test_m_sets_the_feed_of_a_dynamic_table(tmp_path):
+    app, board = _dyn_app(tmp_path)
+    out = _send(app, board, cmd(b"TC,M,2500,0,100000"))
+    assert out[0][3] == "A" and out[0][4] == "M" and app.ev.fin == 2500
+    _send(app, board, cmd(b"TC,M,0,0,0"))
+    assert app.ev.fin == 0
+
+
+def test_latch_restarts_filters_and_step_phase(tmp_path):
+    from fwhelpers import scmd
+    app, board = _dyn_app(tmp_path)
+    _send(app, board, cmd(b"TC,P,0,12000"))
+    run_cycles(app, board, 105)
+    assert any(app.ev.Y[j] for j in range(app.table.nf) if app.table.A[j])
+    out = _send(app, board, scmd(app, "L"))
+    assert out[0][3] == "A", out
+    assert all(app.ev.Y[j] == 0 for j in range(app.table.nf) if app.table.A[j]) and app.step_ms == 0
+
+
+def rtu(body):
+    c = crc16_modbus(body)
+    return body + bytes([c & 0xFF, c >> 8])
+
+
+def _ask(app, board, req):
+    board.serial.feed(rtu(req))
+    app.link.poll(board.clock.t)
+    board.clock.t += 5
+    app.link.poll(board.clock.t)
+    return board.serial.take()
+
+
+def test_modbus_spindle_register_pair(tmp_path):
+    app, board = _dyn_app(tmp_path, "modbus")
+    rpm = 70000  # beyond 16 bits: the pair, high word first
+    out = _ask(app, board, bytes([1, 16, 0, 18, 0, 2, 4, rpm >> 24, (rpm >> 16) & 255, (rpm >> 8) & 255, rpm & 255]))
+    assert out[:6] == bytes([1, 16, 0, 18, 0, 2]), out  # written without an auth block: an input, like the position
+    assert app.spindle == 70000 and app.ev.spin == 70000
+    out = _ask(app, board, bytes([1, 3, 0, 18, 0, 2]))
+    assert out[:7] == bytes([1, 3, 4, 0, 1, (rpm >> 8) & 255, rpm & 255])
+    neg = (-1500) & 0xFFFFFFFF
+    _ask(app, board, bytes([1, 16, 0, 18, 0, 2, 4, neg >> 24, (neg >> 16) & 255, (neg >> 8) & 255, neg & 255]))
+    assert app.spindle == -1500 and app.ev.spin == 1500
+    # half the pair, out of range, or spanning the auth block: refused, nothing changes
+    for req in (bytes([1, 6, 0, 18, 0, 1]), bytes([1, 16, 0, 19, 0, 1, 2, 0, 1]),
+                bytes([1, 16, 0, 18, 0, 2, 4, 0, 0x0F, 0x42, 0x41]), bytes([1, 16, 0, 17, 0, 3, 6, 0, 0, 0, 0, 0, 1])):
+        out = _ask(app, board, req)
+        assert out[1] & 0x80 and out[2] == 3, (req, out)
+    assert app.spindle == -1500
+    out = _ask(app, board, bytes([1, 3, 0, 20, 0, 1]))
+    assert out[1] == 0x83 and out[2] == 2  # past the map
+
+
+def test_accept_refuses_a_dynamic_table_beyond_its_certificate(tmp_path):
+    """The board's cheap certificate check puts the filter states at the ends of their boxes."""
+    import struct
+    import zlib
+    from fwhelpers import dynamic_table
+    from firmware.table import parse_table, TableError, HEADER_SIZE, NAME_SIZE, SENSOR_SIZE
+    names = ["T%d" % i for i in range(1, 12)]
+    good = dynamic_table(names)
+    t = parse_table(good)
+    b = bytearray(good)
+    # the bY list: after COMMON, the 12-word head and 8 lists of nf words (src A shA gA rA fy Ylo Yhi)
+    off = HEADER_SIZE + (NAME_SIZE + SENSOR_SIZE) * t.n_sensors + 4 * (8 + 3 * t.n_sensors + 1 + 12 + 8 * t.nf)
+    assert struct.unpack_from("<i", b, off)[0] == t.bY[0]
+    struct.pack_into("<i", b, off, t.bY[0] * 1000)
+    struct.pack_into("<I", b, len(b) - 4, zlib.crc32(bytes(b[:-4])))
+    (tmp_path / "table_a.bin").write_bytes(bytes(b))
+    app, board = rig_app(tmp_path, table=False, serial_mode="stream", extra={"frame_ms": 0})
+    assert app.table is None
+    with pytest.raises(TableError) as e:
+        app._accept(parse_table(bytes(b)))
+    assert e.value.reason == "certificate"
+    app._accept(parse_table(good))
