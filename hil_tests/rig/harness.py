@@ -36,6 +36,10 @@ MP_DIR = os.path.join(ROOT, "hil_tests", "mp")
 DUT = os.path.join(ROOT, "hil_tests", "rig", "dut.py")
 VENV_BIN = os.path.join(ROOT, ".venv", "bin")
 HEAP = os.environ.get("TCOMP_HIL_HEAP", "192K")  # 64-bit unix port: ~2x a 32-bit MCU (docs/hil.md)
+# The emulated Cortex-M3 board (ports/mps2, built by make setup): the firmware and the rig's board
+# side in its ROM; heap for the firmware plus the chip simulators (the firmware alone: docs/firmware.md).
+QEMU_IMAGE = os.environ.get("TCOMP_QEMU_IMAGE", os.path.join(ROOT, "build", "mps2-cortex-m3", "firmware-rig.elf"))
+QEMU_HEAP = os.environ.get("TCOMP_QEMU_HEAP", "256K")
 
 
 class RigError(RuntimeError):
@@ -47,6 +51,21 @@ def micropython_path():
     return p if os.path.exists(p) else shutil.which("micropython")
 
 
+def qemu_cmd(serial_fd, ctl_path, code, heap=QEMU_HEAP, image=QEMU_IMAGE):
+    """qemu-system-arm running ``code`` on the emulated board: UART0 on ``serial_fd`` (the pty's DUT
+    side, passed as a QEMU fd set), UART1 connected to the unix socket ``ctl_path`` (or no UART1)."""
+    exe = shutil.which("qemu-system-arm")
+    if exe is None or not os.path.exists(image):
+        raise RigError("QEMU board image not found (%s; make setup builds it with qemu-system-arm)" % image)
+    argv = [exe, "-M", "mps2-an385", "-display", "none", "-monitor", "none", "-nodefaults", "-net", "none",
+            "-add-fd", "fd=%d,set=1" % serial_fd, "-chardev", "serial,id=uart0,path=/dev/fdset/1",
+            "-serial", "chardev:uart0"]
+    if ctl_path:
+        argv += ["-chardev", "socket,id=uart1,path=" + ctl_path, "-serial", "chardev:uart1"]
+    argv += ["-semihosting-config", "enable=on,target=native", "-kernel", image]
+    return argv + ["-append", "heap=%s%s" % (heap, (" -c " + code) if code else "")]
+
+
 def interpreter_cmd(name, heap=HEAP):
     if name == "micropython":
         mp = micropython_path()
@@ -55,7 +74,7 @@ def interpreter_cmd(name, heap=HEAP):
         return [mp, "-X", "heapsize=" + heap]
     if name == "cpython":
         return [sys.executable, "-u"]
-    raise RigError("interpreter must be micropython or cpython, got %r" % (name,))
+    raise RigError("interpreter must be micropython, cpython or qemu, got %r" % (name,))
 
 
 _MPY_CACHE = {}
@@ -274,7 +293,11 @@ class Rig(LinkClient):
                 f.write(key)
         self.spec = {"config": self.config, "ctl": os.path.join(self.workdir, "ctl.sock"), "temps": temps or {},
                      "noise_uohm": noise_uohm, "seed": seed, "start_ms": start_ms}
-        self.heap = heap
+        if interpreter == "qemu":  # the board's own files on the emulator; the control channel on UART1
+            self.spec["board"] = "mps2_an385"
+            self.spec["ctl"] = "uart:1"
+        self.ctl_path = os.path.join(self.workdir, "ctl.sock")
+        self.heap = heap if interpreter != "qemu" or heap != HEAP else QEMU_HEAP
         self.use_mpy = use_mpy
         self.stream = (self.config.get("serial") or {}).get("mode", "stream") == "stream"
         self.proc = None
@@ -305,7 +328,7 @@ class Rig(LinkClient):
         self.reader.start()
 
     def start(self):
-        ctl = self.spec["ctl"]
+        ctl = self.ctl_path
         if os.path.exists(ctl):
             os.unlink(ctl)
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -324,15 +347,22 @@ class Rig(LinkClient):
             dut = os.path.join(compile_mpy(), "hil_tests", "rig", "dut.mpy") if self.use_mpy else DUT
             argv = interpreter_cmd("micropython", self.heap) + (["-m", "hil_tests.rig.dut"] if self.use_mpy else [DUT])
             del dut
+            argv = argv + [spec_path]
+        elif self.interpreter == "qemu":
+            argv = qemu_cmd(self.master, ctl, "from hil_tests.rig import dut\ndut.main(%r)" % spec_path,
+                            heap=self.heap)
         else:
             env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
-            argv = interpreter_cmd("cpython") + [DUT]
-        argv = argv + [spec_path]
+            argv = interpreter_cmd("cpython") + [DUT, spec_path]
         self.stderr_path = os.path.join(self.workdir, "dut-stderr-%d.txt" % self.starts)
         self.stderr = open(self.stderr_path, "wb")
         self.powered = True
-        self.proc = subprocess.Popen(argv, stdin=self.master, stdout=self.master, stderr=self.stderr,
-                                     cwd=self.flash, env=env)
+        if self.interpreter == "qemu":  # the pty reaches UART0 through QEMU's fd set, not stdio
+            self.proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=self.stderr, stderr=self.stderr,
+                                         cwd=self.flash, env=env, pass_fds=(self.master,))
+        else:
+            self.proc = subprocess.Popen(argv, stdin=self.master, stdout=self.master, stderr=self.stderr,
+                                         cwd=self.flash, env=env)
         self.starts += 1
         self.listener.settimeout(30)
         try:
