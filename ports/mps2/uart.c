@@ -41,6 +41,9 @@ static bool interrupt_char_on[MPS2_UART_COUNT] = {true, false};  // Ctrl-C on th
 static void uart_rx_irq(int n) {
     cmsdk_uart_t *u = uarts[n];
     rx_ring_t *r = &rings[n];
+    // Clear the interrupt before reading: a byte that arrives after the last read raises it
+    // again (cleared after the loop, that byte would sit in the UART with no interrupt pending).
+    u->intstatus = UART_INT_RX;
     while (u->state & UART_STATE_RXFULL) {
         int c = u->data & 0xff;
         if (interrupt_char_on[n] && c == mp_interrupt_char) {
@@ -53,7 +56,6 @@ static void uart_rx_irq(int n) {
             r->head = next;
         }
     }
-    u->intstatus = UART_INT_RX;
 }
 
 void UART0RX_Handler(void) {
