@@ -82,6 +82,7 @@ typecheck: setup
 
 bench: setup
 	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPCORE)) CPU=cortex-m0plus >/dev/null
+	@$(MAKE) --no-print-directory -s -C tools/qemu_icount >/dev/null
 	$(BIN)/python tools/bench.py
 
 clean:
