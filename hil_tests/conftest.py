@@ -3,8 +3,8 @@
 ``--port /dev/ttyACM0`` runs the link-level scenarios against a real board
 (already flashed, with a table); scenarios that need the rig's simulated
 chips, clock or power switch are marked ``rig`` and skipped then. Every rig
-scenario runs under MicroPython (unix port), CPython and on the emulated Cortex-M3 board
-(``qemu``: ports/mps2 under qemu-system-arm) (``interpreter`` parameter).
+scenario runs under MicroPython (unix port) and CPython (``interpreter`` parameter); some also on
+the emulated Cortex-M3 board (``qemu``: ports/mps2 under qemu-system-arm).
 """
 import os
 
@@ -39,7 +39,9 @@ def _have_micropython():
     return micropython_path() is not None
 
 
-INTERPRETERS = ["micropython", "cpython", "qemu"]
+# "qemu" (the emulated board) is accepted where a scenario parametrizes it itself (test_hil_heaplock.py,
+# test_hil_qemu.py); it is not in the default set: long scenarios hang on it (docs/hil.md, known limits).
+INTERPRETERS = ["micropython", "cpython"]
 
 
 @pytest.fixture(params=INTERPRETERS)

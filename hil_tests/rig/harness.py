@@ -57,7 +57,7 @@ def qemu_cmd(serial_fd, ctl_path, code, heap=QEMU_HEAP, image=QEMU_IMAGE):
     exe = shutil.which("qemu-system-arm")
     if exe is None or not os.path.exists(image):
         raise RigError("QEMU board image not found (%s; make setup builds it with qemu-system-arm)" % image)
-    argv = [exe, "-M", "mps2-an385", "-display", "none", "-monitor", "none", "-nodefaults", "-net", "none",
+    argv = [exe, "-M", "mps2-an385", "-display", "none", "-monitor", os.environ.get("TCOMP_QEMU_MONITOR", "none"), "-nodefaults", "-net", "none",
             "-add-fd", "fd=%d,set=1" % serial_fd, "-chardev", "serial,id=uart0,path=/dev/fdset/1",
             "-serial", "chardev:uart0"]
     if ctl_path:
