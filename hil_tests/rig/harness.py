@@ -51,6 +51,13 @@ def micropython_path():
     return p if os.path.exists(p) else shutil.which("micropython")
 
 
+def _die_with_parent():
+    """QEMU gets SIGKILL when the rig's process ends, however it ends (Linux prctl PR_SET_PDEATHSIG):
+    an emulator left running keeps a core busy."""
+    import ctypes
+    ctypes.CDLL(None).prctl(1, signal.SIGKILL)
+
+
 def qemu_cmd(serial_fd, ctl_path, code, heap=QEMU_HEAP, image=QEMU_IMAGE):
     """qemu-system-arm running ``code`` on the emulated board: UART0 on ``serial_fd`` (the pty's DUT
     side, passed as a QEMU fd set), UART1 connected to the unix socket ``ctl_path`` (or no UART1)."""
@@ -359,7 +366,8 @@ class Rig(LinkClient):
         self.powered = True
         if self.interpreter == "qemu":  # the pty reaches UART0 through QEMU's fd set, not stdio
             self.proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=self.stderr, stderr=self.stderr,
-                                         cwd=self.flash, env=env, pass_fds=(self.master,))
+                                         cwd=self.flash, env=env, pass_fds=(self.master,),
+                                         preexec_fn=_die_with_parent)
         else:
             self.proc = subprocess.Popen(argv, stdin=self.master, stdout=self.master, stderr=self.stderr,
                                          cwd=self.flash, env=env)
