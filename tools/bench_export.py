@@ -5,10 +5,11 @@
 Export: wall time of export_model per model kind (sample documents from
 hil_tests.fixtures.samples), table size, certified error. Evaluation: microseconds
 per call of update / offset_at / ref_offset+slope / step on CPython and on the
-MicroPython unix port (firmware modules compiled with mpy-cross, 64 kB heap),
+MicroPython TCOMP_MICROPYTHON chooses (the firmware's board build, host/fwbuild.py, 64 kB heap),
 instructions per call under valgrind/callgrind (stable on a loaded machine),
 best of several repetitions (the machine may be shared),
-and the .mpy size of the three firmware modules for armv6m (RP2040).
+and the .mpy size of the three firmware modules as shipped (the board build: -O3, bytecode
+only, the same bytes as -march=armv6m for an RP2040).
 """
 import argparse
 import os
@@ -29,6 +30,8 @@ from models_export import export_model  # noqa: E402
 from hil_tests.fixtures.samples import linear_direct_doc, poly_slope_doc, screw_doc  # noqa: E402
 
 BIN = REPO / ".venv" / "bin"
+from hil_tests.rig import interpreters  # noqa: E402
+MICROPYTHON = Path(interpreters.get().path)  # the one TCOMP_MICROPYTHON chooses (default: the 32-bit port)
 
 MP_SCRIPT = """
 import time
@@ -95,16 +98,16 @@ run(ev, %(n)d)
 """
 
 
-def callgrind_per_call(tmp, table_path, stmt, n1=50, n2=250):
+def callgrind_per_call(tmp, mpypath, table_path, stmt, n1=50, n2=250):
     """Instructions per call on the MicroPython unix port: (Ir(n2) - Ir(n1)) / (n2 - n1), stable under load."""
     irs = []
     for n in (n1, n2):
         script = tmp / "cg.py"
         script.write_text(CG_SCRIPT % dict(path=str(table_path), stmt=stmt, n=n))
         out = tmp / "cg.out"
-        proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=%s" % out, str(BIN / "micropython"),
+        proc = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=%s" % out, str(MICROPYTHON),
                                "-X", "heapsize=64K", str(script)], capture_output=True, text=True,
-                              env=dict(os.environ, MICROPYPATH=str(tmp)))
+                              env=dict(os.environ, MICROPYPATH=mpypath))
         if proc.returncode != 0:
             return None
         summary = [line for line in out.read_text().splitlines() if line.startswith("summary:") or line.startswith("totals:")]
@@ -124,12 +127,12 @@ def main():
         ("screw, 12 segments, base sensor", screw_doc(random.Random(3), segments=12, dt_s=10.0, degree=2)),
         ("screw, 16 segments, dt 1 s", screw_doc(random.Random(4), segments=16, dt_s=1.0, degree=2)),
     ]
-    mp_ok = (BIN / "micropython").exists() and (BIN / "mpy-cross").exists()
+    mp_ok = MICROPYTHON.exists() and (BIN / "mpy-cross").exists()
     tmp = Path(tempfile.mkdtemp(prefix="bench_export_"))
     if mp_ok:
-        (tmp / "firmware").mkdir()
-        for name in ("crc32", "table", "evaluate"):
-            subprocess.run([str(BIN / "mpy-cross"), "-o", str(tmp / "firmware" / (name + ".mpy")), str(REPO / "firmware" / (name + ".py"))], check=True)
+        from host.fwbuild import build
+        board = build()
+        mpypath = "%s:%s" % (tmp, board.root)  # the firmware as tcomp flash ships it
     print("export (CPython %s)" % sys.version.split()[0])
     print("  %-36s %9s %7s %11s %9s %6s" % ("model", "export ms", "bytes", "max err um", "headroom", "limbs"))
     tables = []
@@ -157,8 +160,8 @@ def main():
             script.write_text(MP_SCRIPT % dict(path=str(path), n=args.n, screw=screw, pos=pos))
             runs = []
             for _ in range(3):  # best of three runs, as for CPython
-                out = subprocess.run([str(BIN / "micropython"), "-X", "heapsize=64K", str(script)], capture_output=True, text=True,
-                                     env=dict(os.environ, MICROPYPATH=str(tmp)), check=True).stdout.split()
+                out = subprocess.run([str(MICROPYTHON), "-X", "heapsize=64K", str(script)], capture_output=True, text=True,
+                                     env=dict(os.environ, MICROPYPATH=mpypath), check=True).stdout.split()
                 runs.append([int(v) for v in out])
             us = [min(col) for col in zip(*runs)]
             loop = us[4] / args.n
@@ -166,7 +169,8 @@ def main():
             vals = [us[0] / args.n - loop, us[1] / args.n - loop, us[2] / args.n - loop, us[3] / ns if screw else float("nan")]
             print("  %-36s MicroPython %7.2f | %7.2f | %7.2f | %8.1f" % ("", *vals))
     if mp_ok and not args.no_valgrind and shutil.which("valgrind"):
-        print("\ninstructions per call on the MicroPython unix port (valgrind --tool=callgrind, x86-64):")
+        it = interpreters.get()
+        print("\ninstructions per call on MicroPython %s (%d-bit; valgrind --tool=callgrind):" % (it.kind, it.bits))
         for label, ex in tables:
             t = parse_table(ex.table)
             path = tmp / "table.bin"
@@ -177,17 +181,16 @@ def main():
                 stmts.append(("advance_position+step", "ev.advance_position(%d + (k %% 5) * 1000); ev.step()" % pos))
             figs = []
             for name, stmt in stmts:
-                ir = callgrind_per_call(tmp, path, stmt)
+                ir = callgrind_per_call(tmp, mpypath, path, stmt)
                 figs.append("%s %s" % (name, "%.0f" % ir if ir is not None else "n/a"))
             print("  %-36s %s" % (label, " | ".join(figs)))
     if mp_ok:
-        print("\n.mpy size for armv6m (mpy-cross -march=armv6m):")
+        print("\n.mpy size as shipped (board build, host/fwbuild.py):")
         total = 0
+        sizes = {t: os.path.getsize(p) for t, p in board.files}
         for name in ("crc32", "table", "evaluate"):
-            out = tmp / (name + ".armv6m.mpy")
-            subprocess.run([str(BIN / "mpy-cross"), "-march=armv6m", "-o", str(out), str(REPO / "firmware" / (name + ".py"))], check=True)
-            total += out.stat().st_size
-            print("  firmware/%-12s %6d bytes" % (name + ".py", out.stat().st_size))
+            total += sizes["firmware/%s.mpy" % name]
+            print("  firmware/%-12s %6d bytes" % (name + ".mpy", sizes["firmware/%s.mpy" % name]))
         print("  %-22s %6d bytes" % ("total", total))
 
 

@@ -1,6 +1,9 @@
 """Firmware budgets, measured: cycle time, instructions per cycle, .mpy size, heap.
 
-    .venv/bin/python tools/bench_firmware.py [--cycles N] [--no-valgrind]
+    .venv/bin/python tools/bench_firmware.py [--cycles N] [--no-valgrind] [--interpreter KIND|PATH] [--heaps-only]
+
+The interpreter is the one TCOMP_MICROPYTHON chooses (hil_tests/rig/interpreters.py; default the
+32-bit port ports/linux32), or --interpreter (``unix64``: the 64-bit unix wheel).
 
 Prints
 - cycle time for 11 channels (9 MAX31865 on SPI + 2 ADS122C04 on I2C,
@@ -10,18 +13,20 @@ Prints
 - instructions per steady-state cycle under ``valgrind --tool=callgrind``
   (stable): the difference in total instructions between two runs with
   different cycle counts, divided by the difference;
-- the size of every firmware module compiled with ``mpy-cross -march=armv6m``
-  (what a Cortex-M0+ board gets), at -O0 and at -O3 (the firmware has no
-  asserts or ``__debug__`` blocks, so -O3 only drops line numbers from
-  tracebacks): per serial mode what a board loads (a board runs in ONE mode:
-  the stream link or the Modbus link is imported only when configured; the
-  boot-only config check ``bootcfg.py`` counts, it is on flash) and the total
-  of every board-side module (target < 24 kB). ``linux_adapters.py`` and
-  ``boards/linux.py`` (smbus2, spidev, pyserial adapters) are CPython-side and
-  not counted (the friendly config validator is host/boardconfig.py);
+- the size of every file firmware/manifest.py puts on a board, as host/fwbuild.py
+  builds it for ``tcomp flash`` (-O3, bytecode only: byte for byte what
+  ``mpy-cross -march=armv6m`` gives, the firmware has no native code), next to
+  the same files at -O0 (the firmware has no asserts or ``__debug__`` blocks,
+  so -O3 only drops line numbers from tracebacks): the whole build, the
+  manifest's per-mode builds (``serial="stream"`` / ``"modbus"``), and per
+  serial mode what a booted board loads (a board runs in ONE mode: the stream
+  link or the Modbus link is imported only when configured; the boot-only
+  config check ``bootcfg.py`` counts, it is on flash); target < 24 kB.
+  The files the manifest leaves off (``NOT_ON_BOARD``: ``linux_adapters.py``,
+  ``boards/linux.py``, ``wire.py``) are not counted;
 - heap on the unix port (a 64-bit build: objects and loaded bytecode are
   about twice their size on a 32-bit MCU), per serial mode with the firmware
-  loaded from -O3 .mpy files: code of the modules that mode imports, the test
+  loaded from the same build: code of the modules that mode imports, the test
   fakes, data of the running app after warm-up (target < 16 kB), the largest
   live heap, and the smallest ``-X heapsize`` (binary search, 1 kB steps) with
   which boot, warm-up and heap-locked cycles run (the script of
@@ -32,7 +37,6 @@ Then the figures on the emulated Cortex-M3 board (tools/bench_qemu_board.py: ins
 cycle and per table kind, on M3 and M0+ code; heap with the firmware frozen).
 """
 import argparse
-import glob
 import os
 import re
 import shutil
@@ -43,11 +47,7 @@ import tempfile
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests", "firmware"))
-MP = os.path.join(ROOT, ".venv", "bin", "micropython")
-CROSS = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
-# CPython-only: the Linux adapters, and the friendly config validator (the host runs it in
-# tcomp flash/hil; the board checks its config with bootcfg.py)
-BOARD_SIDE_EXCLUDE = ("linux_adapters.py", os.path.join("boards", "linux.py"))
+MP = None  # the interpreter's executable, set by main() (hil_tests/rig/interpreters.py)
 
 SCRIPT = r"""
 import time
@@ -89,20 +89,19 @@ print("RESULT", total // N, worst, fakes // 1000)
 """
 
 
-def compile_tree(dest, march=None, opt=0):
-    files = []
-    for src in sorted(glob.glob(os.path.join(ROOT, "firmware", "**", "*.py"), recursive=True)):
-        rel = os.path.relpath(src, os.path.join(ROOT, "firmware"))
-        if rel in BOARD_SIDE_EXCLUDE:
-            continue
-        out = os.path.join(dest, "firmware", rel[:-3] + ".mpy")
-        os.makedirs(os.path.dirname(out), exist_ok=True)
-        cmd = [CROSS] + (["-march=" + march] if march else []) + ["-O%d" % opt, "-o", out, src]
-        subprocess.run(cmd, check=True)
-        files.append((rel, os.path.getsize(out)))
-    subprocess.run([CROSS, "-O%d" % opt, "-o", os.path.join(dest, "fwfakes.mpy"),
-                    os.path.join(ROOT, "tests", "firmware", "fwfakes.py")], check=True)
-    return files
+def board_sizes(opt_args=None, **options):
+    """[(path under firmware/, .mpy bytes)] of the board build (host/fwbuild.py, firmware/manifest.py
+    with ``options``); ``opt_args``: the same files compiled with other mpy-cross options instead."""
+    from host.fwbuild import build, load_manifest, mpy_cross
+    if opt_args is None:
+        return [(t[len("firmware/"):-4] + ".py", os.path.getsize(p)) for t, p in build(**options).files]
+    out = []
+    with tempfile.TemporaryDirectory() as d:
+        for e in load_manifest(**options).entries:
+            mpy = os.path.join(d, "x.mpy")
+            subprocess.run([mpy_cross()] + list(opt_args) + ["-s", e.target, "-o", mpy, e.source], check=True)
+            out.append((e.target[len("firmware/"):], os.path.getsize(mpy)))
+    return out
 
 
 def prepare(work):
@@ -207,18 +206,28 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--cycles", type=int, default=2000)
     ap.add_argument("--no-valgrind", action="store_true")
+    ap.add_argument("--interpreter", default=None, help="a kind (linux32, unix64) or a path; default TCOMP_MICROPYTHON")
+    ap.add_argument("--heaps-only", action="store_true", help="only the heap figures")
     args = ap.parse_args()
+    global MP
+    from hil_tests.rig import interpreters
+    it = interpreters.get(args.interpreter)
+    try:
+        MP = it.require().path
+    except interpreters.InterpreterMissing as e:
+        sys.exit(str(e))
     with tempfile.TemporaryDirectory() as work:
-        mpy = os.path.join(work, "mpy")
+        from fwhelpers import compile_mpy
+        mpy = compile_mpy(fakes=True)  # the board build plus the fakes (tests/firmware/manifest.py)
         prepare(work)
-        compile_tree(mpy, opt=3)
-        sizes = {}
-        for opt in (0, 3):
-            sizes[opt] = compile_tree(os.path.join(work, "arm%d" % opt), "armv6m", opt)
+        if args.heaps_only:
+            print_heaps(work, mpy, it)
+            return
+        sizes = {0: board_sizes(["-O0"]), 3: board_sizes()}
 
         p = run_mp(work, mpy, args.cycles)
         mean_us, worst_us, fakes_us = [int(x) for x in p.stdout.split("RESULT")[1].split()]
-        print("MicroPython %s unix port (64-bit), 11 channels, poly_slope table" % _mp_version())
+        print("MicroPython %s %s (%d-bit), 11 channels, poly_slope table" % (_mp_version(), it.kind, it.bits))
         print("  cycle time: mean %d us, worst %d us over %d cycles (fakes' own share ~%d us)"
               % (mean_us, worst_us, args.cycles, fakes_us))
         if not args.no_valgrind and shutil.which("valgrind"):
@@ -228,15 +237,21 @@ def main():
             print("  instructions per cycle (callgrind, steady state): %d" % ((ib - ia) // (b - a)))
         else:
             print("  instructions per cycle: skipped (valgrind not run)")
-        print("mpy-cross -march=armv6m sizes (board-side modules; linux_adapters.py and boards/linux.py"
-              " are CPython-side and not counted):")
+        from host.fwbuild import MPY_CROSS_ARGS
+        print("board build sizes (firmware/manifest.py via host/fwbuild.py, mpy-cross %s as shipped; -O0 for"
+              " comparison; = -march=armv6m bytes):" % " ".join(MPY_CROSS_ARGS))
         print("  %-24s %8s %8s" % ("module", "-O0", "-O3"))
         for (rel, s0), (_, s3) in zip(sizes[0], sizes[3]):
             print("  %-24s %6d B %6d B" % (rel, s0, s3))
         for opt in (0, 3):
             total = sum(s for _, s in sizes[opt])
-            print("  -O%d total, every board-side module: %d B = %.1f kB (target < 24 kB): %s"
-                  % (opt, total, total / 1024, "met" if total < 24 * 1024 else "NOT met"))
+            print("  -O%d total, every file tcomp flash ships (%d): %d B = %.1f kB (target < 24 kB): %s"
+                  % (opt, len(sizes[opt]), total, total / 1024, "met" if total < 24 * 1024 else "NOT met"))
+        for mode in ("stream", "modbus"):
+            sub = board_sizes(serial=mode)
+            total = sum(s for _, s in sub)
+            print("  manifest serial=%r (both drivers, example board file): %d files, %d B = %.1f kB"
+                  % (mode, len(sub), total, total / 1024))
         for label, args_ in (("stream board (9 MAX31865 + 2 ADS122C04, $TC stream)", (9, 2, "stream")),
                              ("stream board, MAX31865 channels only", (11, 0, "stream")),
                              ("modbus board (9 MAX31865 + 2 ADS122C04, Modbus RTU)", (9, 2, "modbus")),
@@ -247,18 +262,22 @@ def main():
                   % (label, len(mods), sub[0], sub[0] / 1024, sub[1], sub[1] / 1024,
                      "met" if sub[1] < 24 * 1024 else "NOT met"))
             print("    (%s, plus the board file)" % " ".join(m[:-3] for m in mods))
-        print("heap per serial mode on the unix port (64-bit: pointers and objects twice a 32-bit MCU's;"
-              " .mpy bytecode is copied into the heap), firmware from -O3 .mpy:")
-        for mode in ("stream", "modbus"):
-            code, fakes, data, peak, smallest = mode_heap(work, mpy, mode)
-            print("  %s: code %d B, test fakes %d B, app data after warm-up %d B = %.1f kB (target < 16 kB):"
-                  " %s; largest live heap (code + fakes + data) %d B; smallest -X heapsize that runs boot, warm-up"
-                  " and 50 heap-locked cycles: %d kB"
-                  % (mode, code, fakes, data, data / 1024, "met" if data < 16 * 1024 else "NOT met", peak,
-                     smallest))
+        print_heaps(work, mpy, it)
     print()
     import bench_qemu_board  # the same budgets on the emulated Cortex-M3 board (tools/bench_qemu_board.py)
     bench_qemu_board.main()
+
+
+def print_heaps(work, mpy, it):
+    print("heap per serial mode on %s (%d-bit%s; .mpy bytecode is copied into the heap), firmware from -O3 .mpy:"
+          % (it.kind, it.bits, ": pointers and objects twice a 32-bit MCU's" if it.bits == 64 else ""))
+    for mode in ("stream", "modbus"):
+        code, fakes, data, peak, smallest = mode_heap(work, mpy, mode)
+        print("  %s: code %d B, test fakes %d B, app data after warm-up %d B = %.1f kB (target < 16 kB):"
+              " %s; largest live heap (code + fakes + data) %d B; smallest -X heapsize that runs boot, warm-up"
+              " and 50 heap-locked cycles: %d kB"
+              % (mode, code, fakes, data, data / 1024, "met" if data < 16 * 1024 else "NOT met", peak,
+                 smallest))
 
 
 def _mp_version():

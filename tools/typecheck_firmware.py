@@ -3,8 +3,12 @@
 The Makefile installs micropython-rp2-stubs and micropython-stdlib-stubs into
 .stubs/; the latter carries a MicroPython typeshed (.stubs/stdlib) that
 replaces CPython's, so a call that exists only on CPython is an error here.
-linux_adapters.py is CPython-only (fcntl, ctypes, pyserial, smbus2) and is
-checked separately against the ordinary CPython typeshed.
+The files checked against MicroPython are the ones firmware/manifest.py puts
+on a board (host/fwbuild.py reads it); the files it leaves off (NOT_ON_BOARD:
+linux_adapters.py and boards/linux.py, CPython-only with fcntl, ctypes,
+pyserial, smbus2; wire.py, which the host reads) are checked separately
+against the ordinary CPython typeshed. The manifest itself is build input
+(its module()/package() names come from the loader) and is not checked.
 
 Exit status: 0 when pyright reports no errors, 1 otherwise (2 if the stubs
 are missing).
@@ -18,7 +22,6 @@ import tempfile
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 STUBS = os.path.join(ROOT, ".stubs")
 PYRIGHT = os.path.join(ROOT, ".venv", "bin", "pyright")
-CPYTHON_ONLY = ["firmware/linux_adapters.py", "firmware/boards/linux.py"]
 
 
 def _rel(config, d):
@@ -64,14 +67,15 @@ def main():
         return 2
     common = {"pythonVersion": "3.10", "reportMissingModuleSource": "none",
               "reportAttributeAccessIssue": "error", "reportOptionalMemberAccess": "error"}
-    mp = dict(common, include=[os.path.join(ROOT, "firmware")],
-              exclude=[os.path.join(ROOT, p) for p in CPYTHON_ONLY] + ["**/__pycache__"],
-              typeshedPath=STUBS, stubPath=STUBS, pythonPlatform="Linux",
+    sys.path.insert(0, ROOT)
+    from host.fwbuild import BOARD_MANIFEST, load_manifest, not_on_board
+    board = [e.source for e in load_manifest(BOARD_MANIFEST).entries]
+    host_side = [os.path.join(ROOT, "firmware", p) for p in sorted(not_on_board()) if p != "manifest.py"]
+    mp = dict(common, include=board, typeshedPath=STUBS, stubPath=STUBS, pythonPlatform="Linux",
               extraPaths=[ROOT])
-    cp = dict(common, include=[os.path.join(ROOT, p) for p in CPYTHON_ONLY], extraPaths=[ROOT],
-              venvPath=ROOT, venv=".venv")
-    rc = run(mp, "firmware vs MicroPython stubs")
-    rc |= run(cp, "CPython-only board adapters")
+    cp = dict(common, include=host_side, extraPaths=[ROOT], venvPath=ROOT, venv=".venv")
+    rc = run(mp, "board files (firmware/manifest.py) vs MicroPython stubs")
+    rc |= run(cp, "files left off the board (CPython)")
     return rc
 
 

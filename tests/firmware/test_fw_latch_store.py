@@ -14,7 +14,7 @@ import pytest
 import hashlib
 
 from fwhelpers import (cmd, compile_mpy, frames, modbus_auth_block, provision, run_cycles, run_micropython, scmd,
-                       table_fields, HERE)
+                       table_fields)
 
 NAMES = ("T1", "T2")
 
@@ -354,7 +354,7 @@ print("locked", free - gc.mem_free(), app.cycles)
 def test_warm_restart_on_micropython(tmp_path):
     """The real interpreter: refs.bin written and read back by MicroPython's own file API,
     and the cycle after loading stored references allocates nothing."""
-    mpy = compile_mpy(str(tmp_path / "mpy"), [os.path.join(HERE, "fwfakes.py")])
+    mpy = compile_mpy(fakes=True)
     (tmp_path / "table_a.bin").write_bytes(_table())
     out = run_micropython(WARM_RESTART, str(tmp_path), mpy, "256K").split("\n")
     l0, l1, r0, r1, st, t0 = (int(v) for v in out[0].split())

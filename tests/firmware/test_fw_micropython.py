@@ -129,9 +129,10 @@ def test_same_bytes_on_cpython_and_micropython(tmp_path_factory):
             assert p.returncode == 0, p.stderr
             results.append(p.stdout)
         else:
-            mpy = compile_mpy(str(tmp_path_factory.mktemp("mpy")), [os.path.join(HERE, "fwfakes.py")])
-            # 148 kB is the smallest that works (boot, authorised upload, faults; 64-bit port: see test_fw_heaplock.py)
-            results.append(run_micropython(SCENARIO, str(d), mpy, "156K"))
+            mpy = compile_mpy(fakes=True)
+            # the smallest that works plus a margin, per word size (interpreters.HEAPS, docs/firmware.md)
+            from hil_tests.rig import interpreters
+            results.append(run_micropython(SCENARIO, str(d), mpy, interpreters.heap("fw_scenario")))
     cpy, mpy = results
     assert cpy == mpy
     lines = cpy.splitlines()

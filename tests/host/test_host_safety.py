@@ -437,12 +437,17 @@ def test_flash_names_a_table_sensor_the_config_does_not_wire(capsys, tmp_path, t
 
 # ------------------------------------------------------------ leftovers
 
-def test_the_compiled_firmware_folder_goes_with_the_process(tmp_path):
-    code = "from hil_tests.rig.harness import compile_mpy; print(compile_mpy())"
-    p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120)
+def test_the_rig_build_leaves_only_its_cache_folder(tmp_path):
+    """The rig's .mpy files live in the build cache (host/fwbuild.py), one folder per content;
+    a process leaves no temporary folder (.tmp-*) behind in it."""
+    cache = tmp_path / "cache"
+    code = "from hil_tests.rig.mpybuild import rig_build; print(rig_build().root)"
+    p = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=120,
+                       env=dict(os.environ, TCOMP_MPY_CACHE=str(cache)))
     assert p.returncode == 0, p.stderr
     folder = p.stdout.strip()
-    assert os.path.basename(folder).startswith("tcomp-hil-mpy-") and not os.path.exists(folder)
+    assert os.listdir(cache) == [os.path.basename(folder)] and os.path.isfile(
+        os.path.join(folder, "hil_tests", "rig", "dut.mpy"))
 
 
 def test_hil_disk_full_leaves_no_output(capsys, tmp_path, table):
