@@ -23,9 +23,9 @@ MP32 := ports/linux32/build/micropython
 MP32_SRC := $(wildcard ports/linux32/*.c ports/linux32/*.h ports/linux32/Makefile ports/common/*.c ports/common/*.h \
                        ports/common/extmod/*.h ports/common/lib/*.py)
 
-.PHONY: setup demo test test-fast typecheck bench clean
+.PHONY: setup demo test test-fast typecheck bench clean qemu-image
 
-setup: $(STAMP) $(STUBS_STAMP) sysdeps $(LCNC_STAMP) $(MP32)
+setup: $(STAMP) $(STUBS_STAMP) sysdeps $(LCNC_STAMP) $(MP32) qemu-image
 
 $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m venv $(VENV)
@@ -41,13 +41,17 @@ $(STUBS_STAMP): constraints.txt $(STAMP)
 	touch $@
 
 # socat gives mpremote a pty "board"; linuxcnc-uspace is the LinuxCNC the bridge is tested in
-# (hil_tests/test_hil_linuxcnc.py; ~80 MB); gcc-multilib compiles the 32-bit MicroPython (-m32).
-# Installed from Debian when missing.
+# (hil_tests/test_hil_linuxcnc.py; ~80 MB); gcc-multilib compiles the 32-bit MicroPython (-m32);
+# gcc-arm-none-eabi, libnewlib-arm-none-eabi and qemu-system-arm build and run the emulated Cortex-M3
+# board (ports/mps2, docs/hil.md; ~105 MB without recommends). Installed from Debian when missing.
 sysdeps:
 	@command -v socat >/dev/null 2>&1 && command -v halrun >/dev/null 2>&1 && \
+	  command -v arm-none-eabi-gcc >/dev/null 2>&1 && command -v qemu-system-arm >/dev/null 2>&1 && \
+	  [ -f /usr/lib/arm-none-eabi/newlib/libc.a ] && \
 	  echo 'int main(void) { return 0; }' | gcc -m32 -x c - -o /dev/null 2>/dev/null || { \
 	  $(call APT,update -qq) && \
-	  $(call APT,install -y -qq --no-install-recommends socat linuxcnc-uspace gcc-multilib) >/dev/null; }
+	  $(call APT,install -y -qq --no-install-recommends socat linuxcnc-uspace gcc-multilib \
+	    gcc-arm-none-eabi libnewlib-arm-none-eabi qemu-system-arm) >/dev/null; }
 
 # pip checks the hash (--require-hashes) and so does sha256sum, on the cached tarball too.
 $(MPY_TARBALL): $(MPY_REQ) | $(STAMP)
@@ -65,6 +69,12 @@ $(MP32): $(MP32_SRC) $(MPY_TOP)/.unpacked | sysdeps
 	$(MAKE) --no-print-directory -C ports/linux32 -j2 MPY_TOP=$(abspath $(MPY_TOP)) > .build/linux32.log 2>&1 || \
 	  { tail -40 .build/linux32.log; exit 1; }
 	touch $@
+
+# The Cortex-M3 images (ports/mps2/Makefile) on the same core: firmware.elf (firmware/manifest.py
+# frozen) and firmware-rig.elf (plus the rig's board side, for `tcomp hil --interpreter qemu`). The ROM
+# table is regenerated on every run (a second or so), so the image always carries the current firmware.
+qemu-image: $(MPY_TOP)/.unpacked $(STAMP) | sysdeps
+	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) >/dev/null
 
 # Only LinuxCNC's own modules (hal, _hal, linuxcnc) go on the venv's path, not all of dist-packages.
 $(LCNC_STAMP): $(STAMP) | sysdeps
@@ -88,7 +98,9 @@ typecheck: setup
 	$(BIN)/python tools/typecheck_firmware.py
 
 bench: setup
+	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) CPU=cortex-m0plus >/dev/null
+	@$(MAKE) --no-print-directory -s -C tools/qemu_icount >/dev/null
 	$(BIN)/python tools/bench.py
 
 clean:
-	rm -rf $(VENV) $(STUBS) out .pytest_cache .hypothesis .build ports/linux32/build
+	rm -rf $(VENV) $(STUBS) out .pytest_cache .hypothesis .build ports/linux32/build build

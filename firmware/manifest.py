@@ -18,7 +18,7 @@
 metadata(description="tcomp firmware: thermal-error compensation on the board", version="0.1.0", license="MIT")
 
 # the example board files that run on MicroPython (boards/linux.py runs under CPython: NOT_ON_BOARD)
-BOARD_FILES = ("rp2040",)
+BOARD_FILES = ("rp2040", "mps2_an385")  # mps2_an385: the QEMU board image (ports/mps2)
 
 options.defaults(serial=None, drivers=None, boards=("rp2040",))
 

@@ -3,7 +3,8 @@
 ``--port /dev/ttyACM0`` runs the link-level scenarios against a real board
 (already flashed, with a table); scenarios that need the rig's simulated
 chips, clock or power switch are marked ``rig`` and skipped then. Every rig
-scenario runs under MicroPython and CPython (``interpreter`` parameter).
+scenario runs under MicroPython (unix port) and CPython (``interpreter`` parameter); some also on
+the emulated Cortex-M3 board (``qemu``: ports/mps2 under qemu-system-arm).
 """
 import os
 
@@ -33,6 +34,8 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(skip)
 
 
+# "qemu" (the emulated board) is accepted where a scenario parametrizes it itself (it is slower:
+# short scenarios there; docs/hil.md).
 INTERPRETERS = ["micropython", "cpython"]
 
 
@@ -45,6 +48,11 @@ def interpreter(request):
             interpreters.get().require()
         except interpreters.InterpreterMissing as e:
             pytest.fail(str(e))
+    if request.param == "qemu":
+        import shutil
+        from hil_tests.rig.harness import QEMU_IMAGE
+        if shutil.which("qemu-system-arm") is None or not os.path.exists(QEMU_IMAGE):
+            pytest.fail("QEMU board image missing (make setup installs qemu-system-arm and builds %s)" % QEMU_IMAGE)
     return request.param
 
 

@@ -57,6 +57,35 @@ def test_tcomp_hil_answers_every_errors_row(tmp_path, short_run, interpreter, ca
         assert abs(a["offset_um"] - p) <= bound, (a, p, bound)
 
 
+def test_tcomp_hil_on_the_emulated_board(tmp_path, demo_run, capsys):
+    """`tcomp hil --interpreter qemu`: 4 minutes of the twin on the emulated Cortex-M3 board."""
+    from host.cli import main as tcomp
+    from host.models import load_model
+    from host.runs import Errors, Run, Temperatures, load_run, write_run
+    t, e = demo_run.temperatures, demo_run.errors
+    kt, ke = t.time_s <= 240, e.time_s <= 240
+    folder = str(tmp_path / "short")
+    write_run(Run(demo_run.meta, Temperatures(t.time_s[kt], t.names, t.values[kt]),
+                  Errors(e.time_s[ke], e.position_mm[ke], e.error_um[ke])), folder)
+    run = load_run(folder)
+    doc = poly_slope_for_run(run, SENSORS, seed=3)
+    ex = export(doc)
+    (tmp_path / "t.bin").write_bytes(ex.table)
+    out = tmp_path / "hil.json"
+    rc = tcomp(["hil", "--run", folder, "--table", str(tmp_path / "t.bin"), "--interpreter", "qemu",
+                "--json", str(out), "--print-every", "0"])
+    assert rc == 0
+    d = json.loads(out.read_text())
+    assert d["interpreter"] == "qemu" and d["malformed_frames"] == 0 and d["frames"] > 240
+    ans = d["answers"]
+    assert len(ans) == len(run.errors)
+    for a, p in zip(ans, load_model(doc).predict(run)):
+        if int(a["status"], 16) & 0x20000:
+            continue
+        bound = ex.report["max_error_um"] + poly_slope_bound_um(doc, run, SENSORS, a["position_mm"]) + 0.05 + 1e-9
+        assert abs(a["offset_um"] - p) <= bound, (a, p, bound)
+
+
 def test_tcomp_hil_with_fault_reports_it(tmp_path, short_run):
     from host.cli import main as tcomp
     run, folder = short_run

@@ -132,3 +132,10 @@ def test_fault_flagged_held_ramped_recovered(make_rig, fault_table, fault):
     assert rig.alive and not rig.reader.decoder.bad
     st = rig.stats()
     assert all(c["violations"] == 0 for c in st["chips"].values()), st["chips"]
+
+
+@pytest.mark.parametrize("interpreter", ["qemu"])
+@pytest.mark.parametrize("fault", ["open_rtd", "i2c_timeouts"])
+def test_fault_on_the_emulated_board(make_rig, fault_table, fault, interpreter):
+    """Two of the faults on the emulated Cortex-M3 board (the full set runs on the unix port and CPython)."""
+    test_fault_flagged_held_ramped_recovered(make_rig, fault_table, fault)

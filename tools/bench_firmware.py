@@ -41,6 +41,8 @@ separately (a cycle of the bare fakes) so it can be subtracted.
   dynamic table is the FL_THERMAL ch1 model (hil_tests/fixtures/
   dynamic_fl_thermal_ch1.json: 7 lag filters, 3 sensors) and a 6-filter
   table over all 11 channels; poly_slope for comparison.
+Then the figures on the emulated Cortex-M3 board (tools/bench_qemu_board.py: instructions per
+cycle and per table kind, on M3 and M0+ code; heap with the firmware frozen).
 """
 import argparse
 import os
@@ -351,6 +353,9 @@ def main():
                      "met" if sub[1] < 24 * 1024 else "NOT met"))
             print("    (%s, plus the board file)" % " ".join(m[:-3] for m in mods))
         print_heaps(work, mpy, it)
+    print()
+    import bench_qemu_board  # the same budgets on the emulated Cortex-M3 board (tools/bench_qemu_board.py)
+    bench_qemu_board.main()
 
 
 def print_heaps(work, mpy, it):

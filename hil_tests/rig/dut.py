@@ -5,6 +5,10 @@ hil_tests/mp) or ``python dut.py SPEC.json``, with stdin/stdout on the pty
 the controller opens. SPEC holds the firmware's board ``config``, the
 control socket path ``ctl``, initial temperatures, sensor noise and seed.
 
+On the emulated board (``tcomp hil --interpreter qemu``) this runs on the board
+itself, from the image's ROM: the spec names the board file (``board``) and
+the control channel is UART1 (``ctl`` = ``uart:1``; hil_tests/rig/qemu_board.py).
+
 The control channel (a unix socket, one JSON object per line) is served
 only while the firmware sleeps past the time the test granted: the firmware
 never sees it. Requests (``op``): ``run`` (grant time up to ``until_ms``,
@@ -18,10 +22,14 @@ temperatures now), ``sensor`` (condition ok/open/short/stuck), ``chip``
 """
 
 import gc
-import json
 import sys
 
 from hil_tests.sim.buses import HEAP_LOCKED
+
+try:
+    import json
+except ImportError:  # the QEMU board image (ports/mps2) has no json module
+    from hil_tests.rig import minijson as json
 
 try:
     import micropython
@@ -32,6 +40,10 @@ MICRO = sys.implementation.name == "micropython"
 
 
 def _connect(path):
+    if path.startswith("uart:"):  # the emulated board: the control channel is a UART (qemu_board.py)
+        from hil_tests.rig.qemu_board import UartControl
+        c = UartControl(int(path[5:]))
+        return c, c
     import socket
     s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
     if MICRO:
@@ -130,7 +142,10 @@ class Control:
                 self.send({"ev": "error", "error": "unknown op %r" % (op,)})
 
 
-def make_board(world, config):
+def make_board(world, config, board_file=None):
+    if board_file == "mps2_an385":  # the emulated board: its board file, UART0 (qemu_board.py)
+        from hil_tests.rig.qemu_board import make_board as qemu_make_board
+        return qemu_make_board(world, config)
     from firmware.board import Board
     from hil_tests.sim.uart import StdioUART
     uart = StdioUART()
@@ -176,7 +191,7 @@ def main(spec_path):
     world_mod.set_current(w)
     ctl = Control(spec["ctl"], w)
     w.clock.gate = ctl.gate
-    board = make_board(w, config)
+    board = make_board(w, config, spec.get("board"))
     ctl.gate()  # initial stimulus and faults before power-up
     from firmware.app import main as fw_main
     try:

@@ -35,6 +35,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)
 MP_DIR = os.path.join(ROOT, "hil_tests", "mp")
 DUT = os.path.join(ROOT, "hil_tests", "rig", "dut.py")
 VENV_BIN = os.path.join(ROOT, ".venv", "bin")
+# The emulated Cortex-M3 board (ports/mps2, built by make setup): the firmware and the rig's board
+# side in its ROM; heap for the firmware plus the chip simulators (the firmware alone: docs/firmware.md).
+QEMU_IMAGE = os.environ.get("TCOMP_QEMU_IMAGE", os.path.join(ROOT, "build", "mps2-cortex-m3", "firmware-rig.elf"))
+QEMU_HEAP = os.environ.get("TCOMP_QEMU_HEAP", "256K")
 
 
 class RigError(RuntimeError):
@@ -50,6 +54,28 @@ def micropython_path():
     return it.path if it.exists() else None
 
 
+def _die_with_parent():
+    """QEMU gets SIGKILL when the rig's process ends, however it ends (Linux prctl PR_SET_PDEATHSIG):
+    an emulator left running keeps a core busy."""
+    import ctypes
+    ctypes.CDLL(None).prctl(1, signal.SIGKILL)
+
+
+def qemu_cmd(serial_fd, ctl_path, code, heap=QEMU_HEAP, image=QEMU_IMAGE):
+    """qemu-system-arm running ``code`` on the emulated board: UART0 on ``serial_fd`` (the pty's DUT
+    side, passed as a QEMU fd set), UART1 connected to the unix socket ``ctl_path`` (or no UART1)."""
+    exe = shutil.which("qemu-system-arm")
+    if exe is None or not os.path.exists(image):
+        raise RigError("QEMU board image not found (%s; make setup builds it with qemu-system-arm)" % image)
+    argv = [exe, "-M", "mps2-an385", "-display", "none", "-monitor", os.environ.get("TCOMP_QEMU_MONITOR", "none"), "-nodefaults", "-net", "none",
+            "-add-fd", "fd=%d,set=1" % serial_fd, "-chardev", "serial,id=uart0,path=/dev/fdset/1",
+            "-serial", "chardev:uart0"]
+    if ctl_path:
+        argv += ["-chardev", "socket,id=uart1,path=" + ctl_path, "-serial", "chardev:uart1"]
+    argv += ["-semihosting-config", "enable=on,target=native", "-kernel", image]
+    return argv + ["-append", "heap=%s%s" % (heap, (" -c " + code) if code else "")]
+
+
 def rig_heap():
     """The DUT's -X heapsize: TCOMP_HIL_HEAP, else the measured one for the chosen interpreter's word size."""
     return os.environ.get("TCOMP_HIL_HEAP") or interpreters.heap("rig")
@@ -63,7 +89,7 @@ def interpreter_cmd(name, heap=None):
             raise RigError(str(e))
     if name == "cpython":
         return [sys.executable, "-u"]
-    raise RigError("interpreter must be micropython or cpython, got %r" % (name,))
+    raise RigError("interpreter must be micropython, cpython or qemu, got %r" % (name,))
 
 
 class SerialReader(threading.Thread):
@@ -242,7 +268,11 @@ class Rig(LinkClient):
                 f.write(key)
         self.spec = {"config": self.config, "ctl": os.path.join(self.workdir, "ctl.sock"), "temps": temps or {},
                      "noise_uohm": noise_uohm, "seed": seed, "start_ms": start_ms}
-        self.heap = heap
+        if interpreter == "qemu":  # the board's own files on the emulator; the control channel on UART1
+            self.spec["board"] = "mps2_an385"
+            self.spec["ctl"] = "uart:1"
+        self.ctl_path = os.path.join(self.workdir, "ctl.sock")
+        self.heap = heap if interpreter != "qemu" or heap is not None else QEMU_HEAP
         self.use_mpy = use_mpy
         self.stream = (self.config.get("serial") or {}).get("mode", "stream") == "stream"
         self.proc = None
@@ -273,7 +303,7 @@ class Rig(LinkClient):
         self.reader.start()
 
     def start(self):
-        ctl = self.spec["ctl"]
+        ctl = self.ctl_path
         if os.path.exists(ctl):
             os.unlink(ctl)
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -289,15 +319,23 @@ class Rig(LinkClient):
             from hil_tests.rig.mpybuild import rig_build
             env["MICROPYPATH"] = ":".join([MP_DIR, rig_build().root if self.use_mpy else ROOT])
             argv = interpreter_cmd("micropython", self.heap) + (["-m", "hil_tests.rig.dut"] if self.use_mpy else [DUT])
+            argv = argv + [spec_path]
+        elif self.interpreter == "qemu":
+            argv = qemu_cmd(self.master, ctl, "from hil_tests.rig import dut\ndut.main(%r)" % spec_path,
+                            heap=self.heap)
         else:
             env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
-            argv = interpreter_cmd("cpython") + [DUT]
-        argv = argv + [spec_path]
+            argv = interpreter_cmd("cpython") + [DUT, spec_path]
         self.stderr_path = os.path.join(self.workdir, "dut-stderr-%d.txt" % self.starts)
         self.stderr = open(self.stderr_path, "wb")
         self.powered = True
-        self.proc = subprocess.Popen(argv, stdin=self.master, stdout=self.master, stderr=self.stderr,
-                                     cwd=self.flash, env=env)
+        if self.interpreter == "qemu":  # the pty reaches UART0 through QEMU's fd set, not stdio
+            self.proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=self.stderr, stderr=self.stderr,
+                                         cwd=self.flash, env=env, pass_fds=(self.master,),
+                                         preexec_fn=_die_with_parent)
+        else:
+            self.proc = subprocess.Popen(argv, stdin=self.master, stdout=self.master, stderr=self.stderr,
+                                         cwd=self.flash, env=env)
         self.starts += 1
         self.listener.settimeout(30)
         try:

@@ -21,9 +21,11 @@ Not modelled: the CRC16/inverted-data output modes (recorded as a violation),
 the temperature-sensor mode, burn-out current sources' effect on the reading.
 """
 
+from hil_tests.sim.intmath import muldiv
 from hil_tests.sim.stimulus import OPEN
 from hil_tests.sim.violations import ViolationLog
 
+_PV_2048MV = 2048000000000000  # the internal 2.048 V reference in pV (uA x uohm)
 _SPS = (20, 45, 90, 175, 330, 600, 1000)
 _IDAC_UA = (0, 10, 50, 100, 250, 500, 1000, 1500)
 _MAX = 0x7FFFFF
@@ -34,6 +36,7 @@ class ADS122C04(ViolationLog):
         self.clock = clock
         self.rtd = rtd
         self.rref_uohm = int(rref_ohm * 1e6 + 0.5)
+        self._vref2 = 2 * self.rref_uohm  # both IDACs through R_REF
         self.address = address
         self.wires = wires
         self.name = name
@@ -87,10 +90,10 @@ class ADS122C04(ViolationLog):
         vref_sel = (self.regs[1] >> 1) & 3
         if vref_sel == 1:
             # ratiometric: V_REF = n * I * R_REF, V_IN = I * R_RTD
-            code = (ohm * gain << 23) // (self.rref_uohm * (2 if both else 1))
+            code = muldiv(ohm, gain, self._vref2 if both else self.rref_uohm, 0, 23)
         else:
             # internal 2.048 V (or supply) reference: V_IN = I * R, I in uA, R in uohm -> pV
-            code = (i_ua * ohm * gain << 23) // 2048000000000000
+            code = muldiv(ohm, i_ua * gain, _PV_2048MV, 0, 23)
         return _MAX if code > _MAX else code
 
     def update(self):

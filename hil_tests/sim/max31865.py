@@ -38,6 +38,7 @@ Timing comes from a ``SimClock``; nothing here allocates after construction
 on the transfer path, so the firmware's cycle can run under heap_lock.
 """
 
+from hil_tests.sim.intmath import muldiv
 from hil_tests.sim.stimulus import OPEN
 from hil_tests.sim.violations import ViolationLog
 
@@ -53,6 +54,7 @@ class MAX31865(ViolationLog):
         self.clock = clock
         self.rtd = rtd
         self.rref_uohm = int(rref_ohm * 1e6 + 0.5)
+        self._half_rref = self.rref_uohm // 2
         self.name = name
         self.regs = bytearray(8)
         self.present = True
@@ -100,7 +102,7 @@ class MAX31865(ViolationLog):
             if self.rtd.condition == OPEN or self.force_open:
                 code = _FULL
             else:
-                code = (ohm * 32768 + self.rref_uohm // 2) // self.rref_uohm
+                code = muldiv(ohm, 32768, self.rref_uohm, self._half_rref)
                 if code > _FULL:
                     code = _FULL
         self.code = code

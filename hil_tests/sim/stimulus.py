@@ -14,6 +14,7 @@ the chip sees full scale), ``short`` (element bridged: lead resistance only),
 """
 
 from hil_tests.sim.iec60751 import resistance_uohm
+from hil_tests.sim.intmath import muldiv
 from hil_tests.sim.rng import XorShift32
 
 OK = 0
@@ -63,7 +64,11 @@ class Rtd:
             return self.r1
         if t_ms <= self.t0_ms:
             return self.r0
-        return self.r0 + (self.r1 - self.r0) * (t_ms - self.t0_ms) // (self.t1_ms - self.t0_ms)
+        d = self.r1 - self.r0
+        span = self.t1_ms - self.t0_ms
+        if d >= 0:  # floor(d * dt / span), as Python's // (muldiv: no long ints on a 32-bit board)
+            return self.r0 + muldiv(d, t_ms - self.t0_ms, span)
+        return self.r0 - muldiv(-d, t_ms - self.t0_ms, span, span - 1)
 
     def set_condition(self, cond, now_ms):
         if cond == STUCK and self.condition != STUCK:

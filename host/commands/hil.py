@@ -16,8 +16,9 @@ _FAULT = re.compile(r"^(open|short|stuck|absent):([^@]+)@([0-9.]+)-([0-9.]+)$")
 def add_arguments(p):
     p.add_argument("--run", required=True, help="run folder (twin or measured) whose temperatures drive the chips")
     p.add_argument("--table", required=True, help="coefficient table (tcomp export)")
-    p.add_argument("--interpreter", choices=("micropython", "cpython"), default="micropython",
-                   help="interpreter of the firmware process (default micropython)")
+    p.add_argument("--interpreter", choices=("micropython", "cpython", "qemu"), default="micropython",
+                   help="interpreter of the firmware process (default micropython; qemu: the emulated Cortex-M3 "
+                        "board image make setup builds, docs/hil.md)")
     p.add_argument("--json", help="write {answers, frames, faults, ...} here")
     p.add_argument("--config", help="board config JSON (default: the table's sensors on MAX31865s, the last on an "
                                     "ADS122C04)")

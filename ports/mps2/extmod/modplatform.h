@@ -1,0 +1,1 @@
+// pyexec.c includes this header of the full tree; the board has no platform module.
