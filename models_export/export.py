@@ -71,13 +71,12 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
                           % (declared, actual))
     rec = planner.rec
     limit = LIMITS_UM[model.kind] if limit_um is None else limit_um
-    fo = f["fo"]
     scale_um = 1.0 / OU_PER_UM
     max_err = _up(max(abs(errs["offset"][0]), abs(errs["offset"][1])) * scale_um) + 1e-9
     terms = []
     for t in planner.terms:
         terms.append({"name": t["name"], "scale": t["scale"], "headroom_bits": round(rec.headroom(t["key"]), 3),
-                      "max_error_um": _up(t["err_ou"] / (1 << fo) * scale_um) if t["err_ou"] else 0.0})
+                      "max_error_um": _up(t["err_ou"] * scale_um) if t["err_ou"] else 0.0})
     if max_err >= limit:
         worst = max(terms, key=lambda t: t["max_error_um"])
         raise ExportError("certified worst-case error %.4g um is not below %.4g um for %s; largest contribution: term %s "

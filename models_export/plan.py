@@ -52,9 +52,11 @@ class Planner:
         self.m = model
         self.rec = Recorder()
         self.f = {}
-        self.terms = []  # dicts: name, scale, term (recorder key), err_ou (contribution in output units)
+        self.terms = []  # dicts: name, scale, key (recorder key), err_ou (contribution in output units, 0.01 um)
 
     def term(self, name, scale, err_ou, key=None):
+        """Record one term's error contribution to the offset; ``err_ou`` is in output units (0.01 um), never in
+        accumulator units: callers divide accumulator-scale errors by 2**fo (export.py reports err_ou / 100 um)."""
         self.terms.append({"name": name, "scale": scale, "key": key or name, "err_ou": F(err_ou)})
 
     # ------------------------------------------------------------ S = S0 + sum b*d
@@ -234,7 +236,7 @@ class Planner:
         f.update(Lw=Lw, nw=nw, shw=shw)
         th, k = rec.mul(SLOT_THMUL, (m.pos_lo, m.pos_hi), S_iv, Lw, nw, shw, "slope x position")
         err_th = iv_add(iv_scale(iv_mul(P, eS), 1 / p2(shw)), floor_err(k))
-        self.term("rounding: slope x position", fo, F(k), key="slope x position")
+        self.term("rounding: slope x position", fo, F(k) / p2(fo), key="slope x position")  # k floors of one acc unit
         # geometric polynomial, Horner in p (um)
         h_iv, err_geo = self.horner(fo, PM)
         # screw segments
@@ -313,7 +315,7 @@ class Planner:
         names = ["geometric.coefficients_um[%d]" % j for j in range(d + 1)]
         for j in range(d + 1):
             rec.note(-1, G[j], G[j], names[j])
-            self.term(names[j], fr[j], abs(F(G[j]) - m.g[j] * p2(fr[j])) * F(PM) ** j / p2(fr[j]) * p2(fo))
+            self.term(names[j], fr[j], abs(F(G[j]) - m.g[j] * p2(fr[j])) * F(PM) ** j / p2(fr[j]))
         for ng in range(1, 7):
             try:
                 sub = Recorder()
@@ -565,7 +567,7 @@ class Planner:
                  shB=shB, rS=rS, W0=W0q, shW0=shW0, W1=W1q, shW1=shW1, Ka=Ka, shKa=shKa)
         # informational split of the certified state error by source: output weight of a unit residual in row i
         W = np.linalg.inv(np.eye(M) - np.abs(np.asarray(A, dtype=float)))
-        wout = [float(abs(m.alpha) * (F(s["edges"][j + 1]) - F(s["edges"][j])) * OU_PER_UM) / 2.0 ** ft * 2.0 ** fo for j in range(M)]
+        wout = [float(abs(m.alpha) * (F(s["edges"][j + 1]) - F(s["edges"][j])) * OU_PER_UM) / 2.0 ** ft for j in range(M)]
         gain = [sum(wout[j] * W[j, i] for j in range(M)) for i in range(M)]
         for i in range(M):
             big = max(abs(c) for c in Cq[i])
@@ -597,7 +599,7 @@ class Planner:
             ecum = iv_add(ecum, iv_mul(_c(dq), (F(Tlq), F(Tq))), floor_err(k), iv_scale((-v[i], v[i]), abs(gq)))
             err_cum.append(ecum)
             cum_ivs.append(cum)
-            self.term("thermal.reduced.alpha x edges[%d]" % i, fo - ft + sh, abs(dq) * TA)
+            self.term("thermal.reduced.alpha x edges[%d]" % i, fo - ft + sh, abs(dq) * TA / p2(fo))
         hval = alpha * F(OU_PER_UM, 1000)  # OU per um per K
         fh = frac_bits(abs(hval) * (Tabs + 1), ACC)
         H, shH = fit_coef(hval, lms, fh - ft)
@@ -610,7 +612,7 @@ class Planner:
                                  iv_scale((-v[i], v[i]), abs(hq))))
         eu = s["edges_um"]
         LEN = max(b - a for a, b in zip(eu, eu[1:]))
-        self.term("thermal.reduced.alpha_um_per_mm_per_K", fh - ft + shH, abs(hq - hval * p2(fh - ft)) * TA * LEN / p2(fh - fo))
+        self.term("thermal.reduced.alpha_um_per_mm_per_K", fh - ft + shH, abs(hq - hval * p2(fh - ft)) * TA * LEN / p2(fh))
         Lx = narrow_width(LEN)
         ss_all = _hull(*[(F(a), F(b)) for a, b in seg_ivs])
         ss_int = (int(ss_all[0]), int(ss_all[1]))
@@ -639,7 +641,7 @@ class Planner:
         e_geo = geo_um * OU_PER_UM * p2(fo)
         seg_iv = _hull(*segs)
         err_seg = iv_add(_hull(*segerr), (-e_geo, e_geo))
-        self.term("edges/fixed end rounded to 1 um", 0, e_geo)
+        self.term("edges/fixed end rounded to 1 um", 0, geo_um * OU_PER_UM)
         f.update(G2=G2, shG2=shG2, H=H, shH=shH, fh=fh, Lx=Lx, nx=nx, shX=shX)
         return seg_iv, err_seg
 
