@@ -10,7 +10,7 @@ coefficients are converted exactly):
   evaluation, for every input inside the envelope, must lie inside
   ``|x| <= 2**30 - 1`` (the 31-bit small int of a 32-bit MicroPython port).
   Scales are chosen so that coefficient products stay below 2**29 (one bit of
-  margin) and accumulators below 2**28; the ``slots`` intervals are what the
+  margin) and accumulators below 2**28; the ``accs`` intervals (per checked accumulator) are what the
   tests compare with values observed in the firmware's checking mode;
 * accuracy: an interval for ``integer result - exact model`` is carried
   through every operation (coefficient quantisation, each floor of a right
@@ -141,16 +141,16 @@ def fit_coef(value, limbmax, base_frac, cap=62):
 
 
 class Recorder:
-    """Interval of every firmware slot, and the peak |integer| each named term produces."""
+    """Interval of every checked firmware accumulator (firmware/evaluate.py ACC_*), and the peak |integer| each named term produces."""
 
     def __init__(self):
-        self.slots = {}
+        self.accs = {}
         self.peaks = {}
         self.where = {}
 
-    def note(self, slot, lo, hi, term):
-        cur = self.slots.get(slot)
-        self.slots[slot] = (lo, hi) if cur is None else (min(cur[0], lo), max(cur[1], hi))
+    def note(self, acc_id, lo, hi, term):
+        cur = self.accs.get(acc_id)
+        self.accs[acc_id] = (lo, hi) if cur is None else (min(cur[0], lo), max(cur[1], hi))
         m = max(abs(lo), abs(hi))
         if m > self.peaks.get(term, -1):
             self.peaks[term] = m
@@ -159,7 +159,7 @@ class Recorder:
                               "small-int limit 2^30; the model cannot be made integer-safe over its envelope"
                               % (term, m, math.log2(m)))
 
-    def mul(self, slot, c, x, L, n, sh, term):
+    def mul(self, acc_id, c, x, L, n, sh, term):
         """Mirror of Evaluator._mul: returns (result interval, number of flooring shifts)."""
         rlo = rhi = 0
         s = sh
@@ -167,7 +167,7 @@ class Recorder:
         for lo, hi in limbs(x, L, n):
             cand = (c[0] * lo, c[0] * hi, c[1] * lo, c[1] * hi)
             plo, phi = min(cand), max(cand)
-            self.note(slot, plo, phi, term)
+            self.note(acc_id, plo, phi, term)
             if s > 0:
                 tlo, thi = plo >> s, phi >> s
                 floors += 1
@@ -175,8 +175,8 @@ class Recorder:
                 tlo, thi = plo << -s, phi << -s
             rlo += tlo
             rhi += thi
-            self.note(slot + 1, tlo, thi, term)
-            self.note(slot + 1, rlo, rhi, term)
+            self.note(acc_id + 1, tlo, thi, term)
+            self.note(acc_id + 1, rlo, rhi, term)
             s -= L
         return (rlo, rhi), floors
 

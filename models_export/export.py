@@ -10,15 +10,15 @@ from models_export.tableformat import VERSION, pack
 
 
 class Export:
-    """Result of export_model: ``table`` (bytes), ``fields`` (dict), ``report`` (dict), ``slots``
-    ({slot: (lo, hi)} certified intervals of the firmware's check slots), ``errors_ou``
+    """Result of export_model: ``table`` (bytes), ``fields`` (dict), ``report`` (dict), ``accs``
+    ({accumulator: (lo, hi)} certified intervals of the firmware's checked accumulators, ACC_*), ``errors_ou``
     ({output: (lo, hi)} certified integer-minus-model intervals, output units)."""
 
-    def __init__(self, fields, table, report, slots, errors_ou):
+    def __init__(self, fields, table, report, accs, errors_ou):
         self.fields = fields
         self.table = table
         self.report = report
-        self.slots = slots
+        self.accs = accs
         self.errors_ou = errors_ou
 
     def c_header(self, guard="TCOMP_TABLE_H"):
@@ -82,7 +82,7 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
         worst = max(terms, key=lambda t: t["max_error_um"])
         raise ExportError("certified worst-case error %.4g um is not below %.4g um for %s; largest contribution: term %s "
                           "(%.4g um)" % (max_err, limit, model.kind, worst["name"], worst["max_error_um"]))
-    peak = max(max(abs(lo), abs(hi)) for lo, hi in rec.slots.values())
+    peak = max(max(abs(lo), abs(hi)) for lo, hi in rec.accs.values())
     envelope = {
         "temperature_mC": {s: [lo, hi] for s, lo, hi in zip(model.sensors, model.env_lo, model.env_hi)},
         "reference_mC": dict(zip(model.sensors, model.ref)),
@@ -135,8 +135,8 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
             "dt_ms": f["dt_ms"], "positional": bool(f["positional"]), "filters": planner.dyn_cert,
             "horizon": "unbounded (steady state) from the cold start (latch): |e| <= v with v >= (1 - a) v + rho verified exactly",
         }
-    slots = {k: v for k, v in rec.slots.items() if k >= 0}
-    return Export(f, table, report, slots, errs)
+    accs = {k: v for k, v in rec.accs.items() if k >= 0}
+    return Export(f, table, report, accs, errs)
 
 
 def _up(x):
