@@ -1,6 +1,6 @@
 """Integer evaluation of a coefficient table (poly_slope, linear_direct, screw_reduced, dynamic).
 
-This is the evaluation order the exporter certifies (models_export/certify.py
+This is the evaluation order the exporter certifies (models_export/plan.py
 mirrors it operation by operation): change one, change the other. Only integer
 operations appear; with a certified table every intermediate stays inside
 |x| < 2**30, the small-int range of a 32-bit MicroPython port, so evaluation
@@ -14,13 +14,13 @@ lists created by the constructor.
 Checking mode (``Evaluator(table, check=True)``, for tests; off in production)
 checks every intermediate against +-2**30 (OverflowError; an ``if``, not an
 ``assert``, so it works in code compiled with ``mpy-cross -O3``) and records
-per-slot minima and maxima in ``lo``/``hi`` (slot numbers are the SLOT_*
+per-accumulator minima and maxima in ``lo``/``hi`` (accumulator numbers are the ACC_*
 constants), which the tests compare with the exporter's interval bounds.
 
 The module's constants are ``_``-prefixed ``const()``: MicroPython folds those
 into the bytecode and stores no name for them (public constants cost a global
 and a name each, ~0.6 kB of .mpy here). On CPython the end of this module
-publishes each under its public name (``SLOT_D``, ``FEED_W_BITS``, ``CLAMP_*``,
+publishes each under its public name (``ACC_D``, ``FEED_W_BITS``, ``CLAMP_*``,
 ...) for the exporter (models_export/plan.py) and the tests.
 """
 import sys
@@ -43,40 +43,41 @@ _CLAMP_TRAVEL = const(0x2000000)  # nut travel or feed beyond the table's bound 
 _CLAMP_STATE = const(0x4000000)  # a segment state hit the table's state bound (screw)
 _CLAMP_INPUT = const(0x8000000)  # spindle speed or feed beyond the table's envelope (dynamic)
 
-# Check-mode slots: a _mul call site uses slot s for its limb products and s+1
-# for its shifted terms and partial sums.
-_SLOT_D = const(0)
-_SLOT_SMUL = const(1)
-_SLOT_S = const(3)
-_SLOT_P = const(4)
-_SLOT_THMUL = const(5)
-_SLOT_GEOMUL = const(7)
-_SLOT_GEO = const(9)
-_SLOT_ACC = const(10)
-_SLOT_OUT = const(11)
-_SLOT_KMUL = const(12)
-_SLOT_SLOPE = const(14)
-_SLOT_ROWMUL = const(15)
-_SLOT_ROW = const(16)
-_SLOT_LIMB = const(17)
-_SLOT_BMUL = const(18)
-_SLOT_STATE = const(20)
-_SLOT_CUMMUL = const(21)
-_SLOT_CUM = const(23)
-_SLOT_HMUL = const(24)
-_SLOT_SEGMUL = const(26)
-_SLOT_XL = const(28)
-_SLOT_TRAVEL = const(29)
-_SLOT_FEEDMUL = const(30)
-_SLOT_CMUL = const(32)
-_SLOT_DE = const(34)
-_SLOT_AMUL = const(35)
-_SLOT_QMUL = const(37)  # dynamic: the spindle speed squared
-_SLOT_DX = const(39)  # dynamic: input minus filter state
-_SLOT_DMUL = const(40)  # dynamic: the filter increment
-_SLOT_Y = const(42)  # dynamic: filter states
-_SLOT_YMUL = const(43)  # dynamic: coefficient x filter state
-_N_SLOTS = const(45)
+# Check-mode accumulators (numbered intermediates whose minima and maxima the checking mode records; not the
+# table slots of firmware/slots.py): a _mul call site uses accumulator s for its limb products and s+1 for its
+# shifted terms and partial sums.
+_ACC_D = const(0)
+_ACC_SMUL = const(1)
+_ACC_S = const(3)
+_ACC_P = const(4)
+_ACC_THMUL = const(5)
+_ACC_GEOMUL = const(7)
+_ACC_GEO = const(9)
+_ACC_SUM = const(10)
+_ACC_OUT = const(11)
+_ACC_KMUL = const(12)
+_ACC_SLOPE = const(14)
+_ACC_ROWMUL = const(15)
+_ACC_ROW = const(16)
+_ACC_LIMB = const(17)
+_ACC_BMUL = const(18)
+_ACC_STATE = const(20)
+_ACC_CUMMUL = const(21)
+_ACC_CUM = const(23)
+_ACC_HMUL = const(24)
+_ACC_SEGMUL = const(26)
+_ACC_XL = const(28)
+_ACC_TRAVEL = const(29)
+_ACC_FEEDMUL = const(30)
+_ACC_CMUL = const(32)
+_ACC_DE = const(34)
+_ACC_AMUL = const(35)
+_ACC_QMUL = const(37)  # dynamic: the spindle speed squared
+_ACC_DX = const(39)  # dynamic: input minus filter state
+_ACC_DMUL = const(40)  # dynamic: the filter increment
+_ACC_Y = const(42)  # dynamic: filter states
+_ACC_YMUL = const(43)  # dynamic: coefficient x filter state
+_N_ACCS = const(45)
 
 _FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
 _FEED_LIMB = const(10)
@@ -110,8 +111,8 @@ class Evaluator:
         self.S = t.S0
         self.pos_ref = t.pos_ref
         self.direct = table.kind_code == _KIND_LINEAR_DIRECT or (table.kind_code == _KIND_DYNAMIC and not t.positional)
-        self.lo = [_MAXV] * _N_SLOTS
-        self.hi = [-_MAXV] * _N_SLOTS
+        self.lo = [_MAXV] * _N_ACCS
+        self.hi = [-_MAXV] * _N_ACCS
         if self.kind == _KIND_SCREW_REDUCED:
             m = t.M
             self.T = [0] * m
@@ -142,15 +143,15 @@ class Evaluator:
             self.rest()
 
     # -- checking mode ------------------------------------------------------
-    def _note(self, slot, v):
+    def _note(self, acc_id, v):
         if v > _MAXV or v < -_MAXV:
-            raise OverflowError("slot %d: %d outside +-2**30" % (slot, v))
-        if v < self.lo[slot]:
-            self.lo[slot] = v
-        if v > self.hi[slot]:
-            self.hi[slot] = v
+            raise OverflowError("accumulator %d: %d outside +-2**30" % (acc_id, v))
+        if v < self.lo[acc_id]:
+            self.lo[acc_id] = v
+        if v > self.hi[acc_id]:
+            self.hi[acc_id] = v
 
-    def _mul(self, slot, c, x, L, n, sh):
+    def _mul(self, acc_id, c, x, L, n, sh):
         """floor-ish c*x/2**sh with x split into n limbs of L bits (top limb signed).
 
         Each limb product c*limb stays small when |c| * 2**L < 2**30; every
@@ -163,29 +164,29 @@ class Evaluator:
         while n > 1:
             p = c * (x & m)
             if chk:
-                self._note(slot, p)
+                self._note(acc_id, p)
             if sh > 0:
                 p >>= sh
             else:
                 p <<= -sh
             r += p
             if chk:
-                self._note(slot + 1, p)
-                self._note(slot + 1, r)
+                self._note(acc_id + 1, p)
+                self._note(acc_id + 1, r)
             x >>= L
             sh -= L
             n -= 1
         p = c * x
         if chk:
-            self._note(slot, p)
+            self._note(acc_id, p)
         if sh > 0:
             p >>= sh
         else:
             p <<= -sh
         r += p
         if chk:
-            self._note(slot + 1, p)
-            self._note(slot + 1, r)
+            self._note(acc_id + 1, p)
+            self._note(acc_id + 1, r)
         return r
 
     # -- temperature-dependent part -------------------------------------------
@@ -247,14 +248,14 @@ class Evaluator:
                 ex |= 1 << i
             d = v - ref[i]
             if chk:
-                self._note(_SLOT_D, d)
+                self._note(_ACC_D, d)
             if i == air:
                 self.da = d
             if dyn:
                 self.d[i] = d
-            s += self._mul(_SLOT_SMUL, b[i], d, Lt, nt, shb[i])
+            s += self._mul(_ACC_SMUL, b[i], d, Lt, nt, shb[i])
             if chk:
-                self._note(_SLOT_S, s)
+                self._note(_ACC_S, s)
         if dyn:
             self.Slin = s
             fl |= self._inputs()
@@ -282,34 +283,34 @@ class Evaluator:
         if self.direct:
             v = (self.S + t.rL) >> t.fo
             if chk:
-                self._note(_SLOT_ACC, self.S + t.rL)
-                self._note(_SLOT_OUT, v)
+                self._note(_ACC_SUM, self.S + t.rL)
+                self._note(_ACC_OUT, v)
             return v
         p = self._clamp_pos(pos_um)
         if chk:
-            self._note(_SLOT_P, p)
+            self._note(_ACC_P, p)
         G = t.G
         shg = t.shg
         Lg = t.Lg
         ng = t.ng
         h = G[t.degree]
         for j in range(t.degree - 1, -1, -1):
-            h = self._mul(_SLOT_GEOMUL, p, h, Lg, ng, shg[j]) + G[j]
+            h = self._mul(_ACC_GEOMUL, p, h, Lg, ng, shg[j]) + G[j]
             if chk:
-                self._note(_SLOT_GEO, h)
-        acc = h + self._mul(_SLOT_THMUL, p, self.S, t.Lw, t.nw, t.shw)
+                self._note(_ACC_GEO, h)
+        acc = h + self._mul(_ACC_THMUL, p, self.S, t.Lw, t.nw, t.shw)
         if chk:
-            self._note(_SLOT_ACC, acc)
+            self._note(_ACC_SUM, acc)
         if self.kind == _KIND_SCREW_REDUCED:
             acc += self._seg(p)
             if chk:
-                self._note(_SLOT_ACC, acc)
+                self._note(_ACC_SUM, acc)
         acc += t.rO
         if chk:
-            self._note(_SLOT_ACC, acc)
+            self._note(_ACC_SUM, acc)
         v = acc >> t.fo
         if chk:
-            self._note(_SLOT_OUT, v)
+            self._note(_ACC_OUT, v)
         return v
 
     def set_reference(self, pos_um):
@@ -328,15 +329,15 @@ class Evaluator:
         if self.direct:
             return self.offset_at(0)
         p = self.pos_ref
-        acc = self._mul(_SLOT_THMUL, p, self.S, t.Lw, t.nw, t.shw)
+        acc = self._mul(_ACC_THMUL, p, self.S, t.Lw, t.nw, t.shw)
         if self.kind == _KIND_SCREW_REDUCED:
             acc += self._seg(p)
         acc += t.rT
         if chk:
-            self._note(_SLOT_ACC, acc)
+            self._note(_ACC_SUM, acc)
         v = acc >> t.fo
         if chk:
-            self._note(_SLOT_OUT, v)
+            self._note(_ACC_OUT, v)
         return v
 
     def slope(self):
@@ -345,18 +346,18 @@ class Evaluator:
         chk = self.check
         if self.direct:
             return 0
-        acc = self._mul(_SLOT_KMUL, t.KS, self.S, t.Lw, t.nw, t.shK)
+        acc = self._mul(_ACC_KMUL, t.KS, self.S, t.Lw, t.nw, t.shK)
         if self.kind == _KIND_SCREW_REDUCED:
             de = self._seg(t.pos_hi) - self._seg(t.pos_lo)
             if chk:
-                self._note(_SLOT_DE, de)
-            acc += self._mul(_SLOT_CMUL, t.KC, de, t.Lc, t.nc, t.shC)
+                self._note(_ACC_DE, de)
+            acc += self._mul(_ACC_CMUL, t.KC, de, t.Lc, t.nc, t.shC)
         acc += t.rK
         if chk:
-            self._note(_SLOT_SLOPE, acc)
+            self._note(_ACC_SLOPE, acc)
         v = acc >> t.fK
         if chk:
-            self._note(_SLOT_OUT, v)
+            self._note(_ACC_OUT, v)
         return v
 
     # -- dynamic ----------------------------------------------------------------
@@ -380,7 +381,7 @@ class Evaluator:
         if f > t.fmax:
             f = t.fmax
             fl = _CLAMP_INPUT
-        q = self._mul(_SLOT_QMUL, r, r, t.Lq, t.nq, t.shq)  # rpm**2 / 2**shq
+        q = self._mul(_ACC_QMUL, r, r, t.Lq, t.nq, t.shq)  # rpm**2 / 2**shq
         src = t.src
         A = t.A
         fy = t.fy
@@ -392,7 +393,7 @@ class Evaluator:
             if A[j] == 0:
                 v <<= fy[j]
                 if self.check:
-                    self._note(_SLOT_Y, v)
+                    self._note(_ACC_Y, v)
                 self.Y[j] = v
         return fl
 
@@ -405,9 +406,9 @@ class Evaluator:
         LY = t.LY
         nY = t.nY
         for j in range(t.nf):
-            s += self._mul(_SLOT_YMUL, bY[j], Y[j], LY, nY, shY[j])
+            s += self._mul(_ACC_YMUL, bY[j], Y[j], LY, nY, shY[j])
             if self.check:
-                self._note(_SLOT_S, s)
+                self._note(_ACC_S, s)
         return s
 
     def rest(self):
@@ -448,15 +449,15 @@ class Evaluator:
             if A[j]:
                 x = (U0[j] << fy[j]) - Y[j]
                 if chk:
-                    self._note(_SLOT_DX, x)
+                    self._note(_ACC_DX, x)
                 # the increment is formed gA[j] guard bits finer and rounded once (rA[j] centres it)
                 g = gA[j]
-                v = self._mul(_SLOT_DMUL, A[j], x, LX, nX, shA[j] - g) + rA[j]
+                v = self._mul(_ACC_DMUL, A[j], x, LX, nX, shA[j] - g) + rA[j]
                 if chk:
-                    self._note(_SLOT_DMUL + 1, v)
+                    self._note(_ACC_DMUL + 1, v)
                 v = Y[j] + (v >> g)
                 if chk:
-                    self._note(_SLOT_Y, v)
+                    self._note(_ACC_Y, v)
                 if v < Ylo[j]:  # the exact state lies in the box (a convex combination of inputs and 0):
                     v = Ylo[j]  # clamping only removes error
                 elif v > Yhi[j]:
@@ -481,10 +482,10 @@ class Evaluator:
             k += 1
         xl = x - e[k]
         if self.check:
-            self._note(_SLOT_XL, xl)
-        v = self.cum[k] + self._mul(_SLOT_SEGMUL, xl, self.segslope[k], t.Lx, t.nx, t.shX)
+            self._note(_ACC_XL, xl)
+        v = self.cum[k] + self._mul(_ACC_SEGMUL, xl, self.segslope[k], t.Lx, t.nx, t.shX)
         if self.check:
-            self._note(_SLOT_CUM, v)
+            self._note(_ACC_CUM, v)
         return v
 
     def advance_position(self, pos_um):
@@ -512,7 +513,7 @@ class Evaluator:
             if hi > lo:
                 v = u[i] + (hi - lo)
                 if self.check:
-                    self._note(_SLOT_TRAVEL, v)
+                    self._note(_ACC_TRAVEL, v)
                 if v > umax:
                     v = umax
                     self.flags |= _CLAMP_TRAVEL
@@ -580,9 +581,9 @@ class Evaluator:
             w = self.w
             F = self.F
             for i in range(m):
-                v = u[i] + self._mul(_SLOT_FEEDMUL, w[i], F, _FEED_LIMB, 3, _FEED_W_BITS)
+                v = u[i] + self._mul(_ACC_FEEDMUL, w[i], F, _FEED_LIMB, 3, _FEED_W_BITS)
                 if chk:
-                    self._note(_SLOT_TRAVEL, v)
+                    self._note(_ACC_TRAVEL, v)
                 if v > umax:
                     v = umax
                     self.flags |= _CLAMP_TRAVEL
@@ -598,7 +599,7 @@ class Evaluator:
                 x >>= Ls
             limbs[(ns - 1) * m + j] = x
             if chk:
-                self._note(_SLOT_LIMB, x)
+                self._note(_ACC_LIMB, x)
         C = t.C
         B = t.B
         shB = t.shB
@@ -617,26 +618,26 @@ class Evaluator:
                 for j in range(m):
                     r += C[base + j] * limbs[lb + j]
                     if chk:
-                        self._note(_SLOT_ROWMUL, C[base + j] * limbs[lb + j])
-                        self._note(_SLOT_ROWMUL, r)
+                        self._note(_ACC_ROWMUL, C[base + j] * limbs[lb + j])
+                        self._note(_ACC_ROWMUL, r)
                 if sh > 0:
                     acc += r >> sh
                 else:
                     acc += r << -sh
                 if chk:
-                    self._note(_SLOT_ROW, acc)
+                    self._note(_ACC_ROW, acc)
                 sh -= Ls
-            acc += self._mul(_SLOT_BMUL, B[i], u[i], t.Lu, t.nu, shB[i]) + rS[i]
+            acc += self._mul(_ACC_BMUL, B[i], u[i], t.Lu, t.nu, shB[i]) + rS[i]
             if chk:
-                self._note(_SLOT_ROW, acc)
+                self._note(_ACC_ROW, acc)
             if t.air >= 0:
-                acc += self._mul(_SLOT_AMUL, t.W0[i], self.da0, t.Lt, t.nt, t.shW0[i])
-                acc += self._mul(_SLOT_AMUL, t.W1[i], self.da, t.Lt, t.nt, t.shW1[i])
+                acc += self._mul(_ACC_AMUL, t.W0[i], self.da0, t.Lt, t.nt, t.shW0[i])
+                acc += self._mul(_ACC_AMUL, t.W1[i], self.da, t.Lt, t.nt, t.shW1[i])
                 if chk:
-                    self._note(_SLOT_ROW, acc)
+                    self._note(_ACC_ROW, acc)
             v = T[i] + (acc >> gs)
             if chk:
-                self._note(_SLOT_STATE, v)
+                self._note(_ACC_STATE, v)
             if v < t.Tlo:
                 v = t.Tlo  # the exact state is >= the air's lowest value, so this only removes error
             elif v > Tmax:
@@ -655,13 +656,13 @@ class Evaluator:
         t = self.table
         v = 0
         if t.air >= 0:
-            v = self._mul(_SLOT_AMUL, t.Ka, self.da, t.Lt, t.nt, t.shKa)
+            v = self._mul(_ACC_AMUL, t.Ka, self.da, t.Lt, t.nt, t.shKa)
             if v < t.Tlo:
                 v = t.Tlo
             elif v > t.Tmax:
                 v = t.Tmax
         if self.check:
-            self._note(_SLOT_STATE, v)
+            self._note(_ACC_STATE, v)
         for i in range(t.M):
             self.T[i] = v
         self.da0 = self.da
@@ -686,10 +687,10 @@ class Evaluator:
         c = 0
         for i in range(t.M):
             cum[i] = c
-            c += self._mul(_SLOT_CUMMUL, G2[i], T[i], Ls, ns, shG2[i])
+            c += self._mul(_ACC_CUMMUL, G2[i], T[i], Ls, ns, shG2[i])
             if chk:
-                self._note(_SLOT_CUM, c)
-            seg[i] = self._mul(_SLOT_HMUL, t.H, T[i], Ls, ns, t.shH)
+                self._note(_ACC_CUM, c)
+            seg[i] = self._mul(_ACC_HMUL, t.H, T[i], Ls, ns, t.shH)
         cum[t.M] = c
 
 

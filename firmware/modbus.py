@@ -25,6 +25,7 @@ silence of 3.5 character times (at least 2 ms) for anything else. Allocation-fre
 from micropython import const
 
 from firmware.crc16 import crc16_modbus
+from firmware.safety import round10
 
 # input registers
 _IR_STATUS_LO = const(0)
@@ -76,10 +77,6 @@ def _s16(v):
     if v < -32768:
         return -32768
     return v
-
-
-def _round10(v):
-    return (v + 5) // 10 if v >= 0 else -((5 - v) // 10)
 
 
 class ModbusLink:
@@ -236,9 +233,9 @@ class ModbusLink:
         if r == _IR_SEQUENCE:
             return a.cycles & 0xFFFF
         if r == _IR_TOTAL:
-            return _s16(_round10(a.total))
+            return _s16(round10(a.total))
         if r == _IR_REF_OFFSET:
-            return _s16(_round10(a.ref_out))
+            return _s16(round10(a.ref_out))
         if r == _IR_SLOPE:
             return _s16(a.slope_out)
         if r == _IR_POSITION or r == _IR_POSITION + 1:

@@ -17,12 +17,14 @@ the hello frame may (they are not part of the steady state).
 from micropython import const
 
 from firmware import frame as fr
+from firmware.safety import round10
 from firmware.slots import UploadError, SLOT_NAMES
 
 # wire contract values (firmware/wire.py), as folded copies (tests/firmware/test_fw_consts.py checks)
 _PROTOCOL_VERSION = const(1)
 _FIRMWARE_VERSION = const(b"0.1.0")
 _REF_LETTERS = const(b"-SLUNCO")
+_UPLOAD_STEPS = const(b"BDCX")  # wire.UPLOAD_STEPS (the U sub-commands known, so a malformed one is a syntax error)
 _TAG_BYTES = const(16)
 _MAX_COUNTER = const(999999999)
 # firmware.auth's (tests/firmware/test_fw_consts.py checks the copies)
@@ -80,11 +82,6 @@ _C = const(67)
 _L = const(76)
 
 
-def _round10(v):
-    """0.01 um -> 0.1 um, rounding half away from zero."""
-    return (v + 5) // 10 if v >= 0 else -((5 - v) // 10)
-
-
 class StreamLink:
     def __init__(self, app):
         self.app = app
@@ -136,8 +133,8 @@ class StreamLink:
         w.begin(a.status, kind)
         w.int(a.last_t)
         w.int(pos)
-        w.fixed(_round10(a.total if kind == _O else a.total_at(pos)), 1)
-        w.fixed(_round10(a.ref_out), 1)
+        w.fixed(round10(a.total if kind == _O else a.total_at(pos)), 1)
+        w.fixed(round10(a.ref_out), 1)
         w.fixed(a.slope_out, 2)
         w.end()
 
@@ -369,7 +366,7 @@ class StreamLink:
                 a.store.abort()
                 self.ack(_U, _X)
             else:
-                self.error(_E_SYNTAX if sub in b"BDCX" else _E_UNKNOWN)
+                self.error(_E_SYNTAX if sub in _UPLOAD_STEPS else _E_UNKNOWN)
         except UploadError as e:
             self.error(_UPLOAD_CODES.get(e.code, _E_STATE), e.detail.encode())
         except OSError as e:

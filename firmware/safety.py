@@ -32,6 +32,12 @@ _RECOVERING = const(0x4000000)
 _MAX_DT_MS = const(10000)  # a stalled loop must not earn a huge step
 
 
+def round10(v):
+    """0.01 um -> 0.1 um, rounding half away from zero: the outputs' resolution on both links
+    (protocol.py's $TC frames and modbus.py's registers send 0.1 um)."""
+    return (v + 5) // 10 if v >= 0 else -((5 - v) // 10)
+
+
 def _clamp(v, m):
     return m if v > m else (-m if v < -m else v)
 

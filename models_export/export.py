@@ -2,22 +2,23 @@
 import math
 
 from firmware.crc32 import crc32
-from models_export.certify import DEFAULT_ENVELOPE_MARGIN_K, LIMITS_UM, OU_PER_UM, ExportError, Model
+from models_export.certify import LIMITS_UM, OU_PER_UM, ExportError
 from models_export.document import document_hash
+from models_export.model import DEFAULT_ENVELOPE_MARGIN_K, Model
 from models_export.plan import Planner
 from models_export.tableformat import VERSION, pack
 
 
 class Export:
-    """Result of export_model: ``table`` (bytes), ``fields`` (dict), ``report`` (dict), ``slots``
-    ({slot: (lo, hi)} certified intervals of the firmware's check slots), ``errors_ou``
+    """Result of export_model: ``table`` (bytes), ``fields`` (dict), ``report`` (dict), ``accs``
+    ({accumulator: (lo, hi)} certified intervals of the firmware's checked accumulators, ACC_*), ``errors_ou``
     ({output: (lo, hi)} certified integer-minus-model intervals, output units)."""
 
-    def __init__(self, fields, table, report, slots, errors_ou):
+    def __init__(self, fields, table, report, accs, errors_ou):
         self.fields = fields
         self.table = table
         self.report = report
-        self.slots = slots
+        self.accs = accs
         self.errors_ou = errors_ou
 
     def c_header(self, guard="TCOMP_TABLE_H"):
@@ -71,18 +72,17 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
                           % (declared, actual))
     rec = planner.rec
     limit = LIMITS_UM[model.kind] if limit_um is None else limit_um
-    fo = f["fo"]
     scale_um = 1.0 / OU_PER_UM
     max_err = _up(max(abs(errs["offset"][0]), abs(errs["offset"][1])) * scale_um) + 1e-9
     terms = []
     for t in planner.terms:
         terms.append({"name": t["name"], "scale": t["scale"], "headroom_bits": round(rec.headroom(t["key"]), 3),
-                      "max_error_um": _up(t["err_ou"] / (1 << fo) * scale_um) if t["err_ou"] else 0.0})
+                      "max_error_um": _up(t["err_ou"] * scale_um) if t["err_ou"] else 0.0})
     if max_err >= limit:
         worst = max(terms, key=lambda t: t["max_error_um"])
         raise ExportError("certified worst-case error %.4g um is not below %.4g um for %s; largest contribution: term %s "
                           "(%.4g um)" % (max_err, limit, model.kind, worst["name"], worst["max_error_um"]))
-    peak = max(max(abs(lo), abs(hi)) for lo, hi in rec.slots.values())
+    peak = max(max(abs(lo), abs(hi)) for lo, hi in rec.accs.values())
     envelope = {
         "temperature_mC": {s: [lo, hi] for s, lo, hi in zip(model.sensors, model.env_lo, model.env_hi)},
         "reference_mC": dict(zip(model.sensors, model.ref)),
@@ -135,8 +135,8 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
             "dt_ms": f["dt_ms"], "positional": bool(f["positional"]), "filters": planner.dyn_cert,
             "horizon": "unbounded (steady state) from the cold start (latch): |e| <= v with v >= (1 - a) v + rho verified exactly",
         }
-    slots = {k: v for k, v in rec.slots.items() if k >= 0}
-    return Export(f, table, report, slots, errs)
+    accs = {k: v for k, v in rec.accs.items() if k >= 0}
+    return Export(f, table, report, accs, errs)
 
 
 def _up(x):

@@ -3,7 +3,7 @@
 ``Planner(model)`` then ``linear_direct()`` or ``positional()`` returns the error
 interval of every output; afterwards ``f`` holds the table fields
 (models_export.tableformat.pack), ``terms`` the per-term scales and error
-contributions and ``rec`` (a certify.Recorder) the slot intervals and headroom
+contributions and ``rec`` (a certify.Recorder) the accumulator intervals and headroom
 (models_export.certify explains the argument).
 """
 import math
@@ -12,10 +12,9 @@ from fractions import Fraction as F
 import numpy as np
 
 from firmware.evaluate import (
-    FEED_LIMB, FEED_W_BITS, SLOT_ACC, SLOT_AMUL, SLOT_BMUL, SLOT_CMUL, SLOT_CUM, SLOT_CUMMUL, SLOT_D, SLOT_DE, SLOT_FEEDMUL,
-    SLOT_GEO, SLOT_GEOMUL, SLOT_HMUL, SLOT_KMUL, SLOT_LIMB, SLOT_OUT, SLOT_P, SLOT_ROW, SLOT_ROWMUL, SLOT_S,
-    SLOT_SEGMUL, SLOT_SLOPE, SLOT_SMUL, SLOT_STATE, SLOT_THMUL, SLOT_TRAVEL, SLOT_XL,
-    SLOT_DMUL, SLOT_DX, SLOT_QMUL, SLOT_Y, SLOT_YMUL,
+    ACC_AMUL, ACC_BMUL, ACC_CMUL, ACC_CUM, ACC_CUMMUL, ACC_D, ACC_DE, ACC_DMUL, ACC_DX, ACC_FEEDMUL, ACC_GEO,
+    ACC_GEOMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_OUT, ACC_P, ACC_QMUL, ACC_ROW, ACC_ROWMUL, ACC_S, ACC_SEGMUL,
+    ACC_SLOPE, ACC_SMUL, ACC_STATE, ACC_SUM, ACC_THMUL, ACC_TRAVEL, ACC_XL, ACC_Y, ACC_YMUL, FEED_LIMB, FEED_W_BITS,
 )
 from models_export.certify import (
     ACC, OU_PER_UM, PROD, SLOPE_PER_OU_PER_UM, ExportError, Recorder, center, fit_coef, floor_err, frac_bits,
@@ -52,9 +51,11 @@ class Planner:
         self.m = model
         self.rec = Recorder()
         self.f = {}
-        self.terms = []  # dicts: name, scale, term (recorder key), err_ou (contribution in output units)
+        self.terms = []  # dicts: name, scale, key (recorder key), err_ou (contribution in output units, 0.01 um)
 
     def term(self, name, scale, err_ou, key=None):
+        """Record one term's error contribution to the offset; ``err_ou`` is in output units (0.01 um), never in
+        accumulator units: callers divide accumulator-scale errors by 2**fo (export.py reports err_ou / 100 um)."""
         self.terms.append({"name": name, "scale": scale, "key": key or name, "err_ou": F(err_ou)})
 
     # ------------------------------------------------------------ S = S0 + sum b*d
@@ -74,13 +75,13 @@ class Planner:
             err = iv_add(err, *[e for _, _, _, _, e in parts])
         for i in range(n):
             d = (m.d_lo[i], m.d_hi[i])
-            rec.note(SLOT_D, d[0], d[1], "temperatures")
+            rec.note(ACC_D, d[0], d[1], "temperatures")
             lm = limb_max(d, Lt, nt)
             q, sh = fit_coef(m.b[i], lm, fS)
             f["b"].append(q)
             f["shb"].append(sh)
             f["fb"].append(fS + sh)
-            res, k = rec.mul(SLOT_SMUL, (q, q), d, Lt, nt, sh, m.b_names[i])
+            res, k = rec.mul(ACC_SMUL, (q, q), d, Lt, nt, sh, m.b_names[i])
             quant = iv_scale((F(d[0]), F(d[1])), F(q) / p2(sh) - m.b[i] * p2(fS))
             err = iv_add(err, quant, floor_err(k))
             parts.insert(i, (res, m.b_names[i], fS + sh, iv_abs(quant), ZERO))
@@ -92,11 +93,11 @@ class Planner:
         eS = iv_add(err, _c(e0))
         self.term("S0 (%s)" % ("intercept_um" if m.direct else "intercept_um_per_mm"), fS,
                   abs(e0 - bias) * out_factor, key="S0")
-        rec.note(-1, S0, S0, "S0")  # slot -1: constants (no firmware slot)
+        rec.note(-1, S0, S0, "S0")  # -1: constants (no firmware accumulator)
         acc = (S0, S0)
         for res, name, _, _, _ in parts:
             acc = iv_add(acc, res)
-            rec.note(SLOT_S, acc[0], acc[1], name)
+            rec.note(ACC_S, acc[0], acc[1], name)
         s_real = m.s_range()
         S_iv = _meet(acc, int_iv((s_real[0] * p2(fS), s_real[1] * p2(fS)), eS))
         return S_iv, eS
@@ -120,7 +121,7 @@ class Planner:
         big = max([max(-lo, hi) for lo, hi in zip(m.d_lo[len(m.sensors):], m.d_hi[len(m.sensors):])] + [1])
         LY = max(1, -(-big.bit_length() // nY))
         Lq, nq = m.Lq, m.nq
-        q_iv, kq = rec.mul(SLOT_QMUL, (0, m.smax), (0, m.smax), Lq, nq, m.shq, "spindle speed squared")
+        q_iv, kq = rec.mul(ACC_QMUL, (0, m.smax), (0, m.smax), Lq, nq, m.shq, "spindle speed squared")
         f.update(positional=0 if m.direct else 1, dt_ms=m.dt_ms, smax=m.smax, Lq=Lq, nq=nq, shq=m.shq, fmax=m.fmax,
                  LX=LX, nX=nX, LY=LY, nY=nY, nf=len(terms), src=[], A=[], shA=[], gA=[], rA=[], fy=[], Ylo=[], Yhi=[])
         out = []
@@ -128,7 +129,7 @@ class Planner:
         for t in terms:
             fy, a = t["fy"], t["a"]
             Ylo, Yhi = t["u"][0] << fy, t["u"][1] << fy
-            rec.note(SLOT_Y, Ylo, Yhi, t["name"])
+            rec.note(ACC_Y, Ylo, Yhi, t["name"])
             ein = ZERO
             if t["src"] == -2:  # rpm**2 floored limb by limb: the input is low by less than kq units
                 ein = (F(-kq) * p2(fy), F(0))
@@ -147,18 +148,18 @@ class Planner:
                 self.dyn_cert.append({"term": t["name"], "a": 0.0, "state_error_units": 0.0})
                 continue
             X = (Ylo - Yhi, Yhi - Ylo)
-            rec.note(SLOT_DX, X[0], X[1], t["name"])
+            rec.note(ACC_DX, X[0], X[1], t["name"])
             q, sh = fit_coef(a, limb_max(X, LX, nX), 0)
             if q <= 0:
                 raise ExportError("%s: the step %d ms is too small against the time constant for the table" % (t["name"], m.dt_ms))
             aq = F(q) / p2(sh)
             # guard bits: the increment a*X (at most aq*|X|) is summed g bits finer, then rounded once
             g = max(0, min(sh, 24, frac_bits(aq * (Yhi - Ylo) + 1, ACC)))
-            res, k = rec.mul(SLOT_DMUL, (q, q), X, LX, nX, sh - g, t["name"])
+            res, k = rec.mul(ACC_DMUL, (q, q), X, LX, nX, sh - g, t["name"])
             rA, e_inc = _round_out(floor_err(k), g)
-            rec.note(SLOT_DMUL + 1, res[0] + rA, res[1] + rA, t["name"])
+            rec.note(ACC_DMUL + 1, res[0] + rA, res[1] + rA, t["name"])
             rho = abs(aq - a) * (Yhi - Ylo) + iv_abs(e_inc)
-            rec.note(SLOT_Y, Ylo + ((res[0] + rA) >> g), Yhi + ((res[1] + rA) >> g), t["name"])
+            rec.note(ACC_Y, Ylo + ((res[0] + rA) >> g), Yhi + ((res[1] + rA) >> g), t["name"])
             v = _supersolution(np.array([[1.0 - float(a)]]), [rho])
             if v is None or not v[0] >= (1 - a) * v[0] + rho:
                 raise ExportError("%s: the filter's state error cannot be bounded" % t["name"])
@@ -182,7 +183,7 @@ class Planner:
             q, sh = fit_coef(B, limb_max(Yiv, f["LY"], f["nY"]), fS)
             f["bY"].append(q)
             f["shY"].append(sh)
-            res, k = rec.mul(SLOT_YMUL, (q, q), Yiv, f["LY"], f["nY"], sh, t["name"])
+            res, k = rec.mul(ACC_YMUL, (q, q), Yiv, f["LY"], f["nY"], sh, t["name"])
             qv = F(q) / p2(sh)
             quant = iv_scale((F(Yiv[0]), F(Yiv[1])), qv - B * p2(fS))
             err = iv_add(quant, iv_scale(y_err[j], qv), floor_err(k))
@@ -200,9 +201,9 @@ class Planner:
         S_iv, eS = self.s_block(fo, F(1, 1 << fo))
         rL, err_out = _round_out(eS, fo)
         f["rL"] = rL
-        rec.note(SLOT_ACC, S_iv[0] + rL, S_iv[1] + rL, "output")
+        rec.note(ACC_SUM, S_iv[0] + rL, S_iv[1] + rL, "output")
         out = ((S_iv[0] + rL) >> fo, (S_iv[1] + rL) >> fo)
-        rec.note(SLOT_OUT, out[0], out[1], "output")
+        rec.note(ACC_OUT, out[0], out[1], "output")
         f.update(cert_out=_mag(out), cert_ref=_mag(out), cert_slope=0)
         self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
         return {"offset": err_out, "ref_offset": err_out, "slope": ZERO}
@@ -225,16 +226,16 @@ class Planner:
         f["rL"] = 0
         fS = frac_bits(m.s_bound(), ACC)
         S_iv, eS = self.s_block(fS, F(PM) / p2(fS))
-        rec.note(SLOT_P, m.pos_lo, m.pos_hi, "position")
+        rec.note(ACC_P, m.pos_lo, m.pos_hi, "position")
         Lw = narrow_width(PM)
         nw = top_limbs_needed(S_iv, Lw, PM)
         if nw is None:
             raise ExportError("%s: slope x position cannot be split into small-int limbs" % _largest(m, PM))
         shw = fS - fo
         f.update(Lw=Lw, nw=nw, shw=shw)
-        th, k = rec.mul(SLOT_THMUL, (m.pos_lo, m.pos_hi), S_iv, Lw, nw, shw, "slope x position")
+        th, k = rec.mul(ACC_THMUL, (m.pos_lo, m.pos_hi), S_iv, Lw, nw, shw, "slope x position")
         err_th = iv_add(iv_scale(iv_mul(P, eS), 1 / p2(shw)), floor_err(k))
-        self.term("rounding: slope x position", fo, F(k), key="slope x position")
+        self.term("rounding: slope x position", fo, F(k) / p2(fo), key="slope x position")  # k floors of one acc unit
         # geometric polynomial, Horner in p (um)
         h_iv, err_geo = self.horner(fo, PM)
         # screw segments
@@ -243,21 +244,21 @@ class Planner:
         else:
             seg_iv, err_seg = (0, 0), ZERO
         acc = iv_add(h_iv, th)
-        rec.note(SLOT_ACC, acc[0], acc[1], "output")
+        rec.note(ACC_SUM, acc[0], acc[1], "output")
         if screw:
             acc = iv_add(acc, seg_iv)
-            rec.note(SLOT_ACC, acc[0], acc[1], "output")
+            rec.note(ACC_SUM, acc[0], acc[1], "output")
         err_acc = iv_add(err_geo, err_th, err_seg)
         rO, err_out = _round_out(err_acc, fo)
         f["rO"] = rO
         acc = (acc[0] + rO, acc[1] + rO)
-        rec.note(SLOT_ACC, acc[0], acc[1], "output")
-        rec.note(SLOT_OUT, acc[0] >> fo, acc[1] >> fo, "output")
+        rec.note(ACC_SUM, acc[0], acc[1], "output")
+        rec.note(ACC_OUT, acc[0] >> fo, acc[1] >> fo, "output")
         f["cert_out"] = _mag((acc[0] >> fo, acc[1] >> fo))
         self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
         # the pair: thermal offset at the reference position ...
         # certified for any reference position inside the envelope (Evaluator.set_reference), not only pos_ref
-        th_ref, k = rec.mul(SLOT_THMUL, (m.pos_lo, m.pos_hi), S_iv, Lw, nw, shw, "slope x position")
+        th_ref, k = rec.mul(ACC_THMUL, (m.pos_lo, m.pos_hi), S_iv, Lw, nw, shw, "slope x position")
         err_ref = iv_add(iv_scale(iv_mul(P, eS), 1 / p2(shw)), floor_err(k))
         acc_ref = th_ref
         if screw:
@@ -265,8 +266,8 @@ class Planner:
             err_ref = iv_add(err_ref, err_seg)
         rT, err_ref_out = _round_out(err_ref, fo)
         f["rT"] = rT
-        rec.note(SLOT_ACC, acc_ref[0] + rT, acc_ref[1] + rT, "output")
-        rec.note(SLOT_OUT, (acc_ref[0] + rT) >> fo, (acc_ref[1] + rT) >> fo, "output")
+        rec.note(ACC_SUM, acc_ref[0] + rT, acc_ref[1] + rT, "output")
+        rec.note(ACC_OUT, (acc_ref[0] + rT) >> fo, (acc_ref[1] + rT) >> fo, "output")
         f["cert_ref"] = _mag(((acc_ref[0] + rT) >> fo, (acc_ref[1] + rT) >> fo))
         # ... and the thermal slope in 0.01 um/m
         s_real = m.s_range()
@@ -280,7 +281,7 @@ class Planner:
         lmw = limb_max(S_iv, Lw, nw)
         KS, shK = fit_coef(F(SLOPE_PER_OU_PER_UM), lmw, fK - fS)
         f.update(KS=KS, shK=shK, fK=fK)
-        sl, k = rec.mul(SLOT_KMUL, (KS, KS), S_iv, Lw, nw, shK, "KS (slope unit conversion)")
+        sl, k = rec.mul(ACC_KMUL, (KS, KS), S_iv, Lw, nw, shK, "KS (slope unit conversion)")
         kq = F(KS) / p2(shK)
         err_sl = iv_add(iv_scale((s_real[0] * p2(fS), s_real[1] * p2(fS)), kq - SLOPE_PER_OU_PER_UM * p2(fK - fS)),
                         iv_scale(eS, kq), floor_err(k))
@@ -289,13 +290,13 @@ class Planner:
             sl2, err_sl2 = self.screw_chord(seg_iv, err_seg, fo, fK)
             sl = iv_add(sl, sl2)
             err_sl = iv_add(err_sl, err_sl2)
-            rec.note(SLOT_SLOPE, sl[0], sl[1], "output")
+            rec.note(ACC_SLOPE, sl[0], sl[1], "output")
         else:
             self.f.update(KC=0, Lc=1, nc=1, shC=0)
         rK, err_sl_out = _round_out(err_sl, fK)
         f["rK"] = rK
-        rec.note(SLOT_SLOPE, sl[0] + rK, sl[1] + rK, "output")
-        rec.note(SLOT_OUT, (sl[0] + rK) >> fK, (sl[1] + rK) >> fK, "output")
+        rec.note(ACC_SLOPE, sl[0] + rK, sl[1] + rK, "output")
+        rec.note(ACC_OUT, (sl[0] + rK) >> fK, (sl[1] + rK) >> fK, "output")
         f["cert_slope"] = _mag(((sl[0] + rK) >> fK, (sl[1] + rK) >> fK))
         return {"offset": err_out, "ref_offset": err_ref_out, "slope": err_sl_out}
 
@@ -313,7 +314,7 @@ class Planner:
         names = ["geometric.coefficients_um[%d]" % j for j in range(d + 1)]
         for j in range(d + 1):
             rec.note(-1, G[j], G[j], names[j])
-            self.term(names[j], fr[j], abs(F(G[j]) - m.g[j] * p2(fr[j])) * F(PM) ** j / p2(fr[j]) * p2(fo))
+            self.term(names[j], fr[j], abs(F(G[j]) - m.g[j] * p2(fr[j])) * F(PM) ** j / p2(fr[j]))
         for ng in range(1, 7):
             try:
                 sub = Recorder()
@@ -322,11 +323,11 @@ class Planner:
                 for j in range(d - 1, -1, -1):
                     if top_limbs_needed(h, Lg, PM) is None or top_limbs_needed(h, Lg, PM) > ng:
                         raise _Retry()
-                    res, k = sub.mul(SLOT_GEOMUL, (m.pos_lo, m.pos_hi), h, Lg, ng, shg[j], names[j + 1])
+                    res, k = sub.mul(ACC_GEOMUL, (m.pos_lo, m.pos_hi), h, Lg, ng, shg[j], names[j + 1])
                     err = iv_add(iv_scale(iv_mul(P, err), 1 / p2(shg[j])), floor_err(k), _c(F(G[j]) - m.g[j] * p2(fr[j])))
                     hr = m.horner_range(j)
                     h = _meet(iv_add(res, (G[j], G[j])), int_iv((hr[0] * p2(fr[j]), hr[1] * p2(fr[j])), err))
-                    sub.note(SLOT_GEO, h[0], h[1], names[j])
+                    sub.note(ACC_GEO, h[0], h[1], names[j])
                 break
             except _Retry:
                 continue
@@ -458,7 +459,7 @@ class Planner:
         TA = max(Tq, -Tlq)
         lms = limb_max(T_iv, Ls, ns)
         limb_ivs = limbs(T_iv, Ls, ns)
-        rec.note(SLOT_LIMB, limb_ivs[-1][0], limb_ivs[-1][1], "state")
+        rec.note(ACC_LIMB, limb_ivs[-1][0], limb_ivs[-1][1], "state")
         Cx = [[F(float(A[i, j])) - (1 if i == j else 0) for j in range(M)] for i in range(M)]
         rowsum = max(sum(abs(c) for c in row) for row in Cx)
         fc = frac_bits(rowsum * lms, PROD, cap=62)
@@ -495,15 +496,15 @@ class Planner:
                     c = Cq[i][j]
                     lo, hi = limb_ivs[k]
                     p = (min(c * lo, c * hi), max(c * lo, c * hi))
-                    rec.note(SLOT_ROWMUL, p[0], p[1], name)
+                    rec.note(ACC_ROWMUL, p[0], p[1], name)
                     r = iv_add(r, p)
-                    rec.note(SLOT_ROWMUL, r[0], r[1], name)
+                    rec.note(ACC_ROWMUL, r[0], r[1], name)
                 if sh > 0:
                     acc = iv_add(acc, (r[0] >> sh, r[1] >> sh))
                     err = iv_add(err, floor_err(1))
                 else:
                     acc = iv_add(acc, (r[0] << -sh, r[1] << -sh))
-                rec.note(SLOT_ROW, acc[0], acc[1], name)
+                rec.note(ACC_ROW, acc[0], acc[1], name)
                 sh -= Ls
             errC = ZERO
             for j in range(M):
@@ -513,7 +514,7 @@ class Planner:
             q, sb = fit_coef(F(float(s["B"][i])) / 1000, lmu, ft + gs)
             Bq.append(q)
             shB.append(sb)
-            res, k = rec.mul(SLOT_BMUL, (q, q), U_iv, Lu, nu, sb, "thermal.reduced.B_K_per_mm[%d]" % i)
+            res, k = rec.mul(ACC_BMUL, (q, q), U_iv, Lu, nu, sb, "thermal.reduced.B_K_per_mm[%d]" % i)
             bq = F(q) / p2(sb)
             db = bq - F(float(s["B"][i])) / 1000 * p2(ft + gs)
             errB = iv_add(iv_mul(_c(db), (F(0), F(umax))), _hull(ZERO, iv_scale(feed_du, bq)))
@@ -525,7 +526,7 @@ class Planner:
                 q, sw = fit_coef(c / 1000, lmd, ft + gs)
                 qs.append(q)
                 shs.append(sw)
-                res, k = rec.mul(SLOT_AMUL, (q, q), d_air, f["Lt"], f["nt"], sw, "thermal.reduced.air_K[%d]" % i)
+                res, k = rec.mul(ACC_AMUL, (q, q), d_air, f["Lt"], f["nt"], sw, "thermal.reduced.air_K[%d]" % i)
                 acc = iv_add(acc, res)
                 errW = iv_add(errW, iv_mul(_c(F(q) / p2(sw) - c / 1000 * p2(ft + gs)), (F(d_air[0]), F(d_air[1]))), floor_err(k))
             err = iv_add(err, errW)
@@ -533,21 +534,21 @@ class Planner:
             bias, err_state = _round_out(err, gs)  # v = T + (acc + rS) >> gs
             rS.append(bias)
             acc = (acc[0] + bias, acc[1] + bias)
-            rec.note(SLOT_ROW, acc[0], acc[1], name)
-            rec.note(SLOT_STATE, Tlq + (acc[0] >> gs), Tq + (acc[1] >> gs), name)
+            rec.note(ACC_ROW, acc[0], acc[1], name)
+            rec.note(ACC_STATE, Tlq + (acc[0] >> gs), Tq + (acc[1] >> gs), name)
             rho.append(max(abs(err_state[0]), abs(err_state[1])))
         # travel accumulators and the feed fallback
         maxlen = max(b - a for a, b in zip(s["edges_um"], s["edges_um"][1:]))
-        rec.note(SLOT_TRAVEL, 0, umax + max(maxlen, umax), "travel")
-        rec.mul(SLOT_FEEDMUL, (0, 1 << FEED_W_BITS), (0, umax), FEED_LIMB, 3, FEED_W_BITS, "travel")
+        rec.note(ACC_TRAVEL, 0, umax + max(maxlen, umax), "travel")
+        rec.mul(ACC_FEEDMUL, (0, 1 << FEED_W_BITS), (0, umax), FEED_LIMB, 3, FEED_W_BITS, "travel")
         # the start state (Evaluator.settle): Ka * a ~ a * 2**ft / 1000, clamped to the state box
         if s["air"] >= 0:
             Ka, shKa = fit_coef(p2(ft) / 1000, lmd, 0)
-            res, k = rec.mul(SLOT_AMUL, (Ka, Ka), d_air, f["Lt"], f["nt"], shKa, "air start state")
+            res, k = rec.mul(ACC_AMUL, (Ka, Ka), d_air, f["Lt"], f["nt"], shKa, "air start state")
             e0 = iv_abs(iv_add(iv_mul(_c(F(Ka) / p2(shKa) - p2(ft) / 1000), (F(d_air[0]), F(d_air[1]))), floor_err(k)))
         else:
             Ka, shKa, e0 = 0, 0, F(0)
-        rec.note(SLOT_STATE, Tlq, Tq, "air start state")
+        rec.note(ACC_STATE, Tlq, Tq, "air start state")
         # state error: v >= |A| v + rho, verified exactly; a start error e0 adds e0 to every component
         # (|A| has row sums <= 1, so v + e0 is again a supersolution and bounds the error from the start)
         v = _supersolution(A, rho)
@@ -565,7 +566,7 @@ class Planner:
                  shB=shB, rS=rS, W0=W0q, shW0=shW0, W1=W1q, shW1=shW1, Ka=Ka, shKa=shKa)
         # informational split of the certified state error by source: output weight of a unit residual in row i
         W = np.linalg.inv(np.eye(M) - np.abs(np.asarray(A, dtype=float)))
-        wout = [float(abs(m.alpha) * (F(s["edges"][j + 1]) - F(s["edges"][j])) * OU_PER_UM) / 2.0 ** ft * 2.0 ** fo for j in range(M)]
+        wout = [float(abs(m.alpha) * (F(s["edges"][j + 1]) - F(s["edges"][j])) * OU_PER_UM) / 2.0 ** ft for j in range(M)]
         gain = [sum(wout[j] * W[j, i] for j in range(M)) for i in range(M)]
         for i in range(M):
             big = max(abs(c) for c in Cq[i])
@@ -589,28 +590,28 @@ class Planner:
             q, sh = fit_coef(val, lms, fo - ft)
             G2.append(q)
             shG2.append(sh)
-            res, k = rec.mul(SLOT_CUMMUL, (q, q), T_iv, Ls, ns, sh, "thermal.reduced.alpha x edges[%d]" % i)
+            res, k = rec.mul(ACC_CUMMUL, (q, q), T_iv, Ls, ns, sh, "thermal.reduced.alpha x edges[%d]" % i)
             cum = iv_add(cum, res)
-            rec.note(SLOT_CUM, cum[0], cum[1], "thermal.reduced.alpha x edges[%d]" % i)
+            rec.note(ACC_CUM, cum[0], cum[1], "thermal.reduced.alpha x edges[%d]" % i)
             gq = F(q) / p2(sh)
             dq = gq - val * p2(fo - ft)
             ecum = iv_add(ecum, iv_mul(_c(dq), (F(Tlq), F(Tq))), floor_err(k), iv_scale((-v[i], v[i]), abs(gq)))
             err_cum.append(ecum)
             cum_ivs.append(cum)
-            self.term("thermal.reduced.alpha x edges[%d]" % i, fo - ft + sh, abs(dq) * TA)
+            self.term("thermal.reduced.alpha x edges[%d]" % i, fo - ft + sh, abs(dq) * TA / p2(fo))
         hval = alpha * F(OU_PER_UM, 1000)  # OU per um per K
         fh = frac_bits(abs(hval) * (Tabs + 1), ACC)
         H, shH = fit_coef(hval, lms, fh - ft)
         hq = F(H) / p2(shH)
         seg_ivs, err_ss = [], []
         for i in range(M):
-            res, k = rec.mul(SLOT_HMUL, (H, H), T_iv, Ls, ns, shH, "thermal.reduced.alpha_um_per_mm_per_K")
+            res, k = rec.mul(ACC_HMUL, (H, H), T_iv, Ls, ns, shH, "thermal.reduced.alpha_um_per_mm_per_K")
             seg_ivs.append(res)
             err_ss.append(iv_add(iv_mul(_c(hq - hval * p2(fh - ft)), (F(Tlq), F(Tq))), floor_err(k),
                                  iv_scale((-v[i], v[i]), abs(hq))))
         eu = s["edges_um"]
         LEN = max(b - a for a, b in zip(eu, eu[1:]))
-        self.term("thermal.reduced.alpha_um_per_mm_per_K", fh - ft + shH, abs(hq - hval * p2(fh - ft)) * TA * LEN / p2(fh - fo))
+        self.term("thermal.reduced.alpha_um_per_mm_per_K", fh - ft + shH, abs(hq - hval * p2(fh - ft)) * TA * LEN / p2(fh))
         Lx = narrow_width(LEN)
         ss_all = _hull(*[(F(a), F(b)) for a, b in seg_ivs])
         ss_int = (int(ss_all[0]), int(ss_all[1]))
@@ -618,12 +619,12 @@ class Planner:
         if nx is None:
             raise ExportError("thermal.reduced.alpha_um_per_mm_per_K: segment slope x length does not fit small-int limbs")
         shX = fh - fo
-        rec.note(SLOT_XL, 0, LEN, "position")
+        rec.note(ACC_XL, 0, LEN, "position")
         segs, segerr = [(0, 0)], [ZERO]
         for kk in range(M):
-            res, k = rec.mul(SLOT_SEGMUL, (0, eu[kk + 1] - eu[kk]), seg_ivs[kk], Lx, nx, shX, "segment elongation")
+            res, k = rec.mul(ACC_SEGMUL, (0, eu[kk + 1] - eu[kk]), seg_ivs[kk], Lx, nx, shX, "segment elongation")
             iv = iv_add(cum_ivs[kk], res)
-            rec.note(SLOT_CUM, iv[0], iv[1], "segment elongation")
+            rec.note(ACC_CUM, iv[0], iv[1], "segment elongation")
             segs.append(iv)
             segerr.append(iv_add(err_cum[kk], iv_scale(iv_mul((F(0), F(eu[kk + 1] - eu[kk])), err_ss[kk]), 1 / p2(shX)),
                                  floor_err(k)))
@@ -639,7 +640,7 @@ class Planner:
         e_geo = geo_um * OU_PER_UM * p2(fo)
         seg_iv = _hull(*segs)
         err_seg = iv_add(_hull(*segerr), (-e_geo, e_geo))
-        self.term("edges/fixed end rounded to 1 um", 0, e_geo)
+        self.term("edges/fixed end rounded to 1 um", 0, geo_um * OU_PER_UM)
         f.update(G2=G2, shG2=shG2, H=H, shH=shH, fh=fh, Lx=Lx, nx=nx, shX=shX)
         return seg_iv, err_seg
 
@@ -647,7 +648,7 @@ class Planner:
         """slope += KC * (seg(pos_hi) - seg(pos_lo)): the chord of the segment elongation over the envelope."""
         m, f, rec = self.m, self.f, self.rec
         de = (seg_iv[0] - seg_iv[1], seg_iv[1] - seg_iv[0])
-        rec.note(SLOT_DE, de[0], de[1], "slope chord")
+        rec.note(ACC_DE, de[0], de[1], "slope chord")
         span = m.pos_hi - m.pos_lo
         nc = 3
         Lc = max(1, -(-max(abs(de[0]), abs(de[1]), 1).bit_length() // nc))
@@ -657,7 +658,7 @@ class Planner:
         else:
             KC, shC = fit_coef(F(SLOPE_PER_OU_PER_UM, span), lmc, fK - fo)
         f.update(KC=KC, Lc=Lc, nc=nc, shC=shC)
-        res, k = rec.mul(SLOT_CMUL, (KC, KC), de, Lc, nc, shC, "KC (chord slope)")
+        res, k = rec.mul(ACC_CMUL, (KC, KC), de, Lc, nc, shC, "KC (chord slope)")
         kq = F(KC) / p2(shC)
         target = F(SLOPE_PER_OU_PER_UM, span) * p2(fK - fo) if span else F(0)
         err = iv_add(iv_scale((F(de[0]), F(de[1])), kq - target),
@@ -671,8 +672,8 @@ class _Retry(Exception):
 
 
 def _merge(dst, src):
-    for slot, (lo, hi) in src.slots.items():
-        dst.note(slot, lo, hi, "_merge")
+    for acc_id, (lo, hi) in src.accs.items():
+        dst.note(acc_id, lo, hi, "_merge")
     for k, v in src.peaks.items():
         dst.peaks[k] = max(dst.peaks.get(k, 0), v)
     dst.peaks.pop("_merge", None)

@@ -85,7 +85,7 @@ def _export(args):
         doc = read_document(args.model)
     except ModelFormatError as exc:
         raise UserError(str(exc))
-    from models_export.certify import DEFAULT_ENVELOPE_MARGIN_K
+    from models_export.model import DEFAULT_ENVELOPE_MARGIN_K
 
     envelope = parse_envelope(args.envelope)
     margin = DEFAULT_ENVELOPE_MARGIN_K if args.envelope_margin is None else args.envelope_margin

@@ -3,7 +3,7 @@
 Hypothesis draws models in realistic coefficient ranges and inputs inside (and
 beyond) the envelope; the evaluator runs in checking mode, so every
 intermediate is also asserted against +-2**30, and the values it observed per
-slot must lie inside the exporter's certified intervals.
+accumulator must lie inside the exporter's certified intervals.
 """
 import os
 import random
@@ -100,12 +100,12 @@ def _maybe_latch(data, ev, ref):
         ref.latch(ev.ref, ev.temps)
 
 
-def _slots_inside(ex, ev):
+def _accs_inside(ex, ev):
     seen = 0
-    for slot, (lo, hi) in ex.slots.items():
-        if ev.lo[slot] <= ev.hi[slot]:
+    for acc_id, (lo, hi) in ex.accs.items():
+        if ev.lo[acc_id] <= ev.hi[acc_id]:
             seen += 1
-            assert lo <= ev.lo[slot] and ev.hi[slot] <= hi, "slot %d observed %s certified %s" % (slot, (ev.lo[slot], ev.hi[slot]), (lo, hi))
+            assert lo <= ev.lo[acc_id] and ev.hi[acc_id] <= hi, "accumulator %d observed %s certified %s" % (acc_id, (ev.lo[acc_id], ev.hi[acc_id]), (lo, hi))
     return seen
 
 
@@ -130,7 +130,7 @@ def test_poly_slope_within_certificate(doc, data):
         ev.update()
         _check(ex, ev, ref, temps, pos)
         assert bool(ev.flags & CLAMP_POSITION) == (not t.pos_lo <= pos <= t.pos_hi)
-    assert _slots_inside(ex, ev) > 5
+    assert _accs_inside(ex, ev) > 5
 
 
 @pytest.mark.slow
@@ -151,7 +151,7 @@ def test_linear_direct_within_certificate(doc, data):
         ev.update()
         _check(ex, ev, ref, temps, 0)
         assert ev.slope() == 0
-    assert _slots_inside(ex, ev) >= 2
+    assert _accs_inside(ex, ev) >= 2
 
 
 def test_extreme_corners_poly_slope():
@@ -173,7 +173,7 @@ def test_extreme_corners_poly_slope():
             ev.update()
             for pos in (t.pos_lo, t.pos_hi, rng.randint(t.pos_lo, t.pos_hi)):
                 _check(ex, ev, ref, list(corner), pos)
-        _slots_inside(ex, ev)
+        _accs_inside(ex, ev)
 
 
 def _feed_travel(t, feed, lo, hi):
@@ -242,7 +242,7 @@ def test_screw_reduced_within_certificate(seed, data):
         ref.update(temps)
         _check(ex, ev, ref, temps, data.draw(st.integers(t.pos_lo - 5000, t.pos_hi + 5000)) if k % 10 == 0 else rng.randint(t.pos_lo, t.pos_hi))
         assert not ev.flags & CLAMP_STATE  # the certified state bound is never hit by admissible motion
-    assert _slots_inside(ex, ev) > 20
+    assert _accs_inside(ex, ev) > 20
 
 
 @pytest.mark.slow

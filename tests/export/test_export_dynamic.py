@@ -5,7 +5,7 @@ firmware sees (temperatures clamped to the envelope minus the latched reference,
 feed clamped to theirs): y <- y + a (u_prev - y) with a = 1 - exp(-dt/tau), started at rest at the
 latch. The firmware's output must stay within the exporter's certificate at every step, however
 long the run (the state error bound holds over an unbounded horizon), and every intermediate
-inside the slot intervals the exporter certified.
+inside the accumulator intervals the exporter certified.
 """
 import math
 import random
@@ -92,11 +92,11 @@ def _run(doc, steps, seed, slow_inputs=False):
             got = ev.offset_at(p) / 100.0
             worst = max(worst, abs(got - want) / cert)
             assert abs(got - want) <= cert, "step %d P=%d: firmware %.4f um, model %.6f um, certificate %.4f um" % (k, p, got, want, cert)
-    for slot, (lo, hi) in enumerate(zip(ev.lo, ev.hi)):
+    for acc_id, (lo, hi) in enumerate(zip(ev.lo, ev.hi)):
         if lo <= hi:
-            assert slot in ex.slots, "slot %d used by the firmware but not certified" % slot
-            c = ex.slots[slot]
-            assert c[0] <= lo and hi <= c[1], "slot %d: observed %d..%d outside certified %d..%d" % (slot, lo, hi, c[0], c[1])
+            assert acc_id in ex.accs, "accumulator %d used by the firmware but not certified" % acc_id
+            c = ex.accs[acc_id]
+            assert c[0] <= lo and hi <= c[1], "accumulator %d: observed %d..%d outside certified %d..%d" % (acc_id, lo, hi, c[0], c[1])
     return worst, ex
 
 

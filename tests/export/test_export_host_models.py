@@ -6,7 +6,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from firmware.evaluate import SLOT_AMUL, Evaluator
+from firmware.evaluate import ACC_AMUL, Evaluator
 from firmware.table import parse_table
 from host.cli import main
 from host.models import document_hash, load_model, read_document
@@ -57,9 +57,9 @@ def test_poly_slope_from_tcomp_fit_matches_host_model(fitted, reference):
         R = np.array(temps) / 1000.0 - refs
         host = float(model.geometric(p / 1000.0) + model.slope(R[None, :])[0] * p / 1000.0)
         assert abs(ev.offset_at(p) * 0.01 - host) <= cert + 1e-9
-    for slot, (lo, hi) in ex.slots.items():
-        if ev.lo[slot] <= ev.hi[slot]:
-            assert lo <= ev.lo[slot] and ev.hi[slot] <= hi
+    for acc_id, (lo, hi) in ex.accs.items():
+        if ev.lo[acc_id] <= ev.hi[acc_id]:
+            assert lo <= ev.lo[acc_id] and ev.hi[acc_id] <= hi
 
 
 def test_screw_from_tcomp_fit_matches_host_reduced_model(fitted):
@@ -122,8 +122,8 @@ def test_screw_from_tcomp_fit_matches_host_reduced_model(fitted):
     # the run heated the screw: the state against the same air history without the heat (comparing with the
     # last air draw alone fails whenever the random walk has just jumped to the envelope's top)
     assert max(x - x_air) > 0.1
-    assert ev.hi[SLOT_AMUL] > ev.lo[SLOT_AMUL]  # the air terms ran
-    for slot, (lo, hi) in ex.slots.items():  # every observed intermediate inside its certified interval
-        if ev.lo[slot] <= ev.hi[slot]:
-            assert lo <= ev.lo[slot] and ev.hi[slot] <= hi, slot
+    assert ev.hi[ACC_AMUL] > ev.lo[ACC_AMUL]  # the air terms ran
+    for acc_id, (lo, hi) in ex.accs.items():  # every observed intermediate inside its certified interval
+        if ev.lo[acc_id] <= ev.hi[acc_id]:
+            assert lo <= ev.lo[acc_id] and ev.hi[acc_id] <= hi, acc_id
     assert json.dumps(ex.report)  # the report is plain JSON

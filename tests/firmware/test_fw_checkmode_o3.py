@@ -2,7 +2,7 @@
 
 -O3 strips ``assert`` statements and ``__debug__`` blocks; the checking mode
 uses neither (an ``if`` and OverflowError), so from -O3 .mpy on the
-MicroPython unix port it must record the same per-slot minima and maxima as
+MicroPython unix port it must record the same per-accumulator minima and maxima as
 on CPython and still refuse an out-of-range intermediate.
 """
 import os
@@ -59,7 +59,7 @@ def test_check_mode_from_O3_mpy_matches_cpython(tmp_path):
     want = run_cpython(names, str(tmp_path))
     assert got == want
     assert got.count("OverflowError") == 2 and "no OverflowError" not in got
-    # the checking mode really recorded the temperature differences (slot 0) of every table
+    # the checking mode really recorded the temperature differences (accumulator 0) of every table
     for line in got.splitlines()[::2]:
         lo0 = int(line.split("[", 1)[1].split(",", 1)[0])
         assert lo0 == -40000, line  # -30000 + 2900*0 + 1000*0 minus the 20000 reference

@@ -77,6 +77,9 @@ def test_protocol_letters_and_texts_are_the_wire_contract():
     texts = dict(BYTES_CONST.findall(text))
     assert texts["_FIRMWARE_VERSION"].encode() == wire.FIRMWARE_VERSION.encode()
     assert texts["_REF_LETTERS"].encode() == wire.REF_LETTERS
+    assert texts["_UPLOAD_STEPS"] == wire.UPLOAD_STEPS  # the U sub-commands the parser knows
+    assert not re.search(r"b\"[%s]{2,}\"" % wire.UPLOAD_STEPS, text.replace('_UPLOAD_STEPS = const(b"', "")), \
+        "a literal copy of the upload steps outside _UPLOAD_STEPS"
     for name in ("_ONE_POSITION", "_NO_ARGUMENT", "_SIGNED"):  # command groups the parser dispatches on
         group = re.search(r"^%s = b\"(\w+)\"" % name, text, re.M).group(1)
         assert set(group) <= set(wire.COMMANDS), name

@@ -15,6 +15,7 @@ import hashlib
 
 from fwhelpers import (cmd, compile_mpy, frames, modbus_auth_block, provision, run_cycles, run_micropython, scmd,
                        table_fields)
+from firmware.wire import REF_PENDING
 
 NAMES = ("T1", "T2")
 
@@ -69,7 +70,7 @@ def _near(v, deg_c):
 def test_warm_restart_keeps_the_stored_references(tmp_path):
     app, board, hello = _boot(tmp_path, (23.5, 21.0), _table())
     assert hello[-2] == "N"  # nothing stored yet: latch pending
-    assert int(hello[2], 16) & 0x8000000  # REF_PENDING in the boot status
+    assert int(hello[2], 16) & REF_PENDING  # in the boot status
     saves = []
     save = app.store.save_refs
     app.store.save_refs = lambda t, r: saves.append(list(r)) or save(t, r)
@@ -77,18 +78,18 @@ def test_warm_restart_keeps_the_stored_references(tmp_path):
     latched = list(app.ev.ref)
     assert _near(latched[0], 23.5) and _near(latched[1], 21.0)
     assert len(saves) == 1, "written once when latching, never in the steady state"
-    assert not app.status & 0x8000000 and app.ref_state == 2
+    assert not app.status & REF_PENDING and app.ref_state == 2
     assert _stored(tmp_path) == (app.table.crc, latched)
     hello = _send(app, board, cmd(b"TC,V"))[0]
     assert hello[-2] == "L"
     # watchdog reset mid-shift: the machine has warmed by 1.5 K
     app, board, hello = _boot(tmp_path, (25.0, 22.5))
-    assert hello[-2] == "S" and not int(hello[2], 16) & 0x8000000
+    assert hello[-2] == "S" and not int(hello[2], 16) & REF_PENDING
     assert app.ev.ref == latched
     app.store.save_refs = lambda t, r: pytest.fail("stored references are not written again")
     run_cycles(app, board, 20)
     assert app.ev.ref == latched and _near(app.ev.temps[0], 25.0)
-    assert not app.status & 0x8000000
+    assert not app.status & REF_PENDING
     # the output is the model's for the 1.5 K rise since the cold start, not the
     # warm-latched model's (which would start from zero again)
     from firmware.evaluate import Evaluator
