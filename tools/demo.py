@@ -91,7 +91,7 @@ def main():
     step("which physical effect is the base screw model missing? (held out, leave-one-run-out)",
          ["discrepancy", os.path.join(demo, "v6500_r210_490"), test, os.path.join(demo, "mixed"), "--json", o("discrepancy.json"), "--report", o("discrepancy")])
     step("export the screw model to a certified integer table", ["export", o("screw.json"), "--out", o("screw.bin"), "--report", o("screw_report.json")])
-    step("run the real firmware (MicroPython unix port) on simulated MAX31865/ADS122C04 chips, read over a pty",
+    step("run the real firmware (32-bit MicroPython, ports/linux32, or TCOMP_MICROPYTHON) on simulated MAX31865/ADS122C04 chips, read over a pty",
          ["hil", "--run", test, "--table", o("screw.bin"), "--interpreter", "micropython", "--json", o("hil.json"), "--print-every", "120"])
     with open(o("screw_report.json")) as fh:
         certified = json.load(fh)["max_error_um"]
