@@ -5,49 +5,7 @@
 #include "py/mphal.h"
 #include "semihost.h"
 
-#define TICKS_PERIOD (1u << 30)
-#define TICKS_MAX (TICKS_PERIOD - 1)
-#define TICKS_HALF (TICKS_PERIOD / 2)
-
-static mp_obj_t time_ticks_ms(void) {
-    return MP_OBJ_NEW_SMALL_INT(mp_hal_ticks_ms() & TICKS_MAX);
-}
-static MP_DEFINE_CONST_FUN_OBJ_0(time_ticks_ms_obj, time_ticks_ms);
-
-static mp_obj_t time_ticks_us(void) {
-    return MP_OBJ_NEW_SMALL_INT(mp_hal_ticks_us() & TICKS_MAX);
-}
-static MP_DEFINE_CONST_FUN_OBJ_0(time_ticks_us_obj, time_ticks_us);
-
-static mp_obj_t time_ticks_diff(mp_obj_t end_in, mp_obj_t start_in) {
-    mp_uint_t d = (mp_uint_t)(MP_OBJ_SMALL_INT_VALUE(end_in) - MP_OBJ_SMALL_INT_VALUE(start_in));
-    d = ((d + TICKS_HALF) & TICKS_MAX) - TICKS_HALF;
-    return MP_OBJ_NEW_SMALL_INT((mp_int_t)d);
-}
-static MP_DEFINE_CONST_FUN_OBJ_2(time_ticks_diff_obj, time_ticks_diff);
-
-static mp_obj_t time_ticks_add(mp_obj_t t_in, mp_obj_t d_in) {
-    return MP_OBJ_NEW_SMALL_INT((MP_OBJ_SMALL_INT_VALUE(t_in) + mp_obj_get_int(d_in)) & TICKS_MAX);
-}
-static MP_DEFINE_CONST_FUN_OBJ_2(time_ticks_add_obj, time_ticks_add);
-
-static mp_obj_t time_sleep_ms(mp_obj_t ms_in) {
-    mp_int_t ms = mp_obj_get_int(ms_in);
-    if (ms > 0) {
-        mp_hal_delay_ms(ms);
-    }
-    return mp_const_none;
-}
-static MP_DEFINE_CONST_FUN_OBJ_1(time_sleep_ms_obj, time_sleep_ms);
-
-static mp_obj_t time_sleep_us(mp_obj_t us_in) {
-    mp_int_t us = mp_obj_get_int(us_in);
-    if (us > 0) {
-        mp_hal_delay_us(us);
-    }
-    return mp_const_none;
-}
-static MP_DEFINE_CONST_FUN_OBJ_1(time_sleep_us_obj, time_sleep_us);
+#include "ticks.h"  // ports/common: ticks_ms/us/diff/add, sleep_ms/us
 
 static mp_obj_t time_sleep(mp_obj_t s_in) {
     mp_hal_delay_ms((mp_uint_t)(mp_obj_get_float(s_in) * 1000));
