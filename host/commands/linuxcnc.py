@@ -22,6 +22,9 @@ def add_arguments(p):
     p.add_argument("--cold-start", action="store_true",
                    help="this start is a cold start: send L when the machine is first switched on "
                         "(as the cold-start pin)")
+    p.add_argument("--spindle", action="store_true",
+                   help="send the spindle-rpm pin to the board with the position (P,<pos>,<rpm>, or holding "
+                        "registers 18-19): for dynamic tables that use the spindle speed")
 
 
 def _check(args):
@@ -84,7 +87,7 @@ def run(args):
         _log("slew limit: firmware default %g um/s (give --slew-um-per-s if the board's config differs)" % slew)
     bridge = Bridge(link, slew, units=args.units, stale_s=args.stale_ms / 1000.0,
                     recover_s=args.recover_ms / 1000.0, cold_start=args.cold_start, log=_log,
-                    max_dt_s=2 * args.period_ms / 1000.0)
+                    max_dt_s=2 * args.period_ms / 1000.0, send_spindle=args.spindle)
     _log("%s on %s (%s), period %d ms" % (args.name, args.port, args.mode, args.period_ms))
     try:
         halcomp.serve(comp, bridge, args.period_ms / 1000.0)

@@ -54,8 +54,9 @@ class Exchange:
 
 
 class StreamLink:
-    """``$TC`` stream mode: each exchange sends ``P,<pos>`` and ``Q,<pos>`` (the board's offset at this
-    position, now) and decodes whatever arrived (Q answers and periodic O frames)."""
+    """``$TC`` stream mode: each exchange sends ``P,<pos>`` (``P,<pos>,<rpm>`` with the spindle speed)
+    and ``Q,<pos>`` (the board's offset at this position, now) and decodes whatever arrived (Q answers
+    and periodic O frames)."""
 
     def __init__(self, open_port, reopen_s=1.0, clock=time.monotonic, signer=None):
         """``open_port()`` returns an open pyserial-like port (timeout 0); it is called again, at most
@@ -72,9 +73,10 @@ class StreamLink:
         self.decoder = StreamDecoder()
         self.latch_pending = False
 
-    def exchange(self, pos_um, latch=False):
+    def exchange(self, pos_um, latch=False, spindle_rpm=None):
         ex = Exchange()
-        out = command("P", pos_um) + command("Q", pos_um)
+        p = command("P", pos_um) if spindle_rpm is None else command("P", pos_um, spindle_rpm)
+        out = p + command("Q", pos_um)
         if self.want_hello:
             out = command("V") + out
             self.want_hello = False
@@ -139,7 +141,8 @@ def _s16(v):
 
 
 class ModbusLink:
-    """Modbus RTU mode (pymodbus master): write the position (holding 3-4), read input 0-9."""
+    """Modbus RTU mode (pymodbus master): write the position (holding 3-4) and, when given, the
+    spindle speed (holding 18-19, int32 written whole), read input 0-9."""
 
     def __init__(self, client, address=1, signer=None):
         self.client = client
@@ -154,11 +157,14 @@ class ModbusLink:
             return None
         return None if rr.isError() else rr.registers[0]
 
-    def exchange(self, pos_um, latch=False):
+    def exchange(self, pos_um, latch=False, spindle_rpm=None):
         ex = Exchange()
         p = pos_um & 0xFFFFFFFF
         try:
             w = self.client.write_registers(3, [p >> 16, p & 0xFFFF], device_id=self.address)
+            if spindle_rpm is not None and not w.isError():
+                r = spindle_rpm & 0xFFFFFFFF
+                w = self.client.write_registers(18, [r >> 16, r & 0xFFFF], device_id=self.address)
             rr = self.client.read_input_registers(0, count=10, device_id=self.address)
             if w.isError() or rr.isError():
                 ex.error = "modbus exception %s" % (w if w.isError() else rr)
@@ -229,6 +235,7 @@ class Inputs:
     eoffset_request: float = 0.0   # axis.L.eoffset-request, machine units: what motion has taken
     cold_start: bool = False       # the controller says: this start is a cold start
     latch: bool = False            # rising edge: declare a cold start now
+    spindle_rpm: float = 0.0       # spindle speed (e.g. spindle.0.speed-out-abs); sent with send_spindle
 
 
 @dataclass
@@ -258,10 +265,11 @@ class Bridge:
     """
 
     def __init__(self, link, slew_um_per_s, units="mm", stale_s=1.0, recover_s=1.0, cold_start=False,
-                 log=None, latch_retry_s=1.0, latch_tries=10, max_dt_s=0.1):
+                 log=None, latch_retry_s=1.0, latch_tries=10, max_dt_s=0.1, send_spindle=False):
         if units not in UM_PER_UNIT:
             raise ValueError("units must be one of %s, got %r" % (", ".join(UM_PER_UNIT), units))
         self.link = link
+        self.send_spindle = send_spindle  # off: exactly the position-only exchange of older boards
         self.ramp = OffsetRamp(slew_um_per_s)
         self.um_per_unit = UM_PER_UNIT[units]
         self.scale = COUNT_UM / self.um_per_unit
@@ -332,7 +340,12 @@ class Bridge:
             self.last_new_s = now
         pos_um = int(round(inp.position * self.um_per_unit))
         send_latch = self._want_latch(now, inp)
-        ex = self.link.exchange(pos_um, latch=send_latch)
+        if self.send_spindle and math.isfinite(inp.spindle_rpm):
+            # an input of dynamic tables (docs/protocol.md); the board checks its range. A NaN/inf pin
+            # is not sent: the board keeps the last speed it was given
+            ex = self.link.exchange(pos_um, latch=send_latch, spindle_rpm=int(round(inp.spindle_rpm)))
+        else:
+            ex = self.link.exchange(pos_um, latch=send_latch)
         if ex.latch:
             self._latch_reply(now, ex.latch)
         elif send_latch and ex.error:

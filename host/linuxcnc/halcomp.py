@@ -16,6 +16,7 @@ PINS = (
     ("eoffset-request", "FLOAT", "IN", "eoffset_request"),
     ("cold-start", "BIT", "IN", "cold_start"),
     ("latch", "BIT", "IN", "latch"),
+    ("spindle-rpm", "FLOAT", "IN", "spindle_rpm"),
     ("eoffset-counts", "S32", "OUT", "eoffset_counts"),
     ("eoffset-scale", "FLOAT", "OUT", "eoffset_scale"),
     ("eoffset-enable", "BIT", "OUT", "eoffset_enable"),

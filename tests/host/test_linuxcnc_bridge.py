@@ -287,3 +287,62 @@ def test_extrapolating_and_clamped_are_not_faults():
     run.link.status = EXTRAPOLATING | FALLBACK
     rows = run.step(60)
     assert rows[-1][1] == pytest.approx(0.0, abs=1e-9) and rows[-1][2] & BOARD
+
+
+class FakeModbus:
+    """pymodbus client's calls the bridge makes, recorded; answers like a healthy board."""
+
+    class _Ok:
+        def __init__(self, registers=()):
+            self.registers = list(registers)
+
+        def isError(self):
+            return False
+
+    def __init__(self):
+        self.writes = []
+
+    def write_registers(self, start, values, device_id):
+        self.writes.append((start, list(values)))
+        return self._Ok()
+
+    def read_input_registers(self, start, count, device_id):
+        return self._Ok([0, 0, 1, 123, 0, 0, 0, 250, 0, 0][:count])
+
+
+def test_spindle_speed_is_sent_only_when_asked_and_only_when_finite():
+    # off (the default): the position-only exchange, whatever the pin says
+    port = FakePort()
+    off = Run(StreamLink(lambda: port, reopen_s=0.0))
+    off.inp.spindle_rpm = 8000.0
+    off.step()
+    assert command("P", 250000) in bytes(port.tx) and b"$TC,P,250000," not in bytes(port.tx)
+    # on: P,<pos>,<rpm> in stream mode ...
+    port = FakePort()
+    on = Run(StreamLink(lambda: port, reopen_s=0.0), send_spindle=True)
+    on.inp.spindle_rpm = 7999.6
+    on.step()
+    assert command("P", 250000, 8000) in bytes(port.tx)
+    # ... a NaN pin is not sent (the board keeps the last speed), and the bridge keeps running
+    port.tx.clear()
+    on.inp.spindle_rpm = float("nan")
+    on.step()
+    assert command("P", 250000) in bytes(port.tx) and b"$TC,P,250000," not in bytes(port.tx)
+    # ... and holding registers 18-19 (int32, high word first, written whole) in Modbus mode
+    from host.linuxcnc.bridge import ModbusLink
+    client = FakeModbus()
+    mb = Run(ModbusLink(client), send_spindle=True)
+    mb.inp.spindle_rpm = 70000.0
+    mb.step()
+    assert (3, [0x0003, 0xD090]) in client.writes and (18, [0x0001, 0x1170]) in client.writes
+    client = FakeModbus()
+    Run(ModbusLink(client)).step()
+    assert [w for w in client.writes if w[0] == 18] == []
+
+
+def test_linuxcnc_cli_has_the_spindle_option():
+    from host.commands import linuxcnc
+    import argparse
+    p = argparse.ArgumentParser()
+    linuxcnc.add_arguments(p)
+    assert p.parse_args(["--port", "x", "--spindle"]).spindle and not p.parse_args(["--port", "x"]).spindle
