@@ -57,18 +57,9 @@ sys.path.insert(0, ROOT)
 sys.path.insert(0, os.path.join(ROOT, "tests", "firmware"))
 MP = None  # the interpreter's executable, set by main() (hil_tests/rig/interpreters.py)
 
-SCRIPT = r"""
-import time
-import firmware.app
-import fwfakes
-from firmware.crc16 import crc16_ccitt
-board = fwfakes.make_rig(table_dir=".", extra={"frame_ms": 100})
-app = firmware.app.App(board)
-for k in range(100):
-    app.cycle(); board.clock.t += 100
-    board.serial.nout = 0
-body = b"TC,P,123456"
-cmd = b"$" + body + b"*" + (b"%04X" % crc16_ccitt(body)) + b"\r\n"
+from fwhelpers import BENCH_FAKES, BENCH_RIG  # noqa: E402 (after the sys.path lines)
+
+SCRIPT = "import time\n" + BENCH_RIG + r"""
 N = NCYC
 worst = 0
 t0 = time.ticks_us()
@@ -82,16 +73,9 @@ for k in range(N):
     board.clock.t += 100
     board.serial.nout = 0
 total = time.ticks_diff(time.ticks_us(), t0)
-# the fakes alone: the same bus traffic without the firmware
-spi = board.buses["spi0"]; i2c = board.buses["i2c0"]
-tx = bytearray(3); rx = bytearray(3); b1 = bytearray(1); b3 = bytearray(3)
-pins = [board.pin(10 + i) for i in range(9)]
+""" + BENCH_FAKES + r"""
 a = time.ticks_us()
-for k in range(FAKEN):
-    for p in pins:
-        p.value(0); tx[0] = 1; spi.write_readinto(tx, rx); p.value(1)
-    for ad in (0x40, 0x41):
-        i2c.readfrom_mem_into(ad, 0x28, b1); i2c.readfrom_mem_into(ad, 0x10, b3)
+fakes_traffic(FAKEN)
 fakes = time.ticks_diff(time.ticks_us(), a) * 1000 // FAKEN
 print("RESULT", total // N, worst, fakes // 1000)
 """

@@ -36,30 +36,16 @@ PLUGIN = os.path.join(ROOT, "build", "libicount.so")
 IMAGES = {"Cortex-M3": os.path.join(ROOT, "build", "mps2-cortex-m3", "firmware.elf"),
           "M0+ code": os.path.join(ROOT, "build", "mps2-cortex-m0plus", "firmware.elf")}
 
-CYCLE = r"""
-import firmware.app
-import fwfakes
-from firmware.crc16 import crc16_ccitt
-board = fwfakes.make_rig(table_dir=".", extra={"frame_ms": 100})
-app = firmware.app.App(board)
-for k in range(100):
-    app.cycle(); board.clock.t += 100
-    board.serial.nout = 0
-body = b"TC,P,123456"
-cmd = b"$" + body + b"*" + (b"%04X" % crc16_ccitt(body)) + b"\r\n"
+from fwhelpers import BENCH_FAKES, BENCH_RIG  # noqa: E402 (after the sys.path lines)
+
+CYCLE = BENCH_RIG + r"""
 for k in range(NCYC):
     board.serial.feed(cmd)
     app.cycle()
     board.clock.t += 100
     board.serial.nout = 0
-spi = board.buses["spi0"]; i2c = board.buses["i2c0"]
-tx = bytearray(3); rx = bytearray(3); b1 = bytearray(1); b3 = bytearray(3)
-pins = [board.pin(10 + i) for i in range(9)]
-for k in range(FAKEN):
-    for p in pins:
-        p.value(0); tx[0] = 1; spi.write_readinto(tx, rx); p.value(1)
-    for ad in (0x40, 0x41):
-        i2c.readfrom_mem_into(ad, 0x28, b1); i2c.readfrom_mem_into(ad, 0x10, b3)
+""" + BENCH_FAKES + r"""
+fakes_traffic(FAKEN)
 print("DONE", app.cycles)
 """
 

@@ -163,6 +163,35 @@ def run_micropython(script, cwd, path, heap="128K", timeout=120):
     return p.stdout
 
 
+# The benchmarks' cycle (tools/bench_firmware.py on the unix ports, tools/bench_qemu_board.py on the
+# emulated board), written once: an 11-channel rig on the fakes warmed up for 100 cycles, and the P
+# line fed every cycle; then the fakes' own bus traffic without the firmware, to be subtracted.
+BENCH_RIG = r"""
+import firmware.app
+import fwfakes
+from firmware.crc16 import crc16_ccitt
+board = fwfakes.make_rig(table_dir=".", extra={"frame_ms": 100})
+app = firmware.app.App(board)
+for k in range(100):
+    app.cycle(); board.clock.t += 100
+    board.serial.nout = 0
+body = b"TC,P,123456"
+cmd = b"$" + body + b"*" + (b"%04X" % crc16_ccitt(body)) + b"\r\n"
+"""
+
+BENCH_FAKES = r"""
+spi = board.buses["spi0"]; i2c = board.buses["i2c0"]
+tx = bytearray(3); rx = bytearray(3); b1 = bytearray(1); b3 = bytearray(3)
+pins = [board.pin(10 + i) for i in range(9)]
+def fakes_traffic(n):
+    for k in range(n):
+        for p in pins:
+            p.value(0); tx[0] = 1; spi.write_readinto(tx, rx); p.value(1)
+        for ad in (0x40, 0x41):
+            i2c.readfrom_mem_into(ad, 0x28, b1); i2c.readfrom_mem_into(ad, 0x10, b3)
+"""
+
+
 # The steady-state cycle under micropython.heap_lock() on the unix port (prefix
 # "MODE = 'stream'|'modbus'\nN = cycles\n"). Used by test_fw_heaplock.py and by
 # tools/bench_firmware.py (smallest heap that works). Prints
