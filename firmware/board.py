@@ -82,7 +82,7 @@ container for them):
 
 Bad configuration raises ``ValueError`` naming the key: on the board
 ``firmware.bootcfg.load_config`` (terse, ``config <key>: <value>``), on the
-host ``host.boardconfig.load_config`` (the same rules with messages that state
+host ``host.board.config.load_config`` (the same rules with messages that state
 them; ``tcomp flash --config`` and ``tcomp hil --config`` run it); the app lets
 it propagate at start-up so a wrong config never runs.
 """

@@ -1,13 +1,13 @@
-"""The board's boot-time config check: every rule of host/boardconfig.py, terse messages.
+"""The board's boot-time config check: every rule of host/board/config.py, terse messages.
 
-The friendly validator (``host.boardconfig.load_config``: messages that state
+The friendly validator (``host.board.config.load_config``: messages that state
 the rule) runs on the host, in ``tcomp flash --config`` and ``tcomp hil
 --config``; the board imports only this module (and drops it after boot), so
 its flash and RAM do not pay for the explanations. It still refuses every bad
 config the friendly one refuses, with ``ValueError("config <key>: <value>")``
 naming the key (tests/firmware/test_fw_config.py holds both to the same
 cases), so a corrupt config never crashes the firmware nor yields an offset.
-The key tables are shared: host/boardconfig.py imports them from here, and the
+The key tables are shared: host/board/config.py imports them from here, and the
 driver names come from the driver table, firmware/drivers.py.
 """
 from firmware.drivers import DRIVERS

@@ -1,5 +1,5 @@
 """Board entry point: ``tcomp flash`` ships it compiled (firmware/main.mpy) with a root main.py that
-calls ``run([])`` (host/fwbuild.py BOOT_MAIN).
+calls ``run([])`` (host/board/fwbuild.py BOOT_MAIN).
 
 Looks for the user's board file ``tcomp_board.py`` at the root (a copy of one of
 firmware/boards/), falling back to the RP2040 example. Under CPython:

@@ -2,7 +2,7 @@
 #
 # A MicroPython manifest in micropython-lib's style (docs.micropython.org, reference/manifest):
 # metadata() first, then package()/module() calls; include() another manifest, passing options.
-# host/fwbuild.py evaluates it with its own small implementation of those functions (it never
+# host/board/fwbuild.py evaluates it with its own small implementation of those functions (it never
 # imports a firmware module), compiles the listed files with mpy-cross and hands the same .mpy
 # files to `tcomp flash`, the tests, the HIL rig, the benchmarks and the QEMU image. The firmware
 # never imports this file (it is not board code: tests/test_manifest.py keeps it off the board).

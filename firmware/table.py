@@ -34,7 +34,7 @@ _KIND_LINEAR_DIRECT = const(2)
 _KIND_SCREW_REDUCED = const(3)
 _KIND_DYNAMIC = const(4)
 KINDS = {1: "poly_slope", 2: "linear_direct", 3: "screw_reduced", 4: "dynamic"}
-_MAX_FILTERS = const(8)  # dynamic: lag-filtered terms (host/empirical/dynamic.py max_terms)
+_MAX_FILTERS = const(8)  # dynamic: lag-filtered terms (host/learning/empirical/dynamic.py max_terms)
 
 REASON_TRUNCATED = "truncated"
 REASON_MAGIC = "bad magic"

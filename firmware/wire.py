@@ -2,14 +2,14 @@
 letters, protocol and firmware versions, the authorised commands' counter and tag sizes
 (docs/protocol.md).
 
-The host decodes with this module (host/link.py, `tcomp monitor`). The firmware modules that use a
+The host decodes with this module (host/board/link.py, `tcomp monitor`). The firmware modules that use a
 value in the cycle keep a ``_``-prefixed ``const()`` copy, which MicroPython folds into the bytecode,
 so a board loads this module only to answer ``V`` and ``L`` (tests/firmware/test_fw_consts.py checks
 every copy against this file).
 
 Status word, shared by the $TC stream (8 hex digits) and Modbus (two registers): bits 0..15:
 sensor i (channel order) is faulty and excluded; the flag bits above say why the output is what it is.
-Every single-bit constant above SENSOR_MASK here is a status flag (host/link.py lists them by that).
+Every single-bit constant above SENSOR_MASK here is a status flag (host/board/link.py lists them by that).
 """
 
 from micropython import const
@@ -38,7 +38,7 @@ FRAME_KINDS = "HOQTAE"  # hello, offsets, query answer, temperatures, acknowledg
 COMMANDS = "PMQRSVULX"  # position, motion, query, reference, temperatures, hello, upload, latch, reset
 UPLOAD_STEPS = "BDCX"  # U,<step>: begin, data, commit, abort
 # Commands that change the output (U,B U,C U,X L X) end with <counter>,<tag> (docs/protocol.md,
-# "Who may change the output"; firmware/auth.py checks, host/linkauth.py signs)
+# "Who may change the output"; firmware/auth.py checks, host/board/linkauth.py signs)
 SIGNED_COMMANDS = "XL"  # besides the upload's begin, commit and abort
 TAG_BYTES = const(16)  # the tag: HMAC-SHA256's first TAG_BYTES bytes, sent as 2 * TAG_BYTES hex digits
 MAX_COUNTER = const(999999999)  # largest counter: a small int on a 32-bit port even after auth's reserve block

@@ -58,7 +58,7 @@ def interpreter(request):
 
 @pytest.fixture(scope="session")
 def demo_run():
-    from host.runs import load_run
+    from host.data.runs import load_run
     return load_run(os.path.join(ROOT, "data", "demo", "mixed"))
 
 
@@ -88,13 +88,13 @@ def dut(request, make_rig):
         from hil_tests.rig.realport import RealDut
         kf = request.config.getoption("--key")
         if kf:
-            from host.linkauth import read_key
+            from host.board.linkauth import read_key
         d = RealDut(port, request.config.getoption("--baud"), read_key(kf) if kf else None)
         yield d
         d.close()
         return
     from hil_tests.rig.boards import export, rig_config, poly_slope_for_run
-    from host.runs import load_run
+    from host.data.runs import load_run
     run = load_run(os.path.join(ROOT, "data", "demo", "mixed"))
     sensors = ["T1", "T2", "T4"]
     table = export(poly_slope_for_run(run, sensors)).table

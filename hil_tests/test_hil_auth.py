@@ -21,7 +21,7 @@ import zlib
 import pytest
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from host.linkauth import LinkSigner, stream_line
+from host.board.linkauth import LinkSigner, stream_line
 
 N_EXAMPLES = 250 if os.environ.get("TCOMP_SLOW") else 50
 

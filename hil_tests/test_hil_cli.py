@@ -20,7 +20,7 @@ SENSORS = ["T1", "T2", "T4"]
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory, demo_run):
     """The first 20 minutes of the twin run as a run folder."""
-    from host.runs import Errors, Run, Temperatures, load_run, write_run
+    from host.data.runs import Errors, Run, Temperatures, load_run, write_run
     t, e = demo_run.temperatures, demo_run.errors
     kt, ke = t.time_s <= 1200, e.time_s <= 1200
     sub = Run(demo_run.meta, Temperatures(t.time_s[kt], t.names, t.values[kt]),
@@ -32,7 +32,7 @@ def short_run(tmp_path_factory, demo_run):
 
 def test_tcomp_hil_answers_every_errors_row(tmp_path, short_run, interpreter, capsys):
     from host.cli import main as tcomp
-    from host.models import load_model
+    from host.learning.documents import load_model
     run, folder = short_run
     doc = poly_slope_for_run(run, SENSORS, seed=3)
     ex = export(doc)
@@ -60,8 +60,8 @@ def test_tcomp_hil_answers_every_errors_row(tmp_path, short_run, interpreter, ca
 def test_tcomp_hil_on_the_emulated_board(tmp_path, demo_run, capsys):
     """`tcomp hil --interpreter qemu`: 4 minutes of the twin on the emulated Cortex-M3 board."""
     from host.cli import main as tcomp
-    from host.models import load_model
-    from host.runs import Errors, Run, Temperatures, load_run, write_run
+    from host.learning.documents import load_model
+    from host.data.runs import Errors, Run, Temperatures, load_run, write_run
     t, e = demo_run.temperatures, demo_run.errors
     kt, ke = t.time_s <= 240, e.time_s <= 240
     folder = str(tmp_path / "short")
@@ -159,7 +159,7 @@ def test_tcomp_monitor_latch_declares_a_cold_start(tmp_path, demo_run, capsys):
     fixed = poly_slope_for_run(demo_run, SENSORS, seed=3)
     run_start = json.loads(json.dumps(fixed))
     run_start["thermal"]["reference"] = "run_start"
-    from host.linkauth import generate_key, write_key
+    from host.board.linkauth import generate_key, write_key
     key = generate_key()
     key_file = str(tmp_path / "board.key")
     write_key(key_file, key)

@@ -23,7 +23,7 @@ from hil_tests.conftest import SLOW
 from hil_tests.rig.boards import export, rig_config
 from hil_tests.rig.play import play, rtd_bound_K
 from firmware.wire import CLAMPED
-from host.link import RATE_LIMITED
+from host.board.link import RATE_LIMITED
 
 pytestmark = pytest.mark.rig
 
@@ -34,7 +34,7 @@ RUN = os.path.join(os.path.dirname(HERE), "data", "fl_thermal")
 
 def _subset(run, hours, channel):
     """The first ``hours`` of ``run``, errors of one channel only."""
-    from host.runs import Errors, Run, Spindle, Temperatures
+    from host.data.runs import Errors, Run, Spindle, Temperatures
     t = run.temperatures
     keep = t.time_s <= hours * 3600
     e = run.errors
@@ -47,8 +47,8 @@ def _subset(run, hours, channel):
 
 
 def test_dynamic_table_on_the_rig_matches_host_model(make_rig):
-    from host.models import load_model
-    from host.runs import load_run
+    from host.learning.documents import load_model
+    from host.data.runs import load_run
     with open(FIXTURE) as fh:
         doc = json.load(fh)
     run = _subset(load_run(RUN), 12.0 if SLOW else 3.0, doc["channel"])

@@ -14,14 +14,14 @@ import pytest
 from hil_tests.conftest import SLOW
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config, screw_doc
 from hil_tests.rig.play import play, poly_slope_bound_um
-from host.link import RATE_LIMITED
+from host.board.link import RATE_LIMITED
 
 pytestmark = pytest.mark.rig
 
 
 def _subset(run, hours):
     """The first ``hours`` of a run (CI uses a part of the 5 h twin run; TCOMP_SLOW=1 the whole)."""
-    from host.runs import Errors, Run, Temperatures
+    from host.data.runs import Errors, Run, Temperatures
     t = run.temperatures
     keep = t.time_s <= hours * 3600
     e = run.errors
@@ -38,7 +38,7 @@ QEMU_HOURS = 0.05
 
 @pytest.mark.parametrize("interpreter", ["micropython", "cpython", "qemu"])
 def test_e2e_poly_slope_matches_host_model(make_rig, demo_run, interpreter):
-    from host.models import load_model
+    from host.learning.documents import load_model
     run = demo_run if SLOW and interpreter != "qemu" else _subset(demo_run, QEMU_HOURS if interpreter == "qemu" else 0.5)
     sensors = ["T1", "T2", "T4"]  # two on MAX31865 (SPI), one on an ADS122C04 (I2C)
     doc = poly_slope_for_run(run, sensors)

@@ -16,7 +16,7 @@ import pytest
 from hil_tests.conftest import ROOT
 from hil_tests.rig.boards import rig_config
 from hil_tests.rig.play import play, poly_slope_bound_um
-from host.link import RATE_LIMITED
+from host.board.link import RATE_LIMITED
 from firmware.wire import CLAMPED, EXTRAPOLATING
 
 pytestmark = pytest.mark.rig
@@ -27,7 +27,7 @@ WINDOW_H = (1.0, 2.0)  # hours of the hot run played (the nut is above the train
 
 def _window(run, h0, h1):
     """The part of ``run`` between ``h0`` and ``h1`` hours, times shifted to start at 0."""
-    from host.runs import Errors, Run, Temperatures
+    from host.data.runs import Errors, Run, Temperatures
     t = run.temperatures
     keep = (t.time_s >= h0 * 3600) & (t.time_s <= h1 * 3600)
     e = run.errors
@@ -53,8 +53,8 @@ def _bound(ex, doc, run, pos_mm):
 
 
 def test_hotter_run_inside_the_certified_envelope_matches_the_host_model(make_rig, fitted):
-    from host.models import load_model
-    from host.runs import load_run
+    from host.learning.documents import load_model
+    from host.data.runs import load_run
     from models_export.export import export_model
     hot = load_run(os.path.join(ROOT, "data", "demo", "v15000_r210_490"))
     run = _window(hot, *WINDOW_H)
@@ -92,8 +92,8 @@ def test_the_training_range_as_envelope_would_clamp_and_miss(fitted):
     training range the same window clamps and the offsets leave the bound the rig test holds."""
     from firmware.evaluate import Evaluator
     from firmware.table import parse_table
-    from host.models import load_model
-    from host.runs import load_run
+    from host.learning.documents import load_model
+    from host.data.runs import load_run
     from models_export.export import export_model
     run = _window(load_run(os.path.join(ROOT, "data", "demo", "v15000_r210_490")), *WINDOW_H)
     pred = np.asarray(load_model(fitted).predict(run))

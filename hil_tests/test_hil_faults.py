@@ -12,7 +12,7 @@ import zlib
 import pytest
 
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
-from host.link import FALLBACK, HELD, RATE_LIMITED, RECOVERING
+from host.board.link import FALLBACK, HELD, RATE_LIMITED, RECOVERING
 
 
 pytestmark = pytest.mark.rig

@@ -13,7 +13,7 @@ import pytest
 import serial
 
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
-from host.link import StreamDecoder, command
+from host.board.link import StreamDecoder, command
 
 pytestmark = [pytest.mark.rig, pytest.mark.micropython]
 
@@ -52,7 +52,7 @@ def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run, capfd):
         rc = tcomp(["flash", "--port", link, "--table", str(tmp_path / "table.bin"),
                     "--config", str(tmp_path / "board.json"), "--key", str(tmp_path / "board.key")])
         assert rc == 0
-    from host.linkauth import LinkSigner, read_key
+    from host.board.linkauth import LinkSigner, read_key
     key = read_key(str(tmp_path / "board.key"))  # created by tcomp flash, readable by its owner only
     assert os.stat(tmp_path / "board.key").st_mode & 0o777 == 0o600
     assert (flash / "tables" / "key.bin").read_bytes() == key

@@ -10,7 +10,7 @@ import os
 
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from host.link import command, crc16
+from host.board.link import command, crc16
 
 N_EXAMPLES = 300 if os.environ.get("TCOMP_SLOW") else 60
 POS_LIMIT = 100000000

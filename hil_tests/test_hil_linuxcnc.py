@@ -35,7 +35,7 @@ import pytest
 from hil_tests.lcnc.tap import LinkTap
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
 from hil_tests.rig.harness import Rig
-from host.link import FALLBACK, HELD, RATE_LIMITED, RECOVERING, SENSOR_MASK
+from host.board.link import FALLBACK, HELD, RATE_LIMITED, RECOVERING, SENSOR_MASK
 
 pytestmark = pytest.mark.rig
 
@@ -140,7 +140,7 @@ class Board:
 
     def __init__(self, workdir, table, mode):
         cfg = rig_config(SENSORS, mode=mode, slew_um_per_s=SLEW, hold_ms=300)
-        from host.linkauth import generate_key, write_key
+        from host.board.linkauth import generate_key, write_key
         key = generate_key()  # provisioned into the board's flash, as tcomp flash --key does
         self.key_file = os.path.join(workdir, "board.key")
         write_key(self.key_file, key)

@@ -1,7 +1,7 @@
 """Scenario 4: table update over the link with the power cut (process killed) at random points.
 
 Each trial uploads the table not in force (U,B / U,D... / U,C, authorised with
-the board's key: host/linkauth.py) while the firmware runs, and SIGKILLs the
+the board's key: host/board/linkauth.py) while the firmware runs, and SIGKILLs the
 process at a random step, a random few milliseconds after sending it. After restart the hello frame must name a
 slot and a CRC of either the complete old or the complete new table, the
 active slot file must be byte-identical to that table, and the firmware's

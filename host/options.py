@@ -7,7 +7,7 @@ any key is accepted and the value is read as JSON (numbers, true/false, lists) o
 import json
 import math
 
-from host.cli import UserError
+from host.errors import UserError
 
 
 def split_option(item, expected="KEY=VALUE", flag="--option"):

@@ -20,7 +20,7 @@ import shutil
 import stat
 import tempfile
 
-from host.cli import UserError, check_output, check_output_dir
+from host.errors import UserError, check_output, check_output_dir
 
 _PART = ".tcomp-part-"
 

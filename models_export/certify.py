@@ -1,7 +1,7 @@
 """Exact interval arithmetic that certifies the integer evaluation (scales, limbs, error intervals, headroom).
 
 Interval arithmetic and the certificate's building blocks (models_export/plan.py applies them kind by kind;
-models_export/model.py reads the document). Everything mirrors firmware/evaluate.py operation by operation (same
+models_export/exact.py reads the document). Everything mirrors firmware/evaluate.py operation by operation (same
 order, same limb splits, same shifts). Two things are certified, both with
 exact rational arithmetic (``fractions.Fraction``; the model's float
 coefficients are converted exactly):

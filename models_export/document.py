@@ -1,7 +1,7 @@
 """What the exporter reads of a model document (docs/model-format.md) beyond its terms: the hash.
 
 The exporter depends on the document format only, never on the host classes that fit models;
-host/models.py uses this same hash when it saves a document.
+host/learning/documents.py uses this same hash when it saves a document.
 """
 import hashlib
 import json

@@ -4,7 +4,7 @@ import math
 from firmware.crc32 import crc32
 from models_export.certify import LIMITS_UM, OU_PER_UM, ExportError
 from models_export.document import document_hash
-from models_export.model import DEFAULT_ENVELOPE_MARGIN_K, Model
+from models_export.exact import DEFAULT_ENVELOPE_MARGIN_K, Model
 from models_export.plan import Planner
 from models_export.tableformat import VERSION, pack
 

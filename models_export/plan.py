@@ -382,7 +382,7 @@ class Planner:
         air, c0, c1, d_air = self._screw_air(red, A, M)
         # the state is the heat response (in [0, state_max_K]) plus the air response, a convex combination of
         # air readings (A >= 0, c0, c1 >= 0, row sums of [A c0 c1] <= 1, 0 inside the air range): together
-        # [a_min, a_max + state_max_K] (host/screw/reduced.py)
+        # [a_min, a_max + state_max_K] (host/learning/screw/reduced.py)
         Tlo_K = F(d_air[0], 1000)
         Thi_K = F(Tmax) + F(d_air[1], 1000)
         self.s = dict(M=M, A=A, B=B, edges=edges, edges_um=edges_um, fixed=fixed, fe=fe, Tmax=Thi_K, Tlo=Tlo_K, umax=umax,

@@ -12,7 +12,7 @@ PRODUCT = set(LAYERS)
 TEST_SIDE = ("hil_tests", "tests", "tools")
 # The one production -> test-side edge: `tcomp hil` drives the simulated rig that lives with the HIL
 # tests. It is imported inside run(), so no other verb (nor `tcomp --help`) loads the rig.
-LAZY_EXCEPTIONS = {("host.commands.hil", "hil_tests.rig")}
+LAZY_EXCEPTIONS = {("host.cli.verbs.hil", "hil_tests.rig")}
 
 
 def imports(source):
@@ -66,16 +66,16 @@ def test_every_production_module_keeps_to_its_layer():
 
 
 def test_the_checker_catches_each_kind_of_breach():
-    assert violations("firmware.app", "from host.link import STATUS_BITS\n") == ["firmware.app:1 imports host.link"]
-    assert violations("models_export.export", "def f():\n    from host.models import x\n") == [
-        "models_export.export:2 imports host.models"]
-    assert violations("host.commands.monitor", "import hil_tests.rig.harness\n") == [
-        "host.commands.monitor:1 imports hil_tests.rig.harness"]
+    assert violations("firmware.app", "from host.board.link import STATUS_BITS\n") == ["firmware.app:1 imports host.board.link"]
+    assert violations("models_export.export", "def f():\n    from host.learning.documents import x\n") == [
+        "models_export.export:2 imports host.learning.documents"]
+    assert violations("host.cli.verbs.monitor", "import hil_tests.rig.harness\n") == [
+        "host.cli.verbs.monitor:1 imports hil_tests.rig.harness"]
     assert violations("host.x", "from hil_tests.fixtures.samples import screw_doc\n") != []
     # the exception is lazy only: at module level it is a breach too
-    assert violations("host.commands.hil", "from hil_tests.rig.play import play\n") != []
-    assert violations("host.commands.hil", "def run():\n    from hil_tests.rig.play import play\n") == []
-    assert violations("host.empirical.fit", "import numpy\nfrom models_export import export_model\n") == []
+    assert violations("host.cli.verbs.hil", "from hil_tests.rig.play import play\n") != []
+    assert violations("host.cli.verbs.hil", "def run():\n    from hil_tests.rig.play import play\n") == []
+    assert violations("host.learning.empirical.fit", "import numpy\nfrom models_export import export_model\n") == []
 
 
 def test_the_lazy_exception_is_still_needed():
@@ -83,3 +83,69 @@ def test_the_lazy_exception_is_still_needed():
         with open(os.path.join(ROOT, *module.split(".")) + ".py", encoding="utf-8") as fh:
             names = [name for name, _, at_top in imports(fh.read())]
         assert any(n == target or n.startswith(target + ".") for n in names), (module, target)
+
+
+# Rooms inside host/ (docs/architecture.md), each with what it may import of ours and of the scientific stack.
+# "base" is host's bottom: the package itself (version), errors, options, outputs. A room may import its own
+# modules. The board side runs on the controller with the board-side install: no numpy, scipy or matplotlib.
+SCIENCE = ("numpy", "scipy", "matplotlib")
+BASE = ("host", "host.errors", "host.options", "host.outputs")
+HOST_ROOMS = {
+    "base": (BASE, ()),
+    "host.data": (BASE, SCIENCE),
+    "host.twin": (BASE + ("host.data",), SCIENCE),  # never the learning room: the twin must disagree on its own
+    "host.learning": (BASE + ("host.data", "models_export", "firmware"), SCIENCE),
+    "host.board": (BASE + ("firmware", "models_export"), ()),
+    "host.cli": None,  # the top: any room
+}
+
+
+def host_room(module):
+    """The room of a host module: 'base', 'host.data', ..., by its dotted name."""
+    parts = module.split(".")
+    if module in BASE or len(parts) < 2 or module == "host.__main__":
+        return "base" if module != "host.__main__" else "host.cli"
+    return "host." + parts[1]
+
+
+def room_violations(module, source):
+    """Room rule breaches of a host module; [] when it keeps them."""
+    rule = HOST_ROOMS[host_room(module)]
+    if rule is None:
+        return []
+    allowed, science = rule
+    room = host_room(module)
+    bad = []
+    for name, line, _ in imports(source):
+        top = name.partition(".")[0]
+        if top == "host":
+            ok = host_room(name) == room or name in allowed or any(
+                name.startswith(a + ".") for a in allowed if a.startswith("host."))
+        elif top in SCIENCE:
+            ok = top in science
+        elif top in ("models_export", "firmware"):
+            ok = top in allowed
+        else:
+            continue
+        if not ok:
+            bad.append("%s:%d imports %s" % (module, line, name))
+    return bad
+
+
+def test_every_host_module_keeps_to_its_room():
+    bad = []
+    for module, path in _sources("host"):
+        with open(path, encoding="utf-8") as fh:
+            bad += room_violations(module, fh.read())
+    assert bad == []
+
+
+def test_the_room_checker_catches_each_kind_of_breach():
+    assert room_violations("host.board.link", "import numpy as np\n") == ["host.board.link:1 imports numpy"]
+    assert room_violations("host.board.linuxcnc.bridge", "def f():\n    from host.data.runs import load_run\n") == [
+        "host.board.linuxcnc.bridge:2 imports host.data.runs"]
+    assert room_violations("host.twin.screw", "from host.learning.screw import heat\n") != []
+    assert room_violations("host.learning.screw.heat", "from host.cli import main\n") != []
+    assert room_violations("host.errors", "import numpy\n") != []
+    assert room_violations("host.data.runs", "from host.errors import UserError\nimport numpy\n") == []
+    assert room_violations("host.cli.verbs.fit", "import numpy\nfrom host.twin import simulate_run\n") == []

@@ -1,4 +1,4 @@
-"""One manifest says what goes on the board (firmware/manifest.py, built by host/fwbuild.py).
+"""One manifest says what goes on the board (firmware/manifest.py, built by host/board/fwbuild.py).
 
 Every firmware file is either listed or explicitly left off; the loader follows MicroPython's
 manifest API without importing firmware; the build is one option set in a content-keyed cache; and
@@ -10,8 +10,8 @@ import shutil
 
 import pytest
 
-from host import fwbuild
-from host.fwbuild import BOARD_MANIFEST, BuildError, build, load_manifest, not_on_board
+from host.board import fwbuild
+from host.board.fwbuild import BOARD_MANIFEST, BuildError, build, load_manifest, not_on_board
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -171,8 +171,8 @@ def test_flash_tests_and_rig_get_the_same_firmware_bytes(tmp_path):
     finally:
         sys.path.pop(0)
     from hil_tests.rig.mpybuild import rig_build
-    from host.commands.flash import stage
-    from host.fwbuild import BOOT_MAIN
+    from host.cli.verbs.flash import stage
+    from host.board.fwbuild import BOOT_MAIN
 
     board = {t: open(p, "rb").read() for t, p in build().files}
     files, _ = stage(str(tmp_path))

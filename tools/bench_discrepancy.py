@@ -12,7 +12,7 @@ at a random laser noise level (0.3-1.0 um). Every other null seed writes
 bidirectional sweeps with a zero reversal value, so ``reversal_error`` is tested
 on the null too. On the null it also prints the base model's held-out RMSE over
 the laser noise (budget <= 1.25) and the residual diagnostic's strongest
-|partial r| (host/discrepancy/unexplained.py: its threshold is set above what the
+|partial r| (host/learning/discrepancy/unexplained.py: its threshold is set above what the
 null reaches). Prints the rates and wall times (budget: 60 s on four runs, 2 cores).
 
     .venv/bin/python tools/bench_discrepancy.py [--seeds 40] [--first-seed 1000] [--jobs 2]
@@ -26,11 +26,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.discrepancy import unexplained  # noqa: E402
-from host.discrepancy.report import residual_diagnostic  # noqa: E402
-from host.discrepancy.screw_family import ScrewFamily  # noqa: E402
-from host.discrepancy.workflow import discover  # noqa: E402
-from host.sim import EFFECTS, simulate_run  # noqa: E402
+from host.learning.discrepancy import unexplained  # noqa: E402
+from host.learning.discrepancy.report import residual_diagnostic  # noqa: E402
+from host.learning.discrepancy.screw_family import ScrewFamily  # noqa: E402
+from host.learning.discrepancy.workflow import discover  # noqa: E402
+from host.twin import EFFECTS, simulate_run  # noqa: E402
 
 PROTOCOLS = ("v8000_r210_490", "v6500_r210_490", "v15000_r210_490", "v8000_r0_700")  # literature states 1, 2, 3, 5
 PAIRS = (("ambient_expansion", "moving_convection"), ("bearing_heat", "reversal_error"),

@@ -5,7 +5,7 @@
 Export: wall time of export_model per model kind (sample documents from
 hil_tests.fixtures.samples), table size, certified error. Evaluation: microseconds
 per call of update / offset_at / ref_offset+slope / step on CPython and on the
-MicroPython TCOMP_MICROPYTHON chooses (the firmware's board build, host/fwbuild.py, 64 kB heap),
+MicroPython TCOMP_MICROPYTHON chooses (the firmware's board build, host/board/fwbuild.py, 64 kB heap),
 instructions per call under valgrind/callgrind (stable on a loaded machine),
 best of several repetitions (the machine may be shared),
 and the .mpy size of the three firmware modules as shipped (the board build: -O3, bytecode
@@ -130,7 +130,7 @@ def main():
     mp_ok = MICROPYTHON.exists() and (BIN / "mpy-cross").exists()
     tmp = Path(tempfile.mkdtemp(prefix="bench_export_"))
     if mp_ok:
-        from host.fwbuild import build
+        from host.board.fwbuild import build
         board = build()
         mpypath = "%s:%s" % (tmp, board.root)  # the firmware as tcomp flash ships it
     print("export (CPython %s)" % sys.version.split()[0])
@@ -185,7 +185,7 @@ def main():
                 figs.append("%s %s" % (name, "%.0f" % ir if ir is not None else "n/a"))
             print("  %-36s %s" % (label, " | ".join(figs)))
     if mp_ok:
-        print("\n.mpy size as shipped (board build, host/fwbuild.py):")
+        print("\n.mpy size as shipped (board build, host/board/fwbuild.py):")
         total = 0
         sizes = {t: os.path.getsize(p) for t, p in board.files}
         for name in ("crc32", "table", "evaluate"):

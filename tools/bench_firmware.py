@@ -13,7 +13,7 @@ Prints
 - instructions per steady-state cycle under ``valgrind --tool=callgrind``
   (stable): the difference in total instructions between two runs with
   different cycle counts, divided by the difference;
-- the size of every file firmware/manifest.py puts on a board, as host/fwbuild.py
+- the size of every file firmware/manifest.py puts on a board, as host/board/fwbuild.py
   builds it for ``tcomp flash`` (-O3, bytecode only: byte for byte what
   ``mpy-cross -march=armv6m`` gives, the firmware has no native code), next to
   the same files at -O0 (the firmware has no asserts or ``__debug__`` blocks,
@@ -157,9 +157,9 @@ def eval_cost(work, mpy, n, valgrind):
 
 
 def board_sizes(opt_args=None, **options):
-    """[(path under firmware/, .mpy bytes)] of the board build (host/fwbuild.py, firmware/manifest.py
+    """[(path under firmware/, .mpy bytes)] of the board build (host/board/fwbuild.py, firmware/manifest.py
     with ``options``); ``opt_args``: the same files compiled with other mpy-cross options instead."""
-    from host.fwbuild import build, load_manifest, mpy_cross
+    from host.board.fwbuild import build, load_manifest, mpy_cross
     if opt_args is None:
         return [(t[len("firmware/"):-4] + ".py", os.path.getsize(p)) for t, p in build(**options).files]
     out = []
@@ -311,8 +311,8 @@ def main():
             print("  instructions per cycle (callgrind, steady state): %d" % ((ib - ia) // (b - a)))
         else:
             print("  instructions per cycle: skipped (valgrind not run)")
-        from host.fwbuild import MPY_CROSS_ARGS
-        print("board build sizes (firmware/manifest.py via host/fwbuild.py, mpy-cross %s as shipped; -O0 for"
+        from host.board.fwbuild import MPY_CROSS_ARGS
+        print("board build sizes (firmware/manifest.py via host/board/fwbuild.py, mpy-cross %s as shipped; -O0 for"
               " comparison; = -march=armv6m bytes):" % " ".join(MPY_CROSS_ARGS))
         print("  %-24s %8s %8s" % ("module", "-O0", "-O3"))
         for (rel, s0), (_, s3) in zip(sizes[0], sizes[3]):

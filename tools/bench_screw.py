@@ -1,4 +1,4 @@
-"""Benchmarks of the screw model (host/screw): prints figures, asserts nothing.
+"""Benchmarks of the screw model (host/learning/screw): prints figures, asserts nothing.
 
     .venv/bin/python tools/bench_screw.py [--runs DIR...]
 
@@ -22,11 +22,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.runs import Motion, load_run  # noqa: E402
-from host.screw import heat  # noqa: E402
-from host.screw.identify import IdentifiabilityWarning  # noqa: E402
-from host.screw.model import ScrewModel  # noqa: E402
-from host.screw.reduced import reduction_error  # noqa: E402
+from host.data.runs import Motion, load_run  # noqa: E402
+from host.learning.screw import heat  # noqa: E402
+from host.learning.screw.identify import IdentifiabilityWarning  # noqa: E402
+from host.learning.screw.screwmodel import ScrewModel  # noqa: E402
+from host.learning.screw.reduced import reduction_error  # noqa: E402
 
 DEMO = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "demo")
 THREE = ("v8000_r210_490", "v6500_r210_490", "v8000_r0_700")
@@ -84,9 +84,9 @@ def bench_reduction(model, runs):
 
 def bench_heldout(seeds=(11, 12, 13), noise_um=0.5):
     try:
-        from host.sim import simulate_run
+        from host.twin import simulate_run
     except ImportError:
-        print("held-out on twin runs: host.sim not available, skipped")
+        print("held-out on twin runs: host.twin not available, skipped")
         return
     states = ("v8000_r210_490", "v6500_r210_490", "v15000_r210_490", "v8000_r0_700")
     print("held-out RMSE on twin runs of states 1, 2, 3, 5 (drifting air, no hidden effect, noise %.2f um), "

@@ -5,7 +5,7 @@ Prints wall time, subset-model evaluations per second (fit on the training run
 as a Python loop of np.linalg.lstsq fits for comparison.
 
 Data (``--source``):
-  twin       (default) three digital-twin runs (host/sim) at feeds 8000, 6500 and
+  twin       (default) three digital-twin runs (host/twin) at feeds 8000, 6500 and
              15000 mm/min. The twin has 13 structure sensors; 10 more are derived
              as sensors mounted between two of them: a weighted mean of a pair of
              twin sensors plus 0.02 K white noise. That gives a dense, strongly
@@ -29,8 +29,8 @@ N_SENSORS = 23
 
 
 def twin_arrays(target, seed=0):
-    from host.empirical.targets import training_arrays
-    from host.sim import simulate_run
+    from host.learning.empirical.targets import training_arrays
+    from host.twin import simulate_run
 
     runs = [simulate_run(protocol=p, seed=seed + i) for i, p in enumerate(PROTOCOLS)]
     base = training_arrays(runs, target=target)
@@ -68,7 +68,7 @@ def batch_vs_loop(arrays, clusters, limit=5000, repeats=5):
     Python loop of np.linalg.lstsq fits, on the same combinations -> (m, batch_s, loop_s)."""
     import itertools
 
-    from host.empirical.selectors.linalg import SubsetFitter, subset_rmse
+    from host.learning.empirical.selectors.linalg import SubsetFitter, subset_rmse
 
     (Xtr, ytr, names), tests = arrays[0], arrays[1:]
     idx = [[names.index(s) for s in c] for c in clusters]
@@ -97,7 +97,7 @@ def main(argv=None):
     ap.add_argument("--seeds", type=int, default=3, help="GA seeds to run (timings per seed)")
     args = ap.parse_args(argv)
 
-    from host.empirical.selectors import select
+    from host.learning.empirical.selectors import select
 
     t0 = time.perf_counter()
     if args.source == "twin":

@@ -42,7 +42,7 @@ def summarise(run_dir, pred_csv, hil_json, certified_um):
 
     import numpy as np
 
-    from host.runs import load_run
+    from host.data.runs import load_run
 
     run = load_run(run_dir)
     with open(pred_csv) as fh:

@@ -23,9 +23,9 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)
 
-from host.empirical.compare import LOCO_METHODS, METHODS, case_split, findings, leave_one_cycle_out, public, run_case, write_plots  # noqa: E402
-from host.empirical.schedule import cycles  # noqa: E402
-from host.runs import load_run  # noqa: E402
+from host.learning.empirical.compare import LOCO_METHODS, METHODS, case_split, findings, leave_one_cycle_out, public, run_case, write_plots  # noqa: E402
+from host.learning.empirical.schedule import cycles  # noqa: E402
+from host.data.runs import load_run  # noqa: E402
 
 LABELS = {
     "mlr": "MLR, all sensors (baseline)",
@@ -191,8 +191,8 @@ def render_demo(L, folder):
     """Literature-style table on the bundled twin runs: fit on the first run, predict each other run."""
     import glob
 
-    from host.empirical.compare import cases_runs
-    from host.runs import load_runs
+    from host.learning.empirical.compare import cases_runs
+    from host.data.runs import load_runs
 
     runs = load_runs(sorted(d for d in glob.glob(os.path.join(folder, "*")) if os.path.isdir(d)))
     if len(runs) < 2:

@@ -4,7 +4,7 @@ The Makefile installs micropython-rp2-stubs and micropython-stdlib-stubs into
 .stubs/; the latter carries a MicroPython typeshed (.stubs/stdlib) that
 replaces CPython's, so a call that exists only on CPython is an error here.
 The files checked against MicroPython are the ones firmware/manifest.py puts
-on a board (host/fwbuild.py reads it); the files it leaves off (NOT_ON_BOARD:
+on a board (host/board/fwbuild.py reads it); the files it leaves off (NOT_ON_BOARD:
 linux_adapters.py and boards/linux.py, CPython-only with fcntl, ctypes,
 pyserial, smbus2; wire.py, which the host reads) are checked separately
 against the ordinary CPython typeshed. The manifest itself is build input
@@ -68,7 +68,7 @@ def main():
     common = {"pythonVersion": "3.10", "reportMissingModuleSource": "none",
               "reportAttributeAccessIssue": "error", "reportOptionalMemberAccess": "error"}
     sys.path.insert(0, ROOT)
-    from host.fwbuild import BOARD_MANIFEST, load_manifest, not_on_board
+    from host.board.fwbuild import BOARD_MANIFEST, load_manifest, not_on_board
     board = [e.source for e in load_manifest(BOARD_MANIFEST).entries]
     host_side = [os.path.join(ROOT, "firmware", p) for p in sorted(not_on_board()) if p != "manifest.py"]
     mp = dict(common, include=board, typeshedPath=STUBS, stubPath=STUBS, pythonPlatform="Linux",

@@ -15,7 +15,7 @@ import threading
 import time
 import tty
 
-from host.link import FrameError, parse_line
+from host.board.link import FrameError, parse_line
 
 
 class LinkTap(threading.Thread):

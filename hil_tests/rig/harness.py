@@ -29,7 +29,7 @@ from typing import Any
 import serial
 
 from hil_tests.rig import interpreters
-from host.link import StreamDecoder, command
+from host.board.link import StreamDecoder, command
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MP_DIR = os.path.join(ROOT, "hil_tests", "mp")
@@ -181,7 +181,7 @@ class SerialReader(threading.Thread):
 class LinkClient:
     """The controller's side of the link, shared by every device under test (the rig, a real port):
     needs ``ser`` (the pyserial port), ``reader`` (its SerialReader), ``advance``, ``t_ms`` and, for
-    commands that change the output, ``signer`` (host.linkauth.LinkSigner with the board's key)."""
+    commands that change the output, ``signer`` (host.board.linkauth.LinkSigner with the board's key)."""
 
     request_step_ms = 10
     request_timeout_s = 10.0
@@ -260,7 +260,7 @@ class Rig(LinkClient):
                 f.write(table)
             with open(os.path.join(tdir, "active"), "w") as f:
                 f.write(slot)
-        from host.linkauth import LinkSigner, generate_key
+        from host.board.linkauth import LinkSigner, generate_key
         key = generate_key() if key is None else key
         self.signer = LinkSigner(key) if key else None
         if key:

@@ -8,7 +8,7 @@ limiter settles on the run's first temperatures before t = 0).
 """
 import math
 
-from host.link import FALLBACK, HELD, RECOVERING
+from host.board.link import FALLBACK, HELD, RECOVERING
 
 
 def sensor_rows(run, sensors):

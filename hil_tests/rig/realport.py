@@ -12,9 +12,9 @@ class RealDut(LinkClient):
     request_timeout_s = 5.0
 
     def __init__(self, port, baud=115200, key=None):
-        """``key``: the board's key (host.linkauth.read_key), for commands that change the output."""
+        """``key``: the board's key (host.board.linkauth.read_key), for commands that change the output."""
         if key:
-            from host.linkauth import LinkSigner
+            from host.board.linkauth import LinkSigner
             self.signer = LinkSigner(key)
         self.ser = serial.serial_for_url(port, baud, timeout=0)  # a device path or a pySerial URL
         self.reader = SerialReader(self.ser, True)

@@ -8,7 +8,7 @@ import hooks (files.c) serve from flash: the loader reads them with MP_READER_IS
 bytecode, strings and bytes run in place and only the objects (functions, classes, dicts)
 take heap, as with stock frozen modules.
 
-``firmware``: the modules firmware/manifest.py lists, built by host/fwbuild.py (the one
+``firmware``: the modules firmware/manifest.py lists, built by host/board/fwbuild.py (the one
 .mpy build), with this image's board file firmware/boards/mps2_an385.py. ``rig``:
 hil_tests/manifest.py (the firmware plus the chip simulators and the launcher) plus the
 emulated board's glue (qemu_board.py, minijson.py), for ``tcomp hil --interpreter qemu``.
@@ -31,11 +31,11 @@ class ManifestError(Exception):
 
 
 def modules(which):
-    """[(path in the image, .mpy file)]: host/fwbuild.py builds firmware/manifest.py (with this image's
+    """[(path in the image, .mpy file)]: host/board/fwbuild.py builds firmware/manifest.py (with this image's
     board file) or hil_tests/manifest.py (the rig: firmware + simulators + dut.py), the one build the
     tests, the rig and `tcomp flash` use; the rig image adds its board-side glue."""
     sys.path.insert(0, ROOT)
-    from host.fwbuild import BuildError, build
+    from host.board.fwbuild import BuildError, build
     try:
         if which == "rig":
             b = build(os.path.join(ROOT, "hil_tests", "manifest.py"))

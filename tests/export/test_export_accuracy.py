@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from firmware.evaluate import CLAMP_POSITION, CLAMP_STATE, CLAMP_TRAVEL, Evaluator
 from firmware.table import parse_table
-from host.models import document_hash
+from host.learning.documents import document_hash
 from models_export import export_model
 from hil_tests.fixtures.reference import Reference
 from hil_tests.fixtures.samples import screw_doc

@@ -1,6 +1,6 @@
 """The dynamic table (kind 4): lag filters as integer recurrences, certified against the exact model.
 
-The reference is the host's recurrence (host/empirical/dynamic.py) in doubles on the inputs the
+The reference is the host's recurrence (host/learning/empirical/dynamic.py) in doubles on the inputs the
 firmware sees (temperatures clamped to the envelope minus the latched reference, spindle speed and
 feed clamped to theirs): y <- y + a (u_prev - y) with a = 1 - exp(-dt/tau), started at rest at the
 latch. The firmware's output must stay within the exporter's certificate at every step, however

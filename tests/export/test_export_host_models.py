@@ -9,8 +9,8 @@ import pytest
 from firmware.evaluate import ACC_AMUL, Evaluator
 from firmware.table import parse_table
 from host.cli import main
-from host.models import document_hash, load_model, read_document
-from host.runs import load_run
+from host.learning.documents import document_hash, load_model, read_document
+from host.data.runs import load_run
 from models_export import export_model
 from hil_tests.fixtures.reference import Reference
 
@@ -63,8 +63,8 @@ def test_poly_slope_from_tcomp_fit_matches_host_model(fitted, reference):
 
 
 def test_screw_from_tcomp_fit_matches_host_reduced_model(fitted):
-    from host.screw import heat
-    from host.screw.reduced import reduced_error_um
+    from host.learning.screw import heat
+    from host.learning.screw.reduced import reduced_error_um
 
     doc = fitted["screw"]
     red = doc["thermal"]["reduced"]

@@ -78,14 +78,14 @@ def provision(table_dir, key=TEST_KEY):
 
 
 def scmd(app, *fields, extra=b"", key=TEST_KEY, counter=None):
-    """An authorised command line for ``app``: the next counter after its last one (host/linkauth.py)."""
-    from host.linkauth import LinkSigner
+    """An authorised command line for ``app``: the next counter after its last one (host/board/linkauth.py)."""
+    from host.board.linkauth import LinkSigner
     return LinkSigner(key, app.auth.last if counter is None else counter - 1).stream_line(*fields, extra=extra)
 
 
 def modbus_auth_block(app, req, key=TEST_KEY):
     """The FC16 request (slave 1, no CRC) writing the auth block that authorises the write ``req``."""
-    from host.linkauth import LinkSigner
+    from host.board.linkauth import LinkSigner
     start = req[2] << 8 | req[3]
     if req[1] == 6:
         values = [req[4] << 8 | req[5]]
@@ -133,15 +133,15 @@ def run_cycles(app, board, n, dt=100):
 
 
 def compile_mpy(fakes=False):
-    """The firmware's .mpy build (host/fwbuild.py), as ``tcomp flash`` ships it; returns its folder
+    """The firmware's .mpy build (host/board/fwbuild.py), as ``tcomp flash`` ships it; returns its folder
     (a MICROPYPATH entry, shared and read-only). ``fakes``: with the register-level fakes
     (tests/firmware/manifest.py, which includes firmware/manifest.py: the same firmware files).
 
     The unix port loads .mpy without compiling, so the heap the firmware needs is
     that of the code and data, as on a board that ships .mpy files. One option set
-    for every build (host/fwbuild.py MPY_CROSS_ARGS: -O3, bytecode only).
+    for every build (host/board/fwbuild.py MPY_CROSS_ARGS: -O3, bytecode only).
     """
-    from host.fwbuild import BOARD_MANIFEST, build
+    from host.board.fwbuild import BOARD_MANIFEST, build
     return build(os.path.join(HERE, "manifest.py") if fakes else BOARD_MANIFEST).root
 
 

@@ -4,7 +4,7 @@ import copy
 import pytest
 
 from firmware import bootcfg
-from host.boardconfig import load_config
+from host.board.config import load_config
 from firmware.boards import rp2040, linux
 
 BASE = {"channels": [{"name": "T1", "driver": "max31865", "bus": "spi0", "cs": 5}]}

@@ -90,7 +90,7 @@ def test_protocol_letters_and_texts_are_the_wire_contract():
 def test_host_signer_sizes_are_the_wire_contract():
     # the host signs with the sizes the board checks (one source: firmware/wire.py)
     from firmware import wire
-    from host import linkauth
+    from host.board import linkauth
     assert (linkauth.TAG_BYTES, linkauth.MAX_COUNTER) == (wire.TAG_BYTES, wire.MAX_COUNTER)
 
 

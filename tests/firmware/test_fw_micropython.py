@@ -61,7 +61,7 @@ send(b"\x00\xff garbage\r\n")
 f = open("new.bin", "rb")
 data = f.read()
 f.close()
-f = open("signed.txt", "rb")  # lines signed on the host (host/linkauth.py)
+f = open("signed.txt", "rb")  # lines signed on the host (host/board/linkauth.py)
 signed = [x + b"\r\n" for x in f.read().split(b"\n")]
 f.close()
 # without authorisation: refused, nothing changes
@@ -100,7 +100,7 @@ def _signed_lines(new, other):
     import hashlib
     import zlib
     from fwhelpers import TEST_KEY
-    from host.linkauth import LinkSigner
+    from host.board.linkauth import LinkSigner
     s = LinkSigner(TEST_KEY)
     lines = [s.stream_line("U", "B", len(new), "%08X" % zlib.crc32(new)),
              s.stream_line("U", "C", extra=hashlib.sha256(other).digest()),

@@ -4,7 +4,7 @@ import os
 import numpy as np
 import pytest
 
-from host.runs import Errors, Motion, Run, Temperatures, write_run
+from host.data.runs import Errors, Motion, Run, Temperatures, write_run
 
 
 def _make_run(bidirectional=False, channels=None):

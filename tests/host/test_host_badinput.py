@@ -10,7 +10,8 @@ import sys
 
 import pytest
 
-from host.cli import UserError, main, open_output
+from host.cli import main
+from host.errors import UserError, open_output
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 DEMO = os.path.join(ROOT, "data", "demo")
@@ -102,7 +103,7 @@ def test_open_output_names_the_path():
 
 
 def test_an_unexpected_oserror_is_one_line(capsys, monkeypatch):
-    import host.commands.validate as validate
+    import host.cli.verbs.validate as validate
 
     def boom(args):
         raise PermissionError(13, "Permission denied", "/some/where.json")
@@ -124,7 +125,7 @@ def test_simulate_out_on_an_existing_file(capsys, tmp_path):
 
 
 def test_write_run_onto_a_file_names_it(tmp_path, make_run):
-    from host.runs import write_run
+    from host.data.runs import write_run
 
     f = tmp_path / "afile"
     f.write_text("x")
@@ -147,7 +148,7 @@ def test_export_reference_position_outside_the_envelope_says_the_envelope(capsys
 
 
 def test_certify_rejects_a_non_finite_reference_position(model):
-    from host.models import read_document
+    from host.learning.documents import read_document
     from models_export import ExportError, export_model
 
     with pytest.raises(ExportError, match="finite"):
@@ -240,13 +241,13 @@ def test_import_out_on_an_existing_file(capsys, tmp_path):
 def test_import_accepts_a_byte_order_mark(capsys, tmp_path):
     src = _csv(tmp_path, b"\xef\xbb\xbftime_s,a,b\n0,20,1\n60,21,2\n", "excel.csv")
     assert main(["import", src, "--time", "time_s", "--temp", "a", "--error", "b", "--out", str(tmp_path / "i")]) == 0
-    from host.runs import load_run
+    from host.data.runs import load_run
 
     assert load_run(str(tmp_path / "i")).temperatures.names == ["a"]
 
 
 def test_run_folder_with_byte_order_marks_loads(tmp_path, make_run):
-    from host.runs import load_run, write_run
+    from host.data.runs import load_run, write_run
 
     folder = write_run(make_run(), str(tmp_path / "run"))
     for name in ("meta.json", "temperatures.csv", "errors.csv", "motion.csv"):
@@ -332,7 +333,7 @@ def test_screw_document_errors_name_file_and_field(capsys, tmp_path, screw_model
 
 
 def test_load_model_prefixes_the_path(tmp_path, model):
-    from host.models import ModelFormatError, load_model
+    from host.learning.documents import ModelFormatError, load_model
 
     path = _edited(model, tmp_path, lambda d: d.pop("sensors"))
     with pytest.raises(ModelFormatError, match="^%s: poly_slope model document lacks the field 'sensors'" % path):
@@ -373,8 +374,8 @@ def test_fit_empty_training_window(capsys, tmp_path):
 def test_geometric_max_degree_below_one():
     import numpy as np
 
-    from host.empirical import EmpiricalDataError
-    from host.empirical.geometric import GeometricPolynomial
+    from host.learning.empirical import EmpiricalDataError
+    from host.learning.empirical.geometric import GeometricPolynomial
 
     with pytest.raises(EmpiricalDataError, match="max_degree must be >= 1"):
         GeometricPolynomial(0).fit(np.arange(10.0), np.arange(10.0))
@@ -396,8 +397,8 @@ def test_compare_flag_out_of_range(capsys, tmp_path, extra, words):
 def test_cv_subset_max_sensors_below_one():
     import numpy as np
 
-    from host.empirical import EmpiricalDataError
-    from host.empirical.regression import BestSubsetCV
+    from host.learning.empirical import EmpiricalDataError
+    from host.learning.empirical.regression import BestSubsetCV
 
     X = np.random.default_rng(0).normal(size=(20, 3))
     with pytest.raises(EmpiricalDataError, match="max_sensors must be an integer >= 1, got 0"):
@@ -412,7 +413,7 @@ def test_simulate_negative_effect_magnitude(capsys, tmp_path, effect):
 
 
 def test_signed_effects_keep_their_documented_meaning():
-    from host.sim.effects import resolve_effects
+    from host.twin.effects import resolve_effects
 
     # reversal_error is the signed reversal value B; moving_convection only needs h > 0
     assert resolve_effects({"reversal_error": -4, "moving_convection": -0.5}) == {"moving_convection": -0.5, "reversal_error": -4.0}

@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from host.cli import main
-from host.runs import Errors, Run, Temperatures, write_run
+from host.data.runs import Errors, Run, Temperatures, write_run
 
 RUN_FILES = ("meta.json", "temperatures.csv", "errors.csv")
 SPECIAL = ['"', ",", "\n", "\r", "\x00", "_", "\uff12", "\u00e9", "e", "-", ".", " ", "{", "]", "9" * 40]
@@ -70,7 +70,7 @@ def _verbs(d):
         "hil": (["hil", "--run", run, "--table", table, "--interpreter", "cpython", "--json", out + "/h.json"], ["h.json"]),
         "flash": (["flash", "--port", "/dev/null", "--table", table, "--no-firmware", "--mpremote", "/bin/true"], []),
         # the small run has no motion.csv, so discrepancy always refuses it: what is fuzzed is how it reads the
-        # run (meta.json's screw block, the CSVs) before that refusal, not the workflow (tests/discrepancy/)
+        # run (meta.json's screw block, the CSVs) before that refusal, not the workflow (tests/learning/discrepancy/)
         "discrepancy": (["discrepancy", run, "--json", out + "/d.json", "--report", out + "/rep"], ["d.json", "rep"]),
     }
 

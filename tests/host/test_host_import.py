@@ -8,8 +8,8 @@ import sys
 import numpy as np
 import pytest
 
-from host.importer import ImportError_, import_csv
-from host.runs import load_run
+from host.data.importer import ImportError_, import_csv
+from host.data.runs import load_run
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 SOURCE = os.path.join(ROOT, "..", "shared", "data", "fl_thermal", "fl_thermal.csv")

@@ -3,7 +3,8 @@ import os
 
 import pytest
 
-from host.cli import UserError, main
+from host.cli import main
+from host.errors import UserError
 from host.options import number, parse_options
 
 RUN = os.path.join(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))), "data", "demo", "v8000_r210_490")

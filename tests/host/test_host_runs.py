@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from host.runs import RunFormatError, check_run, load_run, write_run
+from host.data.runs import RunFormatError, check_run, load_run, write_run
 
 
 @pytest.mark.parametrize("bidirectional,channels", [(False, None), (True, None), (False, ["ch1", "ch2"])])

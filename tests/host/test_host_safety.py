@@ -13,7 +13,8 @@ import warnings
 
 import pytest
 
-from host.cli import UserError, main
+from host.cli import main
+from host.errors import UserError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 DEMO_RUN = os.path.join(ROOT, "data", "demo", "v8000_r210_490")
@@ -414,7 +415,7 @@ def test_hil_settings_bounded_by_the_run(capsys, table, flags, words):
 
 
 def test_hil_fault_past_the_run_end_is_cut_with_a_warning(capsys):
-    from host.commands.hil import _faults
+    from host.cli.verbs.hil import _faults
 
     (f,) = _faults(["open:T1@600-999999"], ["T1"], 18000.0)
     assert f["end_s"] == 18000.0 and f["start_s"] == 600.0
@@ -444,7 +445,7 @@ def test_flash_names_a_table_sensor_the_config_does_not_wire(capsys, tmp_path, t
 # ------------------------------------------------------------ leftovers
 
 def test_the_rig_build_leaves_only_its_cache_folder(tmp_path):
-    """The rig's .mpy files live in the build cache (host/fwbuild.py), one folder per content;
+    """The rig's .mpy files live in the build cache (host/board/fwbuild.py), one folder per content;
     a process leaves no temporary folder (.tmp-*) behind in it."""
     cache = tmp_path / "cache"
     code = "from hil_tests.rig.mpybuild import rig_build; print(rig_build().root)"
@@ -457,7 +458,7 @@ def test_the_rig_build_leaves_only_its_cache_folder(tmp_path):
 
 
 def test_hil_disk_full_leaves_no_output(capsys, tmp_path, table):
-    from host.runs import Errors, Run, Temperatures, load_run, write_run
+    from host.data.runs import Errors, Run, Temperatures, load_run, write_run
 
     demo = load_run(DEMO_RUN)
     t, e = demo.temperatures, demo.errors

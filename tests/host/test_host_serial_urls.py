@@ -6,7 +6,7 @@ import threading
 import time
 
 from firmware.linux_adapters import make_linux_board
-from host.link import command
+from host.board.link import command
 from hil_tests.rig.realport import RealDut
 from host.cli import main
 

@@ -1,10 +1,10 @@
-"""The verb registry (host/commands/__init__.py): `tcomp --help` imports no verb module, every verb resolves."""
+"""The verb registry (host/cli/verbs/__init__.py): `tcomp --help` imports no verb module, every verb resolves."""
 import importlib
 import os
 import subprocess
 import sys
 
-from host.commands import VERBS
+from host.cli.verbs import VERBS
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
@@ -16,7 +16,7 @@ try:
     main(%r)
 except SystemExit:
     pass
-print("LOADED:" + ",".join(sorted(m for m in sys.modules if m.startswith("host.commands."))))
+print("LOADED:" + ",".join(sorted(m for m in sys.modules if m.startswith("host.cli.verbs."))))
 """
 
 
@@ -33,7 +33,7 @@ def test_help_imports_no_verb_module():
 
 def test_a_verb_imports_only_its_own_module():
     # the probe itself must be able to see an import: `tcomp import --help` loads exactly one module
-    assert _loaded_after(["import", "--help"]) == ["host.commands.importlog"]
+    assert _loaded_after(["import", "--help"]) == ["host.cli.verbs.importlog"]
 
 
 def test_every_verb_module_has_arguments_and_run_and_every_module_is_registered():

@@ -1,11 +1,11 @@
-"""The LinuxCNC bridge's logic without HAL (host/linuxcnc/bridge.py): link decoding, fault rules, ramp,
+"""The LinuxCNC bridge's logic without HAL (host/board/linuxcnc/bridge.py): link decoding, fault rules, ramp,
 counts loop against a motion model, cold-start rule. The same bridge in a real LinuxCNC:
 hil_tests/test_hil_linuxcnc.py."""
 import pytest
 
-from host.link import FALLBACK, command, crc16
+from host.board.link import FALLBACK, command, crc16
 from host.cli import main
-from host.linuxcnc.bridge import (BOARD, CRC, LATCH_DONE, LATCH_NONE, LATCH_REFUSED, LINK, STALE, Bridge, Exchange,
+from host.board.linuxcnc.bridge import (BOARD, CRC, LATCH_DONE, LATCH_NONE, LATCH_REFUSED, LINK, STALE, Bridge, Exchange,
                                   Inputs, OffsetRamp, Reading, StreamLink)
 
 SLEW = 10.0
@@ -253,7 +253,7 @@ def test_stream_link_sends_p_and_q_and_decodes_answers():
 
 
 def test_stream_link_signs_l_with_the_board_counter():
-    from host.linkauth import LinkSigner
+    from host.board.linkauth import LinkSigner
     hello = b"TC,0,00000000,H,1,0.1.0,A,0ABCAE5F,0001020304050607,poly_slope,X,3,S,41"
     port = FakePort(b"$" + hello + b"*%04X\r\n" % crc16(hello))
     signer = LinkSigner(b"k" * 32)
@@ -329,7 +329,7 @@ def test_spindle_speed_is_sent_only_when_asked_and_only_when_finite():
     on.step()
     assert command("P", 250000) in bytes(port.tx) and b"$TC,P,250000," not in bytes(port.tx)
     # ... and holding registers 18-19 (int32, high word first, written whole) in Modbus mode
-    from host.linuxcnc.bridge import ModbusLink
+    from host.board.linuxcnc.bridge import ModbusLink
     client = FakeModbus()
     mb = Run(ModbusLink(client), send_spindle=True)
     mb.inp.spindle_rpm = 70000.0
@@ -341,7 +341,7 @@ def test_spindle_speed_is_sent_only_when_asked_and_only_when_finite():
 
 
 def test_linuxcnc_cli_has_the_spindle_option():
-    from host.commands import linuxcnc
+    from host.cli.verbs import linuxcnc
     import argparse
     p = argparse.ArgumentParser()
     linuxcnc.add_arguments(p)

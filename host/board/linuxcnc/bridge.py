@@ -1,0 +1,426 @@
+"""The LinuxCNC bridge's logic, without HAL: link to the board, fault rules, offset ramp, counts loop.
+
+``Bridge.step(now_s, inputs)`` is called once per period by the HAL layer
+(``host/board/linuxcnc/halcomp.py``) with the controller's pins and returns the
+pins to write. Everything here runs on plain Python so that it is
+unit-tested without LinuxCNC (tests/host/test_linuxcnc_bridge.py); the
+whole chain is tested in a real LinuxCNC in hil_tests/test_hil_linuxcnc.py.
+
+What LinuxCNC does with the pins (motion's external axis offsets, checked in
+the simulator): motion adds ``(counts - previous counts) * eoffset-scale`` to
+``axis.L.eoffset-request`` only while the machine is on and homed, drops
+count changes at any other time, and zeroes the external offset when the
+machine is switched on again (the offset in force is folded into the axis
+position, the axis does not move). So the bridge closes its loop on
+``eoffset-request`` (what motion has taken) and writes count changes only
+while motion can take them.
+"""
+import math
+import time
+from dataclasses import dataclass, field
+
+from host.board.link import FALLBACK, StreamDecoder, command
+
+COUNT_UM = 0.1  # one eoffset count: the board's offset resolution (docs/protocol.md, 0.1 um)
+UM_PER_UNIT = {"mm": 1000.0, "inch": 25400.0}
+
+# fault reasons, bits of the ``fault-code`` pin
+LINK = 1       # the port failed, or (Modbus) the board did not answer a request
+STALE = 2      # no new frame (sequence number moving) within stale_s
+CRC = 4        # a malformed frame (bad CRC, bad syntax) arrived
+BOARD = 8      # the board reports FALLBACK: its model cannot be used
+FAULT_NAMES = {LINK: "link", STALE: "stale", CRC: "crc", BOARD: "fallback"}
+
+# latch-state pin
+LATCH_NONE, LATCH_SENT, LATCH_DONE, LATCH_REFUSED = 0, 1, 2, 3
+
+
+@dataclass
+class Reading:
+    """One answer of the board: total offset (um) at ``pos_um``, status word, frame/cycle sequence."""
+    total_um: float
+    pos_um: int
+    status: int
+    seq: int
+
+
+@dataclass
+class Exchange:
+    """What one link exchange brought back."""
+    readings: list = field(default_factory=list)
+    malformed: list = field(default_factory=list)   # reasons (bad CRC, syntax)
+    error: str = ""                                 # the link failed this time (port gone, no answer)
+    latch: str = ""                                 # "" no reply, "ok:<refs>" acknowledged, "refused:<why>"
+
+
+class StreamLink:
+    """``$TC`` stream mode: each exchange sends ``P,<pos>`` (``P,<pos>,<rpm>`` with the spindle speed)
+    and ``Q,<pos>`` (the board's offset at this position, now) and decodes whatever arrived (Q answers
+    and periodic O frames)."""
+
+    def __init__(self, open_port, reopen_s=1.0, clock=time.monotonic, signer=None):
+        """``open_port()`` returns an open pyserial-like port (timeout 0); it is called again, at most
+        every ``reopen_s``, after the port failed (a USB board unplugged and back). ``signer``
+        (host.board.linkauth.LinkSigner with the board's key) signs ``L``; the board's last counter comes
+        from its hello, asked for (``V``) after every (re)open and after a refused ``L``."""
+        self.open_port = open_port
+        self.signer = signer
+        self.want_hello = True
+        self.reopen_s = reopen_s
+        self.clock = clock
+        self.ser = None
+        self.next_open = 0.0
+        self.decoder = StreamDecoder()
+        self.latch_pending = False
+
+    def exchange(self, pos_um, latch=False, spindle_rpm=None):
+        ex = Exchange()
+        p = command("P", pos_um) if spindle_rpm is None else command("P", pos_um, spindle_rpm)
+        out = p + command("Q", pos_um)
+        if self.want_hello:
+            out = command("V") + out
+            self.want_hello = False
+        if latch:
+            out += self.signer.stream_line("L") if self.signer else command("L")
+            self.latch_pending = True
+        try:
+            if self.ser is None:
+                if self.clock() < self.next_open:
+                    raise OSError("port closed after an error, reopening")
+                self.next_open = self.clock() + self.reopen_s
+                self.ser = self.open_port()
+                self.decoder = StreamDecoder()
+            self.ser.write(out)
+            data = self.ser.read(self.ser.in_waiting or 1)
+            while data:
+                for f in self.decoder.feed(data):
+                    self._frame(f, ex)
+                data = self.ser.read(self.ser.in_waiting) if self.ser.in_waiting else b""
+        except (OSError, ValueError) as exc:  # serial.SerialException is an OSError
+            ex.error = str(exc) or type(exc).__name__
+            self.latch_pending = False
+            self.close()
+        while self.decoder.bad:
+            ex.malformed.append(self.decoder.bad.pop(0)[1])
+        return ex
+
+    def _frame(self, f, ex):
+        if f.kind in ("O", "Q"):
+            try:
+                ex.readings.append(Reading(float(f.fields[2]), int(f.fields[1]), f.status, f.seq))
+            except (IndexError, ValueError):
+                ex.malformed.append("bad %s fields: %r" % (f.kind, f.raw[:80]))
+        elif f.kind == "A" and f.fields[:1] == ["L"] and self.latch_pending:
+            self.latch_pending = False
+            ex.latch = "ok:" + (f.fields[1] if len(f.fields) > 1 else "")
+        elif f.kind == "H" and self.signer is not None and f.fields:
+            try:
+                self.signer.observe(f.fields[-1])
+            except ValueError:
+                pass  # an old firmware's hello ends with the refs letter: no counter
+        elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["5"], ["8"], ["9"]):
+            # 5 state (no table, fixed references, sensor faulty), 8 auth (unsigned, bad tag,
+            # replayed counter...), 9 busy
+            self.latch_pending = False
+            ex.latch = "refused:" + ",".join(f.fields[1:] if f.fields[0] != "5" else f.fields[2:])
+            if f.fields[0] == "8":
+                self.want_hello = True  # the counter may be behind the board's
+
+    def close(self):
+        self.want_hello = True  # a board that comes back is asked for its hello (counter)
+        if self.ser is not None:
+            try:
+                self.ser.close()
+            except (OSError, ValueError):
+                pass
+            self.ser = None
+
+
+def _s16(v):
+    return v - 0x10000 if v & 0x8000 else v
+
+
+class ModbusLink:
+    """Modbus RTU mode (pymodbus master): write the position (holding 3-4) and, when given, the
+    spindle speed (holding 18-19, int32 written whole), read input 0-9."""
+
+    def __init__(self, client, address=1, signer=None):
+        self.client = client
+        self.address = address
+        self.signer = signer
+
+    def slew_um_per_s(self):
+        """The board's slew limit (holding register 1), or None if it cannot be read."""
+        try:
+            rr = self.client.read_holding_registers(1, count=1, device_id=self.address)
+        except Exception:  # pymodbus raises its own exception tree (ModbusException, ConnectionException)
+            return None
+        return None if rr.isError() else rr.registers[0]
+
+    def exchange(self, pos_um, latch=False, spindle_rpm=None):
+        ex = Exchange()
+        p = pos_um & 0xFFFFFFFF
+        try:
+            w = self.client.write_registers(3, [p >> 16, p & 0xFFFF], device_id=self.address)
+            if spindle_rpm is not None and not w.isError():
+                r = spindle_rpm & 0xFFFFFFFF
+                w = self.client.write_registers(18, [r >> 16, r & 0xFFFF], device_id=self.address)
+            rr = self.client.read_input_registers(0, count=10, device_id=self.address)
+            if w.isError() or rr.isError():
+                ex.error = "modbus exception %s" % (w if w.isError() else rr)
+            else:
+                r = rr.registers
+                pos = (r[6] << 16) | r[7]
+                pos = pos - (1 << 32) if pos & 0x80000000 else pos
+                ex.readings.append(Reading(_s16(r[3]) / 10.0, pos, r[0] | (r[1] << 16), r[2]))
+            if latch:
+                if self.signer is not None:  # the auth block (holding 8..17) for this very write
+                    cr = self.client.read_input_registers(48, count=2, device_id=self.address)
+                    if not cr.isError():
+                        self.signer.observe((cr.registers[0] << 16) | cr.registers[1])
+                    self.client.write_registers(8, self.signer.modbus_auth(self.address, 7, [1]),
+                                                device_id=self.address)
+                lr = self.client.write_register(7, 1, device_id=self.address)
+                ex.latch = ("refused:exception %s" % getattr(lr, "exception_code", "?")) if lr.isError() else "ok:"
+        except Exception as exc:  # no answer, CRC error (pymodbus drops the frame), port gone
+            ex.error = str(exc) or type(exc).__name__
+        return ex
+
+    def close(self):
+        self.client.close()
+
+
+class OffsetRamp:
+    """The offset the bridge commands (um).
+
+    While the link is healthy and the ramp has caught the board's value it
+    follows the board exactly (the board limits its own slew; position moves
+    change the total continuously). Otherwise it moves towards its target
+    (zero on a fault, the board's value on recovery or at start) by at most
+    the slew limit times the elapsed time: never a step.
+    """
+
+    def __init__(self, slew_um_per_s):
+        if not slew_um_per_s > 0:
+            raise ValueError("slew limit must be > 0 um/s, got %r" % (slew_um_per_s,))
+        self.slew = float(slew_um_per_s)
+        self.out_um = 0.0
+        self.tracking = False
+
+    def step(self, target_um, dt_s, healthy):
+        if healthy and self.tracking:
+            self.out_um = target_um
+            return self.out_um
+        room = self.slew * max(dt_s, 0.0)
+        d = target_um - self.out_um
+        if abs(d) <= room:
+            self.out_um = target_um
+            self.tracking = healthy
+        else:
+            self.out_um += math.copysign(room, d)
+            self.tracking = False
+        return self.out_um
+
+    def restart(self):
+        """Motion zeroes its external offset when the machine is switched on: start again from zero."""
+        self.out_um = 0.0
+        self.tracking = False
+
+
+@dataclass
+class Inputs:
+    position: float = 0.0          # axis.L.pos-cmd, machine units (without the external offset)
+    machine_on: bool = False       # motion.motion-enabled
+    homed: bool = False            # motion.is-all-homed
+    eoffset_request: float = 0.0   # axis.L.eoffset-request, machine units: what motion has taken
+    cold_start: bool = False       # the controller says: this start is a cold start
+    latch: bool = False            # rising edge: declare a cold start now
+    spindle_rpm: float = 0.0       # spindle speed (e.g. spindle.0.speed-out-abs); sent with send_spindle
+
+
+@dataclass
+class Outputs:
+    eoffset_counts: int = 0
+    eoffset_scale: float = 0.0
+    eoffset_enable: bool = True
+    offset_um: float = 0.0          # what the bridge commands now
+    board_offset_um: float = 0.0    # the board's last total
+    board_status: int = 0
+    link_ok: bool = False
+    fault: bool = True
+    fault_code: int = LINK
+    tracking: bool = False
+    latch_state: int = LATCH_NONE
+
+
+class Bridge:
+    """One axis: board link -> offset ramp -> eoffset counts; position -> board.
+
+    ``stale_s``: no new frame for this long is a fault (the stream answers
+    every period, a Modbus board's cycle counter moves every ``cycle_ms``).
+    ``recover_s``: a fault ends only after this long without any fault
+    reason, then the ramp goes back to the board's value at the slew limit.
+    ``max_dt_s``: a ramp step covers at most this much time (two periods), so
+    a bridge descheduled by a loaded host ramps more slowly, never in a step.
+    """
+
+    def __init__(self, link, slew_um_per_s, units="mm", stale_s=1.0, recover_s=1.0, cold_start=False,
+                 log=None, latch_retry_s=1.0, latch_tries=10, max_dt_s=0.1, send_spindle=False):
+        if units not in UM_PER_UNIT:
+            raise ValueError("units must be one of %s, got %r" % (", ".join(UM_PER_UNIT), units))
+        self.link = link
+        self.send_spindle = send_spindle  # off: exactly the position-only exchange of older boards
+        self.ramp = OffsetRamp(slew_um_per_s)
+        self.um_per_unit = UM_PER_UNIT[units]
+        self.scale = COUNT_UM / self.um_per_unit
+        self.stale_s = stale_s
+        self.recover_s = recover_s
+        self.max_dt_s = max_dt_s
+        self.force_cold = cold_start
+        self.log = log or (lambda msg: None)
+        self.latch_retry_s = latch_retry_s
+        self.latch_tries = latch_tries
+        self.out = Outputs(eoffset_scale=self.scale)
+        self.counts = 0
+        self.last_now = None
+        self.last_new_s = None     # when the last new reading arrived
+        self.last_seq = None
+        self.reading = None
+        self.fault_since = None
+        self.clear_since = None
+        self.link_error = ""
+        self.was_on = False
+        self.cold_decided = False
+        self.latch_tries_left = 0
+        self.latch_next_s = 0.0
+        self.last_latch_pin = False
+        self.fault_code = LINK
+
+    # --- cold start ------------------------------------------------------------------------
+    def _want_latch(self, now, inp):
+        """The rule: the first time the machine is on after the bridge started, the ``cold-start`` pin
+        (or --cold-start) decides; a rising edge of the ``latch`` pin latches at any time. A refusal
+        because a sensor is not reading good yet is retried every latch_retry_s, latch_tries times."""
+        if inp.machine_on and not self.cold_decided:
+            self.cold_decided = True
+            if inp.cold_start or self.force_cold:
+                self.log("cold start: sending L (re-latch the reference temperatures)")
+                self.latch_tries_left = self.latch_tries
+                self.latch_next_s = now
+        if inp.latch and not self.last_latch_pin:
+            self.log("latch pin: sending L")
+            self.latch_tries_left = self.latch_tries
+            self.latch_next_s = now
+        self.last_latch_pin = inp.latch
+        if self.latch_tries_left and now >= self.latch_next_s and self.out.latch_state != LATCH_SENT:
+            self.latch_tries_left -= 1
+            self.latch_next_s = now + self.latch_retry_s
+            self.out.latch_state = LATCH_SENT
+            return True
+        return False
+
+    def _latch_reply(self, now, reply):
+        if reply.startswith("ok:"):
+            self.out.latch_state = LATCH_DONE
+            self.latch_tries_left = 0
+            self.log("L acknowledged (refs %s)" % (reply[3:] or "latched"))
+        else:
+            why = reply.split(":", 1)[1]
+            retry = any(w in why for w in ("sensor faulty", "exception 4", "busy", "replayed"))
+            if not (retry and self.latch_tries_left):
+                self.latch_tries_left = 0
+            self.out.latch_state = LATCH_REFUSED
+            self.log("L refused: %s%s" % (why, ", retrying" if self.latch_tries_left else ""))
+
+    # --- one period ---------------------------------------------------------------------------
+    def step(self, now, inp):
+        dt = 0.0 if self.last_now is None else min(now - self.last_now, self.max_dt_s)
+        self.last_now = now
+        if self.last_new_s is None:
+            self.last_new_s = now
+        pos_um = int(round(inp.position * self.um_per_unit))
+        send_latch = self._want_latch(now, inp)
+        if self.send_spindle and math.isfinite(inp.spindle_rpm):
+            # an input of dynamic tables (docs/protocol.md); the board checks its range. A NaN/inf pin
+            # is not sent: the board keeps the last speed it was given
+            ex = self.link.exchange(pos_um, latch=send_latch, spindle_rpm=int(round(inp.spindle_rpm)))
+        else:
+            ex = self.link.exchange(pos_um, latch=send_latch)
+        if ex.latch:
+            self._latch_reply(now, ex.latch)
+        elif send_latch and ex.error:
+            self.out.latch_state = LATCH_NONE  # never reached the board: sent again at the next retry
+        code = 0
+        if ex.error:
+            code |= LINK
+            if ex.error != self.link_error:
+                self.log("link: %s" % ex.error)
+        self.link_error = ex.error
+        if ex.malformed:
+            code |= CRC
+            for why in ex.malformed:
+                self.log("malformed frame: %s" % why)
+        for r in ex.readings:
+            if r.seq != self.last_seq:
+                self.last_seq = r.seq
+                self.last_new_s = now
+                self.reading = r
+        if now - self.last_new_s > self.stale_s:
+            code |= STALE
+        if self.reading is not None and self.reading.status & FALLBACK:
+            code |= BOARD
+        if self.reading is None:
+            code |= STALE
+        self._track_fault(now, code)
+        healthy = self.fault_code == 0
+        target = self.reading.total_um if healthy else 0.0
+        ready = inp.machine_on and inp.homed
+        if not inp.machine_on or (ready and not self.was_on):
+            self.ramp.restart()
+        self.was_on = ready
+        if ready:
+            self.ramp.step(target, dt, healthy)
+            want = int(round(self.ramp.out_um / COUNT_UM))
+            taken = int(round(inp.eoffset_request / self.scale))
+            self.counts = (self.counts + want - taken + 2 ** 31) % 2 ** 32 - 2 ** 31
+        o = self.out
+        o.eoffset_counts = self.counts
+        o.offset_um = self.ramp.out_um
+        o.tracking = self.ramp.tracking and ready
+        o.link_ok = not (code & (LINK | STALE))
+        o.fault = not healthy
+        o.fault_code = self.fault_code
+        if self.reading is not None:
+            o.board_offset_um = self.reading.total_um
+            o.board_status = self.reading.status
+        return o
+
+    def _track_fault(self, now, code):
+        if code:
+            if not self.fault_code or code & ~self.fault_code:
+                names = "+".join(n for b, n in FAULT_NAMES.items() if code & b)
+                self.log("fault (%s): offset ramps to zero at %.4g um/s" % (names, self.ramp.slew))
+            self.fault_code |= code
+            self.clear_since = None
+        elif self.fault_code:
+            if self.clear_since is None:
+                self.clear_since = now
+            if now - self.clear_since >= self.recover_s:
+                self.log("link healthy for %.3g s: offset ramps back to the board's value" % self.recover_s)
+                self.fault_code = 0
+                self.clear_since = None
+
+
+def run_loop(bridge, read_inputs, write_outputs, period_s=0.05, clock=time.monotonic, sleep=time.sleep,
+             running=lambda: True):
+    """Call ``bridge.step`` every ``period_s`` with the inputs read, write the outputs."""
+    next_t = clock()
+    while running():
+        now = clock()
+        write_outputs(bridge.step(now, read_inputs()))
+        next_t += period_s
+        delay = next_t - clock()
+        if delay > 0:
+            sleep(delay)
+        else:
+            next_t = clock()

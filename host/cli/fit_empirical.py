@@ -1,0 +1,114 @@
+"""``tcomp fit --model mlr|pcr|stepwise|cv-subset|ann|dynamic`` (arguments defined in host/cli/verbs/fit.py)."""
+import json
+
+from host import options
+from host.learning.empirical import EmpiricalDataError
+from host.options import boolean, number, numbers
+
+# --option KEY=VALUE settings understood by fit_command, with their converters (host/options.py); a
+# minimum is the smallest meaningful value, below which the estimator would fail obscurely or accept nonsense
+OPTIONS = {
+    "variance_threshold": number(float),  # PCR
+    "n_components": number(int, 1),  # PCR
+    "f_enter": number(float),  # stepwise
+    "f_remove": number(float),  # stepwise
+    "envelope_margin_K": number(float, 0.0),
+    "reference": str,  # run_start | fixed
+    "geometric_max_degree": number(int, 1),
+    "geometric_criterion": str,  # cv | aic
+    "t_min_s": number(float),  # training window on target time
+    "t_max_s": number(float),
+    "max_sensors": number(int, 1),  # cv-subset, dynamic
+    "cv_blocks": number(int, 2),  # cv-subset on one run; ann's validation group
+    "hidden_sizes": numbers(int, 1),  # ann: candidate sizes, e.g. 3/4/5
+    "seed": number(int, 0),  # ann
+    "max_epochs": number(int, 1),  # ann
+    "patience": number(int, 1),  # ann
+    "validation_fraction": number(float),  # ann, random validation
+    "validation": str,  # ann: random | last_group
+    "learning_rate": number(float),  # ann
+    "taus_s": numbers(float),  # dynamic: time-constant grid, e.g. 0/1800/7200
+    "ridge": numbers(float),  # dynamic: penalty grid
+    "max_terms": number(int, 1),  # dynamic
+    "min_gain": number(float, 0.0),  # dynamic
+    "cv_score": str,  # dynamic: worst | pooled
+    "swaps": boolean,  # dynamic
+    "use_spindle": boolean,  # dynamic
+    "use_feed": boolean,  # dynamic
+}
+METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",),
+                  "dynamic": ("taus_s", "ridge", "max_terms", "min_gain", "cv_score", "swaps", "use_spindle", "use_feed"),
+                  "ann": ("hidden_sizes", "validation", "seed", "max_epochs", "patience", "validation_fraction", "learning_rate")}
+
+
+def parse_options(pairs, method):
+    """--option KEY=VALUE list -> dict, rejecting unknown keys and options of other methods."""
+    from host.errors import UserError
+
+    out = options.parse_options(pairs, OPTIONS)
+    for key in out:
+        owner = [m for m, keys in METHOD_OPTIONS.items() if key in keys] + (["dynamic"] if key == "max_sensors" else [])
+        if owner and method not in owner:
+            raise UserError("--option %s applies to --model %s, not %s" % (key, owner[0], method))
+    lo, hi = out.get("t_min_s"), out.get("t_max_s")
+    if lo is not None and hi is not None and not lo < hi:
+        raise UserError("--option t_min_s=%g, t_max_s=%g: the training window is empty (t_min_s must be < t_max_s)" % (lo, hi))
+    return out
+
+
+def fit_command(args, out):
+    """Fit, print the report, write ``args.out`` (and ``args.json``) through ``out`` (host.outputs.Outputs)."""
+    from host.errors import UserError
+    from host.learning.empirical.fitting import fit_model
+    from host.learning.documents import save_model
+    from host.data.runs import RunFormatError, load_runs
+
+    opts = parse_options(args.option, args.model)
+    try:
+        runs = load_runs(args.runs)
+    except RunFormatError as exc:
+        raise UserError(str(exc))
+    sensors = [s.strip() for s in args.sensors.split(",") if s.strip()] if args.sensors else None
+    lo, hi = opts.pop("t_min_s", None), opts.pop("t_max_s", None)
+    window = (lo, hi) if lo is not None or hi is not None else None
+    target = "direct" if args.direct else "slope"
+    try:
+        model = fit_model(runs, method=args.model, target=target, channel=args.channel, sensors=sensors,
+                          fit_intercept=not args.no_intercept, window=window, **opts)
+    except EmpiricalDataError as exc:
+        raise UserError(str(exc))
+    except TypeError as exc:
+        raise UserError("bad --option for %s: %s" % (args.model, exc))
+    doc = save_model(model.to_document(), out.path(args.out))
+    est = model.estimator_
+    print("%s %s model of %s on %d run(s), %d samples: sensors %s" % (
+        args.model, model.kind, args.channel or "the error", len(runs), est.n_samples_, ",".join(model.sensors)))
+    if args.model == "mlr":
+        print(est.summary())
+    elif args.model == "stepwise":
+        for h in est.history_:
+            print("  step %d: %s %s (partial F %.4g, threshold %g)" % (h["step"], h["action"], h["sensor"], h["F"], h["threshold"]))
+        print(est.mlr_.summary())
+    elif args.model == "cv-subset":
+        print("  %s; cross-validation over %d groups" % (est.search_, est.n_groups_))
+        for k, v in sorted(est.cv_rmse_.items()):
+            print("  best %d-sensor subset %s: CV RMSE %.4g" % (k, ",".join(v["sensors"]), v["cv_rmse"]))
+        print(est.mlr_.summary())
+    elif args.model == "dynamic":
+        print("  ridge %g chosen by cross-validation over %d groups (%s score %.4g); fit R2=%.4f RMSE=%.4g" % (
+            est.ridge_, est.n_groups_, est.cv_score, est.cv_rmse_, est.rsquared_, est.rmse_))
+        for (sig, tau), c in zip(est.terms_, est.coef_):
+            print("  %+.5g x lag(%s, tau %g s)" % (c, sig, tau))
+    elif args.model == "ann":
+        print("  %d hidden nodes chosen by validation (%s); validation RMSE by size: %s" % (
+            est.hidden_size_, est.validation_, ", ".join("%d: %.4g" % kv for kv in sorted(est.validation_rmse_.items()))))
+        print("  fit on all training samples: R2=%.4f RMSE=%.4g; best epoch %d" % (est.rsquared_, est.rmse_, est.best_epoch_))
+    else:
+        print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (
+            est.n_components_, est.eigenvalues_.size, 100 * est.cumulative_variance_ratio_[est.n_components_ - 1], 100 * est.variance_threshold))
+        print("  R2=%.4f adj R2=%.4f F=%.4g (p=%.3g) residual std error=%.4g" % (est.rsquared_, est.rsquared_adj_, est.fvalue_, est.f_pvalue_, est.resid_std_err_))
+    if args.json:
+        with out.open(args.json) as fh:
+            json.dump({"model": args.out, "kind": doc["kind"], "method": args.model, "sensors": model.sensors,
+                       "statistics": doc["statistics"], "training": doc["training"]}, fh, indent=2)
+    return 0

@@ -1,0 +1,109 @@
+"""``tcomp fit --model screw``: option parsing, fitting, the printed/JSON report.
+
+Options (``--option KEY=VALUE``, repeatable): segments, dt_s, free (comma list of
+q,h,lambda,c,alpha), geometric_degree (0..4 or auto), effects (comma list of
+host/learning/screw/effects.py names), nut_weight, reduced_segments, reduced_dt_s,
+feed_max_mm_min, ambient (on/off), air (auto, a sensor name, or off), base_ref (run_start/fixed), max_nfev,
+fit_window (LO:HI seconds, either side may be empty: fit only on error rows in it).  ``--sensors NAME`` picks the base
+sensor of the E_e term; ``--channel`` the errors.csv channel.
+"""
+import json
+import warnings
+
+from host import options
+from host.options import choice, number
+from host.learning.screw.effects import make_effect
+from host.learning.screw.identify import IdentifiabilityWarning
+
+
+def _geometric_degree(text):
+    if text == "auto":
+        return text
+    try:
+        return int(text)
+    except ValueError:
+        raise ValueError("expected 0..4 or auto")
+
+
+def _fit_window(text):
+    lo, colon, hi = text.partition(":")
+    try:
+        if not colon:
+            raise ValueError
+        return (float(lo) if lo.strip() else None, float(hi) if hi.strip() else None)
+    except ValueError:
+        raise ValueError("expected LO:HI in seconds (e.g. 0:10800 or :10800)")
+
+
+def _on_off(text):
+    return choice("on", "off")(text) == "on"
+
+
+def _effects(text):
+    return [make_effect(n.strip()) for n in text.split(",") if n.strip()]
+
+
+# --option KEY=VALUE settings of ScrewModel, with their converters (host/options.py)
+OPTIONS = {
+    "segments": number(int), "dt_s": number(float), "free": str, "geometric_degree": _geometric_degree,
+    "effects": _effects, "nut_weight": number(float), "reduced_segments": number(int), "reduced_dt_s": number(float),
+    "feed_max_mm_min": number(float), "ambient": _on_off, "air": str,  # air: auto, a sensor name, or off
+    "max_nfev": number(int), "base_ref": str, "fit_window": _fit_window,
+}
+
+
+def format_report(model):
+    st = model.statistics_
+    lines = ["screw model: %d segments, dt %g s, geometric degree %d" % (model.geometry_.segments, model.dt_s, model.geometric_degree_),
+             "  air: %s (%s)" % (model.air_sensor_ or "constant", model.air_source_)]
+    for name, p in st["parameters"].items():
+        if p.get("fixed"):
+            lines.append("  %-22s %12.5g %-10s (fixed)" % (name, p["value"], p["unit"]))
+        else:
+            lines.append("  %-22s %12.5g %-10s ± %.3g (%.2f %%)" % (name, p["value"], p["unit"], p["std"], 100 * p["rel_std"]))
+    for r in st["runs"]:
+        nut = "no nut sensor" if r["nut_rise_rmse_K"] is None else "nut rise RMSE %.2f K" % r["nut_rise_rmse_K"]
+        lines.append("  run %s: %d rows, RMSE %.3f um, max |residual| %.3f um, %s"
+                     % (r["run"], r["rows"], r["rmse_um"], r["max_abs_residual_um"], nut))
+    red = model.reduced_
+    for run, e in red["reduction_error_um"].items():
+        lines.append("  reduced (%d segments, dt %g s) vs full on %s: RMS %.3f um, max %.3f um"
+                     % (red["segments"], red["dt_s"], run, e["rms_um"], e["max_um"]))
+    lines.append("  reduced state bound %.2f K at feed %g mm/min" % (red["state_max_K"], red["feed_max_mm_min"]))
+    for w in st["warnings"]:
+        lines.append("  WARNING: " + w)
+    return "\n".join(lines)
+
+
+def fit_command(args, out):
+    """Fit, print the report, write ``args.out`` (and ``args.json``) through ``out`` (host.outputs.Outputs)."""
+    from host.errors import UserError
+    from host.learning.documents import save_model
+    from host.data.runs import RunFormatError, load_runs
+    from host.learning.screw.screwmodel import ScrewModel
+
+    kw = options.parse_options(args.option, OPTIONS)
+    if getattr(args, "direct", False) or getattr(args, "no_intercept", False):
+        raise UserError("--direct/--no-intercept apply to the empirical models, not to --model screw")
+    if args.sensors:
+        names = [s.strip() for s in args.sensors.split(",") if s.strip()]
+        if len(names) != 1:
+            raise UserError("--model screw takes one --sensors name: the base sensor of the ambient term (got %s)" % args.sensors)
+        kw["base_sensor"] = names[0]
+    try:
+        runs = load_runs(args.runs)
+    except RunFormatError as exc:
+        raise UserError(str(exc))
+    model = ScrewModel(channel=args.channel, **kw)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", IdentifiabilityWarning)  # they are in the report
+            model.fit(runs)
+    except ValueError as exc:
+        raise UserError(str(exc))
+    doc = save_model(model.to_document(), out.path(args.out))
+    print(format_report(model))
+    if args.json:
+        with out.open(args.json) as fh:
+            json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": model.reduced_["reduction_error_um"]}, fh, indent=2)
+    return 0

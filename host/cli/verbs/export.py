@@ -1,0 +1,116 @@
+"""tcomp export MODEL.json --out table.bin [--report report.json] [--json summary.json] [--c-header table.h] [--allow-edited]
+    [--envelope SENSOR=LO:HI[,SENSOR=LO:HI...]]... [--envelope-margin K]"""
+
+
+def add_arguments(p):
+    p.add_argument("model", help="model document (tcomp-model/1 JSON: poly_slope, linear_direct, screw or dynamic)")
+    p.add_argument("--out", required=True, help="table file to write (docs/table-format.md)")
+    p.add_argument("--report", help="write the certificate as JSON (max_error_um, min_headroom_bits, terms, envelope)")
+    p.add_argument("--json", metavar="PATH",
+                   help="write the certificate as JSON, the same document as --report (every result-producing verb takes --json)")
+    p.add_argument("--c-header", dest="c_header", help="also write the table and its integer evaluation as a C header")
+    p.add_argument("--ref-position-mm", dest="ref_position_mm", type=float,
+                   help="reference position of the offset/slope pair (default: 0 if inside the envelope, else its low end)")
+    p.add_argument("--allow-edited", dest="allow_edited", action="store_true",
+                   help="export a model whose recorded provenance.sha256 does not match its content (edited after "
+                        "it was saved): the table names the actual document and is marked edited")
+    p.add_argument("--envelope", action="append", default=[], metavar="SENSOR=LO:HI",
+                   help="certified temperature envelope of a sensor in degC (the machine's operating range; repeat "
+                        "or comma-separate, e.g. T1=10:60,T2=15:45). Must contain the model's training range. Inside "
+                        "it the firmware evaluates the model (EXTRAPOLATING outside the training range); beyond it "
+                        "it clamps (CLAMPED). Default: the training range widened by --envelope-margin")
+    p.add_argument("--envelope-margin", dest="envelope_margin", type=float, default=None, metavar="K",
+                   help="widen the training range by this many K on both sides for sensors without --envelope "
+                        "(default 15, docs/firmware.md \"Operating envelope\")")
+
+
+def run(args):
+    import math
+
+    from host.errors import UserError
+    from host.outputs import Outputs
+
+    if args.ref_position_mm is not None and not math.isfinite(args.ref_position_mm):
+        raise UserError("--ref-position-mm %s: must be a finite position in mm" % args.ref_position_mm)
+    with Outputs([args.model]) as out:
+        for flag, path in (("--out", args.out), ("--report", args.report), ("--json", args.json), ("--c-header", args.c_header)):
+            if path:
+                out.file(path, flag)
+        ex = _export(args)
+        _write(args, ex, out)
+        out.commit()
+    r = ex.report
+    print("%s -> %s: %s table, %d bytes, CRC-32 %s; certified max |integer - model| %.4f um (limit %.2f um), "
+          "min headroom %.2f bits" % (args.model, args.out, r["model_kind"], r["table_bytes"], r["crc32"],
+                                      r["max_error_um"], r["limit_um"], r["min_headroom_bits"]))
+    return 0
+
+
+def parse_envelope(values):
+    """``--envelope`` values ("T1=10:60", "T1=10:60,T2=15:45", repeatable) -> {sensor: (lo, hi)} in degC."""
+    import math
+
+    from host.errors import UserError
+
+    out = {}
+    for value in values:
+        for item in value.split(","):
+            name, eq, rng = item.strip().partition("=")
+            lo, colon, hi = rng.partition(":")
+            if not eq or not colon or not name.strip():
+                raise UserError("--envelope %r: expected SENSOR=LO:HI in degC (e.g. T1=10:60)" % item)
+            try:
+                lo, hi = float(lo), float(hi)
+            except ValueError:
+                raise UserError("--envelope %s: %r is not a pair of temperatures in degC" % (item, rng))
+            if not (math.isfinite(lo) and math.isfinite(hi)):
+                raise UserError("--envelope %s: temperatures must be finite numbers" % item)
+            if lo >= hi:
+                raise UserError("--envelope %s: the low end %g degC must be below the high end %g degC" % (item, lo, hi))
+            name = name.strip()
+            if name in out:
+                raise UserError("--envelope: sensor %s given twice" % name)
+            out[name] = (lo, hi)
+    return out
+
+
+def _export(args):
+    import math
+
+    from host.errors import UserError
+    from host.learning.documents import ModelFormatError, read_document
+    from models_export import ExportError, export_model
+
+    try:
+        doc = read_document(args.model)
+    except ModelFormatError as exc:
+        raise UserError(str(exc))
+    from models_export.exact import DEFAULT_ENVELOPE_MARGIN_K
+
+    envelope = parse_envelope(args.envelope)
+    margin = DEFAULT_ENVELOPE_MARGIN_K if args.envelope_margin is None else args.envelope_margin
+    if not (math.isfinite(margin) and margin >= 0):
+        raise UserError("--envelope-margin %s: must be a finite number of K >= 0" % args.envelope_margin)
+    try:
+        ex = export_model(doc, ref_position_mm=args.ref_position_mm, allow_edited=args.allow_edited,
+                          envelope=envelope, margin_K=margin)
+    except ExportError as exc:
+        raise UserError("%s: %s" % (args.model, exc))
+    return ex
+
+
+def _write(args, ex, out):
+    import json
+    import os
+
+    outputs = [(args.out, ex.table, "wb")]
+    if args.report:
+        outputs.append((args.report, json.dumps(ex.report, indent=2) + "\n", "w"))
+    if args.json:
+        outputs.append((args.json, json.dumps(ex.report, indent=2) + "\n", "w"))
+    if args.c_header:
+        guard = "TCOMP_" + "".join(c if c.isalnum() else "_" for c in os.path.basename(args.c_header).upper())
+        outputs.append((args.c_header, ex.c_header(guard), "w"))
+    for path, data, mode in outputs:
+        with out.open(path, mode) as fh:
+            fh.write(data)

@@ -1,0 +1,198 @@
+"""tcomp flash --port PORT [--table table.bin] [--config board.json | --board board.py] [--key board.key]"""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+
+
+
+def add_arguments(p):
+    p.add_argument("--port", required=True, help="serial port of the board (e.g. /dev/ttyACM0, or a pty)")
+    p.add_argument("--table", help="coefficient table (tcomp export) installed as slot A and made active")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--config", help="board config JSON (firmware/board.py format); generates tcomp_board.py "
+                                    "around firmware/boards/rp2040.py's make_board")
+    g.add_argument("--board", help="your board file, copied to the board root as tcomp_board.py")
+    p.add_argument("--table-dir", help="table directory on the board (default: the config's table_dir, else /tables)")
+    p.add_argument("--no-firmware", action="store_true", help="copy only the table and the board file")
+    p.add_argument("--reset", action="store_true", help="soft-reset the board afterwards so that main.py runs "
+                                                        "(not for a unix-port board: it would exit)")
+    p.add_argument("--mpremote", default=None, help="mpremote executable (default: the one next to this Python)")
+    p.add_argument("--dry-run", action="store_true", help="print the mpremote command instead of running it")
+    p.add_argument("--key", metavar="FILE",
+                   help="the board's key (64 hex digits, host/board/linkauth.py), written to the board's table directory "
+                        "as key.bin; a new random key is created in FILE (mode 0600) when FILE does not exist. "
+                        "Without a key the board refuses every command that changes its output (table upload, "
+                        "L, X, Modbus enable/slew/timeout/latch). The key is never printed")
+
+
+def _mpremote(explicit):
+    if explicit:
+        return explicit
+    here = os.path.join(os.path.dirname(sys.executable), "mpremote")
+    return here if os.path.exists(here) else (shutil.which("mpremote") or "mpremote")
+
+
+def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=True, key=None):
+    """Lay out the board's flash under ``dest``; returns {remote dir: [local files]} and the table dir.
+    ``key``: the board key (bytes), staged as ``<table dir>/key.bin`` (mode 0600)."""
+    from host.errors import UserError
+    files = {}
+    if firmware:
+        # exactly the .mpy files firmware/manifest.py lists, as the tests and the HIL rig run them
+        # (host/board/fwbuild.py), and main.py, which boots the compiled firmware/main.mpy
+        from host.board.fwbuild import BOOT_MAIN, BuildError, build
+        try:
+            built = build()
+        except BuildError as exc:
+            raise UserError("cannot build the firmware: %s" % exc)
+        for target, path in built.files:
+            out = os.path.join(dest, target)
+            os.makedirs(os.path.dirname(out), exist_ok=True)
+            shutil.copy(path, out)
+            files.setdefault(os.path.dirname(target), []).append(out)
+        path = os.path.join(dest, "main.py")
+        with open(path, "wb") as f:
+            f.write(BOOT_MAIN)
+        files.setdefault("", []).append(path)
+    cfg = None
+    if config:
+        try:
+            with open(config, encoding="utf-8") as f:
+                cfg = json.load(f)
+        except (OSError, json.JSONDecodeError) as exc:
+            raise UserError("%s: cannot read the board config: %s" % (config, exc))
+        try:
+            from host.board.config import load_config
+            load_config(cfg)
+        except ValueError as exc:
+            raise UserError("%s: %s" % (config, exc))
+        path = os.path.join(dest, "tcomp_board.py")
+        with open(path, "w", encoding="utf-8") as f:
+            f.write('"""Board file written by tcomp flash from %s."""\n' % os.path.basename(config))
+            f.write("CONFIG = %r\n\n\n" % (cfg,))
+            f.write("def make_board(config=CONFIG):\n")
+            f.write("    from firmware.boards.rp2040 import make_board as _make\n")
+            f.write("    return _make(config)\n")
+        files.setdefault("", []).append(path)
+    elif board:
+        if not os.path.isfile(board):
+            raise UserError("%s: board file is missing" % board)
+        path = os.path.join(dest, "tcomp_board.py")
+        shutil.copy(board, path)
+        files.setdefault("", []).append(path)
+    tdir = (table_dir or (cfg or {}).get("table_dir") or "/tables").strip("/") or "tables"
+    if table:
+        try:
+            with open(table, "rb") as f:
+                data = f.read()
+        except OSError as exc:
+            raise UserError("%s: cannot read the table: %s" % (table, exc))
+        try:
+            from firmware.table import parse_table
+            sensors = parse_table(data).sensors
+        except Exception as exc:  # firmware.table.TableError or a malformed file
+            raise UserError("%s: not a valid coefficient table: %s" % (table, exc))
+        missing = unwired_sensors(sensors, cfg) if cfg is not None else []
+        if missing:
+            raise UserError("%s: table sensor(s) %s have no channel in the board config %s" % (table, ", ".join(missing), config))
+        os.makedirs(os.path.join(dest, tdir), exist_ok=True)
+        for name, content in (("table_a.bin", data), ("active", b"A")):
+            p = os.path.join(dest, tdir, name)
+            with open(p, "wb") as f:
+                f.write(content)
+            files.setdefault(tdir, []).append(p)
+    if key is not None:
+        os.makedirs(os.path.join(dest, tdir), exist_ok=True)
+        p = os.path.join(dest, tdir, "key.bin")
+        fd = os.open(p, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
+        with os.fdopen(fd, "wb") as f:
+            f.write(key)
+        files.setdefault(tdir, []).append(p)
+    return files, tdir
+
+
+def board_key(path):
+    """The key in ``path``, created there first when the file does not exist; (key, created)."""
+    from host.errors import UserError
+    from host.board.linkauth import KeyFileError, generate_key, read_key, write_key
+    created = False
+    if not os.path.lexists(path):
+        try:
+            write_key(path, generate_key())
+        except OSError as exc:
+            raise UserError("--key %s: cannot create the key file: %s" % (path, exc.strerror or exc))
+        created = True
+    try:
+        return read_key(path), created
+    except KeyFileError as exc:
+        raise UserError(str(exc))
+
+
+def unwired_sensors(table_sensors, cfg):
+    """Table sensors without a channel of the same name in board config ``cfg`` (a dict), in table order.
+
+    The firmware refuses such a table with its generic reason "sensor count mismatch"; checked here first,
+    the user reads which sensor is missing.
+    """
+    wired = {c.get("name") for c in cfg.get("channels") or () if isinstance(c, dict)}
+    return [s for s in table_sensors if s not in wired]
+
+
+def command(port, files, mpremote="mpremote", reset=False):
+    """One mpremote invocation (``resume``: no soft reset on connect) that creates the directories
+    and copies every file."""
+    dirs = sorted({d for d in files if d})
+    mk = "import os\nfor d in %r:\n    try:\n        os.mkdir(d)\n    except OSError:\n        pass\n" % (
+        [p for d in dirs for p in _parents(d)],)
+    argv = [mpremote, "connect", port, "resume", "exec", mk]
+    for d in sorted(files):
+        argv += ["+", "fs", "cp"] + files[d] + [":" + (d + "/" if d else "./")]
+    if reset:
+        argv += ["+", "soft-reset"]
+    return argv
+
+
+def _parents(d):
+    parts = d.split("/")
+    return ["/".join(parts[:i + 1]) for i in range(len(parts))]
+
+
+def run(args):
+    from host.errors import UserError
+    if not (args.table or args.config or args.board or args.key or not args.no_firmware):
+        raise UserError("nothing to flash: give --table, --config, --board or --key, or drop --no-firmware")
+    key = None
+    if args.key:
+        key, created = board_key(args.key)
+        print("board key: %s (%s)" % (args.key, "new" if created else "existing"), file=sys.stderr)
+    tmp = tempfile.mkdtemp(prefix="tcomp-flash-")
+    keep = False
+    try:
+        files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware, key)
+        argv = command(args.port, files, _mpremote(args.mpremote), args.reset)
+        if args.dry_run:
+            # The printed command copies these staged files: they stay until the user has used (or dropped) it.
+            keep = True
+            print(" ".join(repr(a) if ("\n" in a or " " in a) else a for a in argv))
+            print("tcomp flash: the files of this command are kept in %s; delete it when done" % tmp, file=sys.stderr)
+            return 0
+        n = sum(len(v) for v in files.values())
+        print("flashing %d files to %s (tables in /%s)" % (n, args.port, tdir))
+        try:
+            p = subprocess.run(argv, capture_output=True, text=True, timeout=300)
+        except FileNotFoundError:
+            raise UserError("mpremote not found (%s); install the dev extra" % argv[0])
+        except subprocess.TimeoutExpired:
+            raise UserError("mpremote did not finish within 300 s on %s" % args.port)
+        if p.returncode != 0:
+            raise UserError("mpremote failed on %s (exit %d): %s" % (args.port, p.returncode,
+                                                                     (p.stderr or p.stdout).strip()[-800:]))
+        print("done: %s" % ", ".join(sorted(os.path.relpath(f, tmp) for v in files.values() for f in v)))
+        return 0
+    finally:
+        if not keep:
+            shutil.rmtree(tmp, ignore_errors=True)

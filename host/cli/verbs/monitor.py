@@ -1,0 +1,152 @@
+"""tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch]"""
+
+import csv
+import sys
+import time
+
+LATCH_WAIT_S = 5.0  # the firmware answers L within one cycle (cycle_ms, 100 ms by default)
+COLUMNS = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_offset_um", "slope_um_per_m",
+           "fields")
+
+
+def add_arguments(p):
+    p.add_argument("--port", required=True, help="serial port or pySerial URL (e.g. /dev/ttyACM0, socket://host:port, spy:///dev/ttyACM0, loop://)")
+    p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
+    p.add_argument("--csv", help="append every decoded frame to this CSV file")
+    p.add_argument("--count", type=int, default=0, help="stop after this many frames (0: never)")
+    p.add_argument("--duration", type=float, default=0.0, help="stop after this many seconds (0: never)")
+    p.add_argument("--hello", action="store_true", help="ask the board for its hello frame (V) first")
+    p.add_argument("--latch", action="store_true",
+                   help="declare a cold start: send L (re-latch the reference temperatures, docs/protocol.md) and "
+                        "report the answer; without --count/--duration stop at the answer (exit 1 if refused)")
+    p.add_argument("--key", help="the board's key file (tcomp flash --key): --latch signs L with it (the board "
+                                "refuses an unsigned L when it has a key)")
+    p.add_argument("--json", help="write {frames, malformed, rows: [decoded frames], bad: [reasons]} as JSON at the end")
+
+
+def row(f):
+    """A decoded frame as the monitor's columns."""
+    from host.board.link import STATUS_BITS
+    flags = [n for bit, n in STATUS_BITS.items() if f.status & bit]
+    if f.status & 0xFFFF:
+        flags.append("sensors:%04X" % (f.status & 0xFFFF))
+    r = {"seq": f.seq, "kind": f.kind, "status": "%08X" % f.status, "flags": "|".join(flags),
+         "t_ms": "", "pos_um": "", "total_um": "", "ref_offset_um": "", "slope_um_per_m": "",
+         "fields": ",".join(f.fields)}
+    if f.kind in ("O", "Q") and len(f.fields) >= 5:
+        r.update(t_ms=f.fields[0], pos_um=f.fields[1], total_um=f.fields[2], ref_offset_um=f.fields[3],
+                 slope_um_per_m=f.fields[4], fields="")
+    return r
+
+
+def run(args):
+    from host.errors import UserError
+    from host.outputs import Outputs
+
+    for flag, value in (("--baud", args.baud), ("--count", args.count), ("--duration", args.duration)):
+        if not value >= (1 if flag == "--baud" else 0):
+            raise UserError("%s %s: must be %s" % (flag, value, "a positive rate in bit/s" if flag == "--baud" else ">= 0 (0: no limit)"))
+    with Outputs([args.port]) as outputs:
+        if args.csv:
+            outputs.log(args.csv, "--csv")
+        if args.json:
+            outputs.file(args.json, "--json")
+        rc = _monitor(args, outputs)
+        outputs.commit()
+    return rc
+
+
+def _monitor(args, outputs):
+    import serial
+
+    from host.board.link import PROTOCOL_VERSION, StreamDecoder, command
+    from host.errors import UserError
+    try:
+        ser = serial.serial_for_url(args.port, args.baud, timeout=0.1)
+    except (serial.SerialException, OSError, ValueError) as exc:
+        raise UserError("cannot open %s: %s" % (args.port, exc))
+    out = None
+    writer = None
+    rows = []
+    bad_reasons = []
+    if args.csv:
+        try:
+            out = open(args.csv, "a", newline="", encoding="utf-8")
+        except OSError as exc:
+            raise UserError("cannot write %s: %s" % (args.csv, exc))
+        writer = csv.DictWriter(out, COLUMNS)
+        if out.tell() == 0:
+            writer.writeheader()
+    dec = StreamDecoder()
+    n = 0
+    bad = 0
+    start = time.monotonic()
+    print("%6s %1s %8s %10s %10s %9s %9s %9s  %s" % ("seq", "", "status", "t_ms", "pos_um", "total_um",
+                                                      "ref_um", "slope", "flags / fields"))
+    latch = None  # the board's answer to L: "ok" or "refused"
+    until_answer = args.latch and not (args.count or args.duration)
+    from host.board.linkauth import signer_for_option
+    signer = signer_for_option(args.key)
+    latch_sent = False
+    try:
+        if args.hello or signer is not None and args.latch:
+            ser.write(command("V"))  # a signed L needs the board's last counter, the hello's last field
+        if args.latch and signer is None:
+            ser.write(command("L"))
+            latch_sent = True
+        while not (args.count and n >= args.count) and not (args.duration and time.monotonic() - start
+                                                               >= args.duration):
+            if until_answer and latch:
+                break
+            if until_answer and time.monotonic() - start >= LATCH_WAIT_S:
+                raise UserError("%s: no answer to L within %g s" % (args.port, LATCH_WAIT_S))
+            try:
+                data = ser.read(4096)
+            except serial.SerialException as exc:
+                raise UserError("%s: %s" % (args.port, exc))
+            if not data:
+                continue
+            for f in dec.feed(data, time.monotonic()):
+                if f.kind == "H" and f.fields[:1] != [str(PROTOCOL_VERSION)]:
+                    raise UserError("%s: the board's hello frame says protocol version %s; this tcomp speaks %d "
+                                    "(docs/protocol.md)" % (args.port, (f.fields or ["(none)"])[0], PROTOCOL_VERSION))
+                r = row(f)
+                print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
+                    f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
+                    r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
+                if args.latch and not latch_sent and f.kind == "H":
+                    signer.observe(f.fields[-1])
+                    ser.write(signer.stream_line("L"))
+                    latch_sent = True
+                if latch_sent and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]
+                                                     or f.kind == "E" and f.fields[:1] in (["5"], ["8"], ["9"])):
+                    latch = "ok" if f.kind == "A" else "refused"
+                    print("L acknowledged, references %s" % ",".join(f.fields[1:]) if f.kind == "A"
+                          else "L refused: %s" % ",".join(f.fields[2:] if f.fields[0] == "5" else f.fields[1:]))
+                if writer:
+                    writer.writerow(r)
+                if args.json:
+                    rows.append(r)
+                n += 1
+                if args.count and n >= args.count or until_answer and latch:
+                    break
+            while dec.bad:
+                line, why = dec.bad.pop(0)
+                bad += 1
+                if args.json:
+                    bad_reasons.append(str(why))
+                print("bad frame: %s" % why, file=sys.stderr)
+            sys.stdout.flush()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        ser.close()
+        if out:
+            out.close()
+    print("%d frames, %d malformed" % (n, bad))
+    if args.json:
+        import json
+
+        with outputs.open(args.json) as fh:
+            json.dump({"port": args.port, "frames": n, "malformed": bad, "rows": rows, "bad": bad_reasons}, fh, indent=1)
+    return 1 if latch == "refused" else 0

@@ -1,0 +1,64 @@
+"""tcomp predict MODEL.json RUN --out PRED.csv"""
+
+
+def add_arguments(p):
+    p.add_argument("model", help="model document (tcomp-model/1 JSON)")
+    p.add_argument("run", help="run folder")
+    p.add_argument("--out", required=True, help="CSV: time_s,position_mm[,direction][,channel],predicted_um")
+    p.add_argument("--json", help="also write summary statistics (RMSE against the measured errors) as JSON")
+
+
+def run(args):
+    from host.outputs import Outputs
+
+    with Outputs([args.model, args.run]) as out:
+        out.file(args.out, "--out")
+        if args.json:
+            out.file(args.json, "--json")
+        _predict(args, out)
+        out.commit()
+    return 0
+
+
+def _predict(args, out):
+    import json
+
+    import numpy as np
+
+    from host.errors import UserError
+    from host.learning.documents import ModelFormatError, load_model
+    from host.data.runs import RunFormatError, load_run
+
+    try:
+        model = load_model(args.model)
+        run_ = load_run(args.run)
+    except (ModelFormatError, RunFormatError) as exc:
+        raise UserError(str(exc))
+    e = run_.errors
+    rows = np.arange(len(e))
+    if getattr(model, "channel", None) and e.channel is not None:
+        rows = np.flatnonzero(e.channel == model.channel)
+    try:
+        pred = np.asarray(model.predict(run_), dtype=float)
+    except ValueError as exc:  # the run lacks what the model needs (a sensor, motion, a channel)
+        raise UserError("%s cannot be predicted with %s: %s" % (args.run, args.model, exc))
+    if pred.shape != (len(e),):
+        raise UserError("model returned %s predictions for %d rows of %s" % (pred.shape, len(e), args.run))
+    header = ["time_s", "position_mm"] + (["direction"] if e.direction is not None else []) + (["channel"] if e.channel is not None else []) + ["predicted_um"]
+    with out.open(args.out) as fh:
+        fh.write(",".join(header) + "\n")
+        for i in range(len(e)):
+            cells = ["%.3f" % e.time_s[i], "%.4f" % e.position_mm[i]]
+            if e.direction is not None:
+                cells.append("%+d" % e.direction[i])
+            if e.channel is not None:
+                cells.append(str(e.channel[i]))
+            cells.append("nan" if np.isnan(pred[i]) else "%.4f" % pred[i])
+            fh.write(",".join(cells) + "\n")
+    resid = e.error_um[rows] - pred[rows]
+    resid = resid[np.isfinite(resid)]
+    rmse = float(np.sqrt(np.mean(resid ** 2))) if resid.size else float("nan")
+    print("%s on %s: %d rows, RMSE %.3f um against the measured errors" % (args.model, args.run, len(e), rmse))
+    if args.json:
+        with out.open(args.json) as fh:
+            json.dump({"model": args.model, "run": args.run, "rows": int(len(e)), "rmse_um": rmse}, fh, indent=2)

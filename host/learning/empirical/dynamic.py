@@ -1,0 +1,438 @@
+"""Dynamic thermal-error model: first-order-lag-filtered signals with identified time constants.
+
+A static regression on temperatures cannot represent the lag between a heat
+source and the structure's deformation. This model adds it explicitly:
+
+    δ(t) = b0 + Σ_j b_j · L_τj[u_j](t)
+
+where each u_j is a *signal* the board has online — a temperature rise
+T_s − T_s(start) of a sensor, the spindle speed (krpm) and its square as the
+controller reports them, or the axis feed (m/min) — and L_τ is the causal
+first-order lag 𝜏·dy/dt = u − y (τ = 0: the signal itself), started at rest
+(y = 0) at the run start, when every rise is zero. The discrete form, exact for
+an input held constant over each sample interval Δt (zero-order hold):
+
+    y[k] = y[k−1] + (1 − exp(−Δt/τ)) · (u[k−1] − y[k−1])
+
+Structure selection (which signals, which time constants) is a greedy forward
+search with sequential replacement, scored by leave-one-group-out
+cross-validation: groups are the training runs or, for one run, its spindle
+cycles (host/learning/empirical/schedule.py). At each step the candidate term (signal, τ)
+that lowers the CV score most is added while the gain is at least ``min_gain``
+(1 %, relative); after each addition, single exchanges of a chosen term for any
+other are made while they lower the score. At most ``max_sensors`` distinct
+temperature sensors (5) and ``max_terms`` terms (8). The score is the *worst*
+held-out group's RMSE (``cv_score="worst"``; "pooled" is the RMSE over all
+held-out samples): a compensation model has to hold on every operating
+condition, not on average. The time constants come from the grid ``taus_s``, so
+"identified" means chosen by cross-validation among them. Coefficients are
+ridge least squares on RMS-scaled terms, the penalty chosen from ``ridge`` by
+the same cross-validation (0 is plain least squares); lag-filtered copies of one
+signal at neighbouring τ are nearly collinear, and the penalty keeps their
+coefficients from cancelling each other out of the training range.
+
+Scoring uses per-group Gram matrices of the candidate columns, so one CV
+evaluation costs O(k³ · groups) whatever the number of samples.
+"""
+import numpy as np
+
+from host.learning.empirical import EmpiricalDataError
+
+# 0 (the signal itself), 15 min .. 16 h: from a sensor's own lag to two 8 h heating/cooling cycles of a machine structure
+TAUS_S = (0.0, 900.0, 1800.0, 3600.0, 7200.0, 14400.0, 28800.0, 57600.0)
+RIDGE = (0.0, 1e-3, 1e-2)  # penalty per sample on RMS-scaled terms, chosen by the same cross-validation
+
+
+def lag_filter(time_s, u, tau_s):
+    """First-order lag of u (n,) or (n, m) sampled at time_s, from rest, zero-order-hold exact."""
+    u = np.asarray(u, dtype=float)
+    if tau_s <= 0:
+        return u.copy()
+    t = np.asarray(time_s, dtype=float)
+    a = 1.0 - np.exp(-np.diff(t) / float(tau_s))
+    y = np.zeros_like(u)
+    for k in range(1, t.size):
+        y[k] = y[k - 1] + a[k - 1] * (u[k - 1] - y[k - 1])
+    return y
+
+
+def _lag_filter_fast(time_s, U, tau_s):
+    """lag_filter of every column of U at once with scipy's lfilter when the sampling is uniform."""
+    U = np.asarray(U, dtype=float)
+    if tau_s <= 0:
+        return U.copy()
+    dt = np.diff(time_s)
+    if dt.size and np.allclose(dt, dt[0], rtol=1e-9, atol=1e-9):
+        from scipy.signal import lfilter
+
+        a = 1.0 - np.exp(-dt[0] / float(tau_s))
+        # y[k] = (1 − a)·y[k−1] + a·u[k−1]: numerator [0, a], denominator [1, −(1 − a)]
+        return lfilter([0.0, a], [1.0, -(1.0 - a)], U, axis=0)
+    return lag_filter(time_s, U, tau_s)
+
+
+SPINDLE = ("spindle_krpm", "spindle_krpm2")
+FEED = "feed_m_min"
+
+
+def signals(run, sensors):
+    """Time base (the temperature log) and the raw signals {name: (n,)} the model can filter.
+
+    Temperature rises over the run's first sample are named ``T:<sensor>``; the
+    spindle speed (held from each spindle.csv sample to the next) gives
+    ``spindle_krpm`` and ``spindle_krpm2``; motion.csv gives ``feed_m_min`` (the
+    commanded feed while the axis moves, 0 when idle).
+    """
+    temps = run.temperatures
+    t = np.asarray(temps.time_s, dtype=float)
+    out = {}
+    for s in sensors:
+        if s not in temps.names:
+            raise EmpiricalDataError("%s: the dynamic model needs sensor %s, not in temperatures.csv" % (run.name, s))
+        col = np.asarray(temps.column(s), dtype=float)
+        out["T:" + s] = col - col[0]
+    if run.spindle is not None:
+        sp = run.spindle
+        idx = np.searchsorted(sp.time_s, t, side="right") - 1
+        rpm = np.where(idx >= 0, sp.rpm[np.clip(idx, 0, None)], 0.0)
+        out["spindle_krpm"] = rpm / 1000.0
+        out["spindle_krpm2"] = (rpm / 1000.0) ** 2
+    if run.motion is not None:
+        m = run.motion
+        feed = np.zeros(t.size)
+        for t0, t1, f in zip(m.t_start_s, m.t_end_s, m.feed_mm_min):
+            feed[(t >= t0) & (t < t1)] = f / 1000.0
+        out[FEED] = feed
+    return t, out
+
+
+def features(run, terms, times):
+    """Columns of the model terms [(signal, tau_s)] at ``times`` (interpolated from the temperature time base)."""
+    names = sorted({sig[2:] for sig, _ in terms if sig.startswith("T:")})
+    t, sig = signals(run, names)
+    times = np.atleast_1d(np.asarray(times, dtype=float))
+    if times.size and (times.min() < t[0] or times.max() > t[-1]):
+        bad = times[(times < t[0]) | (times > t[-1])][0]
+        raise EmpiricalDataError("%s: time %g s is outside the temperature log %g..%g s (no extrapolation)" % (run.name, bad, t[0], t[-1]))
+    cols = []
+    cache = {}
+    for name, tau in terms:
+        if name not in sig:
+            what = "spindle.csv" if name in SPINDLE else "motion.csv" if name == FEED else "temperatures.csv"
+            raise EmpiricalDataError("%s: the dynamic model needs the signal %s (from %s), which the run lacks" % (run.name, name, what))
+        bad = np.flatnonzero(~np.isfinite(sig[name]))
+        if bad.size:  # a filter carries a NaN into every later output: refuse, as the static models do
+            raise EmpiricalDataError("%s: signal %s reads NaN/inf at %g s; no prediction from it" % (run.name, name, t[bad[0]]))
+        key = (name, float(tau))
+        if key not in cache:
+            cache[key] = np.interp(times, t, _lag_filter_fast(t, sig[name], float(tau)))
+        cols.append(cache[key])
+    return np.column_stack(cols) if cols else np.zeros((times.size, 0))
+
+
+def candidate_matrix(runs, times_per_run, sensors, taus_s, use_spindle=True, use_feed=True):
+    """Every candidate column (signal × τ) stacked over the runs -> (F (n, m), [(signal, tau)])."""
+    blocks, terms = [], None
+    for run, times in zip(runs, times_per_run):
+        t, sig = signals(run, sensors)
+        names = ["T:" + s for s in sensors]
+        if use_spindle:
+            names += [s for s in SPINDLE if s in sig]
+        if use_feed and FEED in sig:
+            names.append(FEED)
+        these = [(n, float(tau)) for n in names for tau in taus_s]
+        if terms is None:
+            terms = these
+        elif these != terms:
+            raise EmpiricalDataError("%s: has different signals (%s) from the first training run; give runs with the same logs"
+                                     % (run.name, ", ".join(sorted(set(n for n, _ in these) ^ set(n for n, _ in terms)))))
+        U = np.column_stack([sig[n] for n in names])
+        cols = []
+        for tau in taus_s:
+            cols.append(_lag_filter_fast(t, U, float(tau)))
+        # reorder to (signal, tau) order
+        stack = np.stack(cols, axis=2)  # (n_t, signals, taus)
+        full = stack.reshape(t.size, -1)
+        blocks.append(np.column_stack([np.interp(times, t, full[:, j]) for j in range(full.shape[1])]))
+    return np.vstack(blocks), terms
+
+
+class DynamicRegression:
+    """Greedy forward choice of lag-filtered terms by group cross-validation; scikit-learn style.
+
+    ``fit(F, y, terms, groups)``: F holds every candidate column, ``terms`` their
+    (signal, tau_s). Parameters (keyword-only): ``max_sensors`` (distinct
+    temperature sensors, default 5), ``max_terms`` (default 8), ``min_gain``
+    (relative CV reduction a term must bring, default 0.01), ``cv_score``
+    ("worst" or "pooled"), ``swaps`` (sequential replacement), ``ridge`` (a value
+    or a grid chosen by CV), ``fit_intercept``.
+    Learned: ``selected_`` (column indices), ``terms_``, ``coef_``,
+    ``intercept_``, ``ridge_``, ``cv_rmse_``, ``cv_by_ridge_``, ``history_``,
+    ``rmse_``, ``rsquared_``, ``n_samples_``, ``n_groups_``.
+    """
+
+    method = "dynamic"
+
+    def __init__(self, *, max_sensors=5, max_terms=8, min_gain=0.01, cv_score="worst", swaps=True, ridge=RIDGE, fit_intercept=True):
+        self.ridge = ridge
+        self.cv_score = cv_score
+        self.swaps = swaps
+        self.max_sensors = max_sensors
+        self.max_terms = max_terms
+        self.min_gain = min_gain
+        self.fit_intercept = fit_intercept
+
+    def fit(self, F, y, terms, groups):
+        """Structure and coefficients for every ridge value in ``ridge``; the lowest CV score wins."""
+        if self.cv_score not in ("worst", "pooled"):
+            raise EmpiricalDataError("dynamic: cv_score must be 'worst' or 'pooled', got %r" % (self.cv_score,))
+        grid = [self.ridge] if np.isscalar(self.ridge) else list(self.ridge)
+        if not grid or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 for v in grid):
+            raise EmpiricalDataError("dynamic: ridge must be a number >= 0 or a list of them, got %r" % (self.ridge,))
+        best, tried = None, {}
+        for lam in grid:
+            fitted = self._fit_one(F, y, terms, groups, float(lam))
+            tried[float(lam)] = fitted["cv_rmse"]
+            if best is None or fitted["cv_rmse"] < best["cv_rmse"]:
+                best = fitted
+        for k, v in best.items():
+            setattr(self, k, v)
+        self.cv_by_ridge_ = tried
+        r = y - self.predict(np.asarray(F, dtype=float)[:, self.selected_])
+        self.rmse_ = float(np.sqrt(np.mean(r**2)))
+        sst = float(((y - np.mean(y)) ** 2).sum())
+        self.rsquared_ = 1.0 - float(r @ r) / sst if sst > 0 else float("nan")
+        return self
+
+    def _fit_one(self, F, y, terms, groups, ridge):
+        for key in ("max_sensors", "max_terms"):
+            v = getattr(self, key)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
+                raise EmpiricalDataError("dynamic: %s must be an integer >= 1, got %r" % (key, v))
+        if not 0.0 <= float(self.min_gain) < 1.0:
+            raise EmpiricalDataError("dynamic: min_gain must be in [0, 1), got %r" % (self.min_gain,))
+        F = np.asarray(F, dtype=float)
+        y = np.asarray(y, dtype=float)
+        groups = np.asarray(groups)
+        labels = np.unique(groups)
+        if labels.size < 2:
+            raise EmpiricalDataError("dynamic: cross-validation needs at least 2 groups (runs or spindle cycles), got %d" % labels.size)
+        if not np.isfinite(F).all() or not np.isfinite(y).all():
+            raise EmpiricalDataError("dynamic: NaN/inf in the signals or the target")
+        o = int(bool(self.fit_intercept))
+        A = np.column_stack([np.ones(len(y)), F]) if o else F
+        # scale columns so the Gram matrices are well conditioned (krpm² and K live on different scales)
+        scale = np.sqrt((A**2).mean(axis=0))
+        scale[scale == 0] = 1.0
+        A = A / scale
+        G = [(A[groups == g].T @ A[groups == g], A[groups == g].T @ y[groups == g], float(y[groups == g] @ y[groups == g]), int((groups == g).sum()))
+             for g in labels]
+        Gall = sum(g[0] for g in G)
+        call = sum(g[1] for g in G)
+        n_all = len(y)
+
+        def penalty(idx, n):
+            # ridge on the scaled terms, never on the intercept
+            P = ridge * n * np.eye(len(idx))
+            if o:
+                P[0, 0] = 0.0
+            return P
+
+        def cv(cols):
+            idx = ([0] if o else []) + [c + o for c in cols]
+            sse = []
+            for Gv, cv_, yy, nv in G:
+                M = (Gall - Gv)[np.ix_(idx, idx)] + penalty(idx, n_all - nv)
+                if np.linalg.cond(M) > 1e12:
+                    return np.inf
+                beta = np.linalg.solve(M, (call - cv_)[idx])
+                sse.append(max(yy - 2 * beta @ cv_[idx] + beta @ Gv[np.ix_(idx, idx)] @ beta, 0.0))
+            if self.cv_score == "worst":
+                return float(max(np.sqrt(s / g[3]) for s, g in zip(sse, G)))
+            return float(np.sqrt(sum(sse) / n_all))
+
+        def sensor_of(j):
+            return terms[j][0][2:] if terms[j][0].startswith("T:") else None
+
+        def allowed(sel, j):
+            used = {sensor_of(i) for i in sel} - {None}
+            s = sensor_of(j)
+            return j not in sel and (s is None or s in used or len(used) < int(self.max_sensors))
+
+        def best_swap(sel, score):
+            """Sequential replacement: the single exchange of a chosen term that lowers the CV error most."""
+            best = (score, None)
+            for pos in range(len(sel)):
+                rest = sel[:pos] + sel[pos + 1:]
+                for j in range(F.shape[1]):
+                    if allowed(rest, j) and j != sel[pos]:
+                        s = cv(rest[:pos] + [j] + rest[pos:])
+                        if s < best[0] * (1.0 - 1e-9):
+                            best = (s, rest[:pos] + [j] + rest[pos:])
+            return best
+
+        selected, history = [], []
+        current = cv([]) if o else np.inf
+        history.append({"step": 0, "action": "start", "term": None, "cv_rmse": current})
+        while len(selected) < int(self.max_terms):
+            best = (np.inf, None)
+            for j in range(F.shape[1]):
+                if allowed(selected, j):
+                    score = cv(selected + [j])
+                    if score < best[0]:
+                        best = (score, j)
+            if best[1] is None or not best[0] < current * (1.0 - float(self.min_gain)):
+                break
+            selected.append(best[1])
+            current = best[0]
+            history.append({"step": len(history), "action": "add", "term": [terms[best[1]][0], terms[best[1]][1]], "cv_rmse": current})
+            while self.swaps:
+                score, sel = best_swap(selected, current)
+                if sel is None:
+                    break
+                out_ = [j for j in selected if j not in sel][0]
+                in_ = [j for j in sel if j not in selected][0]
+                selected, current = sel, score
+                history.append({"step": len(history), "action": "swap", "term": [terms[in_][0], terms[in_][1]],
+                                "replaces": [terms[out_][0], terms[out_][1]], "cv_rmse": current})
+        if not selected:
+            raise EmpiricalDataError("dynamic: no lag-filtered term lowers the cross-validation error by %.0f %%" % (100 * self.min_gain))
+        idx = ([0] if o else []) + [c + o for c in selected]
+        beta = np.linalg.solve(Gall[np.ix_(idx, idx)] + penalty(idx, n_all), call[idx]) / scale[idx]
+        return {"intercept_": float(beta[0]) if o else 0.0, "coef_": beta[o:], "selected_": selected,
+                "terms_": [(terms[j][0], float(terms[j][1])) for j in selected], "cv_rmse": current, "cv_rmse_": current,
+                "history_": history, "n_samples_": n_all, "n_groups_": int(labels.size), "ridge_": ridge}
+
+    def predict(self, F):
+        """``F``: the selected terms' signals, one column per ``terms_`` entry."""
+        from host.learning.empirical.regression import check_predict_x
+
+        F = check_predict_x(self, F, "coef_", lambda: self.coef_.size)
+        return self.intercept_ + F @ self.coef_
+
+    def statistics(self):
+        from host.learning.empirical.regression import _f
+
+        return {
+            "n_samples": int(self.n_samples_), "r2": _f(self.rsquared_), "rmse": _f(self.rmse_), "cv_rmse": _f(self.cv_rmse_),
+            "cv_groups": self.n_groups_, "cv_score": self.cv_score, "history": self.history_, "ridge": self.ridge_,
+            "cv_by_ridge": {str(k): _f(v) for k, v in self.cv_by_ridge_.items()},
+            "terms": [{"signal": n, "tau_s": tau, "coefficient": _f(c)} for (n, tau), c in zip(self.terms_, self.coef_)],
+            "sensors_used": sorted({n[2:] for n, _ in self.terms_ if n.startswith("T:")}),
+            "r2_adj": None, "F": None, "F_p": None, "residual_std_error": _f(self.rmse_),
+        }
+
+
+class DynamicModel:
+    """Model document kind ``dynamic`` (docs/model-format.md): δ = b0 + Σ b_j·L_τj[u_j], direct or slope.
+
+    Inputs are referenced to the evaluated run's start (``thermal.reference`` is
+    "run_start"): the filters start at rest when the board latches its
+    reference temperatures, so a run must be logged from that moment.
+    """
+
+    kind = "dynamic"
+    reference = "run_start"
+    coefficients = None  # not a linear function of the temperatures
+    intercept = 0.0
+
+    def __init__(self, terms, coefficients, intercept, target="direct", channel=None, geometric_coef=(0.0,), method="dynamic", axis=None,
+                 reference_C=None, envelope=None, statistics=None, training=None, dt_s=None):
+        self.dt_s = dt_s  # the filters' step on the board (the training runs' sample interval); None: not recorded
+        self.terms = [(str(n), float(tau)) for n, tau in terms]
+        self.term_coefficients = np.asarray(coefficients, dtype=float)
+        self.intercept = float(intercept)
+        self.target = target
+        self.channel = channel
+        self.geometric_coef = np.asarray(geometric_coef, dtype=float)
+        self.method = method
+        self.axis = axis
+        self.sensors = sorted({n[2:] for n, _ in self.terms if n.startswith("T:")}, key=lambda s: [n for n, _ in self.terms].index("T:" + s))
+        self.reference_C = dict(reference_C or {})
+        self.envelope = envelope or {}
+        self.statistics = statistics or {}
+        self.training = training or {}
+
+    def thermal_at(self, run, times):
+        return self.intercept + features(run, self.terms, times) @ self.term_coefficients
+
+    def geometric(self, P):
+        return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
+
+    def _rows(self, run):
+        from host.learning.empirical.targets import _channel_rows
+
+        if self.channel is not None and run.errors.channel is None:
+            return np.arange(len(run.errors))
+        return _channel_rows(run, self.channel)
+
+    def predict(self, run):
+        e = run.errors
+        out = np.full(len(e), np.nan)
+        rows = self._rows(run)
+        th = self.thermal_at(run, e.time_s[rows])
+        out[rows] = self.geometric(e.position_mm[rows]) + th * e.position_mm[rows] if self.target == "slope" else th
+        return out
+
+    def to_document(self):
+        return {
+            "format": "tcomp-model/1", "kind": self.kind, "method": self.method, "axis": self.axis, "channel": self.channel,
+            "sensors": list(self.sensors), "reference_C": dict(self.reference_C),
+            "geometric": None if self.target == "direct" else {"degree": int(self.geometric_coef.size - 1),
+                                                               "coefficients_um": [float(c) for c in self.geometric_coef]},
+            "thermal": {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": "run_start",
+                        "intercept": self.intercept, **({"dt_s": self.dt_s} if self.dt_s is not None else {}),
+                        "terms": [{"signal": n, "tau_s": tau, "coefficient": float(c)} for (n, tau), c in zip(self.terms, self.term_coefficients)]},
+            "envelope": self.envelope, "statistics": self.statistics, "training": self.training,
+        }
+
+    @classmethod
+    def from_document(cls, doc):
+        import math
+
+        from host.learning.documents import ModelFormatError
+
+        def num(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        th = doc.get("thermal")
+        if not isinstance(th, dict):
+            raise ModelFormatError("dynamic model document lacks the object 'thermal'")
+        if th.get("target") not in ("direct", "slope"):
+            raise ModelFormatError("dynamic model document: thermal.target must be 'direct' or 'slope', found %r" % (th.get("target"),))
+        if th.get("reference", "run_start") != "run_start":
+            raise ModelFormatError("dynamic model document: thermal.reference must be 'run_start' (the filters start at rest), found %r" % (th.get("reference"),))
+        if not num(th.get("intercept")):
+            raise ModelFormatError("dynamic model document: thermal.intercept must be a finite number, found %r" % (th.get("intercept"),))
+        terms = th.get("terms")
+        if not isinstance(terms, list) or not terms:
+            raise ModelFormatError("dynamic model document: thermal.terms must be a non-empty list")
+        known = SPINDLE + (FEED,)
+        out, coefs = [], []
+        for i, t in enumerate(terms):
+            if not isinstance(t, dict):
+                raise ModelFormatError("dynamic model document: thermal.terms[%d] must be an object" % i)
+            sig = t.get("signal")
+            if not isinstance(sig, str) or not (sig.startswith("T:") and len(sig) > 2 or sig in known):
+                raise ModelFormatError("dynamic model document: thermal.terms[%d].signal must be 'T:<sensor>' or one of %s, found %r"
+                                       % (i, ", ".join(known), sig))
+            if not num(t.get("tau_s")) or t["tau_s"] < 0:
+                raise ModelFormatError("dynamic model document: thermal.terms[%d].tau_s must be a number >= 0, found %r" % (i, t.get("tau_s")))
+            if not num(t.get("coefficient")):
+                raise ModelFormatError("dynamic model document: thermal.terms[%d].coefficient must be a finite number, found %r" % (i, t.get("coefficient")))
+            out.append((sig, t["tau_s"]))
+            coefs.append(t["coefficient"])
+        geo = (0.0,)
+        if th["target"] == "slope":
+            from host.learning.empirical.kinds import _geometric_from_document
+
+            geo = _geometric_from_document(doc, "dynamic")
+        if doc.get("channel") is not None and not isinstance(doc.get("channel"), str):
+            raise ModelFormatError("dynamic model document: field 'channel' must be a channel name (string) or null")
+        for key in ("reference_C", "envelope", "statistics", "training"):
+            if doc.get(key) is not None and not isinstance(doc.get(key), dict):
+                raise ModelFormatError("dynamic model document: field '%s' must be an object or null, found %s" % (key, type(doc.get(key)).__name__))
+        if th.get("dt_s") is not None and not (num(th["dt_s"]) and th["dt_s"] > 0):
+            raise ModelFormatError("dynamic model document: thermal.dt_s must be a number > 0 (seconds), found %r" % (th.get("dt_s"),))
+        return cls(out, coefs, th["intercept"], th["target"], doc.get("channel"), geo, doc.get("method", "dynamic"), doc.get("axis"),
+                   doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"), th.get("dt_s"))

@@ -1,0 +1,252 @@
+"""Fit a model document from runs: targets -> regression -> PolySlopeModel / LinearDirectModel.
+
+Envelope rule (recorded in the document's ``envelope.rule``): for each model
+sensor, the absolute temperatures and the rises seen over the training span
+(first to last target time of each training run), widened by
+``envelope_margin_K`` (default 2 K) on both sides; positions 0..stroke_mm when
+the run declares its stroke, else the measured position range; a direct model
+has its fixed measuring position.
+"""
+import numpy as np
+
+from host.learning.empirical import EmpiricalDataError
+from host.learning.empirical.geometric import fit_geometric
+from host.learning.empirical.kinds import LinearDirectModel, NetworkModel, PolySlopeModel
+from host.learning.empirical.regression import make_estimator
+from host.learning.empirical.schedule import block_labels, cycles
+from host.learning.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
+
+ENVELOPE_MARGIN_K = 2.0
+NONLINEAR = ("ann", "ppr")  # estimators that are not a linear function of the rises: NetworkModel
+
+
+def _envelope(runs, arrays, sensors, margin, target, channel):
+    tlo, thi, rlo, rhi = {}, {}, {}, {}
+    for r, a in zip(runs, arrays):
+        temps = r.temperatures
+        keep = (temps.time_s >= a.time_s.min()) & (temps.time_s <= a.time_s.max())
+        if not keep.any():
+            keep = np.ones(temps.time_s.size, bool)
+        for s in sensors:
+            col = temps.column(s)
+            v = col[keep]
+            rise = v - col[0]
+            tlo[s] = min(tlo.get(s, np.inf), float(v.min()))
+            thi[s] = max(thi.get(s, -np.inf), float(v.max()))
+            rlo[s] = min(rlo.get(s, np.inf), float(rise.min()))
+            rhi[s] = max(rhi.get(s, -np.inf), float(rise.max()))
+    pos = []
+    for r in runs:
+        rows = _channel_rows(r, channel)
+        pos.append(r.errors.position_mm[rows])
+    pos = np.concatenate(pos)
+    strokes = [r.stroke_mm for r in runs if r.stroke_mm]
+    if target == "slope" and strokes:
+        prange = [0.0, float(min(strokes))]
+    else:
+        prange = [float(pos.min()), float(pos.max())]
+    return {
+        "temperature_C": {s: [tlo[s] - margin, thi[s] + margin] for s in sensors},
+        "temperature_rise_K": {s: [rlo[s] - margin, rhi[s] + margin] for s in sensors},
+        "position_mm": prange,
+        "margin_K": float(margin),
+        "rule": "training temperatures and rises over the training span widened by margin_K; "
+                + ("positions 0..stroke_mm" if target == "slope" and strokes else "measured position range"),
+    }
+
+
+def select_columns(arrays, sensors):
+    """RunArrays restricted to ``sensors`` (a new list, same runs)."""
+    from host.learning.empirical.targets import RunArrays
+
+    out = []
+    for a in arrays:
+        missing = [s for s in sensors if s not in a.names]
+        if missing:
+            raise EmpiricalDataError("%s: sensor(s) %s not available (have %s)" % (a.run, ", ".join(missing), ", ".join(a.names)))
+        idx = [a.names.index(s) for s in sensors]
+        out.append(RunArrays(a.X[:, idx], a.y, list(sensors), a.time_s, a.run, None if a.start is None else a.start[idx]))
+    return out
+
+
+def merge_small_groups(groups, fraction=0.25):
+    """Merge groups smaller than ``fraction`` of the largest into the group before them in time.
+
+    A training window that ends just after a cycle starts would otherwise make
+    a group of a few samples whose CV error counts as much as a whole cycle's.
+    """
+    groups = np.asarray(groups).copy()
+    labels, counts = np.unique(groups, return_counts=True)
+    small = set(labels[counts < fraction * counts.max()].tolist())
+    order = list(dict.fromkeys(groups.tolist()))  # labels in time order
+    for i, lab in enumerate(order):
+        if lab in small:
+            into = order[i - 1] if i > 0 else next((o for o in order if o not in small), lab)
+            groups[groups == lab] = into
+    return groups
+
+
+def cv_groups(runs, arrays, cv_blocks=None):
+    """Cross-validation group of every stacked sample.
+
+    Several runs: the run. One run: ``cv_blocks`` equal-length contiguous time
+    blocks if given, else the run's spindle cycles (host/learning/empirical/schedule.py).
+    """
+    if len(arrays) >= 2:
+        if cv_blocks is not None:
+            raise EmpiricalDataError("cv_blocks applies to a single training run; with %d runs the runs are the groups" % len(arrays))
+        return np.concatenate([np.full(a.y.size, i) for i, a in enumerate(arrays)])
+    t = np.concatenate([a.time_s for a in arrays])
+    if cv_blocks is not None:
+        k = int(cv_blocks)
+        if k < 2:
+            raise EmpiricalDataError("cv_blocks must be >= 2, got %d" % k)
+        edges = np.linspace(t.min(), t.max(), k + 1)[1:-1]
+        return block_labels(t, edges)
+    if runs[0].spindle is None:
+        # no schedule to cut along: three contiguous time blocks (early, middle, late part of the run)
+        edges = np.linspace(t.min(), t.max(), 4)[1:-1]
+        return block_labels(t, edges)
+    edges = [c["t_start_s"] for c in cycles(runs[0])[1:]]
+    g = merge_small_groups(block_labels(t, edges))
+    if np.unique(g).size < 2:
+        raise EmpiricalDataError("cv-subset: the training span covers a single spindle cycle; give cv_blocks=N")
+    return g
+
+
+def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
+              reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
+              cv_blocks=None, exclude=None, **options):
+    """Fit ``method`` (mlr|pcr|stepwise) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
+
+    ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
+    ``reference``: "fixed" (default: inputs are T − reference_C, the document
+    contract the exporter and firmware implement; reference_C is the mean
+    cold-start temperature of the training runs) or "run_start" (rises over
+    each evaluated run's own first sample, the literature's ΔT; the document
+    then says so in thermal.reference). Training always uses each training
+    run's own rises, so with one training run both give the same model.
+    ``cv_blocks``: cross-validation groups of ``cv-subset`` (see :func:`cv_groups`).
+    ``exclude=(lo, hi)``: targets in that span are left out of the fit (leave-one-cycle-out).
+    """
+    runs = list(runs)
+    if not runs:
+        raise EmpiricalDataError("fit: no training run given")
+    arrays = training_arrays(runs, target=target, channel=channel, sensors=sensors, window=window, exclude=exclude)
+    names = arrays[0].names
+    X, y = stack(arrays)
+    if method == "dynamic":
+        return _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K, geometric_max_degree,
+                            geometric_criterion, cv_blocks, options)
+    est = make_estimator(method, fit_intercept=fit_intercept, **options)
+    if method in ("cv-subset", "ann"):
+        # cv-subset cross-validates over the groups; the ann validates on the last one
+        groups = cv_groups(runs, arrays, cv_blocks)
+        est.fit(X, y, names, groups=groups)
+    else:
+        est.fit(X, y, names)
+    if method in NONLINEAR:
+        used, coefs = list(names), None
+    elif hasattr(est, "selected_names_"):
+        used = list(est.selected_names_)
+        coefs = est.mlr_.coef_
+    else:
+        used = list(names)
+        coefs = est.coef_
+    start = np.mean([start_temperatures(r, used) for r in runs], axis=0)
+    ref = dict(zip(used, start.tolist()))
+    stats = est.statistics()
+    training = {
+        "runs": [r.path or r.name for r in runs],
+        "target": target,
+        "window_s": list(window) if window is not None else None,
+        "excluded_s": list(exclude) if exclude is not None else None,
+        "n_samples": int(y.size),
+        "rises": True,
+        "fit_intercept": bool(fit_intercept),
+        "candidate_sensors": list(names),
+        "options": {k: v for k, v in options.items()},
+    }
+    kw: dict = dict(reference=reference, channel=channel, method=method, axis=runs[0].meta.get("axis"),
+              envelope=_envelope(runs, arrays, used, envelope_margin_K, target, channel), statistics=stats, training=training)
+    if target == "direct":
+        model = NetworkModel(used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
+    else:
+        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
+        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+        if method in NONLINEAR:
+            model = NetworkModel(used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
+        else:
+            model = PolySlopeModel(used, coefs, est.intercept_, ref, geometric_coef=geo.coef_, **kw)
+        model.geometric_ = geo
+    model.estimator_ = est
+    model.arrays_ = arrays
+    return model
+
+
+INPUT_MARGIN = 1.25  # spindle speed and feed envelopes: the training maximum x this (the board clamps beyond)
+
+
+def _input_envelope(runs, terms):
+    """Envelopes of the controller's inputs a dynamic model reads: [0, training maximum x INPUT_MARGIN],
+    rounded up to 100 rpm / 100 mm/min (the exporter certifies the table over them)."""
+    sig = {n for n, _ in terms}
+    out = {}
+    if sig & {"spindle_krpm", "spindle_krpm2"}:
+        top = max([float(np.max(np.abs(r.spindle.rpm))) for r in runs if r.spindle is not None and r.spindle.rpm.size] + [0.0])
+        out["spindle_rpm"] = [0, float(100 * np.ceil(top * INPUT_MARGIN / 100))]
+    if "feed_m_min" in sig:
+        top = max([float(np.max(np.abs(r.motion.feed_mm_min))) for r in runs if r.motion is not None and len(r.motion)] + [0.0])
+        out["feed_mm_min"] = [0, float(100 * np.ceil(top * INPUT_MARGIN / 100))]
+    if out:
+        out["input_rule"] = "spindle speed and feed: [0, training maximum x %g], rounded up to 100" % INPUT_MARGIN
+    return out
+
+
+def _sample_interval(runs):
+    """The training runs' temperature sample interval (median, whole ms): the board's filter step, at which
+    its recurrence is the host's (host/learning/empirical/dynamic.py filters at each run's own sample times)."""
+    dts = np.concatenate([np.diff(np.asarray(r.temperatures.time_s, dtype=float)) for r in runs])
+    dts = dts[dts > 0]
+    return float(np.round(np.median(dts) * 1000) / 1000) if dts.size else None
+
+
+def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric_max_degree, geometric_criterion, cv_blocks, options):
+    """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/learning/empirical/dynamic.py)."""
+    from host.learning.empirical.dynamic import TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
+
+    opts = dict(options)
+    taus = tuple(float(v) for v in opts.pop("taus_s", TAUS_S))
+    if not taus or any(not np.isfinite(v) or v < 0 for v in taus):
+        raise EmpiricalDataError("dynamic: taus_s must be time constants >= 0 s, got %r" % (taus,))
+    use_spindle = bool(opts.pop("use_spindle", True))
+    use_feed = bool(opts.pop("use_feed", True))
+    names = arrays[0].names
+    F, terms = candidate_matrix(runs, [a.time_s for a in arrays], names, taus, use_spindle, use_feed)
+    groups = cv_groups(runs, arrays, cv_blocks)
+    try:
+        est = DynamicRegression(fit_intercept=fit_intercept, **opts).fit(F, y, terms, groups)
+    except TypeError as exc:
+        raise EmpiricalDataError("dynamic: %s" % exc)
+    stats = est.statistics()
+    used = [n[2:] for n, _ in est.terms_ if n.startswith("T:")]
+    used = list(dict.fromkeys(used))
+    start = np.mean([start_temperatures(r, used) for r in runs], axis=0) if used else []
+    training = {
+        "runs": [r.path or r.name for r in runs], "target": target, "window_s": list(window) if window is not None else None,
+        "n_samples": int(y.size), "rises": True, "fit_intercept": bool(fit_intercept), "candidate_sensors": list(names),
+        "taus_s": list(taus), "signals": sorted({n for n, _ in terms}), "options": {k: v for k, v in options.items()},
+    }
+    geo = None
+    if target == "slope":
+        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
+        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+    env = _envelope(runs, arrays, used, margin, target, channel) if used else {}
+    env.update(_input_envelope(runs, est.terms_))
+    model = DynamicModel(est.terms_, est.coef_, est.intercept_, target, channel, geo.coef_ if geo is not None else (0.0,), "dynamic",
+                         runs[0].meta.get("axis"), dict(zip(used, np.atleast_1d(start).tolist())), env, stats, training,
+                         _sample_interval(runs))
+    model.estimator_ = est
+    model.arrays_ = arrays
+    model.geometric_ = geo
+    return model

@@ -1,0 +1,607 @@
+"""Linear regressions of a thermal target on temperatures: MLR, PCR, stepwise.
+
+scikit-learn style estimators: parameters in ``__init__``, ``fit(X, y, names=None)``
+returns self, ``predict(X)``, learned attributes end in ``_``. Every fitted
+estimator exposes the same linear form ``y ≈ intercept_ + X @ coef_`` in the
+units of X (a plain linear function of the raw inputs, also for PCR) and
+``statistics()``, a JSON-ready dict. docs/empirical.md gives the formulas.
+
+Bad input raises :class:`host.learning.empirical.EmpiricalDataError` naming the problem:
+NaN, fewer samples than parameters, a constant sensor, perfectly collinear
+sensors (MLR and stepwise; PCR handles collinearity by design), constant target.
+"""
+import numpy as np
+from scipy import stats as _st
+
+from host.learning.empirical import EmpiricalDataError
+
+_COLLINEAR_TOL = 1e-10  # 1 − R² of a sensor on the others below this = perfectly collinear
+
+
+def _names(names, p):
+    if names is None:
+        return ["x%d" % (j + 1) for j in range(p)]
+    names = [str(n) for n in names]
+    if len(names) != p:
+        raise EmpiricalDataError("%d sensor names for %d columns" % (len(names), p))
+    return names
+
+
+def check_xy(X, y, names=None, n_params=None, what="regression"):
+    """Validate a design: 2-D finite X, 1-D finite y of the same length, no constant column.
+
+    ``n_params`` is the number of fitted parameters; at least one more sample is
+    needed so the residual variance has a degree of freedom.
+    """
+    X = np.asarray(X, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if X.ndim == 1:
+        X = X[:, None]
+    if X.ndim != 2 or y.ndim != 1:
+        raise EmpiricalDataError("%s: X must be (n, p) and y (n,), got %s and %s" % (what, X.shape, y.shape))
+    n, p = X.shape
+    names = _names(names, p)
+    if y.size != n:
+        raise EmpiricalDataError("%s: X has %d rows but y has %d" % (what, n, y.size))
+    if p == 0:
+        raise EmpiricalDataError("%s: no sensor given" % what)
+    bad = np.argwhere(~np.isfinite(X))
+    if bad.size:
+        i, j = bad[0]
+        raise EmpiricalDataError("%s: sensor %s sample %d is %r (NaN/inf in the temperatures)" % (what, names[j], i, X[i, j]))
+    bad = np.flatnonzero(~np.isfinite(y))
+    if bad.size:
+        raise EmpiricalDataError("%s: target sample %d is %r (NaN/inf in the errors)" % (what, bad[0], y[bad[0]]))
+    if n_params is not None and n <= n_params:
+        raise EmpiricalDataError(
+            "%s: %d samples for %d parameters; need at least %d (fewer sensors or more measurements)" % (what, n, n_params, n_params + 1)
+        )
+    const = [names[j] for j in range(p) if np.ptp(X[:, j]) == 0.0]
+    if const:
+        raise EmpiricalDataError("%s: sensor(s) %s constant over all %d samples (zero variance); remove them" % (what, ", ".join(const), n))
+    return X, y, names
+
+
+def _collinear_groups(A, names, has_intercept):
+    """Names of the columns of A that are (numerically) linear combinations of earlier ones.
+
+    |R_jj| of the QR decomposition is the norm of column j's residual on the
+    columns before it; compared with the column's own (centred) norm.
+    """
+    R = np.linalg.qr(A, mode="r")
+    d2 = np.diag(R) ** 2
+    dep = []
+    for j in range(A.shape[1]):
+        if has_intercept and j == 0:
+            continue
+        col = A[:, j]
+        ref = col - col.mean() if has_intercept else col
+        if d2[j] <= _COLLINEAR_TOL * max(float(ref @ ref), 1e-300):
+            dep.append(names[j - int(has_intercept)])
+    return dep
+
+
+def ols_statistics(A, y, beta, has_intercept):
+    """Textbook OLS statistics of y ≈ A @ beta (A includes the ones column when has_intercept).
+
+    Returns a dict: bse (standard errors of beta), t, p (two-sided), rss, df_resid,
+    df_model, sigma (residual standard error), r2, r2_adj, F, F_p, cov.
+    R² is centred with an intercept and uncentred without (the usual convention).
+    """
+    n, k = A.shape
+    resid = y - A @ beta
+    rss = float(resid @ resid)
+    df_resid = n - k
+    df_model = k - int(has_intercept)
+    tss = float(((y - y.mean()) ** 2).sum()) if has_intercept else float(y @ y)
+    if tss == 0.0:
+        raise EmpiricalDataError("regression: the target is constant (%g) over all %d samples; nothing to model" % (y[0], n))
+    sigma2 = rss / df_resid
+    # (A'A)^-1 from the SVD of R (A = QR, same singular values and V as A): the
+    # explicit inverse's value, better conditioned, and cheap for tall A
+    _, s, Vt = np.linalg.svd(np.linalg.qr(A, mode="r"))
+    xtx_inv = (Vt.T / s**2) @ Vt
+    cov = sigma2 * xtx_inv
+    bse = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = beta / bse
+        F = ((tss - rss) / df_model) / sigma2 if df_model else float("nan")
+    p = 2.0 * _st.t.sf(np.abs(t), df_resid)
+    r2 = 1.0 - rss / tss
+    r2_adj = 1.0 - (1.0 - r2) * (n - int(has_intercept)) / df_resid
+    F_p = float(_st.f.sf(F, df_model, df_resid)) if df_model else float("nan")
+    return {
+        "bse": bse, "t": t, "p": p, "rss": rss, "df_resid": int(df_resid), "df_model": int(df_model),
+        "sigma": float(np.sqrt(sigma2)), "r2": float(r2), "r2_adj": float(r2_adj), "F": float(F), "F_p": F_p, "cov": cov,
+        "rmse": float(np.sqrt(rss / n)),
+    }
+
+
+def check_predict_x(est, X, fitted, n_columns):
+    """``X`` for ``est.predict`` as a 2-D float array. EmpiricalDataError when ``est`` has no attribute
+    ``fitted`` yet (predict before fit), X holds NaN/inf, or its column count is not ``n_columns()``."""
+    if not hasattr(est, fitted):
+        raise EmpiricalDataError("%s: predict before fit (call fit first)" % est.method)
+    X = np.asarray(X, dtype=float)
+    if X.ndim == 1:
+        X = X[:, None]
+    bad = np.argwhere(~np.isfinite(X))
+    if bad.size:
+        raise EmpiricalDataError("%s predict: sample %d column %d is %r (NaN/inf in the temperatures)"
+                                 % (est.method, bad[0][0], bad[0][1], X[tuple(bad[0])]))
+    if X.shape[1] != n_columns():
+        raise EmpiricalDataError("predict: X has %d columns, the model has %d inputs" % (X.shape[1], n_columns()))
+    return X
+
+
+def _f(x):
+    x = float(x)
+    return x if np.isfinite(x) else None
+
+
+class _Linear:
+    """Shared prediction and reporting of the fitted linear form."""
+
+    coef_: np.ndarray
+    intercept_: float
+    n_samples_: int
+
+    def predict(self, X):
+        X = check_predict_x(self, X, "coef_", lambda: self.coef_.size)
+        return self.intercept_ + X @ self.coef_
+
+    def _stats_dict(self, st, extra=None):
+        d = {
+            "n_samples": int(self.n_samples_),
+            "r2": _f(st["r2"]),
+            "r2_adj": _f(st["r2_adj"]),
+            "F": _f(st["F"]),
+            "F_p": _f(st["F_p"]),
+            "df_model": st["df_model"],
+            "df_resid": st["df_resid"],
+            "residual_std_error": _f(st["sigma"]),
+            "rmse": _f(st["rmse"]),
+        }
+        if extra:
+            d.update(extra)
+        return d
+
+    def _refit_on(self, X, y, sel):
+        """Subset selectors: the final model is a plain MLR on the chosen columns ``sel``."""
+        self.mlr_ = MLR(fit_intercept=self.fit_intercept).fit(X[:, sel], y, self.selected_names_)
+        self.coef_ = np.zeros(X.shape[1])
+        self.coef_[sel] = self.mlr_.coef_
+        self.intercept_ = self.mlr_.intercept_
+        self.n_samples_ = X.shape[0]
+        for a in ("rsquared_", "rsquared_adj_", "fvalue_", "f_pvalue_", "resid_std_err_", "df_resid_", "rmse_"):
+            setattr(self, a, getattr(self.mlr_, a))
+        return self
+
+
+class MLR(_Linear):
+    """Ordinary least squares with full statistics.
+
+    Parameters: ``fit_intercept``. Learned: ``coef_``, ``intercept_``, ``bse_``
+    (standard errors of coef_), ``intercept_bse_``, ``tvalues_``, ``pvalues_``
+    (coef_, then intercept last in ``intercept_t_``/``intercept_p_``),
+    ``rsquared_``, ``rsquared_adj_``, ``fvalue_``, ``f_pvalue_``,
+    ``resid_std_err_``, ``df_resid_``, ``df_model_``, ``n_samples_``, ``names_``.
+    """
+
+    method = "mlr"
+
+    def __init__(self, *, fit_intercept=True):
+        self.fit_intercept = fit_intercept
+
+    def fit(self, X, y, names=None):
+        X, y, names = check_xy(X, y, names, X_params(X, self.fit_intercept), "MLR")
+        A = np.column_stack([np.ones(len(y)), X]) if self.fit_intercept else X
+        dep = _collinear_groups(A, names, self.fit_intercept)
+        if dep:
+            raise EmpiricalDataError(
+                "MLR: sensor(s) %s are perfectly collinear with the other sensors (a linear combination of them); "
+                "drop them, select sensors first, or use PCR" % ", ".join(dep)
+            )
+        beta, *_ = np.linalg.lstsq(A, y, rcond=None)
+        st = ols_statistics(A, y, beta, self.fit_intercept)
+        o = int(self.fit_intercept)
+        self.names_ = names
+        self.n_samples_ = len(y)
+        self.coef_ = beta[o:]
+        self.intercept_ = float(beta[0]) if o else 0.0
+        self.bse_ = st["bse"][o:]
+        self.tvalues_ = st["t"][o:]
+        self.pvalues_ = st["p"][o:]
+        self.intercept_bse_ = float(st["bse"][0]) if o else None
+        self.intercept_t_ = float(st["t"][0]) if o else None
+        self.intercept_p_ = float(st["p"][0]) if o else None
+        self.cov_ = st["cov"]
+        self.rsquared_ = st["r2"]
+        self.rsquared_adj_ = st["r2_adj"]
+        self.fvalue_ = st["F"]
+        self.f_pvalue_ = st["F_p"]
+        self.resid_std_err_ = st["sigma"]
+        self.df_resid_ = st["df_resid"]
+        self.df_model_ = st["df_model"]
+        self.rmse_ = st["rmse"]
+        self._st = st
+        return self
+
+    def statistics(self):
+        coefs = {
+            n: {"coef": _f(c), "std_error": _f(s), "t": _f(t), "p": _f(p)}
+            for n, c, s, t, p in zip(self.names_, self.coef_, self.bse_, self.tvalues_, self.pvalues_)
+        }
+        extra: dict = {"coefficients": coefs}
+        if self.fit_intercept:
+            extra["intercept"] = {"coef": _f(self.intercept_), "std_error": _f(self.intercept_bse_), "t": _f(self.intercept_t_), "p": _f(self.intercept_p_)}
+        return self._stats_dict(self._st, extra)
+
+    def summary(self):
+        """Plain-text coefficient table (what a statistics package prints)."""
+        lines = ["%-12s %12s %12s %9s %10s" % ("term", "coef", "std err", "t", "P>|t|")]
+        rows = list(zip(self.names_, self.coef_, self.bse_, self.tvalues_, self.pvalues_))
+        if self.fit_intercept:
+            rows.insert(0, ("intercept", self.intercept_, self.intercept_bse_, self.intercept_t_, self.intercept_p_))
+        for n, c, s, t, p in rows:
+            lines.append("%-12s %12.5g %12.4g %9.3f %10.3g" % (n, c, s, t, p))
+        lines.append(
+            "n=%d  R2=%.4f  adj R2=%.4f  F=%.4g (p=%.3g, df %d/%d)  residual std error=%.4g"
+            % (self.n_samples_, self.rsquared_, self.rsquared_adj_, self.fvalue_, self.f_pvalue_, self.df_model_, self.df_resid_, self.resid_std_err_)
+        )
+        return "\n".join(lines)
+
+
+def X_params(X, fit_intercept):
+    X = np.asarray(X)
+    return (X.shape[1] if X.ndim == 2 else 1) + int(fit_intercept)
+
+
+class PCR(_Linear):
+    """Principal component regression mapped back to the raw temperatures.
+
+    Standardise (centre and scale to unit sample variance; without intercept:
+    scale by the root mean square, no centring), correlation matrix,
+    eigen-decomposition sorted by decreasing eigenvalue, keep the first
+    ``n_components`` or the fewest components whose cumulative explained
+    variance reaches ``variance_threshold`` (default 0.85), regress y on their
+    scores by OLS, map the score coefficients back: coef_ = V_k·γ / scale.
+
+    Learned: ``coef_``, ``intercept_``, ``bse_`` (standard errors of coef_ via the
+    mapped covariance), ``n_components_``, ``eigenvalues_``,
+    ``explained_variance_ratio_``, ``cumulative_variance_ratio_``,
+    ``components_`` (k, p loadings), ``score_coef_``, ``mean_``, ``scale_``,
+    ``corr_``, ``rsquared_``, ``rsquared_adj_``, ``fvalue_``, ``f_pvalue_``,
+    ``resid_std_err_`` (degrees of freedom counted with k components).
+    Perfectly collinear sensors are allowed (their component has eigenvalue 0
+    and is never kept unless asked for explicitly).
+    """
+
+    method = "pcr"
+
+    def __init__(self, *, variance_threshold=0.85, n_components=None, fit_intercept=True):
+        self.variance_threshold = variance_threshold
+        self.n_components = n_components
+        self.fit_intercept = fit_intercept
+
+    def fit(self, X, y, names=None):
+        if not (0.0 < float(self.variance_threshold) <= 1.0):
+            raise EmpiricalDataError("PCR: variance_threshold must be in (0, 1], got %r" % self.variance_threshold)
+        X, y, names = check_xy(X, y, names, None, "PCR")
+        n, p = X.shape
+        if self.fit_intercept:
+            mean = X.mean(axis=0)
+            scale = X.std(axis=0, ddof=1)
+            Z = (X - mean) / scale
+            corr = Z.T @ Z / (n - 1)
+        else:
+            mean = np.zeros(p)
+            scale = np.sqrt((X**2).mean(axis=0))
+            Z = X / scale
+            corr = Z.T @ Z / n
+        w, V = np.linalg.eigh(corr)
+        order = np.argsort(w)[::-1]
+        w = np.clip(w[order], 0.0, None)
+        V = V[:, order]
+        # deterministic signs: the largest loading of each component is positive
+        flip = np.sign(V[np.argmax(np.abs(V), axis=0), np.arange(p)])
+        V = V * np.where(flip == 0, 1.0, flip)
+        ratio = w / w.sum()
+        cum = np.cumsum(ratio)
+        if self.n_components is not None:
+            k = int(self.n_components)
+            if not 1 <= k <= p:
+                raise EmpiricalDataError("PCR: n_components must be 1..%d, got %r" % (p, self.n_components))
+        else:
+            k = int(np.searchsorted(cum, float(self.variance_threshold) - 1e-12) + 1)
+            k = min(k, p)
+        if n <= k + int(self.fit_intercept):
+            raise EmpiricalDataError("PCR: %d samples for %d components%s; need at least %d" % (n, k, " + intercept" if self.fit_intercept else "", k + int(self.fit_intercept) + 1))
+        if w[k - 1] <= _COLLINEAR_TOL * w[0]:
+            raise EmpiricalDataError("PCR: component %d has zero variance (collinear sensors); keep fewer components" % k)
+        Vk = V[:, :k]
+        T = Z @ Vk
+        A = np.column_stack([np.ones(n), T]) if self.fit_intercept else T
+        gamma, *_ = np.linalg.lstsq(A, y, rcond=None)
+        st = ols_statistics(A, y, gamma, self.fit_intercept)
+        o = int(self.fit_intercept)
+        M = Vk / scale[:, None]  # raw coef = M @ score coef
+        self.coef_ = M @ gamma[o:]
+        self.intercept_ = float(gamma[0] - mean @ self.coef_) if o else 0.0
+        cov_g = st["cov"][o:, o:]
+        self.bse_ = np.sqrt(np.clip(np.diag(M @ cov_g @ M.T), 0.0, None))
+        self.names_ = names
+        self.n_samples_ = n
+        self.n_components_ = k
+        self.eigenvalues_ = w
+        self.explained_variance_ratio_ = ratio
+        self.cumulative_variance_ratio_ = cum
+        self.components_ = Vk.T
+        self.score_coef_ = gamma[o:]
+        self.mean_ = mean
+        self.scale_ = scale
+        self.corr_ = corr
+        self.rsquared_ = st["r2"]
+        self.rsquared_adj_ = st["r2_adj"]
+        self.fvalue_ = st["F"]
+        self.f_pvalue_ = st["F_p"]
+        self.resid_std_err_ = st["sigma"]
+        self.df_resid_ = st["df_resid"]
+        self.rmse_ = st["rmse"]
+        self._st = st
+        return self
+
+    def scree(self):
+        """Scree data: one dict per component (eigenvalue, explained and cumulative ratio, kept)."""
+        return [
+            {"component": i + 1, "eigenvalue": float(self.eigenvalues_[i]), "explained": float(self.explained_variance_ratio_[i]),
+             "cumulative": float(self.cumulative_variance_ratio_[i]), "kept": i < self.n_components_}
+            for i in range(self.eigenvalues_.size)
+        ]
+
+    def statistics(self):
+        return self._stats_dict(self._st, {
+            "n_components": int(self.n_components_),
+            "variance_threshold": float(self.variance_threshold),
+            "scree": self.scree(),
+            "coefficients": {n: {"coef": _f(c), "std_error": _f(s)} for n, c, s in zip(self.names_, self.coef_, self.bse_)},
+            "intercept": {"coef": _f(self.intercept_)} if self.fit_intercept else None,
+        })
+
+
+class Stepwise(_Linear):
+    """Stepwise regression with partial-F entry and removal (Efroymson).
+
+    From the empty model: enter the candidate with the largest partial F if it is
+    ≥ ``f_enter``; then remove the selected sensor with the smallest partial F if
+    it is < ``f_remove``; repeat until neither happens. Partial F of sensor j for
+    the larger model L (q sensors) against the smaller S:
+    F = (RSS_S − RSS_L) / (RSS_L / (n − q − intercept)).
+    A candidate perfectly collinear with the selected ones (1 − R² < 1e-10) is
+    skipped. ``f_enter >= f_remove`` is required (otherwise it can cycle).
+    Raises EmpiricalDataError if no sensor reaches f_enter (with the best F seen).
+
+    Learned: ``support_`` (bool mask), ``selected_`` (indices in entry order),
+    ``selected_names_``, ``history_`` (list of steps with F values), ``mlr_``
+    (the MLR on the selected sensors), ``coef_`` over all inputs (0 where not
+    selected), ``intercept_`` and the MLR statistics.
+    """
+
+    method = "stepwise"
+
+    def __init__(self, *, f_enter=100.0, f_remove=50.0, fit_intercept=True, max_steps=None):
+        self.f_enter = f_enter
+        self.f_remove = f_remove
+        self.fit_intercept = fit_intercept
+        self.max_steps = max_steps
+
+    def _rss(self, X, y, cols):
+        n = len(y)
+        parts = [np.ones((n, 1))] if self.fit_intercept else []
+        if cols:
+            parts.append(X[:, cols])
+        if not parts:
+            return float(y @ y)
+        A = np.hstack(parts)
+        beta, *_ = np.linalg.lstsq(A, y, rcond=None)
+        r = y - A @ beta
+        return float(r @ r)
+
+    def _tolerance(self, X, cols, j):
+        x = X[:, j]
+        ref = x - x.mean() if self.fit_intercept else x
+        parts = [np.ones((len(x), 1))] if self.fit_intercept else []
+        if cols:
+            parts.append(X[:, cols])
+        if not parts:
+            return 1.0
+        A = np.hstack(parts)
+        c, *_ = np.linalg.lstsq(A, x, rcond=None)
+        r = x - A @ c
+        return float(r @ r) / max(float(ref @ ref), 1e-300)
+
+    def fit(self, X, y, names=None):
+        if self.f_enter < self.f_remove:
+            raise EmpiricalDataError("stepwise: F_enter (%g) must be >= F_remove (%g), otherwise a sensor can enter and leave forever" % (self.f_enter, self.f_remove))
+        X, y, names = check_xy(X, y, names, 1 + int(self.fit_intercept), "stepwise")
+        n, p = X.shape
+        sel = []
+        history = []
+        max_steps = self.max_steps or 4 * p + 4
+        best_seen = (None, -np.inf)
+        for _ in range(max_steps):
+            changed = False
+            rss_s = self._rss(X, y, sel)
+            df = n - (len(sel) + 1) - int(self.fit_intercept)
+            cand = []
+            if df > 0:
+                for j in range(p):
+                    if j in sel:
+                        continue
+                    if self._tolerance(X, sel, j) < _COLLINEAR_TOL:
+                        continue
+                    rss_l = self._rss(X, y, sel + [j])
+                    F = (rss_s - rss_l) / (rss_l / df) if rss_l > 0 else np.inf
+                    cand.append((F, j))
+            if cand:
+                F, j = max(cand)
+                if F > best_seen[1]:
+                    best_seen = (names[j], F)
+                if F >= self.f_enter:
+                    sel.append(j)
+                    history.append({"step": len(history) + 1, "action": "enter", "sensor": names[j], "F": _f(F), "threshold": float(self.f_enter)})
+                    changed = True
+            if len(sel) > 1:
+                rss_l = self._rss(X, y, sel)
+                df_l = n - len(sel) - int(self.fit_intercept)
+                outs = []
+                for j in sel:
+                    rest = [c for c in sel if c != j]
+                    F = (self._rss(X, y, rest) - rss_l) / (rss_l / df_l) if rss_l > 0 else np.inf
+                    outs.append((F, j))
+                F, j = min(outs)
+                if F < self.f_remove:
+                    sel.remove(j)
+                    history.append({"step": len(history) + 1, "action": "remove", "sensor": names[j], "F": _f(F), "threshold": float(self.f_remove)})
+                    changed = True
+            if not changed:
+                break
+        if not sel:
+            raise EmpiricalDataError(
+                "stepwise: no sensor reaches F_enter=%g (largest partial F: %.4g for %s); lower f_enter or check the data"
+                % (self.f_enter, best_seen[1], best_seen[0])
+            )
+        self.selected_ = list(sel)
+        self.selected_names_ = [names[j] for j in sel]
+        self.support_ = np.zeros(p, bool)
+        self.support_[sel] = True
+        self.history_ = history
+        self.names_ = names
+        return self._refit_on(X, y, sel)
+
+    def statistics(self):
+        d = self.mlr_.statistics()
+        d.update({"selected": list(self.selected_names_), "f_enter": float(self.f_enter), "f_remove": float(self.f_remove), "history": self.history_})
+        return d
+
+
+class BestSubsetCV(_Linear):
+    """Exhaustive best subset of at most ``max_sensors`` sensors by blocked cross-validation.
+
+    Not a published method: our answer to "which few sensors predict *other*
+    conditions". Every subset of 1..max_sensors sensors is scored by
+    leave-one-group-out CV RMSE of an OLS fit (groups: the training runs, or
+    contiguous time blocks of one run, e.g. its speed steps); the subset with
+    the lowest CV RMSE wins, then MLR is refitted on all training data. Scoring
+    is batched: per-group Gram matrices, one batched solve per subset size, no
+    Python loop over subsets. Falls back to greedy forward search when the
+    number of subsets exceeds ``max_combinations`` (``search_`` says which).
+    Needs ``groups`` with at least 2 distinct values.
+
+    Learned: ``selected_names_``, ``selected_``, ``cv_rmse_`` (best per size),
+    ``search_``, ``mlr_``, ``coef_`` (all inputs, 0 if unused), ``intercept_``.
+    """
+
+    method = "cv-subset"
+
+    def __init__(self, *, max_sensors=5, fit_intercept=True, max_combinations=200000):
+        self.max_sensors = max_sensors
+        self.fit_intercept = fit_intercept
+        self.max_combinations = max_combinations
+
+    def fit(self, X, y, names=None, groups=None):
+        import itertools
+        from math import comb
+
+        if isinstance(self.max_sensors, bool) or not isinstance(self.max_sensors, (int, np.integer)) or self.max_sensors < 1:
+            raise EmpiricalDataError("cv-subset: max_sensors must be an integer >= 1, got %r" % (self.max_sensors,))
+        X, y, names = check_xy(X, y, names, 1 + int(self.fit_intercept), "cv-subset")
+        n, p = X.shape
+        if groups is None:
+            raise EmpiricalDataError("cv-subset: needs groups (runs or time blocks) for cross-validation")
+        groups = np.asarray(groups)
+        if groups.shape != (n,):
+            raise EmpiricalDataError("cv-subset: groups has %s entries for %d samples" % (groups.shape, n))
+        labels = np.unique(groups)
+        if labels.size < 2:
+            raise EmpiricalDataError("cv-subset: cross-validation needs at least 2 groups (runs or time blocks), got %d" % labels.size)
+        kmax = min(int(self.max_sensors), p)
+        o = int(self.fit_intercept)
+        A = np.column_stack([np.ones(n), X]) if o else X
+        G = [(A[groups == g].T @ A[groups == g], A[groups == g].T @ y[groups == g], float(y[groups == g] @ y[groups == g]), int((groups == g).sum())) for g in labels]
+        Gall = sum(g[0] for g in G)
+        call = sum(g[1] for g in G)
+
+        def score(combos):
+            c = np.asarray(combos, dtype=int) + o
+            idx = np.column_stack([np.zeros(len(c), int), c]) if o else c
+            tot = np.zeros(len(c))
+            ok = np.ones(len(c), bool)
+            for Gv, cv, yy, nv in G:
+                Gt, ct = Gall - Gv, call - cv
+                M = Gt[idx[:, :, None], idx[:, None, :]]
+                # singular training Gram (collinear subset) -> excluded, never silently solved
+                det_ok = np.linalg.cond(M) < 1e12
+                ok &= det_ok
+                M = np.where(det_ok[:, None, None], M, np.eye(M.shape[1]))
+                beta = np.linalg.solve(M, ct[idx][..., None])[..., 0]
+                Mv = Gv[idx[:, :, None], idx[:, None, :]]
+                sse = yy - 2 * np.einsum("ij,ij->i", beta, cv[idx]) + np.einsum("ij,ijk,ik->i", beta, Mv, beta)
+                tot += np.maximum(sse, 0.0) / nv
+            out = np.sqrt(tot / len(G))
+            out[~ok] = np.inf
+            return out
+
+        total = sum(comb(p, k) for k in range(1, kmax + 1))
+        best_by_k = {}
+        if total <= self.max_combinations:
+            self.search_ = "exhaustive (%d subsets)" % total
+            for k in range(1, kmax + 1):
+                combos = list(itertools.combinations(range(p), k))
+                s = score(combos)
+                i = int(np.argmin(s))
+                best_by_k[k] = (float(s[i]), list(combos[i]))
+        else:
+            self.search_ = "greedy forward (%d subsets exceed max_combinations=%d)" % (total, self.max_combinations)
+            cur = []
+            for k in range(1, kmax + 1):
+                cand = [cur + [j] for j in range(p) if j not in cur]
+                s = score(cand)
+                i = int(np.argmin(s))
+                cur = sorted(cand[i])
+                best_by_k[k] = (float(s[i]), list(cur))
+        finite = {k: v for k, v in best_by_k.items() if np.isfinite(v[0])}
+        if not finite:
+            raise EmpiricalDataError("cv-subset: every subset is collinear within a training fold")
+        k = min(finite, key=lambda k: (finite[k][0], k))
+        sel = finite[k][1]
+        self.cv_rmse_ = {int(kk): {"cv_rmse": v[0], "sensors": [names[j] for j in v[1]]} for kk, v in best_by_k.items()}
+        self.selected_ = sel
+        self.selected_names_ = [names[j] for j in sel]
+        self.names_ = names
+        self.n_groups_ = int(labels.size)
+        return self._refit_on(X, y, sel)
+
+    def statistics(self):
+        d = self.mlr_.statistics()
+        d.update({"selected": list(self.selected_names_), "max_sensors": int(self.max_sensors), "search": self.search_,
+                  "cv_groups": self.n_groups_, "cv_rmse_by_size": self.cv_rmse_})
+        return d
+
+
+# here, at the end: ann.py, dynamic.py and ppr.py use this module's checks
+from host.learning.empirical.ann import ANN  # noqa: E402
+from host.learning.empirical.dynamic import DynamicRegression  # noqa: E402
+from host.learning.empirical.ppr import PPR  # noqa: E402
+
+# method name -> estimator class: the one table behind `tcomp fit --model`, `tcomp compare` and fit_model
+# (dynamic is fitted through fitting.fit_model, which builds its candidate signals)
+ESTIMATORS = {"mlr": MLR, "pcr": PCR, "stepwise": Stepwise, "cv-subset": BestSubsetCV, "ann": ANN, "ppr": PPR,
+              "dynamic": DynamicRegression}
+
+
+def make_estimator(method, fit_intercept=True, **options):
+    """Estimator for ``method`` in ESTIMATORS with method-specific options (e.g. f_enter=100)."""
+    if method not in ESTIMATORS:
+        raise EmpiricalDataError("unknown regression method %r (known: %s)" % (method, ", ".join(ESTIMATORS)))
+    return ESTIMATORS[method](fit_intercept=fit_intercept, **options)

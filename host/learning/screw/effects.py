@@ -1,0 +1,161 @@
+"""Extension point of the screw model: effects that add parameters and hook into the
+heat input, the convection, or the error output (docs/screw-model.md, "Effects").
+
+An effect is an object with
+
+- ``name``: unique key (also its document key);
+- ``parameters()``: list of :class:`ParamSpec` (the effect's own parameters; the
+  model namespaces them as ``"<name>.<param>"`` and identifies them with the
+  base parameters);
+- optional hooks, each receiving the per-run :class:`host.learning.screw.screwmodel.RunContext`
+  and ``p``, a dict of the effect's parameter values by short name:
+    ``heat_W(ctx, p)``            -> (n_steps, M) extra power [W] into the segments;
+    ``heat_scale(ctx, p)``        -> (n_steps,) factor on the friction heat;
+    ``convection_mult(ctx, p)``   -> (n_steps,) or (n_steps, M) factor on h·S;
+    ``error_um(ctx, p)``          -> (n_rows,) extra error at the run's error rows;
+- optional ``check(contexts)``: raise ValueError when the runs cannot show the
+  effect at all (e.g. reversal error without bidirectional sweeps);
+- ``to_document()`` -> dict and a ``from_document(d)`` classmethod for settings
+  that are not parameters (reference speeds, sensor names).
+
+Register a new effect class in ``EFFECTS`` (or pass instances to ScrewModel(effects=...)).
+The five effects below are the catalog the discrepancy workflow (issue 5) tests.
+"""
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class ParamSpec:
+    """A parameter: value > 0 are identified in log space (``positive``), others linearly."""
+
+    name: str
+    start: float
+    lo: float
+    hi: float
+    unit: str = ""
+    positive: bool = True
+
+
+class Effect:
+    name = "effect"
+
+    def parameters(self):
+        return []
+
+    def to_document(self):
+        return {}
+
+    @classmethod
+    def from_document(cls, d):
+        return cls(**d)
+
+    def __repr__(self):
+        return "%s(%s)" % (type(self).__name__, self.to_document())
+
+
+class BearingHeat(Effect):
+    """Fixed-end bearing friction: power k·v into the fixed-end segment while the
+    axis moves (v = mean feed of the step in m/min)."""
+
+    name = "bearing_heat"
+
+    def parameters(self):
+        return [ParamSpec("W_per_m_min", 0.1, 0.0, 50.0, "W/(m/min)", positive=False)]
+
+    def heat_W(self, ctx, p):
+        out = np.zeros((ctx.n_steps, ctx.M))
+        out[:, 0] = p["W_per_m_min"] * ctx.step_speed_m_min
+        return out
+
+
+class SpeedDependentHeat(Effect):
+    """Friction heat per mm grows with speed: q·(1 + k·(v/v_ref − 1))."""
+
+    name = "speed_dependent_heat"
+
+    def __init__(self, v_ref_m_min=8.0):
+        self.v_ref_m_min = float(v_ref_m_min)
+
+    def parameters(self):
+        return [ParamSpec("k", 0.0, -0.9, 5.0, "1", positive=False)]
+
+    def heat_scale(self, ctx, p):
+        v = ctx.step_speed_m_min
+        return np.where(v > 0, 1.0 + p["k"] * (v / self.v_ref_m_min - 1.0), 1.0)
+
+    def to_document(self):
+        return {"v_ref_m_min": self.v_ref_m_min}
+
+
+class MovingConvection(Effect):
+    """Forced convection while the screw turns: h·(1 + k·v/v_ref)."""
+
+    name = "moving_convection"
+
+    def __init__(self, v_ref_m_min=8.0):
+        self.v_ref_m_min = float(v_ref_m_min)
+
+    def parameters(self):
+        return [ParamSpec("k", 0.1, 0.0, 20.0, "1", positive=False)]
+
+    def convection_mult(self, ctx, p):
+        return 1.0 + p["k"] * ctx.step_speed_m_min / self.v_ref_m_min
+
+    def to_document(self):
+        return {"v_ref_m_min": self.v_ref_m_min}
+
+
+class ReversalError(Effect):
+    """Backlash-like offset: +b/2 on +1 sweeps, −b/2 on −1 sweeps (bidirectional data)."""
+
+    name = "reversal_error"
+
+    def parameters(self):
+        return [ParamSpec("b_um", 0.0, -100.0, 100.0, "um", positive=False)]
+
+    def check(self, contexts):
+        if not any(c.direction is not None and np.any(c.direction > 0) and np.any(c.direction < 0) for c in contexts):
+            raise ValueError("reversal_error needs bidirectional sweeps (errors.csv 'direction' column with +1 and -1); "
+                             "none of %s has them" % ", ".join(c.run_name for c in contexts))
+
+    def error_um(self, ctx, p):
+        if ctx.direction is None:
+            return np.zeros(ctx.n_rows)
+        return 0.5 * p["b_um"] * ctx.direction
+
+
+class AmbientExpansion(Effect):
+    """Expansion with the machine's surroundings as its own term: k·(T_s − T_s,start)·P.
+
+    T_s is ``sensor``, by default the base sensor (as in the twin's effect of the same
+    name), else the first air sensor.  It duplicates the model's E_e term, so use it
+    with ``ScrewModel(ambient=False)`` (a base model without E_e + this effect)."""
+
+    name = "ambient_expansion"
+
+    def __init__(self, sensor=None):
+        self.sensor = sensor
+
+    def parameters(self):
+        return [ParamSpec("um_per_m_K", 0.0, -50.0, 50.0, "um/(m K)", positive=False)]
+
+    def error_um(self, ctx, p):
+        name = self.sensor or ctx.base_sensor or ctx.ambient_sensor
+        if name is None:
+            raise ValueError("ambient_expansion: run %s has no sensor with role 'base' or 'ambient'" % ctx.run_name)
+        rise = ctx.sensor_rise_at_rows(name)
+        return 1e-3 * p["um_per_m_K"] * rise * ctx.positions_mm
+
+    def to_document(self):
+        return {"sensor": self.sensor}
+
+
+EFFECTS = {cls.name: cls for cls in (BearingHeat, SpeedDependentHeat, MovingConvection, ReversalError, AmbientExpansion)}
+
+
+def make_effect(name, **settings):
+    if name not in EFFECTS:
+        raise ValueError("unknown screw-model effect %r (known: %s)" % (name, ", ".join(EFFECTS)))
+    return EFFECTS[name](**settings)

@@ -1,0 +1,166 @@
+"""Reduced screw model for the firmware (docs/model-format.md, section ``screw``).
+
+Few segments (default 12 over the whole screw), one fixed step dt, and the
+recurrence ``T[k+1] = A·T[k] + B ∘ u[k] + c0·a[k] + c1·a[k+1]``:
+
+- A = e^{K dt}, the exact step of the conduction + convection system (the same
+  Propagator as the full model).  A ≥ 0 element-wise and its row sums are < 1
+  when h > 0, which is what makes the integer recurrence safe to bound;
+- B_i = q / C_i [K/mm]: the friction heat of the step's travel u_i (mm inside
+  segment i) added as a temperature increment at the end of the step.  Keeping B
+  diagonal (the contract) costs a delay of at most one step in where the heat
+  appears; the measured effect is in the reduction-error figures.
+
+- c0, c1 (``air_K0``, ``air_K1``, K per K): the exact weights of the air
+  temperature a (over the reference) at the start and the end of the step, for
+  air linear within the step (heat.Propagator.air_step).  c0, c1 ≥ 0 and
+  A·1 + c0 + c1 = 1: without heat the state is a convex combination of its start
+  and the air readings, so it stays inside the air's envelope.  A document
+  without an air sensor (or written before the air term) has c0 = c1 = 0.
+
+The state is the heat response plus the air response (the system is linear), so
+it lies in [a_min, a_max + state_max_K] for an air envelope [a_min, a_max]; the
+exporter certifies exactly that interval.  ``state_max_K`` is a certified bound
+of the heat response: with u_i ≥ 0 and Σ_i u_i ≤ U = feed_max·dt,
+T_j[k] ≤ U·Σ_m max_i (A^m)_{ji}·B_i for every input history (A^m ≥ 0), summed
+until the tail is below 1e-9 of the total (geometric tail bound added).
+"""
+import numpy as np
+
+from host.learning.screw import heat
+
+
+def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
+    """``thermal.reduced`` block of the document for a fitted ScrewModel."""
+    if not 1 <= int(segments) <= 64:
+        raise ValueError("reduced segments must be 1..64 (got %r)" % (segments,))
+    if not dt_s > 0:
+        raise ValueError("reduced dt_s must be positive (got %r)" % (dt_s,))
+    geo = model.geometry_.with_segments(int(segments))
+    p = model.params_
+    edges = geo.edges_mm
+    C, G, H = heat.segment_properties(edges, geo.diameter_mm, p, geo.bore_mm)
+    prop = heat.Propagator(C, G, H)
+    A, _ = prop.step(dt_s, 1.0)
+    A = np.clip(A, 0.0, None)  # exp of a Metzler matrix is >= 0; clears round-off of order 1e-17
+    B = p.q_J_per_mm / C
+    air = getattr(model, "air_sensor_", None)
+    c0, c1 = (np.clip(c, 0.0, None) for c in prop.air_step(dt_s, 1.0)) if air else (np.zeros(B.size), np.zeros(B.size))
+    out = {
+        "segments": int(segments),
+        "dt_s": float(dt_s),
+        "edges_mm": [float(e) for e in edges],
+        "fixed_end_mm": float(geo.fixed_end_mm),
+        "A": [[float(v) for v in row] for row in A],
+        "B_K_per_mm": [float(b) for b in B],
+        "air_sensor": air,
+        "air_ref_C": getattr(model, "air_ref_C_", None),
+        "air_K0": [float(c) for c in c0],
+        "air_K1": [float(c) for c in c1],
+        "alpha_um_per_mm_per_K": float(1e3 * p.alpha_per_K),
+        "base_sensor": model.base_sensor_,
+        "base_ref_C": model.base_ref_C_,
+        "base_ref": getattr(model, "base_ref", "fixed"),
+        "feed_max_mm_min": float(feed_max_mm_min),
+        "state_max_K": state_bound(A, B, feed_max_mm_min / 60.0 * dt_s),
+    }
+    if model.effects:
+        out["omitted_effects"] = [e.name for e in model.effects]
+    return out
+
+
+def state_bound(A, B, travel_max_mm):
+    """Certified max of every state for any travel history with Σu ≤ travel_max per step."""
+    A = np.asarray(A, dtype=float)
+    B = np.asarray(B, dtype=float)
+    rho = float(np.max(A.sum(axis=1)))
+    if rho >= 1.0:
+        raise ValueError("reduced model has no heat loss (row sum of A = %g >= 1): no finite state bound; h must be > 0" % rho)
+    acc = np.zeros(A.shape[0])
+    term = np.zeros(A.shape[0])
+    P = np.eye(A.shape[0])
+    for _ in range(200000):
+        term = np.max(P * B[None, :], axis=1)
+        acc += term
+        if term.max() <= 1e-9 * max(acc.max(), 1e-300):
+            break
+        P = P @ A
+    # remaining terms are below term·rho^m: geometric tail
+    tail = float(term.max()) * rho / (1.0 - rho)
+    return float(travel_max_mm * (acc.max() + tail))
+
+
+def _arr(reduced):
+    return (np.asarray(reduced["A"], dtype=float), np.asarray(reduced["B_K_per_mm"], dtype=float),
+            np.asarray(reduced["edges_mm"], dtype=float))
+
+
+def air_weights(reduced):
+    """(c0, c1) of the recurrence; zeros for a document without the air term."""
+    M = int(reduced["segments"])
+    return (np.asarray(reduced.get("air_K0") or np.zeros(M), dtype=float),
+            np.asarray(reduced.get("air_K1") or np.zeros(M), dtype=float))
+
+
+def simulate_reduced(reduced, motion, t0, n_steps, spread=False, air_K=None):
+    """States (n_steps+1, M) of the float recurrence from a cold start at t0
+    (in equilibrium with the air: T = a[0]).
+
+    spread: feed the travel as a feed/range state (spread over the range) instead of
+    the exact reciprocation (position reports); air_K: (n_steps+1,) air temperature
+    over the reference at the step times (None: constant air at the reference)."""
+    A, B, edges = _arr(reduced)
+    c0, c1 = air_weights(reduced)
+    dt = reduced["dt_s"]
+    t = t0 + dt * np.arange(n_steps + 1)
+    u = heat.nut_travel_per_segment(motion, edges, reduced["fixed_end_mm"], t, spread=spread)
+    drive = u * B[None, :]
+    T = np.zeros((n_steps + 1, B.size))
+    if air_K is not None:
+        a = np.asarray(air_K, dtype=float)
+        drive = drive + a[:-1, None] * c0[None, :] + a[1:, None] * c1[None, :]
+        T[0] = a[0]
+    x = T[0].copy()
+    for k in range(n_steps):
+        x = A @ x + drive[k]
+        T[k + 1] = x
+    return t, T
+
+
+def reduced_error_um(reduced, T, positions_mm, base_rise_K=None):
+    """E(P) of the reduced model without the geometric part: α·Σ T_i·overlap_i(P) (+ α·ΔT_b·P).
+
+    T: (..., M); positions broadcastable to T.shape[:-1]."""
+    _, _, edges = _arr(reduced)
+    a = reduced["alpha_um_per_mm_per_K"]
+    E = heat.thermal_error_um(edges, T, positions_mm, reduced["fixed_end_mm"], a * 1e-3)
+    if base_rise_K is not None:
+        E = E + a * np.asarray(base_rise_K) * np.asarray(positions_mm)
+    return E
+
+
+def reduction_error(model, run, positions=21, spread=False):
+    """Difference of E_m between the full model and its reduced form on one run.
+
+    Both are evaluated at every reduced step time on ``positions`` equally spaced
+    points over the model's position envelope; the reduced model uses its latest
+    state (as the firmware does), the full model its own grid interpolated;
+    ``spread`` feeds the reduced model from the feed/range state.
+    Returns {"rms_um", "max_um", "points"}."""
+    red = model.reduced_
+    ctx_full = model._context(run)
+    rises = model.simulate_context(ctx_full)
+    t0 = ctx_full.t_grid[0]
+    n = int(np.floor((ctx_full.t_grid[-1] - t0) / red["dt_s"] + 1e-9))
+    air = model.air_K(ctx_full)
+    if air is not None:
+        air = np.interp(t0 + red["dt_s"] * np.arange(n + 1), ctx_full.t_grid, air)
+    t, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread, air_K=air)
+    lo, hi = model.envelope_["position_mm"] if model.envelope_ else (0.0, model.geometry_.length_mm)
+    P = np.linspace(lo, hi, positions)
+    Rf = heat.interp_rows(t, ctx_full.t_grid, rises)
+    Ef = heat.thermal_error_um(ctx_full.edges_mm, Rf[:, None, :], P[None, :], model.geometry_.fixed_end_mm, model.params_.alpha_per_K)
+    Er = reduced_error_um(red, Tr[:, None, :], P[None, :])
+    d = Er - Ef
+    return {"rms_um": float(np.sqrt(np.mean(d ** 2))), "max_um": float(np.max(np.abs(d))), "points": int(d.size),
+            "full_max_um": float(np.max(np.abs(Ef)))}

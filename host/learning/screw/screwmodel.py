@@ -1,0 +1,558 @@
+"""The identified ball-screw model: E(P, t) = geometric(P) + E_m + E_e (+ effects).
+
+``ScrewModel`` follows the scikit-learn estimator pattern: settings in ``__init__``,
+``fit(runs)`` identifies the parameters (learned attributes end in ``_``),
+``predict(run)`` simulates the run's own motion and base temperature and returns
+one error per row of ``run.errors``.  ``to_document``/``from_document`` give the
+``screw`` kind of docs/model-format.md, with the reduced firmware recurrence in
+``thermal.reduced`` (host/learning/screw/reduced.py).  docs/screw-model.md has the equations.
+"""
+import warnings
+
+import numpy as np
+
+from host.learning.screw import heat
+from host.learning.screw.context import RunContext, check_run
+from host.learning.screw.effects import EFFECTS, Effect, ParamSpec
+from host.learning.screw.identify import IdentifiabilityWarning, fit_parameters
+
+BASE_PARAMS = ("q_J_per_mm", "h_W_m2K", "lambda_W_mK", "c_J_kgK", "alpha_per_K")
+ALIASES = {"q": "q_J_per_mm", "h": "h_W_m2K", "lambda": "lambda_W_mK", "c": "c_J_kgK", "alpha": "alpha_per_K"}
+BOUNDS = {
+    "q_J_per_mm": (1e-5, 20.0, "J/mm"),
+    "h_W_m2K": (0.5, 500.0, "W/(m2 K)"),
+    "lambda_W_mK": (2.0, 400.0, "W/(m K)"),
+    "c_J_kgK": (100.0, 3000.0, "J/(kg K)"),
+    "alpha_per_K": (1e-7, 5e-5, "1/K"),
+}
+START = {"q_J_per_mm": 0.1, "h_W_m2K": 15.0}
+MAX_GEOMETRIC_DEGREE = 4
+BASE_ALPHA_MIN_SPAN_K = 0.5  # base-temperature span below which alpha is not identified (no E_e signal)
+
+
+def _resolve(name):
+    return ALIASES.get(name, name)
+
+
+# Margin (K) added on both sides of the training range of the base sensor in the exported envelope.
+BASE_ENVELOPE_MARGIN_K = 5.0
+
+class ScrewModel:
+    """Segment heat-transfer model of a ball screw, identified from runs.
+
+    segments, dt_s: the full model's resolution; free: parameters to identify
+    (names or aliases q, h, lambda, c, alpha; None = q, h, lambda, plus alpha when
+    the runs' meta.json gives none and the base temperature varies); geometric_degree:
+    0..4 or "auto" (CV/AIC); effects: Effect instances (host/learning/screw/effects.py);
+    channel: errors.csv channel; ambient: include E_e from the base sensor;
+    nut_weight: weight (µm per K) of the nut-temperature residuals in the
+    identification (0 = nut sensor only reported); reduced_segments, reduced_dt_s:
+    the firmware recurrence; feed_max_mm_min: top feed for the reduced state bound
+    (None = 1.5 × the fastest training feed); base_sensor: the E_e sensor (None = the
+    first sensor with role 'base'); base_ref: reference of the E_e term, "run_start"
+    (each run's first base reading: every run starts in equilibrium and its cold
+    geometric error is the one measured then) or "fixed" (``base_ref_C_``, the first
+    training run's start, as a firmware with a fixed calibration temperature does);
+    fit_window: (t_lo, t_hi) in s, fit only on error rows in that window (None = all);
+    air: the air temperature the screw exchanges heat with: "auto" (the first sensor
+    with role 'ambient'; else the base sensor, else a constant air, each fallback
+    warned about in statistics.warnings), a sensor name, or "off" (constant air: the
+    screw as a rise over a still air, the model before the air term)."""
+
+    def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient=True,
+                 nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200, base_sensor=None,
+                 base_ref="run_start", fit_window=None, air="auto"):
+        self.segments = segments
+        self.dt_s = dt_s
+        self.free = free
+        self.geometric_degree = geometric_degree
+        self.effects = list(effects)
+        self.channel = channel
+        self.ambient = ambient
+        self.nut_weight = nut_weight
+        self.reduced_segments = reduced_segments
+        self.reduced_dt_s = reduced_dt_s
+        self.feed_max_mm_min = feed_max_mm_min
+        self.max_nfev = max_nfev
+        self.base_sensor = base_sensor
+        self.base_ref = base_ref
+        self.fit_window = fit_window
+        self.air = air
+
+    # ------------------------------------------------------------ parameters
+
+    def _specs(self, base_params):
+        specs = []
+        for n in BASE_PARAMS:
+            lo, hi, unit = BOUNDS[n]
+            specs.append(ParamSpec(n, getattr(base_params, n), lo, hi, unit, positive=True))
+        for eff in self.effects:
+            for s in eff.parameters():
+                specs.append(ParamSpec("%s.%s" % (eff.name, s.name), s.start, s.lo, s.hi, s.unit, s.positive))
+        return specs
+
+    def _values_dict(self, values, specs):
+        return {s.name: float(v) for s, v in zip(specs, values)}
+
+    def _split(self, allvals):
+        base = heat.ScrewParams(**{k: allvals[k] for k in BASE_PARAMS}, density_kg_m3=self.density_)
+        eff = {}
+        for e in self.effects:
+            pre = e.name + "."
+            eff[e.name] = {k[len(pre):]: v for k, v in allvals.items() if k.startswith(pre)}
+        return base, eff
+
+    # ------------------------------------------------------------ simulation
+
+    def _context(self, run, rows=None):
+        return RunContext(run, self.geometry_, self.dt_s, rows=rows)
+
+    def air_K(self, ctx):
+        """Air temperature over the model's reference on the context's grid (None: constant air).
+
+        The reference is the air at the run's start (base_ref "run_start": the screw starts in
+        equilibrium at 0) or ``air_ref_C_`` (base_ref "fixed": it starts at the air's offset)."""
+        name = getattr(self, "air_sensor_", None)
+        if name is None:
+            return None
+        if name not in ctx.run.temperatures.names:
+            raise ValueError("%s: the model's air sensor %r is not in temperatures.csv" % (ctx.run_name, name))
+        tt = ctx.run.temperatures
+        air = np.interp(ctx.t_grid, tt.time_s, tt.column(name))
+        return air - (float(tt.column(name)[0]) if self.base_ref == "run_start" else self.air_ref_C_)
+
+    def simulate_context(self, ctx, allvals=None):
+        """Segment rises (n_steps+1, M) on the context's grid."""
+        allvals = self.values_ if allvals is None else allvals
+        base, eff = self._split(allvals)
+        scale = np.ones(ctx.n_steps)
+        conv = None
+        extra = np.zeros((ctx.n_steps, ctx.M))
+        for e in self.effects:
+            p = eff[e.name]
+            if hasattr(e, "heat_scale"):
+                scale = scale * e.heat_scale(ctx, p)
+            if hasattr(e, "convection_mult"):
+                g = np.asarray(e.convection_mult(ctx, p), dtype=float)
+                conv = g if conv is None else conv * g
+            if hasattr(e, "heat_W"):
+                extra += e.heat_W(ctx, p) * ctx.dt[:, None]
+        heat_J = heat.friction_heat_J(ctx.travel_mm, base) * scale[:, None] + extra
+        return heat.simulate_segments(ctx.geometry, base, ctx.t_grid, heat_J, convection_mult=conv, edges_mm=ctx.edges_mm,
+                                      air_K=self.air_K(ctx))
+
+    def thermal_context(self, ctx, allvals=None, rises=None):
+        """E_m + E_e + effect outputs at the context's rows (µm), without the geometric part."""
+        allvals = self.values_ if allvals is None else allvals
+        base, eff = self._split(allvals)
+        if rises is None:
+            rises = self.simulate_context(ctx, allvals)
+        E = 1e3 * base.alpha_per_K * np.sum(ctx.at_rows(rises) * ctx.overlap_mm, axis=1)
+        if self.base_sensor_ is not None:
+            if self.base_sensor_ not in ctx.run.temperatures.names:
+                raise ValueError("%s: the model's base sensor %r is not in temperatures.csv" % (ctx.run_name, self.base_sensor_))
+            E = E + 1e3 * base.alpha_per_K * (ctx.sensor_at_rows(self.base_sensor_) - self._base_ref(ctx.run)) * ctx.positions_mm
+        for e in self.effects:
+            if hasattr(e, "error_um"):
+                E = E + e.error_um(ctx, eff[e.name])
+        return E
+
+    def _base_ref(self, run):
+        if self.base_ref == "run_start":
+            return float(run.temperatures.column(self.base_sensor_)[0])
+        return self.base_ref_C_
+
+    def geometric_um(self, positions_mm):
+        P = np.asarray(positions_mm, dtype=float)
+        return np.polynomial.polynomial.polyval(P, self.geometric_) if len(self.geometric_) else np.zeros_like(P)
+
+    # ------------------------------------------------------------ fitting
+
+    def _rows(self, run):
+        rows = self._channel_rows(run)
+        if self.fit_window is None:
+            return rows
+        lo, hi = self.fit_window
+        t = run.errors.time_s
+        keep = (t >= (-np.inf if lo is None else lo)) & (t <= (np.inf if hi is None else hi))
+        if rows is not None:
+            keep &= np.isin(np.arange(t.size), rows)
+        if not keep.any():
+            raise ValueError("%s: no error rows in the fit window %s..%s s" % (run.path or run.name, lo, hi))
+        return np.flatnonzero(keep)
+
+    def _channel_rows(self, run):
+        e = run.errors
+        if e.channel is None:
+            if self.channel:
+                raise ValueError("%s: errors.csv has no 'channel' column but channel %r was asked for" % (run.path or run.name, self.channel))
+            return None
+        chans = e.channels()
+        if self.channel is None:
+            if len(chans) > 1:
+                raise ValueError("%s: errors.csv has channels %s; choose one (--channel)" % (run.path or run.name, ", ".join(chans)))
+            return None
+        if self.channel not in chans:
+            raise ValueError("%s: channel %r not in errors.csv (channels: %s)" % (run.path or run.name, self.channel, ", ".join(chans)))
+        return np.flatnonzero(e.channel == self.channel)
+
+    def _choose_air(self, runs):
+        """(air sensor or None, how it was chosen, warnings) for ``self.air``."""
+        first = runs[0]
+        name0 = first.path or first.name
+        notes = []
+        if self.air == "off":
+            return None, "off", notes
+        if self.air != "auto":
+            if not isinstance(self.air, str) or self.air not in first.temperatures.names:
+                raise ValueError("%s: air sensor %r is not a column of temperatures.csv (columns: %s)"
+                                 % (name0, self.air, ", ".join(first.temperatures.names)))
+            name, source = self.air, "option"
+        else:
+            amb = [n for n in first.sensors_with_role("ambient") if n in first.temperatures.names]
+            base = [n for n in first.sensors_with_role("base") if n in first.temperatures.names]
+            if amb:
+                name, source = amb[0], "role ambient"
+            elif base:
+                name, source = base[0], "base sensor (fallback)"
+                notes.append("no sensor with role 'ambient': the screw exchanges heat with the base sensor %s instead of the air; "
+                             "the lag of the base behind the air is then missing from the model" % name)
+            else:
+                notes.append("no sensor with role 'ambient' or 'base': the air is taken as constant (no air drift in the model)")
+                return None, "constant (no ambient or base sensor)", notes
+        missing = [r.path or r.name for r in runs if name not in r.temperatures.names]
+        if missing:
+            raise ValueError("air sensor %r missing from temperatures.csv of %s" % (name, ", ".join(missing)))
+        return name, source, notes
+
+    def _free_names(self, runs, meta_params):
+        if self.free is not None:
+            names = [_resolve(n.strip()) for n in (self.free.split(",") if isinstance(self.free, str) else self.free) if n.strip()]
+            unknown = [n for n in names if n not in BASE_PARAMS]
+            if unknown:
+                raise ValueError("unknown screw parameter(s) %s in free= (known: %s, aliases %s)"
+                                 % (", ".join(str(u) for u in unknown), ", ".join(BASE_PARAMS), ", ".join(ALIASES)))
+            base = names
+        else:
+            base = ["q_J_per_mm", "h_W_m2K", "lambda_W_mK"]
+            screw = runs[0].meta.get("screw") or {}
+            given = any(k in screw for k in ("alpha_per_K", "alpha_um_per_m_K"))
+            if not given and self.base_sensor_ is not None:
+                span = max(np.ptp(r.temperatures.column(self.base_sensor_)) for r in runs if self.base_sensor_ in r.temperatures.names)
+                if span >= BASE_ALPHA_MIN_SPAN_K:
+                    base.append("alpha_per_K")
+        return base + ["%s.%s" % (e.name, s.name) for e in self.effects for s in e.parameters()]
+
+    def fit(self, runs):
+        """Identify the parameters from one or more runs (host.data.runs.Run)."""
+        if not runs:
+            raise ValueError("no runs to fit on")
+        if self.base_ref not in ("run_start", "fixed"):
+            raise ValueError("base_ref must be 'run_start' or 'fixed' (got %r)" % (self.base_ref,))
+        for e in self.effects:
+            if not isinstance(e, Effect):
+                raise ValueError("effects must be Effect instances (got %r)" % (e,))
+        geo = heat.ScrewGeometry.from_meta(runs[0].meta, self.segments) if isinstance(runs[0].meta.get("screw"), dict) else None
+        if geo is None:
+            raise ValueError("%s: meta.json has no 'screw' block (length_mm, diameter_mm, lead_mm, fixed_end_mm)" % (runs[0].path or runs[0].name))
+        for r in runs:
+            check_run(r, geo, require_nut=self.nut_weight > 0)
+            s0, s = runs[0].meta["screw"], r.meta.get("screw") or {}
+            for k in ("length_mm", "diameter_mm", "fixed_end_mm"):
+                if float(s.get(k, 0)) != float(s0.get(k, 0)):
+                    raise ValueError("%s: screw.%s = %r differs from %r in %s; fit one screw at a time"
+                                     % (r.path or r.name, k, s.get(k), s0.get(k), runs[0].path or runs[0].name))
+        self.geometry_ = geo
+        self.axis_ = runs[0].meta.get("axis")
+        meta_params = heat.ScrewParams.from_meta(runs[0].meta, **{k: v for k, v in START.items() if k not in (runs[0].meta.get("screw") or {})})
+        self.density_ = meta_params.density_kg_m3
+        if self.base_sensor and self.base_sensor not in runs[0].temperatures.names:
+            raise ValueError("%s: base sensor %r is not a column of temperatures.csv (columns: %s)"
+                             % (runs[0].path or runs[0].name, self.base_sensor, ", ".join(runs[0].temperatures.names)))
+        bases = [self.base_sensor] if self.base_sensor else runs[0].sensors_with_role("base")
+        self.base_sensor_ = next((b for b in bases if b in runs[0].temperatures.names), None) if self.ambient else None
+        if self.base_sensor_ is not None:
+            missing = [r.path or r.name for r in runs if self.base_sensor_ not in r.temperatures.names]
+            if missing:
+                raise ValueError("base sensor %r missing from temperatures.csv of %s" % (self.base_sensor_, ", ".join(missing)))
+            self.base_ref_C_ = float(runs[0].temperatures.column(self.base_sensor_)[0])
+        else:
+            self.base_ref_C_ = None
+        # the nut sensor is not a model input: reported against the simulated screw under the nut when present
+        self.nut_sensor_ = next((n for n in runs[0].sensors_with_role("nut") if n in runs[0].temperatures.names), None)
+        self.air_sensor_, self.air_source_, air_notes = self._choose_air(runs)
+        self.air_ref_C_ = float(runs[0].temperatures.column(self.air_sensor_)[0]) if self.air_sensor_ else None
+        specs_all = self._specs(meta_params)
+        free = self._free_names(runs, meta_params)
+        self.free_ = free
+        fixed = {s.name: s.start for s in specs_all if s.name not in free}
+        specs = [s for s in specs_all if s.name in free]
+        ctxs = [self._context(r, self._rows(r)) for r in runs]
+        for e in self.effects:
+            if hasattr(e, "check"):
+                e.check(ctxs)
+        y = np.concatenate([c.measured_um for c in ctxs])
+        if not np.all(np.isfinite(y)):
+            raise ValueError("errors.csv contains non-finite values")
+        P = np.concatenate([c.positions_mm for c in ctxs])
+        self.p_scale_ = float(max(np.max(np.abs(P)), 1.0))
+        nut_meas = [c.nut_rise_measured() for c in ctxs] if self.nut_weight > 0 else None
+        if nut_meas is not None:  # the nut's temperature over the reference, as the state is
+            nut_meas = [m + (self.air_K(c) if self.air_sensor_ else 0.0) for m, c in zip(nut_meas, ctxs)]
+
+        def thermal_all(values):
+            allv = dict(fixed)
+            allv.update(self._values_dict(values, specs))
+            out, nut = [], []
+            for i, c in enumerate(ctxs):
+                rises = self.simulate_context(c, allv)
+                out.append(self.thermal_context(c, allv, rises))
+                if nut_meas is not None:
+                    nut.append(self.nut_weight * (nut_meas[i] - c.nut_rise_predicted(rises)))
+            return np.concatenate(out), (np.concatenate(nut) if nut else np.zeros(0))
+
+        def make_residual(degree):
+            Phi = np.vander(P / self.p_scale_, degree + 1, increasing=True)
+            Q, _ = np.linalg.qr(Phi)
+
+            def residual(values):
+                f, nut = thermal_all(values)
+                z = y - f
+                return np.concatenate([z - Q @ (Q.T @ z), nut])
+
+            return residual, Phi
+
+        top = MAX_GEOMETRIC_DEGREE if self.geometric_degree == "auto" else int(self.geometric_degree)
+        if not 0 <= top <= MAX_GEOMETRIC_DEGREE:
+            raise ValueError("geometric_degree must be 0..%d or 'auto' (got %r)" % (MAX_GEOMETRIC_DEGREE, self.geometric_degree))
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", IdentifiabilityWarning)
+            res = fit_parameters(make_residual(top)[0], specs, max_nfev=self.max_nfev, n_linear=top + 1) if specs else None
+        values = res["values"] if res else np.zeros(0)
+        degree = top
+        degree_scores = None
+        if self.geometric_degree == "auto":
+            f, _ = thermal_all(values)
+            degree, degree_scores = choose_geometric_degree(P, y - f, MAX_GEOMETRIC_DEGREE, len(specs))
+            if degree != top and specs:
+                with warnings.catch_warnings(record=True) as caught:
+                    warnings.simplefilter("always", IdentifiabilityWarning)
+                    specs_start = [ParamSpec(s.name, v, s.lo, s.hi, s.unit, s.positive) for s, v in zip(specs, values)]
+                    res = fit_parameters(make_residual(degree)[0], specs_start, max_nfev=self.max_nfev, n_linear=degree + 1)
+                values = res["values"]
+        for w in caught:
+            warnings.warn(str(w.message), IdentifiabilityWarning, stacklevel=2)
+        allv = dict(fixed)
+        allv.update(self._values_dict(values, specs))
+        self.values_ = allv
+        self.params_, self.effect_params_ = self._split(allv)
+        f, _ = thermal_all(values)
+        Phi = np.vander(P / self.p_scale_, degree + 1, increasing=True)
+        beta, *_ = np.linalg.lstsq(Phi, y - f, rcond=None)
+        self.geometric_ = list(beta / self.p_scale_ ** np.arange(degree + 1))
+        self.geometric_degree_ = degree
+        pred = f + self.geometric_um(P)
+        stats = {"rmse_um": float(np.sqrt(np.mean((y - pred) ** 2))), "max_abs_residual_um": float(np.max(np.abs(y - pred))),
+                 "runs": [], "parameters": {}, "warnings": (res["warnings"] if res else []) + air_notes,
+                 "flat_directions": res["flat"] if res else [],
+                 "geometric_degree_scores": degree_scores, "nfev": res["nfev"] if res else 0}
+        for s, v, sd, rel in zip(specs, values, res["std"] if res else [], res["rel_std"] if res else []):
+            stats["parameters"][s.name] = {"value": float(v), "std": float(sd), "rel_std": float(rel), "unit": s.unit}
+        for n, v in fixed.items():
+            stats["parameters"][n] = {"value": float(v), "std": 0.0, "rel_std": 0.0, "fixed": True,
+                                     "unit": next(s.unit for s in specs_all if s.name == n)}
+        off = 0
+        for c in ctxs:
+            r = y[off:off + c.n_rows] - pred[off:off + c.n_rows]
+            off += c.n_rows
+            rises = self.simulate_context(c)
+            nut_rmse = None
+            if c.nut_sensor is not None:
+                air = self.air_K(c)
+                nut_rmse = float(np.sqrt(np.mean((c.nut_rise_measured() + (0.0 if air is None else air) - c.nut_rise_predicted(rises)) ** 2)))
+            stats["runs"].append({"run": c.run_name, "rows": int(c.n_rows), "rmse_um": float(np.sqrt(np.mean(r ** 2))),
+                                  "max_abs_residual_um": float(np.max(np.abs(r))), "nut_rise_rmse_K": nut_rmse})
+        self.statistics_ = stats
+        self.training_ = {"runs": [c.run_name for c in ctxs], "free": free, "segments": self.segments, "dt_s": self.dt_s,
+                          "geometric_degree": self.geometric_degree, "nut_weight": self.nut_weight, "channel": self.channel,
+                          "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window, "air": self.air}
+        feeds = np.concatenate([r.motion.feed_mm_min for r in runs])
+        P_all = np.concatenate([P] + [np.r_[r.motion.from_mm, r.motion.to_mm] for r in runs])
+        strokes = [float(r.meta["stroke_mm"]) for r in runs if isinstance(r.meta.get("stroke_mm"), (int, float))]
+        p_lo, p_hi = float(P_all.min()), float(P_all.max())
+        if strokes:  # the firmware is asked for offsets anywhere on the stroke, not only where the laser measured
+            p_lo, p_hi = min(p_lo, 0.0), max(p_hi, min(strokes))
+        self.envelope_: dict = {"position_mm": [p_lo, p_hi],
+                          "feed_mm_min": [float(feeds.min()), float(feeds.max())]}
+        if self.base_sensor_ is not None:
+            tb = np.concatenate([r.temperatures.column(self.base_sensor_) for r in runs])
+            # E_e is linear in the base temperature (alpha * dT * P), so a margin beyond the training range is
+            # physics, not extrapolation of a regression: BASE_ENVELOPE_MARGIN_K covers a shop's daily swing.
+            self.envelope_["temperature_C"] = {self.base_sensor_: [float(tb.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                   float(tb.max()) + BASE_ENVELOPE_MARGIN_K]}
+            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+        if self.air_sensor_ is not None and self.air_sensor_ != self.base_sensor_:
+            ta = np.concatenate([r.temperatures.column(self.air_sensor_) for r in runs])
+            self.envelope_.setdefault("temperature_C", {})[self.air_sensor_] = [float(ta.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                                 float(ta.max()) + BASE_ENVELOPE_MARGIN_K]
+            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+        from host.learning.screw.reduced import build_reduced
+        self.reduced_ = build_reduced(self, self.reduced_segments, self.reduced_dt_s,
+                                      feed_max_mm_min=self.feed_max_mm_min or 1.5 * float(feeds.max()))
+        self.envelope_["state_K"] = [0.0, self.reduced_["state_max_K"]]
+        from host.learning.screw.reduced import reduction_error
+        self.reduced_["reduction_error_um"] = {c.run_name: reduction_error(self, c.run) for c in ctxs}
+        return self
+
+    # ------------------------------------------------------------ prediction
+
+    def predict(self, run):
+        """Predicted error (µm) at every row of ``run.errors``: the run's own motion and
+        base temperature are simulated from a cold (ambient) screw at the run's start."""
+        if not hasattr(self, "geometry_"):
+            raise ValueError("screw model: predict before fit (fit(runs) first, or load a fitted document)")
+        check_run(run, self.geometry_, require_nut=False)
+        ctx = self._context(run)
+        out = self.thermal_context(ctx) + self.geometric_um(ctx.positions_mm)
+        bad = np.flatnonzero(~np.isfinite(out))
+        if bad.size:
+            raise ValueError("%s: the prediction at errors.csv row %d (%g s) is NaN/inf: a temperature the model reads "
+                             "(base sensor %s) is NaN/inf" % (ctx.run_name, bad[0], run.errors.time_s[bad[0]], self.base_sensor_))
+        return out
+
+    def predict_grid(self, run, positions_mm, times_s=None):
+        """Thermal + geometric error on a time × position grid (default times: the model grid)."""
+        check_run(run, self.geometry_, require_nut=False)
+        ctx = self._context(run)
+        rises = self.simulate_context(ctx)
+        t = ctx.t_grid if times_s is None else np.asarray(times_s, dtype=float)
+        R = heat.interp_rows(t, ctx.t_grid, rises)
+        P = np.asarray(positions_mm, dtype=float)
+        E = heat.thermal_error_um(ctx.edges_mm, R[:, None, :], P[None, :], self.geometry_.fixed_end_mm, self.params_.alpha_per_K)
+        if self.base_sensor_ is not None:
+            tb = np.interp(t, run.temperatures.time_s, run.temperatures.column(self.base_sensor_))
+            E = E + 1e3 * self.params_.alpha_per_K * (tb - self._base_ref(run))[:, None] * P[None, :]
+        return t, E + self.geometric_um(P)[None, :]
+
+    # ------------------------------------------------------------ document
+
+    def to_document(self):
+        g = self.geometry_
+        thermal = {
+            "parameters": {k: float(v) for k, v in self.values_.items()},
+            "density_kg_m3": self.density_,
+            "free": list(self.free_),
+            "segments": int(g.segments),
+            "dt_s": float(self.dt_s),
+            "geometry": {"length_mm": g.length_mm, "diameter_mm": g.diameter_mm, "fixed_end_mm": g.fixed_end_mm, "bore_mm": g.bore_mm},
+            "effects": [{"name": e.name, "settings": e.to_document()} for e in self.effects],
+            "base_sensor": self.base_sensor_,
+            "base_ref_C": self.base_ref_C_,
+            "base_ref": self.base_ref,
+            "nut_sensor": self.nut_sensor_,
+            "air_sensor": self.air_sensor_,
+            "air_ref_C": self.air_ref_C_,
+            "air_source": self.air_source_,
+            "reduced": self.reduced_,
+        }
+        return {
+            "kind": "screw",
+            "method": "screw",
+            "axis": self.axis_,
+            "channel": self.channel,
+            "sensors": self.input_sensors_(),
+            "reference_C": {n: r for n, r in ((self.base_sensor_, self.base_ref_C_), (self.air_sensor_, self.air_ref_C_))
+                            if n is not None},
+            "geometric": {"degree": int(self.geometric_degree_), "coefficients_um": [float(c) for c in self.geometric_]},
+            "thermal": thermal,
+            "envelope": self.envelope_,
+            "statistics": self.statistics_,
+            "training": self.training_,
+        }
+
+    def input_sensors_(self):
+        """The temperatures prediction reads: the base sensor (E_e), then the air sensor."""
+        out = [self.base_sensor_] if self.base_sensor_ else []
+        if self.air_sensor_ and self.air_sensor_ not in out:
+            out.append(self.air_sensor_)
+        return out
+
+    @classmethod
+    def from_document(cls, doc):
+        from host.learning.documents import ModelFormatError
+
+        th = doc.get("thermal") or {}
+        for where, block in (("thermal", th), ("thermal.geometry", th.get("geometry") if isinstance(th, dict) else None),
+                             ("thermal.parameters", th.get("parameters") if isinstance(th, dict) else None),
+                             ("geometric", doc.get("geometric"))):
+            if block is not None and not isinstance(block, dict):
+                raise ModelFormatError("screw model document: field '%s' must be an object, found %s" % (where, type(block).__name__))
+        effects_doc = th.get("effects", [])
+        if not isinstance(effects_doc, list) or not all(isinstance(e, dict) and isinstance(e.get("name"), str) for e in effects_doc):
+            raise ModelFormatError("screw model document: thermal.effects must be a list of {name, settings} objects")
+        unknown = [e["name"] for e in effects_doc if e["name"] not in EFFECTS]
+        if unknown:
+            raise ModelFormatError("screw model document: thermal.effects has unknown effect %r (known: %s)" % (unknown[0], ", ".join(EFFECTS)))
+        try:
+            effects = [EFFECTS[e["name"]].from_document(e.get("settings") or {}) for e in th.get("effects", [])]
+            if not (int(th["segments"]) >= 1 and float(th["dt_s"]) > 0):
+                raise ValueError("thermal.segments must be >= 1 and thermal.dt_s > 0")
+            m = cls(segments=int(th["segments"]), dt_s=float(th["dt_s"]), effects=effects, channel=doc.get("channel"),
+                    ambient=th.get("base_sensor") is not None, base_ref=th.get("base_ref", "fixed"))
+            geo = th["geometry"]
+            m.geometry_ = heat.ScrewGeometry(float(geo["length_mm"]), float(geo["diameter_mm"]), float(geo.get("fixed_end_mm", 0.0)),
+                                             int(th["segments"]), float(geo.get("bore_mm", 0.0)))
+            m.density_ = float(th["density_kg_m3"])
+            m.values_ = {k: float(v) for k, v in th["parameters"].items()}
+            missing = [k for k in BASE_PARAMS if k not in m.values_]
+            if missing:
+                raise KeyError("thermal.parameters." + missing[0])
+            m.params_, m.effect_params_ = m._split(m.values_)
+            m.free_ = list(th.get("free", []))
+            m.base_sensor_ = th.get("base_sensor")
+            m.base_ref_C_ = th.get("base_ref_C")
+            m.nut_sensor_ = th.get("nut_sensor")
+            # documents written before the air term have no air_sensor: their screw ran over a still air
+            m.air_sensor_ = th.get("air_sensor")
+            m.air_ref_C_ = th.get("air_ref_C")
+            m.air_source_ = th.get("air_source", "off" if m.air_sensor_ is None else "document")
+            m.air = "auto" if m.air_sensor_ else "off"
+            if m.air_sensor_ is not None and m.base_ref == "fixed" and not isinstance(m.air_ref_C_, (int, float)):
+                raise KeyError("thermal.air_ref_C")
+            m.reduced_ = th.get("reduced")
+            gm = doc.get("geometric") or {"degree": 0, "coefficients_um": []}
+            m.geometric_ = [float(c) for c in gm["coefficients_um"]]
+            m.geometric_degree_ = int(gm["degree"])
+        except (KeyError, TypeError, ValueError, AttributeError) as exc:
+            raise ModelFormatError("screw model document: missing or invalid field %s" % exc)
+        m.axis_ = doc.get("axis")
+        m.envelope_ = doc.get("envelope")
+        m.statistics_ = doc.get("statistics")
+        m.training_ = doc.get("training")
+        return m
+
+
+def choose_geometric_degree(P, resid, max_degree, n_thermal):
+    """Degree 0..max_degree of the cold polynomial for the residual after the thermal part.
+
+    Uses host.learning.empirical.geometric (leave-one-out CV over position-averaged points); when it
+    refuses the data (e.g. fewer than 4 positions), AIC = n·ln(RSS/n) + 2(d+1+n_thermal) here,
+    and the returned method names why. Returns (degree, scores)."""
+    from host.learning.empirical import EmpiricalDataError
+    from host.learning.empirical.geometric import GeometricPolynomial
+
+    try:
+        gp = GeometricPolynomial(max_degree=max_degree, criterion="cv").fit(P, resid)
+        return int(gp.degree_), {"method": "host.empirical.geometric (cv)", "scores": gp.scores_}
+    except EmpiricalDataError as exc:
+        note = str(exc)
+    n = P.size
+    u = P / max(np.max(np.abs(P)), 1.0)
+    scores = []
+    for d in range(max_degree + 1):
+        V = np.vander(u, d + 1, increasing=True)
+        beta, *_ = np.linalg.lstsq(V, resid, rcond=None)
+        rss = float(np.sum((resid - V @ beta) ** 2))
+        scores.append({"degree": d, "aic": float(n * np.log(max(rss, 1e-300) / n) + 2 * (d + 1 + n_thermal))})
+    best = min(scores, key=lambda s: (s["aic"], s["degree"]))
+    return best["degree"], {"method": "aic (%s)" % note, "scores": scores}

@@ -1,0 +1,299 @@
+"""The model document (docs/model-format.md) read into exact numbers in table units (docs/table-format.md).
+
+``Model(doc)`` checks every field the exporter uses and names the bad one (ExportError); models_export.plan
+quantises and certifies what it holds with models_export.certify's interval arithmetic. The document's hash is
+models_export.document's job.
+"""
+import math
+from fractions import Fraction as F
+
+from models_export.certify import (
+    ACC, LIMITS_UM, OU_PER_UM, ExportError, Recorder, frac_bits, iv_add, iv_mul, narrow_width, p2, rnd, top_limbs_needed,
+)
+
+# dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
+DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
+DYN_SQUARE_BITS = 24  # the spindle speed squared is held as rpm**2 / 2**shq < 2**24
+# The certified envelope's default (docs/firmware.md, "Operating envelope"): the training range (the
+# document's envelope.temperature_C) widened by this much on both sides. A thermal test never covers
+# every condition a machine sees (a faster feed, a hot afternoon); inside the certified envelope the
+# firmware evaluates the model and reports EXTRAPOLATING, beyond it it clamps and reports CLAMPED.
+DEFAULT_ENVELOPE_MARGIN_K = 15.0
+
+
+def _obj(value, where):
+    """A document block that must be a JSON object; absent (None) reads as empty."""
+    if value is None:
+        return {}
+    if not isinstance(value, dict):
+        raise ExportError("%s must be an object, found %s" % (where, type(value).__name__))
+    return value
+
+
+class Model:
+    """The model document reduced to exact numbers in table units (see docs/table-format.md)."""
+
+    def __init__(self, doc, ref_position_mm=None, envelope=None, margin_K=DEFAULT_ENVELOPE_MARGIN_K):
+        """``envelope``: {sensor: (lo_C, hi_C)}, the certified envelope for those sensors (it must
+        contain the training range); the others get the training range widened by ``margin_K``."""
+        kind = doc.get("kind")
+        self.doc_kind = kind
+        self.kind = "screw_reduced" if kind == "screw" else kind
+        if self.kind not in LIMITS_UM:
+            raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw, dynamic)" % (kind,))
+        sensors = doc.get("sensors") or []
+        if not isinstance(sensors, list) or not all(isinstance(s, str) for s in sensors):
+            raise ExportError("sensors must be a list of sensor names, found %r" % (sensors,))
+        self.sensors = list(sensors)
+        env = _obj(doc.get("envelope"), "envelope")
+        tenv = _obj(env.get("temperature_C"), "envelope.temperature_C")
+        refs = _obj(doc.get("reference_C"), "reference_C")
+        thermal = _obj(doc.get("thermal"), "thermal")
+        # direct: the offset does not depend on the position (linear_direct, dynamic with target "direct")
+        self.direct = self.kind == "linear_direct" or (self.kind == "dynamic" and thermal.get("target") == "direct")
+        if self.kind == "dynamic" and thermal.get("target") not in ("direct", "slope"):
+            raise ExportError("thermal.target must be 'direct' or 'slope', found %r" % (thermal.get("target"),))
+        if thermal.get("reference", "fixed") not in ("fixed", "run_start"):
+            raise ExportError("thermal.reference must be 'fixed' or 'run_start', found %r" % (thermal.get("reference"),))
+        # "run_start": the firmware may latch the references at a cold start (Evaluator.latch_references),
+        # so every integer reference inside the envelope is certified; "fixed": the document's reference_C.
+        self.ref_mode = 1 if thermal.get("reference") == "run_start" else 0
+        if kind == "screw" and isinstance(thermal.get("reduced"), dict) and thermal["reduced"].get("base_ref") == "run_start":
+            # The screw model's ambient term is referenced to each run's start: certify latched references too.
+            self.ref_mode = 1
+        self.env_lo, self.env_hi, self.ref, self.ref_frac = [], [], [], []
+        self.train_lo, self.train_hi, self.env_source = [], [], []
+        envelope = dict(envelope or {})
+        unknown = [s for s in envelope if s not in self.sensors]
+        if unknown:
+            raise ExportError("envelope for sensor %s: not an input of this model (its sensors: %s)"
+                              % (unknown[0], ", ".join(self.sensors) or "none"))
+        if not (isinstance(margin_K, (int, float)) and math.isfinite(margin_K) and margin_K >= 0):
+            raise ExportError("envelope margin %r K: must be a finite number >= 0" % (margin_K,))
+        for s in self.sensors:
+            if s not in tenv:
+                raise ExportError("envelope.temperature_C has no range for sensor %r" % s)
+            lo, hi = _pair(tenv[s], "envelope.temperature_C.%s" % s)
+            if s not in refs:
+                raise ExportError("reference_C has no entry for sensor %r" % s)
+            r = F(_num(refs[s], "reference_C.%s" % s)) * 1000
+            lo_m, hi_m = math.ceil(F(lo) * 1000), math.floor(F(hi) * 1000)
+            if lo_m > hi_m:
+                raise ExportError("envelope.temperature_C.%s: empty range %r" % (s, [lo, hi]))
+            # the document's envelope is the range the model was fitted over (the training range);
+            # the certified envelope is the operating range around it
+            self.train_lo.append(lo_m)
+            self.train_hi.append(hi_m)
+            if s in envelope:
+                elo, ehi = envelope[s]
+                for v in (elo, ehi):
+                    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                        raise ExportError("envelope for sensor %s: %r is not a finite temperature in degC" % (s, v))
+                if not elo < ehi:
+                    raise ExportError("envelope for sensor %s: low end %g degC must be below the high end %g degC"
+                                      % (s, elo, ehi))
+                e_lo, e_hi = math.ceil(F(elo) * 1000), math.floor(F(ehi) * 1000)
+                if not e_lo <= lo_m <= hi_m <= e_hi:
+                    raise ExportError("envelope for sensor %s: %g..%g degC does not contain the training range "
+                                      "%.3f..%.3f degC (the model's envelope.temperature_C)"
+                                      % (s, elo, ehi, lo_m / 1000.0, hi_m / 1000.0))
+                self.env_source.append("set")
+            else:
+                pad = math.floor(F(margin_K) * 1000)
+                e_lo, e_hi = lo_m - pad, hi_m + pad
+                self.env_source.append("default")
+            lo_m, hi_m = e_lo, e_hi
+            self.env_lo.append(lo_m)
+            self.env_hi.append(hi_m)
+            ri = min(max(rnd(r), lo_m), hi_m) if self.ref_mode else rnd(r)
+            self.ref.append(ri)
+            # fixed references: the fraction is folded into the intercept so d = t - ref stays an exact int
+            self.ref_frac.append(0 if self.ref_mode else r - ri)
+        if self.direct:
+            self.pos_lo = self.pos_hi = self.pos_ref = 0
+        else:
+            lo, hi = _pair(env.get("position_mm"), "envelope.position_mm")
+            self.pos_lo, self.pos_hi = math.ceil(F(lo) * 1000), math.floor(F(hi) * 1000)
+            if self.pos_lo > self.pos_hi:
+                raise ExportError("envelope.position_mm: empty range %r" % ([lo, hi],))
+            if ref_position_mm is None:
+                ref = 0 if self.pos_lo <= 0 <= self.pos_hi else self.pos_lo
+            else:
+                if not math.isfinite(ref_position_mm):
+                    raise ExportError("reference position must be a finite number of mm, got %r" % (ref_position_mm,))
+                ref = rnd(F(ref_position_mm) * 1000)
+                if not self.pos_lo <= ref <= self.pos_hi:
+                    raise ExportError("reference position %s mm is outside envelope.position_mm %s..%s mm"
+                                      % (ref_position_mm, lo, hi))
+            self.pos_ref = ref
+        # S: the temperature-linear part. poly_slope/screw: OU per um (slope); linear_direct: OU.
+        if self.kind == "poly_slope":
+            coefs = thermal.get("coefficients_um_per_mm_per_K")
+            per_mc = F(OU_PER_UM, 1000 * 1000)  # (um/mm/K) -> (OU/um per mK)
+            self.b0 = F(_num(thermal.get("intercept_um_per_mm", 0.0), "thermal.intercept_um_per_mm")) * F(OU_PER_UM, 1000)
+            self.b_names = ["thermal.coefficients_um_per_mm_per_K.%s" % s for s in self.sensors]
+            self.b = [F(_num(_get(coefs, s, "thermal.coefficients_um_per_mm_per_K"), self.b_names[i])) * per_mc
+                      for i, s in enumerate(self.sensors)]
+        elif self.kind == "dynamic":
+            # the temperature-linear part is empty: every term reads a filter state (dyn_terms, after the sensors)
+            unit = OU_PER_UM if self.direct else F(OU_PER_UM, 1000)  # um -> OU, or um/mm -> OU/um
+            self.b0 = F(_num(thermal.get("intercept", 0.0), "thermal.intercept")) * unit
+            self.b_names = ["sensor %s (read by the filters only)" % s for s in self.sensors]
+            self.b = [F(0)] * len(self.sensors)
+        elif self.kind == "linear_direct":
+            coefs = thermal.get("coefficients_um_per_K")
+            self.b0 = F(_num(thermal.get("intercept_um", 0.0), "thermal.intercept_um")) * OU_PER_UM
+            self.b_names = ["thermal.coefficients_um_per_K.%s" % s for s in self.sensors]
+            self.b = [F(_num(_get(coefs, s, "thermal.coefficients_um_per_K"), self.b_names[i])) * F(OU_PER_UM, 1000)
+                      for i, s in enumerate(self.sensors)]
+        else:
+            red = thermal.get("reduced")
+            if not isinstance(red, dict):
+                raise ExportError("screw model document has no thermal.reduced block (the firmware's recurrence)")
+            self.red = red
+            alpha = F(_num(red.get("alpha_um_per_mm_per_K"), "thermal.reduced.alpha_um_per_mm_per_K"))
+            self.alpha = alpha
+            base = red.get("base_sensor")
+            self.b0 = F(0)
+            self.b = [F(0)] * len(self.sensors)
+            self.b_names = ["thermal.reduced.base_sensor(%s)" % s for s in self.sensors]
+            if base is not None:
+                if base not in self.sensors:
+                    raise ExportError("thermal.reduced.base_sensor %r is not in sensors %r" % (base, self.sensors))
+                i = self.sensors.index(base)
+                self.b[i] = alpha * F(OU_PER_UM, 1000 * 1000)
+                bref = F(_num(red.get("base_ref_C"), "thermal.reduced.base_ref_C")) * 1000
+                self.ref[i] = rnd(bref)
+                self.ref_frac[i] = bref - rnd(bref)
+        for i in range(len(self.sensors)):
+            self.b0 -= self.b[i] * self.ref_frac[i]
+        if self.ref_mode:
+            self.d_lo = [lo - hi for lo, hi in zip(self.env_lo, self.env_hi)]
+            self.d_hi = [hi - lo for lo, hi in zip(self.env_lo, self.env_hi)]
+        else:
+            self.d_lo = [lo - r for lo, r in zip(self.env_lo, self.ref)]
+            self.d_hi = [hi - r for hi, r in zip(self.env_hi, self.ref)]
+        if self.kind == "dynamic":
+            self._dyn_terms(doc, thermal, env, unit)
+        geo = doc.get("geometric") if not self.direct else None
+        gc = _obj(geo, "geometric").get("coefficients_um") or [0.0]
+        if not isinstance(gc, list):
+            raise ExportError("geometric.coefficients_um must be a list of numbers, found %r" % (gc,))
+        self.g = [F(_num(c, "geometric.coefficients_um[%d]" % j)) * OU_PER_UM / F(1000) ** j for j, c in enumerate(gc)]
+        if len(self.g) - 1 > 6:
+            raise ExportError("geometric degree %d: the table holds at most degree 6" % (len(self.g) - 1))
+
+    def _dyn_terms(self, doc, thermal, env, unit):
+        """The filters in table units; their coefficients and state boxes are appended to b, d_lo, d_hi, b_names
+        (after the sensors, whose own coefficients are 0), so S's ranges include them."""
+        dt = thermal.get("dt_s")
+        if not isinstance(dt, (int, float)) or isinstance(dt, bool) or not dt > 0 or not math.isfinite(dt):
+            raise ExportError("thermal.dt_s must be the filters' step in seconds (> 0), found %r; re-fit the model with "
+                              "this tcomp" % (dt,))
+        self.dt_ms = rnd(F(dt) * 1000)
+        if abs(F(dt) * 1000 - self.dt_ms) > F(1, 10 ** 6) or not 1 <= self.dt_ms <= 3600000:
+            raise ExportError("thermal.dt_s=%r is not a whole number of milliseconds in 0.001..3600 s" % (dt,))
+        terms = thermal.get("terms")
+        if not isinstance(terms, list) or not 1 <= len(terms) <= 8:
+            raise ExportError("thermal.terms must list 1..8 terms, found %r" % (terms,))
+
+        def top(key, needed):
+            if not needed:
+                return 0
+            v = env.get(key)
+            lo, hi = _pair(v, "envelope.%s" % key) if v is not None else (None, None)
+            if v is None or lo != 0 or not hi >= 0:
+                raise ExportError("envelope.%s must be [0, max] for a model reading %s; re-fit the model with this tcomp"
+                                  % (key, key.split("_")[0]))
+            if hi > (1 << 20):
+                raise ExportError("envelope.%s: %r is beyond what the table holds (%d)" % (key, hi, 1 << 20))
+            return math.ceil(F(hi))
+
+        signals = [t.get("signal") if isinstance(t, dict) else None for t in terms]
+        self.smax = top("spindle_rpm", any(s in ("spindle_krpm", "spindle_krpm2") for s in signals))
+        self.fmax = top("feed_mm_min", "feed_m_min" in signals)
+        self.shq = max(0, (self.smax * self.smax).bit_length() - DYN_SQUARE_BITS)
+        # the square's limbs (firmware Evaluator._inputs); its integer interval as the firmware's mul bounds it
+        self.Lq = max(1, min(29, narrow_width(max(self.smax, 1))))
+        self.nq = top_limbs_needed((0, self.smax), self.Lq, max(self.smax, 1)) or 0
+        if not 1 <= self.nq <= 4:
+            raise ExportError("envelope.spindle_rpm: %d rpm cannot be squared in small-int limbs" % self.smax)
+        self.q_iv = Recorder().mul(0, (0, self.smax), (0, self.smax), self.Lq, self.nq, self.shq, "spindle speed squared")
+        self.dyn = []
+        for j, t in enumerate(terms):
+            where = "thermal.terms[%d]" % j
+            if not isinstance(t, dict):
+                raise ExportError("%s must be an object" % where)
+            sig = t.get("signal")
+            tau = F(_num(t.get("tau_s"), where + ".tau_s"))
+            coef = F(_num(t.get("coefficient"), where + ".coefficient"))
+            if tau < 0:
+                raise ExportError("%s.tau_s must be >= 0, found %r" % (where, t.get("tau_s")))
+            if isinstance(sig, str) and sig.startswith("T:"):
+                if sig[2:] not in self.sensors:
+                    raise ExportError("%s.signal %r: sensor %r is not in sensors %r" % (where, sig, sig[2:], self.sensors))
+                i = self.sensors.index(sig[2:])
+                src, u, per = i, (self.d_lo[i], self.d_hi[i]), F(1, 1000)  # mK -> K
+            elif sig in DYN_SOURCES:
+                src = DYN_SOURCES[sig]
+                if src == -1:
+                    u, per = (0, self.smax), F(1, 1000)  # rpm -> krpm
+                elif src == -2:
+                    u, per = (0, max(-(-self.smax * self.smax // (1 << self.shq)), self.q_iv[0][1])), p2(self.shq) / 10 ** 6  # rpm**2/2**shq -> krpm**2
+                else:
+                    u, per = (0, self.fmax), F(1, 1000)  # mm/min -> m/min
+            else:
+                raise ExportError("%s.signal must be 'T:<sensor>' or one of %s, found %r" % (where, ", ".join(DYN_SOURCES), sig))
+            if not u[0] <= 0 <= u[1]:
+                raise ExportError("%s: the input range %r does not hold the rest state 0" % (where, u))
+            fy = max(0, frac_bits(max(u[1] - u[0], 1), ACC, cap=28))
+            # the host's discrete lag (host/learning/empirical/dynamic.py): a = 1 - exp(-dt/tau) in doubles, exactly
+            import numpy as np
+            a = F(float(1.0 - np.exp(-(self.dt_ms / 1000.0) / float(tau)))) if tau > 0 else F(0)
+            name = "thermal.terms[%d] (%s, tau %g s)" % (j, sig, float(tau))
+            self.dyn.append(dict(src=src, u=u, fy=fy, a=a, name=name, tau=tau))
+            self.b.append(coef * unit * per / p2(fy))  # output scale per state unit
+            self.d_lo.append(u[0] << fy)
+            self.d_hi.append(u[1] << fy)
+            self.b_names.append(name)
+
+    # real ranges ----------------------------------------------------------
+    def s_range(self):
+        lo = hi = self.b0
+        for b, a, c in zip(self.b, self.d_lo, self.d_hi):
+            lo += min(b * a, b * c)
+            hi += max(b * a, b * c)
+        return (lo, hi)
+
+    def s_bound(self):
+        """Bound of |every partial sum| of S."""
+        return abs(self.b0) + sum(abs(b) * max(abs(a), abs(c)) for b, a, c in zip(self.b, self.d_lo, self.d_hi))
+
+    def p_iv(self):
+        return (F(self.pos_lo), F(self.pos_hi))
+
+    def horner_range(self, j):
+        """Sound interval of h_j(p) = sum_{k>=j} g_k p^(k-j) over the position envelope (interval Horner)."""
+        P = self.p_iv()
+        h = (self.g[-1], self.g[-1])
+        for k in range(len(self.g) - 2, j - 1, -1):
+            h = iv_add(iv_mul(h, P), (self.g[k], self.g[k]))
+        return h
+
+
+def _num(v, where):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        raise ExportError("%s: expected a finite number, got %r" % (where, v))
+    return v
+
+
+def _get(d, key, where):
+    if not isinstance(d, dict) or key not in d:
+        raise ExportError("%s has no entry for sensor %r" % (where, key))
+    return d[key]
+
+
+def _pair(v, where):
+    if not (isinstance(v, (list, tuple)) and len(v) == 2):
+        raise ExportError("%s: expected [lo, hi], got %r" % (where, v))
+    return _num(v[0], where + "[0]"), _num(v[1], where + "[1]")

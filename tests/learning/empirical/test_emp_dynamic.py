@@ -1,0 +1,155 @@
+"""Dynamic model: lag filters, structure chosen by cross-validation, document, command line, real data."""
+import json
+import os
+
+import numpy as np
+import pytest
+
+from host.cli import main
+from host.learning.empirical import EmpiricalDataError
+from host.learning.empirical.dynamic import DynamicRegression, _lag_filter_fast, candidate_matrix, features, lag_filter, signals
+from host.learning.empirical.fitting import fit_model
+from host.learning.documents import ModelFormatError, load_model
+from host.data.runs import Errors
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+
+
+def test_lag_filter_is_exact_for_held_inputs():
+    t = np.arange(0.0, 3600.0, 15.0)
+    step = np.ones(t.size)
+    # a unit step held from t = 0: y(t) = 1 − exp(−t/τ) at every sample, independently of the step size
+    np.testing.assert_allclose(lag_filter(t, step, 600.0), 1 - np.exp(-t / 600.0), rtol=1e-12)
+    # the scipy path on a uniform grid and the loop agree; a non-uniform grid takes the loop
+    u = np.column_stack([np.sin(t / 300.0), (t > 900).astype(float)])
+    np.testing.assert_allclose(_lag_filter_fast(t, u, 450.0), lag_filter(t, u, 450.0), atol=1e-12)
+    tn = np.cumsum(np.r_[0.0, np.random.default_rng(0).uniform(5, 25, 200)])
+    y = _lag_filter_fast(tn, np.ones(tn.size), 300.0)
+    np.testing.assert_allclose(y, 1 - np.exp(-tn / 300.0), rtol=1e-12)
+    np.testing.assert_array_equal(lag_filter(t, u, 0.0), u)
+
+
+def _lagged_run(make_direct, noise=0.02):
+    """A spindle run whose ch1 is 3·lag(t1 rise, 1 h) + 2·lag(krpm, 30 min): a static model cannot follow it."""
+    run = make_direct(spindle=True, n_sensors=4, channels=("ch1",))
+    t, sig = signals(run, ["t1"])
+    y = 3 * lag_filter(t, sig["T:t1"], 3600) + 2 * lag_filter(t, sig["spindle_krpm"], 1800)
+    y = y + np.random.default_rng(1).normal(0, noise, t.size)
+    run.errors = Errors(t.copy(), np.zeros(t.size), y, None, np.array(["ch1"] * t.size, dtype=object))
+    return run
+
+
+def test_structure_and_time_constants_are_recovered(make_direct):
+    run = _lagged_run(make_direct)
+    model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200))
+    terms = dict(zip(model.terms, model.term_coefficients))
+    assert terms[("T:t1", 3600.0)] == pytest.approx(3, rel=0.05)
+    assert terms[("spindle_krpm", 1800.0)] == pytest.approx(2, rel=0.05)
+    st = model.statistics
+    assert st["cv_groups"] == 5 and st["rmse"] < 0.05 and st["history"][0]["action"] == "start"
+    assert model.sensors == ["t1"]
+    # a static MLR on all sensors cannot represent the lags
+    static = fit_model([run], "mlr", target="direct", channel="ch1")
+    assert static.statistics["rmse"] > 5 * st["rmse"]
+
+
+def test_sensor_limit_and_settings_are_enforced(make_direct):
+    run = _lagged_run(make_direct)
+    t = run.errors.time_s
+    F, terms = candidate_matrix([run], [t], ["t1", "t2", "t3", "t4"], (0.0, 3600.0), use_spindle=False)
+    assert [n for n, _ in terms] == ["T:t1", "T:t1", "T:t2", "T:t2", "T:t3", "T:t3", "T:t4", "T:t4"]
+    groups = (t // 7200).astype(int)
+    est = DynamicRegression(max_sensors=2, min_gain=0.0, max_terms=8).fit(F, run.errors.error_um, terms, groups)
+    assert len({n for n, _ in est.terms_}) <= 2
+    for kw, msg in (({"max_sensors": 0}, "max_sensors"), ({"cv_score": "mean"}, "cv_score"), ({"ridge": -1}, "ridge"),
+                    ({"min_gain": 1.5}, "min_gain")):
+        with pytest.raises(EmpiricalDataError, match=msg):
+            DynamicRegression(**kw).fit(F, run.errors.error_um, terms, groups)
+    with pytest.raises(EmpiricalDataError, match="at least 2 groups"):
+        DynamicRegression().fit(F, run.errors.error_um, terms, np.zeros(t.size))
+
+
+def test_document_round_trip_command_line_and_bad_documents(make_direct, tmp_path):
+    from host.data.runs import write_run
+
+    run = _lagged_run(make_direct)
+    folder = write_run(run, str(tmp_path / "run"))
+    out = str(tmp_path / "dyn.json")
+    assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", "--sensors", "t1,t2", folder, "--out", out,
+                 "--option", "taus_s=0/1800/3600/7200", "--option", "max_sensors=2"]) == 0
+    doc = json.loads(open(out).read())
+    assert doc["kind"] == "dynamic" and doc["thermal"]["reference"] == "run_start"
+    assert set(doc["sensors"]) <= {"t1", "t2"} and doc["training"]["candidate_sensors"] == ["t1", "t2"]
+    assert main(["predict", out, folder, "--out", str(tmp_path / "p.csv"), "--json", str(tmp_path / "p.json")]) == 0
+    assert json.loads(open(str(tmp_path / "p.json")).read())["rmse_um"] < 0.1
+    model = load_model(out)
+    np.testing.assert_allclose(model.predict(run), model.intercept + features(run, model.terms, run.errors.time_s) @ model.term_coefficients)
+    for mutate, msg in ((lambda d: d["thermal"]["terms"][0].update(signal="rpm"), "signal"),
+                        (lambda d: d["thermal"]["terms"][0].update(tau_s=-1), "tau_s"),
+                        (lambda d: d["thermal"].update(reference="fixed"), "run_start"),
+                        (lambda d: d["thermal"].update(terms=[]), "non-empty")):
+        bad = json.loads(open(out).read())
+        mutate(bad)
+        with pytest.raises(ModelFormatError, match=msg):
+            load_model(bad)
+    # a run without the spindle log cannot feed a model that uses it: a clear error, exit 2
+    run.spindle = None
+    nospin = write_run(run, str(tmp_path / "nospin"))
+    assert main(["predict", out, nospin, "--out", str(tmp_path / "q.csv")]) == 2
+    assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "taus_s=a"]) == 2
+
+
+def test_slope_target_multiplies_by_position(make_slope):
+    run = make_slope(n_sweeps=30, noise_um=0.01, duration_s=28800.0)
+    model = fit_model([run], "dynamic", target="slope", taus_s=(0, 3600), cv_blocks=3)
+    doc = model.to_document()
+    back = load_model(dict(doc, format="tcomp-model/1"))
+    e = run.errors
+    expect = back.geometric(e.position_mm) + back.thermal_at(run, e.time_s) * e.position_mm
+    np.testing.assert_allclose(back.predict(run), expect)
+    assert back.target == "slope" and doc["geometric"]["degree"] >= 1
+
+
+def test_real_fl_thermal_dynamic_beats_static_on_the_held_out_cycles():
+    """One fast real-data check: trained on the first three cycles with a small time-constant grid,
+    the dynamic model predicts the held-out cycles of ch1 better than MLR on all 16 sensors."""
+    from host.learning.empirical.scoring import evaluate
+    from host.data.runs import load_run
+
+    run = load_run(os.path.join(ROOT, "data", "fl_thermal"))
+    split = 86865.0  # start of the 4th spindle cycle (32.1 h)
+    dyn = fit_model([run], "dynamic", target="direct", channel="ch1", window=(None, split), taus_s=(0, 1800, 14400), max_terms=4, ridge=0.0)
+    mlr = fit_model([run], "mlr", target="direct", channel="ch1", window=(None, split), reference="run_start")
+    d, m = evaluate(dyn, run, (split, None))["rmse_um"], evaluate(mlr, run, (split, None))["rmse_um"]
+    assert d < 0.8 * m, (d, m)
+
+
+def test_compare_runs_the_dynamic_model_with_its_settings(make_direct, tmp_path):
+    from host.data.runs import write_run
+
+    folder = write_run(_lagged_run(make_direct), str(tmp_path / "run"))
+    out = str(tmp_path / "cmp.json")
+    base = ["compare", folder, "--split-h", "7", "--direct", "--channel", "ch1", "--methods", "mlr,dynamic", "--repeats", "1", "--json", out]
+    assert main(base + ["--option", "dynamic.taus_s=[0,1800,3600]", "--option", "dynamic.max_sensors=1"]) == 0
+    res = {r["method"]: r for r in json.loads(open(out).read())["results"]}
+    assert res["dynamic"]["n_sensors"] == 1 and res["dynamic"]["mean_test_rmse_um"] < res["mlr"]["mean_test_rmse_um"]
+    assert main(base + ["--option", "dynamic.bogus=1"]) == 2
+
+
+@pytest.mark.slow
+def test_goal_leave_one_cycle_out_at_most_0p8_of_mlr16():
+    """Issue 16's goal on the real FL_THERMAL test: under leave-one-cycle-out over all six spindle cycles
+    (every choice made inside each fold), the dynamic model's pooled held-out RMSE is at most 0.8 x that of
+    MLR on all 16 sensors. CI checks ch4, the closest channel (0.75 in docs/results.md); TCOMP_SLOW=1 all five
+    (0.34 0.27 0.68 0.75 0.58, re-measured by this test's full form)."""
+    from host.learning.empirical.compare import leave_one_cycle_out
+    from host.data.runs import load_run
+
+    run = load_run(os.path.join(ROOT, "data", "fl_thermal"))
+    channels = ["ch1", "ch2", "ch3", "ch4", "ch5"] if os.environ.get("TCOMP_SLOW") == "1" else ["ch4"]
+    ratios = {}
+    for ch in channels:
+        out = leave_one_cycle_out(run, channel=ch, methods=("mlr", "dynamic"))
+        assert len(out["cycles"]) == 6 and len(out["methods"]["dynamic"]["folds"]) == 6
+        ratios[ch] = out["ratio_to_mlr"]["dynamic"]
+    assert all(r <= 0.8 for r in ratios.values()), ratios

@@ -1,0 +1,120 @@
+"""The paper comparisons that are not linear in the temperatures: the back-propagation network and PPR."""
+import json
+
+import numpy as np
+import pytest
+
+from host.cli import main
+from host.learning.empirical import EmpiricalDataError
+from host.learning.empirical.ann import ANN
+from host.learning.empirical.fitting import fit_model
+from host.learning.empirical.ppr import PPR, natural_spline_basis
+from host.learning.empirical.regression import MLR
+from host.learning.documents import ModelFormatError, load_model, save_model
+
+FAST = {"max_epochs": 600, "patience": 60, "learning_rate": 0.03}
+
+
+def _curved(n, seed):
+    rng = np.random.default_rng(seed)
+    X = rng.uniform(-1.0, 1.0, (n, 3))
+    y = 4.0 * np.tanh(2.0 * X[:, 0]) + X[:, 1] ** 2 + 0.02 * rng.normal(size=n)
+    return X, y
+
+
+def test_ann_learns_a_curve_a_line_cannot_and_is_deterministic():
+    X, y = _curved(300, 1)
+    Xt, yt = _curved(200, 2)
+    a = ANN(hidden_sizes=(3, 5), seed=4, **FAST).fit(X, y)
+    b = ANN(hidden_sizes=(3, 5), seed=4, **FAST).fit(X, y)
+    np.testing.assert_array_equal(a.W_, b.W_)
+    assert a.hidden_size_ == min(a.validation_rmse_, key=lambda h: (a.validation_rmse_[h], h))
+    assert all(a.epochs_[h] <= FAST["max_epochs"] for h in a.epochs_) and 1 <= a.best_epoch_ <= a.epochs_[a.hidden_size_]
+    rmse_ann = np.sqrt(np.mean((a.predict(Xt) - yt) ** 2))
+    rmse_mlr = np.sqrt(np.mean((MLR().fit(X, y).predict(Xt) - yt) ** 2))
+    assert rmse_ann < 0.5 * rmse_mlr, (rmse_ann, rmse_mlr)
+    c = ANN(hidden_sizes=(3, 5), seed=5, **FAST).fit(X, y)
+    assert not np.array_equal(a.W_, c.W_)  # the seed is used
+    # the forward pass written out independently from the stored network
+    net = a.network()
+    Z = (Xt - np.array(net["input_offset"])) / np.array(net["input_scale"])
+    H = np.tanh(Z @ np.array(net["hidden_weights"]).T + np.array(net["hidden_bias"]))
+    by_hand = net["output_offset"] + net["output_scale"] * (H @ np.array(net["output_weights"]) + net["output_bias"])
+    np.testing.assert_allclose(a.predict(Xt), by_hand)
+
+
+def test_ann_validation_on_the_last_group_and_bad_settings():
+    X, y = _curved(200, 3)
+    groups = np.repeat([0, 1, 2, 3], 50)
+    a = ANN(hidden_sizes=(3,), validation="last_group", **FAST).fit(X, y, groups=groups)
+    assert a.n_validation_ == 50 and a.validation_.startswith("last group")
+    for kw, msg in (({"hidden_sizes": (0,)}, "hidden_sizes"), ({"validation": "none"}, "validation must be"),
+                    ({"max_epochs": 0}, "max_epochs"), ({"validation_fraction": 1.0}, "validation_fraction")):
+        with pytest.raises(EmpiricalDataError, match=msg):
+            ANN(**kw).fit(X, y, groups=groups)
+    with pytest.raises(EmpiricalDataError, match="needs at least 2 groups"):
+        ANN(validation="last_group").fit(X, y)
+    with pytest.raises(EmpiricalDataError, match="training and"):
+        ANN().fit(X[:4], y[:4])
+
+
+def test_natural_spline_is_linear_outside_its_knots():
+    knots = np.array([0.0, 1.0, 2.0, 3.0, 4.0])
+    v = np.array([5.0, 6.0, 7.0, -3.0, -2.0, -1.0])
+    B = natural_spline_basis(v, knots)
+    beta = np.random.default_rng(0).normal(size=B.shape[1])
+    f = B @ beta
+    assert f[2] - 2 * f[1] + f[0] == pytest.approx(0.0, abs=1e-9)
+    assert f[5] - 2 * f[4] + f[3] == pytest.approx(0.0, abs=1e-9)
+
+
+def test_ppr_finds_a_single_index_curve():
+    rng = np.random.default_rng(0)
+    X = rng.normal(size=(400, 3))
+    u = (X[:, 0] + X[:, 1]) / np.sqrt(2)
+    y = u**2 + 0.01 * rng.normal(size=400)
+    m = PPR(n_terms=1, knots=7).fit(X, y)
+    a = m.terms_[0].a * m.x_scale_[0] / m.x_scale_  # back to raw units, up to scale
+    a = a / np.linalg.norm(a)
+    assert abs(abs(a @ np.array([1, 1, 0]) / np.sqrt(2)) - 1.0) < 0.02
+    assert m.rsquared_ > 0.99 and MLR().fit(X, y).rsquared_ < 0.2
+    with pytest.raises(EmpiricalDataError, match="n_terms"):
+        PPR(n_terms=0).fit(X, y)
+
+
+def test_ann_model_document_round_trip_and_cli(make_direct, tmp_path):
+    from host.data.runs import write_run
+
+    run = make_direct(spindle=True, n_sensors=3, noise_um=0.05)
+    model = fit_model([run], "ann", target="direct", channel="ch1", hidden_sizes=(3,), **FAST)
+    path = str(tmp_path / "ann.json")
+    doc = save_model(model.to_document(), path)
+    assert doc["kind"] == "ann" and doc["thermal"]["target"] == "direct" and doc["statistics"]["hidden_size"] == 3
+    back = load_model(path)
+    np.testing.assert_allclose(back.predict(run), model.predict(run))
+    bad = json.loads(open(path).read())
+    bad["thermal"]["network"]["hidden_weights"][0] = [1.0]
+    with pytest.raises(ModelFormatError, match="hidden_weights"):
+        load_model(bad)
+    bad = json.loads(open(path).read())
+    bad["thermal"]["network"]["activation"] = "relu"
+    with pytest.raises(ModelFormatError, match="activation"):
+        load_model(bad)
+    # the command line: fit, then predict with the saved network
+    folder = write_run(run, str(tmp_path / "run"))
+    out = str(tmp_path / "cli.json")
+    assert main(["fit", "--model", "ann", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "hidden_sizes=3/4",
+                 "--option", "max_epochs=300", "--option", "seed=1"]) == 0
+    assert main(["predict", out, folder, "--out", str(tmp_path / "pred.csv")]) == 0
+    assert main(["fit", "--model", "ann", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "hidden_sizes=x"]) == 2
+
+
+def test_ann_slope_model_predicts_geometric_plus_thermal(make_slope):
+    run = make_slope(n_sweeps=30, noise_um=0.01)
+    model = fit_model([run], "ann", target="slope", hidden_sizes=(3,), validation_fraction=0.3, **FAST)
+    doc = load_model(model.to_document())
+    e = run.errors
+    R = doc.rises(run, e.time_s)
+    expect = doc.geometric(e.position_mm) + doc.estimator_.predict(R) * e.position_mm
+    np.testing.assert_allclose(doc.predict(run), expect)
+    assert doc.target == "slope" and doc.to_document()["geometric"]["degree"] >= 1
