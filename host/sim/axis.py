@@ -9,6 +9,8 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+MAX_SEGMENTS = 1000  # the twin's grid: the step maps are (segments + 1)^2 and built per convection level
+
 
 @dataclass(frozen=True)
 class AxisParams:
@@ -94,8 +96,8 @@ class AxisParams:
             v = getattr(self, k)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
                 problems.append("%s must be a number >= 0 (found %r)" % (k, v))
-        if not isinstance(self.segments, int) or isinstance(self.segments, bool) or self.segments < 2:
-            problems.append("segments must be an integer >= 2 (found %r)" % (self.segments,))
+        if not isinstance(self.segments, int) or isinstance(self.segments, bool) or not 2 <= self.segments <= MAX_SEGMENTS:
+            problems.append("segments must be an integer in 2..%d (found %r)" % (MAX_SEGMENTS, self.segments))
         if not 0 <= self.screw_share <= 1:
             problems.append("screw_share must be within 0..1 (found %r)" % (self.screw_share,))
         if not problems:
