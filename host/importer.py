@@ -45,7 +45,10 @@ def _number(value, what, where):
     if isinstance(value, bool) or not isinstance(value, (int, float)):
         raise ImportError_("%s: %s must be a number, found %r%s" % (where, what, value,
                                                                     " (a string: write it without quotes)" if isinstance(value, str) else ""))
-    v = float(value)
+    try:
+        v = float(value)
+    except OverflowError:  # an integer of 400 digits
+        v = math.inf
     if not math.isfinite(v):
         raise ImportError_("%s: %s must be a finite number, found %r" % (where, what, value))
     return v

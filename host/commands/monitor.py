@@ -28,6 +28,7 @@ def add_arguments(p):
 
 _INTEGER = re.compile(r"-?[0-9]+\Z")
 _DECIMAL = re.compile(r"-?[0-9]+(\.[0-9]+)?\Z")  # what the firmware prints: an integer model, no nan/inf/exponent
+MAX_FIELD_CHARS = 24  # a 32-bit integer and its decimals print in 12; 400 digits would read as inf
 OFFSET_FIELDS = (("t_ms", _INTEGER), ("pos_um", _INTEGER), ("total_um", _DECIMAL), ("ref_offset_um", _DECIMAL),
                  ("slope_um_per_m", _DECIMAL))
 
@@ -43,7 +44,7 @@ def offset_problem(f):
         return "%s frame seq %d: %d fields, expected %d (%s)" % (f.kind, f.seq, len(f.fields), len(OFFSET_FIELDS),
                                                                ",".join(n for n, _ in OFFSET_FIELDS))
     for (name, pattern), value in zip(OFFSET_FIELDS, f.fields):
-        if not pattern.match(value):
+        if len(value) > MAX_FIELD_CHARS or not pattern.match(value):
             return "%s frame seq %d: %s %r is not a finite %s" % (f.kind, f.seq, name, value[:40],
                                                                  "integer" if pattern is _INTEGER else "decimal number")
     return None

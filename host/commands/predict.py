@@ -37,14 +37,15 @@ def _predict(args, out):
 
     try:
         doc = read_document(args.model)
-        actual, declared = provenance(doc)
-        edited = declared is not None and declared != actual
-        if edited and not args.allow_edited:  # the check tcomp export makes: the same document, the same answer
-            raise UserError("%s: %s" % (args.model, edited_reason(declared, actual)))
         try:
             model = load_model(doc)
         except ModelFormatError as exc:
             raise ModelFormatError("%s: %s" % (args.model, exc))
+        actual, declared = provenance(doc)
+        edited = declared is not None and declared != actual
+        if edited and not args.allow_edited:
+            # the check tcomp export makes, after the fields' own checks (which name the field), with its words
+            raise UserError("%s: %s" % (args.model, edited_reason(declared, actual)))
         run_ = load_run(args.run)
     except (ModelFormatError, RunFormatError) as exc:
         raise UserError(str(exc))
