@@ -27,8 +27,10 @@ def json_or_word(text):
         return text
 
 
-def number(kind, minimum=None):
-    """Converter to a finite ``kind`` (int or float), at least ``minimum`` when given."""
+def number(kind, minimum=None, maximum=None, above=None):
+    """Converter to a finite ``kind`` (int or float): at least ``minimum``, at most ``maximum``, more than
+    ``above``, each when given. A bound is what keeps a typo (segments=100000) from a 1 GiB array or a
+    negative feed from a meaningless model: an option that sizes memory or has a physical sign has one."""
     def convert(text):
         try:
             value = kind(text)
@@ -38,6 +40,10 @@ def number(kind, minimum=None):
             raise ValueError("must be a finite number")
         if minimum is not None and value < minimum:
             raise ValueError("must be >= %g" % minimum)
+        if above is not None and value <= above:
+            raise ValueError("must be > %g" % above)
+        if maximum is not None and value > maximum:
+            raise ValueError("must be <= %g" % maximum)
         return value
     return convert
 

@@ -13,6 +13,8 @@ without a commit (an error, disk full, Ctrl-C) removes every staged file, so a
 failure leaves neither half an output nor some outputs without the others.
 Targets that are not regular files (``/dev/stdout``, a FIFO, ``/dev/full``) cannot
 be renamed onto: they are written first at commit, before any rename.
+A folder output may name the files that make one whole (a run folder's): writing
+it into an existing folder then removes the ones of the older whole it did not rewrite.
 """
 import errno
 import os
@@ -75,6 +77,7 @@ class _Target:
         self.real = _real(shown)
         self.device = not folder and _is_device(shown)
         self.stage = None
+        self.owned = ()
 
 
 class Outputs:
@@ -92,10 +95,16 @@ class Outputs:
         check_output(path, flag)
         return self._claim(_Target(flag, path, folder=False))
 
-    def folder(self, path, flag="--out"):
-        """Claim ``path`` as an output folder (created at commit; files already in it stay unless rewritten)."""
+    def folder(self, path, flag="--out", owned=()):
+        """Claim ``path`` as an output folder (created at commit; files already in it stay unless rewritten).
+
+        ``owned``: file names that together make one thing the command writes whole (a run folder's files,
+        host.data.runs.RUN_FILES). At commit, in every folder where the command wrote one of them, the others
+        it did not write are removed: a run written over an older one never keeps the older motion.csv."""
         check_output_dir(path, flag)
-        return self._claim(_Target(flag, path, folder=True))
+        t = _Target(flag, path, folder=True)
+        t.owned = tuple(owned)
+        return self._claim(t)
 
     def log(self, path, flag):
         """Claim ``path`` as a log the command appends to as it goes (not staged: what was logged stays)."""
@@ -221,6 +230,11 @@ class Outputs:
                     mode = stat.S_IMODE(os.stat(final).st_mode) if os.path.exists(final) else _default_mode(False)
                     os.chmod(os.path.join(root, f), mode)
                     os.replace(os.path.join(root, f), final)
+                if set(files) & set(t.owned):
+                    for f in t.owned:
+                        stale = os.path.join(dest, f)
+                        if f not in files and os.path.lexists(stale) and not os.path.isdir(stale):
+                            os.remove(stale)  # part of the older whole this one replaces
                 _fsync(dest)
 
     def discard(self):

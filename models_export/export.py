@@ -3,7 +3,7 @@ import math
 
 from firmware.crc32 import crc32
 from models_export.certify import LIMITS_UM, OU_PER_UM, ExportError
-from models_export.document import document_hash
+from models_export.document import edited_reason, provenance
 from models_export.exact import DEFAULT_ENVELOPE_MARGIN_K, Model
 from models_export.plan import Planner
 from models_export.tableformat import VERSION, pack
@@ -30,9 +30,7 @@ class Export:
 def _provenance(doc):
     """(sha256 of the document being exported, the recorded one or None). The table names the
     actual document; a recorded hash that differs means it was edited after it was saved."""
-    prov = doc.get("provenance")
-    declared = prov.get("sha256") if isinstance(prov, dict) else None
-    return document_hash(doc), declared
+    return provenance(doc)
 
 
 def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, envelope=None,
@@ -67,9 +65,7 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
     except ValueError as exc:
         raise ExportError("table: %s" % exc)
     if edited and not allow_edited:  # after the model's and the table's own checks, which name the field
-        raise ExportError("provenance.sha256 %.16s... does not match the document (actual %.16s...): it was edited "
-                          "after it was saved; re-save it, or export it marked as edited (--allow-edited)"
-                          % (declared, actual))
+        raise ExportError(edited_reason(declared, actual))
     rec = planner.rec
     limit = LIMITS_UM[model.kind] if limit_um is None else limit_um
     scale_um = 1.0 / OU_PER_UM

@@ -15,6 +15,10 @@ from host.options import choice, number
 from host.learning.screw.effects import make_effect
 from host.learning.screw.identify import IdentifiabilityWarning
 
+MAX_SEGMENTS = 1000  # full model; the reduced one is bounded by the table (32)
+MIN_DT_S, MAX_DT_S = 0.1, 600.0
+MAX_FEED_MM_MIN = 1e6  # 1 km/min, far above any machine-tool feed (rapid traverses reach ~1e5)
+
 
 def _geometric_degree(text):
     if text == "auto":
@@ -44,11 +48,16 @@ def _effects(text):
 
 
 # --option KEY=VALUE settings of ScrewModel, with their converters (host/options.py)
+# Bounds: segments and dt_s size the model's arrays (host/learning/screw/context.py checks their product too);
+# reduced_segments and reduced_dt_s are what a table can hold (firmware/table.py: 1..32 segments, 1 ms..1 h);
+# a feed is positive, a weight is not negative.
 OPTIONS = {
-    "segments": number(int), "dt_s": number(float), "free": str, "geometric_degree": _geometric_degree,
-    "effects": _effects, "nut_weight": number(float), "reduced_segments": number(int), "reduced_dt_s": number(float),
-    "feed_max_mm_min": number(float), "ambient": _on_off, "air": str,  # air: auto, a sensor name, or off
-    "max_nfev": number(int), "base_ref": str, "fit_window": _fit_window,
+    "segments": number(int, 2, MAX_SEGMENTS), "dt_s": number(float, MIN_DT_S, MAX_DT_S), "free": str,
+    "geometric_degree": _geometric_degree, "effects": _effects, "nut_weight": number(float, 0.0, 1e6),
+    "reduced_segments": number(int, 1, 32), "reduced_dt_s": number(float, 0.001, 3600.0),
+    "feed_max_mm_min": number(float, maximum=MAX_FEED_MM_MIN, above=0.0),
+    "ambient": _on_off, "air": str,  # air: auto, a sensor name, or off
+    "max_nfev": number(int, 1, 100000), "base_ref": str, "fit_window": _fit_window,
 }
 
 

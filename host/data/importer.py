@@ -34,13 +34,21 @@ class ImportError_(ValueError):
     """A mapping or source file problem; the message names file, line and column."""
 
 
+# A log's time, once scaled to seconds: Unix time (1.7e9 s) fits, and a thermal test lasts at most a year.
+MAX_ABS_TIME_S = 1e10
+MAX_DURATION_S = 366 * 86400.0
+
+
 def _number(value, what, where):
-    if isinstance(value, bool) or not isinstance(value, (int, float, str)):
-        raise ImportError_("%s: %s must be a number, found %r" % (where, what, value))
+    """A JSON number of the mapping; a string ("2.5") is refused: it is a quoted cell of a spreadsheet export,
+    or a word, and reading it would guess."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ImportError_("%s: %s must be a number, found %r%s" % (where, what, value,
+                                                                    " (a string: write it without quotes)" if isinstance(value, str) else ""))
     try:
         v = float(value)
-    except ValueError:
-        raise ImportError_("%s: %s must be a number, found %r" % (where, what, value))
+    except OverflowError:  # an integer of 400 digits
+        v = math.inf
     if not math.isfinite(v):
         raise ImportError_("%s: %s must be a finite number, found %r" % (where, what, value))
     return v
@@ -122,6 +130,9 @@ def _normalise_mapping(mapping, where):
             "position_mm": _number(spec.get("position_mm", 0.0), "errors.%s.position_mm" % col, where),
             "scale": _number(spec.get("scale", 1.0), "errors.%s.scale" % col, where),
         }
+        if e_out[col]["scale"] == 0:
+            raise ImportError_("%s: errors.%s.scale is 0: every error would read 0 um (the factor from the column to um, "
+                               "1 when it is in um, 1000 for mm, -1 for a probe measuring the other way)" % (where, col))
     roles = [("time", mapping["time"])] + [("temperatures", c) for c in t_out] + [("errors", c) for c in e_out]
     roles += [("spindle", spindle)] if spindle else []
     roles += [("ignore", c) for c in ignore]
@@ -222,7 +233,16 @@ def import_csv(source, mapping, mapping_where="mapping"):
         raise ImportError_("\n".join(problems))
     if data.shape[0] == 0:
         raise ImportError_("%s: no data rows after the header" % source)
-    time_s = data[:, 0] * m["time_scale"]
+    with np.errstate(over="ignore"):  # an overflow to inf is refused below, by name
+        time_s = data[:, 0] * m["time_scale"]
+    far = np.flatnonzero(~(np.abs(time_s) <= MAX_ABS_TIME_S))
+    if far.size:
+        i = far[0]
+        raise ImportError_("%s line %d column %r: %g x time_scale %g = %g s is beyond +-%g s (a wrong time_scale?)"
+                           % (source, records[1 + i][0], m["time"], data[i, 0], m["time_scale"], time_s[i], MAX_ABS_TIME_S))
+    if time_s[-1] - time_s[0] > MAX_DURATION_S:
+        raise ImportError_("%s: the log spans %g s once scaled by time_scale %g, more than a year (%g s): a wrong time_scale?"
+                           % (source, time_s[-1] - time_s[0], m["time_scale"], MAX_DURATION_S))
     back = np.flatnonzero(np.diff(time_s) <= 0)
     if back.size:
         raise ImportError_(

@@ -23,6 +23,7 @@ ERRORS = "errors.csv"
 MOTION = "motion.csv"
 SPINDLE = "spindle.csv"
 META = "meta.json"
+RUN_FILES = (META, TEMPERATURES, ERRORS, MOTION, SPINDLE)  # every file of a run folder; a run is written whole
 
 ERROR_COLUMNS = ("time_s", "position_mm", "error_um")
 ERROR_OPTIONAL = ("direction", "channel")

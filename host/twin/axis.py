@@ -9,6 +9,10 @@ import dataclasses
 import math
 from dataclasses import dataclass
 
+MAX_MAGNITUDE = 1e9  # any number of the axis: far beyond a machine, far inside float range once squared
+MIN_POSITIVE = 1e-9  # a positive quantity the physics divides by
+MAX_SEGMENTS = 1000  # the twin's grid: the step maps are (segments + 1)^2 and built per convection level
+
 
 @dataclass(frozen=True)
 class AxisParams:
@@ -88,14 +92,23 @@ class AxisParams:
             v = getattr(self, k)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v <= 0:
                 problems.append("%s must be a positive number (found %r)" % (k, v))
+            elif v < MIN_POSITIVE:
+                problems.append("%s must be at least %g (found %r): the twin divides by it" % (k, MIN_POSITIVE, v))
+        for f in dataclasses.fields(self):
+            values = getattr(self, f.name)
+            for v in values if isinstance(values, tuple) else (values,):
+                if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and abs(v) > MAX_MAGNITUDE:
+                    # squared or multiplied together, such a value overflows the float arithmetic of the physics
+                    problems.append("%s must be within +-%g (found %r)" % (f.name, MAX_MAGNITUDE, v))
+                    break
         for k in ("friction_J_per_mm", "motor_idle_W", "motor_W_at_ref", "bearing_W_at_ref", "sweep_duration_min",
                   "temp_noise_K", "ambient_wander_K", "nut_length_mm", "ambient_rise_min_K", "ambient_rise_max_K",
                   "ambient_hold_hours", "ambient_fall_hours", "hvac_ripple_K", "sweep_trips", "sensor_tau_scale"):
             v = getattr(self, k)
             if not isinstance(v, (int, float)) or isinstance(v, bool) or not math.isfinite(v) or v < 0:
                 problems.append("%s must be a number >= 0 (found %r)" % (k, v))
-        if not isinstance(self.segments, int) or isinstance(self.segments, bool) or self.segments < 2:
-            problems.append("segments must be an integer >= 2 (found %r)" % (self.segments,))
+        if not isinstance(self.segments, int) or isinstance(self.segments, bool) or not 2 <= self.segments <= MAX_SEGMENTS:
+            problems.append("segments must be an integer in 2..%d (found %r)" % (MAX_SEGMENTS, self.segments))
         if not 0 <= self.screw_share <= 1:
             problems.append("screw_share must be within 0..1 (found %r)" % (self.screw_share,))
         if not problems:

@@ -114,6 +114,9 @@ def contact_travel(bounds_mm, t_edges, t_start, t_end, a_mm, b_mm, feed_mm_min, 
     return out
 
 
+MAX_SUBSTEPS = 100000  # Crank-Nicolson sub-steps in one step: beyond, the step map takes minutes to build
+
+
 class ScrewIntegrator:
     """Crank-Nicolson stepping of the grid, with the step maps cached per convection multiplier."""
 
@@ -128,6 +131,12 @@ class ScrewIntegrator:
         """Sub-steps per step: h*lambda_max <= 2 (monotone CN, Gershgorin bound) and h <= tau/50."""
         C, H = self.grid.capacity_J_K, self.grid.mantle_W_K
         lam = np.max((np.abs(self.K).sum(axis=1) + g * H) / C)
+        with np.errstate(all="ignore"):  # a time constant that underflowed to 0 gives inf, refused below
+            need = max(self.dt * lam / 2.0, np.float64(50.0 * self.dt * g) / np.float64(self.tau_s))
+        if not need <= MAX_SUBSTEPS:  # also NaN/inf: parameters far outside a real screw (h_W_m2K=1e308)
+            raise ValueError("the screw's fastest thermal mode (%.3g 1/s) needs %.3g sub-steps per %g s step, more than "
+                             "%d: a parameter is far outside a real axis (h_W_m2K, conductivity_W_mK, density_kg_m3, "
+                             "heat_capacity_J_kgK, segments, sensor time constants)" % (lam, need, self.dt, MAX_SUBSTEPS))
         return max(1, int(math.ceil(self.dt * lam / 2.0 - 1e-12)), int(math.ceil(50.0 * self.dt / (self.tau_s / g))))
 
     def maps(self, g):

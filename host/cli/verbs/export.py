@@ -51,7 +51,9 @@ def parse_envelope(values):
     import math
 
     from host.errors import UserError
+    from host.data.runs import TEMPERATURE_RANGE_C
 
+    PT100_LO, PT100_HI = TEMPERATURE_RANGE_C
     out = {}
     for value in values:
         for item in value.split(","):
@@ -67,6 +69,10 @@ def parse_envelope(values):
                 raise UserError("--envelope %s: temperatures must be finite numbers" % item)
             if lo >= hi:
                 raise UserError("--envelope %s: the low end %g degC must be below the high end %g degC" % (item, lo, hi))
+            if lo < PT100_LO or hi > PT100_HI:
+                # a bound below absolute zero, or beyond what a Pt100 reads: the certificate would cover nothing real
+                raise UserError("--envelope %s: outside %g..%g degC, the range of a Pt100 (IEC 60751), the sensor the "
+                                "board reads" % (item, PT100_LO, PT100_HI))
             name = name.strip()
             if name in out:
                 raise UserError("--envelope: sensor %s given twice" % name)
@@ -91,6 +97,18 @@ def _export(args):
     margin = DEFAULT_ENVELOPE_MARGIN_K if args.envelope_margin is None else args.envelope_margin
     if not (math.isfinite(margin) and margin >= 0):
         raise UserError("--envelope-margin %s: must be a finite number of K >= 0" % args.envelope_margin)
+    from host.data.runs import TEMPERATURE_RANGE_C
+
+    trained = (doc.get("envelope") or {}).get("temperature_C") if isinstance(doc.get("envelope"), dict) else None
+    for sensor, rng in (trained.items() if isinstance(trained, dict) else ()):
+        if sensor in envelope or not (isinstance(rng, list) and len(rng) == 2
+                                      and all(isinstance(v, (int, float)) for v in rng)):
+            continue  # given by --envelope, or a malformed range the export names itself
+        lo, hi = rng[0] - margin, rng[1] + margin
+        if lo < TEMPERATURE_RANGE_C[0] or hi > TEMPERATURE_RANGE_C[1]:
+            raise UserError("--envelope-margin %g: widens %s's training range %g..%g degC to %g..%g degC, outside "
+                            "%g..%g degC, the range of a Pt100 (IEC 60751); give a smaller margin or --envelope %s=LO:HI"
+                            % (margin, sensor, rng[0], rng[1], lo, hi, TEMPERATURE_RANGE_C[0], TEMPERATURE_RANGE_C[1], sensor))
     try:
         ex = export_model(doc, ref_position_mm=args.ref_position_mm, allow_edited=args.allow_edited,
                           envelope=envelope, margin_K=margin)

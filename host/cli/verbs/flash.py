@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -84,7 +85,12 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
         path = os.path.join(dest, "tcomp_board.py")
         shutil.copy(board, path)
         files.setdefault("", []).append(path)
-    tdir = (table_dir or (cfg or {}).get("table_dir") or "/tables").strip("/") or "tables"
+    if table_dir is not None:
+        tdir = board_dir(table_dir, "--table-dir")
+    elif cfg is not None and "table_dir" in cfg:
+        tdir = board_dir(cfg["table_dir"], "%s: table_dir" % config)
+    else:
+        tdir = "tables"
     if table:
         try:
             with open(table, "rb") as f:
@@ -96,9 +102,15 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
             sensors = parse_table(data).sensors
         except Exception as exc:  # firmware.table.TableError or a malformed file
             raise UserError("%s: not a valid coefficient table: %s" % (table, exc))
-        missing = unwired_sensors(sensors, cfg) if cfg is not None else []
+        wiring, source = (cfg, config) if cfg is not None else (board_file_config(board), board) if board else (None, None)
+        if wiring is None:
+            # Without the board's config the check cannot be made here; the board refuses such a table at boot.
+            print("tcomp flash: warning: the table's sensors (%s) are not checked against the board's channels: %s"
+                  % (", ".join(sensors), "give --config" if not board else
+                     "%s has no literal CONFIG dict to read them from" % board), file=sys.stderr)
+        missing = unwired_sensors(sensors, wiring) if wiring is not None else []
         if missing:
-            raise UserError("%s: table sensor(s) %s have no channel in the board config %s" % (table, ", ".join(missing), config))
+            raise UserError("%s: table sensor(s) %s have no channel in the board config %s" % (table, ", ".join(missing), source))
         os.makedirs(os.path.join(dest, tdir), exist_ok=True)
         for name, content in (("table_a.bin", data), ("active", b"A")):
             p = os.path.join(dest, tdir, name)
@@ -115,19 +127,74 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
     return files, tdir
 
 
-def board_key(path):
-    """The key in ``path``, created there first when the file does not exist; (key, created)."""
+_BOARD_NAME = re.compile(r"[A-Za-z0-9_.-]+\Z")
+
+
+def board_dir(text, where):
+    """A folder on the board's flash as mpremote names it (``tables``, ``/data/tables``), without the slashes
+    around it; UserError for an empty path, '.' or '..' parts (the staged copy would land outside its folder:
+    ``../../etc`` is /etc of this computer) or characters outside letters, digits and ``_.-``."""
     from host.errors import UserError
-    from host.board.linkauth import KeyFileError, generate_key, read_key, write_key
-    created = False
-    if not os.path.lexists(path):
-        try:
-            write_key(path, generate_key())
-        except OSError as exc:
-            raise UserError("--key %s: cannot create the key file: %s" % (path, exc.strerror or exc))
-        created = True
+    if not isinstance(text, str) or not text.strip("/"):
+        raise UserError("%s %r: expected a folder on the board, e.g. tables or /tables" % (where, text))
+    parts = text.strip("/").split("/")
+    for part in parts:
+        if part in (".", "..") or not _BOARD_NAME.match(part):
+            raise UserError("%s %r: %r is not a folder name on the board (letters, digits, _ . -; no '.' or '..')"
+                            % (where, text, part))
+    return "/".join(parts)
+
+
+_PURE_BUILTINS = {"range": range, "len": len, "dict": dict, "list": list, "tuple": tuple, "str": str, "int": int,
+                  "enumerate": enumerate, "zip": zip, "min": min, "max": max}
+
+
+def board_file_config(path):
+    """The ``CONFIG = {...}`` dict at the top level of board file ``path`` (firmware/boards/*.py have one), validated;
+    None when the file has none that can be read without running the file. A file that is not Python is a UserError."""
+    import ast
+
+    from host.errors import UserError
     try:
-        return read_key(path), created
+        with open(path, encoding="utf-8") as fh:
+            tree = ast.parse(fh.read(), path)
+    except (OSError, UnicodeDecodeError, SyntaxError, ValueError) as exc:
+        raise UserError("%s: cannot read the board file as Python: %s" % (path, exc))
+    for node in tree.body:
+        if isinstance(node, ast.Assign) and any(isinstance(t, ast.Name) and t.id == "CONFIG" for t in node.targets):
+            try:
+                cfg = ast.literal_eval(node.value)
+            except ValueError:
+                # Computed (firmware/boards/rp2040.py builds its channels with a comprehension): the expression alone,
+                # with a few pure builtins and nothing imported. It is the user's own file, about to run on the board.
+                try:
+                    cfg = eval(compile(ast.Expression(node.value), path, "eval"), {"__builtins__": _PURE_BUILTINS})
+                except Exception:  # it needs more than that (a module, a helper): the board checks it at boot
+                    return None
+            if not isinstance(cfg, dict):
+                return None
+            try:
+                from host.board.config import load_config
+                load_config(cfg)
+            except ValueError as exc:
+                raise UserError("%s: CONFIG: %s" % (path, exc))
+            return cfg
+    return None
+
+
+def board_key(path, dry_run=False):
+    """The key in ``path``: (key, created). A missing file gets a new random key, which the caller writes to ``path``
+    (write_key) only once the board holds it: a dry run or a failed flash leaves no key file behind."""
+    from host.errors import UserError, check_output
+    from host.board.linkauth import KeyFileError, generate_key, read_key
+    if not os.path.lexists(path):
+        if dry_run:
+            raise UserError("--key %s: the file does not exist, and a dry run creates no key; give an existing key file, "
+                            "or run without --dry-run to create it" % path)
+        check_output(path, "--key")  # writable before the flash, written after it
+        return generate_key(), True
+    try:
+        return read_key(path), False
     except KeyFileError as exc:
         raise UserError(str(exc))
 
@@ -161,14 +228,43 @@ def _parents(d):
     return ["/".join(parts[:i + 1]) for i in range(len(parts))]
 
 
+PROBE_TIMEOUT_S = 20.0  # a board answers mpremote's raw REPL in about a second; nobody answering is not worth 300 s
+COPY_TIMEOUT_S = 300.0
+
+
+def _run_mpremote(argv, port, timeout, what):
+    from host.errors import UserError
+    try:
+        p = subprocess.run(argv, capture_output=True, text=True, timeout=timeout)
+    except FileNotFoundError:
+        raise UserError("mpremote not found (%s); install the dev extra" % argv[0])
+    except subprocess.TimeoutExpired:
+        raise UserError("mpremote did not %s within %g s on %s; nothing answered (is it the board's port, and "
+                        "is the board's REPL free?)" % (what, timeout, port))
+    if p.returncode != 0:
+        raise UserError("mpremote failed on %s (exit %d): %s" % (port, p.returncode, (p.stderr or p.stdout).strip()[-800:]))
+    return p
+
+
+def probe(port, mpremote):
+    """Ask the board on ``port`` to print a word through its REPL, within PROBE_TIMEOUT_S: a port nobody answers
+    is an error in seconds, before any file is copied or any key written."""
+    from host.errors import UserError
+    p = _run_mpremote([mpremote, "connect", port, "resume", "exec", "print('tcomp-' + 'probe')"], port,
+                      PROBE_TIMEOUT_S, "reach a MicroPython REPL")
+    if "tcomp-probe" not in p.stdout:
+        raise UserError("%s: no MicroPython REPL answered (mpremote printed %r)" % (port, p.stdout.strip()[-200:]))
+
+
 def run(args):
     from host.errors import UserError
     if not (args.table or args.config or args.board or args.key or not args.no_firmware):
         raise UserError("nothing to flash: give --table, --config, --board or --key, or drop --no-firmware")
-    key = None
+    key, created = None, False
     if args.key:
-        key, created = board_key(args.key)
-        print("board key: %s (%s)" % (args.key, "new" if created else "existing"), file=sys.stderr)
+        key, created = board_key(args.key, args.dry_run)
+        print("board key: %s (%s)" % (args.key, "new, written once the board holds it" if created else "existing"),
+              file=sys.stderr)
     tmp = tempfile.mkdtemp(prefix="tcomp-flash-")
     keep = False
     try:
@@ -181,16 +277,16 @@ def run(args):
             print("tcomp flash: the files of this command are kept in %s; delete it when done" % tmp, file=sys.stderr)
             return 0
         n = sum(len(v) for v in files.values())
+        probe(args.port, _mpremote(args.mpremote))
         print("flashing %d files to %s (tables in /%s)" % (n, args.port, tdir))
-        try:
-            p = subprocess.run(argv, capture_output=True, text=True, timeout=300)
-        except FileNotFoundError:
-            raise UserError("mpremote not found (%s); install the dev extra" % argv[0])
-        except subprocess.TimeoutExpired:
-            raise UserError("mpremote did not finish within 300 s on %s" % args.port)
-        if p.returncode != 0:
-            raise UserError("mpremote failed on %s (exit %d): %s" % (args.port, p.returncode,
-                                                                     (p.stderr or p.stdout).strip()[-800:]))
+        _run_mpremote(argv, args.port, COPY_TIMEOUT_S, "copy the files")
+        if created:
+            from host.board.linkauth import write_key
+            try:
+                write_key(args.key, key)
+            except OSError as exc:
+                raise UserError("the board now holds a new key, but --key %s cannot be written: %s; flash again with "
+                                "a --key path you can write" % (args.key, exc.strerror or exc))
         print("done: %s" % ", ".join(sorted(os.path.relpath(f, tmp) for v in files.values() for f in v)))
         return 0
     finally:

@@ -15,17 +15,28 @@ def add_arguments(p):
     p.add_argument("--json", help="write a summary of what was imported")
 
 
+def _once(given, col, flag):
+    from host.errors import UserError
+
+    if col in given:
+        raise UserError("%s: column %r is already mapped by %s; give each column once" % (flag, col, given[col]))
+    given[col] = flag
+
+
 def _from_flags(args):
     from host.errors import UserError
 
     temps = {}
+    given = {}  # column -> the flag that mapped it: a column given twice would keep only the last meaning
     for spec in args.temp:
         col, _, rest = spec.partition("=")
+        _once(given, col, "--temp %s" % spec)
         name, _, role = rest.partition(":")
         temps[col] = {"name": name or col, "role": role or "structure"}
     errors = {}
     for spec in args.error:
         col, _, rest = spec.partition("=")
+        _once(given, col, "--error %s" % spec)
         chan, _, pos = rest.partition("@")
         try:
             position = float(pos) if pos else 0.0
@@ -49,8 +60,10 @@ def run(args):
 
     if not (math.isfinite(args.time_scale) and args.time_scale > 0):
         raise UserError("--time-scale %s: must be a positive factor to seconds (60 for minutes)" % args.time_scale)
+    from host.data.runs import RUN_FILES
+
     out = Outputs([args.source, args.mapping])
-    out.folder(args.out, "--out")
+    out.folder(args.out, "--out", owned=RUN_FILES)
     if args.json:
         out.file(args.json, "--json")
     if args.mapping:

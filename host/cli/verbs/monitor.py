@@ -1,6 +1,8 @@
 """tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch]"""
 
 import csv
+import math
+import re
 import sys
 import time
 
@@ -22,6 +24,52 @@ def add_arguments(p):
     p.add_argument("--key", help="the board's key file (tcomp flash --key): --latch signs L with it (the board "
                                 "refuses an unsigned L when it has a key)")
     p.add_argument("--json", help="write {frames, malformed, rows: [decoded frames], bad: [reasons]} as JSON at the end")
+
+
+_INTEGER = re.compile(r"-?[0-9]+\Z")
+_DECIMAL = re.compile(r"-?[0-9]+(\.[0-9]+)?\Z")  # what the firmware prints: an integer model, no nan/inf/exponent
+MAX_FIELD_CHARS = 24  # a 32-bit integer and its decimals print in 12; 400 digits would read as inf
+OFFSET_FIELDS = (("t_ms", _INTEGER), ("pos_um", _INTEGER), ("total_um", _DECIMAL), ("ref_offset_um", _DECIMAL),
+                 ("slope_um_per_m", _DECIMAL))
+
+
+def offset_problem(f):
+    """Why an O or Q frame's fields are not the offsets docs/protocol.md defines (None when they are).
+
+    A frame with a good CRC can still carry 'nan' or '1e999' (a faulty or foreign board): such a frame is
+    counted as malformed, never written into the CSV or JSON rows as if it were an offset."""
+    if f.kind not in ("O", "Q"):
+        return None
+    if len(f.fields) != len(OFFSET_FIELDS):
+        return "%s frame seq %d: %d fields, expected %d (%s)" % (f.kind, f.seq, len(f.fields), len(OFFSET_FIELDS),
+                                                               ",".join(n for n, _ in OFFSET_FIELDS))
+    for (name, pattern), value in zip(OFFSET_FIELDS, f.fields):
+        if len(value) > MAX_FIELD_CHARS or not pattern.match(value):
+            return "%s frame seq %d: %s %r is not a finite %s" % (f.kind, f.seq, name, value[:40],
+                                                                 "integer" if pattern is _INTEGER else "decimal number")
+    return None
+
+
+def hello_counter(f, port):
+    """The authorisation counter of a hello frame (last field): None for '-' (the board has no key), else an int in
+    0..MAX_COUNTER; anything else is a UserError (a signed command needs a counter above it)."""
+    from host.errors import UserError
+    from host.board.linkauth import MAX_COUNTER
+
+    text = f.fields[-1] if f.fields else "(none)"
+    if text == "-":
+        return None
+    if not _INTEGER.match(text) or text.startswith("-"):
+        raise UserError("%s: the board's hello reports the authorisation counter %r, not a number; cannot sign L "
+                        "(docs/protocol.md)" % (port, text[:40]))
+    value = int(text)
+    if value > MAX_COUNTER:
+        raise UserError("%s: the board's hello reports the authorisation counter %d, above the largest %d; no signed "
+                        "command can follow it: provision a new key (tcomp flash --key NEWFILE)" % (port, value, MAX_COUNTER))
+    if value == MAX_COUNTER:
+        raise UserError("%s: the board's authorisation counter is at its largest, %d; no signed command is left for "
+                        "this key: provision a new key (tcomp flash --key NEWFILE)" % (port, value))
+    return value
 
 
 def row(f):
@@ -46,7 +94,10 @@ def run(args):
     for flag, value in (("--baud", args.baud), ("--count", args.count), ("--duration", args.duration)):
         if not value >= (1 if flag == "--baud" else 0):
             raise UserError("%s %s: must be %s" % (flag, value, "a positive rate in bit/s" if flag == "--baud" else ">= 0 (0: no limit)"))
-    with Outputs([args.port]) as outputs:
+    if not math.isfinite(args.duration):  # inf would never stop; 0 is the way to say "no limit"
+        raise UserError("--duration %s: must be a finite number of seconds (0: no limit, Ctrl-C stops)" % args.duration)
+    # The key is an input too: --csv KEY or --json KEY would overwrite the board's key.
+    with Outputs([args.port, args.key]) as outputs:
         if args.csv:
             outputs.log(args.csv, "--csv")
         if args.json:
@@ -107,6 +158,10 @@ def _monitor(args, outputs):
             if not data:
                 continue
             for f in dec.feed(data, time.monotonic()):
+                why = offset_problem(f)
+                if why:
+                    dec.bad.append((f.raw, why))
+                    continue
                 if f.kind == "H" and f.fields[:1] != [str(PROTOCOL_VERSION)]:
                     raise UserError("%s: the board's hello frame says protocol version %s; this tcomp speaks %d "
                                     "(docs/protocol.md)" % (args.port, (f.fields or ["(none)"])[0], PROTOCOL_VERSION))
@@ -115,7 +170,9 @@ def _monitor(args, outputs):
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
                 if args.latch and not latch_sent and f.kind == "H":
-                    signer.observe(f.fields[-1])
+                    counter = hello_counter(f, args.port)
+                    if counter is not None:
+                        signer.observe(counter)
                     ser.write(signer.stream_line("L"))
                     latch_sent = True
                 if latch_sent and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]

@@ -6,6 +6,9 @@ def add_arguments(p):
     p.add_argument("run", help="run folder")
     p.add_argument("--out", required=True, help="CSV: time_s,position_mm[,direction][,channel],predicted_um")
     p.add_argument("--json", help="also write summary statistics (RMSE against the measured errors) as JSON")
+    p.add_argument("--allow-edited", dest="allow_edited", action="store_true",
+                   help="predict with a model whose recorded provenance.sha256 does not match its content (edited "
+                        "after it was saved), as tcomp export --allow-edited does; the JSON records it")
 
 
 def run(args):
@@ -25,15 +28,30 @@ def _predict(args, out):
 
     import numpy as np
 
+    import sys
+
     from host.errors import UserError
-    from host.learning.documents import ModelFormatError, load_model
+    from host.learning.documents import ModelFormatError, load_model, read_document
     from host.data.runs import RunFormatError, load_run
+    from models_export.document import edited_reason, provenance
 
     try:
-        model = load_model(args.model)
+        doc = read_document(args.model)
+        try:
+            model = load_model(doc)
+        except ModelFormatError as exc:
+            raise ModelFormatError("%s: %s" % (args.model, exc))
+        actual, declared = provenance(doc)
+        edited = declared is not None and declared != actual
+        if edited and not args.allow_edited:
+            # the check tcomp export makes, after the fields' own checks (which name the field), with its words
+            raise UserError("%s: %s" % (args.model, edited_reason(declared, actual)))
         run_ = load_run(args.run)
     except (ModelFormatError, RunFormatError) as exc:
         raise UserError(str(exc))
+    if edited:
+        print("tcomp predict: warning: %s was edited after it was saved (provenance.sha256 does not match); "
+              "predicting with it as asked (--allow-edited)" % args.model, file=sys.stderr)
     e = run_.errors
     rows = np.arange(len(e))
     if getattr(model, "channel", None) and e.channel is not None:
@@ -61,4 +79,5 @@ def _predict(args, out):
     print("%s on %s: %d rows, RMSE %.3f um against the measured errors" % (args.model, args.run, len(e), rmse))
     if args.json:
         with out.open(args.json) as fh:
-            json.dump({"model": args.model, "run": args.run, "rows": int(len(e)), "rmse_um": rmse}, fh, indent=2)
+            json.dump({"model": args.model, "run": args.run, "rows": int(len(e)), "rmse_um": rmse,
+                       "provenance": "edited" if edited else "verified" if declared is not None else "none"}, fh, indent=2)

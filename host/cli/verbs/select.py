@@ -53,7 +53,11 @@ def _check_plot_format(path):
 
     ext = os.path.splitext(path)[1].lstrip(".").lower()
     formats = FigureCanvasBase.get_supported_filetypes()
-    if ext and ext not in formats:
+    if not ext:
+        # matplotlib would add .png to the name it is given: the image would land beside the output, not in it
+        raise UserError("--plot %s: name the image format by the file's extension (e.g. .png; formats: %s)"
+                        % (path, ", ".join(sorted(formats))))
+    if ext not in formats:
         raise UserError("--plot %s: cannot draw a .%s file (formats: %s)" % (path, ext, ", ".join(sorted(formats))))
 
 

@@ -34,18 +34,26 @@ def add_arguments(p):
 
 
 def parse_effects(text):
-    """'a,b=2.5' -> {'a': None, 'b': 2.5}; raises ValueError naming the bad item."""
-    out = {}
+    """'a,b=2.5' -> {'a': None, 'b': 2.5}; raises ValueError naming the bad item (a magnitude that is not a
+    finite number, an effect given twice)."""
+    import math
+
+    out, seen = {}, {}
     for item in (s.strip() for s in text.split(",")):
         if not item:
             continue
         name, eq, mag = item.partition("=")
         name = name.strip()
+        if name in seen:
+            raise ValueError("--effects: %s given twice (%s and %s)" % (name, seen[name], item))
+        seen[name] = item
         if eq:
             try:
                 out[name] = float(mag)
             except ValueError:
                 raise ValueError("--effects item %r: magnitude %r is not a number" % (item, mag))
+            if not math.isfinite(out[name]):
+                raise ValueError("--effects item %r: magnitude %r is not a finite number" % (item, mag))
         else:
             out[name] = None
     return out
@@ -81,6 +89,24 @@ def parse_overrides(items):
     return out
 
 
+MAX_NOISE_UM = 1000.0  # 1 mm: a laser that noisy measures nothing; beyond, errors leave the run format's range
+
+
+def check_protocol_list(text):
+    """Refuse a protocol named twice in ``--protocol`` (directly, or by a name and a group that holds it):
+    it would be simulated once, and one protocol writes the run into DIR itself, not DIR/<protocol>/."""
+    from host.twin import LITERATURE_STATES, PROTOCOLS
+
+    seen = {}
+    for part in (p.strip() for p in text.split(",")):
+        names = list(PROTOCOLS) if part == "all" else list(LITERATURE_STATES) if part == "literature" else [part]
+        for n in names:
+            if n and n in seen:
+                raise ValueError("--protocol %s: protocol %s is named twice (by %s and by %s); name each protocol once"
+                                 % (text, n, seen[n], part))
+            seen[n] = part
+
+
 def _sha256(path):
     import hashlib
 
@@ -91,8 +117,10 @@ def _sha256(path):
 def run(args):
     from host.outputs import Outputs
 
+    from host.data.runs import RUN_FILES
+
     with Outputs() as out:
-        out.folder(args.out, "--out")
+        out.folder(args.out, "--out", owned=RUN_FILES)
         if args.json:
             out.file(args.json, "--json")
         _simulate(args, out)
@@ -107,19 +135,29 @@ def _simulate(args, out):
     import numpy as np
 
     from host.errors import UserError
-    from host.data.runs import load_run
+    from host.data.runs import RunFormatError, load_run
     from host.twin import DEFAULT_NOISE_UM, write_runs
 
+    noise = DEFAULT_NOISE_UM if args.noise_um is None else args.noise_um
+    if not 0 <= noise <= MAX_NOISE_UM:  # NaN too
+        raise UserError("--noise-um %s: must be a laser noise of 0..%g um (standard deviation)" % (args.noise_um, MAX_NOISE_UM))
     try:
+        check_protocol_list(args.protocol)
         effects = parse_effects(args.effects)
         overrides = parse_overrides(args.set)
-        noise = DEFAULT_NOISE_UM if args.noise_um is None else args.noise_um
         written = write_runs(out.path(args.out), args.protocol, effects, args.seed, noise, **overrides)
     except ValueError as exc:
         raise UserError(str(exc))
     summary = {"seed": args.seed, "noise_um": noise, "runs": []}
     for name, folder in written:
-        run_ = load_run(folder)  # what we wrote must load back
+        try:
+            run_ = load_run(folder)  # what we wrote must load back
+        except RunFormatError as exc:
+            # Settings far outside a real axis (an effect magnitude of 1e9) make a run the format refuses.
+            first = exc.problems[0].replace(folder, out.shown(folder)) if exc.problems else str(exc)
+            raise UserError("protocol %s: the simulated run is not a valid run folder (%d problem%s, first: %s); "
+                            "--effects magnitudes and --set values must stay within what a feed axis does"
+                            % (name, len(exc.problems), "" if len(exc.problems) == 1 else "s", first))
         e = run_.errors
         files = sorted(f for f in os.listdir(folder) if f.endswith((".csv", ".json")))
         summary["runs"].append({

@@ -27,6 +27,7 @@ from host.learning.discrepancy.localize import localize
 # and the smallest held-out relative RMSE reduction worth naming an effect for.
 ALPHA = 0.01
 MIN_GAIN = 0.10
+MIN_HELDOUT_SWEEPS = 2  # sweeps (distinct error times) a held-out block needs: one would test an offset, not a drift
 LOG_LOSS = True  # test the per-sweep log MSE ratio (see stats.dm_test)
 
 
@@ -171,6 +172,13 @@ def _num(v):
 def make_folds(runs):
     """Leave-one-run-out for >= 2 runs; a two-block time split of the sweeps for one run."""
     if len(runs) >= 2:
+        for r in runs:
+            n = np.unique(r.errors.time_s).size
+            if n < MIN_HELDOUT_SWEEPS:
+                # held out, it would be the whole evidence of one fold: one sweep tests a constant, not a drift
+                raise ValueError("run %s has only %d sweep%s; each run is held out once and needs at least %d (as each "
+                                 "half of a one-run time split does)" % (r.path or r.name, n, "" if n == 1 else "s",
+                                                                          MIN_HELDOUT_SWEEPS))
         folds = []
         for k in range(len(runs)):
             train = [None if i == k else np.ones(len(r.errors), bool) for i, r in enumerate(runs)]
@@ -179,8 +187,9 @@ def make_folds(runs):
         return folds
     e = runs[0].errors
     times = np.unique(e.time_s)
-    if times.size < 4:
-        raise ValueError("run %s has only %d sweeps; a held-out time split needs at least 4 (or give more runs)" % (runs[0].name, times.size))
+    if times.size < 2 * MIN_HELDOUT_SWEEPS:
+        raise ValueError("run %s has only %d sweeps; a held-out time split needs at least %d (or give more runs)"
+                         % (runs[0].name, times.size, 2 * MIN_HELDOUT_SWEEPS))
     cut = times[times.size // 2]
     first = e.time_s < cut
     return [Fold([~first], [first]), Fold([first], [~first])]

@@ -8,6 +8,9 @@ import numpy as np
 
 from host.learning.screw import heat
 
+# Largest time-steps x segments grid of one run (a float array of it is 160 MB; several are held at once).
+MAX_GRID_CELLS = 20_000_000
+
 
 def check_run(run, geometry=None, require_nut=True):
     """ValueError naming what makes ``run`` unusable for the screw model.
@@ -64,7 +67,14 @@ class RunContext:
             starts.append(run.motion.t_start_s[0])
         t0 = float(min(starts))
         t1 = float(max(run.temperatures.time_s[-1], e.time_s[-1])) if t_end is None else float(t_end)
+        if not (np.isfinite(dt_s) and dt_s > 0):
+            raise ValueError("dt_s must be a positive number of seconds (found %r)" % (dt_s,))
         n = max(1, int(np.ceil((t1 - t0) / dt_s - 1e-9)))
+        if n * self.M > MAX_GRID_CELLS:
+            # Several float arrays of this size are held per run: past the limit a typo costs gigabytes.
+            raise ValueError("%s: %d time steps (dt_s %g s over %g s) x %d segments = %d grid cells, more than %d; "
+                             "raise dt_s or lower segments" % (self.run_name, n, dt_s, t1 - t0, self.M, n * self.M,
+                                                                MAX_GRID_CELLS))
         self.t_grid = t0 + dt_s * np.arange(n + 1)
         self.n_steps = n
         self.dt = np.diff(self.t_grid)

@@ -43,6 +43,9 @@ def fit_parameters(residual, specs, start=None, max_nfev=200, flat_ratio=1e-4, p
     values = _from_x(sol.x, specs)
     r = sol.fun
     n, p = r.size, len(specs)
+    if n < p + int(n_linear):
+        # least_squares returns a point, but the SVD below has fewer singular values than parameters.
+        raise ValueError("%d residuals for %d parameters (%d linear): underdetermined, add data" % (n, p + int(n_linear), int(n_linear)))
     dof = max(n - p - int(n_linear), 1)
     s2 = float(r @ r) / dof
     J = sol.jac

@@ -325,6 +325,14 @@ class ScrewModel:
         top = MAX_GEOMETRIC_DEGREE if self.geometric_degree == "auto" else int(self.geometric_degree)
         if not 0 <= top <= MAX_GEOMETRIC_DEGREE:
             raise ValueError("geometric_degree must be 0..%d or 'auto' (got %r)" % (MAX_GEOMETRIC_DEGREE, self.geometric_degree))
+        unknowns = len(specs) + top + 1
+        if y.size <= unknowns:
+            raise ValueError("%s: %d error row%s to identify %d unknowns (%d thermal parameter%s %s and %d geometric "
+                             "coefficients up to degree %d); the fit needs more rows than unknowns: more sweeps, or "
+                             "fewer free parameters (--option free=...) or a lower geometric_degree"
+                             % (", ".join(c.run_name for c in ctxs), y.size, "" if y.size == 1 else "s", unknowns,
+                                len(specs), "" if len(specs) == 1 else "s", ",".join(s.name for s in specs) or "-",
+                                top + 1, top))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", IdentifiabilityWarning)
             res = fit_parameters(make_residual(top)[0], specs, max_nfev=self.max_nfev, n_linear=top + 1) if specs else None
