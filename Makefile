@@ -75,6 +75,7 @@ $(MP32): $(MP32_SRC) $(MPY_TOP)/.unpacked | sysdeps
 # table is regenerated on every run (a second or so), so the image always carries the current firmware.
 qemu-image: $(MPY_TOP)/.unpacked $(STAMP) | sysdeps
 	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) >/dev/null
+	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) VARIANT=rig >/dev/null
 
 # Only LinuxCNC's own modules (hal, _hal, linuxcnc) go on the venv's path, not all of dist-packages.
 $(LCNC_STAMP): $(STAMP) | sysdeps

@@ -97,7 +97,7 @@ class Control:
                 until = m["until_ms"]
                 if "temps" in m:
                     w.ramp(until, m["temps"])
-                w.clock.limit_us = until * 1000
+                w.clock.grant(until)
                 if m.get("gc"):
                     self.send({"ev": "mem", "mem_free": self.mem(True)})
                 if m.get("lock") and micropython is not None and hasattr(micropython, "heap_lock"):

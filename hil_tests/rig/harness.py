@@ -37,7 +37,7 @@ DUT = os.path.join(ROOT, "hil_tests", "rig", "dut.py")
 VENV_BIN = os.path.join(ROOT, ".venv", "bin")
 # The emulated Cortex-M3 board (ports/mps2, built by make setup): the firmware and the rig's board
 # side in its ROM; heap for the firmware plus the chip simulators (the firmware alone: docs/firmware.md).
-QEMU_IMAGE = os.environ.get("TCOMP_QEMU_IMAGE", os.path.join(ROOT, "build", "mps2-cortex-m3", "firmware-rig.elf"))
+QEMU_IMAGE = os.environ.get("TCOMP_QEMU_IMAGE", os.path.join(ROOT, "build", "mps2-cortex-m3-rig", "firmware-rig.elf"))
 QEMU_HEAP = os.environ.get("TCOMP_QEMU_HEAP", "256K")
 
 
