@@ -12,7 +12,8 @@ the control channel is UART1 (``ctl`` = ``uart:1``; hil_tests/rig/qemu_board.py)
 The control channel (a unix socket, one JSON object per line) is served
 only while the firmware sleeps past the time the test granted: the firmware
 never sees it. Requests (``op``): ``run`` (grant time up to ``until_ms``,
-ramping sensors linearly to ``temps`` meanwhile; ``gc``: collect and report
+ramping sensors linearly to ``temps`` meanwhile; ``ramp``: a ramp request's
+``until_ms`` and ``temps`` taken first; ``gc``: collect and report
 ``mem_free``; ``lock``: run under micropython.heap_lock), ``ramp`` (head
 linearly for ``temps`` at ``until_ms``, without running), ``jump`` (step
 temperatures now), ``sensor`` (condition ok/open/short/stuck), ``chip``
@@ -94,6 +95,9 @@ class Control:
             m = json.loads(line)
             op = m.get("op")
             if op == "run":
+                if "ramp" in m:  # a ramp sent with the run (harness.Rig.ramp): as a ramp request first
+                    r = m["ramp"]
+                    w.ramp(r["until_ms"], r["temps"])
                 until = m["until_ms"]
                 if "temps" in m:
                     w.ramp(until, m["temps"])
@@ -131,6 +135,7 @@ class Control:
                 st = w.stats()
                 st["ev"] = "stats"
                 st["t_ms"] = w.clock.now_ms()
+                st["epochs"] = w.clock.epochs  # the simulators' clock epochs begun (hil_tests/sim/clock.py)
                 st["mem_free"] = self.mem(m.get("gc", False))
                 st["uart"] = [w.uart.rx_bytes, w.uart.tx_bytes] if w.uart is not None else None
                 st["wdt_feeds"] = w.wdt.feeds if w.wdt is not None else None

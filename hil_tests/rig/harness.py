@@ -284,6 +284,7 @@ class Rig(LinkClient):
         self.starts = 0
         self.open_port = open_port
         self._free = None
+        self._ramp = None  # a ramp not sent yet (ramp())
         self.powered = False
         self.rx_base = 0
         self._open_pty()
@@ -372,11 +373,18 @@ class Rig(LinkClient):
         return ev
 
     def _send(self, obj):
+        if self._ramp is not None:  # a ramp waiting for the next run travels with it (one line, one gate)
+            ramp, self._ramp = self._ramp, None
+            if obj.get("op") == "run":
+                obj = dict(obj, ramp=ramp)
+            else:
+                self._send(dict(ramp, op="ramp"))
         self.conn.sendall((json.dumps(obj) + "\n").encode())
 
     def kill(self):
         """Power cut: SIGKILL, no chance to flush or close anything."""
         self.powered = False
+        self._ramp = None
         if self.proc and self.proc.poll() is None:
             self.proc.send_signal(signal.SIGKILL)
             self.proc.wait()
@@ -469,8 +477,12 @@ class Rig(LinkClient):
         return self.run(self.t_ms + ms, **kw)
 
     def ramp(self, until_ms, temps):
-        """From now on, sensors head linearly for ``temps`` at ``until_ms`` (time does not move)."""
-        self._send({"op": "ramp", "until_ms": int(until_ms), "temps": {k: float(v) for k, v in temps.items()}})
+        """From now on, sensors head linearly for ``temps`` at ``until_ms`` (time does not move).
+
+        Sent with the next control message (the ``run`` that lets time move, or before any other
+        request): on the emulated board every control line costs a gate on the board and its bytes
+        cross QEMU's UART one main-loop turn each (docs/hil.md)."""
+        self._ramp = {"until_ms": int(until_ms), "temps": {k: float(v) for k, v in temps.items()}}
 
     def jump(self, temps):
         self._send({"op": "jump", "temps": {k: float(v) for k, v in temps.items()}})
