@@ -238,8 +238,9 @@ def print_long_run(hours, n_sensors):
               % ("met" if qemu_wall <= 120 and hours >= 4.3 and n_sensors >= 8 else "NOT met", qemu_wall))
 
 
-def main():
-    args = sys.argv[1:]
+def main(args=()):
+    """``args``: the command line when run as a script (bench_firmware.py calls it with none)."""
+    args = list(args)
     hours = float(args[args.index("--hours") + 1]) if "--hours" in args else 4.3
     n_sensors = int(args[args.index("--sensors") + 1]) if "--sensors" in args else 8
     if "--long-only" in args:
@@ -297,4 +298,4 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])
