@@ -7,7 +7,8 @@ control socket path ``ctl``, initial temperatures, sensor noise and seed.
 
 On the emulated board (``tcomp hil --interpreter qemu``) this runs on the board
 itself, from the image's ROM: the spec names the board file (``board``) and
-the control channel is UART1 (``ctl`` = ``uart:1``; hil_tests/rig/qemu_board.py).
+the control channel's events go out on UART1 (``ctl`` = ``uart:1``) and its requests
+come from the named pipe ``ctl_requests`` through semihosting (hil_tests/rig/qemu_board.py).
 
 The control channel (a unix socket, one JSON object per line) is served
 only while the firmware sleeps past the time the test granted: the firmware
@@ -40,10 +41,10 @@ except ImportError:
 MICRO = sys.implementation.name == "micropython"
 
 
-def _connect(path):
-    if path.startswith("uart:"):  # the emulated board: the control channel is a UART (qemu_board.py)
+def _connect(path, requests=None):
+    if path.startswith("uart:"):  # the emulated board: events over a UART, requests from a pipe (qemu_board.py)
         from hil_tests.rig.qemu_board import UartControl
-        c = UartControl(int(path[5:]))
+        c = UartControl(int(path[5:]), requests)
         return c, c
     import socket
     s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -56,8 +57,8 @@ def _connect(path):
 
 
 class Control:
-    def __init__(self, path, world):
-        self.sock, self.rf = _connect(path)
+    def __init__(self, path, world, requests=None):
+        self.sock, self.rf = _connect(path, requests)
         self.world = world
         self.locked = False
         self.lock_failures = 0
@@ -194,7 +195,7 @@ def main(spec_path):
                         spec.get("start_ms", 0))
     w.uart = None
     world_mod.set_current(w)
-    ctl = Control(spec["ctl"], w)
+    ctl = Control(spec["ctl"], w, spec.get("ctl_requests"))
     w.clock.gate = ctl.gate
     board = make_board(w, config, spec.get("board"))
     ctl.gate()  # initial stimulus and faults before power-up

@@ -268,9 +268,13 @@ class Rig(LinkClient):
                 f.write(key)
         self.spec = {"config": self.config, "ctl": os.path.join(self.workdir, "ctl.sock"), "temps": temps or {},
                      "noise_uohm": noise_uohm, "seed": seed, "start_ms": start_ms}
-        if interpreter == "qemu":  # the board's own files on the emulator; the control channel on UART1
+        self.requests_path = None
+        self.requests_fd = None
+        if interpreter == "qemu":  # the board's own files on the emulator; events on UART1, requests by a pipe
             self.spec["board"] = "mps2_an385"
             self.spec["ctl"] = "uart:1"
+            self.requests_path = os.path.join(self.workdir, "ctl-requests.fifo")
+            self.spec["ctl_requests"] = self.requests_path
         self.ctl_path = os.path.join(self.workdir, "ctl.sock")
         self.heap = heap if interpreter != "qemu" or heap is not None else QEMU_HEAP
         self.use_mpy = use_mpy
@@ -310,6 +314,16 @@ class Rig(LinkClient):
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         self.listener.bind(ctl)
         self.listener.listen(1)
+        if self.requests_path:
+            # a fresh pipe per power-up (nothing a killed board left unread), held open read-write here
+            # so that neither side's open() waits for the other
+            if self.requests_fd is not None:
+                os.close(self.requests_fd)
+                self.requests_fd = None
+            if os.path.exists(self.requests_path):
+                os.unlink(self.requests_path)
+            os.mkfifo(self.requests_path)
+            self.requests_fd = os.open(self.requests_path, os.O_RDWR)
         spec_path = os.path.join(self.workdir, "spec.json")
         with open(spec_path, "w") as f:
             json.dump(self.spec, f)
@@ -379,7 +393,11 @@ class Rig(LinkClient):
                 obj = dict(obj, ramp=ramp)
             else:
                 self._send(dict(ramp, op="ramp"))
-        self.conn.sendall((json.dumps(obj) + "\n").encode())
+        data = (json.dumps(obj) + "\n").encode()
+        if self.requests_fd is not None:
+            os.write(self.requests_fd, data)  # one line, far below PIPE_BUF: written whole
+        else:
+            self.conn.sendall(data)
 
     def kill(self):
         """Power cut: SIGKILL, no chance to flush or close anything."""
@@ -401,6 +419,9 @@ class Rig(LinkClient):
         raise RigError("no matching frame within %.1f s" % timeout)
 
     def _close_ctl(self):
+        if self.requests_fd is not None:
+            os.close(self.requests_fd)
+            self.requests_fd = None
         for a in ("rf", "conn", "listener"):
             o = getattr(self, a, None)
             if o is not None:
