@@ -70,11 +70,13 @@ $(MP32): $(MP32_SRC) $(MPY_TOP)/.unpacked | sysdeps
 	  { tail -40 .build/linux32.log; exit 1; }
 	touch $@
 
-# The Cortex-M3 images (ports/mps2/Makefile) on the same core: firmware.elf (firmware/manifest.py
-# frozen) and firmware-rig.elf (plus the rig's board side, for `tcomp hil --interpreter qemu`). The ROM
+# The Cortex-M3 images (ports/mps2/Makefile): firmware.elf (firmware/manifest.py frozen; the benches
+# measure it) and firmware-rig.elf (the same firmware plus the rig's board side, for `tcomp hil
+# --interpreter qemu`, on a core built for speed: build/mps2-cortex-m3-rig, docs/hil.md). The ROM
 # table is regenerated on every run (a second or so), so the image always carries the current firmware.
 qemu-image: $(MPY_TOP)/.unpacked $(STAMP) | sysdeps
 	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) >/dev/null
+	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) VARIANT=rig >/dev/null
 
 # Only LinuxCNC's own modules (hal, _hal, linuxcnc) go on the venv's path, not all of dist-packages.
 $(LCNC_STAMP): $(STAMP) | sysdeps

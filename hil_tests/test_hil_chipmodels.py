@@ -210,3 +210,37 @@ def test_models_import_and_run_on_micropython():
                        env=dict(os.environ, MICROPYPATH=ROOT))
     assert p.returncode == 0, p.stdout + p.stderr
     assert int(p.stdout.split()[-1]) == round(resistance_ohm(25.0) * 32768 / 430.0)
+
+
+def test_clock_epochs_keep_microseconds_small_and_conversions_on_time():
+    """40 simulated minutes of auto conversions while the element heats on a ramp: the clock's
+    microseconds stay a small int of a 32-bit board (below 2**30: 17.9 min) through its epochs, and
+    every reading is the code of the resistance at the period boundary the chip last converted at,
+    computed here from absolute time counted by the test itself (sleeps + SPI transfer times)."""
+    from fractions import Fraction
+    from hil_tests.sim.iec60751 import resistance_uohm
+    s = Spi(20.0)
+    span_ms = 40 * 60000
+    s.rtd.ramp_to(0, span_ms, 60.0)
+    r0, r1 = resistance_uohm(20.0), resistance_uohm(60.0)
+    xfer_us = 2 + 16 * 1000000 // 1000000  # a 2-byte write at 1 MHz (bus time: bytes * 8 / baud + 2 us)
+    s.write(0x00, 0xC1)  # V_BIAS, auto conversion, 50 Hz
+    t_us = xfer_us
+    first = xfer_us + 62500  # the chip's first auto conversion: one one-shot time after the write
+    period = 20000
+    read_us = 2 + 24  # the 3-byte read of the RTD registers
+    seen = 0
+    while t_us < span_ms * 1000 - 2000000:
+        s.wait(700)
+        t_us += 700000
+        msb, lsb = s.read(0x01, 2)
+        assert s.clock.us < 1 << 30
+        k = (t_us - first) // period
+        t_conv_ms = (first + k * period) // 1000
+        r = r0 + (r1 - r0) * t_conv_ms // span_ms  # the straight line between the ramp's ends, floored
+        want = int(Fraction(r * 32768, 430000000) + Fraction(1, 2))
+        assert (msb << 8 | lsb) >> 1 == want, (t_us, s.clock.epochs)
+        t_us += read_us
+        seen += 1
+    assert s.clock.epochs >= 4 and seen > 3000
+    assert s.clock.now_ms() == t_us // 1000 and s.chip.violation_count == 0

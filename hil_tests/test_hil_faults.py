@@ -86,8 +86,10 @@ def _settle(rig, limit_ms=200000):
     raise AssertionError("output never settled: %s" % frames[-1].status_names())
 
 
+@pytest.mark.parametrize("interpreter", ["micropython", "cpython", "qemu"])
 @pytest.mark.parametrize("fault", sorted(FAULTS))
-def test_fault_flagged_held_ramped_recovered(make_rig, fault_table, fault):
+def test_fault_flagged_held_ramped_recovered(make_rig, fault_table, fault, interpreter):
+    """Every fault on every interpreter, the emulated Cortex-M3 board (``qemu``) included."""
     spec = FAULTS[fault]
     temps = {"T1": 23.0, "T2": 24.0, "T4": 22.5}
     cfg = rig_config(SENSORS, frame_ms=100, hold_ms=HOLD_MS, stuck_ms=STUCK_MS, slew_um_per_s=SLEW,
@@ -132,10 +134,3 @@ def test_fault_flagged_held_ramped_recovered(make_rig, fault_table, fault):
     assert rig.alive and not rig.reader.decoder.bad
     st = rig.stats()
     assert all(c["violations"] == 0 for c in st["chips"].values()), st["chips"]
-
-
-@pytest.mark.parametrize("interpreter", ["qemu"])
-@pytest.mark.parametrize("fault", ["open_rtd", "i2c_timeouts"])
-def test_fault_on_the_emulated_board(make_rig, fault_table, fault, interpreter):
-    """Two of the faults on the emulated Cortex-M3 board (the full set runs on the unix port and CPython)."""
-    test_fault_flagged_held_ramped_recovered(make_rig, fault_table, fault)

@@ -1,6 +1,6 @@
 """Firmware budgets on the emulated Cortex-M3 board (QEMU mps2-an385, ports/mps2), measured.
 
-    .venv/bin/python tools/bench_qemu_board.py
+    .venv/bin/python tools/bench_qemu_board.py [--long-only] [--hours H] [--sensors N]
 
 Imported by tools/bench_firmware.py (``make bench``), also runnable alone. The image is the
 32-bit MicroPython of ports/mps2 with the firmware frozen into its ROM table (bytecode runs in
@@ -16,6 +16,10 @@ place from flash). Method:
   bus traffic without the firmware) are measured and listed separately;
 - per table kind: one evaluation = the evaluator's work in a cycle: update() (+ one step() for
   screw_reduced), offset_at at two positions, ref_offset(), slope();
+- a real-run-length rig run (``long_run``): the first ``--hours`` (4.3) of the twin run data/demo/mixed
+  with ``--sensors`` (8: 7 MAX31865 + 1 ADS122C04, the rig's default wiring) and a degree-2 poly_slope
+  table, played by hil_tests/rig/play.py (as `tcomp hil`) on the rig image and on the 32-bit port:
+  wall time, the board process's CPU time, and whether every answer (offset and status) is identical;
 - heap (gc.mem_alloc, after gc.collect): after importing the mode's modules from ROM; the app's
   data after boot and a 100-cycle warm-up (the lowest of 5 collections); the largest live heap
   (firmware objects, fakes, app data); the smallest heap= with which boot, warm-up and 50
@@ -167,7 +171,81 @@ def mode_heap(image, work, mode):
     return base, code, fakes, int(out[5]), int(out[6]), hi
 
 
-def main():
+def _cpu_s(pid):
+    """User + system CPU seconds of a live process (all its threads)."""
+    with open("/proc/%d/stat" % pid) as f:
+        v = f.read().rsplit(")", 1)[1].split()
+    return (int(v[11]) + int(v[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def long_run(hours=4.3, n_sensors=8, interpreters=("qemu", "micropython")):
+    """Play the first ``hours`` of data/demo/mixed on each interpreter; returns {interpreter: result}."""
+    import time
+    from hil_tests.rig import interpreters as interp_mod
+    from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
+    from hil_tests.rig.harness import Rig
+    from hil_tests.rig.play import play
+    from host.runs import Errors, Run, Temperatures, load_run
+    demo = load_run(os.path.join(ROOT, "data", "demo", "mixed"))
+    t, e = demo.temperatures, demo.errors
+    kt, ke = t.time_s <= hours * 3600, e.time_s <= hours * 3600
+    run = Run(demo.meta, Temperatures(t.time_s[kt], t.names, t.values[kt]),
+              Errors(e.time_s[ke], e.position_mm[ke], e.error_um[ke]), None, None)
+    sensors = ["T%d" % (i + 1) for i in range(n_sensors)]
+    table = export(poly_slope_for_run(run, sensors)).table
+    temps = {s: float(run.temperatures.column(s)[0]) for s in sensors}
+    out = {}
+    for name in interpreters:
+        if name == "micropython":
+            try:
+                interp_mod.get().require()
+            except interp_mod.InterpreterMissing as exc:
+                out[name] = {"error": str(exc)}
+                continue
+        t0 = time.monotonic()
+        with Rig(rig_config(sensors), table, interpreter=name, temps=temps, noise_uohm=2000) as rig:
+            answers = play(rig, run, sensors)
+            cpu = _cpu_s(rig.proc.pid)
+            sim_s = rig.t_ms / 1000.0
+            frames, bad = len(rig.frames), len(rig.reader.decoder.bad)
+            epochs = rig.stats().get("epochs")
+        out[name] = {"wall_s": time.monotonic() - t0, "cpu_s": cpu, "simulated_s": sim_s, "frames": frames,
+                     "malformed": bad, "epochs": epochs,
+                     "answers": [(a["offset_um"], a["status"]) for a in answers]}
+    return out
+
+
+def print_long_run(hours, n_sensors):
+    res = long_run(hours, n_sensors)
+    print("real-run length: the first %.1f h of data/demo/mixed, %d sensors (7 MAX31865 + 1 ADS122C04 at 8),"
+          " degree-2 poly_slope, played as `tcomp hil` plays it:" % (hours, n_sensors))
+    for name, r in res.items():
+        if "error" in r:
+            print("  %s: not run (%s)" % (name, r["error"]))
+            continue
+        label = "emulated board (rig image)" if name == "qemu" else "32-bit port (%s)" % name
+        print("  %-28s %7.1f s wall, %7.1f s CPU of the board's process, %.0f s simulated (%.2f s wall per"
+              " simulated minute), %d answers, %d frames, %d malformed, %s clock epochs"
+              % (label, r["wall_s"], r["cpu_s"], r["simulated_s"], r["wall_s"] / (r["simulated_s"] / 60.0),
+                 len(r["answers"]), r["frames"], r["malformed"], r["epochs"]))
+    if all("answers" in r for r in res.values()) and len(res) == 2:
+        a, b = [r["answers"] for r in res.values()]
+        same = sum(1 for x, y in zip(a, b) if x == y)
+        print("  answers identical on both (offset and status): %d of %d%s" % (
+            same, len(a), "" if same == len(a) == len(b) else "  <-- DIFFER"))
+        qemu_wall = res["qemu"]["wall_s"]
+        print("  target: <= 120 s wall on the emulated board for 4.3 h with 8 sensors: %s (%.0f s)"
+              % ("met" if qemu_wall <= 120 and hours >= 4.3 and n_sensors >= 8 else "NOT met", qemu_wall))
+
+
+def main(args=()):
+    """``args``: the command line when run as a script (bench_firmware.py calls it with none)."""
+    args = list(args)
+    hours = float(args[args.index("--hours") + 1]) if "--hours" in args else 4.3
+    n_sensors = int(args[args.index("--sensors") + 1]) if "--sensors" in args else 8
+    if "--long-only" in args:
+        print_long_run(hours, n_sensors)
+        return
     missing = [p for p in list(IMAGES.values()) + [PLUGIN] if not os.path.exists(p)]
     if missing or shutil.which("qemu-system-arm") is None:
         print("QEMU board figures skipped: missing %s (make bench builds the images and the plugin)"
@@ -216,7 +294,8 @@ def main():
                   " largest live heap %d B; smallest working heap %d kB (target: runs in 64 kB): %s"
                   % (mode, base, code, fk, data, data / 1024, "met" if data <= 16 * 1024 else "NOT met",
                      peak, smallest, "met" if smallest <= 64 else "NOT met"))
+    print_long_run(hours, n_sensors)
 
 
 if __name__ == "__main__":
-    main()
+    main(sys.argv[1:])

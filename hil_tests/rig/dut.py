@@ -7,12 +7,14 @@ control socket path ``ctl``, initial temperatures, sensor noise and seed.
 
 On the emulated board (``tcomp hil --interpreter qemu``) this runs on the board
 itself, from the image's ROM: the spec names the board file (``board``) and
-the control channel is UART1 (``ctl`` = ``uart:1``; hil_tests/rig/qemu_board.py).
+the control channel's events go out on UART1 (``ctl`` = ``uart:1``) and its requests
+come from the named pipe ``ctl_requests`` through semihosting (hil_tests/rig/qemu_board.py).
 
 The control channel (a unix socket, one JSON object per line) is served
 only while the firmware sleeps past the time the test granted: the firmware
 never sees it. Requests (``op``): ``run`` (grant time up to ``until_ms``,
-ramping sensors linearly to ``temps`` meanwhile; ``gc``: collect and report
+ramping sensors linearly to ``temps`` meanwhile; ``ramp``: a ramp request's
+``until_ms`` and ``temps`` taken first; ``gc``: collect and report
 ``mem_free``; ``lock``: run under micropython.heap_lock), ``ramp`` (head
 linearly for ``temps`` at ``until_ms``, without running), ``jump`` (step
 temperatures now), ``sensor`` (condition ok/open/short/stuck), ``chip``
@@ -39,10 +41,10 @@ except ImportError:
 MICRO = sys.implementation.name == "micropython"
 
 
-def _connect(path):
-    if path.startswith("uart:"):  # the emulated board: the control channel is a UART (qemu_board.py)
+def _connect(path, requests=None):
+    if path.startswith("uart:"):  # the emulated board: events over a UART, requests from a pipe (qemu_board.py)
         from hil_tests.rig.qemu_board import UartControl
-        c = UartControl(int(path[5:]))
+        c = UartControl(int(path[5:]), requests)
         return c, c
     import socket
     s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
@@ -55,8 +57,8 @@ def _connect(path):
 
 
 class Control:
-    def __init__(self, path, world):
-        self.sock, self.rf = _connect(path)
+    def __init__(self, path, world, requests=None):
+        self.sock, self.rf = _connect(path, requests)
         self.world = world
         self.locked = False
         self.lock_failures = 0
@@ -94,10 +96,13 @@ class Control:
             m = json.loads(line)
             op = m.get("op")
             if op == "run":
+                if "ramp" in m:  # a ramp sent with the run (harness.Rig.ramp): as a ramp request first
+                    r = m["ramp"]
+                    w.ramp(r["until_ms"], r["temps"])
                 until = m["until_ms"]
                 if "temps" in m:
                     w.ramp(until, m["temps"])
-                w.clock.limit_us = until * 1000
+                w.clock.grant(until)
                 if m.get("gc"):
                     self.send({"ev": "mem", "mem_free": self.mem(True)})
                 if m.get("lock") and micropython is not None and hasattr(micropython, "heap_lock"):
@@ -131,6 +136,7 @@ class Control:
                 st = w.stats()
                 st["ev"] = "stats"
                 st["t_ms"] = w.clock.now_ms()
+                st["epochs"] = w.clock.epochs  # the simulators' clock epochs begun (hil_tests/sim/clock.py)
                 st["mem_free"] = self.mem(m.get("gc", False))
                 st["uart"] = [w.uart.rx_bytes, w.uart.tx_bytes] if w.uart is not None else None
                 st["wdt_feeds"] = w.wdt.feeds if w.wdt is not None else None
@@ -189,7 +195,7 @@ def main(spec_path):
                         spec.get("start_ms", 0))
     w.uart = None
     world_mod.set_current(w)
-    ctl = Control(spec["ctl"], w)
+    ctl = Control(spec["ctl"], w, spec.get("ctl_requests"))
     w.clock.gate = ctl.gate
     board = make_board(w, config, spec.get("board"))
     ctl.gate()  # initial stimulus and faults before power-up

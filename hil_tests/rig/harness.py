@@ -37,7 +37,7 @@ DUT = os.path.join(ROOT, "hil_tests", "rig", "dut.py")
 VENV_BIN = os.path.join(ROOT, ".venv", "bin")
 # The emulated Cortex-M3 board (ports/mps2, built by make setup): the firmware and the rig's board
 # side in its ROM; heap for the firmware plus the chip simulators (the firmware alone: docs/firmware.md).
-QEMU_IMAGE = os.environ.get("TCOMP_QEMU_IMAGE", os.path.join(ROOT, "build", "mps2-cortex-m3", "firmware-rig.elf"))
+QEMU_IMAGE = os.environ.get("TCOMP_QEMU_IMAGE", os.path.join(ROOT, "build", "mps2-cortex-m3-rig", "firmware-rig.elf"))
 QEMU_HEAP = os.environ.get("TCOMP_QEMU_HEAP", "256K")
 
 
@@ -268,9 +268,13 @@ class Rig(LinkClient):
                 f.write(key)
         self.spec = {"config": self.config, "ctl": os.path.join(self.workdir, "ctl.sock"), "temps": temps or {},
                      "noise_uohm": noise_uohm, "seed": seed, "start_ms": start_ms}
-        if interpreter == "qemu":  # the board's own files on the emulator; the control channel on UART1
+        self.requests_path = None
+        self.requests_fd = None
+        if interpreter == "qemu":  # the board's own files on the emulator; events on UART1, requests by a pipe
             self.spec["board"] = "mps2_an385"
             self.spec["ctl"] = "uart:1"
+            self.requests_path = os.path.join(self.workdir, "ctl-requests.fifo")
+            self.spec["ctl_requests"] = self.requests_path
         self.ctl_path = os.path.join(self.workdir, "ctl.sock")
         self.heap = heap if interpreter != "qemu" or heap is not None else QEMU_HEAP
         self.use_mpy = use_mpy
@@ -284,6 +288,7 @@ class Rig(LinkClient):
         self.starts = 0
         self.open_port = open_port
         self._free = None
+        self._ramp = None  # a ramp not sent yet (ramp())
         self.powered = False
         self.rx_base = 0
         self._open_pty()
@@ -309,6 +314,16 @@ class Rig(LinkClient):
         self.listener = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
         self.listener.bind(ctl)
         self.listener.listen(1)
+        if self.requests_path:
+            # a fresh pipe per power-up (nothing a killed board left unread), held open read-write here
+            # so that neither side's open() waits for the other
+            if self.requests_fd is not None:
+                os.close(self.requests_fd)
+                self.requests_fd = None
+            if os.path.exists(self.requests_path):
+                os.unlink(self.requests_path)
+            os.mkfifo(self.requests_path)
+            self.requests_fd = os.open(self.requests_path, os.O_RDWR)
         spec_path = os.path.join(self.workdir, "spec.json")
         with open(spec_path, "w") as f:
             json.dump(self.spec, f)
@@ -372,11 +387,22 @@ class Rig(LinkClient):
         return ev
 
     def _send(self, obj):
-        self.conn.sendall((json.dumps(obj) + "\n").encode())
+        if self._ramp is not None:  # a ramp waiting for the next run travels with it (one line, one gate)
+            ramp, self._ramp = self._ramp, None
+            if obj.get("op") == "run":
+                obj = dict(obj, ramp=ramp)
+            else:
+                self._send(dict(ramp, op="ramp"))
+        data = (json.dumps(obj) + "\n").encode()
+        if self.requests_fd is not None:
+            os.write(self.requests_fd, data)  # one line, far below PIPE_BUF: written whole
+        else:
+            self.conn.sendall(data)
 
     def kill(self):
         """Power cut: SIGKILL, no chance to flush or close anything."""
         self.powered = False
+        self._ramp = None
         if self.proc and self.proc.poll() is None:
             self.proc.send_signal(signal.SIGKILL)
             self.proc.wait()
@@ -393,6 +419,9 @@ class Rig(LinkClient):
         raise RigError("no matching frame within %.1f s" % timeout)
 
     def _close_ctl(self):
+        if self.requests_fd is not None:
+            os.close(self.requests_fd)
+            self.requests_fd = None
         for a in ("rf", "conn", "listener"):
             o = getattr(self, a, None)
             if o is not None:
@@ -469,8 +498,12 @@ class Rig(LinkClient):
         return self.run(self.t_ms + ms, **kw)
 
     def ramp(self, until_ms, temps):
-        """From now on, sensors head linearly for ``temps`` at ``until_ms`` (time does not move)."""
-        self._send({"op": "ramp", "until_ms": int(until_ms), "temps": {k: float(v) for k, v in temps.items()}})
+        """From now on, sensors head linearly for ``temps`` at ``until_ms`` (time does not move).
+
+        Sent with the next control message (the ``run`` that lets time move, or before any other
+        request): on the emulated board every control line costs a gate on the board and its bytes
+        cross QEMU's UART one main-loop turn each (docs/hil.md)."""
+        self._ramp = {"until_ms": int(until_ms), "temps": {k: float(v) for k, v in temps.items()}}
 
     def jump(self, temps):
         self._send({"op": "jump", "temps": {k: float(v) for k, v in temps.items()}})

@@ -11,16 +11,32 @@ import machine
 
 
 class UartControl:
-    """The control channel over UART1: ``write(bytes)`` and a blocking ``readline()`` (it waits
-    for an interrupt between polls: the UART's receive interrupt fills the image's ring buffer)."""
+    """The control channel: events out over UART1 (``write``), requests in by a blocking
+    ``readline()`` from the rig's named pipe ``requests`` through semihosting (the debug probe's
+    channel: one host read per call, whatever the pipe holds), or, without one, from UART1 (it waits
+    for an interrupt between polls: the UART's receive interrupt fills the image's ring buffer).
 
-    def __init__(self, ident):
+    Why the pipe: QEMU hands the CMSDK UART one received byte per turn of its main loop, and on a
+    loaded machine each turn waits for the scheduler: a 200-byte request took 50-70 ms there, the pipe
+    takes one read (docs/hil.md, "Where the board's time goes")."""
+
+    def __init__(self, ident, requests=None):
         self.uart = machine.UART(ident, baudrate=115200)
-        self.buf = bytearray(256)
+        self.pipe = open(requests, "rb") if requests else None
+        self.buf = bytearray(512)
         self.line = bytearray()
 
     def write(self, data):
         self.uart.write(data)
+
+    def _receive(self, buf):
+        """Bytes into ``buf``: 0 when none waits (UART), at least 1 (the pipe blocks)."""
+        if self.pipe is not None:
+            k = self.pipe.readinto1(buf)
+            if not k:
+                raise SystemExit(0)  # the rig closed the pipe: it went away
+            return k
+        return self.uart.readinto(buf)
 
     def readline(self):
         buf = self.buf
@@ -31,7 +47,7 @@ class UartControl:
                 out = bytes(line[:i + 1])
                 self.line = line[i + 1:]
                 return out
-            k = self.uart.readinto(buf)
+            k = self._receive(buf)
             if k:
                 line.extend(memoryview(buf)[:k])
             else:

@@ -46,6 +46,7 @@ class ADS122C04(ViolationLog):
         self.commands = 0
         self._init_violations()
         self._reset()
+        clock.on_epoch(self)
 
     def _reset(self):
         for i in range(4):
@@ -85,7 +86,7 @@ class ADS122C04(ViolationLog):
             return 0
         if self.rtd.condition == OPEN:
             return _MAX  # IDAC compliance: input driven to the rail
-        ohm = self.rtd.measured(t_us // 1000)
+        ohm = self.rtd.measured(self.clock.ms_at(t_us))
         both = i1 != 0 and i2 != 0
         vref_sel = (self.regs[1] >> 1) & 3
         if vref_sel == 1:
@@ -112,6 +113,16 @@ class ADS122C04(ViolationLog):
             self.running = False
         else:
             self.next_us = t + p
+
+    def shift_epoch(self, shift):
+        """The clock's new epoch begins ``shift`` us after the old one (hil_tests/sim/clock.py): the
+        next conversion time moves by ``shift``; one older than the new epoch's start first moves on
+        by whole periods (the next access converts at the same period boundary)."""
+        if self.next_us >= 0:
+            if self.next_us < shift:
+                p = self._period_us()
+                self.next_us += (shift - self.next_us + p - 1) // p * p
+            self.next_us -= shift
 
     # --- I2C transactions (called by the bus) ---------------------------------------
     def command(self, c):

@@ -71,6 +71,7 @@ class MAX31865(ViolationLog):
         self._sel = False
         self._addr = 0
         self._first = False
+        clock.on_epoch(self)
 
     def _por(self):
         r = self.regs
@@ -98,7 +99,7 @@ class MAX31865(ViolationLog):
             self._violation("conversion with V_BIAS off")
             code = 0
         else:
-            ohm = self.rtd.measured(t_us // 1000)
+            ohm = self.rtd.measured(self.clock.ms_at(t_us))
             if self.rtd.condition == OPEN or self.force_open:
                 code = _FULL
             else:
@@ -146,6 +147,37 @@ class MAX31865(ViolationLog):
             self._convert(t)
         if self.ovuv:
             r[7] |= 0x04
+
+    def shift_epoch(self, shift):
+        """The clock's new epoch (hil_tests/sim/clock.py) begins ``shift`` us after the old one.
+
+        Stored times move by ``shift``. A time older than the new epoch's start (more than 4.5
+        simulated minutes ago) keeps its meaning: a finished fault cycle or one-shot nobody has read
+        yet completes now, at its own time, as the next access would have completed it; the next
+        auto conversion moves by whole periods (the next access converts at the same period
+        boundary); V_BIAS switched on that long ago is settled either way (0: the epoch's start)."""
+        if 0 <= self.cycle_end < shift or 0 <= self.oneshot_end < shift:
+            r = self.regs
+            if 0 <= self.cycle_end < shift:
+                self.cycle_end = -1
+                self._fault_checks()
+                r[0] &= ~0x0C
+            if 0 <= self.oneshot_end < shift:
+                t = self.oneshot_end
+                self.oneshot_end = -1
+                self._convert(t)
+                r[0] &= ~0x20
+        if self.cycle_end >= 0:
+            self.cycle_end -= shift
+        if self.oneshot_end >= 0:
+            self.oneshot_end -= shift
+        if self.auto_next >= 0:
+            if self.auto_next < shift:
+                period = _T_AUTO_US[self.regs[0] & 1]
+                self.auto_next += (shift - self.auto_next + period - 1) // period * period
+            self.auto_next -= shift
+        if self.bias_on_us >= 0:
+            self.bias_on_us = self.bias_on_us - shift if self.bias_on_us >= shift else 0
 
     # --- configuration write (the interactions live here) -------------------------
     def _write_config(self, v):

@@ -20,7 +20,7 @@ class ViolationLog:
         k = self.violation_count
         self.violation_count = k + 1
         if k < _VSLOTS:
-            text = ("%s at %d us: %s" % (self.name, self.clock.us, what)).encode()[:_VLEN]
+            text = ("%s at %d us: %s" % (self.name, self.clock.abs_us(), what)).encode()[:_VLEN]
             o = k * _VLEN
             for i in range(_VLEN):
                 self._vbuf[o + i] = text[i] if i < len(text) else 0

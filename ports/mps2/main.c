@@ -145,6 +145,9 @@ const stdio_obj_t mp_sys_stderr_obj = {{&stdio_type}, 2};
 // ---- runtime glue ----------------------------------------------------------------------------
 
 static uint8_t heap[MICROPY_HEAP_SIZE_MAX] __attribute__((aligned(8)));
+#if MICROPY_ENABLE_PYSTACK
+static uint8_t pystack[MPS2_PYSTACK_SIZE] __attribute__((aligned(8)));
+#endif
 
 void gc_collect(void) {
     gc_collect_start();
@@ -244,6 +247,9 @@ soft_reset:
     extern uint32_t _estack;
     mp_cstack_init_with_top(&_estack, 30 * 1024);
     gc_init(heap, heap + heap_size);
+    #if MICROPY_ENABLE_PYSTACK
+    mp_pystack_init(pystack, pystack + sizeof(pystack));
+    #endif
     mp_init();
     mp_obj_list_append(mp_sys_path, MP_OBJ_NEW_QSTR(MP_QSTR_));
 

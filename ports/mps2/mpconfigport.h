@@ -83,6 +83,24 @@ typedef long mp_off_t;
 
 #define MICROPY_HEAP_SIZE_MAX (512 * 1024)
 
+// The rig image (make VARIANT=rig: firmware-rig.elf, the test bench of `tcomp hil --interpreter qemu`)
+// runs the same frozen firmware on a core built for speed; firmware.elf, whose instructions and heap
+// the benches measure, keeps the plain core. Neither option changes what a program computes:
+// - function frames on a Python stack, not the heap: on the plain core every call of a function with
+//   more than 11 words of state allocates its frame on the GC heap (and frees it), and gc_alloc scans
+//   the heap's fragmented start for room each time (41-51 % of the rig's instructions, docs/hil.md);
+// - the VM options of the MCU ports at the extra-features level (rp2, stm32): cached map lookups,
+//   the attribute fast path, computed-goto dispatch.
+#ifdef MPS2_RIG_IMAGE
+#define MICROPY_ENABLE_PYSTACK (1)
+#define MPS2_PYSTACK_SIZE (16 * 1024)
+#ifndef MPS2_NO_COMPUTED_GOTO
+#define MICROPY_OPT_COMPUTED_GOTO (1)
+#endif
+#define MICROPY_OPT_MAP_LOOKUP_CACHE (1)
+#define MICROPY_OPT_LOAD_ATTR_FAST_PATH (1)
+#endif
+
 #define MP_STATE_PORT MP_STATE_VM
 
 #include <alloca.h>
