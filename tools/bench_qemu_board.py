@@ -185,7 +185,7 @@ def long_run(hours=4.3, n_sensors=8, interpreters=("qemu", "micropython")):
     from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
     from hil_tests.rig.harness import Rig
     from hil_tests.rig.play import play
-    from host.runs import Errors, Run, Temperatures, load_run
+    from host.data.runs import Errors, Run, Temperatures, load_run
     demo = load_run(os.path.join(ROOT, "data", "demo", "mixed"))
     t, e = demo.temperatures, demo.errors
     kt, ke = t.time_s <= hours * 3600, e.time_s <= hours * 3600
