@@ -80,6 +80,12 @@ container for them):
     A callable that resets the device (``machine.reset``), or None: then the
     ``reset`` command restarts the app in-process (reload table, hello frame).
 
+``entropy`` (optional)
+    A callable returning 4 bytes that differ from boot to boot (a hardware
+    random source): the session nonce of the authorisation (firmware/auth.py,
+    docs/protocol.md "Sessions"). Without it the port's ``os.urandom`` is used,
+    else ``/dev/urandom``, else a hash of the microsecond tick at boot.
+
 Bad configuration raises ``ValueError`` naming the key: on the board
 ``firmware.bootcfg.load_config`` (terse, ``config <key>: <value>``), on the
 host ``host.boardconfig.load_config`` (the same rules with messages that state
@@ -114,3 +120,4 @@ class Board:
         self.clock = clock if clock is not None else SystemClock()
         self.watchdog = watchdog
         self.reset = reset
+        self.entropy = None

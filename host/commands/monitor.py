@@ -115,8 +115,12 @@ def _monitor(args, outputs):
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
                 if args.latch and not latch_sent and f.kind == "H":
-                    signer.observe(f.fields[-1])
-                    ser.write(signer.stream_line("L"))
+                    try:
+                        signer.observe_hello(f.fields)
+                        line = signer.stream_line("L")
+                    except ValueError as exc:  # host.linkauth.CounterError: the hello's counter or nonce
+                        raise UserError("%s: --latch: %s" % (args.port, exc))
+                    ser.write(line)
                     latch_sent = True
                 if latch_sent and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]
                                                      or f.kind == "E" and f.fields[:1] in (["5"], ["8"], ["9"])):
