@@ -64,10 +64,12 @@ f.close()
 f = open("signed.txt", "rb")  # lines signed on the host (host/linkauth.py)
 signed = [x + b"\r\n" for x in f.read().split(b"\n")]
 f.close()
+cycles(3)  # the error-frame budget refills (protocol.py: E frames are rate-limited)
 # without authorisation: refused, nothing changes
 for cmd in (b"TC,L", b"TC,X", b"TC,U,X", b"TC,U,B,%d,%08X" % (len(data), crc32(data))):
     send(line(cmd))
 print("UNSIGNED", app.slot, app.store.uploading, app.auth.last)
+cycles(3)
 send(signed[0])  # U,B
 for x in signed[6:]:  # the chunks, each tagged for this upload
     send(x)

@@ -6,7 +6,7 @@ from hypothesis import given, settings, strategies as st, HealthCheck
 
 import hashlib
 
-from fwhelpers import tagged_chunk, cmd, frames, rig_app, run_cycles, make_table, scmd
+from fwhelpers import TEST_NONCE, tagged_chunk, cmd, frames, rig_app, run_cycles, make_table, scmd
 from fwfakes import FakeSerial
 from firmware import frame as fr
 from firmware.crc16 import crc16_ccitt, crc16_modbus
@@ -106,8 +106,9 @@ def test_hello_at_boot(tmp_path):
     assert h[3] == "H" and h[4] == "2" and h[5] == "0.1.0" and h[6] == "A"
     assert int(h[7], 16) == app.table.crc
     assert h[8] == app.table.provenance[:8].hex().upper()
-    # "-": fixed reference temperatures; "0": the last authorisation counter (a key is provisioned)
-    assert h[9:] == ["poly_slope", "X", "11", "-", "0"]
+    # "-": fixed reference temperatures; "0": the last authorisation counter (a key is provisioned);
+    # then the session nonce the fakes' board drew at boot
+    assert h[9:] == ["poly_slope", "X", "11", "-", "0", TEST_NONCE.hex().upper()]
 
 
 def test_no_table_hello_and_reason(tmp_path):
