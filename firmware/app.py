@@ -323,8 +323,8 @@ class App:
         if d < 0:
             d = -d
         q = d // v
-        # ms the move needs at v mm/min (v mm/min = v/60 um/ms), without forming values beyond 2**30
-        need = _CAP if q >= _NEED_CAP else q * 60 + (d - q * v) * 60 // v
+        # ms the move needs at v mm/min (v mm/min = v/60 um/ms), rounded up, without forming values beyond 2**30
+        need = _CAP if q >= _NEED_CAP else q * 60 + ((d - q * v) * 60 + v - 1) // v
         e = self.clock.ticks_diff(now, self.pos_t)
         if e < 0 or e > _CAP:
             e = _CAP
