@@ -90,13 +90,14 @@ def test_hole1_any_name_bytes_are_refused_or_printable(name, where):
 
 
 @SETTINGS
-@given(st.lists(st.tuples(st.integers(0, 10000), st.integers(0, 255)), min_size=1, max_size=6))
+@given(st.lists(st.tuples(st.booleans(), st.integers(0, 10000), st.integers(0, 255)), min_size=1, max_size=6))
 def test_hole1_any_field_bytes_refused_or_run(edits):
-    """Any bytes anywhere in a table whose CRC is right: refused with TableError, or it loads and runs."""
+    """Any bytes anywhere in a table whose CRC is right (names or the rest): refused with TableError,
+    or it loads and runs."""
     from firmware.table import TableError, parse_table
     data = bytearray(make_table(kind="poly_slope", sensors=SENSORS))
-    for pos, v in edits:
-        data[4 + pos % (len(data) - 8)] = v
+    for in_names, pos, v in edits:
+        data[(44 + pos % (20 + 16 * len(SENSORS))) if in_names else 4 + pos % (len(data) - 8)] = v
     struct.pack_into("<I", data, len(data) - 4, zlib.crc32(bytes(data[:-4])))
     try:
         parse_table(bytes(data))
@@ -384,11 +385,14 @@ def test_hole6_modbus_positions_checked_against_the_last_and_the_speed(reports):
 
 # --- 7. reply amplification ---------------------------------------------------------------------------------------
 
+_TOKENS = [b"\n", b"$", b"\r\n", b"x", b"$TC,P,1*0000\r\n", b"\xff\n", b"$TC,L*0000\n"]
+
+
 @SETTINGS
-@given(st.binary(min_size=200, max_size=3000), st.integers(1, 20))
-def test_hole7_garbage_cannot_crowd_out_the_offsets(garbage, per_ms):
+@given(st.lists(st.integers(0, len(_TOKENS) - 1), min_size=100, max_size=1500), st.integers(1, 11))
+def test_hole7_garbage_cannot_crowd_out_the_offsets(tokens, per_ms):
     app, board, _ = small(extra={"frame_ms": 100, "cycle_ms": 100})
-    garbage = garbage.replace(b"x", b"\n")  # plenty of line ends: one E frame each, without a limit
+    garbage = b"".join(_TOKENS[k] for k in tokens)  # plenty of line ends: one E frame each, without a limit
     t0 = board.clock.t
     sent = 0
     n_o = 0
