@@ -415,3 +415,40 @@ def test_hole7_garbage_cannot_crowd_out_the_offsets(tokens, per_ms):
     bound = (wire.E_BURST + elapsed // wire.E_REFILL_MS + 1) * 64  # an E frame is < 64 bytes with its detail
     assert e_bytes <= bound, (e_bytes, bound, longest)
     assert n_o >= elapsed // 100 - 1  # every periodic offset frame still went out
+
+
+def test_hole5_reprovisioning_with_a_new_key_starts_its_counters_again(tmp_path):
+    """A board whose counter reached MAX: `tcomp flash --key NEWFILE` stages the new key with an auth.bin
+    (and auth.bin.new) at 0, and the board then accepts the new key's commands; an existing key file
+    leaves the board's counter store alone."""
+    from host.commands.flash import board_key, stage
+    from host.linkauth import LinkSigner
+    from firmware.crc16 import crc16_ccitt
+    tables = tmp_path / "board" / "tables"
+    tables.mkdir(parents=True)
+    (tables / "table_a.bin").write_bytes(make_table(kind="poly_slope", sensors=SENSORS))
+    provision(tables)
+    b = b"TA\x01" + struct.pack("<I", wire.MAX_COUNTER)
+    (tables / "auth.bin").write_bytes(b + struct.pack("<H", crc16_ccitt(b)))
+    from fwfakes import make_rig
+    from firmware.app import App
+    board = make_rig(2, 1, table_dir=str(tables), serial_size=1 << 20)
+    app = App(board)
+    run_cycles(app, board, 3)
+    board.serial.take()
+    assert app.auth.last == wire.MAX_COUNTER
+    out = send(app, board, LinkSigner(TEST_KEY, wire.MAX_COUNTER - 1, app.auth.nonce()).stream_line("L"))
+    assert out[0][3:7] == ["E", "8", "auth", "replayed counter"], out
+    key, created = board_key(str(tmp_path / "new.key"))
+    assert created
+    files, tdir = stage(str(tmp_path / "stage"), key=key, new_key=created, firmware=False, table_dir="tables")
+    for p in files[tdir]:  # what mpremote copies onto the board
+        (tables / os.path.basename(p)).write_bytes(open(p, "rb").read())
+    board = make_rig(2, 1, table_dir=str(tables), serial_size=1 << 20)
+    app = App(board)
+    run_cycles(app, board, 3)
+    assert app.auth.last == 0
+    assert send(app, board, LinkSigner(key, 0, app.auth.nonce()).stream_line("L"))[0][3:5] == ["E", "5"]
+    _, created = board_key(str(tmp_path / "new.key"))  # the same file again: not new, no counter store
+    files, tdir = stage(str(tmp_path / "stage2"), key=key, new_key=created, firmware=False, table_dir="tables")
+    assert not created and sorted(os.path.basename(p) for p in files[tdir]) == ["key.bin"]
