@@ -43,6 +43,8 @@ container for them):
           "frame_ms": 1000,                    # period of $TC offset frames (stream mode)
           "watchdog_ms": 2000,                 # hardware watchdog timeout (the board creates the WDT)
           "link_timeout_ms": 0,                # no valid controller traffic this long: status LINK (0: off)
+          "max_speed_mm_min": 120000,          # position reports farther apart than this speed allows are
+                                               #   refused (docs/protocol.md, "Position and feed"; 0: off)
           "reference_um": None,                # reference position of the (offset, slope) pair
                                                #   (None: the table's; the controller may set it)
           "table_dir": "/tables",              # holds slot files table_a.bin, table_b.bin and 'active'
