@@ -86,7 +86,7 @@ def _entropy(seed):
     except (ImportError, AttributeError):
         us = 0
     h = sha256(seed)
-    h.update(struct.pack("<I", us & 0xFFFFFFFF))
+    h.update(str(us).encode())
     return h.digest()[:4]
 
 
