@@ -51,6 +51,11 @@ _WEAR_CAP = const(4)
 _WEAR_REFILL_MS = const(60000)
 BUSY = b"busy"  # relatch()'s answer when the flash budget is used up
 _UPLOAD_IDLE_MS = const(60000)  # an upload without a chunk for this long is abandoned
+# Position plausibility (docs/protocol.md, "Position and feed"): a report may be at most as far from the last
+# accepted one as the axis can travel at max_speed_mm_min in the time between them plus this allowance (reports
+# queued in the controller's or the UART's buffers arrive closer together than they were sent)
+_POS_JITTER_MS = const(200)
+_NEED_CAP = const(8000000)  # d // v beyond this: the time needed exceeds _CAP (the sums below stay small ints)
 
 
 def _load_config(d):
@@ -105,6 +110,7 @@ class App:
         self.pos = 0  # last reported position
         self.pos_used = 0  # position the last cycle's total was evaluated at
         self.have_pos = False
+        self.pos_t = now  # tick of the last accepted position report
         self.spindle = 0  # last reported spindle speed (rpm) and feed (mm/min): the dynamic table's inputs
         self.feed = 0
         self.dyn = False  # the table in use is a dynamic one
@@ -134,7 +140,7 @@ class App:
         self.store = TableStore(cfg.table_dir, self._accept)
         self.wear = _WEAR_CAP  # flash-write tokens (spend_flash)
         self.wear_ms = 0
-        self.auth = Auth(self.store, self.spend_flash)
+        self.auth = Auth(self.store, self.spend_flash, getattr(board, "entropy", None))
         t, slot = self.store.load()
         collect()
         if t is not None:
@@ -307,13 +313,39 @@ class App:
             self.limiter.configure(um_per_s, self.cfg.max_offset_um, 1000)
 
     # --- inputs from the controller -------------------------------------------
-    def report_position(self, pos_um):
+    def position_plausible(self, pos_um, now):
+        """Whether the axis can have moved from the last accepted report to ``pos_um`` since it came,
+        at the config's max_speed_mm_min (0: no check); the first report is always plausible."""
+        v = self.cfg.max_speed_mm_min
+        if not v or not self.have_pos:
+            return True
+        d = pos_um - self.pos
+        if d < 0:
+            d = -d
+        q = d // v
+        # ms the move needs at v mm/min (v mm/min = v/60 um/ms), rounded up, without forming values beyond 2**30
+        need = _CAP if q >= _NEED_CAP else q * 60 + ((d - q * v) * 60 + v - 1) // v
+        e = self.clock.ticks_diff(now, self.pos_t)
+        if e < 0 or e > _CAP:
+            e = _CAP
+        return need <= e + _POS_JITTER_MS
+
+    def feed_plausible(self, feed_mm_min):
+        v = self.cfg.max_speed_mm_min
+        return not v or feed_mm_min <= v
+
+    def report_position(self, pos_um, now):
+        """A position report; False (nothing changed) when it is not plausible (position_plausible)."""
+        if not self.position_plausible(pos_um, now):
+            return False
         self.pos = pos_um
+        self.pos_t = now
         self.have_pos = True
         if self.ev is not None and self.screw:
             if self.ev.feed:
                 self.ev.clear_feed()
             self.ev.advance_position(pos_um)
+        return True
 
     def report_spindle(self, rpm):
         """Spindle speed from the controller (rpm, either sign): an input of dynamic tables, like the position."""
@@ -335,6 +367,8 @@ class App:
         return True
 
     def link_alive(self, now):
+        """Valid traffic from the controller (a valid P or Q; on Modbus a request to this slave it
+        answers normally): only this feeds the link watchdog (LINK_TIMEOUT)."""
         self.rx_ms = 0
 
     # --- outputs ---------------------------------------------------------------
@@ -366,6 +400,7 @@ class App:
             dt = _CAP
         v = self.rx_ms + dt
         self.rx_ms = v if v < _CAP else _CAP
+        self.auth.tick(dt)
         if self.wear < _WEAR_CAP:
             v = self.wear_ms + dt
             if v >= _WEAR_REFILL_MS:

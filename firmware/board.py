@@ -43,6 +43,8 @@ container for them):
           "frame_ms": 1000,                    # period of $TC offset frames (stream mode)
           "watchdog_ms": 2000,                 # hardware watchdog timeout (the board creates the WDT)
           "link_timeout_ms": 0,                # no valid controller traffic this long: status LINK (0: off)
+          "max_speed_mm_min": 120000,          # position reports farther apart than this speed allows are
+                                               #   refused (docs/protocol.md, "Position and feed"; 0: off)
           "reference_um": None,                # reference position of the (offset, slope) pair
                                                #   (None: the table's; the controller may set it)
           "table_dir": "/tables",              # holds slot files table_a.bin, table_b.bin and 'active'
@@ -80,6 +82,12 @@ container for them):
     A callable that resets the device (``machine.reset``), or None: then the
     ``reset`` command restarts the app in-process (reload table, hello frame).
 
+``entropy`` (optional)
+    A callable returning 4 bytes that differ from boot to boot (a hardware
+    random source): the session nonce of the authorisation (firmware/auth.py,
+    docs/protocol.md "Sessions"). Without it the port's ``os.urandom`` is used,
+    else ``/dev/urandom``, else a hash of the microsecond tick at boot.
+
 Bad configuration raises ``ValueError`` naming the key: on the board
 ``firmware.bootcfg.load_config`` (terse, ``config <key>: <value>``), on the
 host ``host.board.config.load_config`` (the same rules with messages that state
@@ -114,3 +122,4 @@ class Board:
         self.clock = clock if clock is not None else SystemClock()
         self.watchdog = watchdog
         self.reset = reset
+        self.entropy = None

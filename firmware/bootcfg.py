@@ -23,6 +23,7 @@ TOP = (
     ("frame_ms", 1000, 0, 3600000),
     ("watchdog_ms", 2000, 0, 8388),
     ("link_timeout_ms", 0, 0, 65535),
+    ("max_speed_mm_min", 120000, 0, 1000000),
 )
 CHAN = (
     ("rref_mohm", 430000, 100000, 10000000),
@@ -54,6 +55,7 @@ class Config:
     frame_ms: int
     watchdog_ms: int
     link_timeout_ms: int
+    max_speed_mm_min: int
     baud: int
     address: int
     modbus_address: int

@@ -45,7 +45,8 @@ _IR_TEMPS = const(16)  # 16 x int16 0.01 degC, 0x8000 when faulty
 _IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
 _IR_AUTH_COUNTER = const(48)  # uint32: the last counter used (firmware.auth)
 _IR_AUTH_WHY = const(50)  # the last refusal (firmware.auth reason code)
-_N_INPUT = const(51)
+_IR_NONCE = const(51)  # the session nonce (firmware.auth), high word first: every auth block's tag starts with it
+_N_INPUT = const(53)
 # holding registers
 _HR_ENABLE = const(0)  # 0/1
 _HR_SLEW = const(1)  # um/s, 1..10000
@@ -99,6 +100,8 @@ class ModbusLink:
         # [value, high half, low half] of the table CRC and of the auth counter: 32-bit values, long
         # ints on a 32-bit port (small ints stop at 2**30), where every shift or mask allocates
         self.split = [[-1, 0, 0], [-1, 0, 0]]
+        self.now = self.last_byte  # the tick of the request being handled
+        self.alive = False  # whether its normal answer counts as the controller's life
 
     def boot(self):
         pass
@@ -171,7 +174,8 @@ class ModbusLink:
         fc = b[1]
         if addr == 0 and (fc == 6 or fc == 16):
             return  # a broadcast write would change every slave at once, unanswered: refused
-        self.app.link_alive(now)
+        self.now = now
+        self.alive = True
         if fc == 3 or fc == 4:
             self._read(fc, n, addr)
         elif fc == 6:
@@ -184,7 +188,11 @@ class ModbusLink:
     # --- replies ------------------------------------------------------------------
     def _send(self, n, addr):
         if addr == 0:
-            return
+            return  # a broadcast read is anybody's: it does not feed the link watchdog either
+        if self.alive and not self.tx[1] & 0x80:
+            # a request to this slave that it answers normally: the controller's life (an exception
+            # answers a refused one, which does not count)
+            self.app.link_alive(self.now)
         t = self.tx
         crc = crc16_modbus(t, 0, n)
         t[n] = crc & 0xFF
@@ -254,6 +262,10 @@ class ModbusLink:
             return self._half(1, a.auth.last, r - _IR_AUTH_COUNTER)
         if r == _IR_AUTH_WHY:
             return a.auth.why
+        if r == _IR_NONCE:
+            return a.auth.nonce_hi
+        if r == _IR_NONCE + 1:
+            return a.auth.nonce_lo
         ch = a.channels
         if _IR_TEMPS <= r < _IR_TEMPS + 16:
             i = r - _IR_TEMPS
@@ -324,6 +336,7 @@ class ModbusLink:
                 au[2 * i] = b[7 + 2 * i]
                 au[2 * i + 1] = b[8 + 2 * i]
             self.armed = True
+            self.alive = False  # anyone can write an auth block: only what it authorises counts
             code = 0
         else:
             code = self._apply(start, qty)
@@ -359,6 +372,8 @@ class ModbusLink:
                 p = hi * 65536 + vals[i + 1]
                 if p > _POS_LIMIT or p < -_POS_LIMIT:
                     return _EX_ILLEGAL_VALUE
+                if r == _HR_POSITION and not self.app.position_plausible(p, self.now):
+                    return _EX_ILLEGAL_VALUE
             if (r == _HR_POSITION + 1 or r == _HR_REFERENCE + 1) and r == start:
                 return _EX_ILLEGAL_VALUE  # the low half alone
             if r == _HR_LATCH and v:
@@ -389,7 +404,7 @@ class ModbusLink:
             a.set_slew(h[_HR_SLEW])
         a.link_timeout_ms = h[_HR_LINK_TIMEOUT]
         if pos:
-            a.report_position(self._int32(_HR_POSITION))
+            a.report_position(self._int32(_HR_POSITION), self.now)
         if ref:
             a.set_reference(self._int32(_HR_REFERENCE))
         if h[_HR_LATCH]:

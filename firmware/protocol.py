@@ -7,8 +7,12 @@ P position (and spindle speed), M feed/range, Q query, R reference, S temperatur
 U table upload (B begin, D data, C commit, X abort), L latch reference
 temperatures, X reset.
 A line that is corrupt, unknown or out of range is answered with an E frame
-and changes nothing. U,B, U,C, U,X, L and X change what the board outputs:
-they end with ``<counter>,<tag>`` (firmware/auth.py) and are refused without.
+and changes nothing; E frames are rate-limited (a burst of _E_BURST, then one
+per _E_REFILL_MS), so garbage on the line cannot crowd out the offsets. U,B, U,C,
+U,X, L and X change what the board outputs: they end with ``<counter>,<tag>``
+(firmware/auth.py) and are refused without; each U,D chunk ends with a tag
+bound to its U,B. Only a valid P or Q counts as the controller's life for the
+link watchdog (LINK_TIMEOUT).
 
 Periodic frames, position reports and queries allocate nothing; the upload and
 the hello frame may (they are not part of the steady state).
@@ -21,13 +25,16 @@ from firmware.safety import round10
 from firmware.slots import UploadError, SLOT_NAMES
 
 # wire contract values (firmware/wire.py), as folded copies (tests/firmware/test_fw_consts.py checks)
-_PROTOCOL_VERSION = const(1)
+_PROTOCOL_VERSION = const(2)
 _FIRMWARE_VERSION = const(b"0.1.0")
 _REF_LETTERS = const(b"-SLUNCO")
 _UPLOAD_STEPS = const(b"BDCX")  # wire.UPLOAD_STEPS (the U sub-commands known, so a malformed one is a syntax error)
 _TAG_BYTES = const(16)
 _MAX_COUNTER = const(999999999)
+_E_BURST = const(8)
+_E_REFILL_MS = const(25)
 # firmware.auth's (tests/firmware/test_fw_consts.py checks the copies)
+_BAD_TAG = const(2)
 _AUTH_BUSY = const(5)
 _UNSIGNED = const(6)
 
@@ -93,6 +100,10 @@ class StreamLink:
         self.last = app.clock.ticks_ms()
         self.due_ms = 0  # time towards the next periodic frame (a counter: ticks wrap)
         self.frame_ms = app.cfg.frame_ms
+        self.e_tokens = _E_BURST  # E frames that may go out now (error)
+        self.e_ms = 0
+        self.e_dropped = 0  # E frames not sent for want of a token since boot (a count, not on the wire)
+        self.upload_id = b""  # what binds the open upload's chunks and commit to its U,B (firmware.auth)
 
     # --- frames out ----------------------------------------------------------
     def boot(self):
@@ -120,10 +131,13 @@ class StreamLink:
         w.sep()
         w.buf[w.n] = _REF_LETTERS[a.ref_state]
         w.n += 1
-        if a.auth.keyed:  # the last counter used: an authorised command needs a larger one
-            w.int(a.auth.last)
+        au = a.auth
+        if au.keyed:  # the last counter used: an authorised command needs a larger one
+            w.int(au.last)
         else:
             w.text(b"-")
+        w.hex(au.nonce_hi, 4)  # the session nonce every authorised command's tag starts with
+        w._hex(au.nonce_lo, 4)
         w.end()
 
     def offsets(self, kind, pos):
@@ -172,7 +186,11 @@ class StreamLink:
         w.end()
 
     def error(self, code, detail=None):
-        """E,<code>,<word>[,<detail>] (the word is ERRORS[code])."""
+        """E,<code>,<word>[,<detail>] (the word is ERRORS[code]); dropped without a token (rate limit)."""
+        if self.e_tokens <= 0:
+            self.e_dropped += 1
+            return
+        self.e_tokens -= 1
         w = self.w
         w.begin(self.app.status, _E)
         w.int(code)
@@ -203,6 +221,12 @@ class StreamLink:
     def after_cycle(self, now):
         dt = self.app.clock.ticks_diff(now, self.last)
         self.last = now
+        if self.e_tokens < _E_BURST and dt > 0:
+            v = self.e_ms + dt
+            k = v // _E_REFILL_MS
+            self.e_ms = v - k * _E_REFILL_MS
+            k += self.e_tokens
+            self.e_tokens = k if k < _E_BURST else _E_BURST
         if not self.frame_ms:
             return
         if dt > 0:
@@ -224,10 +248,9 @@ class StreamLink:
         if r.status != _LINE_OK:
             self.error(_E_SYNTAX)
             return
-        self.app.link_alive(now)
-        self._command(r.letter(0), r.nf)
+        self._command(r.letter(0), r.nf, now)
 
-    def _command(self, c, nf):
+    def _command(self, c, nf, now):
         a = self.app
         r = self.r
         if c == _U:
@@ -241,10 +264,13 @@ class StreamLink:
             if v is None or rpm is None:
                 return self.error(_E_RANGE)
             if c == _P:
-                a.report_position(v)
+                if not a.report_position(v, now):
+                    return self.error(_E_RANGE, b"implausible position")
+                a.link_alive(now)  # a valid P or Q is the controller's life, nothing else
                 if nf == 3:
                     a.report_spindle(rpm)
             elif c == _Q:
+                a.link_alive(now)
                 self.offsets(_Q, v)
             else:
                 ref = a.set_reference(v)
@@ -257,7 +283,7 @@ class StreamLink:
             f = r.int(1, 0, _FEED_LIMIT)
             lo = r.int(2, -_POS_LIMIT, _POS_LIMIT)
             hi = r.int(3, -_POS_LIMIT, _POS_LIMIT)
-            if f is None or lo is None or hi is None:
+            if f is None or lo is None or hi is None or not a.feed_plausible(f):
                 return self.error(_E_RANGE)
             if not a.set_feed(f, lo, hi):
                 return self.error(_E_STATE, b"no screw or dynamic table")
@@ -283,13 +309,35 @@ class StreamLink:
         else:
             self.error(_E_UNKNOWN)
 
-    def _authorised(self, nf, want, extra=b""):
+    def _tag(self, k):
+        """Field ``k`` as _TAG_BYTES bytes (2 * _TAG_BYTES hex digits), or None (the E frame is sent)."""
+        r = self.r
+        s = r.fs[k]
+        if r.fe[k] - s != 2 * _TAG_BYTES:
+            self.error(_E_RANGE)
+            return None
+        tag = bytearray(_TAG_BYTES)
+        for i in range(_TAG_BYTES):
+            hi = fr._hexval(r.buf[s + 2 * i])
+            lo = fr._hexval(r.buf[s + 2 * i + 1])
+            if hi < 0 or lo < 0:
+                self.error(_E_SYNTAX)
+                return None
+            tag[i] = (hi << 4) | lo
+        return tag
+
+    def _refuse(self, why):
+        from firmware.auth import REASONS
+        self.app.auth.why = why
+        self.error(_E_AUTH, REASONS[why])
+
+    def _authorised(self, nf, want, extra=b"", bound=None):
         """Whether the line (``want`` fields, the last two ``<counter>,<tag>``) is authorised;
-        if not, the E frame is sent. The tag covers the line up to the counter, then ``extra``."""
+        if not, the E frame is sent. The tag covers the session nonce (or ``bound``), the line up
+        to the counter, then ``extra``."""
         from firmware.auth import REASONS
         if nf == want - 2:
-            self.app.auth.why = _UNSIGNED
-            self.error(_E_AUTH, REASONS[_UNSIGNED])
+            self._refuse(_UNSIGNED)
             return False
         if nf != want:
             self.error(_E_SYNTAX)
@@ -297,19 +345,14 @@ class StreamLink:
         r = self.r
         k = nf - 1
         ctr = r.int(k - 1, 1, _MAX_COUNTER)
-        s = r.fs[k]
-        if ctr is None or r.fe[k] - s != 2 * _TAG_BYTES:
+        if ctr is None:
             self.error(_E_RANGE)
             return False
-        tag = bytearray(_TAG_BYTES)
-        for i in range(_TAG_BYTES):
-            hi = fr._hexval(r.buf[s + 2 * i])
-            lo = fr._hexval(r.buf[s + 2 * i + 1])
-            if hi < 0 or lo < 0:
-                self.error(_E_SYNTAX)
-                return False
-            tag[i] = (hi << 4) | lo
-        why = self.app.auth.check(ctr, tag, memoryview(r.buf)[0:r.fe[k - 1]], extra)
+        tag = self._tag(k)
+        if tag is None:
+            return False
+        self.ctr = ctr
+        why = self.app.auth.check(ctr, tag, memoryview(r.buf)[0:r.fe[k - 1]], extra, bound)
         if why:
             if why == _AUTH_BUSY:
                 self.error(_E_BUSY)
@@ -335,13 +378,24 @@ class StreamLink:
                 if not a.spend_flash():
                     return self.error(_E_BUSY)
                 slot = a.store.begin(size, crc)
+                self.upload_id = a.auth.upload_id(self.ctr)
                 self.ack(_U, _B, None, SLOT_NAMES[slot].encode())
-            elif sub == _D and nf == 4:
+            elif sub == _D and nf in (4, 5):
                 off = r.int(2, 0, 1 << 24)
                 s = r.fs[3]
                 e = r.fe[3]
                 if off is None or (e - s) & 1 or e == s or e - s > 2 * _MAX_CHUNK:
                     return self.error(_E_RANGE)
+                # the chunk's tag binds it to the open upload's U,B: checked before anything is written
+                if nf == 4:
+                    return self._refuse(_UNSIGNED)
+                tag = self._tag(4)
+                if tag is None:
+                    return
+                if not a.store.uploading:
+                    return self.error(_E_STATE, b"no upload open")
+                if not a.auth.chunk_ok(tag, memoryview(r.buf)[0:e], self.upload_id):
+                    return self._refuse(_BAD_TAG)
                 n = (e - s) >> 1
                 buf = self.chunk
                 for k in range(n):
@@ -354,7 +408,7 @@ class StreamLink:
                 self.ack(_U, _D, got)
             elif sub == _C and nf in (2, 4):
                 # the tag covers the table received (its sha256): a refusal leaves the upload open
-                if not self._authorised(nf, 4, a.store.digest()):
+                if not self._authorised(nf, 4, a.store.digest(), self.upload_id):
                     return
                 t, slot = a.store.commit()
                 a.use_table(t, slot)

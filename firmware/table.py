@@ -18,6 +18,7 @@ from firmware.crc32 import crc32
 from micropython import const
 
 MAGIC = b"TCTB"
+NAME_FORBIDDEN = b",*$"  # besides non-printable bytes: the $TC frames' separators (names are sent in the hello)
 _VERSION = const(3)  # 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
@@ -195,6 +196,13 @@ def _name(buf, off, size):
         raise TableError(REASON_FIELD, "empty name at byte %d" % off)
     if raw[end:] != bytes(size - end):
         raise TableError(REASON_FIELD, "name at byte %d not NUL-padded" % off)
+    # printable ASCII without the frames' separators: a name goes into the hello frame as it is,
+    # and bytes that are not text would kill the decode below (a crash, issue 24)
+    for i in range(end):
+        c = raw[i]
+        if c < 32 or c > 126 or c in NAME_FORBIDDEN:
+            raise TableError(REASON_FIELD, "name at byte %d: byte %d is 0x%02x, not printable ASCII without , * $"
+                             % (off, off + i, c))
     return raw[:end].decode()
 
 

@@ -29,7 +29,9 @@ RECOVERING = const(0x4000000)  # ramping back from fallback to the model's outpu
 REF_PENDING = const(0x8000000)  # a run-start table waits for an all-good cycle to latch its reference temperatures
 EXTRAPOLATING = const(0x10000000)  # a temperature is outside the model's training range (inside the certified envelope it is evaluated, not clamped): informational, not a fault
 
-PROTOCOL_VERSION = const(1)  # first field of the hello frame; `tcomp monitor` refuses any other
+# first field of the hello frame; `tcomp monitor` refuses any other. 2: authorised commands are bound to the
+# board's session nonce (the hello's last field), U,D chunks carry a tag bound to their U,B (issue 24)
+PROTOCOL_VERSION = const(2)
 FIRMWARE_VERSION = "0.1.0"  # second field of the hello frame
 # reference temperatures come from: - none, S stored, L latched now, U latched unsaved, N/C/O pending
 # because the stored ones were missing/corrupt/foreign (firmware.app ref_state indexes this)
@@ -42,3 +44,16 @@ UPLOAD_STEPS = "BDCX"  # U,<step>: begin, data, commit, abort
 SIGNED_COMMANDS = "XL"  # besides the upload's begin, commit and abort
 TAG_BYTES = const(16)  # the tag: HMAC-SHA256's first TAG_BYTES bytes, sent as 2 * TAG_BYTES hex digits
 MAX_COUNTER = const(999999999)  # largest counter: a small int on a 32-bit port even after auth's reserve block
+# a counter may exceed the last one used by at most this much: no single command can spend the key's counters
+# (docs/protocol.md, "Counters"); a key whose counter reached MAX_COUNTER is re-provisioned (tcomp flash --key)
+COUNTER_WINDOW = const(1000)
+# the session nonce (hello's last field, Modbus input registers 51-52) changes every SESSION_MS of uptime and at
+# every boot; a command signed with the current or the previous nonce is accepted: it expires 1-2 SESSION_MS
+# after the controller read the nonce
+SESSION_MS = const(60000)
+# error frames: at most E_BURST in a row, then one more per E_REFILL_MS (garbage cannot crowd out the offsets)
+E_BURST = const(8)
+E_REFILL_MS = const(25)
+# refusal reasons of authorised commands: E,8,auth,<AUTH_REASONS[r]> (BUSY is E,9,busy), Modbus input register 50
+AUTH_REASONS = ("", "no key", "bad tag", "replayed counter", "counter not stored", "busy", "unsigned",
+                "counter jump", "counter exhausted")

@@ -109,5 +109,7 @@ def test_serial_fuzz_never_crashes_and_state_changes_only_through_valid_commands
 
     check()
     again = dut.request("V", kinds=("H",))
-    assert again.fields == hello.fields  # same table, same slot: nothing but valid commands touched it
+    # same table, same slot: nothing but valid commands touched it (the last field, the session nonce,
+    # moves on with time)
+    assert again.fields[:-1] == hello.fields[:-1]
     print("fuzz: %d bad lines, %d valid commands" % (COUNT["bad"], COUNT["valid"]))

@@ -106,6 +106,8 @@ def test_modbus_reads_stream_offsets_and_answers_bad_requests(make_rig, demo_run
             assert bad.isError() and bad.exception_code == 4
             why = client.read_input_registers(48, count=3, device_id=1).registers
             assert why == [0, 0, 6]  # no counter used; the last refusal: unsigned
+            nonce = client.read_input_registers(51, count=2, device_id=1).registers  # the session nonce
+            rig.signer.observe(None, nonce[0] << 16 | nonce[1])
             block = rig.signer.modbus_auth(1, 1, [50])
             assert not client.write_registers(8, block, device_id=1).isError()
             assert not client.write_register(1, 50, device_id=1).isError()

@@ -7,7 +7,7 @@ firmware/table.py consumes them in.
 import struct
 
 from firmware.crc32 import crc32
-from firmware.table import HEADER_SIZE, KINDS, MAGIC, NAME_SIZE, SENSOR_SIZE, UNIT_CODE, VERSION
+from firmware.table import HEADER_SIZE, KINDS, MAGIC, NAME_FORBIDDEN, NAME_SIZE, SENSOR_SIZE, UNIT_CODE, VERSION
 
 KIND_CODES = {name: code for code, name in KINDS.items()}  # the firmware's table owns the codes
 
@@ -72,8 +72,9 @@ def _fixed(text, size, what):
         raw = text.encode("ascii")
     except UnicodeEncodeError:
         raw = b""  # refused below with the same message as an empty or long name
-    if not raw or len(raw) > size or b"\x00" in raw:
-        raise ValueError("%s %r must be 1..%d ASCII characters" % (what, text, size))
+    if not raw or len(raw) > size or any(c < 32 or c > 126 or c in NAME_FORBIDDEN for c in raw):
+        raise ValueError("%s %r must be 1..%d ASCII characters, printable, without , * $ (the firmware's rule)"
+                         % (what, text, size))
     return raw + b"\x00" * (size - len(raw))
 
 

@@ -207,10 +207,10 @@ class LinkClient:
         return out
 
     def _observe_counter(self):
-        # the board's last counter is the last field of its newest hello (boot, V, table switch)
+        # the board's last counter and session nonce are in its newest hello (boot, V, table switch)
         for f in reversed(self.reader.frames):
             if f.kind == "H":
-                self.signer.observe(f.fields[-1])
+                self.signer.observe_hello(f.fields)
                 return
 
     def signed_line(self, *fields, extra=b""):

@@ -69,6 +69,7 @@ def cmd(body):
 
 
 TEST_KEY = bytes(range(100, 132))  # the board key the firmware tests provision
+TEST_NONCE = b"\x5e\x55\x10\x4e"  # the session nonce the fakes' boards draw at boot (fwfakes.make_rig)
 
 
 def provision(table_dir, key=TEST_KEY):
@@ -78,9 +79,33 @@ def provision(table_dir, key=TEST_KEY):
 
 
 def scmd(app, *fields, extra=b"", key=TEST_KEY, counter=None):
-    """An authorised command line for ``app``: the next counter after its last one (host/board/linkauth.py)."""
+    """An authorised command line for ``app``: the next counter after its last one, its session nonce
+    (host/board/linkauth.py)."""
     from host.board.linkauth import LinkSigner
-    return LinkSigner(key, app.auth.last if counter is None else counter - 1).stream_line(*fields, extra=extra)
+    # a commit is bound to its upload (the nonce and counter of the U,B that opened it)
+    bound = getattr(app.link, "upload_id", None) or None if tuple(fields[:2]) == ("U", "C") else None
+    return LinkSigner(key, app.auth.last if counter is None else counter - 1,
+                      _nonce(app)).stream_line(*fields, extra=extra, bound=bound)
+
+
+def _nonce(app):
+    # a firmware before protocol 2 has no session nonce: its tags start with nothing (so the new
+    # tests can be run against it and fail for what they test)
+    return app.auth.nonce() if hasattr(app.auth, "nonce") else b""
+
+
+def tagged_chunk(app, off, data, key=TEST_KEY):
+    """A U,D line with ``data`` at ``off`` for ``app``'s open upload, tagged as host/board/linkauth.py does."""
+    from host.board.link import body, command
+    from host.board.linkauth import LinkSigner
+    f = ("U", "D", off, data.hex().upper())
+    return command(*(f + (LinkSigner(key).tag(body(f), b"", app.link.upload_id).hex().upper(),)))
+
+
+def signer_for(app, key=TEST_KEY):
+    """A LinkSigner that knows ``app``'s last counter and session nonce, as a controller reading its hello."""
+    from host.board.linkauth import LinkSigner
+    return LinkSigner(key, app.auth.last, _nonce(app))
 
 
 def modbus_auth_block(app, req, key=TEST_KEY):
@@ -91,7 +116,7 @@ def modbus_auth_block(app, req, key=TEST_KEY):
         values = [req[4] << 8 | req[5]]
     else:
         values = [req[7 + 2 * i] << 8 | req[8 + 2 * i] for i in range(req[5])]
-    regs = LinkSigner(key, app.auth.last).modbus_auth(1, start, values)
+    regs = LinkSigner(key, app.auth.last, _nonce(app)).modbus_auth(1, start, values)
     return bytes([1, 16, 0, 8, 0, 10, 20]) + b"".join(v.to_bytes(2, "big") for v in regs)
 
 

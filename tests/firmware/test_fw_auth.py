@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from firmware.wire import UPLOADING
-from fwhelpers import (cmd, compile_mpy, frames, make_table, provision, rig_app, run_cycles, run_micropython,
+from fwhelpers import (tagged_chunk, cmd, compile_mpy, frames, make_table, provision, rig_app, run_cycles, run_micropython,
                        scmd, table_fields, TEST_KEY)
 
 NAMES = ["T%d" % i for i in range(1, 12)]
@@ -82,7 +82,7 @@ def test_unsigned_commands_are_refused_and_change_nothing(tmp_path, line):
 
 def test_board_without_key_refuses_even_a_signed_command(tmp_path):
     app, board = rig_app(tmp_path, key=None)
-    assert frames(board.serial.take())[0][-1] == "-"  # the hello: no key
+    assert frames(board.serial.take())[0][-2] == "-"  # the hello: no key
     out = send(app, board, scmd(app, "U", "X"))
     assert out[0][3:7] == ["E", "8", "auth", "no key"]
 
@@ -103,7 +103,7 @@ def test_counter_survives_a_reset_with_one_write_per_64(tmp_path):
     assert writes == ["auth.bin", "auth.bin"] and app.auth.last == 70
     app = App(board)  # reset
     hello = frames(board.serial.take())[0]
-    assert hello[-1] == "130"  # the stored mark: 64 ahead of counter 66, the first beyond the mark of 65
+    assert hello[-2] == "130"  # the stored mark: 64 ahead of counter 66, the first beyond the mark of 65
     assert send(app, board, lines[-1])[0][3:7] == ["E", "8", "auth", "replayed counter"]
     assert send(app, board, scmd(app, "U", "X", counter=130))[0][3:7] == ["E", "8", "auth", "replayed counter"]
     assert send(app, board, scmd(app, "U", "X"))[0][3:6] == ["A", "U", "X"]
@@ -120,9 +120,10 @@ def test_L_and_flash_writes_are_rate_limited(tmp_path):
     writes = []
     replace = app.store.replace_file
     app.store.replace_file = lambda n, d: writes.append(n) or replace(n, d)
-    out = [send(app, board, scmd(app, "L"))[0] for _ in range(300)]
+    out = [o for _ in range(300) for o in send(app, board, scmd(app, "L"))]
     assert sum(o[3] == "A" for o in out) == 3  # 4 tokens: the counter mark, then 3 latches
-    assert sum(o[3:5] == ["E", "9"] for o in out) == 297
+    # the other 297 are refused busy (their E frames as far as the error-frame rate limit lets them out)
+    assert all(o[3:5] == ["E", "9"] for o in out if o[3] != "A") and len(out) > 3
     assert writes.count("refs.bin") == 3 and len(writes) == 4
     for _ in range(121):  # two minutes later two more: a new counter mark, and the latch
         app.cycle()
@@ -139,7 +140,7 @@ def test_second_begin_does_not_restart_an_open_upload_and_idle_upload_times_out(
     board.serial.take()
     data = make_table(kind="linear_direct", sensors=NAMES, S0=5)
     assert _upload_head(app, board, data)[0][3:6] == ["A", "U", "B"]
-    assert send(app, board, cmd(b"TC,U,D,0,%s" % data[:48].hex().upper().encode()))[0][3:7] == ["A", "U", "D", "48"]
+    assert send(app, board, tagged_chunk(app, 0, data[:48]))[0][3:7] == ["A", "U", "D", "48"]
     assert _upload_head(app, board, data)[0][3:7] == ["E", "5", "state", "upload open"]
     assert app.store._up[3] == 48  # the open upload kept its bytes
     run_cycles(app, board, 2)
@@ -155,7 +156,7 @@ def test_commit_tag_covers_the_table(tmp_path):
     data = make_table(kind="linear_direct", sensors=NAMES, S0=5)
     _upload_head(app, board, data)
     for off in range(0, len(data), 48):
-        send(app, board, cmd(b"TC,U,D,%d,%s" % (off, data[off:off + 48].hex().upper().encode())))
+        send(app, board, tagged_chunk(app, off, data[off:off + 48]))
     other = hashlib.sha256(data[:-1] + b"\x00").digest()
     assert send(app, board, scmd(app, "U", "C", extra=other))[0][3:7] == ["E", "8", "auth", "bad tag"]
     assert app.store.uploading and app.slot == 0  # still open, old table in force

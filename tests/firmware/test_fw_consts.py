@@ -30,6 +30,7 @@ COPIES = {
     ("ads122c04", "_NO_DATA"): ("drivers", "NO_DATA"),
     ("max31865", "_FAULT"): ("drivers", "FAULT"),
     ("protocol", "_AUTH_BUSY"): ("auth", "BUSY"),
+    ("protocol", "_BAD_TAG"): ("auth", "BAD_TAG"),
     ("protocol", "_UNSIGNED"): ("auth", "UNSIGNED"),
     ("modbus", "_UNSIGNED"): ("auth", "UNSIGNED"),
 }
@@ -61,6 +62,14 @@ def test_wire_contract_copies_match_wire_py():
     # the authorisation's sizes are folded where they are used, on both sides of the check
     for fn in ("auth", "protocol"):
         assert {"_TAG_BYTES", "_MAX_COUNTER"} <= set(consts(fn)), fn
+
+
+def test_auth_reasons_are_the_wire_contract():
+    # E,8,auth,<reason> and Modbus input register 50 (firmware/auth.py REASONS, firmware/wire.py AUTH_REASONS)
+    from firmware import auth, wire
+    assert [r.decode() for r in auth.REASONS] == list(wire.AUTH_REASONS)
+    assert (auth.JUMP, auth.EXHAUSTED) == (wire.AUTH_REASONS.index("counter jump"),
+                                           wire.AUTH_REASONS.index("counter exhausted"))
 
 
 BYTES_CONST = re.compile(r"^(_[A-Z][A-Z0-9_]*) = const\(b\"([^\"]*)\"\)", re.M)

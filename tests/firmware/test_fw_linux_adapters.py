@@ -104,7 +104,7 @@ def test_app_runs_on_cpython_adapters(tmp_path):
     app.run(max_cycles=10)
     assert app.channels.good[0] and abs(app.channels.temp[0] - 25000) <= 3
     lines = ser.tx.split(b"\r\n")
-    assert lines[0].startswith(b"$TC,0,") and b",H,1," in lines[0]
+    assert lines[0].startswith(b"$TC,0,") and b",H,2," in lines[0]
     assert b",T," in lines[1] and b",!40" in lines[1]  # asked before the first good reading
     ser.rx += b"$TC,S*56EA\r\n"
     app.run(max_cycles=12)

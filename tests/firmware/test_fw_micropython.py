@@ -64,13 +64,15 @@ f.close()
 f = open("signed.txt", "rb")  # lines signed on the host (host/board/linkauth.py)
 signed = [x + b"\r\n" for x in f.read().split(b"\n")]
 f.close()
+cycles(3)  # the error-frame budget refills (protocol.py: E frames are rate-limited)
 # without authorisation: refused, nothing changes
 for cmd in (b"TC,L", b"TC,X", b"TC,U,X", b"TC,U,B,%d,%08X" % (len(data), crc32(data))):
     send(line(cmd))
 print("UNSIGNED", app.slot, app.store.uploading, app.auth.last)
+cycles(3)
 send(signed[0])  # U,B
-for off in range(0, len(data), 40):
-    send(line(b"TC,U,D,%d," % off + binascii.hexlify(data[off:off + 40]).upper()))
+for x in signed[6:]:  # the chunks, each tagged for this upload
+    send(x)
 send(signed[1])  # U,C over another table's sha256: refused, the upload stays open
 send(signed[2])  # U,C
 send(signed[2])  # replayed: nothing is open to commit
@@ -99,15 +101,18 @@ print(acc, app.slot, app.cycles, "%08X" % app.status, app.auth.last)
 def _signed_lines(new, other):
     import hashlib
     import zlib
-    from fwhelpers import TEST_KEY
+    from fwhelpers import TEST_KEY, TEST_NONCE
     from host.board.linkauth import LinkSigner
-    s = LinkSigner(TEST_KEY)
-    lines = [s.stream_line("U", "B", len(new), "%08X" % zlib.crc32(new)),
-             s.stream_line("U", "C", extra=hashlib.sha256(other).digest()),
-             s.stream_line("U", "C", extra=hashlib.sha256(new).digest())]
-    lines.append(LinkSigner(bytes(32), s.counter).stream_line("L"))
+    up = LinkSigner(TEST_KEY, 0, TEST_NONCE).upload_lines(new, 40)  # U,B (counter 1), the tagged chunks, U,C
+    s = LinkSigner(TEST_KEY, 1, TEST_NONCE)
+    upload_id = TEST_NONCE + b"\x00\x00\x00\x01"
+    lines = [up[0],
+             s.stream_line("U", "C", extra=hashlib.sha256(other).digest(), bound=upload_id),
+             s.stream_line("U", "C", extra=hashlib.sha256(new).digest(), bound=upload_id)]
+    lines.append(LinkSigner(bytes(32), s.counter, TEST_NONCE).stream_line("L"))
     lines.append(s.stream_line("L"))
-    lines.append(LinkSigner(TEST_KEY, 1).stream_line("L"))
+    lines.append(LinkSigner(TEST_KEY, 1, TEST_NONCE).stream_line("L"))
+    lines += up[1:-1]  # the chunks, from signed[6] on
     return b"\n".join(x.rstrip(b"\r\n") for x in lines)
 
 

@@ -6,7 +6,7 @@ from hypothesis import given, settings, strategies as st, HealthCheck
 
 import hashlib
 
-from fwhelpers import cmd, frames, rig_app, run_cycles, make_table, scmd
+from fwhelpers import TEST_NONCE, tagged_chunk, cmd, frames, rig_app, run_cycles, make_table, scmd
 from fwfakes import FakeSerial
 from firmware import frame as fr
 from firmware.crc16 import crc16_ccitt, crc16_modbus
@@ -103,11 +103,12 @@ def test_hello_at_boot(tmp_path):
     app, board = rig_app(tmp_path)
     f = frames(board.serial.take())
     h = f[0]
-    assert h[3] == "H" and h[4] == "1" and h[5] == "0.1.0" and h[6] == "A"
+    assert h[3] == "H" and h[4] == "2" and h[5] == "0.1.0" and h[6] == "A"
     assert int(h[7], 16) == app.table.crc
     assert h[8] == app.table.provenance[:8].hex().upper()
-    # "-": fixed reference temperatures; "0": the last authorisation counter (a key is provisioned)
-    assert h[9:] == ["poly_slope", "X", "11", "-", "0"]
+    # "-": fixed reference temperatures; "0": the last authorisation counter (a key is provisioned);
+    # then the session nonce the fakes' board drew at boot
+    assert h[9:] == ["poly_slope", "X", "11", "-", "0", TEST_NONCE.hex().upper()]
 
 
 def test_no_table_hello_and_reason(tmp_path):
@@ -217,7 +218,7 @@ def upload(app, board, data, chunk=48, cut=None):
     for off in range(0, len(data), chunk):
         if cut is not None and off >= cut:
             return None
-        out = app_out(app, board, cmd(b"TC,U,D,%d,%s" % (off, data[off:off + chunk].hex().upper().encode())))
+        out = app_out(app, board, tagged_chunk(app, off, data[off:off + chunk]))
         assert out[-1][3:6] == ["A", "U", "D"], out
         assert int(out[-1][6]) == min(off + chunk, len(data))
     return app_out(app, board, scmd(app, "U", "C", extra=hashlib.sha256(data).digest()))
@@ -270,7 +271,7 @@ def test_upload_chunk_out_of_order_rejected(tmp_path):
     app, board = rig_app(tmp_path)
     data = make_table(kind="linear_direct", sensors=["T1"])
     app_out(app, board, scmd(app, "U", "B", len(data), "%08X" % zlib.crc32(data)))
-    out = app_out(app, board, cmd(b"TC,U,D,10,%s" % data[10:20].hex().encode()))
+    out = app_out(app, board, tagged_chunk(app, 10, data[10:20]))
     assert out[0][3] == "E" and out[0][5] == "state"
     out = app_out(app, board, scmd(app, "U", "X"))
     assert out[0][3:6] == ["A", "U", "X"] and not app.store.uploading

@@ -5,6 +5,8 @@ import socket
 import threading
 import time
 
+import pytest
+
 from firmware.linux_adapters import make_linux_board
 from host.board.link import command
 from hil_tests.rig.realport import RealDut
@@ -88,3 +90,18 @@ def test_monitor_accepts_a_hello_with_its_protocol_version(tmp_path):
     out = tmp_path / "m.json"
     assert main(["monitor", "--port", _serve(hello), "--count", "1", "--duration", "5", "--json", str(out)]) == 0
     assert json.loads(out.read_text())["rows"][0]["flags"] == "NO_TABLE"
+
+
+@pytest.mark.parametrize("counter", ["1000000063", "12x", "-5"])
+def test_monitor_latch_refuses_a_bad_hello_counter_in_one_line(tmp_path, capsys, counter):
+    """Issue 24 hole 5: a hello counter above MAX (after a power cut at counter 999,999,999 on an older
+    firmware) or not a number: one clear error naming the counter, no traceback."""
+    from firmware.wire import FIRMWARE_VERSION, PROTOCOL_VERSION
+    from host.board.linkauth import write_key
+    write_key(str(tmp_path / "k"), bytes(range(32)))
+    hello = command(0, "00200000", "H", PROTOCOL_VERSION, FIRMWARE_VERSION, "-", "-", "-", "-", "-", 3, "-",
+                    counter, "0A0B0C0D")
+    assert main(["monitor", "--port", _serve(hello), "--latch", "--key", str(tmp_path / "k"),
+                 "--duration", "5"]) == 2
+    err = capsys.readouterr().err
+    assert "counter" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1, err

@@ -254,16 +254,22 @@ def test_stream_link_sends_p_and_q_and_decodes_answers():
 
 def test_stream_link_signs_l_with_the_board_counter():
     from host.board.linkauth import LinkSigner
-    hello = b"TC,0,00000000,H,1,0.1.0,A,0ABCAE5F,0001020304050607,poly_slope,X,3,S,41"
+    hello = b"TC,0,00000000,H,2,0.1.0,A,0ABCAE5F,0001020304050607,poly_slope,X,3,S,41,0A0B0C0D"
     port = FakePort(b"$" + hello + b"*%04X\r\n" % crc16(hello))
     signer = LinkSigner(b"k" * 32)
     link = StreamLink(lambda: port, signer=signer)
     link.exchange(0)
-    assert signer.counter == 41
+    assert signer.counter == 41 and signer.nonce == bytes.fromhex("0A0B0C0D")
+    # L waits for a fresh hello (the session nonce moves on): V goes out, L is signed when the hello comes
+    port.tx.clear()
+    link.exchange(0, latch=True)
+    assert bytes(port.tx).startswith(b"$TC,V*") and b"$TC,L," not in bytes(port.tx)
+    hello = b"TC,1,00000000,H,2,0.1.0,A,0ABCAE5F,0001020304050607,poly_slope,X,3,S,41,0A0B0C0E"
     refused = b"TC,3,00000000,E,8,auth,replayed counter"
-    port.rx += b"$" + refused + b"*%04X\r\n" % crc16(refused)
-    ex = link.exchange(0, latch=True)
-    assert b"$TC,L,42," in bytes(port.tx) and ex.latch == "refused:auth,replayed counter"
+    port.rx += b"$" + hello + b"*%04X\r\n" % crc16(hello) + b"$" + refused + b"*%04X\r\n" % crc16(refused)
+    ex = link.exchange(0)
+    want = LinkSigner(b"k" * 32, 41, bytes.fromhex("0A0B0C0E")).stream_line("L")
+    assert want in bytes(port.tx) and ex.latch == "refused:auth,replayed counter"
     assert link.want_hello
 
 

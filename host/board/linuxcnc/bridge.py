@@ -72,6 +72,7 @@ class StreamLink:
         self.next_open = 0.0
         self.decoder = StreamDecoder()
         self.latch_pending = False
+        self.latch_wanted = False  # a signed L waits for the hello that carries the session nonce it needs
 
     def exchange(self, pos_um, latch=False, spindle_rpm=None):
         ex = Exchange()
@@ -80,8 +81,13 @@ class StreamLink:
         if self.want_hello:
             out = command("V") + out
             self.want_hello = False
-        if latch:
-            out += self.signer.stream_line("L") if self.signer else command("L")
+        if latch and self.signer is not None:
+            # the tag needs the board's current session nonce: ask for the hello, sign L when it comes
+            self.latch_wanted = True
+            if not out.startswith(command("V")):
+                out = command("V") + out
+        elif latch:
+            out += command("L")
             self.latch_pending = True
         try:
             if self.ser is None:
@@ -99,6 +105,7 @@ class StreamLink:
         except (OSError, ValueError) as exc:  # serial.SerialException is an OSError
             ex.error = str(exc) or type(exc).__name__
             self.latch_pending = False
+            self.latch_wanted = False
             self.close()
         while self.decoder.bad:
             ex.malformed.append(self.decoder.bad.pop(0)[1])
@@ -115,9 +122,17 @@ class StreamLink:
             ex.latch = "ok:" + (f.fields[1] if len(f.fields) > 1 else "")
         elif f.kind == "H" and self.signer is not None and f.fields:
             try:
-                self.signer.observe(f.fields[-1])
-            except ValueError:
-                pass  # an old firmware's hello ends with the refs letter: no counter
+                self.signer.observe_hello(f.fields)
+                line = self.signer.stream_line("L") if self.latch_wanted else None
+            except ValueError as exc:  # host.board.linkauth.CounterError: an old firmware's hello, a bad counter
+                line = None
+                if self.latch_wanted:
+                    ex.latch = "refused:" + str(exc)
+            if self.latch_wanted:
+                self.latch_wanted = False
+                if line is not None:
+                    self.ser.write(line)
+                    self.latch_pending = True
         elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["5"], ["8"], ["9"]):
             # 5 state (no table, fixed references, sensor faulty), 8 auth (unsigned, bad tag,
             # replayed counter...), 9 busy
@@ -175,9 +190,11 @@ class ModbusLink:
                 ex.readings.append(Reading(_s16(r[3]) / 10.0, pos, r[0] | (r[1] << 16), r[2]))
             if latch:
                 if self.signer is not None:  # the auth block (holding 8..17) for this very write
-                    cr = self.client.read_input_registers(48, count=2, device_id=self.address)
+                    # the last counter (48-49) and the session nonce (51-52) the tag must use
+                    cr = self.client.read_input_registers(48, count=5, device_id=self.address)
                     if not cr.isError():
-                        self.signer.observe((cr.registers[0] << 16) | cr.registers[1])
+                        r = cr.registers
+                        self.signer.observe((r[0] << 16) | r[1], (r[3] << 16) | r[4])
                     self.client.write_registers(8, self.signer.modbus_auth(self.address, 7, [1]),
                                                 device_id=self.address)
                 lr = self.client.write_register(7, 1, device_id=self.address)

@@ -37,9 +37,11 @@ def _mpremote(explicit):
     return here if os.path.exists(here) else (shutil.which("mpremote") or "mpremote")
 
 
-def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=True, key=None):
+def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=True, key=None, new_key=False):
     """Lay out the board's flash under ``dest``; returns {remote dir: [local files]} and the table dir.
-    ``key``: the board key (bytes), staged as ``<table dir>/key.bin`` (mode 0600)."""
+    ``key``: the board key (bytes), staged as ``<table dir>/key.bin`` (mode 0600); ``new_key``: it was
+    just created, so ``auth.bin`` is staged too, starting its counters at 0 (re-provisioning,
+    docs/protocol.md "Counters")."""
     from host.errors import UserError
     files = {}
     if firmware:
@@ -124,6 +126,13 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
         with os.fdopen(fd, "wb") as f:
             f.write(key)
         files.setdefault(tdir, []).append(p)
+        if new_key:  # both names: the board reads a complete auth.bin.new first (firmware/auth.py)
+            from host.board.linkauth import counter_mark
+            for name in ("auth.bin", "auth.bin.new"):
+                p = os.path.join(dest, tdir, name)
+                with open(p, "wb") as f:
+                    f.write(counter_mark(0))
+                files[tdir].append(p)
     return files, tdir
 
 
@@ -268,7 +277,8 @@ def run(args):
     tmp = tempfile.mkdtemp(prefix="tcomp-flash-")
     keep = False
     try:
-        files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware, key)
+        files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware, key,
+                            key is not None and created)
         argv = command(args.port, files, _mpremote(args.mpremote), args.reset)
         if args.dry_run:
             # The printed command copies these staged files: they stay until the user has used (or dropped) it.

@@ -50,28 +50,6 @@ def offset_problem(f):
     return None
 
 
-def hello_counter(f, port):
-    """The authorisation counter of a hello frame (last field): None for '-' (the board has no key), else an int in
-    0..MAX_COUNTER; anything else is a UserError (a signed command needs a counter above it)."""
-    from host.errors import UserError
-    from host.board.linkauth import MAX_COUNTER
-
-    text = f.fields[-1] if f.fields else "(none)"
-    if text == "-":
-        return None
-    if not _INTEGER.match(text) or text.startswith("-"):
-        raise UserError("%s: the board's hello reports the authorisation counter %r, not a number; cannot sign L "
-                        "(docs/protocol.md)" % (port, text[:40]))
-    value = int(text)
-    if value > MAX_COUNTER:
-        raise UserError("%s: the board's hello reports the authorisation counter %d, above the largest %d; no signed "
-                        "command can follow it: provision a new key (tcomp flash --key NEWFILE)" % (port, value, MAX_COUNTER))
-    if value == MAX_COUNTER:
-        raise UserError("%s: the board's authorisation counter is at its largest, %d; no signed command is left for "
-                        "this key: provision a new key (tcomp flash --key NEWFILE)" % (port, value))
-    return value
-
-
 def row(f):
     """A decoded frame as the monitor's columns."""
     from host.board.link import STATUS_BITS
@@ -170,10 +148,12 @@ def _monitor(args, outputs):
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
                 if args.latch and not latch_sent and f.kind == "H":
-                    counter = hello_counter(f, args.port)
-                    if counter is not None:
-                        signer.observe(counter)
-                    ser.write(signer.stream_line("L"))
+                    try:
+                        signer.observe_hello(f.fields)
+                        line = signer.stream_line("L")
+                    except ValueError as exc:  # host.board.linkauth.CounterError: the hello's counter or nonce
+                        raise UserError("%s: --latch: %s" % (args.port, exc))
+                    ser.write(line)
                     latch_sent = True
                 if latch_sent and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]
                                                      or f.kind == "E" and f.fields[:1] in (["5"], ["8"], ["9"])):
