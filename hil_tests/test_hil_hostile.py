@@ -238,15 +238,16 @@ def stream_names(rig, tally, table):
 
 def stream_garbage(rig, tally, n_bytes=1000):
     rig.advance(200)
-    rig.take_raw()
+    n0 = len(rig.frames)
     junk = (b"$x\n\xff\r\n" * (n_bytes // 6 + 1))[:n_bytes]
     t0 = rig.t_ms
     for k in range(0, len(junk), 100):  # 100 bytes every 10 ms: about a 115200-baud line's rate
         rig.write(junk[k:k + 100])
         rig.advance(10)
     rig.advance(100)
-    out = rig.take_raw()
-    e_bytes = sum(len(line) + 2 for line in out.split(b"\r\n") if b",E," in line[:20])
+    e = [f for f in rig.frames[n0:] if f.kind == "E"]
+    assert e, "no E frame at all: the garbage did not reach the board"
+    e_bytes = sum(len(f.raw) + 2 for f in e)
     elapsed = rig.t_ms - t0
     bound = (wire.E_BURST + elapsed // wire.E_REFILL_MS + 2) * 64
     tally.count("garbage", e_bytes <= bound, "%d bytes of E frames for %d bytes of garbage (bound %d)"
