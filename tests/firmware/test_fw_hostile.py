@@ -444,6 +444,8 @@ def test_hole5_reprovisioning_with_a_new_key_starts_its_counters_again(tmp_path)
     files, tdir = stage(str(tmp_path / "stage"), key=key, new_key=created, firmware=False, table_dir="tables")
     for p in files[tdir]:  # what mpremote copies onto the board
         (tables / os.path.basename(p)).write_bytes(open(p, "rb").read())
+    from host.board.linkauth import write_key
+    write_key(str(tmp_path / "new.key"), key)  # tcomp flash writes the key file once the board holds it
     board = make_rig(2, 1, table_dir=str(tables), serial_size=1 << 20)
     app = App(board)
     run_cycles(app, board, 3)

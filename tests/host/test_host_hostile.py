@@ -471,9 +471,11 @@ def _pty_board(frames, delay=0.3):
 
 
 def _hello(counter):
+    from firmware.wire import PROTOCOL_VERSION
     from host.board.link import command
 
-    return command(3, "00000000", "H", "1", "0.1.0", "A", "0ABCAE5F", "0001020304050607", "poly_slope", "X", "11", "-", counter)
+    return command(3, "00000000", "H", str(PROTOCOL_VERSION), "0.1.0", "A", "0ABCAE5F", "0001020304050607", "poly_slope",
+                   "X", "11", "-", counter, "0A0B0C0D")
 
 
 HOLE9 = [
@@ -520,9 +522,9 @@ def test_hole9_no_call_ends_in_a_traceback(world):
                   and os.listdir(fmt["o"]) == [])
     key = os.path.join(world, "k.key")
     from host.board.linkauth import MAX_COUNTER
-    for counter, words in (("abc", "counter 'abc', not a number"), ("-5", "counter '-5', not a number"),
-                           (str(MAX_COUNTER + 64), "counter %d, above the largest %d" % (MAX_COUNTER + 64, MAX_COUNTER)),
-                           (str(MAX_COUNTER), "counter is at its largest")):
+    for counter, words in (("abc", "counter 'abc' is not a number"), ("-5", "counter '-5' is not a number"),
+                           (str(MAX_COUNTER + 64), "counter %d is above the largest, %d" % (MAX_COUNTER + 64, MAX_COUNTER)),
+                           (str(MAX_COUNTER), "counter reached %d, the largest" % MAX_COUNTER)):
         port, fds = _pty_board([_hello(counter)])
         try:
             outcome = call(["monitor", "--port", port, "--latch", "--key", key])
