@@ -799,3 +799,23 @@ def test_property_hole10_import_scales(tmp_path, scale, time_scale):
     assert np.all(np.isfinite(run.temperatures.time_s)) and run.temperatures.time_s[-1] <= 366 * 86400
     assert np.allclose(run.errors.error_um, np.array([1.5, 2.5, -0.5]) * float(scale))
     assert np.all(np.abs(run.errors.error_um) <= 10000)
+
+
+def test_flash_reads_a_board_files_config_without_running_it(world, tmp_path):
+    """The table's sensors are checked against a --board file's CONFIG (firmware/boards/rp2040.py builds it with a
+    comprehension); a CONFIG that would need the file to run is never evaluated: a warning says nothing was checked."""
+    table = os.path.join(world, "t.bin")
+    rp2040 = os.path.join(ROOT, "firmware", "boards", "rp2040.py")
+    outcome = call(["flash", "--port", "/dev/null", "--table", table, "--board", rp2040, "--dry-run", "--no-firmware"])
+    kept = outcome.err.split("kept in ")[-1].split(";")[0]
+    shutil.rmtree(kept, ignore_errors=True)
+    assert outcome.rc == 0 and "warning" not in outcome.err, outcome.err  # T1..T3 are channels of rp2040.py
+    marker = tmp_path / "ran"
+    evil = tmp_path / "evil.py"
+    for config in ('__import__("os").mkdir(%r)' % str(marker), '[c for c in ().__class__.__base__.__subclasses__()]',
+                   '{"channels": [{"name": "T%d" % i} for i in range(10 ** 9)]}', '"%0999999999d" % 1'):
+        evil.write_text("CONFIG = %s\n" % config)
+        outcome = call(["flash", "--port", "/dev/null", "--table", table, "--board", str(evil), "--dry-run", "--no-firmware"])
+        shutil.rmtree(outcome.err.split("kept in ")[-1].split(";")[0], ignore_errors=True)
+        assert outcome.rc == 0 and "has no CONFIG dict that can be read without running the file" in outcome.err, outcome.err
+        assert not marker.exists()
