@@ -24,7 +24,6 @@ import os
 import shutil
 import stat
 import sys
-import threading
 import time
 import warnings
 
@@ -455,16 +454,23 @@ def _one_row_run(world, rows=1):
     return write_run(_small_run(error_rows=rows), os.path.join(world, "short%d" % rows))
 
 
-def _pty_board(frames, delay=0.3):
-    """A pty standing in for a board that sends ``frames`` (bytes) once, ``delay`` s after the call starts."""
+def _pty_board(frames):
+    """A pty standing in for a board that answers the monitor's first command (V) with ``frames`` (bytes).
+    Answering, not sending at a time: pySerial empties the input when it opens the port."""
+    import select
+    import threading
+    import tty
+
     master, slave = os.openpty()
+    tty.setraw(slave)
 
-    def feed():
-        time.sleep(delay)
-        for f in frames:
-            os.write(master, f)
+    def answer():
+        if select.select([master], [], [], 30.0)[0]:
+            os.read(master, 4096)
+            for f in frames:
+                os.write(master, f)
 
-    threading.Thread(target=feed, daemon=True).start()
+    threading.Thread(target=answer, daemon=True).start()
     return os.ttyname(slave), (master, slave)
 
 
@@ -718,9 +724,9 @@ def test_hole10_nothing_is_accepted_silently(world, monkeypatch):
               command(2, "00000000", "O", "1100", "5", "2.5", "inf", "0.00"),
               command(3, "00000000", "Q", "1200", "5", "1e999", "0.1", "0.00"),
               command(4, "00000000", "O", "1300", "5", "2.5", "0.1", "0.00")]
-    port, fds = _pty_board(frames, delay=0.1)
+    port, fds = _pty_board(frames)
     try:
-        outcome = call(["monitor", "--port", port, "--duration", "1.5", "--json", o + "/m.json", "--csv", o + "/m.csv"])
+        outcome = call(["monitor", "--port", port, "--hello", "--duration", "2", "--json", o + "/m.json", "--csv", o + "/m.csv"])
     finally:
         for fd in fds:
             os.close(fd)
