@@ -24,7 +24,6 @@ import os
 import shutil
 import stat
 import sys
-import threading
 import time
 import warnings
 
@@ -457,16 +456,23 @@ def _one_row_run(world, rows=1):
     return write_run(_small_run(error_rows=rows), os.path.join(world, "short%d" % rows))
 
 
-def _pty_board(frames, delay=0.3):
-    """A pty standing in for a board that sends ``frames`` (bytes) once, ``delay`` s after the call starts."""
+def _pty_board(frames):
+    """A pty standing in for a board that answers the monitor's first command (V) with ``frames`` (bytes).
+    Answering, not sending at a time: pySerial empties the input when it opens the port."""
+    import select
+    import threading
+    import tty
+
     master, slave = os.openpty()
+    tty.setraw(slave)
 
-    def feed():
-        time.sleep(delay)
-        for f in frames:
-            os.write(master, f)
+    def answer():
+        if select.select([master], [], [], 30.0)[0]:
+            os.read(master, 4096)
+            for f in frames:
+                os.write(master, f)
 
-    threading.Thread(target=feed, daemon=True).start()
+    threading.Thread(target=answer, daemon=True).start()
     return os.ttyname(slave), (master, slave)
 
 
@@ -722,9 +728,9 @@ def test_hole10_nothing_is_accepted_silently(world, monkeypatch):
               command(2, "00000000", "O", "1100", "5", "2.5", "inf", "0.00"),
               command(3, "00000000", "Q", "1200", "5", "1e999", "0.1", "0.00"),
               command(4, "00000000", "O", "1300", "5", "2.5", "0.1", "0.00")]
-    port, fds = _pty_board(frames, delay=0.1)
+    port, fds = _pty_board(frames)
     try:
-        outcome = call(["monitor", "--port", port, "--duration", "1.5", "--json", o + "/m.json", "--csv", o + "/m.csv"])
+        outcome = call(["monitor", "--port", port, "--hello", "--duration", "2", "--json", o + "/m.json", "--csv", o + "/m.csv"])
     finally:
         for fd in fds:
             os.close(fd)
@@ -802,3 +808,23 @@ def test_property_hole10_import_scales(tmp_path, scale, time_scale):
     assert np.all(np.isfinite(run.temperatures.time_s)) and run.temperatures.time_s[-1] <= 366 * 86400
     assert np.allclose(run.errors.error_um, np.array([1.5, 2.5, -0.5]) * float(scale))
     assert np.all(np.abs(run.errors.error_um) <= 10000)
+
+
+def test_flash_reads_a_board_files_config_without_running_it(world, tmp_path):
+    """The table's sensors are checked against a --board file's CONFIG (firmware/boards/rp2040.py builds it with a
+    comprehension); a CONFIG that would need the file to run is never evaluated: a warning says nothing was checked."""
+    table = os.path.join(world, "t.bin")
+    rp2040 = os.path.join(ROOT, "firmware", "boards", "rp2040.py")
+    outcome = call(["flash", "--port", "/dev/null", "--table", table, "--board", rp2040, "--dry-run", "--no-firmware"])
+    kept = outcome.err.split("kept in ")[-1].split(";")[0]
+    shutil.rmtree(kept, ignore_errors=True)
+    assert outcome.rc == 0 and "warning" not in outcome.err, outcome.err  # T1..T3 are channels of rp2040.py
+    marker = tmp_path / "ran"
+    evil = tmp_path / "evil.py"
+    for config in ('__import__("os").mkdir(%r)' % str(marker), '[c for c in ().__class__.__base__.__subclasses__()]',
+                   '{"channels": [{"name": "T%d" % i} for i in range(10 ** 9)]}', '"%0999999999d" % 1'):
+        evil.write_text("CONFIG = %s\n" % config)
+        outcome = call(["flash", "--port", "/dev/null", "--table", table, "--board", str(evil), "--dry-run", "--no-firmware"])
+        shutil.rmtree(outcome.err.split("kept in ")[-1].split(";")[0], ignore_errors=True)
+        assert outcome.rc == 0 and "has no CONFIG dict that can be read without running the file" in outcome.err, outcome.err
+        assert not marker.exists()

@@ -109,7 +109,7 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
             # Without the board's config the check cannot be made here; the board refuses such a table at boot.
             print("tcomp flash: warning: the table's sensors (%s) are not checked against the board's channels: %s"
                   % (", ".join(sensors), "give --config" if not board else
-                     "%s has no literal CONFIG dict to read them from" % board), file=sys.stderr)
+                     "%s has no CONFIG dict that can be read without running the file" % board), file=sys.stderr)
         missing = unwired_sensors(sensors, wiring) if wiring is not None else []
         if missing:
             raise UserError("%s: table sensor(s) %s have no channel in the board config %s" % (table, ", ".join(missing), source))
@@ -154,8 +154,32 @@ def board_dir(text, where):
     return "/".join(parts)
 
 
-_PURE_BUILTINS = {"range": range, "len": len, "dict": dict, "list": list, "tuple": tuple, "str": str, "int": int,
-                  "enumerate": enumerate, "zip": zip, "min": min, "max": max}
+def _plain_expression(node):
+    """True when expression ``node`` is data built without running anything of the file: literals, names bound
+    by its own comprehensions, + - % on them, comprehensions over ``range`` of constants up to 1000 (as
+    firmware/boards/rp2040.py's CONFIG). No attribute, subscript, call other than range, lambda or import: nothing
+    that reaches Python's objects, so evaluating it cannot run code; no '*' and small ranges keep it small."""
+    import ast
+
+    bound = {g.target.id for c in ast.walk(node) if isinstance(c, (ast.ListComp, ast.DictComp))
+             for g in c.generators if isinstance(g.target, ast.Name)}
+    allowed = (ast.Expression, ast.Constant, ast.Dict, ast.List, ast.Tuple, ast.ListComp, ast.DictComp,
+               ast.comprehension, ast.BinOp, ast.UnaryOp, ast.Add, ast.Sub, ast.Mod, ast.USub, ast.Load,
+               ast.Store, ast.Name, ast.Call)
+    for n in ast.walk(node):
+        if not isinstance(n, allowed):
+            return False
+        if isinstance(n, ast.Name) and n.id not in bound | {"range"}:
+            return False
+        if isinstance(n, ast.Call) and not (isinstance(n.func, ast.Name) and n.func.id == "range" and not n.keywords
+                                            and all(isinstance(a, ast.Constant) and isinstance(a.value, int)
+                                                    and abs(a.value) <= 1000 for a in n.args)):
+            return False
+        if isinstance(n, ast.Constant) and isinstance(n.value, str) and re.search(r"%[-+ #0]*[0-9]{3,}", n.value):
+            return False  # a field width that builds a huge string
+        if isinstance(n, ast.comprehension) and (n.ifs or n.is_async):
+            return False
+    return True
 
 
 def board_file_config(path):
@@ -174,11 +198,14 @@ def board_file_config(path):
             try:
                 cfg = ast.literal_eval(node.value)
             except ValueError:
-                # Computed (firmware/boards/rp2040.py builds its channels with a comprehension): the expression alone,
-                # with a few pure builtins and nothing imported. It is the user's own file, about to run on the board.
+                # Computed (firmware/boards/rp2040.py builds its channels with a comprehension): evaluated alone when
+                # it is plain data (_plain_expression), never the file; anything more is left to the board's boot check.
+                expression = ast.Expression(node.value)
+                if not _plain_expression(expression):
+                    return None
                 try:
-                    cfg = eval(compile(ast.Expression(node.value), path, "eval"), {"__builtins__": _PURE_BUILTINS})
-                except Exception:  # it needs more than that (a module, a helper): the board checks it at boot
+                    cfg = eval(compile(expression, path, "eval"), {"__builtins__": {}, "range": range})
+                except Exception:  # e.g. "T%d" % "x": not a config the board could boot either
                     return None
             if not isinstance(cfg, dict):
                 return None
