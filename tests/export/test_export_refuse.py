@@ -95,7 +95,7 @@ def test_cli_writes_table_report_and_header(tmp_path, capsys):
     assert {x["name"] for x in r["terms"]} >= {"thermal.coefficients_um_per_mm_per_K.%s" % s for s in doc["sensors"]}
     assert r["envelope"]["position_um"] == [0, int(doc["envelope"]["position_mm"][1] * 1000)]
     assert r["provenance_verified"] is True and bytes.fromhex(r["provenance_sha256"]) == t.provenance
-    assert "#define TCOMP_KIND 1" in hdr.read_text() and "TCOMP_TABLE_H" in hdr.read_text()
+    assert "#define TCOMP_KIND TCOMP_KIND_POLY_SLOPE\n" in hdr.read_text() and "#define TCOMP_KIND_POLY_SLOPE 1\n" in hdr.read_text() and "TCOMP_TABLE_H" in hdr.read_text()
     assert "certified max |integer - model|" in capsys.readouterr().out
 
 
