@@ -48,6 +48,20 @@ def test_private_copies_match_their_source():
         assert here[name] == getattr(importlib.import_module("firmware." + src), public), (mod, name)
 
 
+def test_every_kind_code_copy_is_the_tables():
+    # the table's kind codes are owned by firmware/table.py; any module's folded _KIND_* copy must agree
+    from firmware import table
+    checked = 0
+    for fn in sorted(os.listdir(FW)):
+        if fn.endswith(".py") and fn != "table.py":
+            for k, v in consts(fn[:-3]).items():
+                if k.startswith("_KIND_"):
+                    assert hasattr(table, k[1:]), (fn, k)
+                    assert v == getattr(table, k[1:]), (fn, k)
+                    checked += 1
+    assert checked >= 5  # evaluate.py's three, app.py's two
+
+
 def test_wire_contract_copies_match_wire_py():
     from firmware import wire
     checked = 0
