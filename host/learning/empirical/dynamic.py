@@ -37,6 +37,7 @@ evaluation costs O(k³ · groups) whatever the number of samples.
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
+from models_export.document import FORMAT
 
 # 0 (the signal itself), 15 min .. 16 h: from a sensor's own lag to two 8 h heating/cooling cycles of a machine structure
 TAUS_S = (0.0, 900.0, 1800.0, 3600.0, 7200.0, 14400.0, 28800.0, 57600.0)
@@ -376,7 +377,7 @@ class DynamicModel:
 
     def to_document(self):
         return {
-            "format": "tcomp-model/1", "kind": self.kind, "method": self.method, "axis": self.axis, "channel": self.channel,
+            "format": FORMAT, "kind": self.kind, "method": self.method, "axis": self.axis, "channel": self.channel,
             "sensors": list(self.sensors), "reference_C": dict(self.reference_C),
             "geometric": None if self.target == "direct" else {"degree": int(self.geometric_coef.size - 1),
                                                                "coefficients_um": [float(c) for c in self.geometric_coef]},

@@ -10,6 +10,7 @@ from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.dynamic import DynamicRegression, _lag_filter_fast, candidate_matrix, features, lag_filter, signals
 from host.learning.empirical.fitting import fit_model
 from host.learning.documents import ModelFormatError, load_model
+from models_export.document import FORMAT
 from host.data.runs import Errors
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
@@ -103,7 +104,7 @@ def test_slope_target_multiplies_by_position(make_slope):
     run = make_slope(n_sweeps=30, noise_um=0.01, duration_s=28800.0)
     model = fit_model([run], "dynamic", target="slope", taus_s=(0, 3600), cv_blocks=3)
     doc = model.to_document()
-    back = load_model(dict(doc, format="tcomp-model/1"))
+    back = load_model(dict(doc, format=FORMAT))
     e = run.errors
     expect = back.geometric(e.position_mm) + back.thermal_at(run, e.time_s) * e.position_mm
     np.testing.assert_allclose(back.predict(run), expect)
