@@ -19,6 +19,10 @@ import math
 import time
 from dataclasses import dataclass, field
 
+from firmware.wire import (
+    E_AUTH, E_BUSY, E_STATE, EX_DEVICE_FAILURE, HR_AUTH, HR_LATCH, HR_POSITION, HR_SLEW, HR_SPINDLE, IR_AUTH_COUNTER,
+    IR_POSITION, IR_SEQUENCE, IR_STATUS_HI, IR_STATUS_LO, IR_TOTAL,
+)
 from host.board.link import FALLBACK, StreamDecoder, command
 
 COUNT_UM = 0.1  # one eoffset count: the board's offset resolution (docs/protocol.md, 0.1 um)
@@ -118,12 +122,12 @@ class StreamLink:
                 self.signer.observe(f.fields[-1])
             except ValueError:
                 pass  # an old firmware's hello ends with the refs letter: no counter
-        elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["5"], ["8"], ["9"]):
+        elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["%d" % E_STATE], ["%d" % E_AUTH], ["%d" % E_BUSY]):
             # 5 state (no table, fixed references, sensor faulty), 8 auth (unsigned, bad tag,
             # replayed counter...), 9 busy
             self.latch_pending = False
-            ex.latch = "refused:" + ",".join(f.fields[1:] if f.fields[0] != "5" else f.fields[2:])
-            if f.fields[0] == "8":
+            ex.latch = "refused:" + ",".join(f.fields[1:] if f.fields[0] != "%d" % E_STATE else f.fields[2:])
+            if f.fields[0] == "%d" % E_AUTH:
                 self.want_hello = True  # the counter may be behind the board's
 
     def close(self):
@@ -142,7 +146,7 @@ def _s16(v):
 
 class ModbusLink:
     """Modbus RTU mode (pymodbus master): write the position (holding 3-4) and, when given, the
-    spindle speed (holding 18-19, int32 written whole), read input 0-9."""
+    spindle speed (holding 18-19, int32 written whole), read input 0-9 (firmware/wire.py's register map)."""
 
     def __init__(self, client, address=1, signer=None):
         self.client = client
@@ -150,9 +154,9 @@ class ModbusLink:
         self.signer = signer
 
     def slew_um_per_s(self):
-        """The board's slew limit (holding register 1), or None if it cannot be read."""
+        """The board's slew limit (holding register HR_SLEW), or None if it cannot be read."""
         try:
-            rr = self.client.read_holding_registers(1, count=1, device_id=self.address)
+            rr = self.client.read_holding_registers(HR_SLEW, count=1, device_id=self.address)
         except Exception:  # pymodbus raises its own exception tree (ModbusException, ConnectionException)
             return None
         return None if rr.isError() else rr.registers[0]
@@ -161,26 +165,26 @@ class ModbusLink:
         ex = Exchange()
         p = pos_um & 0xFFFFFFFF
         try:
-            w = self.client.write_registers(3, [p >> 16, p & 0xFFFF], device_id=self.address)
+            w = self.client.write_registers(HR_POSITION, [p >> 16, p & 0xFFFF], device_id=self.address)
             if spindle_rpm is not None and not w.isError():
                 r = spindle_rpm & 0xFFFFFFFF
-                w = self.client.write_registers(18, [r >> 16, r & 0xFFFF], device_id=self.address)
-            rr = self.client.read_input_registers(0, count=10, device_id=self.address)
+                w = self.client.write_registers(HR_SPINDLE, [r >> 16, r & 0xFFFF], device_id=self.address)
+            rr = self.client.read_input_registers(IR_STATUS_LO, count=IR_POSITION + 2, device_id=self.address)
             if w.isError() or rr.isError():
                 ex.error = "modbus exception %s" % (w if w.isError() else rr)
             else:
                 r = rr.registers
-                pos = (r[6] << 16) | r[7]
+                pos = (r[IR_POSITION] << 16) | r[IR_POSITION + 1]
                 pos = pos - (1 << 32) if pos & 0x80000000 else pos
-                ex.readings.append(Reading(_s16(r[3]) / 10.0, pos, r[0] | (r[1] << 16), r[2]))
+                ex.readings.append(Reading(_s16(r[IR_TOTAL]) / 10.0, pos, r[IR_STATUS_LO] | (r[IR_STATUS_HI] << 16), r[IR_SEQUENCE]))
             if latch:
                 if self.signer is not None:  # the auth block (holding 8..17) for this very write
-                    cr = self.client.read_input_registers(48, count=2, device_id=self.address)
+                    cr = self.client.read_input_registers(IR_AUTH_COUNTER, count=2, device_id=self.address)
                     if not cr.isError():
                         self.signer.observe((cr.registers[0] << 16) | cr.registers[1])
-                    self.client.write_registers(8, self.signer.modbus_auth(self.address, 7, [1]),
+                    self.client.write_registers(HR_AUTH, self.signer.modbus_auth(self.address, HR_LATCH, [1]),
                                                 device_id=self.address)
-                lr = self.client.write_register(7, 1, device_id=self.address)
+                lr = self.client.write_register(HR_LATCH, 1, device_id=self.address)
                 ex.latch = ("refused:exception %s" % getattr(lr, "exception_code", "?")) if lr.isError() else "ok:"
         except Exception as exc:  # no answer, CRC error (pymodbus drops the frame), port gone
             ex.error = str(exc) or type(exc).__name__
@@ -326,7 +330,7 @@ class Bridge:
             self.log("L acknowledged (refs %s)" % (reply[3:] or "latched"))
         else:
             why = reply.split(":", 1)[1]
-            retry = any(w in why for w in ("sensor faulty", "exception 4", "busy", "replayed"))
+            retry = any(w in why for w in ("sensor faulty", "exception %d" % EX_DEVICE_FAILURE, "busy", "replayed"))
             if not (retry and self.latch_tries_left):
                 self.latch_tries_left = 0
             self.out.latch_state = LATCH_REFUSED
