@@ -43,10 +43,11 @@ from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.scoring import disturb_run, evaluate
 from host.learning.empirical.fitting import fit_model
 
-METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-mlr", "maxtree-pcr", "maxtree-ann", "dynamic")
-SELECTORS = ("maxtree", "hclust-ga")
-# selector, then estimator on the chosen sensors (estimator settings: --option maxtree-pcr.KEY=V; selection: maxtree.KEY=V)
-PIPELINES = {"maxtree-mlr": ("maxtree", "mlr"), "maxtree-pcr": ("maxtree", "pcr"), "maxtree-ann": ("maxtree", "ann")}
+# the methods, the selectors run before MLR and the pipelines (selector, then estimator on the chosen sensors;
+# estimator settings: --option maxtree-pcr.KEY=V; selection: maxtree.KEY=V): the registry's (methods.py)
+from host.learning.empirical.methods import COMPARE_METHODS as METHODS
+from host.learning.empirical.methods import COMPARE_SELECTORS as SELECTORS
+from host.learning.empirical.methods import PIPELINES
 ROBUSTNESS = {"noise_C": 0.2, "offset_C": 0.5, "seed": 0, "repeats": 5}
 
 

@@ -12,12 +12,14 @@ import pytest
 
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.fitting import fit_model
-from host.learning.empirical.regression import ESTIMATORS
+from host.learning.empirical.methods import ESTIMATORS as METHOD_NAMES, estimator_class
 from host.learning.documents import KIND_CLASSES, load_model
 from models_export.document import DOCUMENT_KINDS
 from host.learning.screw import synth
 from host.learning.screw.identify import IdentifiabilityWarning
 from host.learning.screw.screwmodel import ScrewModel
+
+ESTIMATORS = {m: estimator_class(m) for m in METHOD_NAMES}  # the registry, its classes imported
 
 
 def _design(n=60, p=4, seed=0):
