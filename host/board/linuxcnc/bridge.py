@@ -23,7 +23,7 @@ from firmware.wire import (
     E_AUTH, E_BUSY, E_STATE, EX_DEVICE_FAILURE, HR_AUTH, HR_LATCH, HR_POSITION, HR_SLEW, HR_SPINDLE, IR_AUTH_COUNTER,
     IR_POSITION, IR_SEQUENCE, IR_STATUS_HI, IR_STATUS_LO, IR_TOTAL,
 )
-from host.board.link import FALLBACK, StreamDecoder, command
+from host.board.link import FALLBACK, StreamDecoder, command_line
 
 COUNT_UM = 0.1  # one eoffset count: the board's offset resolution (docs/protocol.md, 0.1 um)
 UM_PER_UNIT = {"mm": 1000.0, "inch": 25400.0}
@@ -79,13 +79,13 @@ class StreamLink:
 
     def exchange(self, pos_um, latch=False, spindle_rpm=None):
         ex = Exchange()
-        p = command("P", pos_um) if spindle_rpm is None else command("P", pos_um, spindle_rpm)
-        out = p + command("Q", pos_um)
+        p = command_line("P", pos_um) if spindle_rpm is None else command_line("P", pos_um, spindle_rpm)
+        out = p + command_line("Q", pos_um)
         if self.want_hello:
-            out = command("V") + out
+            out = command_line("V") + out
             self.want_hello = False
         if latch:
-            out += self.signer.stream_line("L") if self.signer else command("L")
+            out += self.signer.stream_line("L") if self.signer else command_line("L")
             self.latch_pending = True
         try:
             if self.ser is None:
@@ -243,7 +243,7 @@ class Inputs:
 
 
 @dataclass
-class Outputs:
+class BridgeOutputs:
     eoffset_counts: int = 0
     eoffset_scale: float = 0.0
     eoffset_enable: bool = True
@@ -284,7 +284,7 @@ class Bridge:
         self.log = log or (lambda msg: None)
         self.latch_retry_s = latch_retry_s
         self.latch_tries = latch_tries
-        self.out = Outputs(eoffset_scale=self.scale)
+        self.out = BridgeOutputs(eoffset_scale=self.scale)
         self.counts = 0
         self.last_now = None
         self.last_new_s = None     # when the last new reading arrived

@@ -60,7 +60,7 @@ def _monitor(args, outputs):
     import serial
 
     from firmware.wire import E_AUTH, E_BUSY, E_STATE
-    from host.board.link import PROTOCOL_VERSION, StreamDecoder, command
+    from host.board.link import PROTOCOL_VERSION, StreamDecoder, command_line
     from host.errors import UserError
     try:
         ser = serial.serial_for_url(args.port, args.baud, timeout=0.1)
@@ -91,9 +91,9 @@ def _monitor(args, outputs):
     latch_sent = False
     try:
         if args.hello or signer is not None and args.latch:
-            ser.write(command("V"))  # a signed L needs the board's last counter, the hello's last field
+            ser.write(command_line("V"))  # a signed L needs the board's last counter, the hello's last field
         if args.latch and signer is None:
-            ser.write(command("L"))
+            ser.write(command_line("L"))
             latch_sent = True
         while not (args.count and n >= args.count) and not (args.duration and time.monotonic() - start
                                                                >= args.duration):

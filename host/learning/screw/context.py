@@ -9,7 +9,7 @@ import numpy as np
 from host.learning.screw import heat
 
 
-def check_run(run, geometry=None, require_nut=True):
+def check_screw_run(run, geometry=None, require_nut=True):
     """ValueError naming what makes ``run`` unusable for the screw model.
 
     require_nut: identification needs a sensor with role 'nut' (diagnostic and

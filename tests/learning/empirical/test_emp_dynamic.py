@@ -114,14 +114,14 @@ def test_slope_target_multiplies_by_position(make_slope):
 def test_real_fl_thermal_dynamic_beats_static_on_the_held_out_cycles():
     """One fast real-data check: trained on the first three cycles with a small time-constant grid,
     the dynamic model predicts the held-out cycles of ch1 better than MLR on all 16 sensors."""
-    from host.learning.empirical.scoring import evaluate
+    from host.learning.empirical.scoring import score_model
     from host.data.runs import load_run
 
     run = load_run(os.path.join(ROOT, "data", "fl_thermal"))
     split = 86865.0  # start of the 4th spindle cycle (32.1 h)
     dyn = fit_model([run], "dynamic", target="direct", channel="ch1", window=(None, split), taus_s=(0, 1800, 14400), max_terms=4, ridge=0.0)
     mlr = fit_model([run], "mlr", target="direct", channel="ch1", window=(None, split), reference="run_start")
-    d, m = evaluate(dyn, run, (split, None))["rmse_um"], evaluate(mlr, run, (split, None))["rmse_um"]
+    d, m = score_model(dyn, run, (split, None))["rmse_um"], score_model(mlr, run, (split, None))["rmse_um"]
     assert d < 0.8 * m, (d, m)
 
 
