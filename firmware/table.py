@@ -22,6 +22,7 @@ NAME_FORBIDDEN = b",*$"  # besides non-printable bytes: the $TC frames' separato
 _VERSION = const(3)  # 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
+_AXIS_SIZE = const(8)
 _SENSOR_SIZE = const(20)  # per sensor: envelope lo, hi, reference, training lo, hi (int32 milli-degC)
 _MAX_SENSORS = const(24)
 _MAX_SEGMENTS = const(32)
@@ -34,7 +35,8 @@ _KIND_POLY_SLOPE = const(1)
 _KIND_LINEAR_DIRECT = const(2)
 _KIND_SCREW_REDUCED = const(3)
 _KIND_DYNAMIC = const(4)
-KINDS = {1: "poly_slope", 2: "linear_direct", 3: "screw_reduced", 4: "dynamic"}
+KINDS = {_KIND_POLY_SLOPE: "poly_slope", _KIND_LINEAR_DIRECT: "linear_direct", _KIND_SCREW_REDUCED: "screw_reduced",
+         _KIND_DYNAMIC: "dynamic"}
 _MAX_FILTERS = const(8)  # dynamic: lag-filtered terms (host/learning/empirical/dynamic.py max_terms)
 
 REASON_TRUNCATED = "truncated"
@@ -147,7 +149,7 @@ def parse_table(buf, expected_sensors=None):
     t.ref_mode = buf[56]
     t.edited = buf[57]
     t.provenance = bytes(buf[12:44])
-    t.axis = _name(buf, 44, 8)
+    t.axis = _name(buf, 44, _AXIS_SIZE)
     t.crc = stored
     t.sensors = []
     t.env_lo = []
@@ -160,25 +162,20 @@ def parse_table(buf, expected_sensors=None):
         if name in t.sensors:  # one channel would feed two coefficients
             raise TableError(REASON_FIELD, "sensor %s twice" % name)
         t.sensors.append(name)
-        lo, hi, ref, tlo, thi = struct.unpack_from("<iiiii", buf, _HEADER_SIZE + ns * _NAME_SIZE + _SENSOR_SIZE * i)
+        row = struct.unpack_from("<iiiii", buf, _HEADER_SIZE + ns * _NAME_SIZE + _SENSOR_SIZE * i)
+        lo, hi, ref, tlo, thi = row  # the order of SENSOR_FIELDS
         if lo > hi:
             raise TableError(REASON_FIELD, "sensor %s envelope %d > %d" % (t.sensors[i], lo, hi))
         if not lo <= tlo <= thi <= hi:
             raise TableError(REASON_FIELD, "sensor %s training range %d..%d not inside the envelope %d..%d"
                              % (t.sensors[i], tlo, thi, lo, hi))
-        t.train_lo.append(tlo)
-        t.train_hi.append(thi)
-        t.env_lo.append(lo)
-        t.env_hi.append(hi)
-        t.ref.append(ref)
+        k = 0
+        for name in SENSOR_FIELDS.split():
+            getattr(t, name).append(row[k])
+            k += 1
     w = [payload, payload + 4 * nwords]  # read offset, end
-    _fields(t, buf, w, _COMMON)
-    if kind == _KIND_DYNAMIC:
-        _fields(t, buf, w, _DYNAMIC)
-    if kind != _KIND_LINEAR_DIRECT and (kind != _KIND_DYNAMIC or t.positional):
-        _fields(t, buf, w, _POSITION)
-    if kind == _KIND_SCREW_REDUCED:
-        _fields(t, buf, w, _SCREW)
+    for spec in model_sections(kind, t):
+        _fields(t, buf, w, spec)
     if w[0] == w[1]:
         raise TableError(REASON_CERT, "missing")
     _fields(t, buf, w, _CERT)
@@ -213,12 +210,17 @@ _SCALE = const(1000)  # fraction bits of a coefficient (informational, not used 
 # statement per field (a third of the module's flash). A word is "name",
 # "name:r" (range-checked, r indexes _RANGE_CODES) or "name=n" (a list, n
 # indexes _COUNT_CODES); "|" runs a consistency check on what was read so far;
-# "@" is the per-sensor triple b[i] shb[i] fb[i].
+# "@" is one PER_SENSOR group per sensor (b[0] shb[0] fb[0] b[1] ...). These strings are the one
+# statement of the payload's order: the exporter (models_export/tableformat.py) writes by them and
+# the C header (models_export/cheader.py) takes its coefficient names from them.
 _RANGE_CODES = "fLn4scdMtFThaAPN"
 _LO = (0, 1, 1, 1, -_SH, -_SCALE, 0, 1, 1, 0, 0, 0, -1, -(1 << 30) + 1, 0, 1)
 _HI = (30, 29, 6, 4, _SH, _SCALE, _MAX_DEGREE, _MAX_SEGMENTS, 3600000, 1 << 20, (1 << 30) - 1, _SH, _MAX_SENSORS - 1, 0, 1,
        _MAX_FILTERS)
 _COUNT_CODES = "DdEQmj"  # degree + 1, degree, M + 1, M * M, M, nf
+PER_SENSOR = "b shb:s fb:c"  # a sensor's slope coefficient, its shift and its fraction bits
+# the per-sensor block between the names and the payload: int32 each, milli-degC (_SENSOR_SIZE bytes)
+SENSOR_FIELDS = "env_lo env_hi ref train_lo train_hi"
 _COMMON = "pos_lo pos_hi pos_ref | fo:f Lt:L nt:4 S0 fS:c @ rL"
 _POSITION = "Lw:L nw:n shw:s KS shK:s fK:f rK rT degree:d Lg:L ng:n G=D fG=D shg=d rO"
 # the certificate, last: the largest |offset_at|, |ref_offset| (0.01 um) and |slope| (0.01 um/m)
@@ -230,6 +232,26 @@ _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:
 # dynamic: first-order lags of temperature rises, spindle speed (and its square) and feed (docs/table-format.md)
 _DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F LX:L nX:4 LY:L nY:4 nf:N "
             "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j |")
+
+
+def model_sections(kind, t):
+    """The payload's sections before the certificate, in table order, for kind code ``kind``;
+    ``t`` has the fields read so far (a dynamic table's ``positional`` flag, read in its own section,
+    says whether the position section follows). The exporter writes exactly these."""
+    yield _COMMON
+    if kind == _KIND_DYNAMIC:
+        yield _DYNAMIC
+    if kind != _KIND_LINEAR_DIRECT and (kind != _KIND_DYNAMIC or t.positional):
+        yield _POSITION
+    if kind == _KIND_SCREW_REDUCED:
+        yield _SCREW
+
+
+def list_length(code, t):
+    """Entries of a list field whose count code (_COUNT_CODES) is ``code``, from the fields ``t`` has so far."""
+    g = getattr(t, "degree", 0)
+    m = getattr(t, "M", 0)
+    return (g + 1, g, m + 1, m * m, m, getattr(t, "nf", 0))[_COUNT_CODES.index(code)]
 
 
 def _take(buf, w, name, r=-1):
@@ -247,19 +269,16 @@ def _fields(t, buf, w, spec):
         if f == "|":
             _check(t)
         elif f == "@":
-            t.b = []
-            t.shb = []
-            t.fb = []
+            per = PER_SENSOR.split()
+            for p in per:
+                setattr(t, p.split(":")[0], [])
             for i in range(t.n_sensors):
-                t.b.append(_take(buf, w, "b[%d]" % i))
-                t.shb.append(_take(buf, w, "shb[%d]" % i, 4))
-                t.fb.append(_take(buf, w, "fb[%d]" % i, 5))
+                for p in per:
+                    name = p.split(":")[0]
+                    getattr(t, name).append(_take(buf, w, "%s[%d]" % (name, i), _RANGE_CODES.index(p[-1]) if ":" in p else -1))
         elif f[-2:-1] == "=":
-            g = getattr(t, "degree", 0)
-            m = getattr(t, "M", 0)
             name = f[:-2]
-            setattr(t, name, [_take(buf, w, "%s[%d]" % (name, i))
-                              for i in range((g + 1, g, m + 1, m * m, m, getattr(t, "nf", 0))[_COUNT_CODES.index(f[-1])])])
+            setattr(t, name, [_take(buf, w, "%s[%d]" % (name, i)) for i in range(list_length(f[-1], t))])
         elif f[-2:-1] == ":":
             setattr(t, f[:-2], _take(buf, w, f[:-2], _RANGE_CODES.index(f[-1])))
         else:

@@ -57,3 +57,54 @@ E_REFILL_MS = const(25)
 # refusal reasons of authorised commands: E,8,auth,<AUTH_REASONS[r]> (BUSY is E,9,busy), Modbus input register 50
 AUTH_REASONS = ("", "no key", "bad tag", "replayed counter", "counter not stored", "busy", "unsigned",
                 "counter jump", "counter exhausted")
+
+# Error frames E,<code>,<word>[,<detail>] (docs/protocol.md, "Error codes")
+E_CRC = const(1)  # crc: the line's CRC-16 does not match
+E_SYNTAX = const(2)  # syntax: not $TC,...*XXXX, wrong field count, bad characters
+E_UNKNOWN = const(3)  # unknown: command letter or upload step
+E_RANGE = const(4)  # range: a number malformed or out of range
+E_STATE = const(5)  # state: not possible now (no upload open, no table; for L: fixed references, sensor faulty)
+E_TABLE = const(6)  # table: a table refused (firmware/table.py reason)
+E_OVERFLOW = const(7)  # overflow: the line is longer than the receive buffer
+E_AUTH = const(8)  # auth: a command that changes the output is not authorised (firmware/auth.py)
+E_BUSY = const(9)  # busy: the flash-write budget is used up; retry later
+
+# Modbus RTU register map (docs/protocol.md, firmware/modbus.py). Input registers:
+IR_STATUS_LO = const(0)  # the status word's low and high halves
+IR_STATUS_HI = const(1)
+IR_SEQUENCE = const(2)
+IR_TOTAL = const(3)  # 0.1 um, int16, at the reported position
+IR_REF_OFFSET = const(4)  # 0.1 um, int16, at the reference position
+IR_SLOPE = const(5)  # 0.01 um/m, int16
+IR_POSITION = const(6)  # int32 um, high word first
+IR_REFERENCE = const(8)  # int32 um
+IR_TABLE_CRC = const(10)  # uint32
+IR_SLOT = const(12)  # 0 none, 1 A, 2 B
+IR_CHANNELS = const(13)
+IR_REF_STATE = const(14)  # index into REF_LETTERS: where the reference temperatures come from
+IR_UNMAPPED = const(15)  # the one hole in the map: exception 02
+IR_TEMPS = const(16)  # 16 x int16 0.01 degC, NO_VALUE when faulty
+IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
+IR_AUTH_COUNTER = const(48)  # uint32: the last counter used (firmware.auth)
+IR_AUTH_WHY = const(50)  # the last refusal (firmware.auth reason code)
+IR_NONCE = const(51)  # the session nonce (firmware.auth), high word first: every auth block's tag starts with it
+N_INPUT = const(53)
+# holding registers
+HR_ENABLE = const(0)  # 0/1
+HR_SLEW = const(1)  # um/s, 1..10000
+HR_LINK_TIMEOUT = const(2)  # ms, 0 = off
+HR_POSITION = const(3)  # int32 um, high word first: writing it is a position report
+HR_REFERENCE = const(5)  # int32 um
+HR_LATCH = const(7)  # write 1: latch the reference temperatures now (reads 0)
+N_VALUES = const(8)  # registers 0..7 hold values; the auth block reads 0
+HR_AUTH = const(8)  # N_AUTH registers: counter (uint32), tag (TAG_BYTES bytes); written whole with FC16
+N_AUTH = const(10)
+HR_SPINDLE = const(18)  # int32 rpm, high word first, written whole with FC16: a spindle speed report
+N_HOLDING = const(20)
+PROTECTED = const(0x87)  # bit r: holding register r needs authorisation (0 enable, 1 slew, 2 timeout, 7 latch)
+NO_VALUE = const(-32768)  # an int16 register with no value (a faulty channel's temperature)
+# Modbus exception codes the board answers with
+EX_ILLEGAL_FUNCTION = const(1)
+EX_ILLEGAL_ADDRESS = const(2)
+EX_ILLEGAL_VALUE = const(3)
+EX_DEVICE_FAILURE = const(4)  # also: a protected write refused by the authorisation (the reason in IR_AUTH_WHY)

@@ -13,7 +13,7 @@ import pytest
 import serial
 
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
-from host.board.link import StreamDecoder, command
+from host.board.link import StreamDecoder, command_line
 
 pytestmark = [pytest.mark.rig, pytest.mark.micropython]
 
@@ -76,12 +76,12 @@ def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run, capfd):
             dec = StreamDecoder()
             frames = _frames(ser, dec, 20.0, lambda fr: sum(f.kind == "O" and f.status & 0xFFFF == 0
                                                            for f in fr) >= 2)
-            ser.write(command("V"))
+            ser.write(command_line("V"))
             frames += _frames(ser, dec, 5.0, lambda fr: any(f.kind == "H" for f in fr))
             # the provisioned key authorises; without it the same command is refused
             signer = LinkSigner(key)
             signer.observe_hello([f for f in frames if f.kind == "H"][-1].fields)
-            ser.write(command("U", "X"))
+            ser.write(command_line("U", "X"))
             ser.write(signer.stream_line("U", "X"))
             replies = _frames(ser, dec, 5.0, lambda fr: sum(f.kind in ("A", "E") for f in fr) >= 2)
             assert [(f.kind, f.fields[0]) for f in replies if f.kind in ("A", "E")] == [("E", "8"), ("A", "U")]

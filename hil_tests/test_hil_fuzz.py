@@ -10,7 +10,7 @@ import os
 
 from hypothesis import HealthCheck, given, settings, strategies as st
 
-from host.board.link import command, crc16
+from host.board.link import command_line, crc16
 
 N_EXAMPLES = 300 if os.environ.get("TCOMP_SLOW") else 60
 POS_LIMIT = 100000000
@@ -27,7 +27,7 @@ def _bad(draw):
     if kind == "garbage":
         return kind, draw(_garbage) + b"\r\n"
     if kind == "truncated":
-        full = command("Q", draw(_in_range))[:-2]
+        full = command_line("Q", draw(_in_range))[:-2]
         k = draw(st.integers(1, len(full) - 1))
         return kind, full[:k] + b"\r\n"
     if kind == "crc":
@@ -35,13 +35,13 @@ def _bad(draw):
         wrong = crc16(body) ^ draw(st.integers(1, 0xFFFF))
         return kind, b"$" + body + b"*%04X\r\n" % wrong
     if kind == "range":
-        return kind, command(draw(st.sampled_from(["P", "Q", "R"])), draw(_out_of_range))
+        return kind, command_line(draw(st.sampled_from(["P", "Q", "R"])), draw(_out_of_range))
     if kind == "unknown":
-        return kind, command(draw(st.sampled_from(["Z", "K", "PP", "q", "1"])), 5)
+        return kind, command_line(draw(st.sampled_from(["Z", "K", "PP", "q", "1"])), 5)
     if kind == "fields":
-        return kind, command("P", 1, 2, 3)  # P takes <pos>[,<spindle rpm>]
+        return kind, command_line("P", 1, 2, 3)  # P takes <pos>[,<spindle rpm>]
     if kind == "number":
-        return kind, command("Q", draw(st.sampled_from(["12a", "", "-", "1.5", "0x10", "--3"])))
+        return kind, command_line("Q", draw(st.sampled_from(["12a", "", "-", "1.5", "0x10", "--3"])))
     return kind, b"$TC,P," + b"1" * draw(st.integers(200, 300)) + b"*0000\r\n"
 
 

@@ -29,7 +29,7 @@ import pytest
 
 from firmware import wire
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
-from host.board.link import body, command
+from host.board.link import body, command_line
 from host.board.linkauth import LinkSigner
 
 pytestmark = pytest.mark.rig
@@ -119,7 +119,7 @@ def _last_status(rig, n0):
 def stream_unsigned(rig, tally):
     h0 = _hello(rig)
     other = LinkSigner(bytes(range(32)), rig.signer.counter, rig.signer.nonce)
-    for line in (command("L"), command("X"), command("U", "X"), command("U", "B", 200, "0000ABCD"),
+    for line in (command_line("L"), command_line("X"), command_line("U", "X"), command_line("U", "B", 200, "0000ABCD"),
                  other.stream_line("L"), other.stream_line("X"), other.stream_line("U", "B", 200, "0000ABCD")):
         new = _say(rig, line)
         h = _hello(rig)
@@ -165,9 +165,9 @@ def stream_jam(rig, tally, new_table, rounds=1, junk_per_round=6):
         old = LinkSigner(rig.signer._key).tag(body(("U", "D", 0, "00")), b"", b"\0" * 8).hex().upper()
         for k in range(junk_per_round):
             piece = bytes([k]) * (1 + k % 4)
-            line = (command("U", "D", 0, piece.hex().upper()) if k % 3 == 0
-                    else command("U", "D", 0, piece.hex().upper(), ("%02X" % k) * 16) if k % 3 == 1
-                    else command("U", "D", 0, "00", old))
+            line = (command_line("U", "D", 0, piece.hex().upper()) if k % 3 == 0
+                    else command_line("U", "D", 0, piece.hex().upper(), ("%02X" % k) * 16) if k % 3 == 1
+                    else command_line("U", "D", 0, "00", old))
             new = _say(rig, line)
             ok = [f.kind for f in new] == ["E"] and os.path.getsize(path) == size0
             tally.count("jam", ok, (line, [f.raw for f in new], os.path.getsize(path)))
@@ -180,8 +180,8 @@ def stream_jam(rig, tally, new_table, rounds=1, junk_per_round=6):
 
 def stream_watchdog(rig, tally, rounds=1):
     # the rig's config: link_timeout_ms 1000
-    junk = [command("L"), b"\x00\xffjunk\r\n", command("Z", 1), command("P", 10 ** 12), command("S"),
-            command("V"), command("U", "D", 0, "00"), b"$TC,P,5*0000\r\n"]
+    junk = [command_line("L"), b"\x00\xffjunk\r\n", command_line("Z", 1), command_line("P", 10 ** 12), command_line("S"),
+            command_line("V"), command_line("U", "D", 0, "00"), b"$TC,P,5*0000\r\n"]
     for r in range(rounds):
         rig.send("P", 1000 + r)
         rig.advance(300)
@@ -213,7 +213,7 @@ def stream_position(rig, tally):
     rig.send("P", 100000)
     rig.advance(1100)
     for far in (-90000000, 90000000, 50000000):
-        new = _say(rig, command("P", far))
+        new = _say(rig, command_line("P", far))
         rig.advance(1100)
         o = [f for f in rig.frames if f.kind == "O"][-1]
         ok = [f.kind for f in new] == ["E"] and new[0].fields[:3] == ["4", "range", "implausible position"] \

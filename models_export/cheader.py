@@ -10,17 +10,26 @@ sign, left shifts as multiplications. Right shift of a negative int32_t is
 assumed arithmetic (gcc, clang, arm-none-eabi, IAR, Keil all do so).
 """
 
-SCALARS = {
-    "all": ("pos_lo", "pos_hi", "pos_ref", "fo", "Lt", "nt", "S0", "rL"),
-    "position": ("Lw", "nw", "shw", "KS", "shK", "fK", "rK", "rT", "degree", "Lg", "ng", "rO"),
-    "screw": ("M", "dt_ms", "fixed_end", "fmax", "ft", "Tmax", "Tlo", "air", "Ka", "shKa", "Ls", "ns", "fc", "gs", "umax", "Lu", "nu", "H", "shH",
-              "Lx", "nx", "shX", "KC", "Lc", "nc", "shC"),
-}
-ARRAYS = {
-    "all": ("env_lo", "env_hi", "ref", "train_lo", "train_hi", "b", "shb"),
-    "position": ("G", "shg"),
-    "screw": ("edges", "C", "B", "shB", "rS", "G2", "shG2", "W0", "shW0", "W1", "shW1"),
-}
+from firmware.table import COMMON, KINDS, POSITION, SCREW, SENSOR_FIELDS
+from models_export.tableformat import KIND_CODES, spec_names
+
+# Fraction bits of coefficients: recorded in the table for its readers, never used by the
+# evaluation (firmware/evaluate.py reads none of them; tests/export/test_export_table.py checks).
+INFORMATIONAL = ("fS", "fb", "fG", "fh")
+
+
+def _groups(spec, sensor_block=False):
+    """(scalars, arrays) of one section of firmware/table.py, in table order, without INFORMATIONAL."""
+    names = [(n, is_list) for n, is_list in spec_names(spec) if n not in INFORMATIONAL]
+    arrays = (SENSOR_FIELDS.split() if sensor_block else []) + [n for n, is_list in names if is_list]
+    return tuple(n for n, is_list in names if not is_list), tuple(arrays)
+
+
+# the coefficients the C evaluator reads, section by section (the table's own order)
+_SECTIONS = {"all": _groups(COMMON, sensor_block=True), "position": _groups(POSITION), "screw": _groups(SCREW)}
+SCALARS = {g: v[0] for g, v in _SECTIONS.items()}
+ARRAYS = {g: v[1] for g, v in _SECTIONS.items()}
+C_KINDS = ("poly_slope", "linear_direct", "screw_reduced")  # the kinds with a C evaluator
 
 CODE = r"""
 #define TCOMP_CLAMP_POSITION 0x1000000u
@@ -35,7 +44,7 @@ typedef struct {
     uint32_t flags; /* bit i: sensor i clamped; TCOMP_CLAMP_* */
     uint32_t extrap; /* bit i: sensor i evaluated outside the training range (status EXTRAPOLATING) */
     int32_t pos_ref;
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     int32_t T[TCOMP_M], Tn[TCOMP_M], u[TCOMP_M], w[TCOMP_M], limbs[TCOMP_M * TCOMP_NS], cum[TCOMP_M + 1], segslope[TCOMP_M];
     int32_t x, F;
     int32_t da, da0; /* air over its reference (milli-K) at the last update and at the last step */
@@ -74,7 +83,7 @@ static void tcomp_update(tcomp_eval_t *e)
         else if (v > tcomp_env_hi[i]) { v = tcomp_env_hi[i]; fl |= 1u << i; }
         if (v < tcomp_train_lo[i] || v > tcomp_train_hi[i]) ex |= 1u << i;
         s += tcomp_mul(tcomp_b[i], v - e->ref[i], TCOMP_LT, TCOMP_NT, tcomp_shb[i]);
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
         if (i == TCOMP_AIR) e->da = v - e->ref[i];
 #endif
     }
@@ -83,7 +92,7 @@ static void tcomp_update(tcomp_eval_t *e)
     e->extrap = ex;
 }
 
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
 static void tcomp_refresh(tcomp_eval_t *e);
 /* start state: in equilibrium with the air (construction, latch) */
 static void tcomp_settle(tcomp_eval_t *e)
@@ -111,7 +120,7 @@ static void tcomp_latch_references(tcomp_eval_t *e)
         e->ref[i] = v < tcomp_env_lo[i] ? tcomp_env_lo[i] : (v > tcomp_env_hi[i] ? tcomp_env_hi[i] : v);
     }
     tcomp_update(e);
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     tcomp_settle(e);
 #endif
 }
@@ -125,7 +134,7 @@ static int32_t tcomp_clamp_pos(tcomp_eval_t *e, int32_t pos)
     return pos;
 }
 
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
 static int32_t tcomp_seg(const tcomp_eval_t *e, int32_t p)
 {
     int32_t x = p - TCOMP_FIXED_END;
@@ -248,7 +257,7 @@ static void tcomp_step(tcomp_eval_t *e)
 /* total offset (geometric + thermal) at pos (um), in 0.01 um */
 static int32_t tcomp_offset_at(tcomp_eval_t *e, int32_t pos)
 {
-#if TCOMP_KIND == 2
+#if TCOMP_KIND == TCOMP_KIND_LINEAR_DIRECT
     (void)pos;
     return (e->S + TCOMP_RL) >> TCOMP_FO;
 #else
@@ -257,7 +266,7 @@ static int32_t tcomp_offset_at(tcomp_eval_t *e, int32_t pos)
     for (j = TCOMP_DEGREE - 1; j >= 0; j--)
         h = tcomp_mul(p, h, TCOMP_LG, TCOMP_NG, tcomp_shg[j]) + tcomp_G[j];
     acc = h + tcomp_mul(p, e->S, TCOMP_LW, TCOMP_NW, TCOMP_SHW);
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     acc += tcomp_seg(e, p);
 #endif
     return (acc + TCOMP_RO) >> TCOMP_FO;
@@ -267,11 +276,11 @@ static int32_t tcomp_offset_at(tcomp_eval_t *e, int32_t pos)
 /* thermal offset at the reference position, 0.01 um (with tcomp_slope: the Siemens/Beckhoff pair) */
 static int32_t tcomp_ref_offset(tcomp_eval_t *e)
 {
-#if TCOMP_KIND == 2
+#if TCOMP_KIND == TCOMP_KIND_LINEAR_DIRECT
     return tcomp_offset_at(e, 0);
 #else
     int32_t acc = tcomp_mul(e->pos_ref, e->S, TCOMP_LW, TCOMP_NW, TCOMP_SHW);
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     acc += tcomp_seg(e, e->pos_ref);
 #endif
     return (acc + TCOMP_RT) >> TCOMP_FO;
@@ -281,12 +290,12 @@ static int32_t tcomp_ref_offset(tcomp_eval_t *e)
 /* thermal slope in 0.01 um/m */
 static int32_t tcomp_slope(tcomp_eval_t *e)
 {
-#if TCOMP_KIND == 2
+#if TCOMP_KIND == TCOMP_KIND_LINEAR_DIRECT
     (void)e;
     return 0;
 #else
     int32_t acc = tcomp_mul(TCOMP_KS, e->S, TCOMP_LW, TCOMP_NW, TCOMP_SHK);
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     acc += tcomp_mul(TCOMP_KC, tcomp_seg(e, TCOMP_POS_HI) - tcomp_seg(e, TCOMP_POS_LO), TCOMP_LC, TCOMP_NC, TCOMP_SHC);
 #endif
     return (acc + TCOMP_RK) >> TCOMP_FK;
@@ -302,12 +311,12 @@ static void tcomp_init(tcomp_eval_t *e)
     }
     e->flags = 0;
     e->pos_ref = TCOMP_POS_REF;
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     for (i = 0; i < TCOMP_M; i++) { e->T[i] = 0; e->u[i] = 0; e->w[i] = 0; }
     e->have_x = 0; e->feed = 0; e->x = 0; e->F = 0; e->da = 0; e->da0 = 0;
 #endif
     tcomp_update(e);
-#if TCOMP_KIND == 3
+#if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     tcomp_settle(e);
 #endif
 }
@@ -324,10 +333,9 @@ def c_header(ex, guard="TCOMP_TABLE_H"):
     f = ex.fields
     r = ex.report
     kind = f["kind"]
-    if kind == "dynamic":
+    if kind not in C_KINDS:
         from models_export.certify import ExportError
-        raise ExportError("--c-header: dynamic tables have no C evaluator yet; export the table only")
-    code = {"poly_slope": 1, "linear_direct": 2, "screw_reduced": 3}[kind]
+        raise ExportError("--c-header: %s tables have no C evaluator yet; export the table only" % kind)
     groups = ["all"] + (["position"] if kind != "linear_direct" else []) + (["screw"] if kind == "screw_reduced" else [])
     out = []
     out.append("/* tcomp coefficient table, generated by `tcomp export` (docs/table-format.md).\n")
@@ -341,7 +349,9 @@ def c_header(ex, guard="TCOMP_TABLE_H"):
                " *   tcomp_eval_t e; tcomp_init(&e); e.temps[i] = ...; tcomp_update(&e); tcomp_offset_at(&e, pos_um);\n"
                " * screw tables: tcomp_advance_position(&e, pos_um) on each report, tcomp_step(&e) every TCOMP_DT_MS.\n */\n")
     out.append("#ifndef %s\n#define %s\n#include <stdint.h>\n\n" % (guard, guard))
-    out.append("#define TCOMP_KIND %d /* 1 poly_slope, 2 linear_direct, 3 screw_reduced */\n" % code)
+    for code, name in sorted(KINDS.items()):  # the table's kind codes (firmware/table.py)
+        out.append("#define TCOMP_KIND_%s %d\n" % (name.upper(), code))
+    out.append("#define TCOMP_KIND TCOMP_KIND_%s\n" % kind.upper())
     out.append("#define TCOMP_N_SENSORS %d\n#define TCOMP_N_SENSORS_ALLOC %d\n" % (len(f["sensors"]), max(1, len(f["sensors"]))))
     out.append("#define TCOMP_REF_MODE %d /* 1: references may be latched (tcomp_latch_references) */\n" % f.get("ref_mode", 0))
     for g in groups:

@@ -10,6 +10,7 @@ from fractions import Fraction as F
 from models_export.certify import (
     ACC, LIMITS_UM, OU_PER_UM, ExportError, Recorder, frac_bits, iv_add, iv_mul, narrow_width, p2, rnd, top_limbs_needed,
 )
+from models_export.document import FORMAT
 
 # dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
 DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
@@ -36,6 +37,8 @@ class Model:
     def __init__(self, doc, ref_position_mm=None, envelope=None, margin_K=DEFAULT_ENVELOPE_MARGIN_K):
         """``envelope``: {sensor: (lo_C, hi_C)}, the certified envelope for those sensors (it must
         contain the training range); the others get the training range widened by ``margin_K``."""
+        if doc.get("format") != FORMAT:
+            raise ExportError("format must be %r (a model document), found %r" % (FORMAT, doc.get("format")))
         kind = doc.get("kind")
         self.doc_kind = kind
         self.kind = "screw_reduced" if kind == "screw" else kind

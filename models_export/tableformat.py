@@ -1,70 +1,71 @@
 """Write the binary coefficient table (docs/table-format.md); firmware/table.py reads it.
 
 ``pack(fields)`` takes the same names the firmware's Table exposes and lays
-them out in the order ``payload_words`` gives, which is the order
-firmware/table.py consumes them in.
+them out in the order ``payload_words`` gives. That order is not written here:
+it is firmware/table.py's section specs (``model_sections``, ``CERT``,
+``PER_SENSOR``, ``SENSOR_FIELDS``), the ones the loader reads by, so the two
+cannot drift apart.
 """
 import struct
+import types
 
 from firmware.crc32 import crc32
-from firmware.table import HEADER_SIZE, KINDS, MAGIC, NAME_FORBIDDEN, NAME_SIZE, SENSOR_SIZE, UNIT_CODE, VERSION
+from firmware.table import (AXIS_SIZE, CERT, HEADER_SIZE, KINDS, MAGIC, NAME_FORBIDDEN, NAME_SIZE, PER_SENSOR, SENSOR_FIELDS,
+                            SENSOR_SIZE, UNIT_CODE, VERSION, list_length, model_sections)
 
 KIND_CODES = {name: code for code, name in KINDS.items()}  # the firmware's table owns the codes
 
-COMMON = ("pos_lo", "pos_hi", "pos_ref", "fo", "Lt", "nt", "S0", "fS")
-POSITION = ("Lw", "nw", "shw", "KS", "shK", "fK", "rK", "rT", "degree", "Lg", "ng")
-SCREW_HEAD = ("M", "dt_ms", "fixed_end", "fmax")
-SCREW_STATE = ("ft", "Tmax", "Ls", "ns", "fc", "gs")
-SCREW_TRAVEL = ("umax", "Lu", "nu")
-SCREW_TAIL = ("H", "shH", "fh", "Lx", "nx", "shX", "KC", "Lc", "nc", "shC")
-SCREW_AIR_HEAD = ("air", "Tlo")  # format 2: the air channel (-1: none) and the state's lower bound
-SCREW_AIR_TAIL = ("Ka", "shKa")
 
-
-DYNAMIC_HEAD = ("positional", "dt_ms", "smax", "Lq", "nq", "shq", "fmax", "LX", "nX", "LY", "nY", "nf")
-DYNAMIC_LISTS = ("src", "A", "shA", "gA", "rA", "fy", "Ylo", "Yhi", "bY", "shY")  # nf entries each
-
-CERTIFICATE = ("cert_out", "cert_ref", "cert_slope")
+def spec_names(spec):
+    """The field names of one section spec of firmware/table.py, in order, each as (name, is_list);
+    the per-sensor group ``@`` gives PER_SENSOR's names as lists."""
+    out = []
+    for word in spec.split():
+        if word == "|":
+            continue
+        if word == "@":
+            out += [(p.split(":")[0], True) for p in PER_SENSOR.split()]
+        elif word[-2:-1] == "=":
+            out.append((word[:-2], True))
+        else:
+            out.append((word.split(":")[0], False))
+    return out
 
 
 def payload_words(f):
     """The payload as a list of (name, int) in table order; the certificate closes it."""
-    return _model_words(f) + [(k, f[k]) for k in CERTIFICATE]
-
-
-def _model_words(f):
-    out = [(k, f[k]) for k in COMMON]
-    for i in range(len(f["sensors"])):
-        out += [("b[%d]" % i, f["b"][i]), ("shb[%d]" % i, f["shb"][i]), ("fb[%d]" % i, f["fb"][i])]
-    out.append(("rL", f["rL"]))
-    if f["kind"] == "dynamic":
-        out += [(k, f[k]) for k in DYNAMIC_HEAD]
-        for name in DYNAMIC_LISTS:
-            out += [("%s[%d]" % (name, j), v) for j, v in enumerate(f[name])]
-        if not f["positional"]:
-            return out
-    if f["kind"] == "linear_direct":
-        return out
-    out += [(k, f[k]) for k in POSITION]
-    out += [("G[%d]" % j, v) for j, v in enumerate(f["G"])]
-    out += [("fG[%d]" % j, v) for j, v in enumerate(f["fG"])]
-    out += [("shg[%d]" % j, v) for j, v in enumerate(f["shg"])]
-    out.append(("rO", f["rO"]))
-    if f["kind"] != "screw_reduced":
-        return out
-    out += [(k, f[k]) for k in SCREW_HEAD]
-    out += [("edges[%d]" % i, v) for i, v in enumerate(f["edges"])]
-    out += [(k, f[k]) for k in SCREW_STATE]
-    out += [("C[%d]" % i, v) for i, v in enumerate(f["C"])]
-    out += [(k, f[k]) for k in SCREW_TRAVEL]
-    for name in ("B", "shB", "rS", "G2", "shG2"):
-        out += [("%s[%d]" % (name, i), v) for i, v in enumerate(f[name])]
-    out += [(k, f[k]) for k in SCREW_TAIL]
-    out += [(k, f[k]) for k in SCREW_AIR_HEAD]
-    for name in ("W0", "shW0", "W1", "shW1"):
-        out += [("%s[%d]" % (name, i), v) for i, v in enumerate(f[name])]
-    out += [(k, f[k]) for k in SCREW_AIR_TAIL]
+    t = types.SimpleNamespace(**{k: v for k, v in f.items() if isinstance(k, str) and k.isidentifier()})
+    out = []
+    for spec in list(model_sections(KIND_CODES[f["kind"]], t)) + [CERT]:
+        out += _section_words(spec, f, t)
     return out
+
+
+def _section_words(spec, f, t):
+    out = []
+    for word in spec.split():
+        if word == "|":
+            continue
+        if word == "@":
+            names = [p.split(":")[0] for p in PER_SENSOR.split()]
+            for i in range(len(f["sensors"])):
+                out += [("%s[%d]" % (name, i), _entry(f, name, i)) for name in names]
+        elif word[-2:-1] == "=":
+            name = word[:-2]
+            n = list_length(word[-1], t)
+            if len(f[name]) != n:
+                raise ValueError("table field %s has %d entries, the table's layout needs %d" % (name, len(f[name]), n))
+            out += [("%s[%d]" % (name, j), v) for j, v in enumerate(f[name])]
+        else:
+            name = word.split(":")[0]
+            out.append((name, f[name]))
+    return out
+
+
+def _entry(f, name, i):
+    if len(f[name]) != len(f["sensors"]):
+        raise ValueError("table field %s has %d entries for %d sensors" % (name, len(f[name]), len(f["sensors"])))
+    return f[name][i]
 
 
 def _fixed(text, size, what):
@@ -94,7 +95,7 @@ def pack(f):
     out += MAGIC
     out += struct.pack("<BBBBI", VERSION, KIND_CODES[f["kind"]], n, UNIT_CODE, total)
     out += prov
-    out += _fixed(f["axis"], 8, "axis name")
+    out += _fixed(f["axis"], AXIS_SIZE, "axis name")
     out += struct.pack("<I", len(words))
     out += struct.pack("<BB", f.get("ref_mode", 0), 1 if f.get("edited") else 0)
     out += b"\x00" * 6
@@ -104,14 +105,15 @@ def pack(f):
     train = {"train_lo": f.get("train_lo") or f["env_lo"], "train_hi": f.get("train_hi") or f["env_hi"]}
     for i in range(n):
         row = []
-        for name in ("env_lo", "env_hi", "ref", "train_lo", "train_hi"):
+        for name in SENSOR_FIELDS.split():
             v = train[name][i] if name in train else f[name][i]
             if not -(1 << 31) <= v < (1 << 31):
                 raise ValueError("sensor %s: %s=%r mC is not a 32-bit integer" % (sensors[i], name, v))
             row.append(v)
-        if not row[0] <= row[3] <= row[4] <= row[1]:
+        v = dict(zip(SENSOR_FIELDS.split(), row))
+        if not v["env_lo"] <= v["train_lo"] <= v["train_hi"] <= v["env_hi"]:
             raise ValueError("sensor %s: training range %d..%d mC is not inside the envelope %d..%d mC"
-                             % (sensors[i], row[3], row[4], row[0], row[1]))
+                             % (sensors[i], v["train_lo"], v["train_hi"], v["env_lo"], v["env_hi"]))
         out += struct.pack("<iiiii", *row)
     for _, v in words:
         out += struct.pack("<i", v)

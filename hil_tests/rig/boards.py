@@ -22,7 +22,7 @@ def rig_config(sensors, n_ads=1, mode="stream", **extra):
 
 
 def _finish(doc):
-    from host.learning.documents import document_hash
+    from models_export.document import document_hash
     doc = dict(doc)
     doc.pop("provenance", None)
     doc["provenance"] = {"tcomp_version": "hil", "created_utc": "2026-01-01T00:00:00Z",

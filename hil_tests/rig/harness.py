@@ -29,7 +29,7 @@ from typing import Any
 import serial
 
 from hil_tests.rig import interpreters
-from host.board.link import StreamDecoder, command
+from host.board.link import StreamDecoder, command_line
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MP_DIR = os.path.join(ROOT, "hil_tests", "mp")
@@ -194,7 +194,7 @@ class LinkClient:
         self.ser.flush()
 
     def send(self, *fields):
-        self.write(command(*fields))
+        self.write(command_line(*fields))
 
     @property
     def frames(self):

@@ -25,7 +25,7 @@ def body(fields):
     return b"TC," + b",".join(f if isinstance(f, bytes) else str(f).encode() for f in fields)
 
 
-def command(*fields):
+def command_line(*fields):
     """``$TC,<fields>*CRC\\r\\n`` as bytes."""
     b = body(fields)
     return b"$" + b + b"*%04X\r\n" % crc16(b)

@@ -30,7 +30,7 @@ import os
 import struct
 
 from firmware.wire import MAX_COUNTER, TAG_BYTES  # the board checks the same sizes
-from host.board.link import body as stream_body, command
+from host.board.link import body as stream_body, command_line
 
 KEY_BYTES = 32
 UPLOAD_CHUNK = 48  # table bytes per U,D line (at most 64)
@@ -100,7 +100,7 @@ def write_key(path, key):
 
 def stream_line(fields):
     """``$TC,<fields>*CRC\\r\\n`` (host/board/link.py's codec)."""
-    return command(*fields)
+    return command_line(*fields)
 
 
 class LinkSigner:

@@ -1,4 +1,5 @@
-"""``tcomp fit --model mlr|pcr|stepwise|cv-subset|ann|dynamic`` (arguments defined in host/cli/verbs/fit.py)."""
+"""``tcomp fit --model`` for the empirical methods (host/learning/empirical/methods.py FIT_METHODS; arguments
+defined in host/cli/verbs/fit.py)."""
 import json
 
 from host import options
@@ -6,7 +7,9 @@ from host.learning.empirical import EmpiricalDataError
 from host.options import boolean, number, numbers
 
 # --option KEY=VALUE settings understood by fit_command, with their converters (host/options.py); a
-# minimum is the smallest meaningful value, below which the estimator would fail obscurely or accept nonsense
+# minimum is the smallest meaningful value, below which the estimator would fail obscurely or accept nonsense.
+# Which method a key belongs to is not written here: it is the method's estimator parameters and candidate
+# options (host/learning/empirical/methods.py method_options); the keys no method owns go to fit_model.
 OPTIONS = {
     "variance_threshold": number(float),  # PCR
     "n_components": number(int, 1),  # PCR
@@ -36,18 +39,16 @@ OPTIONS = {
     "use_spindle": boolean,  # dynamic
     "use_feed": boolean,  # dynamic
 }
-METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",),
-                  "dynamic": ("taus_s", "ridge", "max_terms", "min_gain", "cv_score", "swaps", "use_spindle", "use_feed"),
-                  "ann": ("hidden_sizes", "validation", "seed", "max_epochs", "patience", "validation_fraction", "learning_rate")}
 
 
 def parse_options(pairs, method):
     """--option KEY=VALUE list -> dict, rejecting unknown keys and options of other methods."""
     from host.errors import UserError
+    from host.learning.empirical.methods import FIT_METHODS, method_options
 
     out = options.parse_options(pairs, OPTIONS)
     for key in out:
-        owner = [m for m, keys in METHOD_OPTIONS.items() if key in keys] + (["dynamic"] if key == "max_sensors" else [])
+        owner = [m for m in FIT_METHODS if key in method_options(m)]
         if owner and method not in owner:
             raise UserError("--option %s applies to --model %s, not %s" % (key, owner[0], method))
     lo, hi = out.get("t_min_s"), out.get("t_max_s")

@@ -30,7 +30,7 @@ from host.data.runs import (ERROR_LIMIT_UM, FORMAT, ROLES, TEMPERATURE_RANGE_C, 
                        Spindle, Temperatures, parse_number, read_records, write_run)
 
 
-class ImportError_(ValueError):
+class LogImportError(ValueError):
     """A mapping or source file problem; the message names file, line and column."""
 
 
@@ -43,14 +43,14 @@ def _number(value, what, where):
     """A JSON number of the mapping; a string ("2.5") is refused: it is a quoted cell of a spreadsheet export,
     or a word, and reading it would guess."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ImportError_("%s: %s must be a number, found %r%s" % (where, what, value,
+        raise LogImportError("%s: %s must be a number, found %r%s" % (where, what, value,
                                                                     " (a string: write it without quotes)" if isinstance(value, str) else ""))
     try:
         v = float(value)
     except OverflowError:  # an integer of 400 digits
         v = math.inf
     if not math.isfinite(v):
-        raise ImportError_("%s: %s must be a finite number, found %r" % (where, what, value))
+        raise LogImportError("%s: %s must be a finite number, found %r" % (where, what, value))
     return v
 
 
@@ -59,91 +59,91 @@ def _columns(value, key, where):
     if isinstance(value, list):
         dup = sorted({c for c in value if isinstance(c, str) and value.count(c) > 1})
         if dup:
-            raise ImportError_("%s: '%s' lists column(s) %s more than once" % (where, key, ", ".join(dup)))
+            raise LogImportError("%s: '%s' lists column(s) %s more than once" % (where, key, ", ".join(dup)))
         value = {c: {} for c in value} if all(isinstance(c, str) for c in value) else value
     if isinstance(value, list):
         bad = [c for c in value if not isinstance(c, str)]
-        raise ImportError_("%s: '%s' lists column names, which must be strings (found %r); write them as in the CSV header, in quotes"
+        raise LogImportError("%s: '%s' lists column names, which must be strings (found %r); write them as in the CSV header, in quotes"
                            % (where, key, bad[0]))
     if not isinstance(value, dict):
-        raise ImportError_("%s: '%s' must be a list of column names or an object {column: settings}, found %s"
+        raise LogImportError("%s: '%s' must be a list of column names or an object {column: settings}, found %s"
                            % (where, key, type(value).__name__))
     for col, spec in value.items():
         if spec is not None and not isinstance(spec, dict):
-            raise ImportError_("%s: %s.%s must be an object of settings, found %r" % (where, key, col, spec))
+            raise LogImportError("%s: %s.%s must be an object of settings, found %r" % (where, key, col, spec))
     return value
 
 
 def _normalise_mapping(mapping, where):
     if not isinstance(mapping, dict):
-        raise ImportError_("%s: mapping must be a JSON object" % where)
+        raise LogImportError("%s: mapping must be a JSON object" % where)
     unknown = set(mapping) - {"time", "time_scale", "temperatures", "errors", "spindle", "ignore", "meta"}
     if unknown:
-        raise ImportError_("%s: unknown mapping key(s) %s" % (where, ", ".join(sorted(unknown))))
+        raise LogImportError("%s: unknown mapping key(s) %s" % (where, ", ".join(sorted(unknown))))
     if "time" not in mapping:
-        raise ImportError_("%s: mapping needs 'time' (the source column holding the time)" % where)
+        raise LogImportError("%s: mapping needs 'time' (the source column holding the time)" % where)
     if not isinstance(mapping["time"], str) or not mapping["time"]:
-        raise ImportError_("%s: 'time' must be a column name (a string), found %r" % (where, mapping["time"]))
+        raise LogImportError("%s: 'time' must be a column name (a string), found %r" % (where, mapping["time"]))
     spindle = mapping.get("spindle")
     if spindle is not None and not isinstance(spindle, str):
-        raise ImportError_("%s: 'spindle' must be a column name (a string), found %r" % (where, spindle))
+        raise LogImportError("%s: 'spindle' must be a column name (a string), found %r" % (where, spindle))
     ignore = mapping.get("ignore") or []
     if not isinstance(ignore, list) or not all(isinstance(c, str) for c in ignore):
-        raise ImportError_("%s: 'ignore' must be a list of column names (strings), found %r" % (where, ignore))
+        raise LogImportError("%s: 'ignore' must be a list of column names (strings), found %r" % (where, ignore))
     meta = mapping.get("meta") or {}
     if not isinstance(meta, dict):
-        raise ImportError_("%s: 'meta' must be an object, found %r" % (where, meta))
+        raise LogImportError("%s: 'meta' must be an object, found %r" % (where, meta))
     reserved = sorted(set(meta) & {"format", "sensors", "channels", "import"})
     if reserved:
-        raise ImportError_("%s: 'meta' may not set %s (the importer writes them from the mapping)" % (where, ", ".join(reserved)))
+        raise LogImportError("%s: 'meta' may not set %s (the importer writes them from the mapping)" % (where, ", ".join(reserved)))
     time_scale = _number(mapping.get("time_scale", 1.0), "time_scale", where)
     if time_scale <= 0:
-        raise ImportError_("%s: time_scale must be > 0 (the factor from the time column to seconds), found %g" % (where, time_scale))
+        raise LogImportError("%s: time_scale must be > 0 (the factor from the time column to seconds), found %g" % (where, time_scale))
     temps = _columns(mapping.get("temperatures") or {}, "temperatures", where)
     errs = _columns(mapping.get("errors") or {}, "errors", where)
     if not temps:
-        raise ImportError_("%s: mapping needs at least one temperature column" % where)
+        raise LogImportError("%s: mapping needs at least one temperature column" % where)
     if not errs:
-        raise ImportError_("%s: mapping needs at least one error (displacement) column" % where)
+        raise LogImportError("%s: mapping needs at least one error (displacement) column" % where)
     t_out = {}
     for col, spec in temps.items():
         spec = dict(spec or {})
         role = spec.get("role", "structure")
         if role not in ROLES:
-            raise ImportError_("%s: temperature column %r has role %r; expected one of %s" % (where, col, role, ", ".join(ROLES)))
+            raise LogImportError("%s: temperature column %r has role %r; expected one of %s" % (where, col, role, ", ".join(ROLES)))
         name = spec.get("name", col)
         if not isinstance(name, str) or not name:
-            raise ImportError_("%s: temperatures.%s.name must be a non-empty string, found %r" % (where, col, name))
+            raise LogImportError("%s: temperatures.%s.name must be a non-empty string, found %r" % (where, col, name))
         t_out[col] = {"name": name, "role": role, "location": spec.get("location", "")}
     names = [s["name"] for s in t_out.values()]
     dup = sorted({n for n in names if names.count(n) > 1})
     if dup:
-        raise ImportError_("%s: sensor name(s) used twice: %s" % (where, ", ".join(dup)))
+        raise LogImportError("%s: sensor name(s) used twice: %s" % (where, ", ".join(dup)))
     e_out = {}
     for col, spec in errs.items():
         spec = dict(spec or {})
         channel = spec.get("channel", col)
         if not isinstance(channel, str) or not channel:
-            raise ImportError_("%s: errors.%s.channel must be a non-empty string, found %r" % (where, col, channel))
+            raise LogImportError("%s: errors.%s.channel must be a non-empty string, found %r" % (where, col, channel))
         e_out[col] = {
             "channel": channel,
             "position_mm": _number(spec.get("position_mm", 0.0), "errors.%s.position_mm" % col, where),
             "scale": _number(spec.get("scale", 1.0), "errors.%s.scale" % col, where),
         }
         if e_out[col]["scale"] == 0:
-            raise ImportError_("%s: errors.%s.scale is 0: every error would read 0 um (the factor from the column to um, "
+            raise LogImportError("%s: errors.%s.scale is 0: every error would read 0 um (the factor from the column to um, "
                                "1 when it is in um, 1000 for mm, -1 for a probe measuring the other way)" % (where, col))
     roles = [("time", mapping["time"])] + [("temperatures", c) for c in t_out] + [("errors", c) for c in e_out]
     roles += [("spindle", spindle)] if spindle else []
     roles += [("ignore", c) for c in ignore]
     cols = [c for _, c in roles]
     for col in sorted({c for c in cols if cols.count(c) > 1}):
-        raise ImportError_("%s: column %r is mapped more than once (as %s); each source column has one meaning"
+        raise LogImportError("%s: column %r is mapped more than once (as %s); each source column has one meaning"
                            % (where, col, " and ".join(r for r, c in roles if c == col)))
     chans = [e["channel"] for e in e_out.values()]
     dup = sorted({c for c in chans if chans.count(c) > 1})
     if dup:
-        raise ImportError_("%s: error channel name(s) used twice: %s" % (where, ", ".join(dup)))
+        raise LogImportError("%s: error channel name(s) used twice: %s" % (where, ", ".join(dup)))
     return {
         "time": mapping["time"],
         "time_scale": time_scale,
@@ -168,7 +168,7 @@ def _check_ranges(source, m, used, data):
             problems.append("%s line %d column %r: %g is outside %g..%g %s (a logger fault or a wrong unit?)"
                             % (source, i + 2, col, values[i], lo, hi, why))
     if problems:
-        raise ImportError_("\n".join(problems))
+        raise LogImportError("\n".join(problems))
 
 
 def _shortened(header, n=20):
@@ -183,18 +183,18 @@ def import_csv(source, mapping, mapping_where="mapping"):
         with open(source, newline="", encoding="utf-8-sig") as fh:
             records = read_records(fh, source)
     except UnicodeDecodeError as exc:
-        raise ImportError_("%s: not a UTF-8 text CSV (byte %d cannot be decoded); save the log as CSV (UTF-8)" % (source, exc.start))
+        raise LogImportError("%s: not a UTF-8 text CSV (byte %d cannot be decoded); save the log as CSV (UTF-8)" % (source, exc.start))
     except OSError as exc:
-        raise ImportError_("%s: cannot be read (%s)" % (source, exc.strerror or exc))
+        raise LogImportError("%s: cannot be read (%s)" % (source, exc.strerror or exc))
     except CsvSyntaxError as exc:
-        raise ImportError_(str(exc))
+        raise LogImportError(str(exc))
     rows = [r for _, r in records]
     if not rows:
-        raise ImportError_("%s line 1: file is empty" % source)
+        raise LogImportError("%s line 1: file is empty" % source)
     header = [h.strip() for h in rows[0]]
     dup = sorted(c for c, k in Counter(header).items() if k > 1)
     if dup:
-        raise ImportError_("%s line 1: column name(s) %s appear more than once in the header; rename them in the source"
+        raise LogImportError("%s line 1: column name(s) %s appear more than once in the header; rename them in the source"
                            % (source, ", ".join(repr(h) for h in dup)))
     used = [m["time"]] + list(m["temperatures"]) + list(m["errors"]) + ([m["spindle"]] if m["spindle"] else [])
     problems = []
@@ -209,7 +209,7 @@ def import_csv(source, mapping, mapping_where="mapping"):
                 problems.append("... (stopped after 50 problems)")
                 break
     if problems:
-        raise ImportError_("\n".join(problems))
+        raise LogImportError("\n".join(problems))
     idx = {c: header.index(c) for c in used}
     data = np.empty((len(rows) - 1, len(used)))
     for k, (lineno, row) in enumerate(records[1:]):
@@ -230,22 +230,22 @@ def import_csv(source, mapping, mapping_where="mapping"):
             problems.append("... (stopped after 50 problems)")
             break
     if problems:
-        raise ImportError_("\n".join(problems))
+        raise LogImportError("\n".join(problems))
     if data.shape[0] == 0:
-        raise ImportError_("%s: no data rows after the header" % source)
+        raise LogImportError("%s: no data rows after the header" % source)
     with np.errstate(over="ignore"):  # an overflow to inf is refused below, by name
         time_s = data[:, 0] * m["time_scale"]
     far = np.flatnonzero(~(np.abs(time_s) <= MAX_ABS_TIME_S))
     if far.size:
         i = far[0]
-        raise ImportError_("%s line %d column %r: %g x time_scale %g = %g s is beyond +-%g s (a wrong time_scale?)"
+        raise LogImportError("%s line %d column %r: %g x time_scale %g = %g s is beyond +-%g s (a wrong time_scale?)"
                            % (source, records[1 + i][0], m["time"], data[i, 0], m["time_scale"], time_s[i], MAX_ABS_TIME_S))
     if time_s[-1] - time_s[0] > MAX_DURATION_S:
-        raise ImportError_("%s: the log spans %g s once scaled by time_scale %g, more than a year (%g s): a wrong time_scale?"
+        raise LogImportError("%s: the log spans %g s once scaled by time_scale %g, more than a year (%g s): a wrong time_scale?"
                            % (source, time_s[-1] - time_s[0], m["time_scale"], MAX_DURATION_S))
     back = np.flatnonzero(np.diff(time_s) <= 0)
     if back.size:
-        raise ImportError_(
+        raise LogImportError(
             "\n".join("%s line %d column %r: time goes backwards or repeats (%g after %g)" % (source, i + 3, m["time"], data[i + 1, 0], data[i, 0]) for i in back[:20])
         )
     _check_ranges(source, m, used, data)
@@ -283,5 +283,5 @@ def import_to_folder(source, mapping, out, mapping_where="mapping"):
     try:
         load_run(out)
     except RunFormatError as exc:  # pragma: no cover - would be a bug in write_run
-        raise ImportError_("imported run does not validate:\n%s" % exc)
+        raise LogImportError("imported run does not validate:\n%s" % exc)
     return run

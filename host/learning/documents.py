@@ -7,14 +7,14 @@ Every class has ``from_document(doc)``, ``to_document()`` and ``predict(run)``
 """
 import importlib
 import json
-import math
 import time
 
 from host import __version__
-from models_export.document import document_hash
+from models_export.document import DOCUMENT_KINDS, FORMAT, document_hash, document_problem
 
-FORMAT = "tcomp-model/1"
-KINDS = {
+# the class of each document kind (models_export/document.py DOCUMENT_KINDS names the kinds;
+# tests/learning/empirical/test_emp_contract.py checks the two agree)
+KIND_CLASSES = {
     "poly_slope": "host.learning.empirical.kinds:PolySlopeModel",
     "linear_direct": "host.learning.empirical.kinds:LinearDirectModel",
     "screw": "host.learning.screw.screwmodel:ScrewModel",
@@ -48,80 +48,25 @@ def read_document(path):
     except FileNotFoundError:
         raise ModelFormatError("%s: file is missing" % path)
     except IsADirectoryError:
-        raise ModelFormatError("%s: is a folder, expected a model document (tcomp-model/1 JSON)" % path)
+        raise ModelFormatError("%s: is a folder, expected a model document (%s JSON)" % (path, FORMAT))
     except UnicodeDecodeError:
-        raise ModelFormatError("%s: not a text file (a binary file? expected a model document, tcomp-model/1 JSON)" % path)
+        raise ModelFormatError("%s: not a text file (a binary file? expected a model document, %s JSON)" % (path, FORMAT))
     except OSError as exc:
         raise ModelFormatError("%s: cannot be read (%s)" % (path, exc.strerror or exc))
     except json.JSONDecodeError as exc:
         raise ModelFormatError("%s line %d column %d: invalid JSON (%s)" % (path, exc.lineno, exc.colno, exc.msg))
     if not isinstance(doc, dict) or doc.get("format") != FORMAT:
         raise ModelFormatError("%s: not a tcomp model document (key 'format' must be %r)" % (path, FORMAT))
-    if not isinstance(doc.get("kind"), str) or doc["kind"] not in KINDS:
-        raise ModelFormatError("%s: unknown model kind %r (known: %s)" % (path, doc.get("kind"), ", ".join(KINDS)))
+    if not isinstance(doc.get("kind"), str) or doc["kind"] not in DOCUMENT_KINDS:
+        raise ModelFormatError("%s: unknown model kind %r (known: %s)" % (path, doc.get("kind"), ", ".join(DOCUMENT_KINDS)))
     problem = document_problem(doc)
     if problem:
         raise ModelFormatError("%s: %s" % (path, problem))
     return doc
 
 
-# Blocks that define what a model predicts (statistics and training may hold NaN, e.g. an undefined p-value).
-_DEFINING = ("sensors", "reference_C", "envelope", "geometric", "thermal")
-_COEFFICIENTS = {"poly_slope": "coefficients_um_per_mm_per_K", "linear_direct": "coefficients_um_per_K"}
-
-
-def _non_finite(value, where):
-    """JSON path of the first NaN/Infinity in ``value`` (Python's json reads both, and 1e400 as Infinity), or None."""
-    if isinstance(value, float) and not math.isfinite(value):
-        return where
-    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
-    for k, v in items:
-        found = _non_finite(v, "%s[%d]" % (where, k) if isinstance(k, int) else "%s.%s" % (where, k))
-        if found:
-            return found
-    return None
-
-
-def document_problem(doc):
-    """What makes ``doc`` say something other than what predict and export would use, or None.
-
-    Checked for every kind before either reads it: a sensor listed twice, a coefficient of no listed sensor
-    (it would be dropped without a word), a geometric degree its coefficients do not have, NaN/Infinity.
-    """
-    for key in _DEFINING:
-        where = _non_finite(doc.get(key), key)
-        if where:
-            return "%s must be a finite number, found NaN or Infinity (a model cannot predict with it)" % where
-    sensors = doc.get("sensors")
-    if isinstance(sensors, list) and all(isinstance(s, str) for s in sensors):
-        twice = sorted({s for s in sensors if sensors.count(s) > 1})
-        if twice:
-            return "sensors lists %s more than once (each sensor has one coefficient and one table channel)" % ", ".join(twice)
-        thermal = doc.get("thermal")
-        key = _COEFFICIENTS.get(doc.get("kind"))
-        coefs = thermal.get(key) if key and isinstance(thermal, dict) else None
-        if isinstance(coefs, dict):
-            extra = [s for s in coefs if s not in sensors]
-            if extra:
-                return ("thermal.%s has %s, which %s not in sensors (%s); the coefficient would be dropped without a word"
-                        % (key, ", ".join(map(str, extra)), "is" if len(extra) == 1 else "are", ", ".join(map(str, sensors))))
-    prov = doc.get("provenance")
-    if prov is not None and (not isinstance(prov, dict) or not isinstance(prov.get("sha256", ""), (str, type(None)))):
-        return "provenance must be an object whose sha256 is a hex string, found %r" % (prov,)
-    geo = doc.get("geometric")
-    if isinstance(geo, dict) and isinstance(geo.get("coefficients_um"), list):
-        n = len(geo["coefficients_um"])
-        if n == 0 and doc.get("kind") != "screw":
-            return "geometric.coefficients_um is empty (it holds at least the constant term; [0.0] for none)"
-        degree = geo.get("degree")
-        if degree is not None and n and (isinstance(degree, bool) or not isinstance(degree, int) or degree != n - 1):
-            return "geometric.degree is %r but geometric.coefficients_um has %d coefficient%s (degree %d)" % (
-                degree, n, "" if n == 1 else "s", n - 1)
-    return None
-
-
 def model_class(kind):
-    module, _, name = KINDS[kind].partition(":")
+    module, _, name = KIND_CLASSES[kind].partition(":")
     return getattr(importlib.import_module(module), name)
 
 

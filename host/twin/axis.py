@@ -81,7 +81,7 @@ class AxisParams:
         """m = sqrt(h*perimeter/(lambda*A)) of the 1-D fin equation."""
         return math.sqrt(self.h_W_m2K * self.perimeter_m / (self.conductivity_W_mK * self.section_m2))
 
-    def validate(self):
+    def checked(self):
         problems = []
         positive = (
             "stroke_mm", "screw_length_mm", "screw_diameter_mm", "lead_mm", "density_kg_m3",
@@ -148,4 +148,4 @@ def make_params(**overrides):
         overrides["positions_mm"] = tuple(float(p) for p in overrides["positions_mm"])
     if "geometric_um" in overrides:
         overrides["geometric_um"] = tuple(float(c) for c in overrides["geometric_um"])
-    return AxisParams(**overrides).validate()
+    return AxisParams(**overrides).checked()

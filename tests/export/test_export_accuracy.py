@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 from firmware.evaluate import CLAMP_POSITION, CLAMP_STATE, CLAMP_TRAVEL, Evaluator
 from firmware.table import parse_table
-from host.learning.documents import document_hash
+from models_export.document import FORMAT, document_hash
 from models_export import export_model
 from hil_tests.fixtures.reference import Reference
 from hil_tests.fixtures.samples import screw_doc
@@ -51,7 +51,7 @@ def poly_slope_docs(draw):
     geo = [draw(st.floats(-20.0, 20.0))] + [draw(st.floats(-30.0, 30.0)) / stroke ** j for j in range(1, d + 1)]
     coef = {s: draw(st.floats(-0.05, 0.05)) for s in names}
     return _finish({
-        "format": "tcomp-model/1", "kind": "poly_slope", "axis": "X", "sensors": names, "reference_C": ref,
+        "format": FORMAT, "kind": "poly_slope", "axis": "X", "sensors": names, "reference_C": ref,
         "geometric": {"degree": d, "coefficients_um": geo},
         "thermal": {"intercept_um_per_mm": draw(st.floats(-0.01, 0.01)), "coefficients_um_per_mm_per_K": coef,
                     "reference": draw(st.sampled_from(["fixed", "run_start"]))},
@@ -64,7 +64,7 @@ def linear_direct_docs(draw):
     n = draw(st.integers(0, 11))
     names, env, ref = draw(sensor_block(n))
     return _finish({
-        "format": "tcomp-model/1", "kind": "linear_direct", "axis": "Z", "sensors": names, "reference_C": ref,
+        "format": FORMAT, "kind": "linear_direct", "axis": "Z", "sensors": names, "reference_C": ref,
         "geometric": None,
         "thermal": {"intercept_um": draw(st.floats(-50.0, 50.0)), "coefficients_um_per_K": {s: draw(st.floats(-5.0, 5.0)) for s in names},
                     "reference": draw(st.sampled_from(["fixed", "run_start"]))},

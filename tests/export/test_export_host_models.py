@@ -9,7 +9,8 @@ import pytest
 from firmware.evaluate import ACC_AMUL, Evaluator
 from firmware.table import parse_table
 from host.cli import main
-from host.learning.documents import document_hash, load_model, read_document
+from host.learning.documents import load_model, read_document
+from models_export.document import document_hash
 from host.data.runs import load_run
 from models_export import export_model
 from hil_tests.fixtures.reference import Reference

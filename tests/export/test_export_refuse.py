@@ -95,7 +95,7 @@ def test_cli_writes_table_report_and_header(tmp_path, capsys):
     assert {x["name"] for x in r["terms"]} >= {"thermal.coefficients_um_per_mm_per_K.%s" % s for s in doc["sensors"]}
     assert r["envelope"]["position_um"] == [0, int(doc["envelope"]["position_mm"][1] * 1000)]
     assert r["provenance_verified"] is True and bytes.fromhex(r["provenance_sha256"]) == t.provenance
-    assert "#define TCOMP_KIND 1" in hdr.read_text() and "TCOMP_TABLE_H" in hdr.read_text()
+    assert "#define TCOMP_KIND TCOMP_KIND_POLY_SLOPE\n" in hdr.read_text() and "#define TCOMP_KIND_POLY_SLOPE 1\n" in hdr.read_text() and "TCOMP_TABLE_H" in hdr.read_text()
     assert "certified max |integer - model|" in capsys.readouterr().out
 
 
@@ -185,3 +185,13 @@ def test_an_edited_document_is_refused_or_exported_marked_with_the_hash_it_has(t
     actual = bytes.fromhex(document_hash(edited))
     assert t.provenance == actual != bytes.fromhex(doc["provenance"]["sha256"]) and t.edited == 1
     assert r["provenance_verified"] is False and r["provenance_edited"] is True and r["provenance_sha256"] == actual.hex()
+
+
+def test_a_document_of_another_format_is_refused_naming_the_format():
+    # the format tag is models_export/document.py's FORMAT; export_model reads no other document
+    from models_export.document import FORMAT
+
+    doc = poly_slope_doc(random.Random(3))
+    for wrong in ("tcomp-model/2", None):
+        with pytest.raises(ExportError, match="format must be %r" % FORMAT):
+            export_model(restamp(dict(doc, format=wrong)))

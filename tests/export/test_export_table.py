@@ -183,3 +183,41 @@ def test_table_is_data_not_code(exports):
     assert reason(bytes(buf)) == REASON_CRC
     t = parse_table(refresh_crc(buf))  # with a valid CRC it is parsed as what it is: sensor names
     assert t.sensors[:2] == [src[:16].decode(), src[16:32].decode()]
+
+
+def test_pack_refuses_a_list_the_layout_does_not_fit(exports):
+    # the list lengths come from the table's layout (firmware/table.py count codes), not from the list given
+    from models_export.tableformat import pack
+
+    f = dict(exports["poly_slope"].fields)
+    f["G"] = list(f["G"]) + [0]
+    with pytest.raises(ValueError, match=r"table field G has %d entries, the table's layout needs %d"
+                       % (len(f["G"]), len(f["G"]) - 1)):
+        pack(f)
+    g = dict(exports["screw_reduced"].fields)
+    g["shB"] = list(g["shB"])[:-1]
+    with pytest.raises(ValueError, match="table field shB"):
+        pack(g)
+    h = dict(exports["linear_direct"].fields)
+    h["fb"] = list(h["fb"])[:-1]
+    with pytest.raises(ValueError, match="table field fb has 2 entries for 3 sensors"):
+        pack(h)
+
+
+def test_c_header_leaves_out_only_what_the_evaluator_never_reads():
+    # the C header takes its coefficients from the table spec; the ones it omits must be spec fields
+    # that firmware/evaluate.py (whose operations the C code repeats) never reads
+    import re
+    from pathlib import Path
+
+    from firmware import table
+    from models_export import cheader
+    from models_export.tableformat import spec_names
+
+    spec = {n for s in (table.COMMON, table.POSITION, table.SCREW) for n, _ in spec_names(s)}
+    emitted = {n for g in cheader.SCALARS.values() for n in g} | {n for g in cheader.ARRAYS.values() for n in g}
+    assert spec - emitted == set(cheader.INFORMATIONAL)
+    source = (Path(table.__file__).with_name("evaluate.py")).read_text()
+    read = set(re.findall(r"\b(?:t|table)\.([A-Za-z_]\w*)", source))
+    assert "b" in read and "shb" in read and "S0" in read  # the scan sees the evaluator's reads
+    assert not read & set(cheader.INFORMATIONAL)

@@ -96,10 +96,10 @@ def _nonce(app):
 
 def tagged_chunk(app, off, data, key=TEST_KEY):
     """A U,D line with ``data`` at ``off`` for ``app``'s open upload, tagged as host/board/linkauth.py does."""
-    from host.board.link import body, command
+    from host.board.link import body, command_line
     from host.board.linkauth import LinkSigner
     f = ("U", "D", off, data.hex().upper())
-    return command(*(f + (LinkSigner(key).tag(body(f), b"", app.link.upload_id).hex().upper(),)))
+    return command_line(*(f + (LinkSigner(key).tag(body(f), b"", app.link.upload_id).hex().upper(),)))
 
 
 def signer_for(app, key=TEST_KEY):

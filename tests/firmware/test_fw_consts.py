@@ -49,6 +49,20 @@ def test_private_copies_match_their_source():
         assert here[name] == getattr(importlib.import_module("firmware." + src), public), (mod, name)
 
 
+def test_every_kind_code_copy_is_the_tables():
+    # the table's kind codes are owned by firmware/table.py; any module's folded _KIND_* copy must agree
+    from firmware import table
+    checked = 0
+    for fn in sorted(os.listdir(FW)):
+        if fn.endswith(".py") and fn != "table.py":
+            for k, v in consts(fn[:-3]).items():
+                if k.startswith("_KIND_"):
+                    assert hasattr(table, k[1:]), (fn, k)
+                    assert v == getattr(table, k[1:]), (fn, k)
+                    checked += 1
+    assert checked >= 5  # evaluate.py's three, app.py's two
+
+
 def test_wire_contract_copies_match_wire_py():
     from firmware import wire
     checked = 0
@@ -146,3 +160,29 @@ def test_no_module_tells_cpython_by_a_failing_micropython_import():
             with open(os.path.join(FW, fn)) as f:
                 assert not re.search(r"try:\s*\n\s*(import micropython|from micropython import const)\s*\n\s*except",
                                      f.read()), fn
+
+
+def test_modbus_map_and_error_codes_are_the_wire_contract():
+    # the register map, the exception codes and the E-frame codes are owned by firmware/wire.py; the
+    # board's folded copies are checked against it above, and none may exist only in a board module
+    from firmware import wire
+    private = {k for fn in ("modbus", "protocol") for k in consts(fn)
+               if re.match(r"_(IR|HR|EX|E|N)_", k) or k in ("_PROTECTED", "_NO_VALUE")}
+    assert len(private) >= 40
+    missing = sorted(k for k in private if not hasattr(wire, k[1:]))
+    assert not missing, "board-only register or error constants (put them in firmware/wire.py): %s" % missing
+
+
+def test_host_link_users_retype_no_register_or_error_number():
+    # the bridge and tcomp monitor address registers and compare error codes by firmware/wire.py's names
+    import ast
+    registers = {"read_input_registers", "read_holding_registers", "write_registers", "write_register"}
+    for rel in ("host/board/linuxcnc/bridge.py", "host/cli/verbs/monitor.py"):
+        with open(os.path.join(ROOT, rel)) as f:
+            text = f.read()
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.Call) and getattr(node.func, "attr", None) in registers:
+                assert not isinstance(node.args[0], ast.Constant), (rel, node.lineno, "register address as a number")
+            if isinstance(node, ast.Constant) and isinstance(node.value, str) and node.value.isdigit():
+                raise AssertionError("%s line %d: error code %r typed as a number" % (rel, node.lineno, node.value))
+        assert not re.search(r"status & 0x[Ff]{4}\b", text), rel  # the sensor bits are wire.SENSOR_MASK

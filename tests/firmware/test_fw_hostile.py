@@ -266,10 +266,10 @@ def test_hole4_jamming_chunks_refused_before_any_flash_write(jam):
         elif how == "forged tag":
             line = cmd(b"TC,U,D,0,%s,%s" % (piece.hex().upper().encode(), (b"%02X" % k) * 16))
         elif how == "other upload":  # a chunk properly tagged for another upload (an old capture)
-            from host.board.link import body, command
+            from host.board.link import body, command_line
             from host.board.linkauth import LinkSigner
             fs = ("U", "D", 0, piece.hex().upper())
-            line = command(*(fs + (LinkSigner(TEST_KEY).tag(body(fs), b"", old_id).hex().upper(),)))
+            line = command_line(*(fs + (LinkSigner(TEST_KEY).tag(body(fs), b"", old_id).hex().upper(),)))
         else:
             line = cmd(b"TC,U,D,0,%s,ABCD" % piece.hex().upper().encode())
         out = send(app, board, line)

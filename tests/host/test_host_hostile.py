@@ -478,9 +478,9 @@ def _pty_board(frames):
 
 def _hello(counter):
     from firmware.wire import PROTOCOL_VERSION
-    from host.board.link import command
+    from host.board.link import command_line
 
-    return command(3, "00000000", "H", str(PROTOCOL_VERSION), "0.1.0", "A", "0ABCAE5F", "0001020304050607", "poly_slope",
+    return command_line(3, "00000000", "H", str(PROTOCOL_VERSION), "0.1.0", "A", "0ABCAE5F", "0001020304050607", "poly_slope",
                    "X", "11", "-", counter, "0A0B0C0D")
 
 
@@ -723,11 +723,11 @@ def test_hole10_nothing_is_accepted_silently(world, monkeypatch):
         os.remove(os.path.join(o, f))
 
     # NaN offsets from a board: counted as malformed, recorded in the JSON, never written as rows
-    from host.board.link import command
-    frames = [command(1, "00000000", "O", "1000", "0", "nan", "0.0", "0.00"),
-              command(2, "00000000", "O", "1100", "5", "2.5", "inf", "0.00"),
-              command(3, "00000000", "Q", "1200", "5", "1e999", "0.1", "0.00"),
-              command(4, "00000000", "O", "1300", "5", "2.5", "0.1", "0.00")]
+    from host.board.link import command_line
+    frames = [command_line(1, "00000000", "O", "1000", "0", "nan", "0.0", "0.00"),
+              command_line(2, "00000000", "O", "1100", "5", "2.5", "inf", "0.00"),
+              command_line(3, "00000000", "Q", "1200", "5", "1e999", "0.1", "0.00"),
+              command_line(4, "00000000", "O", "1300", "5", "2.5", "0.1", "0.00")]
     port, fds = _pty_board(frames)
     try:
         outcome = call(["monitor", "--port", port, "--hello", "--duration", "2", "--json", o + "/m.json", "--csv", o + "/m.csv"])
@@ -794,14 +794,14 @@ def test_property_hole10_hello_counters_are_numbers_below_max(text):
 def test_property_hole10_import_scales(tmp_path, scale, time_scale):
     """Any error scale and time scale in a mapping: refused by name, or a run whose errors and times are finite,
     within the run format, and scaled exactly as asked."""
-    from host.data.importer import ImportError_, import_csv
+    from host.data.importer import LogImportError, import_csv
 
     src = tmp_path / "log.csv"
     src.write_text("time_s,T1,e\n0,20,1.5\n60,21,2.5\n120,22,-0.5\n")
     mapping = {"time": "time_s", "time_scale": time_scale, "temperatures": ["T1"], "errors": {"e": {"scale": scale}}}
     try:
         run = import_csv(str(src), mapping, "map.json")
-    except ImportError_ as exc:
+    except LogImportError as exc:
         assert str(exc).startswith(("map.json: ", str(src)))
         return
     assert isinstance(scale, (int, float)) and not isinstance(scale, bool) and scale != 0

@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from host.data.importer import ImportError_, import_csv
+from host.data.importer import LogImportError, import_csv
 from host.data.runs import load_run
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
@@ -50,7 +50,7 @@ def test_bundled_real_run_equals_source():
 
 def test_unmapped_column_is_an_error(tmp_path):
     src = _write(tmp_path / "log.csv", [["t", "a", "d", "extra"], [0, 20, 1, 5], [1, 21, 2, 6]])
-    with pytest.raises(ImportError_, match="column 'extra' is neither mapped nor listed in 'ignore'"):
+    with pytest.raises(LogImportError, match="column 'extra' is neither mapped nor listed in 'ignore'"):
         import_csv(src, {"time": "t", "temperatures": ["a"], "errors": ["d"]})
     run = import_csv(src, {"time": "t", "temperatures": ["a"], "errors": ["d"], "ignore": ["extra"]})
     assert run.meta["import"]["ignored_columns"] == ["extra"]
@@ -58,21 +58,21 @@ def test_unmapped_column_is_an_error(tmp_path):
 
 def test_bad_cells_and_time(tmp_path):
     src = _write(tmp_path / "log.csv", [["t", "a", "d"], [0, 20, 1], [2, "oops", 2], [1, 21, 3]])
-    with pytest.raises(ImportError_) as exc:
+    with pytest.raises(LogImportError) as exc:
         import_csv(src, {"time": "t", "temperatures": ["a"], "errors": ["d"]})
     assert "line 3 column 'a': not a number: 'oops'" in str(exc.value)
     src = _write(tmp_path / "log2.csv", [["t", "a", "d"], [0, 20, 1], [2, 20, 2], [1, 21, 3]])
-    with pytest.raises(ImportError_, match="line 4 column 't': time goes backwards"):
+    with pytest.raises(LogImportError, match="line 4 column 't': time goes backwards"):
         import_csv(src, {"time": "t", "temperatures": ["a"], "errors": ["d"]})
 
 
 def test_mapping_errors(tmp_path):
     src = _write(tmp_path / "log.csv", [["t", "a", "d"], [0, 20, 1]])
-    with pytest.raises(ImportError_, match="mapped column 'b' is not in the header"):
+    with pytest.raises(LogImportError, match="mapped column 'b' is not in the header"):
         import_csv(src, {"time": "t", "temperatures": ["a", "b"], "errors": ["d"]})
-    with pytest.raises(ImportError_, match="role 'hot'"):
+    with pytest.raises(LogImportError, match="role 'hot'"):
         import_csv(src, {"time": "t", "temperatures": {"a": {"role": "hot"}}, "errors": ["d"]})
-    with pytest.raises(ImportError_, match="unknown mapping key"):
+    with pytest.raises(LogImportError, match="unknown mapping key"):
         import_csv(src, {"time": "t", "temps": ["a"], "errors": ["d"]})
 
 

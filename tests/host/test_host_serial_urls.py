@@ -8,12 +8,12 @@ import time
 import pytest
 
 from firmware.linux_adapters import make_linux_board
-from host.board.link import command
+from host.board.link import command_line
 from hil_tests.rig.realport import RealDut
 from host.cli import main
 
-FRAMES = [command(7, "00000000", "O", 1000, 25000, "1.50", "1.20", "3.00"),
-          command(8, "00080000", "W", "sensor")]
+FRAMES = [command_line(7, "00000000", "O", 1000, 25000, "1.50", "1.20", "3.00"),
+          command_line(8, "00080000", "W", "sensor")]
 
 
 def test_monitor_reads_a_socket_url(tmp_path):
@@ -78,7 +78,7 @@ def _serve(payload):
 
 def test_monitor_refuses_a_hello_with_an_unknown_protocol_version(capsys):
     from firmware.wire import PROTOCOL_VERSION
-    hello = command(0, "00000000", "H", PROTOCOL_VERSION + 1, "9.9.9", "-", "-", "-", "-", "-", 3, "-")
+    hello = command_line(0, "00000000", "H", PROTOCOL_VERSION + 1, "9.9.9", "-", "-", "-", "-", "-", 3, "-")
     assert main(["monitor", "--port", _serve(hello), "--count", "1", "--duration", "5"]) == 2
     err = capsys.readouterr().err
     assert "protocol version %d" % (PROTOCOL_VERSION + 1) in err and "speaks %d" % PROTOCOL_VERSION in err
@@ -86,7 +86,7 @@ def test_monitor_refuses_a_hello_with_an_unknown_protocol_version(capsys):
 
 def test_monitor_accepts_a_hello_with_its_protocol_version(tmp_path):
     from firmware.wire import FIRMWARE_VERSION, PROTOCOL_VERSION
-    hello = command(0, "00200000", "H", PROTOCOL_VERSION, FIRMWARE_VERSION, "-", "-", "-", "-", "-", 3, "-")
+    hello = command_line(0, "00200000", "H", PROTOCOL_VERSION, FIRMWARE_VERSION, "-", "-", "-", "-", "-", 3, "-")
     out = tmp_path / "m.json"
     assert main(["monitor", "--port", _serve(hello), "--count", "1", "--duration", "5", "--json", str(out)]) == 0
     assert json.loads(out.read_text())["rows"][0]["flags"] == "NO_TABLE"
@@ -99,7 +99,7 @@ def test_monitor_latch_refuses_a_bad_hello_counter_in_one_line(tmp_path, capsys,
     from firmware.wire import FIRMWARE_VERSION, PROTOCOL_VERSION
     from host.board.linkauth import write_key
     write_key(str(tmp_path / "k"), bytes(range(32)))
-    hello = command(0, "00200000", "H", PROTOCOL_VERSION, FIRMWARE_VERSION, "-", "-", "-", "-", "-", 3, "-",
+    hello = command_line(0, "00200000", "H", PROTOCOL_VERSION, FIRMWARE_VERSION, "-", "-", "-", "-", "-", 3, "-",
                     counter, "0A0B0C0D")
     assert main(["monitor", "--port", _serve(hello), "--latch", "--key", str(tmp_path / "k"),
                  "--duration", "5"]) == 2

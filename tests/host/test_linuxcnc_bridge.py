@@ -3,7 +3,7 @@ counts loop against a motion model, cold-start rule. The same bridge in a real L
 hil_tests/test_hil_linuxcnc.py."""
 import pytest
 
-from host.board.link import FALLBACK, command, crc16
+from host.board.link import FALLBACK, command_line, crc16
 from host.cli import main
 from host.board.linuxcnc.bridge import (BOARD, CRC, LATCH_DONE, LATCH_NONE, LATCH_REFUSED, LINK, STALE, Bridge, Exchange,
                                   Inputs, OffsetRamp, Reading, StreamLink)
@@ -238,7 +238,7 @@ def test_stream_link_sends_p_and_q_and_decodes_answers():
     ports = [FakePort(good + bad + ack)]
     link = StreamLink(lambda: ports[-1], reopen_s=0.0)
     ex = link.exchange(250000, latch=True)
-    assert bytes(ports[0].tx) == command("V") + command("P", 250000) + command("Q", 250000) + command("L")
+    assert bytes(ports[0].tx) == command_line("V") + command_line("P", 250000) + command_line("Q", 250000) + command_line("L")
     assert ex.readings == [Reading(-12.3, 250000, FALLBACK, 7)]
     assert len(ex.malformed) == 1 and "CRC" in ex.malformed[0]
     assert ex.latch == "ok:L"
@@ -247,9 +247,9 @@ def test_stream_link_sends_p_and_q_and_decodes_answers():
     assert ex.error == "device disconnected"
     ports.append(FakePort())
     ex = link.exchange(250000)  # reopened, and the hello asked for again
-    assert not ex.error and bytes(ports[1].tx).startswith(command("V"))
+    assert not ex.error and bytes(ports[1].tx).startswith(command_line("V"))
     ex = link.exchange(250000)
-    assert not bytes(ports[1].tx).count(command("V")) > 1
+    assert not bytes(ports[1].tx).count(command_line("V")) > 1
 
 
 def test_stream_link_signs_l_with_the_board_counter():
@@ -322,18 +322,18 @@ def test_spindle_speed_is_sent_only_when_asked_and_only_when_finite():
     off = Run(StreamLink(lambda: port, reopen_s=0.0))
     off.inp.spindle_rpm = 8000.0
     off.step()
-    assert command("P", 250000) in bytes(port.tx) and b"$TC,P,250000," not in bytes(port.tx)
+    assert command_line("P", 250000) in bytes(port.tx) and b"$TC,P,250000," not in bytes(port.tx)
     # on: P,<pos>,<rpm> in stream mode ...
     port = FakePort()
     on = Run(StreamLink(lambda: port, reopen_s=0.0), send_spindle=True)
     on.inp.spindle_rpm = 7999.6
     on.step()
-    assert command("P", 250000, 8000) in bytes(port.tx)
+    assert command_line("P", 250000, 8000) in bytes(port.tx)
     # ... a NaN pin is not sent (the board keeps the last speed), and the bridge keeps running
     port.tx.clear()
     on.inp.spindle_rpm = float("nan")
     on.step()
-    assert command("P", 250000) in bytes(port.tx) and b"$TC,P,250000," not in bytes(port.tx)
+    assert command_line("P", 250000) in bytes(port.tx) and b"$TC,P,250000," not in bytes(port.tx)
     # ... and holding registers 18-19 (int32, high word first, written whole) in Modbus mode
     from host.board.linuxcnc.bridge import ModbusLink
     client = FakeModbus()

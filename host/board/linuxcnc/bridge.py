@@ -19,7 +19,11 @@ import math
 import time
 from dataclasses import dataclass, field
 
-from host.board.link import FALLBACK, StreamDecoder, command
+from firmware.wire import (
+    E_AUTH, E_BUSY, E_STATE, EX_DEVICE_FAILURE, HR_AUTH, HR_LATCH, HR_POSITION, HR_SLEW, HR_SPINDLE, IR_AUTH_COUNTER, IR_NONCE,
+    IR_POSITION, IR_SEQUENCE, IR_STATUS_HI, IR_STATUS_LO, IR_TOTAL,
+)
+from host.board.link import FALLBACK, StreamDecoder, command_line
 
 COUNT_UM = 0.1  # one eoffset count: the board's offset resolution (docs/protocol.md, 0.1 um)
 UM_PER_UNIT = {"mm": 1000.0, "inch": 25400.0}
@@ -76,18 +80,18 @@ class StreamLink:
 
     def exchange(self, pos_um, latch=False, spindle_rpm=None):
         ex = Exchange()
-        p = command("P", pos_um) if spindle_rpm is None else command("P", pos_um, spindle_rpm)
-        out = p + command("Q", pos_um)
+        p = command_line("P", pos_um) if spindle_rpm is None else command_line("P", pos_um, spindle_rpm)
+        out = p + command_line("Q", pos_um)
         if self.want_hello:
-            out = command("V") + out
+            out = command_line("V") + out
             self.want_hello = False
         if latch and self.signer is not None:
             # the tag needs the board's current session nonce: ask for the hello, sign L when it comes
             self.latch_wanted = True
-            if not out.startswith(command("V")):
-                out = command("V") + out
+            if not out.startswith(command_line("V")):
+                out = command_line("V") + out
         elif latch:
-            out += command("L")
+            out += command_line("L")
             self.latch_pending = True
         try:
             if self.ser is None:
@@ -133,12 +137,12 @@ class StreamLink:
                 if line is not None:
                     self.ser.write(line)
                     self.latch_pending = True
-        elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["5"], ["8"], ["9"]):
+        elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["%d" % E_STATE], ["%d" % E_AUTH], ["%d" % E_BUSY]):
             # 5 state (no table, fixed references, sensor faulty), 8 auth (unsigned, bad tag,
             # replayed counter...), 9 busy
             self.latch_pending = False
-            ex.latch = "refused:" + ",".join(f.fields[1:] if f.fields[0] != "5" else f.fields[2:])
-            if f.fields[0] == "8":
+            ex.latch = "refused:" + ",".join(f.fields[1:] if f.fields[0] != "%d" % E_STATE else f.fields[2:])
+            if f.fields[0] == "%d" % E_AUTH:
                 self.want_hello = True  # the counter may be behind the board's
 
     def close(self):
@@ -157,7 +161,7 @@ def _s16(v):
 
 class ModbusLink:
     """Modbus RTU mode (pymodbus master): write the position (holding 3-4) and, when given, the
-    spindle speed (holding 18-19, int32 written whole), read input 0-9."""
+    spindle speed (holding 18-19, int32 written whole), read input 0-9 (firmware/wire.py's register map)."""
 
     def __init__(self, client, address=1, signer=None):
         self.client = client
@@ -165,9 +169,9 @@ class ModbusLink:
         self.signer = signer
 
     def slew_um_per_s(self):
-        """The board's slew limit (holding register 1), or None if it cannot be read."""
+        """The board's slew limit (holding register HR_SLEW), or None if it cannot be read."""
         try:
-            rr = self.client.read_holding_registers(1, count=1, device_id=self.address)
+            rr = self.client.read_holding_registers(HR_SLEW, count=1, device_id=self.address)
         except Exception:  # pymodbus raises its own exception tree (ModbusException, ConnectionException)
             return None
         return None if rr.isError() else rr.registers[0]
@@ -176,28 +180,30 @@ class ModbusLink:
         ex = Exchange()
         p = pos_um & 0xFFFFFFFF
         try:
-            w = self.client.write_registers(3, [p >> 16, p & 0xFFFF], device_id=self.address)
+            w = self.client.write_registers(HR_POSITION, [p >> 16, p & 0xFFFF], device_id=self.address)
             if spindle_rpm is not None and not w.isError():
                 r = spindle_rpm & 0xFFFFFFFF
-                w = self.client.write_registers(18, [r >> 16, r & 0xFFFF], device_id=self.address)
-            rr = self.client.read_input_registers(0, count=10, device_id=self.address)
+                w = self.client.write_registers(HR_SPINDLE, [r >> 16, r & 0xFFFF], device_id=self.address)
+            rr = self.client.read_input_registers(IR_STATUS_LO, count=IR_POSITION + 2, device_id=self.address)
             if w.isError() or rr.isError():
                 ex.error = "modbus exception %s" % (w if w.isError() else rr)
             else:
                 r = rr.registers
-                pos = (r[6] << 16) | r[7]
+                pos = (r[IR_POSITION] << 16) | r[IR_POSITION + 1]
                 pos = pos - (1 << 32) if pos & 0x80000000 else pos
-                ex.readings.append(Reading(_s16(r[3]) / 10.0, pos, r[0] | (r[1] << 16), r[2]))
+                ex.readings.append(Reading(_s16(r[IR_TOTAL]) / 10.0, pos, r[IR_STATUS_LO] | (r[IR_STATUS_HI] << 16), r[IR_SEQUENCE]))
             if latch:
                 if self.signer is not None:  # the auth block (holding 8..17) for this very write
                     # the last counter (48-49) and the session nonce (51-52) the tag must use
-                    cr = self.client.read_input_registers(48, count=5, device_id=self.address)
+                    cr = self.client.read_input_registers(IR_AUTH_COUNTER, count=IR_NONCE + 2 - IR_AUTH_COUNTER,
+                                                          device_id=self.address)
                     if not cr.isError():
                         r = cr.registers
-                        self.signer.observe((r[0] << 16) | r[1], (r[3] << 16) | r[4])
-                    self.client.write_registers(8, self.signer.modbus_auth(self.address, 7, [1]),
+                        n = IR_NONCE - IR_AUTH_COUNTER
+                        self.signer.observe((r[0] << 16) | r[1], (r[n] << 16) | r[n + 1])
+                    self.client.write_registers(HR_AUTH, self.signer.modbus_auth(self.address, HR_LATCH, [1]),
                                                 device_id=self.address)
-                lr = self.client.write_register(7, 1, device_id=self.address)
+                lr = self.client.write_register(HR_LATCH, 1, device_id=self.address)
                 ex.latch = ("refused:exception %s" % getattr(lr, "exception_code", "?")) if lr.isError() else "ok:"
         except Exception as exc:  # no answer, CRC error (pymodbus drops the frame), port gone
             ex.error = str(exc) or type(exc).__name__
@@ -256,7 +262,7 @@ class Inputs:
 
 
 @dataclass
-class Outputs:
+class BridgeOutputs:
     eoffset_counts: int = 0
     eoffset_scale: float = 0.0
     eoffset_enable: bool = True
@@ -297,7 +303,7 @@ class Bridge:
         self.log = log or (lambda msg: None)
         self.latch_retry_s = latch_retry_s
         self.latch_tries = latch_tries
-        self.out = Outputs(eoffset_scale=self.scale)
+        self.out = BridgeOutputs(eoffset_scale=self.scale)
         self.counts = 0
         self.last_now = None
         self.last_new_s = None     # when the last new reading arrived
@@ -343,7 +349,7 @@ class Bridge:
             self.log("L acknowledged (refs %s)" % (reply[3:] or "latched"))
         else:
             why = reply.split(":", 1)[1]
-            retry = any(w in why for w in ("sensor faulty", "exception 4", "busy", "replayed"))
+            retry = any(w in why for w in ("sensor faulty", "exception %d" % EX_DEVICE_FAILURE, "busy", "replayed"))
             if not (retry and self.latch_tries_left):
                 self.latch_tries_left = 0
             self.out.latch_state = LATCH_REFUSED

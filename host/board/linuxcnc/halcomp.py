@@ -8,7 +8,7 @@ import sys
 
 from host.board.linuxcnc.bridge import Inputs, run_loop
 
-# (pin, type, direction, Inputs/Outputs attribute)
+# (pin, type, direction, Inputs/BridgeOutputs attribute)
 PINS = (
     ("position", "FLOAT", "IN", "position"),
     ("machine-on", "BIT", "IN", "machine_on"),

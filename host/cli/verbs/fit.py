@@ -1,6 +1,6 @@
 """tcomp fit --model KIND RUN... --out MODEL.json"""
 
-EMPIRICAL = ("mlr", "pcr", "stepwise", "cv-subset", "ann", "dynamic")
+from host.learning.empirical.methods import FIT_METHODS as EMPIRICAL  # the empirical methods with a document form
 
 
 def add_arguments(p):

@@ -55,7 +55,7 @@ def run(args):
     import math
 
     from host.errors import UserError
-    from host.data.importer import ImportError_, import_to_folder
+    from host.data.importer import LogImportError, import_to_folder
     from host.outputs import Outputs
 
     if not (math.isfinite(args.time_scale) and args.time_scale > 0):
@@ -84,7 +84,7 @@ def run(args):
     with out:
         try:
             run_ = import_to_folder(args.source, mapping, out.path(args.out), where)
-        except ImportError_ as exc:
+        except LogImportError as exc:
             raise UserError(str(exc))
         _report(args, run_, out)
         out.commit()

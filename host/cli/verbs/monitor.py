@@ -52,10 +52,10 @@ def offset_problem(f):
 
 def row(f):
     """A decoded frame as the monitor's columns."""
-    from host.board.link import STATUS_BITS
+    from host.board.link import SENSOR_MASK, STATUS_BITS
     flags = [n for bit, n in STATUS_BITS.items() if f.status & bit]
-    if f.status & 0xFFFF:
-        flags.append("sensors:%04X" % (f.status & 0xFFFF))
+    if f.status & SENSOR_MASK:
+        flags.append("sensors:%04X" % (f.status & SENSOR_MASK))
     r = {"seq": f.seq, "kind": f.kind, "status": "%08X" % f.status, "flags": "|".join(flags),
          "t_ms": "", "pos_um": "", "total_um": "", "ref_offset_um": "", "slope_um_per_m": "",
          "fields": ",".join(f.fields)}
@@ -88,7 +88,8 @@ def run(args):
 def _monitor(args, outputs):
     import serial
 
-    from host.board.link import PROTOCOL_VERSION, StreamDecoder, command
+    from firmware.wire import E_AUTH, E_BUSY, E_STATE
+    from host.board.link import PROTOCOL_VERSION, StreamDecoder, command_line
     from host.errors import UserError
     try:
         ser = serial.serial_for_url(args.port, args.baud, timeout=0.1)
@@ -119,9 +120,9 @@ def _monitor(args, outputs):
     latch_sent = False
     try:
         if args.hello or signer is not None and args.latch:
-            ser.write(command("V"))  # a signed L needs the board's last counter, the hello's last field
+            ser.write(command_line("V"))  # a signed L needs the board's last counter, the hello's last field
         if args.latch and signer is None:
-            ser.write(command("L"))
+            ser.write(command_line("L"))
             latch_sent = True
         while not (args.count and n >= args.count) and not (args.duration and time.monotonic() - start
                                                                >= args.duration):
@@ -156,10 +157,11 @@ def _monitor(args, outputs):
                     ser.write(line)
                     latch_sent = True
                 if latch_sent and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]
-                                                     or f.kind == "E" and f.fields[:1] in (["5"], ["8"], ["9"])):
+                                                     or f.kind == "E" and f.fields[:1] in (["%d" % E_STATE], ["%d" % E_AUTH],
+                                                                                           ["%d" % E_BUSY])):
                     latch = "ok" if f.kind == "A" else "refused"
                     print("L acknowledged, references %s" % ",".join(f.fields[1:]) if f.kind == "A"
-                          else "L refused: %s" % ",".join(f.fields[2:] if f.fields[0] == "5" else f.fields[1:]))
+                          else "L refused: %s" % ",".join(f.fields[2:] if f.fields[0] == "%d" % E_STATE else f.fields[1:]))
                 if writer:
                     writer.writerow(r)
                 if args.json:

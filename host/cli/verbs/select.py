@@ -1,6 +1,6 @@
 """tcomp select --method maxtree|stepwise|hclust-ga RUN... --json OUT  |  tcomp select --method maxtree --corr CORR.csv --json OUT"""
 
-METHODS = ("maxtree", "stepwise", "hclust-ga")
+from host.learning.empirical.methods import SELECTORS as METHODS
 
 
 def add_arguments(p):

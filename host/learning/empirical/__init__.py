@@ -3,7 +3,7 @@
 Modules: ``targets`` (what is modelled: sweep slopes, direct errors, temperature
 features), ``geometric`` (cold polynomial), ``regression`` (MLR, PCR, stepwise
 estimators), ``model`` (the ``poly_slope`` and ``linear_direct`` model documents),
-``evaluate`` (cross-run evaluation, robustness), ``compare`` (``tcomp compare``),
+``scoring`` (cross-run evaluation, robustness), ``compare`` (``tcomp compare``),
 ``plots``, ``cli`` (``tcomp fit`` for mlr/pcr/stepwise) and ``selectors/``
 (sensor selection). docs/empirical.md explains methods and thresholds.
 """

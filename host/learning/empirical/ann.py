@@ -31,8 +31,7 @@ training data, the validation RMSE of every size and the epochs used.
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
-# check_xy and _f are imported where used: regression.py registers this estimator, so a top-level
-# import of it from here would be circular
+from host.learning.empirical.checks import check_predict_x, check_xy, finite_or_none
 
 
 class ANN:
@@ -74,8 +73,6 @@ class ANN:
         return [int(h) for h in sizes]
 
     def fit(self, X, y, names=None, groups=None):
-        from host.learning.empirical.regression import check_xy
-
         sizes = self._check()
         X, y, names = check_xy(X, y, names, None, "ANN")
         n, p = X.shape
@@ -164,30 +161,26 @@ class ANN:
         return (W, b, v, float(c)), best[0], epoch, best[2]
 
     def predict(self, X):
-        from host.learning.empirical.regression import check_predict_x
-
         X = check_predict_x(self, X, "W_", lambda: self.W_.shape[1])
         Z = (X - self.x_mean_) / self.x_scale_
         return self.y_mean_ + self.y_scale_ * (np.tanh(Z @ self.W_.T + self.b_) @ self.v_ + self.c_)
 
     def statistics(self):
-        from host.learning.empirical.regression import _f
-
         return {
             "n_samples": int(self.n_samples_),
             "n_train": self.n_train_,
             "n_validation": self.n_validation_,
             "validation": self.validation_,
-            "r2": _f(self.rsquared_),
-            "rmse": _f(self.rmse_),
+            "r2": finite_or_none(self.rsquared_),
+            "rmse": finite_or_none(self.rmse_),
             "hidden_size": int(self.hidden_size_),
-            "validation_rmse_by_size": {str(k): _f(v) for k, v in self.validation_rmse_.items()},
+            "validation_rmse_by_size": {str(k): finite_or_none(v) for k, v in self.validation_rmse_.items()},
             "epochs_by_size": {str(k): int(v) for k, v in self.epochs_.items()},
             "best_epoch": int(self.best_epoch_),
             "weights": int(self.W_.size + self.b_.size + self.v_.size + 1),
             "seed": int(self.seed),
             # keys shared with the linear estimators' statistics, for the comparison tables
-            "r2_adj": None, "F": None, "F_p": None, "residual_std_error": _f(self.rmse_),
+            "r2_adj": None, "F": None, "F_p": None, "residual_std_error": finite_or_none(self.rmse_),
         }
 
     def network(self):

@@ -40,13 +40,14 @@ from typing import Any, Optional
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
-from host.learning.empirical.scoring import disturb_run, evaluate
+from host.learning.empirical.scoring import disturb_run, score_model
 from host.learning.empirical.fitting import fit_model
 
-METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-mlr", "maxtree-pcr", "maxtree-ann", "dynamic")
-SELECTORS = ("maxtree", "hclust-ga")
-# selector, then estimator on the chosen sensors (estimator settings: --option maxtree-pcr.KEY=V; selection: maxtree.KEY=V)
-PIPELINES = {"maxtree-mlr": ("maxtree", "mlr"), "maxtree-pcr": ("maxtree", "pcr"), "maxtree-ann": ("maxtree", "ann")}
+# the methods, the selectors run before MLR and the pipelines (selector, then estimator on the chosen sensors;
+# estimator settings: --option maxtree-pcr.KEY=V; selection: maxtree.KEY=V): the registry's (methods.py)
+from host.learning.empirical.methods import COMPARE_METHODS as METHODS
+from host.learning.empirical.methods import COMPARE_SELECTORS as SELECTORS
+from host.learning.empirical.methods import PIPELINES
 ROBUSTNESS = {"noise_C": 0.2, "offset_C": 0.5, "seed": 0, "repeats": 5}
 
 
@@ -204,9 +205,9 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
             res["note"] = info["note"]
         res["coefficients"] = None if model.coefficients is None else dict(zip(model.sensors, model.coefficients.tolist()))
         res["intercept"] = model.intercept
-        res["train"] = evaluate(model, case.train[0], case.window)
-        res["tests"] = {label: evaluate(model, r, w) for label, r, w in case.tests}
-        res["disturbed"] = {label: _mean_metrics([evaluate(model, d, w) for d in disturbed[label]]) for label, r, w in case.tests}
+        res["train"] = score_model(model, case.train[0], case.window)
+        res["tests"] = {label: score_model(model, r, w) for label, r, w in case.tests}
+        res["disturbed"] = {label: _mean_metrics([score_model(model, d, w) for d in disturbed[label]]) for label, r, w in case.tests}
         keys = case.summary_tests or list(res["tests"])
         rm = [res["tests"][k]["rmse_um"] for k in keys]
         dm = [res["disturbed"][k]["rmse_um"] for k in keys]
@@ -341,7 +342,7 @@ def leave_one_cycle_out(run, channel=None, target="direct", methods=LOCO_METHODS
         for k, c in enumerate(cyc):
             span = (c["t_start_s"] if k else None, c["t_end_s"] if k < len(cyc) - 1 else None)
             model = fit_model([run], m, target, channel, sensors, True, exclude=span, reference="run_start", **options.get(m, {}))
-            folds.append(evaluate(model, run, span))
+            folds.append(score_model(model, run, span))
             sens.append(list(model.sensors))
             if progress:
                 progress("%s %s cycle %d: %.3f um" % (channel, m, k + 1, folds[-1]["rmse_um"]))

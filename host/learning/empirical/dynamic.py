@@ -37,6 +37,8 @@ evaluation costs O(k³ · groups) whatever the number of samples.
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
+from host.learning.empirical.checks import check_predict_x, finite_or_none
+from models_export.document import FORMAT
 
 # 0 (the signal itself), 15 min .. 16 h: from a sensor's own lag to two 8 h heating/cooling cycles of a machine structure
 TAUS_S = (0.0, 900.0, 1800.0, 3600.0, 7200.0, 14400.0, 28800.0, 57600.0)
@@ -182,8 +184,13 @@ class DynamicRegression:
         self.min_gain = min_gain
         self.fit_intercept = fit_intercept
 
-    def fit(self, F, y, terms, groups):
-        """Structure and coefficients for every ridge value in ``ridge``; the lowest CV score wins."""
+    def fit(self, X, y, names=None, groups=None):
+        """Structure and coefficients for every ridge value in ``ridge``; the lowest CV score wins.
+        ``X``: the lag-filtered candidates (fitting.candidate_matrix), ``names``: their (signal, tau) terms,
+        ``groups``: the cross-validation groups (both required)."""
+        if names is None or groups is None:
+            raise EmpiricalDataError("dynamic: fit needs the candidates' (signal, tau) terms and the cross-validation groups")
+        F, terms = X, names
         if self.cv_score not in ("worst", "pooled"):
             raise EmpiricalDataError("dynamic: cv_score must be 'worst' or 'pooled', got %r" % (self.cv_score,))
         grid = [self.ridge] if np.isscalar(self.ridge) else list(self.ridge)
@@ -305,21 +312,17 @@ class DynamicRegression:
 
     def predict(self, F):
         """``F``: the selected terms' signals, one column per ``terms_`` entry."""
-        from host.learning.empirical.regression import check_predict_x
-
         F = check_predict_x(self, F, "coef_", lambda: self.coef_.size)
         return self.intercept_ + F @ self.coef_
 
     def statistics(self):
-        from host.learning.empirical.regression import _f
-
         return {
-            "n_samples": int(self.n_samples_), "r2": _f(self.rsquared_), "rmse": _f(self.rmse_), "cv_rmse": _f(self.cv_rmse_),
+            "n_samples": int(self.n_samples_), "r2": finite_or_none(self.rsquared_), "rmse": finite_or_none(self.rmse_), "cv_rmse": finite_or_none(self.cv_rmse_),
             "cv_groups": self.n_groups_, "cv_score": self.cv_score, "history": self.history_, "ridge": self.ridge_,
-            "cv_by_ridge": {str(k): _f(v) for k, v in self.cv_by_ridge_.items()},
-            "terms": [{"signal": n, "tau_s": tau, "coefficient": _f(c)} for (n, tau), c in zip(self.terms_, self.coef_)],
+            "cv_by_ridge": {str(k): finite_or_none(v) for k, v in self.cv_by_ridge_.items()},
+            "terms": [{"signal": n, "tau_s": tau, "coefficient": finite_or_none(c)} for (n, tau), c in zip(self.terms_, self.coef_)],
             "sensors_used": sorted({n[2:] for n, _ in self.terms_ if n.startswith("T:")}),
-            "r2_adj": None, "F": None, "F_p": None, "residual_std_error": _f(self.rmse_),
+            "r2_adj": None, "F": None, "F_p": None, "residual_std_error": finite_or_none(self.rmse_),
         }
 
 
@@ -376,7 +379,7 @@ class DynamicModel:
 
     def to_document(self):
         return {
-            "format": "tcomp-model/1", "kind": self.kind, "method": self.method, "axis": self.axis, "channel": self.channel,
+            "format": FORMAT, "kind": self.kind, "method": self.method, "axis": self.axis, "channel": self.channel,
             "sensors": list(self.sensors), "reference_C": dict(self.reference_C),
             "geometric": None if self.target == "direct" else {"degree": int(self.geometric_coef.size - 1),
                                                                "coefficients_um": [float(c) for c in self.geometric_coef]},

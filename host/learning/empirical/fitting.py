@@ -12,7 +12,7 @@ import numpy as np
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.geometric import fit_geometric
 from host.learning.empirical.kinds import LinearDirectModel, NetworkModel, PolySlopeModel
-from host.learning.empirical.regression import make_estimator
+from host.learning.empirical.methods import CROSS_VALIDATED, make_estimator
 from host.learning.empirical.schedule import block_labels, cycles
 from host.learning.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
 
@@ -139,12 +139,9 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
         return _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K, geometric_max_degree,
                             geometric_criterion, cv_blocks, options)
     est = make_estimator(method, fit_intercept=fit_intercept, **options)
-    if method in ("cv-subset", "ann"):
-        # cv-subset cross-validates over the groups; the ann validates on the last one
-        groups = cv_groups(runs, arrays, cv_blocks)
-        est.fit(X, y, names, groups=groups)
-    else:
-        est.fit(X, y, names)
+    # cv-subset cross-validates over the groups; the ann validates on the last one
+    groups = cv_groups(runs, arrays, cv_blocks) if method in CROSS_VALIDATED else None
+    est.fit(X, y, names, groups=groups)
     if method in NONLINEAR:
         used, coefs = list(names), None
     elif hasattr(est, "selected_names_"):
@@ -225,7 +222,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     F, terms = candidate_matrix(runs, [a.time_s for a in arrays], names, taus, use_spindle, use_feed)
     groups = cv_groups(runs, arrays, cv_blocks)
     try:
-        est = DynamicRegression(fit_intercept=fit_intercept, **opts).fit(F, y, terms, groups)
+        est = DynamicRegression(fit_intercept=fit_intercept, **opts).fit(F, y, terms, groups=groups)
     except TypeError as exc:
         raise EmpiricalDataError("dynamic: %s" % exc)
     stats = est.statistics()

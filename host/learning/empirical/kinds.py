@@ -26,6 +26,7 @@ import numpy as np
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.targets import _channel_rows
 from host.learning.documents import ModelFormatError
+from models_export.document import FORMAT
 
 REFERENCES = ("run_start", "fixed")
 
@@ -114,7 +115,7 @@ class _Base:
 
     def _common_doc(self):
         return {
-            "format": "tcomp-model/1",
+            "format": FORMAT,
             "kind": self.kind,
             "method": self.method,
             "axis": self.axis,

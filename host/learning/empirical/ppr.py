@@ -17,8 +17,7 @@ g_m smooth ridge functions. Our choices (the paper does not fix them):
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
-# check_xy and _f are imported where used: regression.py registers this estimator, so a top-level
-# import of it from here would be circular
+from host.learning.empirical.checks import check_predict_x, check_xy, finite_or_none
 
 
 def natural_spline_basis(v, knots):
@@ -88,9 +87,8 @@ class PPR:
         self.backfit_passes = backfit_passes
         self.fit_intercept = fit_intercept  # ȳ is always fitted
 
-    def fit(self, X, y, names=None):
-        from host.learning.empirical.regression import check_xy
-
+    def fit(self, X, y, names=None, groups=None):
+        """``groups`` (cross-validation groups) is part of every estimator's fit signature; PPR does not read it."""
         for key, lo in (("n_terms", 1), ("knots", 3), ("backfit_passes", 0)):
             v = getattr(self, key)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < lo:
@@ -123,21 +121,17 @@ class PPR:
         return self
 
     def predict(self, X):
-        from host.learning.empirical.regression import check_predict_x
-
         X = check_predict_x(self, X, "terms_", lambda: self.x_mean_.size)
         Z = (X - self.x_mean_) / self.x_scale_
         return self.y_mean_ + sum(t(Z) for t in self.terms_)
 
     def statistics(self):
-        from host.learning.empirical.regression import _f
-
         return {
             "n_samples": int(self.n_samples_),
-            "r2": _f(self.rsquared_),
-            "rmse": _f(self.rmse_),
+            "r2": finite_or_none(self.rsquared_),
+            "rmse": finite_or_none(self.rmse_),
             "n_terms": int(self.n_terms),
             "knots": int(self.knots),
             "directions": [{n: float(v) for n, v in zip(self.names_, t.a)} for t in self.terms_],
-            "r2_adj": None, "F": None, "F_p": None, "residual_std_error": _f(self.rmse_),
+            "r2_adj": None, "F": None, "F_p": None, "residual_std_error": finite_or_none(self.rmse_),
         }

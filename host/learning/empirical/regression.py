@@ -14,52 +14,9 @@ import numpy as np
 from scipy import stats as _st
 
 from host.learning.empirical import EmpiricalDataError
+from host.learning.empirical.checks import check_predict_x, check_xy, finite_or_none
 
 _COLLINEAR_TOL = 1e-10  # 1 − R² of a sensor on the others below this = perfectly collinear
-
-
-def _names(names, p):
-    if names is None:
-        return ["x%d" % (j + 1) for j in range(p)]
-    names = [str(n) for n in names]
-    if len(names) != p:
-        raise EmpiricalDataError("%d sensor names for %d columns" % (len(names), p))
-    return names
-
-
-def check_xy(X, y, names=None, n_params=None, what="regression"):
-    """Validate a design: 2-D finite X, 1-D finite y of the same length, no constant column.
-
-    ``n_params`` is the number of fitted parameters; at least one more sample is
-    needed so the residual variance has a degree of freedom.
-    """
-    X = np.asarray(X, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if X.ndim == 1:
-        X = X[:, None]
-    if X.ndim != 2 or y.ndim != 1:
-        raise EmpiricalDataError("%s: X must be (n, p) and y (n,), got %s and %s" % (what, X.shape, y.shape))
-    n, p = X.shape
-    names = _names(names, p)
-    if y.size != n:
-        raise EmpiricalDataError("%s: X has %d rows but y has %d" % (what, n, y.size))
-    if p == 0:
-        raise EmpiricalDataError("%s: no sensor given" % what)
-    bad = np.argwhere(~np.isfinite(X))
-    if bad.size:
-        i, j = bad[0]
-        raise EmpiricalDataError("%s: sensor %s sample %d is %r (NaN/inf in the temperatures)" % (what, names[j], i, X[i, j]))
-    bad = np.flatnonzero(~np.isfinite(y))
-    if bad.size:
-        raise EmpiricalDataError("%s: target sample %d is %r (NaN/inf in the errors)" % (what, bad[0], y[bad[0]]))
-    if n_params is not None and n <= n_params:
-        raise EmpiricalDataError(
-            "%s: %d samples for %d parameters; need at least %d (fewer sensors or more measurements)" % (what, n, n_params, n_params + 1)
-        )
-    const = [names[j] for j in range(p) if np.ptp(X[:, j]) == 0.0]
-    if const:
-        raise EmpiricalDataError("%s: sensor(s) %s constant over all %d samples (zero variance); remove them" % (what, ", ".join(const), n))
-    return X, y, names
 
 
 def _collinear_groups(A, names, has_intercept):
@@ -117,28 +74,6 @@ def ols_statistics(A, y, beta, has_intercept):
     }
 
 
-def check_predict_x(est, X, fitted, n_columns):
-    """``X`` for ``est.predict`` as a 2-D float array. EmpiricalDataError when ``est`` has no attribute
-    ``fitted`` yet (predict before fit), X holds NaN/inf, or its column count is not ``n_columns()``."""
-    if not hasattr(est, fitted):
-        raise EmpiricalDataError("%s: predict before fit (call fit first)" % est.method)
-    X = np.asarray(X, dtype=float)
-    if X.ndim == 1:
-        X = X[:, None]
-    bad = np.argwhere(~np.isfinite(X))
-    if bad.size:
-        raise EmpiricalDataError("%s predict: sample %d column %d is %r (NaN/inf in the temperatures)"
-                                 % (est.method, bad[0][0], bad[0][1], X[tuple(bad[0])]))
-    if X.shape[1] != n_columns():
-        raise EmpiricalDataError("predict: X has %d columns, the model has %d inputs" % (X.shape[1], n_columns()))
-    return X
-
-
-def _f(x):
-    x = float(x)
-    return x if np.isfinite(x) else None
-
-
 class _Linear:
     """Shared prediction and reporting of the fitted linear form."""
 
@@ -153,14 +88,14 @@ class _Linear:
     def _stats_dict(self, st, extra=None):
         d = {
             "n_samples": int(self.n_samples_),
-            "r2": _f(st["r2"]),
-            "r2_adj": _f(st["r2_adj"]),
-            "F": _f(st["F"]),
-            "F_p": _f(st["F_p"]),
+            "r2": finite_or_none(st["r2"]),
+            "r2_adj": finite_or_none(st["r2_adj"]),
+            "F": finite_or_none(st["F"]),
+            "F_p": finite_or_none(st["F_p"]),
             "df_model": st["df_model"],
             "df_resid": st["df_resid"],
-            "residual_std_error": _f(st["sigma"]),
-            "rmse": _f(st["rmse"]),
+            "residual_std_error": finite_or_none(st["sigma"]),
+            "rmse": finite_or_none(st["rmse"]),
         }
         if extra:
             d.update(extra)
@@ -193,7 +128,8 @@ class MLR(_Linear):
     def __init__(self, *, fit_intercept=True):
         self.fit_intercept = fit_intercept
 
-    def fit(self, X, y, names=None):
+    def fit(self, X, y, names=None, groups=None):
+        """``groups`` (cross-validation groups) is part of every estimator's fit signature; this one does not read it."""
         X, y, names = check_xy(X, y, names, X_params(X, self.fit_intercept), "MLR")
         A = np.column_stack([np.ones(len(y)), X]) if self.fit_intercept else X
         dep = _collinear_groups(A, names, self.fit_intercept)
@@ -229,12 +165,12 @@ class MLR(_Linear):
 
     def statistics(self):
         coefs = {
-            n: {"coef": _f(c), "std_error": _f(s), "t": _f(t), "p": _f(p)}
+            n: {"coef": finite_or_none(c), "std_error": finite_or_none(s), "t": finite_or_none(t), "p": finite_or_none(p)}
             for n, c, s, t, p in zip(self.names_, self.coef_, self.bse_, self.tvalues_, self.pvalues_)
         }
         extra: dict = {"coefficients": coefs}
         if self.fit_intercept:
-            extra["intercept"] = {"coef": _f(self.intercept_), "std_error": _f(self.intercept_bse_), "t": _f(self.intercept_t_), "p": _f(self.intercept_p_)}
+            extra["intercept"] = {"coef": finite_or_none(self.intercept_), "std_error": finite_or_none(self.intercept_bse_), "t": finite_or_none(self.intercept_t_), "p": finite_or_none(self.intercept_p_)}
         return self._stats_dict(self._st, extra)
 
     def summary(self):
@@ -284,7 +220,8 @@ class PCR(_Linear):
         self.n_components = n_components
         self.fit_intercept = fit_intercept
 
-    def fit(self, X, y, names=None):
+    def fit(self, X, y, names=None, groups=None):
+        """``groups`` (cross-validation groups) is part of every estimator's fit signature; this one does not read it."""
         if not (0.0 < float(self.variance_threshold) <= 1.0):
             raise EmpiricalDataError("PCR: variance_threshold must be in (0, 1], got %r" % self.variance_threshold)
         X, y, names = check_xy(X, y, names, None, "PCR")
@@ -364,8 +301,8 @@ class PCR(_Linear):
             "n_components": int(self.n_components_),
             "variance_threshold": float(self.variance_threshold),
             "scree": self.scree(),
-            "coefficients": {n: {"coef": _f(c), "std_error": _f(s)} for n, c, s in zip(self.names_, self.coef_, self.bse_)},
-            "intercept": {"coef": _f(self.intercept_)} if self.fit_intercept else None,
+            "coefficients": {n: {"coef": finite_or_none(c), "std_error": finite_or_none(s)} for n, c, s in zip(self.names_, self.coef_, self.bse_)},
+            "intercept": {"coef": finite_or_none(self.intercept_)} if self.fit_intercept else None,
         })
 
 
@@ -420,7 +357,8 @@ class Stepwise(_Linear):
         r = x - A @ c
         return float(r @ r) / max(float(ref @ ref), 1e-300)
 
-    def fit(self, X, y, names=None):
+    def fit(self, X, y, names=None, groups=None):
+        """``groups`` (cross-validation groups) is part of every estimator's fit signature; this one does not read it."""
         if self.f_enter < self.f_remove:
             raise EmpiricalDataError("stepwise: F_enter (%g) must be >= F_remove (%g), otherwise a sensor can enter and leave forever" % (self.f_enter, self.f_remove))
         X, y, names = check_xy(X, y, names, 1 + int(self.fit_intercept), "stepwise")
@@ -449,7 +387,7 @@ class Stepwise(_Linear):
                     best_seen = (names[j], F)
                 if F >= self.f_enter:
                     sel.append(j)
-                    history.append({"step": len(history) + 1, "action": "enter", "sensor": names[j], "F": _f(F), "threshold": float(self.f_enter)})
+                    history.append({"step": len(history) + 1, "action": "enter", "sensor": names[j], "F": finite_or_none(F), "threshold": float(self.f_enter)})
                     changed = True
             if len(sel) > 1:
                 rss_l = self._rss(X, y, sel)
@@ -462,7 +400,7 @@ class Stepwise(_Linear):
                 F, j = min(outs)
                 if F < self.f_remove:
                     sel.remove(j)
-                    history.append({"step": len(history) + 1, "action": "remove", "sensor": names[j], "F": _f(F), "threshold": float(self.f_remove)})
+                    history.append({"step": len(history) + 1, "action": "remove", "sensor": names[j], "F": finite_or_none(F), "threshold": float(self.f_remove)})
                     changed = True
             if not changed:
                 break
@@ -587,21 +525,3 @@ class BestSubsetCV(_Linear):
         d.update({"selected": list(self.selected_names_), "max_sensors": int(self.max_sensors), "search": self.search_,
                   "cv_groups": self.n_groups_, "cv_rmse_by_size": self.cv_rmse_})
         return d
-
-
-# here, at the end: ann.py, dynamic.py and ppr.py use this module's checks
-from host.learning.empirical.ann import ANN  # noqa: E402
-from host.learning.empirical.dynamic import DynamicRegression  # noqa: E402
-from host.learning.empirical.ppr import PPR  # noqa: E402
-
-# method name -> estimator class: the one table behind `tcomp fit --model`, `tcomp compare` and fit_model
-# (dynamic is fitted through fitting.fit_model, which builds its candidate signals)
-ESTIMATORS = {"mlr": MLR, "pcr": PCR, "stepwise": Stepwise, "cv-subset": BestSubsetCV, "ann": ANN, "ppr": PPR,
-              "dynamic": DynamicRegression}
-
-
-def make_estimator(method, fit_intercept=True, **options):
-    """Estimator for ``method`` in ESTIMATORS with method-specific options (e.g. f_enter=100)."""
-    if method not in ESTIMATORS:
-        raise EmpiricalDataError("unknown regression method %r (known: %s)" % (method, ", ".join(ESTIMATORS)))
-    return ESTIMATORS[method](fit_intercept=fit_intercept, **options)

@@ -15,7 +15,7 @@ thermal error and accuracy = (1 − RMSE / RMS(measured)) · 100 %.
 
 The accuracy is **this project's definition**. The papers quote "fitting
 accuracy 89 % / prediction accuracy 86 %" without defining it, and their figures
-show the comprehensive error (geometric + thermal). So :func:`evaluate` also
+show the comprehensive error (geometric + thermal). So :func:`score_model` also
 reports ``comprehensive``: the same metrics on the whole measured error of the
 same rows against the whole prediction (``model.predict``: geometric polynomial
 + thermal part for ``poly_slope``; for ``linear_direct`` there is no geometric
@@ -90,7 +90,7 @@ def _thermal_rows(model, run, window=None):
     return rows, measured, pred
 
 
-def evaluate(model, run, window=None):
+def score_model(model, run, window=None):
     """Metrics of ``model`` on ``run`` (optionally only rows with lo <= time_s < hi).
 
     The thermal metrics at the top level; ``comprehensive``: the same metrics on the

@@ -12,7 +12,7 @@ from host.learning.screw import heat
 MAX_GRID_CELLS = 20_000_000
 
 
-def check_run(run, geometry=None, require_nut=True):
+def check_screw_run(run, geometry=None, require_nut=True):
     """ValueError naming what makes ``run`` unusable for the screw model.
 
     require_nut: identification needs a sensor with role 'nut' (diagnostic and

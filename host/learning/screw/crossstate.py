@@ -58,7 +58,7 @@ def states(fit_run, runs):
     return [s for s in out if s[2].size]
 
 
-def evaluate(models, fit_run, runs):
+def state_errors(models, fit_run, runs):
     rows = []
     for label, run, idx, seen in states(fit_run, runs):
         for name, model in models.items():
@@ -133,7 +133,7 @@ def main(argv=None):
     fit_run = load_run(a.fit_run)
     runs = [load_run(r) for r in a.runs]
     models = fit_models(fit_run)
-    rows = evaluate(models, fit_run, runs)
+    rows = state_errors(models, fit_run, runs)
     os.makedirs(a.out, exist_ok=True)
     md = markdown(rows)
     with open(os.path.join(a.out, "validation.md"), "w", encoding="utf-8") as fh:

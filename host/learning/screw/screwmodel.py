@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 
 from host.learning.screw import heat
-from host.learning.screw.context import RunContext, check_run
+from host.learning.screw.context import RunContext, check_screw_run
 from host.learning.screw.effects import EFFECTS, Effect, ParamSpec
 from host.learning.screw.identify import IdentifiabilityWarning, fit_parameters
 
@@ -256,7 +256,7 @@ class ScrewModel:
         if geo is None:
             raise ValueError("%s: meta.json has no 'screw' block (length_mm, diameter_mm, lead_mm, fixed_end_mm)" % (runs[0].path or runs[0].name))
         for r in runs:
-            check_run(r, geo, require_nut=self.nut_weight > 0)
+            check_screw_run(r, geo, require_nut=self.nut_weight > 0)
             s0, s = runs[0].meta["screw"], r.meta.get("screw") or {}
             for k in ("length_mm", "diameter_mm", "fixed_end_mm"):
                 if float(s.get(k, 0)) != float(s0.get(k, 0)):
@@ -419,7 +419,7 @@ class ScrewModel:
         base temperature are simulated from a cold (ambient) screw at the run's start."""
         if not hasattr(self, "geometry_"):
             raise ValueError("screw model: predict before fit (fit(runs) first, or load a fitted document)")
-        check_run(run, self.geometry_, require_nut=False)
+        check_screw_run(run, self.geometry_, require_nut=False)
         ctx = self._context(run)
         out = self.thermal_context(ctx) + self.geometric_um(ctx.positions_mm)
         bad = np.flatnonzero(~np.isfinite(out))
@@ -430,7 +430,7 @@ class ScrewModel:
 
     def predict_grid(self, run, positions_mm, times_s=None):
         """Thermal + geometric error on a time × position grid (default times: the model grid)."""
-        check_run(run, self.geometry_, require_nut=False)
+        check_screw_run(run, self.geometry_, require_nut=False)
         ctx = self._context(run)
         rises = self.simulate_context(ctx)
         t = ctx.t_grid if times_s is None else np.asarray(times_s, dtype=float)

@@ -161,12 +161,12 @@ def test_split_just_after_a_cycle_start_does_not_make_a_tiny_group(make_direct):
 
 
 def test_accuracy_is_also_reported_on_the_comprehensive_error(three_runs):
-    from host.learning.empirical.scoring import evaluate
+    from host.learning.empirical.scoring import score_model
     from host.learning.empirical.fitting import fit_model
 
     model = fit_model(three_runs[:1], "mlr")
     run = three_runs[1]
-    m = evaluate(model, run)
+    m = score_model(model, run)
     # independent: every non-cold sweep row, whole measured error against geometric + slope * P
     e = run.errors
     cold_t = e.time_s.min()

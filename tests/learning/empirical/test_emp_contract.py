@@ -1,5 +1,5 @@
 """The estimator contract, in the manner of scikit-learn's check_estimator, for every estimator in
-ESTIMATORS and every model-document kind in host.learning.documents.KINDS: keyword-only parameters, fit/predict,
+ESTIMATORS and every model-document kind in host.learning.documents.KIND_CLASSES: keyword-only parameters, fit/predict,
 prediction length and order, NaN refused, predict before fit refused, document round trip."""
 import copy
 import dataclasses
@@ -12,11 +12,14 @@ import pytest
 
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.fitting import fit_model
-from host.learning.empirical.regression import ESTIMATORS
-from host.learning.documents import KINDS, load_model
+from host.learning.empirical.methods import ESTIMATORS as METHOD_NAMES, estimator_class
+from host.learning.documents import KIND_CLASSES, load_model
+from models_export.document import DOCUMENT_KINDS
 from host.learning.screw import synth
 from host.learning.screw.identify import IdentifiabilityWarning
 from host.learning.screw.screwmodel import ScrewModel
+
+ESTIMATORS = {m: estimator_class(m) for m in METHOD_NAMES}  # the registry, its classes imported
 
 
 def _design(n=60, p=4, seed=0):
@@ -125,10 +128,10 @@ def _model(kind):
 
 
 def test_every_kind_is_covered():
-    assert set(KINDS) == {"poly_slope", "linear_direct", "ann", "dynamic", "screw"}
+    assert set(KIND_CLASSES) == set(DOCUMENT_KINDS) == {"poly_slope", "linear_direct", "ann", "dynamic", "screw"}
 
 
-@pytest.mark.parametrize("kind", sorted(KINDS))
+@pytest.mark.parametrize("kind", sorted(KIND_CLASSES))
 def test_document_round_trip(kind):
     model, run = _model(kind)
     doc = json.loads(json.dumps(model.to_document()))  # through JSON, as a file would
@@ -138,7 +141,7 @@ def test_document_round_trip(kind):
     np.testing.assert_array_equal(again.predict(run), model.predict(run))
 
 
-@pytest.mark.parametrize("kind", sorted(KINDS))
+@pytest.mark.parametrize("kind", sorted(KIND_CLASSES))
 def test_predict_gives_one_value_per_error_row_in_order(kind):
     model, run = _model(kind)
     pred = model.predict(run)
@@ -151,7 +154,7 @@ def test_predict_gives_one_value_per_error_row_in_order(kind):
     np.testing.assert_allclose(model.predict(reversed_run), pred[rows], rtol=0, atol=1e-9)
 
 
-@pytest.mark.parametrize("kind", sorted(KINDS))
+@pytest.mark.parametrize("kind", sorted(KIND_CLASSES))
 def test_predict_refuses_nan_temperatures(kind):
     model, run = _model(kind)
     bad = copy.deepcopy(run)

@@ -10,6 +10,7 @@ from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.dynamic import DynamicRegression, _lag_filter_fast, candidate_matrix, features, lag_filter, signals
 from host.learning.empirical.fitting import fit_model
 from host.learning.documents import ModelFormatError, load_model
+from models_export.document import FORMAT
 from host.data.runs import Errors
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
@@ -103,7 +104,7 @@ def test_slope_target_multiplies_by_position(make_slope):
     run = make_slope(n_sweeps=30, noise_um=0.01, duration_s=28800.0)
     model = fit_model([run], "dynamic", target="slope", taus_s=(0, 3600), cv_blocks=3)
     doc = model.to_document()
-    back = load_model(dict(doc, format="tcomp-model/1"))
+    back = load_model(dict(doc, format=FORMAT))
     e = run.errors
     expect = back.geometric(e.position_mm) + back.thermal_at(run, e.time_s) * e.position_mm
     np.testing.assert_allclose(back.predict(run), expect)
@@ -113,14 +114,14 @@ def test_slope_target_multiplies_by_position(make_slope):
 def test_real_fl_thermal_dynamic_beats_static_on_the_held_out_cycles():
     """One fast real-data check: trained on the first three cycles with a small time-constant grid,
     the dynamic model predicts the held-out cycles of ch1 better than MLR on all 16 sensors."""
-    from host.learning.empirical.scoring import evaluate
+    from host.learning.empirical.scoring import score_model
     from host.data.runs import load_run
 
     run = load_run(os.path.join(ROOT, "data", "fl_thermal"))
     split = 86865.0  # start of the 4th spindle cycle (32.1 h)
     dyn = fit_model([run], "dynamic", target="direct", channel="ch1", window=(None, split), taus_s=(0, 1800, 14400), max_terms=4, ridge=0.0)
     mlr = fit_model([run], "mlr", target="direct", channel="ch1", window=(None, split), reference="run_start")
-    d, m = evaluate(dyn, run, (split, None))["rmse_um"], evaluate(mlr, run, (split, None))["rmse_um"]
+    d, m = score_model(dyn, run, (split, None))["rmse_um"], score_model(mlr, run, (split, None))["rmse_um"]
     assert d < 0.8 * m, (d, m)
 
 

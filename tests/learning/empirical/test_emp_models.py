@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from host.learning.empirical import EmpiricalDataError
-from host.learning.empirical.scoring import disturb_run, evaluate, metrics
+from host.learning.empirical.scoring import disturb_run, metrics, score_model
 from host.learning.empirical.fitting import fit_model
 from host.learning.empirical.geometric import GeometricPolynomial, fit_geometric
 from host.learning.empirical.kinds import LinearDirectModel, PolySlopeModel
@@ -106,7 +106,7 @@ def test_poly_slope_model_fits_predicts_and_round_trips(tmp_path, method, make_s
     if method == "mlr":
         # exact data: with rises over the test run's own start the slope model reproduces its thermal error
         latched = fit_model([train], method, reference="run_start")
-        assert evaluate(latched, test)["rmse_um"] < 0.05
+        assert score_model(latched, test)["rmse_um"] < 0.05
 
 
 def test_linear_direct_model_channels_nan_and_no_intercept(tmp_path, make_direct):

@@ -13,7 +13,7 @@ from host.learning.screw import heat, synth
 from host.learning.screw.effects import BearingHeat, Effect, ParamSpec, ReversalError
 from host.learning.screw.screwmodel import ScrewModel
 from host.learning.screw.reduced import build_reduced, reduction_error, state_bound
-from host.learning.screw.crossstate import evaluate, fit_models, summary
+from host.learning.screw.crossstate import fit_models, state_errors, summary
 
 DEMO_FIT = "v8000_r210_490"  # the fitting state of the literature's protocol (tests/learning/screw/conftest.py loads it)
 
@@ -78,7 +78,7 @@ def test_screw_beats_mlr_on_unseen_states_of_the_bundled_runs(demo_runs):
     fit_run = demo_runs[DEMO_FIT]
     others = [demo_runs[n] for n in ("v15000_r210_490", "v8000_r0_210", "mixed") if n in demo_runs]
     models = fit_models(fit_run)
-    rows = evaluate(models, fit_run, others)
+    rows = state_errors(models, fit_run, others)
     s = summary(rows)
     screw = s["screw (base sensor + motion)"]
     for name, v in s.items():
@@ -99,7 +99,7 @@ def test_screw_beats_mlr_on_unseen_states_of_the_bundled_runs(demo_runs):
 def test_screw_beats_mlr_on_synthetic_unseen_states():
     fit_run = synth.make_run(noise_um=0.3, seed=5)
     others = [synth.make_run(12000, 0, 210, noise_um=0.3, seed=6)]
-    s = summary(evaluate(fit_models(fit_run), fit_run, others))
+    s = summary(state_errors(fit_models(fit_run), fit_run, others))
     assert s["screw (base sensor + motion)"]["mean_unseen_rmse_um"] < min(v["mean_unseen_rmse_um"] for k, v in s.items() if k.startswith("MLR"))
 
 

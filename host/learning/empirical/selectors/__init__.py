@@ -49,7 +49,7 @@ message naming the sensor, run or parameter.
 """
 from host.learning.empirical.selectors.common import Selection, SelectionError  # noqa: F401
 
-METHODS = ("maxtree", "stepwise", "hclust-ga")
+from host.learning.empirical.methods import SELECTORS as METHODS  # the registry's
 
 
 def select(method, data, *, target="slope", channel=None, sensors=None, **params):

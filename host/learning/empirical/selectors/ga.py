@@ -34,7 +34,7 @@ def binary_ga(cost, n_bits, population=20, crossover=0.8, mutation=0.005, genera
     cache = {}
     calls = 0
 
-    def evaluate(pop):
+    def cost_of(pop):
         nonlocal calls
         out = np.empty(len(pop))
         for i, g in enumerate(pop):
@@ -46,7 +46,7 @@ def binary_ga(cost, n_bits, population=20, crossover=0.8, mutation=0.005, genera
         return out
 
     pop = rng.integers(0, 2, size=(population, n_bits), dtype=np.int8)
-    costs = evaluate(pop)
+    costs = cost_of(pop)
     history = []
     best_i = int(np.argmin(costs))
     best, best_cost = pop[best_i].copy(), float(costs[best_i])
@@ -65,7 +65,7 @@ def binary_ga(cost, n_bits, population=20, crossover=0.8, mutation=0.005, genera
         children ^= flips.astype(np.int8)
         children[0] = best  # elitism
         pop = children
-        costs = evaluate(pop)
+        costs = cost_of(pop)
         i = int(np.argmin(costs))
         if costs[i] < best_cost:
             best, best_cost = pop[i].copy(), float(costs[i])

@@ -111,7 +111,7 @@ class RobustnessProblem:
             self._agg[alpha] = agglomerate(self.X, alpha, self.moments, self.normalisation)
         return self._agg[alpha]
 
-    def evaluate(self, clusters):
+    def score_partition(self, clusters):
         key = tuple(tuple(c) for c in clusters)
         if key in self._part:
             return self._part[key]
@@ -179,7 +179,7 @@ def select_hclust_ga(arrays, context=None, **params):
 
     def cost(genome):
         alpha, k = decode(genome)
-        return prob.evaluate(prob.agglomeration(alpha).partition(k))["cost"]
+        return prob.score_partition(prob.agglomeration(alpha).partition(k))["cost"]
 
     if prm["alpha"] is not None and prm["k"] is not None:
         ga = None  # nothing left to search
@@ -189,7 +189,7 @@ def select_hclust_ga(arrays, context=None, **params):
         alpha, k = decode(ga.best_genome)
     agg = prob.agglomeration(alpha)
     clusters = agg.partition(k)
-    best = prob.evaluate(clusters)
+    best = prob.score_partition(clusters)
     chosen = sorted(best["combo"])
     sensors = [names[j] for j in chosen]
     order = best["combo"]
