@@ -14,7 +14,8 @@ The control channel (a unix socket, one JSON object per line) is served
 only while the firmware sleeps past the time the test granted: the firmware
 never sees it. Requests (``op``): ``run`` (grant time up to ``until_ms``,
 ramping sensors linearly to ``temps`` meanwhile; ``ramp``: a ramp request's
-``until_ms`` and ``temps`` taken first; ``gc``: collect and report
+``until_ms`` and ``temps`` taken first; ``rx``: on the emulated board, wait until that many
+serial bytes have reached the UART since power-up; ``gc``: collect and report
 ``mem_free``; ``lock``: run under micropython.heap_lock), ``ramp`` (head
 linearly for ``temps`` at ``until_ms``, without running), ``jump`` (step
 temperatures now), ``sensor`` (condition ok/open/short/stuck), ``chip``
@@ -99,6 +100,8 @@ class Control:
                 if "ramp" in m:  # a ramp sent with the run (harness.Rig.ramp): as a ramp request first
                     r = m["ramp"]
                     w.ramp(r["until_ms"], r["temps"])
+                if "rx" in m and hasattr(w.uart, "wait_received"):  # the emulated board (qemu_board.py)
+                    w.uart.wait_received(m["rx"])
                 until = m["until_ms"]
                 if "temps" in m:
                     w.ramp(until, m["temps"])

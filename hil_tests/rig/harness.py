@@ -289,6 +289,7 @@ class Rig(LinkClient):
         self.open_port = open_port
         self._free = None
         self._ramp = None  # a ramp not sent yet (ramp())
+        self.serial_sent = 0  # bytes written to the serial port since the board's power-up
         self.powered = False
         self.rx_base = 0
         self._open_pty()
@@ -341,6 +342,7 @@ class Rig(LinkClient):
         else:
             env["PYTHONPATH"] = ROOT + os.pathsep + env.get("PYTHONPATH", "")
             argv = interpreter_cmd("cpython") + [DUT, spec_path]
+        self.serial_sent = 0
         self.stderr_path = os.path.join(self.workdir, "dut-stderr-%d.txt" % self.starts)
         self.stderr = open(self.stderr_path, "wb")
         self.powered = True
@@ -478,6 +480,10 @@ class Rig(LinkClient):
     def run(self, until_ms, temps=None, gc=False, lock=False, sync=True):
         """Let simulated time run to ``until_ms`` (temperatures ramp linearly to ``temps``)."""
         msg = {"op": "run", "until_ms": int(until_ms)}
+        if self.interpreter == "qemu" and self.open_port:
+            # the board resumes only once every serial byte sent since power-up is in its UART: QEMU
+            # delivers them one main-loop turn each, and simulated time must not run ahead of them
+            msg["rx"] = self.serial_sent
         if temps:
             msg["temps"] = {k: float(v) for k, v in temps.items()}
         if gc:
@@ -553,6 +559,10 @@ class Rig(LinkClient):
         return _Free()
 
     # --- the serial link (write, send, frames, take_frames: LinkClient) ----------------------
+    def write(self, data):
+        LinkClient.write(self, data)
+        self.serial_sent += len(data)
+
     def take_raw(self):
         with self.reader.lock:
             out = bytes(self.reader.raw)

@@ -72,6 +72,13 @@ class CountingSerial:
     def any(self):
         return self._u.any()
 
+    def wait_received(self, n):
+        """Until ``n`` bytes have arrived since power-up (read by the firmware or waiting in the
+        UART's ring): the rig's gate, so that simulated time never runs ahead of serial input QEMU
+        is still handing over one byte per main-loop turn."""
+        while self.rx_bytes + self._u.any() < n:
+            machine.idle()
+
     def write(self, buf, n=-1):
         if n < 0:
             n = len(buf)
