@@ -19,6 +19,8 @@ SCREW_TRAVEL = ("umax", "Lu", "nu")
 SCREW_TAIL = ("H", "shH", "fh", "Lx", "nx", "shX", "KC", "Lc", "nc", "shC")
 SCREW_AIR_HEAD = ("air", "Tlo")  # format 2: the air channel (-1: none) and the state's lower bound
 SCREW_AIR_TAIL = ("Ka", "shKa")
+SCREW_EFFECT_LISTS = ("Bu", "shBu")  # format 4: heat per mm of the step's total travel (bearing_heat), per segment
+SCREW_EFFECT_TAIL = ("Rv",)  # format 4: the reversal term, accumulator units (2**-fo of 0.01 um)
 
 
 DYNAMIC_HEAD = ("positional", "dt_ms", "smax", "Lq", "nq", "shq", "fmax", "LX", "nX", "LY", "nY", "nf")
@@ -64,6 +66,9 @@ def _model_words(f):
     for name in ("W0", "shW0", "W1", "shW1"):
         out += [("%s[%d]" % (name, i), v) for i, v in enumerate(f[name])]
     out += [(k, f[k]) for k in SCREW_AIR_TAIL]
+    for name in SCREW_EFFECT_LISTS:
+        out += [("%s[%d]" % (name, i), v) for i, v in enumerate(f[name])]
+    out += [(k, f[k]) for k in SCREW_EFFECT_TAIL]
     return out
 
 

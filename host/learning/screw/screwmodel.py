@@ -288,6 +288,9 @@ class ScrewModel:
         fixed = {s.name: s.start for s in specs_all if s.name not in free}
         specs = [s for s in specs_all if s.name in free]
         ctxs = [self._context(r, self._rows(r)) for r in runs]
+        # what the effects' reduced forms read (effects.py reduce): the first run's role sensors and start readings
+        self.first_roles_ = (ctxs[0].base_sensor, ctxs[0].ambient_sensor)
+        self.run_start_C_ = {n: float(runs[0].temperatures.column(n)[0]) for n in runs[0].temperatures.names}
         for e in self.effects:
             if hasattr(e, "check"):
                 e.check(ctxs)
@@ -400,8 +403,14 @@ class ScrewModel:
         self.reduced_ = build_reduced(self, self.reduced_segments, self.reduced_dt_s,
                                       feed_max_mm_min=self.feed_max_mm_min or 1.5 * float(feeds.max()))
         self.envelope_["state_K"] = [0.0, self.reduced_["state_max_K"]]
-        from host.learning.screw.reduced import reduction_error
-        self.reduced_["reduction_error_um"] = {c.run_name: reduction_error(self, c.run) for c in ctxs}
+        ee = self.reduced_.get("base_sensor")
+        if ee is not None and ee not in self.envelope_.get("temperature_C", {}):  # an effect's sensor (ambient_expansion)
+            te = np.concatenate([r.temperatures.column(ee) for r in runs])
+            self.envelope_.setdefault("temperature_C", {})[ee] = [float(te.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                  float(te.max()) + BASE_ENVELOPE_MARGIN_K]
+            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+        from host.learning.screw.reduced import reduction_certificate
+        self.reduced_["reduction_error_um"] = reduction_certificate(self, [c.run for c in ctxs])
         return self
 
     # ------------------------------------------------------------ prediction
@@ -461,7 +470,8 @@ class ScrewModel:
             "axis": self.axis_,
             "channel": self.channel,
             "sensors": self.input_sensors_(),
-            "reference_C": {n: r for n, r in ((self.base_sensor_, self.base_ref_C_), (self.air_sensor_, self.air_ref_C_))
+            "reference_C": {n: r for n, r in ((self.base_sensor_, self.base_ref_C_), (self.air_sensor_, self.air_ref_C_),
+                                              self._reduced_base())
                             if n is not None},
             "geometric": {"degree": int(self.geometric_degree_), "coefficients_um": [float(c) for c in self.geometric_]},
             "thermal": thermal,
@@ -471,11 +481,30 @@ class ScrewModel:
         }
 
     def input_sensors_(self):
-        """The temperatures prediction reads: the base sensor (E_e), then the air sensor."""
+        """The temperatures prediction reads: the base sensor (E_e), then the air sensor, then a sensor only an
+        effect reads (ambient_expansion without E_e: the reduced form's base term)."""
         out = [self.base_sensor_] if self.base_sensor_ else []
-        if self.air_sensor_ and self.air_sensor_ not in out:
-            out.append(self.air_sensor_)
+        for name in (self.air_sensor_, self._reduced_base()[0]):
+            if name and name not in out:
+                out.append(name)
         return out
+
+    def _reduced_base(self):
+        """(sensor, reference) of the reduced form's base term when an effect put it there, else (None, None)."""
+        red = getattr(self, "reduced_", None) or {}
+        name = red.get("base_sensor")
+        if name is None or name == self.base_sensor_:
+            return None, None
+        return name, red.get("base_ref_C")
+
+    def effect_sensor_(self, effect):
+        """The sensor an effect reading the machine's surroundings reads on the training runs (base, else ambient)."""
+        base, ambient = getattr(self, "first_roles_", (self.base_sensor_, self.air_sensor_))
+        return base or ambient
+
+    def start_C_(self, name):
+        """The first training run's first reading of ``name`` (degC)."""
+        return self.run_start_C_[name]
 
     @classmethod
     def from_document(cls, doc):
