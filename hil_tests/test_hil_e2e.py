@@ -107,8 +107,10 @@ def test_e2e_screw_reduced_matches_reference(make_rig):
         # a slow back-and-forth stroke: 100 mm per second for 8 s, then pause
         phase = (k // 8) % 3
         if phase < 2:
-            pos = pos + (100000 if phase == 0 else -100000)
-            pos = min(max(pos, lo), hi)
+            new = min(max(pos + (100000 if phase == 0 else -100000), lo), hi)
+            if new != pos:
+                ref.direction = 1 if new > pos else -1  # the table's reversal term follows the last move
+            pos = new
             rig.send("P", pos)
         if k % 10 == 9 and k > 40:
             q = rig.request("Q", pos, kinds=("Q",), step_ms=5)
