@@ -38,9 +38,11 @@ def _meet(a, b):
     return (lo, hi) if lo <= hi else a
 
 
-def _round_out(err, f):
-    """Error interval of floor((acc + r) / 2**f) given acc's error interval ``err`` (acc units); returns (r, err_out)."""
-    r = rnd(-(err[0] + err[1]) / 2 + F((1 << f) - 1, 2))
+def _round_out(err, f, r=None):
+    """Error interval of floor((acc + r) / 2**f) given acc's error interval ``err`` (acc units); returns (r, err_out).
+    ``r`` None: the bias that centres the interval."""
+    if r is None:
+        r = rnd(-(err[0] + err[1]) / 2 + F((1 << f) - 1, 2))
     lo = (err[0] + r) / p2(f) - F((1 << f) - 1, 1 << f)
     hi = (err[1] + r) / p2(f)
     return r, (lo, hi)
@@ -555,8 +557,9 @@ class Planner:
                 res, k = rec.mul(ACC_BMUL, (q, q), U_iv, Lu, nu, sb, "thermal.reduced.travel_heat_K_per_mm[%d]" % i)
                 bq = F(q) / p2(sb)
                 dbu = bq - s["Bu"][i] / 1000 * p2(ft + gs)
-                errBu = iv_add(iv_mul(_c(dbu), (F(0), F(umax))), _hull(ZERO, iv_scale(iv_scale(feed_du, M), bq)), floor_err(k))
-                err = iv_add(err, errBu)
+                # the quantisation (one-sided in U >= 0), the floors and the feed/range mode's travel rounding widen
+                # the interval but stay out of the rounding bias below, so an idle screw stays where it is
+                errBu = iv_add(iv_mul(_c(dbu), (F(0), F(umax))), floor_err(k), _hull(ZERO, iv_scale(iv_scale(feed_du, M), bq)))
                 errB = iv_add(errB, errBu)
                 acc = iv_add(acc, res)
             else:
@@ -574,7 +577,10 @@ class Planner:
                 errW = iv_add(errW, iv_mul(_c(F(q) / p2(sw) - c / 1000 * p2(ft + gs)), (F(d_air[0]), F(d_air[1]))), floor_err(k))
             err = iv_add(err, errW)
             parts.append((iv_abs(errC) / p2(gs), (iv_abs(errB) + iv_abs(errW)) / p2(gs)))
-            bias, err_state = _round_out(err, gs)  # v = T + (acc + rS) >> gs
+            bias, _ = _round_out(err, gs)
+            if s["Bu"][i]:
+                err = iv_add(err, errBu)
+            bias, err_state = _round_out(err, gs, bias)  # v = T + (acc + rS) >> gs
             rS.append(bias)
             acc = (acc[0] + bias, acc[1] + bias)
             rec.note(ACC_ROW, acc[0], acc[1], name)

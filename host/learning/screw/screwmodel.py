@@ -168,8 +168,17 @@ class ScrewModel:
 
     # ------------------------------------------------------------ fitting
 
-    def _rows(self, run):
+    def _rows(self, run, index=None):
         rows = self._channel_rows(run)
+        masks = getattr(self, "_row_masks", None)
+        if masks is not None and index is not None and masks[index] is not None:
+            m = masks[index]
+            if m.shape != (len(run.errors),):
+                raise ValueError("%s: row mask of %d rows for %d errors.csv rows" % (run.path or run.name, m.size, len(run.errors)))
+            keep = m.copy() if rows is None else (m & np.isin(np.arange(m.size), rows))
+            if not keep.any():
+                raise ValueError("%s: no error rows selected to fit on" % (run.path or run.name))
+            rows = np.flatnonzero(keep)
         if self.fit_window is None:
             return rows
         lo, hi = self.fit_window
@@ -243,8 +252,17 @@ class ScrewModel:
                     base.append("alpha_per_K")
         return base + ["%s.%s" % (e.name, s.name) for e in self.effects for s in e.parameters()]
 
-    def fit(self, runs):
-        """Identify the parameters from one or more runs (host.data.runs.Run)."""
+    def fit(self, runs, row_masks=None, start=None, reduce=True):
+        """Identify the parameters from one or more runs (host.data.runs.Run).
+
+        row_masks: per run a boolean array over its errors.csv rows to fit on (None: all; the discrepancy
+        workflow's held-out folds); start: {parameter: value} to start the search from (a previous fit's
+        ``values_``; unknown names ignored); reduce: build the firmware's reduced form and its reduction
+        certificate (the workflow's fold fits skip it, the model it exports has it)."""
+        self._row_masks = None if row_masks is None else [None if m is None else np.asarray(m, dtype=bool) for m in row_masks]
+        if self._row_masks is not None and len(self._row_masks) != len(runs):
+            raise ValueError("row_masks: %d masks for %d runs" % (len(self._row_masks), len(runs)))
+        self._start = dict(start or {})
         if not runs:
             raise ValueError("no runs to fit on")
         if self.base_ref not in ("run_start", "fixed"):
@@ -287,7 +305,11 @@ class ScrewModel:
         self.free_ = free
         fixed = {s.name: s.start for s in specs_all if s.name not in free}
         specs = [s for s in specs_all if s.name in free]
-        ctxs = [self._context(r, self._rows(r)) for r in runs]
+        if self._start:  # a previous fit's values, inside the bounds
+            specs = [ParamSpec(s.name, min(max(float(self._start[s.name]), s.lo), s.hi) if s.name in self._start and
+                               (not s.positive or self._start[s.name] > 0) else s.start, s.lo, s.hi, s.unit, s.positive)
+                     for s in specs]
+        ctxs = [self._context(r, self._rows(r, i)) for i, r in enumerate(runs)]
         # what the effects' reduced forms read (effects.py reduce): the first run's role sensors and start readings
         self.first_roles_ = (ctxs[0].base_sensor, ctxs[0].ambient_sensor)
         self.run_start_C_ = {n: float(runs[0].temperatures.column(n)[0]) for n in runs[0].temperatures.names}
@@ -399,6 +421,9 @@ class ScrewModel:
             self.envelope_.setdefault("temperature_C", {})[self.air_sensor_] = [float(ta.min()) - BASE_ENVELOPE_MARGIN_K,
                                                                                  float(ta.max()) + BASE_ENVELOPE_MARGIN_K]
             self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+        if not reduce:
+            self.reduced_ = None
+            return self
         from host.learning.screw.reduced import build_reduced
         self.reduced_ = build_reduced(self, self.reduced_segments, self.reduced_dt_s,
                                       feed_max_mm_min=self.feed_max_mm_min or 1.5 * float(feeds.max()))
