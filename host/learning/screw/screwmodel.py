@@ -57,11 +57,12 @@ class ScrewModel:
     air: the air temperature the screw exchanges heat with: "auto" (the first sensor
     with role 'ambient'; else the base sensor, else a constant air, each fallback
     warned about in statistics.warnings), a sensor name, or "off" (constant air: the
-    screw as a rise over a still air, the model before the air term)."""
+    screw as a rise over a still air, the model before the air term); ftol: relative change of the cost that
+    ends the identification (the discrepancy workflow's fold fits use a looser one)."""
 
     def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient=True,
                  nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200, base_sensor=None,
-                 base_ref="run_start", fit_window=None, air="auto"):
+                 base_ref="run_start", fit_window=None, air="auto", ftol=1e-12):
         self.segments = segments
         self.dt_s = dt_s
         self.free = free
@@ -78,6 +79,7 @@ class ScrewModel:
         self.base_ref = base_ref
         self.fit_window = fit_window
         self.air = air
+        self.ftol = ftol
 
     # ------------------------------------------------------------ parameters
 
@@ -352,7 +354,7 @@ class ScrewModel:
             raise ValueError("geometric_degree must be 0..%d or 'auto' (got %r)" % (MAX_GEOMETRIC_DEGREE, self.geometric_degree))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", IdentifiabilityWarning)
-            res = fit_parameters(make_residual(top)[0], specs, max_nfev=self.max_nfev, n_linear=top + 1) if specs else None
+            res = fit_parameters(make_residual(top)[0], specs, max_nfev=self.max_nfev, n_linear=top + 1, ftol=self.ftol) if specs else None
         values = res["values"] if res else np.zeros(0)
         degree = top
         degree_scores = None
@@ -363,7 +365,8 @@ class ScrewModel:
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always", IdentifiabilityWarning)
                     specs_start = [ParamSpec(s.name, v, s.lo, s.hi, s.unit, s.positive) for s, v in zip(specs, values)]
-                    res = fit_parameters(make_residual(degree)[0], specs_start, max_nfev=self.max_nfev, n_linear=degree + 1)
+                    res = fit_parameters(make_residual(degree)[0], specs_start, max_nfev=self.max_nfev, n_linear=degree + 1,
+                                         ftol=self.ftol)
                 values = res["values"]
         for w in caught:
             warnings.warn(str(w.message), IdentifiabilityWarning, stacklevel=2)

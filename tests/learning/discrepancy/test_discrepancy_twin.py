@@ -1,4 +1,9 @@
-"""The workflow on digital-twin data with effects hidden (seeds, magnitudes and noise differ from development)."""
+"""The workflow on digital-twin data with effects hidden (seeds, magnitudes and noise differ from development).
+
+The candidates are configurations of host/learning/screw's ScrewModel (host/learning/discrepancy/family.py);
+the twin (host/twin) has its own physics. To keep make test fast the runs are shortened versions of the
+literature states (two hours each: a heating state, a change of state, a cool-down); tools/bench_discrepancy.py
+runs the full protocols over many seeds."""
 import json
 import os
 
@@ -6,13 +11,19 @@ import numpy as np
 import pytest
 
 from host.cli import main
-from host.learning.discrepancy.screw_family import ScrewFamily
+from host.learning.discrepancy.family import ScrewFamily
 from host.learning.discrepancy.workflow import ALPHA, MIN_GAIN, discover
 from host.learning.documents import load_model
 from host.data.runs import load_run, write_run
 from host.twin import EFFECTS, simulate_run
+from host.twin.protocols import Phase, Protocol
 
-PROTOCOLS = ("v6500_r210_490", "v15000_r210_490", "mixed")
+PROTOCOLS = (
+    Protocol("s6500_r210_490", "6500 mm/min 210-490 for 75 min, 45 min cool-down", (Phase(75, 6500, 210, 490), Phase(45)), 11.0),
+    Protocol("s15000_r210_490", "15000 mm/min 210-490 for 75 min, 45 min cool-down", (Phase(75, 15000, 210, 490), Phase(45)), 10.0),
+    Protocol("smixed", "8000 mm/min 210-490, 15000 mm/min 0-700, 6500 mm/min 0-210, cool-down",
+             (Phase(30, 8000, 210, 490), Phase(30, 15000, 0, 700), Phase(20, 6500, 0, 210), Phase(40)), 12.0),
+)
 # The twin (host/twin/screw.py, docs/twin.md) keeps its screw at absolute temperature in a drifting air,
 # so the base model's air term is on (its default) everywhere here except where a test removes it.
 
@@ -48,6 +59,8 @@ def test_two_hidden_effects_both_named():
     assert all(c["p_value"] < ALPHA and c["score"] >= MIN_GAIN for c in acc.values())
 
 
+@pytest.mark.slow
+@pytest.mark.skipif(os.environ.get("TCOMP_SLOW") != "1", reason="five rounds of candidate fits: TCOMP_SLOW=1")
 def test_all_five_hidden_all_named():
     hidden = {"ambient_expansion": 0.9, "speed_dependent_heat": 0.5, "bearing_heat": 3.5, "moving_convection": 1.1, "reversal_error": 3.0}
     res = discover(twin_runs(hidden, 525252, 0.45), ScrewFamily())
@@ -59,10 +72,10 @@ def test_all_five_hidden_all_named():
 def test_false_discovery_rate_on_the_null():
     """No effect hidden: the share of seeds where anything is named is at most 1 in 20.
 
-    Reduced form: 3 seeds, none may name an effect; TCOMP_SLOW=1: 40 seeds, <= 2 may
+    Reduced form: 1 seed, it may not name an effect; TCOMP_SLOW=1: 40 seeds, <= 2 may
     (tools/bench_discrepancy.py counts the same over more seeds and all effects).
     """
-    n = 40 if os.environ.get("TCOMP_SLOW") == "1" else 3
+    n = 40 if os.environ.get("TCOMP_SLOW") == "1" else 1
     rng = np.random.default_rng(99)
     named, ratios = [], []
     for k in range(n):
@@ -106,6 +119,24 @@ def test_cli_end_to_end(tmp_path):
     run = load_run(folders[0])
     rmse = float(np.sqrt(np.mean((model.predict(run) - run.errors.error_um) ** 2)))
     assert rmse < 1.0  # the saved model carries the bearing heat
+    # issue 19's case: the model the workflow validated exports with the bearing heat in the table, and the
+    # board equals the host model within the certificate (was: board 20.0 um, host 40.9 um at 1800 s, 500 mm)
+    from hil_tests.fixtures.boardplay import board_offsets
+    from models_export import export_model
+    doc = json.loads((rep / "model.json").read_text())
+    red = doc["thermal"]["reduced"]
+    assert [e["name"] for e in doc["thermal"]["effects"]] == ["bearing_heat"] and "omitted_effects" not in red
+    assert red["travel_heat_K_per_mm"][0] > 0
+    assert main(["export", str(rep / "model.json"), "--out", str(tmp_path / "t.bin"), "--json", str(tmp_path / "c.json")]) == 0
+    cert = json.loads((tmp_path / "c.json").read_text())
+    ex = export_model(doc)
+    board = board_offsets(ex.table, run)
+    host = model.predict(run)
+    fr = red["reduction_error_um"][run.path or run.name]["feed_range"]["rows_max_um"]
+    bound = cert["max_error_um"] + fr + 0.0005 * red["alpha_um_per_mm_per_K"] * np.abs(run.errors.position_mm) + 0.01
+    assert np.all(np.abs(board - host) <= bound), float(np.max(np.abs(board - host) - bound))
+    late = np.flatnonzero(run.errors.time_s >= 1800)
+    assert np.max(np.abs(host[late])) > 10.0  # the bearing heat is in both, tens of um
 
 
 def test_missing_sweep_and_sensor_dropout_still_work(tmp_path):
@@ -130,7 +161,7 @@ def test_missing_sweep_and_sensor_dropout_still_work(tmp_path):
 
 
 def test_single_run_time_split():
-    run = simulate_run("mixed", effects={"reversal_error": 4.0}, seed=737373, noise_um=0.5)
+    run = simulate_run(PROTOCOLS[2], effects={"reversal_error": 4.0}, seed=737373, noise_um=0.5)
     res = discover([run], ScrewFamily(), jobs=1)
     assert res.effects[:1] == ["reversal_error"]
     assert np.all(np.isfinite(res.before.residuals[0]))
