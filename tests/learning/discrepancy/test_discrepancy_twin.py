@@ -16,27 +16,16 @@ from host.learning.discrepancy.workflow import ALPHA, MIN_GAIN, discover
 from host.learning.documents import load_model
 from host.data.runs import load_run, write_run
 from host.twin import EFFECTS, simulate_run
-from host.twin.protocols import Phase, Protocol
+from hil_tests.fixtures.shortruns import PROTOCOLS, twin_runs
 
-PROTOCOLS = (
-    Protocol("s6500_r210_490", "6500 mm/min 210-490 for 75 min, 45 min cool-down", (Phase(75, 6500, 210, 490), Phase(45)), 11.0),
-    Protocol("s15000_r210_490", "15000 mm/min 210-490 for 75 min, 45 min cool-down", (Phase(75, 15000, 210, 490), Phase(45)), 10.0),
-    Protocol("smixed", "8000 mm/min 210-490, 15000 mm/min 0-700, 6500 mm/min 0-210, cool-down",
-             (Phase(30, 8000, 210, 490), Phase(30, 15000, 0, 700), Phase(20, 6500, 0, 210), Phase(40)), 12.0),
-)
+SLOW = os.environ.get("TCOMP_SLOW") == "1"
 # The twin (host/twin/screw.py, docs/twin.md) keeps its screw at absolute temperature in a drifting air,
 # so the base model's air term is on (its default) everywhere here except where a test removes it.
-
-
-def twin_runs(effects, seed, noise_um):
-    return [simulate_run(p, effects=effects, seed=seed, noise_um=noise_um) for p in PROTOCOLS]
+# speed_dependent_heat, bearing_heat and moving_convection: test_discrepancy_twin_heat.py (the other worker).
 
 
 @pytest.mark.parametrize("name,scale,noise,seed", [
     ("ambient_expansion", 0.8, 0.4, 424242),
-    ("speed_dependent_heat", 1.3, 0.7, 424243),
-    ("bearing_heat", 0.7, 0.6, 424244),
-    ("moving_convection", 1.2, 0.45, 424245),
     ("reversal_error", 0.9, 0.55, 424246),
 ])
 def test_hidden_effect_named_first_and_gap_halved(name, scale, noise, seed):
@@ -60,7 +49,7 @@ def test_two_hidden_effects_both_named():
 
 
 @pytest.mark.slow
-@pytest.mark.skipif(os.environ.get("TCOMP_SLOW") != "1", reason="five rounds of candidate fits: TCOMP_SLOW=1")
+@pytest.mark.skipif(not SLOW, reason="five rounds of candidate fits: TCOMP_SLOW=1")
 def test_all_five_hidden_all_named():
     hidden = {"ambient_expansion": 0.9, "speed_dependent_heat": 0.5, "bearing_heat": 3.5, "moving_convection": 1.1, "reversal_error": 3.0}
     res = discover(twin_runs(hidden, 525252, 0.45), ScrewFamily())
@@ -139,6 +128,8 @@ def test_cli_end_to_end(tmp_path):
     assert np.max(np.abs(host[late])) > 10.0  # the bearing heat is in both, tens of um
 
 
+@pytest.mark.slow
+@pytest.mark.skipif(not SLOW, reason="a robustness scenario of the workflow (a discrepancy run each): TCOMP_SLOW=1")
 def test_missing_sweep_and_sensor_dropout_still_work(tmp_path):
     runs = twin_runs({"ambient_expansion": 1.0}, 727272, 0.5)
     # a missing sweep: drop every row of the 5th sweep of the first run
@@ -160,6 +151,8 @@ def test_missing_sweep_and_sensor_dropout_still_work(tmp_path):
     assert np.isfinite(res.before.rmse())
 
 
+@pytest.mark.slow
+@pytest.mark.skipif(not SLOW, reason="a robustness scenario of the workflow (a discrepancy run each): TCOMP_SLOW=1")
 def test_single_run_time_split():
     run = simulate_run(PROTOCOLS[2], effects={"reversal_error": 4.0}, seed=737373, noise_um=0.5)
     res = discover([run], ScrewFamily(), jobs=1)
@@ -180,6 +173,8 @@ def test_clear_errors(tmp_path, capsys):
     assert "unknown effect" in capsys.readouterr().err
 
 
+@pytest.mark.slow
+@pytest.mark.skipif(not SLOW, reason="a robustness scenario of the workflow (a discrepancy run each): TCOMP_SLOW=1")
 def test_json_alone_and_the_residual_diagnostic(tmp_path):
     # --report is optional: the JSON alone carries every field, the model fields are null
     folders = _write(twin_runs(None, 747474, 0.5), str(tmp_path / "runs"))
@@ -212,6 +207,8 @@ def test_residual_diagnostic_names_a_signal_the_model_lacks():
     assert hits[0]["rmse_share"] >= 0.05
 
 
+@pytest.mark.slow
+@pytest.mark.skipif(not SLOW, reason="a robustness scenario of the workflow (a discrepancy run each): TCOMP_SLOW=1")
 def test_cli_reports_what_is_left_when_no_catalog_effect_passes(tmp_path):
     # the air term off and only a candidate that does not fit (sweeps go one way): the screw's lag behind the drifting air is left in the residual, and
     # the JSON's `unexplained` and the text report must name it with its evidence (issue 11, point 5)
