@@ -128,6 +128,7 @@ class Evaluator:
             self.x = 0
             self.da = 0  # air over its reference (milli-K, clamped) at the last update() and at the last step
             self.da0 = 0
+            self.dir = 0  # direction of the last position change (+1, -1; 0: none yet, or feed/range mode)
         if self.kind == _KIND_DYNAMIC:
             self.d = [0] * n  # clamped temperature minus reference, per sensor (the rises the filters read)
             self.Y = [0] * t.nf  # filter states, 2**-fy[j] input units
@@ -303,6 +304,11 @@ class Evaluator:
             self._note(_ACC_SUM, acc)
         if self.kind == _KIND_SCREW_REDUCED:
             acc += self._seg(p)
+            # reversal error (format 4): +Rv moving in +, -Rv moving in -, as the last position change went
+            if self.dir > 0:
+                acc += t.Rv
+            elif self.dir < 0:
+                acc -= t.Rv
             if chk:
                 self._note(_ACC_SUM, acc)
         acc += t.rO
@@ -500,10 +506,13 @@ class Evaluator:
         a = self.x
         b = x
         self.x = x
-        if a > b:
-            a, b = b, a
         if a == b:
             return
+        if a > b:
+            a, b = b, a
+            self.dir = -1
+        else:
+            self.dir = 1
         e = t.edges
         u = self.u
         umax = t.umax
@@ -561,13 +570,14 @@ class Evaluator:
                         q += 1
                 w[i] = q
         self.feed = True
+        self.dir = 0  # the feed/range state has no direction
 
     def clear_feed(self):
         self.feed = False
 
     def step(self):
         """One time step (every ``table.dt_ms``): the dynamic table's filters, or the screw's segment recurrence
-        T <- T + C*T + B*u + W0*a0 + W1*a1 (then u = 0)."""
+        T <- T + C*T + B*u + Bu*U + W0*a0 + W1*a1 (then u = 0), U = sum u (the step's total travel)."""
         if self.kind == _KIND_DYNAMIC:
             return self._dstep()
         t = self.table
@@ -588,6 +598,14 @@ class Evaluator:
                     v = umax
                     self.flags |= _CLAMP_TRAVEL
                 u[i] = v
+        U = 0  # the step's total travel, for the effects' heat per mm of travel (Bu; bearing_heat)
+        for i in range(m):
+            U += u[i]
+            if chk:
+                self._note(_ACC_TRAVEL, U)
+            if U > umax:
+                U = umax
+                self.flags |= _CLAMP_TRAVEL
         ns = t.ns
         Ls = t.Ls
         mask = (1 << Ls) - 1
@@ -603,6 +621,8 @@ class Evaluator:
         C = t.C
         B = t.B
         shB = t.shB
+        Bu = t.Bu
+        shBu = t.shBu
         rS = t.rS
         gs = t.gs
         Tmax = t.Tmax
@@ -628,6 +648,8 @@ class Evaluator:
                     self._note(_ACC_ROW, acc)
                 sh -= Ls
             acc += self._mul(_ACC_BMUL, B[i], u[i], t.Lu, t.nu, shB[i]) + rS[i]
+            if Bu[i]:
+                acc += self._mul(_ACC_BMUL, Bu[i], U, t.Lu, t.nu, shBu[i])
             if chk:
                 self._note(_ACC_ROW, acc)
             if t.air >= 0:

@@ -39,6 +39,8 @@ OU_PER_UM = 100  # output unit 0.01 um
 SLOPE_PER_OU_PER_UM = 10 ** 6  # 1 OU/um = 0.01 um/um = 10**6 x 0.01 um/m
 FLOAT_MARGIN_UM = 1e-9  # the float model's own rounding (double precision, |values| < 1e5 um)
 LIMITS_UM = {"poly_slope": 0.05, "linear_direct": 0.05, "screw_reduced": 0.1, "dynamic": 0.1}
+# the reduced screw form against the full model it came from, RMS on the training runs (docs/table-format.md)
+DEFAULT_REDUCTION_LIMIT_UM = 0.5
 
 
 class ExportError(ValueError):

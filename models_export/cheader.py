@@ -46,7 +46,7 @@ typedef struct {
     int32_t pos_ref;
 #if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     int32_t T[TCOMP_M], Tn[TCOMP_M], u[TCOMP_M], w[TCOMP_M], limbs[TCOMP_M * TCOMP_NS], cum[TCOMP_M + 1], segslope[TCOMP_M];
-    int32_t x, F;
+    int32_t x, F, dir; /* dir: direction of the last position change (+1, -1, 0: none or feed/range mode) */
     int32_t da, da0; /* air over its reference (milli-K) at the last update and at the last step */
     int have_x, feed;
 #endif
@@ -164,8 +164,8 @@ static void tcomp_advance_position(tcomp_eval_t *e, int32_t pos)
     int i;
     if (!e->have_x) { e->have_x = 1; e->x = x; return; }
     a = e->x; b = x; e->x = x;
-    if (a > b) { int32_t t = a; a = b; b = t; }
     if (a == b) return;
+    if (a > b) { int32_t t = a; a = b; b = t; e->dir = -1; } else e->dir = 1;
     for (i = 0; i < TCOMP_M; i++) {
         int32_t lo = tcomp_edges[i] > a ? tcomp_edges[i] : a;
         int32_t hi = tcomp_edges[i + 1] < b ? tcomp_edges[i + 1] : b;
@@ -208,13 +208,15 @@ static void tcomp_set_feed(tcomp_eval_t *e, int32_t feed, int32_t lo_um, int32_t
         }
     }
     e->feed = 1;
+    e->dir = 0; /* the feed/range state has no direction */
 }
 
-/* one step of T <- T + C*T + B*u + W0*a0 + W1*a1, every TCOMP_DT_MS milliseconds */
+/* one step of T <- T + C*T + B*u + Bu*U + W0*a0 + W1*a1 (U: the step's total travel), every TCOMP_DT_MS ms */
 static void tcomp_step(tcomp_eval_t *e)
 {
     const int32_t mask = (int32_t)((1L << TCOMP_LS) - 1);
     uint32_t fl = 0;
+    int32_t U = 0;
     int i, j, k;
     if (e->feed) {
         for (i = 0; i < TCOMP_M; i++) {
@@ -222,6 +224,10 @@ static void tcomp_step(tcomp_eval_t *e)
             if (v > TCOMP_UMAX) { v = TCOMP_UMAX; e->flags |= TCOMP_CLAMP_TRAVEL; }
             e->u[i] = v;
         }
+    }
+    for (i = 0; i < TCOMP_M; i++) {
+        U += e->u[i];
+        if (U > TCOMP_UMAX) { U = TCOMP_UMAX; e->flags |= TCOMP_CLAMP_TRAVEL; }
     }
     for (j = 0; j < TCOMP_M; j++) {
         int32_t x = e->T[j];
@@ -238,6 +244,7 @@ static void tcomp_step(tcomp_eval_t *e)
             sh -= TCOMP_LS;
         }
         acc += tcomp_mul(tcomp_B[i], e->u[i], TCOMP_LU, TCOMP_NU, tcomp_shB[i]) + tcomp_rS[i];
+        if (tcomp_Bu[i]) acc += tcomp_mul(tcomp_Bu[i], U, TCOMP_LU, TCOMP_NU, tcomp_shBu[i]);
         if (TCOMP_AIR >= 0) {
             acc += tcomp_mul(tcomp_W0[i], e->da0, TCOMP_LT, TCOMP_NT, tcomp_shW0[i]);
             acc += tcomp_mul(tcomp_W1[i], e->da, TCOMP_LT, TCOMP_NT, tcomp_shW1[i]);
@@ -268,6 +275,8 @@ static int32_t tcomp_offset_at(tcomp_eval_t *e, int32_t pos)
     acc = h + tcomp_mul(p, e->S, TCOMP_LW, TCOMP_NW, TCOMP_SHW);
 #if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     acc += tcomp_seg(e, p);
+    if (e->dir > 0) acc += TCOMP_RV; /* reversal error: as the last position change went */
+    else if (e->dir < 0) acc -= TCOMP_RV;
 #endif
     return (acc + TCOMP_RO) >> TCOMP_FO;
 #endif
@@ -313,7 +322,7 @@ static void tcomp_init(tcomp_eval_t *e)
     e->pos_ref = TCOMP_POS_REF;
 #if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED
     for (i = 0; i < TCOMP_M; i++) { e->T[i] = 0; e->u[i] = 0; e->w[i] = 0; }
-    e->have_x = 0; e->feed = 0; e->x = 0; e->F = 0; e->da = 0; e->da0 = 0;
+    e->have_x = 0; e->feed = 0; e->x = 0; e->F = 0; e->dir = 0; e->da = 0; e->da0 = 0;
 #endif
     tcomp_update(e);
 #if TCOMP_KIND == TCOMP_KIND_SCREW_REDUCED

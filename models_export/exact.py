@@ -164,7 +164,10 @@ class Model:
                 if base not in self.sensors:
                     raise ExportError("thermal.reduced.base_sensor %r is not in sensors %r" % (base, self.sensors))
                 i = self.sensors.index(base)
-                self.b[i] = alpha * F(OU_PER_UM, 1000 * 1000)
+                # the base term's coefficient: alpha for E_e, plus ambient_expansion's reduced form (format 4 documents
+                # state it as ee_um_per_mm_per_K; older ones have alpha alone)
+                ee = red.get("ee_um_per_mm_per_K", red.get("alpha_um_per_mm_per_K"))
+                self.b[i] = F(_num(ee, "thermal.reduced.ee_um_per_mm_per_K")) * F(OU_PER_UM, 1000 * 1000)
                 bref = F(_num(red.get("base_ref_C"), "thermal.reduced.base_ref_C")) * 1000
                 self.ref[i] = rnd(bref)
                 self.ref_frac[i] = bref - rnd(bref)

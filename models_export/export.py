@@ -2,7 +2,7 @@
 import math
 
 from firmware.crc32 import crc32
-from models_export.certify import LIMITS_UM, OU_PER_UM, ExportError
+from models_export.certify import DEFAULT_REDUCTION_LIMIT_UM, LIMITS_UM, OU_PER_UM, ExportError
 from models_export.document import edited_reason, provenance
 from models_export.exact import DEFAULT_ENVELOPE_MARGIN_K, Model
 from models_export.plan import Planner
@@ -33,9 +33,55 @@ def _provenance(doc):
     return provenance(doc)
 
 
+def reduction(doc, limit_um=DEFAULT_REDUCTION_LIMIT_UM):
+    """The certificate's reduction part for a screw document (None for other kinds): the reduced form the firmware
+    evaluates against the full model the document was fitted as, on the training runs, from
+    thermal.reduced.reduction_error_um (host/learning/screw/reduced.py reduction_certificate). Raises ExportError
+    when it is missing or its worst RMS is above ``limit_um``, naming the run and the effects left out."""
+    th = doc.get("thermal")
+    red = th.get("reduced") if isinstance(th, dict) else None
+    if doc.get("kind") != "screw" or not isinstance(red, dict):
+        return None
+    if "parameters" not in th:  # a document of the reduced recurrence alone: it is its own full model
+        return {"status": "reduced form only (no full model in the document): nothing reduced", "limit_um": limit_um,
+                "rms_um": 0.0, "max_um": 0.0, "runs": {}, "omitted_effects": []}
+    errs = red.get("reduction_error_um")
+    if not isinstance(errs, dict) or not errs:
+        raise ExportError("thermal.reduced.reduction_error_um is missing: the certificate cannot cover the reduction "
+                          "of this screw model to the firmware's form; re-fit it with this tcomp")
+    runs = {}
+    try:
+        for name, e in errs.items():
+            fr = e.get("feed_range") or {}
+            runs[name] = {"rms_um": max(float(e["rms_um"]), float(e.get("rows_rms_um", 0.0))),
+                          "max_um": max(float(e["max_um"]), float(e.get("rows_max_um", 0.0))),
+                          "feed_range_rms_um": max([float(fr[k]) for k in ("rms_um", "rows_rms_um") if k in fr] or [math.nan]),
+                          "feed_range_max_um": max([float(fr[k]) for k in ("max_um", "rows_max_um") if k in fr] or [math.nan])}
+    except (AttributeError, KeyError, TypeError, ValueError) as exc:
+        raise ExportError("thermal.reduced.reduction_error_um: invalid entry (%s)" % exc)
+    worst = max(runs, key=lambda n: runs[n]["rms_um"])
+    omitted = list(red.get("omitted_effects") or [])
+    reasons = red.get("omitted_reasons") or {}
+    out = {"limit_um": limit_um, "rms_um": runs[worst]["rms_um"], "max_um": max(r["max_um"] for r in runs.values()),
+           "worst_run": worst, "runs": runs, "omitted_effects": omitted,
+           "measure": "RMS and max over the training runs of the full model minus the reduced form, E_m on 21 positions "
+                      "at every step and the whole output at the error rows, position reports (feed/range mode beside)"}
+    if not math.isfinite(runs[worst]["rms_um"]) or runs[worst]["rms_um"] > limit_um:
+        left = ("; effects the firmware's form leaves out: %s" % "; ".join(
+            "%s (%s)" % (n, reasons.get(n, "no reduced form")) for n in omitted)) if omitted else ""
+        raise ExportError("thermal.reduced: the firmware's reduced form differs from the full model by %.3g um RMS "
+                          "(max %.3g um) on training run %s, above the reduction limit %.3g um%s; the board would not "
+                          "do what the host model does (raise --reduction-limit to export it anyway)"
+                          % (runs[worst]["rms_um"], runs[worst]["max_um"], worst, limit_um, left))
+    return out
+
+
 def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, envelope=None,
-                 margin_K=DEFAULT_ENVELOPE_MARGIN_K):
+                 margin_K=DEFAULT_ENVELOPE_MARGIN_K, reduction_limit_um=DEFAULT_REDUCTION_LIMIT_UM):
     """Quantise and certify ``doc`` (a tcomp-model/1 dict). Raises ExportError.
+
+    A screw model's reduced form must be within ``reduction_limit_um`` (RMS on the training runs) of the full model
+    (:func:`reduction`); the report states it beside the integer error.
 
     The certified temperature envelope (docs/firmware.md, "Operating envelope") is ``envelope``
     ({sensor: (lo_C, hi_C)}) where given, else the training range (the document's
@@ -45,7 +91,10 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
     unless ``allow_edited``: the table then carries the actual hash and the edited mark."""
     if not isinstance(doc, dict):
         raise ExportError("model document must be a JSON object")
+    if not (isinstance(reduction_limit_um, (int, float)) and reduction_limit_um >= 0):
+        raise ExportError("reduction limit must be a number of um >= 0 (got %r)" % (reduction_limit_um,))
     model = Model(doc, ref_position_mm, envelope=envelope, margin_K=margin_K)
+    red_cert = reduction(doc, reduction_limit_um)
     planner = Planner(model)
     if model.direct:
         errs = planner.linear_direct()
@@ -124,6 +173,10 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
             "per_step_residual_K": max(sc["rho_state_units"]) / (1 << f["ft"]),
             "horizon": "unbounded (steady state): |e| <= v with v >= |A| v + rho verified exactly",
         }
+        # what the board does against the host model: the integer arithmetic (certified) plus the reduction
+        # (measured on the training runs)
+        report["reduction"] = red_cert
+        report["total_max_error_um"] = max_err + red_cert["max_um"]
     if model.kind == "dynamic":
         envelope["spindle_rpm"] = [0, f["smax"]]
         envelope["feed_mm_min"] = [0, f["fmax"]]

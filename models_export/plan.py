@@ -38,9 +38,11 @@ def _meet(a, b):
     return (lo, hi) if lo <= hi else a
 
 
-def _round_out(err, f):
-    """Error interval of floor((acc + r) / 2**f) given acc's error interval ``err`` (acc units); returns (r, err_out)."""
-    r = rnd(-(err[0] + err[1]) / 2 + F((1 << f) - 1, 2))
+def _round_out(err, f, r=None):
+    """Error interval of floor((acc + r) / 2**f) given acc's error interval ``err`` (acc units); returns (r, err_out).
+    ``r`` None: the bias that centres the interval."""
+    if r is None:
+        r = rnd(-(err[0] + err[1]) / 2 + F((1 << f) - 1, 2))
     lo = (err[0] + r) / p2(f) - F((1 << f) - 1, 1 << f)
     hi = (err[1] + r) / p2(f)
     return r, (lo, hi)
@@ -216,8 +218,9 @@ class Planner:
         if PM > PROD:
             raise ExportError("envelope.position_mm: |position| up to %d um does not fit the table" % PM)
         seg_bound = self.screw_prepare() if screw else F(0)
+        rev_ou = abs(self.s["rev"]) * OU_PER_UM if screw else F(0)  # the reversal term (output units)
         geo_bound = iv_abs(m.horner_range(0))
-        acc_bound = geo_bound + m.s_bound() * PM + seg_bound
+        acc_bound = geo_bound + m.s_bound() * PM + seg_bound + rev_ou
         fo = frac_bits(acc_bound, ACC, cap=24)
         if fo < 0:
             raise ExportError("%s: the offset range %.4g um over the envelope exceeds what the table can hold"
@@ -245,10 +248,19 @@ class Planner:
             seg_iv, err_seg = (0, 0), ZERO
         acc = iv_add(h_iv, th)
         rec.note(ACC_SUM, acc[0], acc[1], "output")
+        err_rev = ZERO
         if screw:
             acc = iv_add(acc, seg_iv)
             rec.note(ACC_SUM, acc[0], acc[1], "output")
-        err_acc = iv_add(err_geo, err_th, err_seg)
+            # reversal: +Rv or -Rv by the direction of the last position change (or 0)
+            Rv = rnd(self.s["rev"] * OU_PER_UM * p2(fo))
+            f["Rv"] = Rv
+            acc = (acc[0] - abs(Rv), acc[1] + abs(Rv))
+            rec.note(ACC_SUM, acc[0], acc[1], "output")
+            dq = abs(F(Rv) - self.s["rev"] * OU_PER_UM * p2(fo))
+            err_rev = (-dq, dq)
+            self.term("thermal.reduced.reversal_um", fo, dq / p2(fo))
+        err_acc = iv_add(err_geo, err_th, err_seg, err_rev)
         rO, err_out = _round_out(err_acc, fo)
         f["rO"] = rO
         acc = (acc[0] + rO, acc[1] + rO)
@@ -385,11 +397,28 @@ class Planner:
         # [a_min, a_max + state_max_K] (host/learning/screw/reduced.py)
         Tlo_K = F(d_air[0], 1000)
         Thi_K = F(Tmax) + F(d_air[1], 1000)
+        Bu, rev = self._screw_effects(red, M)
         self.s = dict(M=M, A=A, B=B, edges=edges, edges_um=edges_um, fixed=fixed, fe=fe, Tmax=Thi_K, Tlo=Tlo_K, umax=umax,
-                      air=air, c0=c0, c1=c1, d_air=d_air)
+                      air=air, c0=c0, c1=c1, d_air=d_air, Bu=Bu, rev=rev)
         f.update(M=M, dt_ms=dt_ms, fixed_end=fe, fmax=fmax, edges=edges_um, umax=umax, air=air)
         alpha = m.alpha
         return abs(alpha) * max(Thi_K, -Tlo_K) * F(edges[-1]) * OU_PER_UM * 2  # x2: margin for state errors
+
+    def _screw_effects(self, red, M):
+        """The effects' reduced forms (host/learning/screw/effects.py reduce): heat per mm of the step's total travel
+        (K/mm, per segment, >= 0) and the reversal term (um); zeros for a document without them."""
+        hu = red.get("travel_heat_K_per_mm")
+        if hu is None:
+            Bu = [F(0)] * M
+        else:
+            if not isinstance(hu, list) or len(hu) != M or not all(isinstance(v, (int, float)) and math.isfinite(v) and v >= 0
+                                                                  for v in hu):
+                raise ExportError("thermal.reduced.travel_heat_K_per_mm must be %d finite non-negative numbers" % M)
+            Bu = [F(float(v)) for v in hu]
+        rev = red.get("reversal_um", 0.0)
+        if not isinstance(rev, (int, float)) or not math.isfinite(rev) or abs(rev) > 1000:
+            raise ExportError("thermal.reduced.reversal_um must be a finite number of um below 1000 (got %r)" % (rev,))
+        return Bu, F(float(rev))
 
     def _screw_air(self, red, A, M):
         """(channel index or -1, c0, c1 as Fractions, air range (milli-K) over its reference)."""
@@ -474,7 +503,7 @@ class Planner:
         U_iv = (0, umax)
         lmu = limb_max(U_iv, Lu, nu)
         # guard bits: the row sum |C T| + B u + W a (state units) times 2**gs stays below ACC
-        Bmax = max(F(float(b)) for b in s["B"]) / 1000 * p2(ft) * umax
+        Bmax = max(F(float(b)) + bu for b, bu in zip(s["B"], s["Bu"])) / 1000 * p2(ft) * umax
         d_air = s["d_air"]
         Dabs = max(-d_air[0], d_air[1])
         Wmax = max(c0 + c1 for c0, c1 in zip(s["c0"], s["c1"])) / 1000 * p2(ft) * Dabs
@@ -482,6 +511,7 @@ class Planner:
         lmd = limb_max(d_air, f["Lt"], f["nt"])
         W0q, shW0, W1q, shW1 = [], [], [], []
         Bq, shB, rS = [], [], []
+        Buq, shBu = [], []
         rho = []
         parts = []  # per row: (C quantisation, B quantisation + feed rounding), state units per step
         feed_du = (-(F(umax) / p2(FEED_W_BITS) + 4), F(0))  # feed/range mode travel error per segment (um)
@@ -520,6 +550,22 @@ class Planner:
             errB = iv_add(iv_mul(_c(db), (F(0), F(umax))), _hull(ZERO, iv_scale(feed_du, bq)))
             err = iv_add(err, errB, floor_err(k))
             acc = iv_add(acc, res)
+            # the effects' heat per mm of the step's total travel U = sum u (clamped to umax, as u is); in the
+            # feed/range mode U carries every segment's travel rounding
+            if s["Bu"][i]:
+                q, sb = fit_coef(s["Bu"][i] / 1000, lmu, ft + gs)
+                res, k = rec.mul(ACC_BMUL, (q, q), U_iv, Lu, nu, sb, "thermal.reduced.travel_heat_K_per_mm[%d]" % i)
+                bq = F(q) / p2(sb)
+                dbu = bq - s["Bu"][i] / 1000 * p2(ft + gs)
+                # the quantisation (one-sided in U >= 0), the floors and the feed/range mode's travel rounding widen
+                # the interval but stay out of the rounding bias below, so an idle screw stays where it is
+                errBu = iv_add(iv_mul(_c(dbu), (F(0), F(umax))), floor_err(k), _hull(ZERO, iv_scale(iv_scale(feed_du, M), bq)))
+                errB = iv_add(errB, errBu)
+                acc = iv_add(acc, res)
+            else:
+                q, sb = 0, 0
+            Buq.append(q)
+            shBu.append(sb)
             # air at the step's start and end (milli-K over the reference), weights c/1000 K per mK
             errW = ZERO
             for c, qs, shs in ((s["c0"][i], W0q, shW0), (s["c1"][i], W1q, shW1)):
@@ -531,7 +577,10 @@ class Planner:
                 errW = iv_add(errW, iv_mul(_c(F(q) / p2(sw) - c / 1000 * p2(ft + gs)), (F(d_air[0]), F(d_air[1]))), floor_err(k))
             err = iv_add(err, errW)
             parts.append((iv_abs(errC) / p2(gs), (iv_abs(errB) + iv_abs(errW)) / p2(gs)))
-            bias, err_state = _round_out(err, gs)  # v = T + (acc + rS) >> gs
+            bias, _ = _round_out(err, gs)
+            if s["Bu"][i]:
+                err = iv_add(err, errBu)
+            bias, err_state = _round_out(err, gs, bias)  # v = T + (acc + rS) >> gs
             rS.append(bias)
             acc = (acc[0] + bias, acc[1] + bias)
             rec.note(ACC_ROW, acc[0], acc[1], name)
@@ -563,7 +612,7 @@ class Planner:
         self.state_cert = {"rho_state_units": [float(r) for r in rho], "v_state_units": [float(x) for x in v], "ft": ft,
                            "start_error_state_units": float(e0)}
         f.update(ft=ft, Tmax=Tq, Tlo=Tlq, Ls=Ls, ns=ns, fc=fc, gs=gs, C=[c for row in Cq for c in row], Lu=Lu, nu=nu, B=Bq,
-                 shB=shB, rS=rS, W0=W0q, shW0=shW0, W1=W1q, shW1=shW1, Ka=Ka, shKa=shKa)
+                 shB=shB, rS=rS, W0=W0q, shW0=shW0, W1=W1q, shW1=shW1, Ka=Ka, shKa=shKa, Bu=Buq, shBu=shBu)
         # informational split of the certified state error by source: output weight of a unit residual in row i
         W = np.linalg.inv(np.eye(M) - np.abs(np.asarray(A, dtype=float)))
         wout = [float(abs(m.alpha) * (F(s["edges"][j + 1]) - F(s["edges"][j])) * OU_PER_UM) / 2.0 ** ft for j in range(M)]

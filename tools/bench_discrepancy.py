@@ -28,7 +28,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from host.learning.discrepancy import unexplained  # noqa: E402
 from host.learning.discrepancy.report import residual_diagnostic  # noqa: E402
-from host.learning.discrepancy.screw_family import ScrewFamily  # noqa: E402
+from host.learning.discrepancy.family import ScrewFamily  # noqa: E402  (ScrewModel configurations, issue 19)
 from host.learning.discrepancy.workflow import discover  # noqa: E402
 from host.twin import EFFECTS, simulate_run  # noqa: E402
 

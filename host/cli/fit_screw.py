@@ -76,8 +76,12 @@ def format_report(model):
                      % (r["run"], r["rows"], r["rmse_um"], r["max_abs_residual_um"], nut))
     red = model.reduced_
     for run, e in red["reduction_error_um"].items():
-        lines.append("  reduced (%d segments, dt %g s) vs full on %s: RMS %.3f um, max %.3f um"
-                     % (red["segments"], red["dt_s"], run, e["rms_um"], e["max_um"]))
+        lines.append("  reduced (%d segments, dt %g s) vs full on %s: RMS %.3f um, max %.3f um (E_m); at the error rows "
+                     "RMS %.3f um, max %.3f um" % (red["segments"], red["dt_s"], run, e["rms_um"], e["max_um"],
+                                                   e.get("rows_rms_um", float("nan")), e.get("rows_max_um", float("nan"))))
+    for name, why in (red.get("omitted_reasons") or {}).items():
+        lines.append("  WARNING: effect %s has no reduced form (%s): tcomp export refuses the model if leaving it out "
+                     "costs more than its reduction limit" % (name, why))
     lines.append("  reduced state bound %.2f K at feed %g mm/min" % (red["state_max_K"], red["feed_max_mm_min"]))
     for w in st["warnings"]:
         lines.append("  WARNING: " + w)

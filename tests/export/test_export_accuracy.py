@@ -218,6 +218,7 @@ def test_screw_reduced_within_certificate(seed, data):
                 lo, hi = rng.randint(t.pos_lo, t.pos_hi), rng.randint(t.pos_lo, t.pos_hi)
                 ev.set_feed(feed, lo, hi)
                 travel = _feed_travel(t, feed, lo, hi)
+                ref.direction = 0  # the feed/range state has no direction
             else:
                 ev.clear_feed()
         if feed_mode:
@@ -231,6 +232,8 @@ def test_screw_reduced_within_certificate(seed, data):
                     break
                 budget -= abs(nx - x)
                 ev.advance_position(nx)
+                if nx != x:
+                    ref.direction = 1 if nx > x else -1  # the reversal term follows the last reported move
                 x = nx
             u = list(ev.u)
             ev.step()

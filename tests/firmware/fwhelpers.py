@@ -36,6 +36,8 @@ def make_table(**kw):
     from models_export.tableformat import pack
     if kw.get("kind") == "dynamic":
         return dynamic_table(kw["sensors"])
+    if kw.get("kind") == "screw":
+        return screw_table(kw["sensors"])
     return pack(table_fields(**kw))
 
 
@@ -50,6 +52,29 @@ def dynamic_table(sensors, dt_s=1.0, seed=3):
         t["tau_s"] = tau
     doc["envelope"]["spindle_rpm"] = [0, 12000]
     from hil_tests.fixtures.samples import restamp
+    return export_model(restamp(doc)).table
+
+
+def screw_table(sensors, seed=3):
+    """An exported screw table over ``sensors`` (base sensors[0], air sensors[1], the rest read and unused) with
+    the effect terms of format 4 (bearing heat per mm of travel, a reversal term); 1 s steps."""
+    import random
+    from hil_tests.fixtures.samples import restamp, screw_doc
+    from models_export import export_model
+    doc = screw_doc(random.Random(seed), segments=8, dt_s=1.0, length_mm=800.0, feed_max_mm_min=12000.0)
+    assert doc["thermal"]["reduced"]["reversal_um"] and doc["thermal"]["reduced"]["travel_heat_K_per_mm"][0] > 0
+    names = list(sensors)
+    ren = {"T_base": names[0], "T_air": names[1]}
+    red = doc["thermal"]["reduced"]
+    red["base_sensor"], red["air_sensor"] = ren[red["base_sensor"]], ren[red["air_sensor"]]
+    doc["reference_C"] = {ren[k]: v for k, v in doc["reference_C"].items()}
+    env = {ren[k]: v for k, v in doc["envelope"]["temperature_C"].items()}
+    for n in names[2:]:
+        doc["reference_C"][n] = 20.0
+        env[n] = [10.0, 40.0]
+    doc["envelope"]["temperature_C"] = env
+    doc["envelope"]["position_mm"] = [0.0, 700.0]
+    doc["sensors"] = names
     return export_model(restamp(doc)).table
 
 

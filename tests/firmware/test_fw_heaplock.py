@@ -28,7 +28,7 @@ def heap(mode, kind="poly_slope"):
     """The test heap for the chosen interpreter's word size (hil_tests/rig/interpreters.py HEAPS); a dynamic
     table (6 filters) has its own entries."""
     from hil_tests.rig import interpreters
-    return interpreters.heap("fw_heaplock_" + ("dynamic_" if kind == "dynamic" else "") + mode)
+    return interpreters.heap("fw_heaplock_" + ("%s_" % kind if kind in ("dynamic", "screw") else "") + mode)
 
 
 @pytest.fixture(scope="module")
@@ -37,10 +37,11 @@ def mpy_dir():
 
 
 @pytest.mark.micropython
-@pytest.mark.parametrize("kind", ["poly_slope", "dynamic"])
+@pytest.mark.parametrize("kind", ["poly_slope", "dynamic", "screw"])
 @pytest.mark.parametrize("mode", ["stream", "modbus"])
 def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode, kind):
-    """The dynamic table (1 s filter step: a step every 10 cycles) with spindle speed and feed reports."""
+    """The dynamic table (1 s filter step: a step every 10 cycles) with spindle speed and feed reports; the screw
+    table (format 4: bearing heat per mm of travel, the reversal term) with position reports going up and back."""
     names = ["T%d" % i for i in range(1, 12)]
     (tmp_path / "table_a.bin").write_bytes(make_table(kind=kind, sensors=names))
     n = 2000 if os.environ.get("TCOMP_SLOW") else 300

@@ -33,7 +33,7 @@ def _discrepancy(args, out):
     from host.errors import UserError
     from host.learning.discrepancy import workflow
     from host.learning.discrepancy.report import write_report
-    from host.learning.discrepancy.screw_family import ScrewFamily
+    from host.learning.discrepancy.family import ScrewFamily
     from host.data.runs import RunFormatError, load_run
 
     runs = []

@@ -1,5 +1,5 @@
 """tcomp export MODEL.json --out table.bin [--report report.json] [--json summary.json] [--c-header table.h] [--allow-edited]
-    [--envelope SENSOR=LO:HI[,SENSOR=LO:HI...]]... [--envelope-margin K]"""
+    [--envelope SENSOR=LO:HI[,SENSOR=LO:HI...]]... [--envelope-margin K] [--reduction-limit UM]"""
 
 
 def add_arguments(p):
@@ -19,6 +19,9 @@ def add_arguments(p):
                         "or comma-separate, e.g. T1=10:60,T2=15:45). Must contain the model's training range. Inside "
                         "it the firmware evaluates the model (EXTRAPOLATING outside the training range); beyond it "
                         "it clamps (CLAMPED). Default: the training range widened by --envelope-margin")
+    p.add_argument("--reduction-limit", dest="reduction_limit", type=float, default=None, metavar="UM",
+                   help="screw models: refuse when the firmware's reduced form differs from the full model by more "
+                        "than this RMS on the training runs (default 0.5 um; docs/table-format.md \"Reduction\")")
     p.add_argument("--envelope-margin", dest="envelope_margin", type=float, default=None, metavar="K",
                    help="widen the training range by this many K on both sides for sensors without --envelope "
                         "(default 15, docs/firmware.md \"Operating envelope\")")
@@ -43,6 +46,12 @@ def run(args):
     print("%s -> %s: %s table, %d bytes, CRC-32 %s; certified max |integer - model| %.4f um (limit %.2f um), "
           "min headroom %.2f bits" % (args.model, args.out, r["model_kind"], r["table_bytes"], r["crc32"],
                                       r["max_error_um"], r["limit_um"], r["min_headroom_bits"]))
+    if r.get("reduction"):
+        rd = r["reduction"]
+        print("reduced form vs full model on the training runs: %.3f um RMS, max %.3f um (limit %.2f um RMS)%s; "
+              "integer + reduction max %.3f um" % (rd["rms_um"], rd["max_um"], rd["limit_um"],
+                                                   "; left out: " + ", ".join(rd["omitted_effects"]) if rd["omitted_effects"] else "",
+                                                   r["total_max_error_um"]))
     return 0
 
 
@@ -109,9 +118,14 @@ def _export(args):
             raise UserError("--envelope-margin %g: widens %s's training range %g..%g degC to %g..%g degC, outside "
                             "%g..%g degC, the range of a Pt100 (IEC 60751); give a smaller margin or --envelope %s=LO:HI"
                             % (margin, sensor, rng[0], rng[1], lo, hi, TEMPERATURE_RANGE_C[0], TEMPERATURE_RANGE_C[1], sensor))
+    from models_export.certify import DEFAULT_REDUCTION_LIMIT_UM
+
+    limit = DEFAULT_REDUCTION_LIMIT_UM if args.reduction_limit is None else args.reduction_limit
+    if not (math.isfinite(limit) and limit >= 0):
+        raise UserError("--reduction-limit %s: must be a finite number of um >= 0" % args.reduction_limit)
     try:
         ex = export_model(doc, ref_position_mm=args.ref_position_mm, allow_edited=args.allow_edited,
-                          envelope=envelope, margin_K=margin)
+                          envelope=envelope, margin_K=margin, reduction_limit_um=limit)
     except ExportError as exc:
         raise UserError("%s: %s" % (args.model, exc))
     return ex

@@ -9,32 +9,19 @@ import numpy as np
 from host.learning.discrepancy.localize import residual_map
 
 
-def final_model_document(result, runs, air=True):
-    """Fit host/learning/screw's ScrewModel with the named effects on all runs; return its model document.
-
-    ``ambient_expansion`` maps to the screw model's own E_e term (base sensor);
-    the other names to host/learning/screw/effects.py implementations of the same name.
-    """
-    from host.learning.screw.effects import EFFECTS as SCREW_EFFECTS
-    from host.learning.screw.effects import make_effect
-    from host.learning.screw.screwmodel import ScrewModel
-
-    effects = [make_effect(n) for n in result.effects if n != "ambient_expansion" and n in SCREW_EFFECTS]
-    # 20 segments and 20 s steps: within a fraction of a micrometre of the 40-segment,
-    # 10 s default on sweeps 15 min apart, at a quarter of the identification time
-    model = ScrewModel(segments=20, dt_s=20.0, ambient="ambient_expansion" in result.effects, effects=effects, geometric_degree=3,
-                       air="auto" if air else "off")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        # host/learning/screw refuses runs without motion (nothing drives E_m); they carry no screw information
-        model.fit([r for r in runs if r.motion is not None and len(r.motion)])
+def final_model_document(result):
+    """The model document of the workflow's final fit: host/learning/screw's ScrewModel with the named effects,
+    fitted on every run (its reduced firmware form included), with the held-out figures that validated it."""
+    model = result.final_fit
+    if model is None or not hasattr(model, "to_document"):
+        raise ValueError("the workflow's final fit is not a screw model document")
     doc = model.to_document()
     doc.setdefault("training", {})
     doc["training"]["discrepancy"] = {
         "effects": list(result.effects),
         "rmse_before_um": result.before.rmse(),
         "rmse_after_um": result.after.rmse(),
-        "held_out_parameters": result.final_fit.values() if result.final_fit is not None else None,
+        "held_out_parameters": dict(model.values_),  # as before: the final fit's parameter values
     }
     return doc
 
@@ -265,7 +252,7 @@ def write_report(result, family, folder, json_path=None, shown_folder=None):
     try:
         from host.learning.documents import save_model
 
-        save_model(final_model_document(result, result.runs, air=getattr(family, "air", True)), os.path.join(folder, "model.json"))
+        save_model(final_model_document(result), os.path.join(folder, "model.json"))
     except Exception as exc:  # the findings stand even when the final document cannot be built
         model_path, model_error = None, "%s: %s" % (type(exc).__name__, exc)
     extra = findings(result, family, model_path, model_error)

@@ -2,8 +2,8 @@
 
 The loop only talks to a *model family* (see :class:`Family`): something that
 can fit a base model plus a set of named effects on selected rows of some runs
-and predict every row of a run. ``host.learning.discrepancy.screw_family`` is the family
-for the screw heat-transfer model; tests use small linear families.
+and predict every row of a run. ``host.learning.discrepancy.family`` is the family of
+host/learning/screw's ScrewModel configurations; tests use small linear families.
 
 Every RMSE and every test statistic here is computed on held-out rows:
 leave-one-run-out when there are two or more runs, otherwise a blocked time
@@ -42,6 +42,8 @@ class Family:
     ``applicable(runs, effect)`` -> None, or a reason why the effect cannot be
     tested on these runs (e.g. no bidirectional sweeps).
     ``candidates`` -> effect names to test, in catalog order.
+    Optional ``fit_final(runs, effects, start)`` -> the fitted object the workflow reports (all rows; the
+    screw family adds the firmware's reduced form there); without it ``fit`` on every row.
     """
 
 
@@ -385,5 +387,8 @@ def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_
         pool.close()
     result = Result(effects[len(base_effects):], first, current, rounds, list(runs))
     start = current.fits[0] if current.fits else None
-    result.final_fit = family.fit(runs, [np.ones(len(r.errors), bool) for r in runs], tuple(effects), start)
+    if hasattr(family, "fit_final"):
+        result.final_fit = family.fit_final(runs, tuple(effects), start)
+    else:
+        result.final_fit = family.fit(runs, [np.ones(len(r.errors), bool) for r in runs], tuple(effects), start)
     return result

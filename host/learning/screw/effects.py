@@ -16,7 +16,11 @@ An effect is an object with
 - optional ``check(contexts)``: raise ValueError when the runs cannot show the
   effect at all (e.g. reversal error without bidirectional sweeps);
 - ``to_document()`` -> dict and a ``from_document(d)`` classmethod for settings
-  that are not parameters (reference speeds, sensor names).
+  that are not parameters (reference speeds, sensor names);
+- ``reduce(model, p, red, C)``: the effect's reduced (firmware) form: it adds its
+  terms to ``red``, the ``thermal.reduced`` block being built (C: the reduced
+  segments' heat capacities, J/K), or raises :class:`NoReducedForm` saying why the
+  firmware's recurrence cannot carry it (docs/screw-model.md, "Reduced forms of the effects").
 
 Register a new effect class in ``EFFECTS`` (or pass instances to ScrewModel(effects=...)).
 The five effects below are the catalog the discrepancy workflow (issue 5) tests.
@@ -24,6 +28,15 @@ The five effects below are the catalog the discrepancy workflow (issue 5) tests.
 from dataclasses import dataclass
 
 import numpy as np
+
+
+class NoReducedForm(ValueError):
+    """The firmware's recurrence has no place for an effect (the message says why)."""
+
+
+# Travel per step <-> mean speed: v [m/min] = U [mm] / dt [s] * 60 / 1000, so a power k·v [W] over a step
+# of dt seconds is the energy k·U·0.06 [J]: linear in the step's total travel whatever dt is.
+J_PER_W_PER_M_MIN_PER_MM = 0.06
 
 
 @dataclass
@@ -69,6 +82,11 @@ class BearingHeat(Effect):
         out[:, 0] = p["W_per_m_min"] * ctx.step_speed_m_min
         return out
 
+    def reduce(self, model, p, red, C):
+        # energy k·U·0.06 J per step into the fixed-end segment: a temperature increment linear in the step's travel
+        heat = red.setdefault("travel_heat_K_per_mm", [0.0] * len(C))
+        heat[0] += p["W_per_m_min"] * J_PER_W_PER_M_MIN_PER_MM / float(C[0])
+
 
 class SpeedDependentHeat(Effect):
     """Friction heat per mm grows with speed: q·(1 + k·(v/v_ref − 1))."""
@@ -88,6 +106,10 @@ class SpeedDependentHeat(Effect):
     def to_document(self):
         return {"v_ref_m_min": self.v_ref_m_min}
 
+    def reduce(self, model, p, red, C):
+        raise NoReducedForm("the friction heat per mm of travel depends on the step's speed (q·(1 + k(v/v_ref - 1))): "
+                            "the firmware's recurrence has one heat per mm of travel (B) and no travel x speed product")
+
 
 class MovingConvection(Effect):
     """Forced convection while the screw turns: h·(1 + k·v/v_ref)."""
@@ -105,6 +127,10 @@ class MovingConvection(Effect):
 
     def to_document(self):
         return {"v_ref_m_min": self.v_ref_m_min}
+
+    def reduce(self, model, p, red, C):
+        raise NoReducedForm("the convection coefficient depends on the step's speed (h·(1 + k·v/v_ref)): the firmware's "
+                            "propagator A is fixed and it has no state x speed product")
 
 
 class ReversalError(Effect):
@@ -124,6 +150,10 @@ class ReversalError(Effect):
         if ctx.direction is None:
             return np.zeros(ctx.n_rows)
         return 0.5 * p["b_um"] * ctx.direction
+
+    def reduce(self, model, p, red, C):
+        # the board knows the direction of the last position change (position reports); +b/2 moving in +, -b/2 in -
+        red["reversal_um"] = red.get("reversal_um", 0.0) + 0.5 * p["b_um"]
 
 
 class AmbientExpansion(Effect):
@@ -147,6 +177,20 @@ class AmbientExpansion(Effect):
             raise ValueError("ambient_expansion: run %s has no sensor with role 'base' or 'ambient'" % ctx.run_name)
         rise = ctx.sensor_rise_at_rows(name)
         return 1e-3 * p["um_per_m_K"] * rise * ctx.positions_mm
+
+    def reduce(self, model, p, red, C):
+        # k·(T_s - T_s,start)·P is the table's base term: its coefficient grows by k (um/(m K) -> um/(mm K)); the
+        # reference is each run's start, which the board latches at its cold start
+        name = self.sensor or model.effect_sensor_(self)
+        if name is None:
+            raise NoReducedForm("no sensor with role 'base' or 'ambient' to read")
+        if red.get("base_sensor") not in (None, name):
+            raise NoReducedForm("it reads %s but the model's E_e term reads %s: the table has one base term"
+                                % (name, red["base_sensor"]))
+        if red.get("base_sensor") is None:
+            red["base_sensor"], red["base_ref"] = name, "run_start"
+            red["base_ref_C"] = model.start_C_(name)
+        red["ee_um_per_mm_per_K"] = red.get("ee_um_per_mm_per_K", 0.0) + 1e-3 * p["um_per_m_K"]
 
     def to_document(self):
         return {"sensor": self.sensor}

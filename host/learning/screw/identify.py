@@ -22,11 +22,12 @@ def _from_x(x, specs):
     return np.array([np.exp(v) if s.positive else v for v, s in zip(x, specs)], dtype=float)
 
 
-def fit_parameters(residual, specs, start=None, max_nfev=200, flat_ratio=1e-4, poor_rel_std=0.5, n_linear=0):
+def fit_parameters(residual, specs, start=None, max_nfev=200, flat_ratio=1e-4, poor_rel_std=0.5, n_linear=0, ftol=1e-12):
     """Minimise ||residual(values)||² over the parameters described by ``specs``.
 
     residual: values (array, in spec order) -> residual vector; n_linear: linear
-    parameters already profiled out of it (they use degrees of freedom too).
+    parameters already profiled out of it (they use degrees of freedom too); ftol: relative change of the
+    cost that ends the search (xtol is 100 times it, gtol as ftol).
     Returns dict: values, std (absolute), rel_std, cov_x (in search coordinates),
     rmse, n, dof, cost, nfev, status, message, flat (list of
     {"parameters": [...], "singular_ratio": r}), poor (names), warnings (strings).
@@ -39,7 +40,7 @@ def fit_parameters(residual, specs, start=None, max_nfev=200, flat_ratio=1e-4, p
     def fun(x):
         return residual(_from_x(x, specs))
 
-    sol = least_squares(fun, x0, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev, method="trf", xtol=1e-10, ftol=1e-12, gtol=1e-10)
+    sol = least_squares(fun, x0, bounds=(lo, hi), x_scale="jac", max_nfev=max_nfev, method="trf", xtol=100 * ftol, ftol=ftol, gtol=100 * ftol)
     values = _from_x(sol.x, specs)
     r = sol.fun
     n, p = r.size, len(specs)

@@ -18,16 +18,28 @@ recurrence ``T[k+1] = A·T[k] + B ∘ u[k] + c0·a[k] + c1·a[k+1]``:
   and the air readings, so it stays inside the air's envelope.  A document
   without an air sensor (or written before the air term) has c0 = c1 = 0.
 
+- effect terms (each effect's ``reduce`` in host/learning/screw/effects.py, defined
+  there once): ``travel_heat_K_per_mm`` (M,), a temperature increment per mm of the
+  step's total travel U = Σ u_i (bearing_heat: k·0.06/C_0 into the fixed-end segment);
+  ``ee_um_per_mm_per_K``, the base term's coefficient (α for E_e, plus
+  ambient_expansion's k); ``reversal_um``, +r moving in +, −r moving in − (the
+  direction of the last position change).  An effect whose form the firmware cannot
+  evaluate is listed in ``omitted_effects`` with the reason in ``omitted_reasons``;
+  the reduction error below then shows what leaving it out costs, and the exporter
+  refuses above its limit.
+
 The state is the heat response plus the air response (the system is linear), so
 it lies in [a_min, a_max + state_max_K] for an air envelope [a_min, a_max]; the
 exporter certifies exactly that interval.  ``state_max_K`` is a certified bound
 of the heat response: with u_i ≥ 0 and Σ_i u_i ≤ U = feed_max·dt,
-T_j[k] ≤ U·Σ_m max_i (A^m)_{ji}·B_i for every input history (A^m ≥ 0), summed
-until the tail is below 1e-9 of the total (geometric tail bound added).
+T_j[k] ≤ U·Σ_m (max_i (A^m)_{ji}·B_i + (A^m·b_U)_j) for every input history (A^m ≥ 0,
+b_U = travel_heat_K_per_mm ≥ 0), summed until the tail is below 1e-9 of the total
+(geometric tail bound added).
 """
 import numpy as np
 
 from host.learning.screw import heat
+from host.learning.screw.effects import NoReducedForm
 
 
 def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
@@ -62,17 +74,32 @@ def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
         "base_ref_C": model.base_ref_C_,
         "base_ref": getattr(model, "base_ref", "fixed"),
         "feed_max_mm_min": float(feed_max_mm_min),
-        "state_max_K": state_bound(A, B, feed_max_mm_min / 60.0 * dt_s),
+        "ee_um_per_mm_per_K": float(1e3 * p.alpha_per_K) if model.base_sensor_ is not None else 0.0,
     }
-    if model.effects:
-        out["omitted_effects"] = [e.name for e in model.effects]
+    omitted = {}
+    for e in model.effects:
+        try:
+            e.reduce(model, model.effect_params_[e.name], out, C)
+        except NoReducedForm as exc:
+            omitted[e.name] = str(exc)
+    heat_u = out.get("travel_heat_K_per_mm")
+    if heat_u is not None and min(heat_u) < 0:
+        bad = [e.name for e in model.effects if e.name not in omitted and e.name == "bearing_heat"]
+        raise NoReducedForm("%s: negative heat per mm of travel %r K/mm: no certified state bound"
+                            % (", ".join(bad) or "travel_heat_K_per_mm", min(heat_u)))
+    out["state_max_K"] = state_bound(A, B, feed_max_mm_min / 60.0 * dt_s, heat_u)
+    if omitted:
+        out["omitted_effects"] = list(omitted)
+        out["omitted_reasons"] = omitted
     return out
 
 
-def state_bound(A, B, travel_max_mm):
-    """Certified max of every state for any travel history with Σu ≤ travel_max per step."""
+def state_bound(A, B, travel_max_mm, travel_heat=None):
+    """Certified max of every state for any travel history with Σu ≤ travel_max per step;
+    ``travel_heat`` (M,) ≥ 0: the increment per mm of the step's total travel (effects)."""
     A = np.asarray(A, dtype=float)
     B = np.asarray(B, dtype=float)
+    Bu = np.zeros(B.size) if travel_heat is None else np.asarray(travel_heat, dtype=float)
     rho = float(np.max(A.sum(axis=1)))
     if rho >= 1.0:
         raise ValueError("reduced model has no heat loss (row sum of A = %g >= 1): no finite state bound; h must be > 0" % rho)
@@ -80,7 +107,7 @@ def state_bound(A, B, travel_max_mm):
     term = np.zeros(A.shape[0])
     P = np.eye(A.shape[0])
     for _ in range(200000):
-        term = np.max(P * B[None, :], axis=1)
+        term = np.max(P * B[None, :], axis=1) + P @ Bu
         acc += term
         if term.max() <= 1e-9 * max(acc.max(), 1e-300):
             break
@@ -115,6 +142,8 @@ def simulate_reduced(reduced, motion, t0, n_steps, spread=False, air_K=None):
     t = t0 + dt * np.arange(n_steps + 1)
     u = heat.nut_travel_per_segment(motion, edges, reduced["fixed_end_mm"], t, spread=spread)
     drive = u * B[None, :]
+    if reduced.get("travel_heat_K_per_mm") is not None:
+        drive = drive + u.sum(axis=1)[:, None] * np.asarray(reduced["travel_heat_K_per_mm"], dtype=float)[None, :]
     T = np.zeros((n_steps + 1, B.size))
     if air_K is not None:
         a = np.asarray(air_K, dtype=float)
@@ -139,14 +168,43 @@ def reduced_error_um(reduced, T, positions_mm, base_rise_K=None):
     return E
 
 
-def reduction_error(model, run, positions=21, spread=False):
-    """Difference of E_m between the full model and its reduced form on one run.
+def reduced_predict(model, run, spread=False):
+    """The reduced form's error at every row of ``run.errors`` (µm), as the board evaluates it: the latest state
+    (a step at t0 + k·dt), α·Σ T_i·overlap_i(P) + ee·(T_b − T_b,ref)·P + the reversal term by the row's direction
+    (none in the feed/range mode, which has no direction) + the geometric polynomial."""
+    red = model.reduced_
+    ctx = model._context(run)
+    t0 = ctx.t_grid[0]
+    dt = red["dt_s"]
+    n = int(np.floor((ctx.t_grid[-1] - t0) / dt + 1e-9))
+    air = model.air_K(ctx)
+    if air is not None:
+        air = np.interp(t0 + dt * np.arange(n + 1), ctx.t_grid, air)
+    _, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread, air_K=air)
+    e = run.errors
+    k = np.clip(np.floor((e.time_s - t0) / dt + 1e-9).astype(int), 0, n)
+    P = e.position_mm
+    E = reduced_error_um(red, Tr[k], P)
+    base = red.get("base_sensor")
+    if base is not None:
+        tb = run.temperatures
+        ref = float(tb.column(base)[0]) if red.get("base_ref") == "run_start" else float(red["base_ref_C"])
+        ee = red.get("ee_um_per_mm_per_K", red["alpha_um_per_mm_per_K"])
+        E = E + ee * (np.interp(e.time_s, tb.time_s, tb.column(base)) - ref) * P
+    if red.get("reversal_um") and e.direction is not None and not spread:
+        E = E + red["reversal_um"] * e.direction
+    return E + model.geometric_um(P)
 
-    Both are evaluated at every reduced step time on ``positions`` equally spaced
-    points over the model's position envelope; the reduced model uses its latest
-    state (as the firmware does), the full model its own grid interpolated;
+
+def reduction_error(model, run, positions=21, spread=False):
+    """Difference between the full model and its reduced form on one run.
+
+    E_m (``rms_um``, ``max_um``): both evaluated at every reduced step time on ``positions`` equally spaced
+    points over the model's position envelope; the reduced model uses its latest state (as the firmware does),
+    the full model its own grid interpolated. The whole output (``rows_rms_um``, ``rows_max_um``): the full
+    model's prediction against :func:`reduced_predict` at the run's error rows (E_e, effect outputs, direction).
     ``spread`` feeds the reduced model from the feed/range state.
-    Returns {"rms_um", "max_um", "points"}."""
+    Returns {"rms_um", "max_um", "points", "full_max_um", "rows_rms_um", "rows_max_um"}."""
     red = model.reduced_
     ctx_full = model._context(run)
     rises = model.simulate_context(ctx_full)
@@ -162,5 +220,17 @@ def reduction_error(model, run, positions=21, spread=False):
     Ef = heat.thermal_error_um(ctx_full.edges_mm, Rf[:, None, :], P[None, :], model.geometry_.fixed_end_mm, model.params_.alpha_per_K)
     Er = reduced_error_um(red, Tr[:, None, :], P[None, :])
     d = Er - Ef
+    rows = reduced_predict(model, run, spread=spread) - model.predict(run)
     return {"rms_um": float(np.sqrt(np.mean(d ** 2))), "max_um": float(np.max(np.abs(d))), "points": int(d.size),
-            "full_max_um": float(np.max(np.abs(Ef)))}
+            "full_max_um": float(np.max(np.abs(Ef))),
+            "rows_rms_um": float(np.sqrt(np.mean(rows ** 2))), "rows_max_um": float(np.max(np.abs(rows)))}
+
+
+def reduction_certificate(model, runs):
+    """{run: reduction_error} with position reports, and the same fed from the feed/range state under "feed_range"."""
+    out = {}
+    for r in runs:
+        e = reduction_error(model, r)
+        e["feed_range"] = {k: v for k, v in reduction_error(model, r, spread=True).items() if k.endswith("_um")}
+        out[r.path or r.name] = e
+    return out

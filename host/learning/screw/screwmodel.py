@@ -57,11 +57,12 @@ class ScrewModel:
     air: the air temperature the screw exchanges heat with: "auto" (the first sensor
     with role 'ambient'; else the base sensor, else a constant air, each fallback
     warned about in statistics.warnings), a sensor name, or "off" (constant air: the
-    screw as a rise over a still air, the model before the air term)."""
+    screw as a rise over a still air, the model before the air term); ftol: relative change of the cost that
+    ends the identification (the discrepancy workflow's fold fits use a looser one)."""
 
     def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient=True,
                  nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200, base_sensor=None,
-                 base_ref="run_start", fit_window=None, air="auto"):
+                 base_ref="run_start", fit_window=None, air="auto", ftol=1e-12):
         self.segments = segments
         self.dt_s = dt_s
         self.free = free
@@ -78,6 +79,7 @@ class ScrewModel:
         self.base_ref = base_ref
         self.fit_window = fit_window
         self.air = air
+        self.ftol = ftol
 
     # ------------------------------------------------------------ parameters
 
@@ -168,8 +170,17 @@ class ScrewModel:
 
     # ------------------------------------------------------------ fitting
 
-    def _rows(self, run):
+    def _rows(self, run, index=None):
         rows = self._channel_rows(run)
+        masks = getattr(self, "_row_masks", None)
+        if masks is not None and index is not None and masks[index] is not None:
+            m = masks[index]
+            if m.shape != (len(run.errors),):
+                raise ValueError("%s: row mask of %d rows for %d errors.csv rows" % (run.path or run.name, m.size, len(run.errors)))
+            keep = m.copy() if rows is None else (m & np.isin(np.arange(m.size), rows))
+            if not keep.any():
+                raise ValueError("%s: no error rows selected to fit on" % (run.path or run.name))
+            rows = np.flatnonzero(keep)
         if self.fit_window is None:
             return rows
         lo, hi = self.fit_window
@@ -243,8 +254,17 @@ class ScrewModel:
                     base.append("alpha_per_K")
         return base + ["%s.%s" % (e.name, s.name) for e in self.effects for s in e.parameters()]
 
-    def fit(self, runs):
-        """Identify the parameters from one or more runs (host.data.runs.Run)."""
+    def fit(self, runs, row_masks=None, start=None, reduce=True):
+        """Identify the parameters from one or more runs (host.data.runs.Run).
+
+        row_masks: per run a boolean array over its errors.csv rows to fit on (None: all; the discrepancy
+        workflow's held-out folds); start: {parameter: value} to start the search from (a previous fit's
+        ``values_``; unknown names ignored); reduce: build the firmware's reduced form and its reduction
+        certificate (the workflow's fold fits skip it, the model it exports has it)."""
+        self._row_masks = None if row_masks is None else [None if m is None else np.asarray(m, dtype=bool) for m in row_masks]
+        if self._row_masks is not None and len(self._row_masks) != len(runs):
+            raise ValueError("row_masks: %d masks for %d runs" % (len(self._row_masks), len(runs)))
+        self._start = dict(start or {})
         if not runs:
             raise ValueError("no runs to fit on")
         if self.base_ref not in ("run_start", "fixed"):
@@ -287,7 +307,14 @@ class ScrewModel:
         self.free_ = free
         fixed = {s.name: s.start for s in specs_all if s.name not in free}
         specs = [s for s in specs_all if s.name in free]
-        ctxs = [self._context(r, self._rows(r)) for r in runs]
+        if self._start:  # a previous fit's values, inside the bounds
+            specs = [ParamSpec(s.name, min(max(float(self._start[s.name]), s.lo), s.hi) if s.name in self._start and
+                               (not s.positive or self._start[s.name] > 0) else s.start, s.lo, s.hi, s.unit, s.positive)
+                     for s in specs]
+        ctxs = [self._context(r, self._rows(r, i)) for i, r in enumerate(runs)]
+        # what the effects' reduced forms read (effects.py reduce): the first run's role sensors and start readings
+        self.first_roles_ = (ctxs[0].base_sensor, ctxs[0].ambient_sensor)
+        self.run_start_C_ = {n: float(runs[0].temperatures.column(n)[0]) for n in runs[0].temperatures.names}
         for e in self.effects:
             if hasattr(e, "check"):
                 e.check(ctxs)
@@ -335,7 +362,7 @@ class ScrewModel:
                                 top + 1, top))
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always", IdentifiabilityWarning)
-            res = fit_parameters(make_residual(top)[0], specs, max_nfev=self.max_nfev, n_linear=top + 1) if specs else None
+            res = fit_parameters(make_residual(top)[0], specs, max_nfev=self.max_nfev, n_linear=top + 1, ftol=self.ftol) if specs else None
         values = res["values"] if res else np.zeros(0)
         degree = top
         degree_scores = None
@@ -346,7 +373,8 @@ class ScrewModel:
                 with warnings.catch_warnings(record=True) as caught:
                     warnings.simplefilter("always", IdentifiabilityWarning)
                     specs_start = [ParamSpec(s.name, v, s.lo, s.hi, s.unit, s.positive) for s, v in zip(specs, values)]
-                    res = fit_parameters(make_residual(degree)[0], specs_start, max_nfev=self.max_nfev, n_linear=degree + 1)
+                    res = fit_parameters(make_residual(degree)[0], specs_start, max_nfev=self.max_nfev, n_linear=degree + 1,
+                                         ftol=self.ftol)
                 values = res["values"]
         for w in caught:
             warnings.warn(str(w.message), IdentifiabilityWarning, stacklevel=2)
@@ -404,12 +432,21 @@ class ScrewModel:
             self.envelope_.setdefault("temperature_C", {})[self.air_sensor_] = [float(ta.min()) - BASE_ENVELOPE_MARGIN_K,
                                                                                  float(ta.max()) + BASE_ENVELOPE_MARGIN_K]
             self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+        if not reduce:
+            self.reduced_ = None
+            return self
         from host.learning.screw.reduced import build_reduced
         self.reduced_ = build_reduced(self, self.reduced_segments, self.reduced_dt_s,
                                       feed_max_mm_min=self.feed_max_mm_min or 1.5 * float(feeds.max()))
         self.envelope_["state_K"] = [0.0, self.reduced_["state_max_K"]]
-        from host.learning.screw.reduced import reduction_error
-        self.reduced_["reduction_error_um"] = {c.run_name: reduction_error(self, c.run) for c in ctxs}
+        ee = self.reduced_.get("base_sensor")
+        if ee is not None and ee not in self.envelope_.get("temperature_C", {}):  # an effect's sensor (ambient_expansion)
+            te = np.concatenate([r.temperatures.column(ee) for r in runs])
+            self.envelope_.setdefault("temperature_C", {})[ee] = [float(te.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                  float(te.max()) + BASE_ENVELOPE_MARGIN_K]
+            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+        from host.learning.screw.reduced import reduction_certificate
+        self.reduced_["reduction_error_um"] = reduction_certificate(self, [c.run for c in ctxs])
         return self
 
     # ------------------------------------------------------------ prediction
@@ -469,7 +506,8 @@ class ScrewModel:
             "axis": self.axis_,
             "channel": self.channel,
             "sensors": self.input_sensors_(),
-            "reference_C": {n: r for n, r in ((self.base_sensor_, self.base_ref_C_), (self.air_sensor_, self.air_ref_C_))
+            "reference_C": {n: r for n, r in ((self.base_sensor_, self.base_ref_C_), (self.air_sensor_, self.air_ref_C_),
+                                              self._reduced_base())
                             if n is not None},
             "geometric": {"degree": int(self.geometric_degree_), "coefficients_um": [float(c) for c in self.geometric_]},
             "thermal": thermal,
@@ -479,11 +517,30 @@ class ScrewModel:
         }
 
     def input_sensors_(self):
-        """The temperatures prediction reads: the base sensor (E_e), then the air sensor."""
+        """The temperatures prediction reads: the base sensor (E_e), then the air sensor, then a sensor only an
+        effect reads (ambient_expansion without E_e: the reduced form's base term)."""
         out = [self.base_sensor_] if self.base_sensor_ else []
-        if self.air_sensor_ and self.air_sensor_ not in out:
-            out.append(self.air_sensor_)
+        for name in (self.air_sensor_, self._reduced_base()[0]):
+            if name and name not in out:
+                out.append(name)
         return out
+
+    def _reduced_base(self):
+        """(sensor, reference) of the reduced form's base term when an effect put it there, else (None, None)."""
+        red = getattr(self, "reduced_", None) or {}
+        name = red.get("base_sensor")
+        if name is None or name == self.base_sensor_:
+            return None, None
+        return name, red.get("base_ref_C")
+
+    def effect_sensor_(self, effect):
+        """The sensor an effect reading the machine's surroundings reads on the training runs (base, else ambient)."""
+        base, ambient = getattr(self, "first_roles_", (self.base_sensor_, self.air_sensor_))
+        return base or ambient
+
+    def start_C_(self, name):
+        """The first training run's first reading of ``name`` (degC)."""
+        return self.run_start_C_[name]
 
     @classmethod
     def from_document(cls, doc):

@@ -174,7 +174,9 @@ def test_effects_plug_in_parameters_and_hooks(synth_run):
     assert m.values_["q_J_per_mm"] == pytest.approx(base.values_["q_J_per_mm"], rel=0.02)
     doc = m.to_document()
     assert [e["name"] for e in doc["thermal"]["effects"]] == ["bearing_heat"]
-    assert doc["thermal"]["reduced"]["omitted_effects"] == ["bearing_heat"]
+    # the effect's reduced form (effects.py reduce): heat per mm of travel into the fixed-end segment
+    red = doc["thermal"]["reduced"]
+    assert "omitted_effects" not in red and red["travel_heat_K_per_mm"][1:] == [0.0] * (red["segments"] - 1)
     assert ScrewModel.from_document(doc).effects[0].name == "bearing_heat"
     # a user-defined effect changes the simulation through its hook
     m.effects = [_ConstantHeat()]
