@@ -237,8 +237,31 @@ def _representative(cluster, names, S, t):
 
 # ---------------------------------------------------------------- selection on data
 
-DEFAULTS = {"alpha": 0.05, "criterion": "paper", "r2_tolerance": 0.01, "max_sensors": None, "absolute": True}
-CRITERIA = ("paper", "tolerance")
+DEFAULTS = {"alpha": 0.05, "criterion": "paper", "r2_tolerance": 0.01, "max_sensors": None, "absolute": True,
+            "min_tolerance": 1e-4}
+CRITERIA = ("paper", "r2-change", "tolerance")
+# SPSS REGRESSION's default TOLERANCE: a variable whose 1 − R² on the other variables is below this is not entered,
+# so the set it belongs to cannot be fitted whole (Li 2021 §4.2 (5): "the tolerance is exceeded")
+SPSS_MIN_TOLERANCE = 1e-4
+
+
+def tolerances(X):
+    """Each column's tolerance 1 − R² of its regression (with intercept) on the other columns (SPSS's TOLERANCE).
+
+    One column: 1. A column that is an exact combination of the others: 0."""
+    X = np.asarray(X, dtype=float)
+    n, k = X.shape
+    out = []
+    for j in range(k):
+        if k == 1:
+            out.append(1.0)
+            continue
+        xj = X[:, j]
+        A = np.column_stack([np.ones(n), np.delete(X, j, axis=1)])
+        res = xj - A @ np.linalg.lstsq(A, xj, rcond=None)[0]
+        sst = float(((xj - xj.mean()) ** 2).sum())
+        out.append(max(0.0, float(res @ res) / sst) if sst > 0 else 0.0)
+    return out
 
 
 def r2_change_test(r2_small, k_small, r2_large, k_large, n):
@@ -260,11 +283,11 @@ def r2_change_test(r2_small, k_small, r2_large, k_large, n):
     return float(F), float(stats.f.sf(F, dk, df))
 
 
-def _choose_paper(ok, alpha, n):
-    """The paper's reading: the first set is the coarsest whose regression is significant at ``alpha``;
-    going to finer partitions, each next representative set must raise R² significantly over the
-    current one (F test of the R² change at ``alpha``); the first that does not ends the search,
-    as in forward selection with an F-to-enter. Returns (chosen row, steps)."""
+def _choose_r2_change(ok, alpha, n):
+    """``criterion="r2-change"`` (this project's reading before issue 23, not the paper's): the first set is the
+    coarsest whose regression is significant at ``alpha``; going to finer partitions, each next representative set
+    must raise R² significantly over the current one (F test of the R² change at ``alpha``); the first that does not
+    ends the search, as in forward selection with an F-to-enter. Returns (chosen row, steps)."""
     ok = sorted(ok, key=lambda r: (len(r["representatives"]), r["partition"]))
     cur = ok[0]
     steps = [{"partition": cur["partition"], "sensors": len(cur["representatives"]), "r2": cur["r2"], "accepted": True,
@@ -279,25 +302,66 @@ def _choose_paper(ok, alpha, n):
     return cur, steps
 
 
-def select_maxtree(arrays, context=None, **params):
-    """Choose the partition whose representatives regress best on the target.
+def choose_partition(rows, n, criterion="paper", alpha=0.05, r2_tolerance=0.01, min_tolerance=SPSS_MIN_TOLERANCE):
+    """The chosen row among evaluated representative sets -> (row, reason dict).
 
-    ``criterion="paper"`` (default): the sample R² of the representatives' regression
-    and F tests at ``alpha`` (0.05). The candidates are the partitions whose
-    regression F test is significant; from the coarsest of them towards finer ones,
-    a finer set replaces the current choice only when its R² gain over the current
-    set is significant (F test of the R² change at ``alpha``); the first finer set
-    that is not significantly better ends the search. So R² says what is better and
-    the F test whether it is better by more than chance.
-    ``criterion="tolerance"`` (this project's earlier rule, kept for comparison):
-    among significant partitions, those within ``r2_tolerance`` of the best R²
-    compete on F (the larger F wins); equal F goes to fewer sensors.
+    ``rows``: one dict per representative set with ``partition`` (an id), ``representatives`` (names), ``r2``,
+    ``F``, ``p_F`` and, for the paper rule, ``min_tolerance`` (the smallest tolerance of its variables); rows
+    with ``skipped`` are not candidates. The published numbers (Li 2021 Tables 6–8) can be passed as such rows.
+
+    * ``paper`` (Li 2021 §3.2 and §4.2 (5)): among the sets whose regression is significant at ``alpha``
+      and whose variables all pass SPSS's tolerance (``min_tolerance``, default 0.0001; a set with a variable
+      below it cannot be fitted whole: "the tolerance is exceeded"), the one whose R² is closest to 1;
+      equal R²: fewer sensors.
+    * ``r2-change``: forward F test of the R² change (:func:`_choose_r2_change`).
+    * ``tolerance``: within ``r2_tolerance`` of the best R², the largest F (equal F: fewer sensors).
+    """
+    if criterion not in CRITERIA:
+        raise SelectionError("maxtree: criterion must be one of %s, got %r" % (", ".join(CRITERIA), criterion))
+    reason = {"criterion_name": criterion}
+    if criterion == "paper":
+        for r in rows:
+            if "skipped" not in r and r.get("min_tolerance") is not None and r["min_tolerance"] < min_tolerance:
+                r["skipped"] = "tolerance exceeded: %s has tolerance %.3g < %g (SPSS excludes it, the set cannot be fitted whole)" % (
+                    r.get("min_tolerance_sensor", "a variable"), r["min_tolerance"], min_tolerance)
+    ok = [r for r in rows if "skipped" not in r and r.get("p_F") is not None and r["p_F"] < alpha]
+    if not ok:
+        return None, reason
+    best_r2 = max(r["r2"] for r in ok)
+    reason["best_r2"] = best_r2
+    if criterion == "paper":
+        chosen = max(ok, key=lambda r: (r["r2"], -len(r["representatives"]), -r["partition"]))
+        reason["criterion"] = ("Li 2021: among the representative sets whose regression is significant (p_F < alpha) and whose "
+                               "variables all pass the tolerance (min_tolerance, SPSS default), the largest R2 (closest to 1)")
+        reason["min_tolerance"] = min_tolerance
+    elif criterion == "r2-change":
+        chosen, steps = _choose_r2_change(ok, alpha, n)
+        reason["criterion"] = ("regression F test p < alpha; from the coarsest significant partition, a finer one replaces the choice "
+                               "only if its R2 gain is significant (F test of the R2 change, p < alpha); the first refusal stops")
+        reason["steps"] = steps
+    else:
+        cands = [r for r in ok if r["r2"] >= best_r2 - r2_tolerance]
+        chosen = max(cands, key=lambda r: (r["F"], -len(r["representatives"]), -r["partition"]))
+        reason["criterion"] = "F test p < alpha; R2 within r2_tolerance of the best; then largest F"
+        reason["r2_tolerance"] = r2_tolerance
+    return chosen, reason
+
+
+def select_maxtree(arrays, context=None, **params):
+    """Choose the partition whose representatives regress best on the target (:func:`choose_partition`).
+
+    ``criterion="paper"`` (default, Li 2021 §3.2/§4.2): the largest R² among the representative sets whose
+    regression F test is significant at ``alpha`` (0.05) and whose variables all have a tolerance
+    1 − R²_j >= ``min_tolerance`` (SPSS's 0.0001). ``criterion="r2-change"``: forward F test of the R² change
+    (this project's reading before issue 23). ``criterion="tolerance"`` (the earlier rule): within
+    ``r2_tolerance`` of the best R², the largest F.
     """
     prm = check_params("maxtree", params, DEFAULTS)
     prm["alpha"] = number("maxtree", "alpha", prm["alpha"], 0.0, 1.0)
     if prm["criterion"] not in CRITERIA:
         raise SelectionError("maxtree: criterion must be one of %s, got %r" % (", ".join(CRITERIA), prm["criterion"]))
     prm["r2_tolerance"] = number("maxtree", "r2_tolerance", prm["r2_tolerance"], 0.0, 1.0)
+    prm["min_tolerance"] = number("maxtree", "min_tolerance", prm["min_tolerance"], 0.0, 1.0)
     prm["max_sensors"] = number("maxtree", "max_sensors", prm["max_sensors"], 1, integer=True, allow_none=True)
     if not isinstance(prm["absolute"], bool):
         raise SelectionError("maxtree: absolute must be true or false, got %r" % (prm["absolute"],))
@@ -315,29 +379,22 @@ def select_maxtree(arrays, context=None, **params):
         elif prm["max_sensors"] is not None and len(reps) > prm["max_sensors"]:
             row["skipped"] = "more than max_sensors=%d" % prm["max_sensors"]
         else:
-            st = ols_stats(X[:, [names.index(r) for r in reps]], y)
-            row.update(r2=st["r2"], adj_r2=st["adj_r2"], F=st["F"], p_F=st["p_F"], rmse=st["rmse"])
+            cols = X[:, [names.index(r) for r in reps]]
+            st = ols_stats(cols, y)
+            tol = tolerances(cols)
+            j = int(np.argmin(tol))
+            row.update(r2=st["r2"], adj_r2=st["adj_r2"], F=st["F"], p_F=st["p_F"], rmse=st["rmse"], min_tolerance=tol[j],
+                       min_tolerance_sensor=reps[j])
             if st["p_F"] is None:
                 row["skipped"] = "representatives are collinear (rank %d of %d)" % (st["rank"], len(reps) + 1)
         rows.append(row)
-    ok = [r for r in rows if "skipped" not in r and r["p_F"] < prm["alpha"]]
-    if not ok:
+    chosen, reason = choose_partition(rows, n, prm["criterion"], prm["alpha"], prm["r2_tolerance"], prm["min_tolerance"])
+    if chosen is None:
         raise SelectionError(
             "maxtree: no partition's representatives give a regression significant at alpha=%g (%d samples, %d sensors); more data or a different target is needed"
             % (prm["alpha"], n, len(names))
         )
-    best_r2 = max(r["r2"] for r in ok)
-    reason = {"criterion_name": prm["criterion"]}
-    if prm["criterion"] == "paper":
-        chosen, steps = _choose_paper(ok, prm["alpha"], n)
-        reason["criterion"] = ("regression F test p < alpha; from the coarsest significant partition, a finer one replaces the choice "
-                               "only if its R2 gain is significant (F test of the R2 change, p < alpha); the first refusal stops")
-        reason["steps"] = steps
-    else:
-        cands = [r for r in ok if r["r2"] >= best_r2 - prm["r2_tolerance"]]
-        chosen = max(cands, key=lambda r: (r["F"], -len(r["representatives"]), -r["partition"]))
-        reason["criterion"] = "F test p < alpha; R2 within r2_tolerance of the best; then largest F"
-        reason["r2_tolerance"] = prm["r2_tolerance"]
+    best_r2 = reason.pop("best_r2")
     part = tree.partitions[chosen["partition"]]
     sensors = [s for s in names if s in part.representatives]
     reason.update({
