@@ -20,6 +20,7 @@ KINDS = {
     "screw": "host.screw.model:ScrewModel",
     "ann": "host.empirical.model:NetworkModel",
     "dynamic": "host.empirical.dynamic:DynamicModel",
+    "mr_poly": "host.empirical.mrpoly:MRPolyModel",
 }
 
 

@@ -9,7 +9,7 @@ def add_arguments(p):
     p.add_argument("--direct", action="store_true", help="direct model of the error at a fixed point (default: slope of each sweep)")
     p.add_argument("--sensors", help="comma-separated candidate sensors (default: all common to the runs)")
     p.add_argument("--methods", default=",".join(("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-pcr",
-                                                  "maxtree-ann", "dynamic")),
+                                                  "maxtree-ann", "dynamic", "mr-poly")),
                    help="comma list of methods (default: all but maxtree-mlr, which is maxtree under the paper's name)")
     p.add_argument("--train", default="0", help="index of the training run, a comma list, or 'all' (each in turn); default 0")
     p.add_argument("--split-h", type=float, metavar="HOURS", help="one run: fit on t < HOURS, predict t >= HOURS")
@@ -50,6 +50,8 @@ def _method_options(items, methods):
             known = [k for k in params if k not in ("self", "fit_intercept")]
             if method == "dynamic":
                 known += ["taus_s", "use_spindle", "use_feed", "cv_blocks"]  # how fit_model builds the candidate signals
+            if method == "mr-poly":
+                known += ["nut", "base"]  # which sensors fit_model gives it (default: by role)
             if key not in known:
                 raise UserError("--option %r: %s has no setting %r (settings: %s)" % (item, method, key, ", ".join(known)))
             default = params[key].default if key in params else None

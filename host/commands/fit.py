@@ -1,6 +1,6 @@
 """tcomp fit --model KIND RUN... --out MODEL.json"""
 
-EMPIRICAL = ("mlr", "pcr", "stepwise", "cv-subset", "ann", "dynamic")
+EMPIRICAL = ("mlr", "pcr", "stepwise", "cv-subset", "ann", "dynamic", "mr-poly")
 
 
 def add_arguments(p):

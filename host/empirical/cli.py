@@ -1,4 +1,4 @@
-"""``tcomp fit --model mlr|pcr|stepwise|cv-subset|ann|dynamic`` (arguments defined in host/commands/fit.py)."""
+"""``tcomp fit --model mlr|pcr|stepwise|cv-subset|ann|dynamic|mr-poly`` (arguments defined in host/commands/fit.py)."""
 import json
 
 from host import options
@@ -35,9 +35,13 @@ OPTIONS = {
     "swaps": boolean,  # dynamic
     "use_spindle": boolean,  # dynamic
     "use_feed": boolean,  # dynamic
+    "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
+    "nut": str,  # mr-poly: nut sensor (default: role "nut")
+    "base": str,  # mr-poly: base sensor (default: role "base")
 }
 METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",),
                   "dynamic": ("taus_s", "ridge", "max_terms", "min_gain", "cv_score", "swaps", "use_spindle", "use_feed"),
+                  "mr-poly": ("degree", "nut", "base"),
                   "ann": ("hidden_sizes", "validation", "seed", "max_epochs", "patience", "validation_fraction", "learning_rate")}
 
 
@@ -99,6 +103,10 @@ def fit_command(args, out):
             est.ridge_, est.n_groups_, est.cv_score, est.cv_rmse_, est.rsquared_, est.rmse_))
         for (sig, tau), c in zip(est.terms_, est.coef_):
             print("  %+.5g x lag(%s, tau %g s)" % (c, sig, tau))
+    elif args.model == "mr-poly":
+        terms = " ".join("%+.5g*dTn^%d" % (a, j + 1) for j, a in enumerate(est.nut_coef_))
+        print("  S004 Eq. 12, nut %s, base %s, degree %d: s = %.5g %s %+.5g*dTb; fit R2=%.4f RMSE=%.4g" % (
+            model.sensors[0], model.sensors[1], est.nut_coef_.size, est.intercept_, terms, est.base_coef_, est.rsquared_, est.rmse_))
     elif args.model == "ann":
         print("  %d hidden nodes chosen by validation (%s); validation RMSE by size: %s" % (
             est.hidden_size_, est.validation_, ", ".join("%d: %.4g" % kv for kv in sorted(est.validation_rmse_.items()))))

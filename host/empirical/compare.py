@@ -23,6 +23,8 @@ again with disturbed temperatures (robustness). Methods:
 ``dynamic``        lag-filtered temperatures and spindle speed / feed, ≤ 5
                    sensors and the time constants chosen by cross-validation
                    across cycles or runs (dynamic.py)
+``mr-poly``        S004's multiple-regression model (Eq. 12): degree-4
+                   polynomial of the nut rise plus the base rise (mrpoly.py)
 =================  ==========================================================
 
 Two case builders: :func:`cases_runs` (fit on one run, predict the others, as in
@@ -43,7 +45,8 @@ from host.empirical import EmpiricalDataError
 from host.empirical.evaluate import disturb_run, evaluate
 from host.empirical.fitting import fit_model
 
-METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-mlr", "maxtree-pcr", "maxtree-ann", "dynamic")
+METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-mlr", "maxtree-pcr", "maxtree-ann", "dynamic",
+           "mr-poly")
 SELECTORS = ("maxtree", "hclust-ga")
 # selector, then estimator on the chosen sensors (estimator settings: --option maxtree-pcr.KEY=V; selection: maxtree.KEY=V)
 PIPELINES = {"maxtree-mlr": ("maxtree", "mlr"), "maxtree-pcr": ("maxtree", "pcr"), "maxtree-ann": ("maxtree", "ann")}

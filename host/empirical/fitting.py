@@ -117,7 +117,7 @@ def cv_groups(runs, arrays, cv_blocks=None):
 def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
               reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
               cv_blocks=None, exclude=None, **options):
-    """Fit ``method`` (mlr|pcr|stepwise) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
+    """Fit ``method`` (an ESTIMATORS name, or dynamic) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
     ``reference``: "fixed" (default: inputs are T − reference_C, the document
@@ -128,10 +128,23 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     run's own rises, so with one training run both give the same model.
     ``cv_blocks``: cross-validation groups of ``cv-subset`` (see :func:`cv_groups`).
     ``exclude=(lo, hi)``: targets in that span are left out of the fit (leave-one-cycle-out).
+    ``method="mr-poly"``: S004's Eq. 12 on the nut and base sensors (roles, or ``nut=``/``base=`` options;
+    host/empirical/mrpoly.py).
     """
     runs = list(runs)
     if not runs:
         raise EmpiricalDataError("fit: no training run given")
+    if method == "mr-poly":
+        from host.empirical.mrpoly import role_sensors
+
+        options = dict(options)
+        pair = role_sensors(runs, options.pop("nut", None), options.pop("base", None))
+        if sensors is not None:
+            outside = [s for s in pair if s not in sensors]
+            if outside:
+                raise EmpiricalDataError("mr-poly: the nut/base sensor(s) %s are not among the candidate sensors %s"
+                                         % (", ".join(outside), ", ".join(sensors)))
+        sensors = pair
     arrays = training_arrays(runs, target=target, channel=channel, sensors=sensors, window=window, exclude=exclude)
     names = arrays[0].names
     X, y = stack(arrays)
@@ -145,7 +158,7 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
         est.fit(X, y, names, groups=groups)
     else:
         est.fit(X, y, names)
-    if method in NONLINEAR:
+    if method in NONLINEAR or method == "mr-poly":
         used, coefs = list(names), None
     elif hasattr(est, "selected_names_"):
         used = list(est.selected_names_)
@@ -169,7 +182,16 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     }
     kw: dict = dict(reference=reference, channel=channel, method=method, axis=runs[0].meta.get("axis"),
               envelope=_envelope(runs, arrays, used, envelope_margin_K, target, channel), statistics=stats, training=training)
-    if target == "direct":
+    if method == "mr-poly":
+        from host.empirical.mrpoly import MRPolyModel
+
+        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion) if target == "slope" else None
+        if geo is not None:
+            stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+        model = MRPolyModel(used, est.nut_coef_, est.base_coef_, est.intercept_, ref, target=target,
+                            geometric_coef=geo.coef_ if geo is not None else (0.0,), **kw)
+        model.geometric_ = geo
+    elif target == "direct":
         model = NetworkModel(used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
     else:
         geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)

@@ -593,11 +593,12 @@ class BestSubsetCV(_Linear):
 from host.empirical.ann import ANN  # noqa: E402
 from host.empirical.dynamic import DynamicRegression  # noqa: E402
 from host.empirical.ppr import PPR  # noqa: E402
+from host.empirical.mrpoly import MRPoly  # noqa: E402
 
 # method name -> estimator class: the one table behind `tcomp fit --model`, `tcomp compare` and fit_model
 # (dynamic is fitted through fitting.fit_model, which builds its candidate signals)
 ESTIMATORS = {"mlr": MLR, "pcr": PCR, "stepwise": Stepwise, "cv-subset": BestSubsetCV, "ann": ANN, "ppr": PPR,
-              "dynamic": DynamicRegression}
+              "dynamic": DynamicRegression, "mr-poly": MRPoly}
 
 
 def make_estimator(method, fit_intercept=True, **options):

@@ -26,7 +26,8 @@ def test_compare_needs_two_runs(make_slope):
 
 def test_every_method_side_by_side(three_runs):
     cases = cases_runs(three_runs, train=[0])
-    res = run_case(cases[0], METHODS, selector_params=FAST_GA, options={"stepwise": {"f_enter": 4.0, "f_remove": 2.0}})
+    res = run_case(cases[0], METHODS, selector_params=FAST_GA, options={"stepwise": {"f_enter": 4.0, "f_remove": 2.0},
+                                                                        "mr-poly": {"nut": "T1", "base": "T2"}})
     assert [r["method"] for r in res] == list(METHODS)
     ok = [r for r in res if not r.get("error")]
     assert [r["method"] for r in ok] == list(METHODS), [r.get("error") for r in res]
