@@ -21,7 +21,7 @@ SCREW_AIR_HEAD = ("air", "Tlo")  # format 2: the air channel (-1: none) and the 
 SCREW_AIR_TAIL = ("Ka", "shKa")
 
 
-DYNAMIC_HEAD = ("positional", "dt_ms", "smax", "Lq", "nq", "shq", "fmax", "LX", "nX", "LY", "nY", "nf")
+DYNAMIC_HEAD = ("positional", "dt_ms", "smax", "Lq", "nq", "shq", "fmax", "Lp", "np", "shp2", "shp", "LX", "nX", "LY", "nY", "nf")
 DYNAMIC_LISTS = ("src", "A", "shA", "gA", "rA", "fy", "Ylo", "Yhi", "bY", "shY")  # nf entries each
 
 CERTIFICATE = ("cert_out", "cert_ref", "cert_slope")

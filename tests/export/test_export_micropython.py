@@ -12,7 +12,7 @@ import pytest
 
 from firmware.table import TableError, parse_table
 from models_export import export_model
-from hil_tests.fixtures.samples import dynamic_doc, linear_direct_doc, poly_slope_doc, restamp, screw_doc
+from hil_tests.fixtures.samples import dynamic_doc, linear_direct_doc, mr_poly_doc, poly_slope_doc, restamp, screw_doc
 
 SLOW = os.environ.get("TCOMP_SLOW") == "1"  # full-size runs; the default is the reduced form
 
@@ -132,7 +132,12 @@ print('steady', out[0], out[1], out[2], out[3])
 """
 
 
-@pytest.mark.parametrize("make", [poly_slope_doc, linear_direct_doc, screw_doc, dynamic_doc], ids=lambda f: f.__name__)
+def mr_poly_doc_degree4(rng):
+    """S004's Eq. 12 with every power (the firmware's power inputs run in the cycle)."""
+    return mr_poly_doc(rng, degree=4)
+
+
+@pytest.mark.parametrize("make", [poly_slope_doc, linear_direct_doc, screw_doc, dynamic_doc, mr_poly_doc_degree4], ids=lambda f: f.__name__)
 def test_steady_state_allocates_nothing(tmp_path, mp, make):
     ex = export_model(make(random.Random(4)))
     t = parse_table(ex.table)
@@ -173,7 +178,7 @@ def test_loader_verdicts_match_cpython(tmp_path, mp):
         b[i] ^= 1 << rng.randrange(8)
         bufs.append(bytes(b))
     bufs += [good[:n] for n in (0, 3, 10, 63, 67, 100, len(good) - 1)]
-    for off, val in ((4, 1), (4, 2), (4, 4), (5, 7), (7, 0)):
+    for off, val in ((4, 1), (4, 2), (4, 3), (4, 5), (5, 7), (7, 0)):
         b = bytearray(good)
         b[off] = val
         struct.pack_into("<I", b, len(b) - 4, zlib.crc32(bytes(b[:-4])))
@@ -182,7 +187,7 @@ def test_loader_verdicts_match_cpython(tmp_path, mp):
     path.write_text(json.dumps([b.hex() for b in bufs]))
     script = tmp_path / "loader.py"
     script.write_text(LOADER_SCRIPT % dict(path=str(path)))
-    # 163 format-3 tables as hex in JSON: 256K ran out on the 32-bit port while its json was pure Python
+    # 164 format-4 tables as hex in JSON: 256K ran out on the 32-bit port while its json was pure Python
     got = mp.run(script, heapsize="512K").split("\n")[:-1]
     cp = []
     for b in bufs:
