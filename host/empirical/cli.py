@@ -25,7 +25,9 @@ OPTIONS = {
     "max_epochs": number(int, 1),  # ann
     "patience": number(int, 1),  # ann
     "validation_fraction": number(float),  # ann, random validation
-    "validation": str,  # ann: random | last_group
+    "validation": str,  # ann: auto | random | last_group | loo
+    "size_rule": str,  # ann: smallest_near_best | best
+    "size_tolerance": number(float, 0.0),  # ann: relative MSE slack of smallest_near_best
     "learning_rate": number(float),  # ann
     "taus_s": numbers(float),  # dynamic: time-constant grid, e.g. 0/1800/7200
     "ridge": numbers(float),  # dynamic: penalty grid
@@ -42,7 +44,7 @@ OPTIONS = {
 METHOD_OPTIONS = {"pcr": ("variance_threshold", "n_components"), "stepwise": ("f_enter", "f_remove"), "mlr": (), "cv-subset": ("max_sensors",),
                   "dynamic": ("taus_s", "ridge", "max_terms", "min_gain", "cv_score", "swaps", "use_spindle", "use_feed"),
                   "mr-poly": ("degree", "nut", "base"),
-                  "ann": ("hidden_sizes", "validation", "seed", "max_epochs", "patience", "validation_fraction", "learning_rate")}
+                  "ann": ("hidden_sizes", "validation", "size_rule", "size_tolerance", "seed", "max_epochs", "patience", "validation_fraction", "learning_rate")}
 
 
 def parse_options(pairs, method):
@@ -108,8 +110,9 @@ def fit_command(args, out):
         print("  S004 Eq. 12, nut %s, base %s, degree %d: s = %.5g %s %+.5g*dTb; fit R2=%.4f RMSE=%.4g" % (
             model.sensors[0], model.sensors[1], est.nut_coef_.size, est.intercept_, terms, est.base_coef_, est.rsquared_, est.rmse_))
     elif args.model == "ann":
-        print("  %d hidden nodes chosen by validation (%s); validation RMSE by size: %s" % (
-            est.hidden_size_, est.validation_, ", ".join("%d: %.4g" % kv for kv in sorted(est.validation_rmse_.items()))))
+        print("  %d hidden nodes chosen by validation (%s), rule %s; validation MSE / R2 by size: %s" % (
+            est.hidden_size_, est.validation_, est.size_rule,
+            ", ".join("%d: %.4g / %.4f" % (h, v ** 2, est.validation_r2_[h]) for h, v in sorted(est.validation_rmse_.items()))))
         print("  fit on all training samples: R2=%.4f RMSE=%.4g; best epoch %d" % (est.rsquared_, est.rmse_, est.best_epoch_))
     else:
         print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (
