@@ -15,6 +15,7 @@ OPTIONS = {
     "envelope_margin_K": number(float, 0.0),
     "reference": str,  # run_start | fixed
     "geometric_max_degree": number(int, 1),
+    "geometric_degree": number(int, 1),  # exact degree of the cold polynomial (Li 2021: 5, S004: 4)
     "geometric_criterion": str,  # cv | aic
     "t_min_s": number(float),  # training window on target time
     "t_max_s": number(float),

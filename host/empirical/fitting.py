@@ -116,7 +116,7 @@ def cv_groups(runs, arrays, cv_blocks=None):
 
 def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
               reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
-              cv_blocks=None, exclude=None, **options):
+              cv_blocks=None, exclude=None, geometric_degree=None, **options):
     """Fit ``method`` (an ESTIMATORS name, or dynamic) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
@@ -128,6 +128,8 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     run's own rises, so with one training run both give the same model.
     ``cv_blocks``: cross-validation groups of ``cv-subset`` (see :func:`cv_groups`).
     ``exclude=(lo, hi)``: targets in that span are left out of the fit (leave-one-cycle-out).
+    ``geometric_degree=N``: the cold polynomial has exactly degree N (else the degree is chosen up to
+    ``geometric_max_degree`` by ``geometric_criterion``).
     ``method="mr-poly"``: S004's Eq. 12 on the nut and base sensors (roles, or ``nut=``/``base=`` options;
     host/empirical/mrpoly.py).
     """
@@ -149,8 +151,8 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     names = arrays[0].names
     X, y = stack(arrays)
     if method == "dynamic":
-        return _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K, geometric_max_degree,
-                            geometric_criterion, cv_blocks, options)
+        return _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K,
+                            (geometric_max_degree, geometric_criterion, geometric_degree), cv_blocks, options)
     est = make_estimator(method, fit_intercept=fit_intercept, **options)
     if method in ("cv-subset", "ann"):
         # cv-subset cross-validates over the groups; the ann validates on the last one
@@ -185,17 +187,19 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     if method == "mr-poly":
         from host.empirical.mrpoly import MRPolyModel
 
-        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion) if target == "slope" else None
+        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion, geometric_degree) if target == "slope" else None
         if geo is not None:
-            stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+            stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_,
+                                  "criterion": geometric_criterion if geometric_degree is None else "fixed"}
         model = MRPolyModel(used, est.nut_coef_, est.base_coef_, est.intercept_, ref, target=target,
                             geometric_coef=geo.coef_ if geo is not None else (0.0,), **kw)
         model.geometric_ = geo
     elif target == "direct":
         model = NetworkModel(used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
     else:
-        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
-        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion, geometric_degree)
+        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_,
+                              "criterion": geometric_criterion if geometric_degree is None else "fixed"}
         if method in NONLINEAR:
             model = NetworkModel(used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
         else:
@@ -233,7 +237,7 @@ def _sample_interval(runs):
     return float(np.round(np.median(dts) * 1000) / 1000) if dts.size else None
 
 
-def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric_max_degree, geometric_criterion, cv_blocks, options):
+def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options):
     """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/empirical/dynamic.py)."""
     from host.empirical.dynamic import TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
 
@@ -261,8 +265,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     }
     geo = None
     if target == "slope":
-        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
-        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+        geo = fit_geometric(runs, channel, *geometric)
+        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_,
+                              "criterion": geometric[1] if geometric[2] is None else "fixed"}
     env = _envelope(runs, arrays, used, margin, target, channel) if used else {}
     env.update(_input_envelope(runs, est.terms_))
     model = DynamicModel(est.terms_, est.coef_, est.intercept_, target, channel, geo.coef_ if geo is not None else (0.0,), "dynamic",
