@@ -47,7 +47,7 @@ DEFAULTS = {
     "max_clusters": 10,
     "max_combinations": 20000,
     "alpha": None,  # fixed distance weight (None: the GA chooses)
-    "k": None,  # fixed number of clusters (None: the GA chooses)
+    "k": None,  # fixed number of clusters (None: the GA chooses; "all": every candidate sensor, S002's group 4)
     "distance_on": "values",  # values | rises
     "normalisation": "max",  # max (Eq. 5) | minmax
     "intercept": False,  # Eq. 16 has none
@@ -164,6 +164,13 @@ def select_hclust_ga(arrays, context=None, **params):
     Xtr, ytr, names = train
     n, p = Xtr.shape
     k_max = min(prm["max_clusters"], p, n - 2)  # >= 1: check_arrays guarantees n >= 3
+    every = prm["k"] == "all"  # S002 comparison group 4: the given sensors (near the heat sources) all kept, one per cluster
+    if every:
+        if p > n - 2:
+            raise SelectionError("hclust-ga: k=all keeps all %d sensors, the training run has %d samples (needs at least %d)" % (p, n, p + 2))
+        prm["k"] = p
+        if prm["alpha"] is None:
+            prm["alpha"] = 1.0  # with one sensor per cluster the distance weight changes nothing
     prm["k"] = number("hclust-ga", "k", prm["k"], 1, min(p, n - 2), integer=True, allow_none=True)
     # tuples without start temperatures are clustered as given; RunArrays of rises get their start back
     cluster_X = getattr(train, "values", Xtr) if prm["distance_on"] == "values" else Xtr
@@ -202,6 +209,7 @@ def select_hclust_ga(arrays, context=None, **params):
         "alpha": alpha,
         "clusters_k": k,
         "fixed": {key: prm[key] for key in ("alpha", "k") if prm[key] is not None},
+        "every_sensor": every,  # k=all: the candidates kept as given (comparison group 4), alpha irrelevant
         "distance_on": prm["distance_on"] if cluster_X is not Xtr or prm["distance_on"] == "rises" else "values as given (no start temperatures)",
         "normalisation": prm["normalisation"],
         "intercept": prm["intercept"],
