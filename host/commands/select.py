@@ -128,5 +128,5 @@ def _windows(runs, n, target, channel, sensors):
         for i in range(n):
             a = training_arrays([run], target, channel, sensors, window=(edges[i], edges[i + 1]))[0]
             hi = t[-1] if edges[i + 1] is None else edges[i + 1]
-            out.append(RunArrays(a.X, a.y, a.names, a.time_s, "%s[%.4g-%.4g h]" % (run.name, edges[i] / 3600, hi / 3600), a.start))
+            out.append(RunArrays(a.X, a.y, a.names, a.time_s, "%s[%.4g-%.4g h]" % (run.name, edges[i] / 3600, hi / 3600), a.start, a.log))
     return out

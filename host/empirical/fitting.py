@@ -65,7 +65,8 @@ def select_columns(arrays, sensors):
         if missing:
             raise EmpiricalDataError("%s: sensor(s) %s not available (have %s)" % (a.run, ", ".join(missing), ", ".join(a.names)))
         idx = [a.names.index(s) for s in sensors]
-        out.append(RunArrays(a.X[:, idx], a.y, list(sensors), a.time_s, a.run, None if a.start is None else a.start[idx]))
+        out.append(RunArrays(a.X[:, idx], a.y, list(sensors), a.time_s, a.run, None if a.start is None else a.start[idx],
+                             a.log_columns(idx)))
     return out
 
 

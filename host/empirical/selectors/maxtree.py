@@ -238,7 +238,8 @@ def _representative(cluster, names, S, t):
 # ---------------------------------------------------------------- selection on data
 
 DEFAULTS = {"alpha": 0.05, "criterion": "paper", "r2_tolerance": 0.01, "max_sensors": None, "absolute": True,
-            "min_tolerance": 1e-4}
+            "min_tolerance": 1e-4, "correlation_on": "log"}
+CORRELATION_ON = ("log", "targets")
 CRITERIA = ("paper", "r2-change", "tolerance")
 # SPSS REGRESSION's default TOLERANCE: a variable whose 1 − R² on the other variables is below this is not entered,
 # so the set it belongs to cannot be fitted whole (Li 2021 §4.2 (5): "the tolerance is exceeded")
@@ -365,9 +366,20 @@ def select_maxtree(arrays, context=None, **params):
     prm["max_sensors"] = number("maxtree", "max_sensors", prm["max_sensors"], 1, integer=True, allow_none=True)
     if not isinstance(prm["absolute"], bool):
         raise SelectionError("maxtree: absolute must be true or false, got %r" % (prm["absolute"],))
+    if prm["correlation_on"] not in CORRELATION_ON:
+        raise SelectionError("maxtree: correlation_on must be one of %s, got %r" % (", ".join(CORRELATION_ON), prm["correlation_on"]))
     X, y, names = pooled(arrays)
     n = X.shape[0]
-    C = np.corrcoef(X, rowvar=False).reshape(len(names), len(names))
+    # Li 2021 Eq. 11: the sensors' correlations over their temperature series, i.e. every logged sample (rises over
+    # each run's start, all runs pooled); the target is only known at the sweeps, so its correlations stay there
+    logs = [getattr(a, "log", None) for a in arrays]
+    if prm["correlation_on"] == "log" and all(lg is not None for lg in logs):
+        L = np.vstack([lg[1] for lg in logs])
+        similarity_on = "temperature log: %d samples (rises over each run's start, runs pooled)" % L.shape[0]
+    else:
+        L = X
+        similarity_on = "target times: %d samples%s" % (n, "" if prm["correlation_on"] == "targets" else " (no temperature log with these arrays)")
+    C = np.corrcoef(L, rowvar=False).reshape(len(names), len(names))
     t = np.array([np.corrcoef(X[:, j], y)[0, 1] for j in range(len(names))])
     tree = maximal_tree(C, names, target_corr=t, absolute=prm["absolute"])
     rows = []
@@ -398,6 +410,7 @@ def select_maxtree(arrays, context=None, **params):
     part = tree.partitions[chosen["partition"]]
     sensors = [s for s in names if s in part.representatives]
     reason.update({
+        "similarity_on": similarity_on,
         "alpha": prm["alpha"],
         "best_r2": best_r2,
         "chosen_partition": chosen["partition"],
