@@ -54,12 +54,13 @@ def _closure(S):
 
 
 def _cut(R, lam, names):
+    """The λ-cut classes as Li 2021's Table 3 reads them: together when the closure is above λ (or 1)."""
     p = len(names)
     seen, out = set(), []
     for i in range(p):
         if i in seen:
             continue
-        cls = [names[j] for j in range(p) if R[i, j] >= lam]
+        cls = [names[j] for j in range(p) if R[i, j] > lam or R[i, j] >= 1.0]
         seen.update(names.index(c) for c in cls)
         out.append(cls)
     return out
@@ -86,9 +87,10 @@ def test_edge_weights_are_the_partition_thresholds_and_intervals_give_the_cuts(s
     rng = np.random.default_rng(seed)
     for k, part in enumerate(tree.partitions):
         lo, hi = part.lambda_low, part.lambda_high
-        lams = [hi] + list(rng.uniform(lo, hi, 3)) + ([0.0] if k == 0 else [])
+        last = k == len(tree.partitions) - 1
+        lams = [lo] + list(rng.uniform(lo, hi, 3)) + ([1.0] if last else [])
         for lam in lams:
-            if k > 0 and lam <= lo:
+            if not last and lam >= hi:
                 continue
             assert tree.partition_at(lam) == part.clusters
             assert sorted(map(sorted, _cut(R, lam, names))) == sorted(map(sorted, part.clusters))
@@ -228,9 +230,9 @@ def test_selection_plot_is_written(arrays3, tmp_path):
 def test_degenerate_intervals():
     one = maximal_tree(np.array([[1.0]]), ["A"])
     assert one.edges == [] and [(p.lambda_low, p.lambda_high, p.clusters) for p in one.partitions] == [(0.0, 1.0, [["A"]])]
-    # zero similarity: together only at λ = 0 exactly, the closed first interval [0, 0]
+    # zero similarity: the edge is cut from λ = 0 on ([0, 0) holds for no λ, so no partition joins them)
     zero = maximal_tree(np.eye(2), ["A", "B"])
-    assert [(p.lambda_low, p.lambda_high, p.clusters) for p in zero.partitions] == [(0.0, 0.0, [["A", "B"]]), (0.0, 1.0, [["A"], ["B"]])]
+    assert [(p.lambda_low, p.lambda_high, p.clusters) for p in zero.partitions] == [(0.0, 1.0, [["A"], ["B"]])]
     # signed similarity below 0 never joins for λ in [0, 1]
     neg = maximal_tree(np.array([[1.0, -0.5], [-0.5, 1.0]]), ["A", "B"], absolute=False)
     assert [(p.lambda_low, p.lambda_high, p.clusters) for p in neg.partitions] == [(0.0, 1.0, [["A"], ["B"]])]
@@ -318,3 +320,13 @@ def test_paper_rule_on_data_skips_nearly_collinear_representatives():
     assert loose.sensors == names
     ok = [row for row in loose.reason["partitions"] if "skipped" not in row and row["p_F"] < 0.05]
     assert loose.reason["r2"] == max(row["r2"] for row in ok)
+
+
+def test_intervals_are_written_as_li2021_table_3():
+    # Table 3: [0, 0.94943) all together, [0.94943, 0.96927) T11 apart: at lambda = the edge weight the edge is cut
+    C = np.array([[1.0, 0.95, 0.90], [0.95, 1.0, 0.85], [0.90, 0.85, 1.0]])
+    tree = maximal_tree(C, ["T1", "T2", "T3"])
+    assert tree.to_json()["interval_convention"].startswith("lambda in [lambda_low, lambda_high)")
+    assert tree.partition_at(0.90) == [["T1", "T2"], ["T3"]]  # the 0.90 edge is cut at lambda = 0.90
+    assert tree.partition_at(0.8999) == [["T1", "T2", "T3"]]
+    assert tree.partition_at(1.0) == [["T1"], ["T2"], ["T3"]]

@@ -7,9 +7,12 @@ edges lighter than λ leaves exactly the closure's λ-cut classes. So the only �
 values where the partition changes are the tree's edge weights, and the full list
 of distinct partitions over λ in [0, 1] comes from sorting them.
 
-Interval convention: a partition holds for λ in (lambda_low, lambda_high]; the
-first interval is closed at 0, [0, lambda_high]. At λ exactly equal to an edge
-weight that edge is kept (sensors i, j are together when similarity >= λ).
+Interval convention, as Li 2021 (Table 3) writes it: a partition holds for λ in
+[lambda_low, lambda_high); the last interval is closed at 1, [lambda_low, 1]. At λ
+exactly equal to an edge weight that edge is cut (sensors i, j stay together when
+their similarity is above λ); edges of weight 1 are never cut. (Before issue 23:
+(lambda_low, lambda_high], the edge kept at equality; the interval ends are the
+same numbers.)
 """
 from dataclasses import dataclass, field
 
@@ -46,8 +49,8 @@ class MaxTree:
     representative_rule: str
 
     def partition_at(self, lam):
-        """Clusters (lists of names) from cutting tree edges lighter than ``lam``."""
-        return _components(self.names, [(self.names.index(a), self.names.index(b)) for a, b, w in self.edges if w >= lam])
+        """Clusters (lists of names) from cutting the tree edges not heavier than ``lam`` (weight-1 edges are kept)."""
+        return _components(self.names, [(self.names.index(a), self.names.index(b)) for a, b, w in self.edges if w > lam or w >= 1.0])
 
     def to_json(self):
         return {
@@ -55,7 +58,7 @@ class MaxTree:
             "edges": [[a, b, float(w)] for a, b, w in self.edges],
             "partitions": [p.to_json() for p in self.partitions],
             "representative_rule": self.representative_rule,
-            "interval_convention": "lambda in (lambda_low, lambda_high]; the first interval is [0, lambda_high]",
+            "interval_convention": "lambda in [lambda_low, lambda_high) (Li 2021 Table 3); the last interval is [lambda_low, 1]",
         }
 
     def linkage(self):
@@ -217,6 +220,8 @@ def maximal_tree(corr, names, target_corr=None, absolute=True):
     lows = [0.0] + breaks
     partitions = []
     for lo, hi in zip(lows, highs):
+        if lo == hi:  # an edge of weight 0: [0, 0) holds for no λ (at λ = 0 that edge is already cut)
+            continue
         clusters = _components(names, [(i, j) for i, j, w in tree if w >= hi])
         partitions.append(Partition(float(lo), float(hi), clusters, [_representative(c, names, S, t) for c in clusters]))
     rule = "max |r| with the target" if t is not None else "max mean similarity to the other cluster members"
