@@ -77,7 +77,8 @@ _ACC_DX = const(39)  # dynamic: input minus filter state
 _ACC_DMUL = const(40)  # dynamic: the filter increment
 _ACC_Y = const(42)  # dynamic: filter states
 _ACC_YMUL = const(43)  # dynamic: coefficient x filter state
-_N_ACCS = const(45)
+_ACC_PMUL = const(45)  # dynamic: a power of a temperature rise (S004's Eq. 12, mr_poly), one factor at a time
+_N_ACCS = const(47)
 
 _FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
 _FEED_LIMB = const(10)
@@ -376,7 +377,8 @@ class Evaluator:
         self.fin = feed_mm_min if feed_mm_min >= 0 else -feed_mm_min
 
     def _inputs(self):
-        """Each filter's input now into Uc (clamped to the envelope; returns the flag); tau = 0 terms follow it."""
+        """Each filter's input now into Uc (clamped to the envelope; returns the flag); tau = 0 terms follow it.
+        Sources: a sensor's rise (>= 0), spindle speed (-1), its square (-2), feed (-3), a power of a rise (<= -4)."""
         t = self.table
         fl = 0
         r = self.spin
@@ -392,9 +394,19 @@ class Evaluator:
         A = t.A
         fy = t.fy
         Uc = self.Uc
+        d = self.d
         for j in range(t.nf):
             k = src[j]
-            v = self.d[k] if k >= 0 else (r if k == -1 else (q if k == -2 else f))
+            if k >= -3:
+                v = d[k] if k >= 0 else (r if k == -1 else (q if k == -2 else f))
+            else:  # -4 - 3*i - (e - 2): sensor i's rise x to the power e (2..4) / 2**(shp2 + shp*(e - 2)), one floored factor at a time
+                k = -4 - k
+                x = d[k // 3]
+                v = self._mul(_ACC_PMUL, x, x, t.Lp, t.np, t.shp2)
+                e = k % 3
+                while e > 0:
+                    v = self._mul(_ACC_PMUL, v, x, t.Lp, t.np, t.shp)
+                    e -= 1
             Uc[j] = v
             if A[j] == 0:
                 v <<= fy[j]

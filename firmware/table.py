@@ -19,7 +19,7 @@ from micropython import const
 
 MAGIC = b"TCTB"
 NAME_FORBIDDEN = b",*$"  # besides non-printable bytes: the $TC frames' separators (names are sent in the hello)
-_VERSION = const(4)  # 4: screw effect terms Bu, shBu, Rv (issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
+_VERSION = const(4)  # 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
 _AXIS_SIZE = const(8)
@@ -230,7 +230,7 @@ _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:
           "B=m shB=m rS=m G2=m shG2=m H shH:s fh:c Lx:L nx:n shX:s KC Lc:L nc:n shC:s "
           "air:a Tlo:A W0=m shW0=m W1=m shW1=m Ka shKa:s Bu=m shBu=m Rv |")
 # dynamic: first-order lags of temperature rises, spindle speed (and its square) and feed (docs/table-format.md)
-_DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F LX:L nX:4 LY:L nY:4 nf:N "
+_DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F Lp:L np:4 shp2:s shp:s LX:L nX:4 LY:L nY:4 nf:N "
             "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j |")
 
 
@@ -288,7 +288,7 @@ def _fields(t, buf, w, spec):
 def _check(t):
     if hasattr(t, "nf"):
         for j in range(t.nf):
-            if not -3 <= t.src[j] < t.n_sensors:
+            if not -4 - 3 * t.n_sensors < t.src[j] < t.n_sensors:  # <= -4: a power of sensor (-4 - src) // 3's rise
                 raise TableError(REASON_FIELD, "filter %d reads source %d" % (j, t.src[j]))
             if t.Ylo[j] > 0 or t.Yhi[j] < 0 or t.fy[j] < 0 or t.fy[j] > 28 or t.A[j] < 0:
                 raise TableError(REASON_FIELD, "filter %d state box %d..%d" % (j, t.Ylo[j], t.Yhi[j]))

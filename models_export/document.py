@@ -10,7 +10,7 @@ import json
 import math
 
 FORMAT = "tcomp-model/1"  # the value of a document's "format" key
-DOCUMENT_KINDS = ("poly_slope", "linear_direct", "screw", "ann", "dynamic")  # the values of its "kind" key
+DOCUMENT_KINDS = ("poly_slope", "linear_direct", "screw", "ann", "dynamic", "mr_poly")  # the values of its "kind" key
 
 
 def canonical(doc):

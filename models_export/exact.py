@@ -14,6 +14,44 @@ from models_export.document import FORMAT
 
 # dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
 DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
+# "T<e>:<sensor>" (e = 2..4): the rise to the power e, source -4 - 3*i - (e - 2) (firmware Evaluator._inputs)
+POWER_PREFIXES = {"T2:": 2, "T3:": 3, "T4:": 4}
+
+
+def power_chain(rec, x_iv, e, L, n, sh2, sh, name, acc):
+    """Integer interval and error interval of the firmware's power x**e / 2**(sh2 + sh*(e - 2)) of an exact integer
+    rise x, formed one floored factor at a time (Evaluator._inputs), recorded on ``rec`` as accumulator ``acc``;
+    also the interval of every left factor (for the limb bound)."""
+    v, err, cs = x_iv, (F(0), F(0)), [x_iv]
+    for step in range(e - 1):
+        s = sh2 if step == 0 else sh
+        res, k = rec.mul(acc, v, x_iv, L, n, s, name)
+        # floor-ish(v*x/2**s) = v*x/2**s + (-k, 0]; v = exact + err, so the error carries err*x/2**s
+        err = iv_add(iv_mul(err, (F(x_iv[0]) / p2(s), F(x_iv[1]) / p2(s))), (F(-k), F(0)))
+        v = res
+        cs.append(v)
+    return v, err, cs
+
+
+def mr_poly_as_dynamic(doc):
+    """An ``mr_poly`` document (S004's Eq. 12, host/learning/empirical/mrpoly.py) as the ``dynamic`` table that evaluates it:
+    every filter has tau = 0 (its input passes through) and reads the nut rise, its powers, or the base rise."""
+    th = _obj(doc.get("thermal"), "thermal")
+    nut, base = th.get("nut_sensor"), th.get("base_sensor")
+    if list(doc.get("sensors") or []) != [nut, base]:
+        raise ExportError("mr_poly: sensors must be [thermal.nut_sensor, thermal.base_sensor], found %r" % (doc.get("sensors"),))
+    a = th.get("nut_coefficients")
+    if not isinstance(a, list) or not 1 <= len(a) <= 4:
+        raise ExportError("thermal.nut_coefficients must list 1..4 numbers (a_1..a_m), found %r" % (a,))
+    terms = [{"signal": ("T:" if j == 0 else "T%d:" % (j + 1)) + nut, "tau_s": 0, "coefficient": _num(c, "thermal.nut_coefficients[%d]" % j)}
+             for j, c in enumerate(a)]
+    terms.append({"signal": "T:" + base, "tau_s": 0, "coefficient": _num(th.get("base_coefficient"), "thermal.base_coefficient")})
+    out = dict(doc)
+    out["kind"] = "dynamic"
+    # dt_s: the board's step; with every tau 0 a step changes nothing, 1 s keeps the scheduler's load small
+    out["thermal"] = {"target": th.get("target"), "reference": th.get("reference", "fixed"), "dt_s": 1.0,
+                      "intercept": _num(th.get("intercept"), "thermal.intercept"), "terms": terms}
+    return out
 DYN_SQUARE_BITS = 24  # the spindle speed squared is held as rpm**2 / 2**shq < 2**24
 # The certified envelope's default (docs/firmware.md, "Operating envelope"): the training range (the
 # document's envelope.temperature_C) widened by this much on both sides. A thermal test never covers
@@ -41,9 +79,12 @@ class Model:
             raise ExportError("format must be %r (a model document), found %r" % (FORMAT, doc.get("format")))
         kind = doc.get("kind")
         self.doc_kind = kind
+        if kind == "mr_poly":
+            doc = mr_poly_as_dynamic(doc)
+            kind = "dynamic"
         self.kind = "screw_reduced" if kind == "screw" else kind
         if self.kind not in LIMITS_UM:
-            raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw, dynamic)" % (kind,))
+            raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw, dynamic, mr_poly)" % (kind,))
         sensors = doc.get("sensors") or []
         if not isinstance(sensors, list) or not all(isinstance(s, str) for s in sensors):
             raise ExportError("sensors must be a list of sensor names, found %r" % (sensors,))
@@ -225,6 +266,28 @@ class Model:
         if not 1 <= self.nq <= 4:
             raise ExportError("envelope.spindle_rpm: %d rpm cannot be squared in small-int limbs" % self.smax)
         self.q_iv = Recorder().mul(0, (0, self.smax), (0, self.smax), self.Lq, self.nq, self.shq, "spindle speed squared")
+        # powers of rises x**e / 2**(shp2 + shp*(e - 2)), one floored factor at a time (Evaluator._inputs): the square is
+        # shifted (shp2) to about 2**(Cb - 1), every further factor by the rise's own width (shp), so each power uses
+        # the same ~Cb bits and a factor's error is not amplified (|x| / 2**shp < 1). Cb is the largest power bound whose
+        # limbs (Lp bits, at most 4 of the rise) stay small ints; the chains are checked against 2**Cb below (the
+        # limb-wise interval bound loses the limbs' correlation, hence the bit to spare)
+        powered = [(self._sensor_index(sig[3:], "thermal.terms[%d].signal" % j), POWER_PREFIXES[sig[:3]]) for j, sig in enumerate(signals)
+                   if isinstance(sig, str) and sig[:3] in POWER_PREFIXES]
+        D = max([max(abs(self.d_lo[i]), abs(self.d_hi[i])) for i, _ in powered] + [1])
+        self.p_bound, self.Lp, self.np, self.shp2, self.shp = 1, 1, 1, 0, 0
+        if powered:
+            for cb in range(26, 0, -1):
+                L = max(1, min(29, narrow_width(1 << cb)))
+                n = top_limbs_needed((-D, D), L, 1 << cb)
+                if n is not None and n <= 4:
+                    break
+            else:
+                raise ExportError("the temperature rises of %s (up to %d mK) cannot be raised to a power in small-int limbs"
+                                  % (", ".join(self.sensors[i] for i, _ in powered), D))
+            db = D.bit_length()
+            self.p_bound, self.Lp, self.np = 1 << cb, L, n
+            self.shp2 = max(0, 2 * db - (cb - 1))
+            self.shp = db
         self.dyn = []
         for j, t in enumerate(terms):
             where = "thermal.terms[%d]" % j
@@ -235,11 +298,20 @@ class Model:
             coef = F(_num(t.get("coefficient"), where + ".coefficient"))
             if tau < 0:
                 raise ExportError("%s.tau_s must be >= 0, found %r" % (where, t.get("tau_s")))
+            ein = (F(0), F(0))
             if isinstance(sig, str) and sig.startswith("T:"):
                 if sig[2:] not in self.sensors:
                     raise ExportError("%s.signal %r: sensor %r is not in sensors %r" % (where, sig, sig[2:], self.sensors))
                 i = self.sensors.index(sig[2:])
                 src, u, per = i, (self.d_lo[i], self.d_hi[i]), F(1, 1000)  # mK -> K
+            elif isinstance(sig, str) and sig[:3] in POWER_PREFIXES:
+                e = POWER_PREFIXES[sig[:3]]
+                i = self.sensors.index(sig[3:])
+                u, ein, cs = power_chain(Recorder(), (self.d_lo[i], self.d_hi[i]), e, self.Lp, self.np, self.shp2, self.shp, sig, 0)
+                if max(max(-lo, hi) for lo, hi in cs) > self.p_bound:  # the limb width Lp was chosen for this bound
+                    raise ExportError("%s: the power of %s outgrows its limbs" % (where, sig[3:]))
+                src = -4 - 3 * i - (e - 2)
+                per = p2(self.shp2 + self.shp * (e - 2)) / F(1000) ** e  # (mK**e / 2**(shp2 + shp*(e-2))) -> K**e
             elif sig in DYN_SOURCES:
                 src = DYN_SOURCES[sig]
                 if src == -1:
@@ -249,7 +321,8 @@ class Model:
                 else:
                     u, per = (0, self.fmax), F(1, 1000)  # mm/min -> m/min
             else:
-                raise ExportError("%s.signal must be 'T:<sensor>' or one of %s, found %r" % (where, ", ".join(DYN_SOURCES), sig))
+                raise ExportError("%s.signal must be 'T:<sensor>', 'T2:'..'T4:<sensor>' or one of %s, found %r"
+                                  % (where, ", ".join(DYN_SOURCES), sig))
             if not u[0] <= 0 <= u[1]:
                 raise ExportError("%s: the input range %r does not hold the rest state 0" % (where, u))
             fy = max(0, frac_bits(max(u[1] - u[0], 1), ACC, cap=28))
@@ -257,11 +330,16 @@ class Model:
             import numpy as np
             a = F(float(1.0 - np.exp(-(self.dt_ms / 1000.0) / float(tau)))) if tau > 0 else F(0)
             name = "thermal.terms[%d] (%s, tau %g s)" % (j, sig, float(tau))
-            self.dyn.append(dict(src=src, u=u, fy=fy, a=a, name=name, tau=tau))
+            self.dyn.append(dict(src=src, u=u, fy=fy, a=a, name=name, tau=tau, ein=ein))
             self.b.append(coef * unit * per / p2(fy))  # output scale per state unit
             self.d_lo.append(u[0] << fy)
             self.d_hi.append(u[1] << fy)
             self.b_names.append(name)
+
+    def _sensor_index(self, name, where):
+        if name not in self.sensors:
+            raise ExportError("%s: sensor %r is not in sensors %r" % (where, name, self.sensors))
+        return self.sensors.index(name)
 
     # real ranges ----------------------------------------------------------
     def s_range(self):

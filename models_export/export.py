@@ -144,6 +144,7 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
         envelope["reference_position_um"] = model.pos_ref
     report = {
         "model_kind": model.kind,
+        "document_kind": model.doc_kind,  # mr_poly is written as a dynamic table (models_export.exact.mr_poly_as_dynamic)
         "table_format": VERSION,  # the version byte of the table written (firmware/table.py owns it)
         "table_bytes": len(table),
         "crc32": "%08x" % crc32(table[:-4]),

@@ -13,13 +13,15 @@ import numpy as np
 
 from firmware.evaluate import (
     ACC_AMUL, ACC_BMUL, ACC_CMUL, ACC_CUM, ACC_CUMMUL, ACC_D, ACC_DE, ACC_DMUL, ACC_DX, ACC_FEEDMUL, ACC_GEO,
-    ACC_GEOMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_OUT, ACC_P, ACC_QMUL, ACC_ROW, ACC_ROWMUL, ACC_S, ACC_SEGMUL,
+    ACC_GEOMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW, ACC_ROWMUL, ACC_S, ACC_SEGMUL,
     ACC_SLOPE, ACC_SMUL, ACC_STATE, ACC_SUM, ACC_THMUL, ACC_TRAVEL, ACC_XL, ACC_Y, ACC_YMUL, FEED_LIMB, FEED_W_BITS,
 )
 from models_export.certify import (
     ACC, OU_PER_UM, PROD, SLOPE_PER_OU_PER_UM, ExportError, Recorder, center, fit_coef, floor_err, frac_bits,
     int_iv, iv_abs, iv_add, iv_mul, iv_scale, limb_max, limbs, narrow_width, p2, rnd, top_limbs_needed,
 )
+
+from models_export.exact import power_chain  # noqa: E402
 
 ZERO = (F(0), F(0))
 
@@ -124,7 +126,7 @@ class Planner:
         LY = max(1, -(-big.bit_length() // nY))
         Lq, nq = m.Lq, m.nq
         q_iv, kq = rec.mul(ACC_QMUL, (0, m.smax), (0, m.smax), Lq, nq, m.shq, "spindle speed squared")
-        f.update(positional=0 if m.direct else 1, dt_ms=m.dt_ms, smax=m.smax, Lq=Lq, nq=nq, shq=m.shq, fmax=m.fmax,
+        f.update(positional=0 if m.direct else 1, dt_ms=m.dt_ms, smax=m.smax, Lq=Lq, nq=nq, shq=m.shq, fmax=m.fmax, Lp=m.Lp, np=m.np, shp2=m.shp2, shp=m.shp,
                  LX=LX, nX=nX, LY=LY, nY=nY, nf=len(terms), src=[], A=[], shA=[], gA=[], rA=[], fy=[], Ylo=[], Yhi=[])
         out = []
         self.dyn_cert = []
@@ -137,6 +139,12 @@ class Planner:
                 ein = (F(-kq) * p2(fy), F(0))
                 if q_iv[1] > t["u"][1]:
                     raise ExportError("%s: the squared speed exceeds its box" % t["name"])
+            elif t["src"] <= -4:  # a power of a rise, floored factor by factor (models_export.exact.power_chain)
+                i, e = (-4 - t["src"]) // 3, (-4 - t["src"]) % 3 + 2
+                u, err, _ = power_chain(rec, (m.d_lo[i], m.d_hi[i]), e, m.Lp, m.np, m.shp2, m.shp, t["name"], ACC_PMUL)
+                if u[0] < t["u"][0] or u[1] > t["u"][1]:
+                    raise ExportError("%s: the power exceeds its box" % t["name"])
+                ein = (err[0] * p2(fy), err[1] * p2(fy))
             f["src"].append(t["src"])
             f["fy"].append(fy)
             f["Ylo"].append(Ylo)

@@ -223,6 +223,20 @@ def render_demo(L, folder):
     L.append("")
 
 
+PAPERS_BEGIN, PAPERS_END = "<!-- papers: begin -->", "<!-- papers: end -->"
+
+
+def _papers_section(path):
+    """The hand-written per-paper section of ``path`` (between the markers), kept when the file is regenerated:
+    its numbers come from other commands, each named in it."""
+    if not os.path.exists(path):
+        return ""
+    with open(path, encoding="utf-8") as fh:
+        text = fh.read()
+    a, b = text.find(PAPERS_BEGIN), text.find(PAPERS_END)
+    return text[a:b + len(PAPERS_END)] + "\n" if 0 <= a < b else ""
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--run", default=os.path.join(ROOT, "data", "fl_thermal"))
@@ -280,8 +294,9 @@ def main(argv=None):
         elapsed, platform.machine(), platform.system(), platform.python_version(), os.path.relpath(args.json, ROOT)))
     all_results = [r for e in evaluated for res in e[3].values() for r in res]
     os.makedirs(os.path.dirname(os.path.abspath(args.out)), exist_ok=True)
+    kept = _papers_section(args.out)
     with open(args.out, "w", encoding="utf-8") as fh:
-        fh.write("\n".join(L))
+        fh.write("\n".join(L[:1] + ([kept] if kept else []) + L[1:]))
     os.makedirs(os.path.dirname(os.path.abspath(args.json)), exist_ok=True)
     with open(args.json, "w", encoding="utf-8") as fh:
         json.dump({"run": args.run, "splits": [{"train_cycles": e[0], "split_s": e[1], "parts": e[2]} for e in evaluated],

@@ -18,6 +18,7 @@ OPTIONS = {
     "envelope_margin_K": number(float, 0.0),
     "reference": str,  # run_start | fixed
     "geometric_max_degree": number(int, 1),
+    "geometric_degree": number(int, 1),  # exact degree of the cold polynomial (Li 2021: 5, S004: 4)
     "geometric_criterion": str,  # cv | aic
     "t_min_s": number(float),  # training window on target time
     "t_max_s": number(float),
@@ -28,7 +29,9 @@ OPTIONS = {
     "max_epochs": number(int, 1),  # ann
     "patience": number(int, 1),  # ann
     "validation_fraction": number(float),  # ann, random validation
-    "validation": str,  # ann: random | last_group
+    "validation": str,  # ann: auto | random | last_group | loo
+    "size_rule": str,  # ann: smallest_near_best | best
+    "size_tolerance": number(float, 0.0),  # ann: relative MSE slack of smallest_near_best
     "learning_rate": number(float),  # ann
     "taus_s": numbers(float),  # dynamic: time-constant grid, e.g. 0/1800/7200
     "ridge": numbers(float),  # dynamic: penalty grid
@@ -38,6 +41,9 @@ OPTIONS = {
     "swaps": boolean,  # dynamic
     "use_spindle": boolean,  # dynamic
     "use_feed": boolean,  # dynamic
+    "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
+    "nut": str,  # mr-poly: nut sensor (default: role "nut")
+    "base": str,  # mr-poly: base sensor (default: role "base")
 }
 
 
@@ -100,9 +106,14 @@ def fit_command(args, out):
             est.ridge_, est.n_groups_, est.cv_score, est.cv_rmse_, est.rsquared_, est.rmse_))
         for (sig, tau), c in zip(est.terms_, est.coef_):
             print("  %+.5g x lag(%s, tau %g s)" % (c, sig, tau))
+    elif args.model == "mr-poly":
+        terms = " ".join("%+.5g*dTn^%d" % (a, j + 1) for j, a in enumerate(est.nut_coef_))
+        print("  S004 Eq. 12, nut %s, base %s, degree %d: s = %.5g %s %+.5g*dTb; fit R2=%.4f RMSE=%.4g" % (
+            model.sensors[0], model.sensors[1], est.nut_coef_.size, est.intercept_, terms, est.base_coef_, est.rsquared_, est.rmse_))
     elif args.model == "ann":
-        print("  %d hidden nodes chosen by validation (%s); validation RMSE by size: %s" % (
-            est.hidden_size_, est.validation_, ", ".join("%d: %.4g" % kv for kv in sorted(est.validation_rmse_.items()))))
+        print("  %d hidden nodes chosen by validation (%s), rule %s; validation MSE / R2 by size: %s" % (
+            est.hidden_size_, est.validation_, est.size_rule,
+            ", ".join("%d: %.4g / %.4f" % (h, v ** 2, est.validation_r2_[h]) for h, v in sorted(est.validation_rmse_.items()))))
         print("  fit on all training samples: R2=%.4f RMSE=%.4g; best epoch %d" % (est.rsquared_, est.rmse_, est.best_epoch_))
     else:
         print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (

@@ -20,6 +20,7 @@ KIND_CLASSES = {
     "screw": "host.learning.screw.screwmodel:ScrewModel",
     "ann": "host.learning.empirical.kinds:NetworkModel",
     "dynamic": "host.learning.empirical.dynamic:DynamicModel",
+    "mr_poly": "host.learning.empirical.mrpoly:MRPolyModel",
 }
 
 

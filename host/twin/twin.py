@@ -11,7 +11,7 @@ from host.data import runs as _runs
 from host.twin.ambient import air_C
 from host.twin.axis import AxisParams, make_params
 from host.twin.effects import resolve_effects
-from host.twin.protocols import PROTOCOLS, Protocol, concrete, resolve_protocols, schedule
+from host.twin.protocols import PROTOCOLS, Protocol, concrete, read_protocol_csv, resolve_protocols, schedule
 from host.twin.screw import ScrewGrid, ScrewIntegrator, contact_travel, expansion_um
 from host.twin.structure import NODES, lagged, node_temperatures
 
@@ -54,6 +54,8 @@ class Simulation:
 def _protocol(protocol):
     if isinstance(protocol, Protocol):
         return protocol
+    if str(protocol).lower().endswith(".csv"):
+        return read_protocol_csv(protocol)
     if protocol not in PROTOCOLS:
         raise ValueError("unknown protocol %r; known: %s" % (protocol, ", ".join(PROTOCOLS)))
     return PROTOCOLS[protocol]
@@ -127,7 +129,7 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
 
     sweeps, motion = schedule(proto, params)
     dt = params.dt_s
-    n = int(math.ceil(proto.minutes * 60.0 / dt - 1e-9))
+    n = int(math.ceil(proto.duration_s(params) / dt - 1e-9))
     t = np.arange(n + 1) * dt
     air = air_C(t, proto.start_hour, params, rng_air)
 
@@ -232,8 +234,8 @@ def to_run(sim):
             "params": {k: _plain(v) for k, v in dataclasses.asdict(p).items()},
         },
     }
-    if sim.protocol.drawn:
-        # the drawn moving states, so the run says what the seed produced
+    if sim.protocol.drawn or sim.protocol.source:
+        # the drawn moving states (what the seed produced) or the states read from the user's file
         meta["simulation"]["phases"] = [dataclasses.asdict(ph) for ph in sim.protocol.phases]
     temps = _runs.Temperatures(sim.t_s.copy(), [nd.name for nd in NODES], sim.sensors_C.copy())
     errors = _runs.Errors(sim.err_time_s.copy(), sim.err_position_mm.copy(), sim.err_um.copy(),

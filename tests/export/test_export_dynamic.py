@@ -181,9 +181,9 @@ def test_loader_refuses_a_filter_reading_a_missing_sensor():
     t = parse_table(ex.table)
     assert t.kind == "dynamic" and t.src == [0, -1]
     b = bytearray(ex.table)
-    # the first src word follows COMMON (8 + 3 per sensor + rL) and the 12-word dynamic head
+    # the first src word follows COMMON (8 + 3 per sensor + rL) and the 16-word dynamic head
     from firmware.table import HEADER_SIZE, NAME_SIZE, SENSOR_SIZE
-    off = HEADER_SIZE + (NAME_SIZE + SENSOR_SIZE) * t.n_sensors + 4 * (8 + 3 * t.n_sensors + 1 + 12)
+    off = HEADER_SIZE + (NAME_SIZE + SENSOR_SIZE) * t.n_sensors + 4 * (8 + 3 * t.n_sensors + 1 + 16)
     assert struct.unpack_from("<i", b, off)[0] == 0
     struct.pack_into("<i", b, off, t.n_sensors)
     struct.pack_into("<I", b, len(b) - 4, zlib.crc32(bytes(b[:-4])))

@@ -12,7 +12,7 @@ import pytest
 
 from firmware.table import TableError, parse_table
 from models_export import export_model
-from hil_tests.fixtures.samples import dynamic_doc, linear_direct_doc, poly_slope_doc, restamp, screw_doc
+from hil_tests.fixtures.samples import dynamic_doc, linear_direct_doc, mr_poly_doc, poly_slope_doc, restamp, screw_doc
 
 SLOW = os.environ.get("TCOMP_SLOW") == "1"  # full-size runs; the default is the reduced form
 
@@ -132,7 +132,12 @@ print('steady', out[0], out[1], out[2], out[3])
 """
 
 
-@pytest.mark.parametrize("make", [poly_slope_doc, linear_direct_doc, screw_doc, dynamic_doc], ids=lambda f: f.__name__)
+def mr_poly_doc_degree4(rng):
+    """S004's Eq. 12 with every power (the firmware's power inputs run in the cycle)."""
+    return mr_poly_doc(rng, degree=4)
+
+
+@pytest.mark.parametrize("make", [poly_slope_doc, linear_direct_doc, screw_doc, dynamic_doc, mr_poly_doc_degree4], ids=lambda f: f.__name__)
 def test_steady_state_allocates_nothing(tmp_path, mp, make):
     ex = export_model(make(random.Random(4)))
     t = parse_table(ex.table)

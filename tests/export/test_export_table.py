@@ -113,7 +113,7 @@ def test_specific_reasons(exports):
     assert reason(bytes(v2)) == REASON_VERSION
     assert reason(refresh_crc(v2)) == REASON_VERSION
     # tables of format 1 (before the screw's air channel), 2 (before the training range) and 3 (before the screw's
-    # effect terms) are refused with a message that says to re-export
+    # effect terms and the power inputs of dynamic tables) are refused with a message that says to re-export
     for old in (1, 2, 3):
         v1 = bytearray(buf)
         v1[4] = old

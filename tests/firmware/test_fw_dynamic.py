@@ -115,8 +115,8 @@ def test_accept_refuses_a_dynamic_table_beyond_its_certificate(tmp_path):
     good = dynamic_table(names)
     t = parse_table(good)
     b = bytearray(good)
-    # the bY list: after COMMON, the 12-word head and 8 lists of nf words (src A shA gA rA fy Ylo Yhi)
-    off = HEADER_SIZE + (NAME_SIZE + SENSOR_SIZE) * t.n_sensors + 4 * (8 + 3 * t.n_sensors + 1 + 12 + 8 * t.nf)
+    # the bY list: after COMMON, the 16-word head and 8 lists of nf words (src A shA gA rA fy Ylo Yhi)
+    off = HEADER_SIZE + (NAME_SIZE + SENSOR_SIZE) * t.n_sensors + 4 * (8 + 3 * t.n_sensors + 1 + 16 + 8 * t.nf)
     assert struct.unpack_from("<i", b, off)[0] == t.bY[0]
     struct.pack_into("<i", b, off, t.bY[0] * 1000)
     struct.pack_into("<I", b, len(b) - 4, zlib.crc32(bytes(b[:-4])))

@@ -12,7 +12,8 @@ def add_arguments(p):
 
     p.add_argument("--methods", default=",".join(COMPARE_DEFAULT),
                    help="comma list of methods (default: all but maxtree-mlr, which is maxtree under the paper's name)")
-    p.add_argument("--train", default="0", help="index of the training run, a comma list, or 'all' (each in turn); default 0")
+    p.add_argument("--train", default="0", help="index of the training run, a comma list, or 'all' (each in turn); indices joined "
+                                                "by + are pooled into one training set (0+1: Li 2017's two speeds); default 0")
     p.add_argument("--split-h", type=float, metavar="HOURS", help="one run: fit on t < HOURS, predict t >= HOURS")
     p.add_argument("--noise-C", type=float, default=0.2, help="robustness: temperature noise, standard deviation (default 0.2 °C)")
     p.add_argument("--offset-C", type=float, default=0.5, help="robustness: per-sensor offset up to ± this after the start (default 0.5 °C)")
@@ -107,9 +108,9 @@ def _compare(args, methods, out):
                 idx = list(range(len(runs)))
             else:
                 try:
-                    idx = [int(v) for v in args.train.split(",")]
+                    idx = [tuple(int(u) for u in v.split("+")) if "+" in v else int(v) for v in args.train.split(",")]
                 except ValueError:
-                    raise UserError("--train: expected an index, a comma list or 'all', got %r" % args.train)
+                    raise UserError("--train: expected an index, a comma list, indices joined by + (pooled) or 'all', got %r" % args.train)
             cases = cases_runs(runs, idx)
         results = []
         for case in cases:

@@ -5,7 +5,7 @@ def add_arguments(p):
     p.add_argument("model", help="model document (tcomp-model/1 JSON)")
     p.add_argument("run", help="run folder")
     p.add_argument("--out", required=True, help="CSV: time_s,position_mm[,direction][,channel],predicted_um")
-    p.add_argument("--json", help="also write summary statistics (RMSE against the measured errors) as JSON")
+    p.add_argument("--json", help="also write summary statistics (RMSE, max and min residual against the measured errors) as JSON")
     p.add_argument("--allow-edited", dest="allow_edited", action="store_true",
                    help="predict with a model whose recorded provenance.sha256 does not match its content (edited "
                         "after it was saved), as tcomp export --allow-edited does; the JSON records it")
@@ -76,8 +76,13 @@ def _predict(args, out):
     resid = e.error_um[rows] - pred[rows]
     resid = resid[np.isfinite(resid)]
     rmse = float(np.sqrt(np.mean(resid ** 2))) if resid.size else float("nan")
-    print("%s on %s: %d rows, RMSE %.3f um against the measured errors" % (args.model, args.run, len(e), rmse))
+    # residual = measured - predicted; Li 2021's MAXR/MINR, Fan & Guo's maximum residual
+    rmax = float(resid.max()) if resid.size else float("nan")
+    rmin = float(resid.min()) if resid.size else float("nan")
+    print("%s on %s: %d rows, RMSE %.3f um, max residual %.3f um, min residual %.3f um (measured - predicted)"
+          % (args.model, args.run, len(e), rmse, rmax, rmin))
     if args.json:
         with out.open(args.json) as fh:
             json.dump({"model": args.model, "run": args.run, "rows": int(len(e)), "rmse_um": rmse,
-                       "provenance": "edited" if edited else "verified" if declared is not None else "none"}, fh, indent=2)
+                       "provenance": "edited" if edited else "verified" if declared is not None else "none",
+                       "max_residual_um": rmax, "min_residual_um": rmin}, fh, indent=2)

@@ -84,8 +84,8 @@ def _run_corr(args, out):
         tree.plot(out.path(args.plot), title="Maximal tree of the correlation matrix %s (%d sensors)" % (args.corr, len(names)))
     print("maxtree on %s: %d sensors, %d tree edges, %d distinct partitions" % (args.corr, len(names), len(tree.edges), len(tree.partitions)))
     for part in tree.partitions:
-        print("  lambda in %s%.4g, %.4g]: %d clusters, representatives %s"
-              % ("[" if part is tree.partitions[0] else "(", part.lambda_low, part.lambda_high, len(part.clusters), ",".join(part.representatives)))
+        print("  lambda in [%.4g, %.4g%s: %d clusters, representatives %s"  # as Li 2021 Table 3 writes them
+              % (part.lambda_low, part.lambda_high, "]" if part is tree.partitions[-1] else ")", len(part.clusters), ",".join(part.representatives)))
     return doc
 
 
@@ -133,5 +133,5 @@ def _windows(runs, n, target, channel, sensors):
         for i in range(n):
             a = training_arrays([run], target, channel, sensors, window=(edges[i], edges[i + 1]))[0]
             hi = t[-1] if edges[i + 1] is None else edges[i + 1]
-            out.append(RunArrays(a.X, a.y, a.names, a.time_s, "%s[%.4g-%.4g h]" % (run.name, edges[i] / 3600, hi / 3600), a.start))
+            out.append(RunArrays(a.X, a.y, a.names, a.time_s, "%s[%.4g-%.4g h]" % (run.name, edges[i] / 3600, hi / 3600), a.start, a.log))
     return out

@@ -6,6 +6,8 @@ def _epilog():
 
     lines = ["protocols (--protocol NAME, a comma list, 'literature' = %s, or 'all'):" % ",".join(LITERATURE_STATES)]
     lines += ["  %-17s %s" % (p.name, p.description) for p in PROTOCOLS.values()]
+    lines.append("  %-17s %s" % ("FILE.csv", "your own schedule: header duration_min,feed_mm_min,from_mm,to_mm, one row per state "
+                                              "(feed 0: idle), a laser sweep at the start and after each row"))
     lines.append("")
     lines.append("effects (--effects NAME or NAME=MAGNITUDE, comma-separated; all off by default):")
     lines += ["  %-21s %s [default %g %s]" % (e.name, e.description, e.default, e.unit) for e in EFFECTS.values()]
@@ -22,7 +24,7 @@ def add_arguments(p):
     p.epilog = _epilog()
     p.add_argument("--out", required=True, metavar="DIR", help="run folder (one protocol) or parent folder (several)")
     p.add_argument("--protocol", default="v8000_r210_490", metavar="NAME",
-                   help="protocol name, comma list, 'literature' or 'all' (default v8000_r210_490; list below)")
+                   help="protocol name, FILE.csv, comma list, 'literature' or 'all' (default v8000_r210_490; list below)")
     p.add_argument("--effects", default="", metavar="LIST",
                    help="comma-separated effects to switch on, each NAME or NAME=MAGNITUDE (list below)")
     p.add_argument("--seed", type=int, default=0, help="random seed (ambient wander, sensor and laser noise); default 0")
@@ -119,7 +121,8 @@ def run(args):
 
     from host.data.runs import RUN_FILES
 
-    with Outputs() as out:
+    # a protocol file is an input: no output may be written over it
+    with Outputs([p.strip() for p in args.protocol.split(",") if p.strip().lower().endswith(".csv")]) as out:
         out.folder(args.out, "--out", owned=RUN_FILES)
         if args.json:
             out.file(args.json, "--json")

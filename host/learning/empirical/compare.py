@@ -23,6 +23,8 @@ again with disturbed temperatures (robustness). Methods:
 ``dynamic``        lag-filtered temperatures and spindle speed / feed, ≤ 5
                    sensors and the time constants chosen by cross-validation
                    across cycles or runs (dynamic.py)
+``mr-poly``        S004's multiple-regression model (Eq. 12): degree-4
+                   polynomial of the nut rise plus the base rise (mrpoly.py)
 =================  ==========================================================
 
 Two case builders: :func:`cases_runs` (fit on one run, predict the others, as in
@@ -64,17 +66,27 @@ class Case:
 
 
 def cases_runs(runs, train=(0,)):
-    """One case per training run index: fit on that run, test on every other run."""
+    """One case per entry of ``train``: an index (fit on that run) or a tuple of indices (fit on those runs pooled,
+    as Li 2017's verification pools two speeds); every other run is a test."""
     runs = list(runs)
     if len(runs) < 2:
         raise EmpiricalDataError("compare: fit on one run and predict others needs at least 2 runs, got %d" % len(runs))
     out = []
-    for i in train:
-        if not 0 <= i < len(runs):
-            raise EmpiricalDataError("compare: training run index %d out of range 0..%d" % (i, len(runs) - 1))
-        tests = [(r.name, r, None) for j, r in enumerate(runs) if j != i]
-        out.append(Case(runs[i].name, [runs[i]], None, tests, ga_data=runs, ga_params={"train_run": i},
-                        ga_note="hclust-ga fitness predicts the other runs given (published protocol): its selection has seen the test runs"))
+    for entry in train:
+        group = list(entry) if isinstance(entry, (tuple, list)) else [entry]
+        for i in group:
+            if not 0 <= i < len(runs):
+                raise EmpiricalDataError("compare: training run index %d out of range 0..%d" % (i, len(runs) - 1))
+        if len(set(group)) != len(group):
+            raise EmpiricalDataError("compare: training run index repeated in the pooled group %s" % "+".join(map(str, group)))
+        if len(group) >= len(runs):
+            raise EmpiricalDataError("compare: pooling runs %s leaves no run to predict" % "+".join(map(str, group)))
+        tests = [(r.name, r, None) for j, r in enumerate(runs) if j not in group]
+        note = "hclust-ga fitness predicts the other runs given (published protocol): its selection has seen the test runs"
+        if len(group) > 1:
+            note += "; with pooled training runs its fitness fits on the first of them (%s)" % runs[group[0]].name
+        out.append(Case("+".join(runs[i].name for i in group), [runs[i] for i in group], None, tests, ga_data=runs,
+                        ga_params={"train_run": group[0]}, ga_note=note))
     return out
 
 
@@ -157,7 +169,13 @@ def _fit(method, case, target, channel, sensors, fit_intercept, options, selecto
         sel = select(selector, data, target=target, channel=channel, sensors=sensors, **params)
         info["selection"] = sel.reason
         info["selection_obj"] = sel
-        model = fit_model(case.train, estimator, target, channel, sel.sensors, fit_intercept, case.window, reference=reference, **opts)
+        fi = fit_intercept
+        if selector == "hclust-ga":
+            # Li 2017 Eq. 16: the model on the chosen rises has no constant term; the selector's intercept setting decides
+            fi = fit_intercept and bool(params.get("intercept", False))
+            info["note"] = (info.get("note", "") + "; " if info.get("note") else "") + (
+                "MLR with intercept" if fi else "MLR without intercept (Eq. 16; hclust-ga.intercept=true adds one)")
+        model = fit_model(case.train, estimator, target, channel, sel.sensors, fi, case.window, reference=reference, **opts)
     else:
         model = fit_model(case.train, method, target, channel, sensors, fit_intercept, case.window, reference=reference, **opts)
     return model, info

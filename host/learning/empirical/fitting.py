@@ -65,7 +65,8 @@ def select_columns(arrays, sensors):
         if missing:
             raise EmpiricalDataError("%s: sensor(s) %s not available (have %s)" % (a.run, ", ".join(missing), ", ".join(a.names)))
         idx = [a.names.index(s) for s in sensors]
-        out.append(RunArrays(a.X[:, idx], a.y, list(sensors), a.time_s, a.run, None if a.start is None else a.start[idx]))
+        out.append(RunArrays(a.X[:, idx], a.y, list(sensors), a.time_s, a.run, None if a.start is None else a.start[idx],
+                             a.log_columns(idx)))
     return out
 
 
@@ -116,8 +117,8 @@ def cv_groups(runs, arrays, cv_blocks=None):
 
 def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
               reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
-              cv_blocks=None, exclude=None, **options):
-    """Fit ``method`` (mlr|pcr|stepwise) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
+              cv_blocks=None, exclude=None, geometric_degree=None, **options):
+    """Fit ``method`` (an ESTIMATORS name, or dynamic) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
     ``reference``: "fixed" (default: inputs are T − reference_C, the document
@@ -128,21 +129,36 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     run's own rises, so with one training run both give the same model.
     ``cv_blocks``: cross-validation groups of ``cv-subset`` (see :func:`cv_groups`).
     ``exclude=(lo, hi)``: targets in that span are left out of the fit (leave-one-cycle-out).
+    ``geometric_degree=N``: the cold polynomial has exactly degree N (else the degree is chosen up to
+    ``geometric_max_degree`` by ``geometric_criterion``).
+    ``method="mr-poly"``: S004's Eq. 12 on the nut and base sensors (roles, or ``nut=``/``base=`` options;
+    host/learning/empirical/mrpoly.py).
     """
     runs = list(runs)
     if not runs:
         raise EmpiricalDataError("fit: no training run given")
+    if method == "mr-poly":
+        from host.learning.empirical.mrpoly import role_sensors
+
+        options = dict(options)
+        pair = role_sensors(runs, options.pop("nut", None), options.pop("base", None))
+        if sensors is not None:
+            outside = [s for s in pair if s not in sensors]
+            if outside:
+                raise EmpiricalDataError("mr-poly: the nut/base sensor(s) %s are not among the candidate sensors %s"
+                                         % (", ".join(outside), ", ".join(sensors)))
+        sensors = pair
     arrays = training_arrays(runs, target=target, channel=channel, sensors=sensors, window=window, exclude=exclude)
     names = arrays[0].names
     X, y = stack(arrays)
     if method == "dynamic":
-        return _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K, geometric_max_degree,
-                            geometric_criterion, cv_blocks, options)
+        return _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K,
+                            (geometric_max_degree, geometric_criterion, geometric_degree), cv_blocks, options)
     est = make_estimator(method, fit_intercept=fit_intercept, **options)
     # cv-subset cross-validates over the groups; the ann validates on the last one
     groups = cv_groups(runs, arrays, cv_blocks) if method in CROSS_VALIDATED else None
     est.fit(X, y, names, groups=groups)
-    if method in NONLINEAR:
+    if method in NONLINEAR or method == "mr-poly":
         used, coefs = list(names), None
     elif hasattr(est, "selected_names_"):
         used = list(est.selected_names_)
@@ -166,11 +182,22 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     }
     kw: dict = dict(reference=reference, channel=channel, method=method, axis=runs[0].meta.get("axis"),
               envelope=_envelope(runs, arrays, used, envelope_margin_K, target, channel), statistics=stats, training=training)
-    if target == "direct":
+    if method == "mr-poly":
+        from host.learning.empirical.mrpoly import MRPolyModel
+
+        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion, geometric_degree) if target == "slope" else None
+        if geo is not None:
+            stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_,
+                                  "criterion": geometric_criterion if geometric_degree is None else "fixed"}
+        model = MRPolyModel(used, est.nut_coef_, est.base_coef_, est.intercept_, ref, target=target,
+                            geometric_coef=geo.coef_ if geo is not None else (0.0,), **kw)
+        model.geometric_ = geo
+    elif target == "direct":
         model = NetworkModel(used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
     else:
-        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
-        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion, geometric_degree)
+        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_,
+                              "criterion": geometric_criterion if geometric_degree is None else "fixed"}
         if method in NONLINEAR:
             model = NetworkModel(used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
         else:
@@ -208,7 +235,7 @@ def _sample_interval(runs):
     return float(np.round(np.median(dts) * 1000) / 1000) if dts.size else None
 
 
-def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric_max_degree, geometric_criterion, cv_blocks, options):
+def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options):
     """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/learning/empirical/dynamic.py)."""
     from host.learning.empirical.dynamic import TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
 
@@ -236,8 +263,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     }
     geo = None
     if target == "slope":
-        geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion)
-        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_, "criterion": geometric_criterion}
+        geo = fit_geometric(runs, channel, *geometric)
+        stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_,
+                              "criterion": geometric[1] if geometric[2] is None else "fixed"}
     env = _envelope(runs, arrays, used, margin, target, channel) if used else {}
     env.update(_input_envelope(runs, est.terms_))
     model = DynamicModel(est.terms_, est.coef_, est.intercept_, target, channel, geo.coef_ if geo is not None else (0.0,), "dynamic",

@@ -13,15 +13,24 @@ import numpy as np
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.targets import sweep_slopes
 
+MAX_DEGREE = 6  # the table's geometric polynomial holds at most degree 6 (firmware/table.py)
+
 
 class GeometricPolynomial:
-    """Cold geometric error polynomial; ``coef_`` ascending powers of P (µm, mm)."""
+    """Cold geometric error polynomial; ``coef_`` ascending powers of P (µm, mm).
 
-    def __init__(self, max_degree=5, criterion="cv"):
+    ``degree=N`` fixes the degree (Li 2021 uses 5, S004 4) instead of choosing one up to ``max_degree``."""
+
+    def __init__(self, max_degree=5, criterion="cv", degree=None):
         self.max_degree = max_degree
         self.criterion = criterion
+        self.degree = degree
 
     def fit(self, position_mm, error_um):
+        if self.degree is not None and (isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer))
+                                        or not 1 <= self.degree <= MAX_DEGREE):
+            raise EmpiricalDataError("geometric: geometric_degree must be an integer 1..%d (the table holds degree %d), got %r"
+                                     % (MAX_DEGREE, MAX_DEGREE, self.degree))
         if self.criterion not in ("cv", "aic"):
             raise EmpiricalDataError("geometric: criterion must be 'cv' or 'aic', got %r" % self.criterion)
         P = np.asarray(position_mm, dtype=float)
@@ -34,16 +43,22 @@ class GeometricPolynomial:
         pos, inv = np.unique(P, return_inverse=True)
         err = np.bincount(inv, weights=e) / np.bincount(inv)
         m = pos.size
-        if int(self.max_degree) < 1:
-            raise EmpiricalDataError("geometric: max_degree must be >= 1 (degrees 1..max_degree are compared), got %r" % self.max_degree)
-        if m < 4:
-            raise EmpiricalDataError("geometric: the cold sweep has %d distinct positions; at least 4 are needed to choose a degree" % m)
-        top = min(int(self.max_degree), m - 3)
+        if self.degree is not None:
+            if m < self.degree + 2:
+                raise EmpiricalDataError("geometric: geometric_degree=%d needs at least %d distinct positions in the cold sweep, it has %d"
+                                         % (self.degree, self.degree + 2, m))
+            low, top = int(self.degree), int(self.degree)
+        else:
+            if int(self.max_degree) < 1:
+                raise EmpiricalDataError("geometric: max_degree must be >= 1 (degrees 1..max_degree are compared), got %r" % self.max_degree)
+            if m < 4:
+                raise EmpiricalDataError("geometric: the cold sweep has %d distinct positions; at least 4 are needed to choose a degree" % m)
+            low, top = 1, min(int(self.max_degree), m - 3)
         # scale positions to [-1, 1] for conditioning; coefficients converted back below
         c0, half = (pos.max() + pos.min()) / 2, (pos.max() - pos.min()) / 2
         u = (pos - c0) / half
         scores = []
-        for d in range(1, top + 1):
+        for d in range(low, top + 1):
             V = np.vander(u, d + 1, increasing=True)
             beta, *_ = np.linalg.lstsq(V, err, rcond=None)
             r = err - V @ beta
@@ -92,7 +107,7 @@ def cold_points(runs, channel=None):
     return np.concatenate(P), np.concatenate(e)
 
 
-def fit_geometric(runs, channel=None, max_degree=5, criterion="cv"):
-    """GeometricPolynomial fitted to the cold sweeps of ``runs``."""
+def fit_geometric(runs, channel=None, max_degree=5, criterion="cv", degree=None):
+    """GeometricPolynomial fitted to the cold sweeps of ``runs`` (``degree``: exactly that degree)."""
     P, e = cold_points(runs, channel)
-    return GeometricPolynomial(max_degree, criterion).fit(P, e)
+    return GeometricPolynomial(max_degree, criterion, degree).fit(P, e)

@@ -20,6 +20,7 @@ ESTIMATORS = {
     "ann": "host.learning.empirical.ann:ANN",
     "ppr": "host.learning.empirical.ppr:PPR",
     "dynamic": "host.learning.empirical.dynamic:DynamicRegression",
+    "mr-poly": "host.learning.empirical.mrpoly:MRPoly",  # S004 Eq. 12 (its columns: nut and base rises)
 }
 CROSS_VALIDATED = ("cv-subset", "ann", "dynamic")  # fit reads groups (host/learning/empirical/fitting.py cv_groups)
 # estimators whose fitted model has no model-document kind yet: `tcomp compare` runs them, `tcomp fit` cannot save them
@@ -31,10 +32,10 @@ SELECTORS = ("maxtree", "stepwise", "hclust-ga")  # `tcomp select --method` (hos
 COMPARE_SELECTORS = ("maxtree", "hclust-ga")
 PIPELINES = {"maxtree-mlr": ("maxtree", "mlr"), "maxtree-pcr": ("maxtree", "pcr"), "maxtree-ann": ("maxtree", "ann")}
 COMPARE_METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset", "ann", "ppr", "maxtree-mlr", "maxtree-pcr",
-                   "maxtree-ann", "dynamic")
+                   "maxtree-ann", "dynamic", "mr-poly")
 # fitting options of a method beyond its estimator's parameters: how fit_model builds its candidates
 # (host/learning/empirical/fitting.py _fit_dynamic)
-CANDIDATE_OPTIONS = {"dynamic": ("taus_s", "use_spindle", "use_feed")}
+CANDIDATE_OPTIONS = {"dynamic": ("taus_s", "use_spindle", "use_feed"), "mr-poly": ("nut", "base")}
 COMPARE_DEFAULT = tuple(m for m in COMPARE_METHODS if m != "maxtree-mlr")  # maxtree-mlr is maxtree under the paper's name
 
 

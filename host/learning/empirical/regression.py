@@ -310,8 +310,8 @@ class Stepwise(_Linear):
     """Stepwise regression with partial-F entry and removal (Efroymson).
 
     From the empty model: enter the candidate with the largest partial F if it is
-    ≥ ``f_enter``; then remove the selected sensor with the smallest partial F if
-    it is < ``f_remove``; repeat until neither happens. Partial F of sensor j for
+    > ``f_enter``; then remove the selected sensor with the smallest partial F if
+    it is ≤ ``f_remove`` (Fan & Guo 2017's inequalities); repeat until neither happens. Partial F of sensor j for
     the larger model L (q sensors) against the smaller S:
     F = (RSS_S − RSS_L) / (RSS_L / (n − q − intercept)).
     A candidate perfectly collinear with the selected ones (1 − R² < 1e-10) is
@@ -385,7 +385,7 @@ class Stepwise(_Linear):
                 F, j = max(cand)
                 if F > best_seen[1]:
                     best_seen = (names[j], F)
-                if F >= self.f_enter:
+                if F > self.f_enter:  # Fan & Guo 2017: enter when F > F_E
                     sel.append(j)
                     history.append({"step": len(history) + 1, "action": "enter", "sensor": names[j], "F": finite_or_none(F), "threshold": float(self.f_enter)})
                     changed = True
@@ -398,7 +398,7 @@ class Stepwise(_Linear):
                     F = (self._rss(X, y, rest) - rss_l) / (rss_l / df_l) if rss_l > 0 else np.inf
                     outs.append((F, j))
                 F, j = min(outs)
-                if F < self.f_remove:
+                if F <= self.f_remove:  # Fan & Guo 2017: delete when F <= F_D
                     sel.remove(j)
                     history.append({"step": len(history) + 1, "action": "remove", "sensor": names[j], "F": finite_or_none(F), "threshold": float(self.f_remove)})
                     changed = True

@@ -193,12 +193,20 @@ class RunArrays:
     ``start``: each sensor's first sample of the run (°C) when X holds rises, so
     ``X + start`` are the measured temperatures (hclust-ga's D_e uses them); None
     when X already holds measured values.
+    ``log``: (time_s, X_log) the whole temperature log of the same sensors over the
+    same span (every sample of temperatures.csv in the window, as X: rises or
+    values), or None. The selectors' sensor-to-sensor correlations and distances use
+    it (Li 2021 Eq. 11, Li 2017 D_e/D_r are computed on the temperature series).
     """
 
-    __slots__ = ("X", "y", "names", "time_s", "run", "start")
+    __slots__ = ("X", "y", "names", "time_s", "run", "start", "log")
 
-    def __init__(self, X, y, names, time_s, run, start=None):
-        self.X, self.y, self.names, self.time_s, self.run, self.start = X, y, names, time_s, run, start
+    def __init__(self, X, y, names, time_s, run, start=None, log=None):
+        self.X, self.y, self.names, self.time_s, self.run, self.start, self.log = X, y, names, time_s, run, start, log
+
+    def log_columns(self, idx):
+        """``log`` restricted to the columns ``idx`` (None stays None)."""
+        return None if self.log is None else (self.log[0], self.log[1][:, idx])
 
     @property
     def values(self):
@@ -260,8 +268,25 @@ def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True,
             if t.size == 0:
                 raise EmpiricalDataError("%s: no %s target left outside the excluded span %s..%s s" % (r.name, target, lo, hi))
         X = temperature_features(r, names, t, rise=rise)
-        out.append(RunArrays(X, y, list(names), t, r.name, start_temperatures(r, names) if rise else None))
+        out.append(RunArrays(X, y, list(names), t, r.name, start_temperatures(r, names) if rise else None,
+                             temperature_log(r, names, window, exclude, rise)))
     return out
+
+
+def temperature_log(run, sensors, window=None, exclude=None, rise=True):
+    """(time_s, (m, p)) every sample of temperatures.csv of ``sensors`` inside ``window`` and outside ``exclude``
+    (rises over the run's first sample, or values); None when fewer than 3 samples remain."""
+    temps = run.temperatures
+    t = np.asarray(temps.time_s, dtype=float)
+    keep = np.ones(t.size, bool) if window is None else in_window(t, window)
+    if exclude is not None:
+        keep &= ~in_window(t, exclude)
+    if keep.sum() < 3:
+        return None
+    cols = [temps.names.index(s) for s in sensors]
+    raw = temps.values[:, cols]
+    V = raw[keep] - raw[0] if rise else raw[keep]
+    return t[keep], np.asarray(V, dtype=float)
 
 
 def stack(arrays):

@@ -6,8 +6,11 @@ import numpy as np
 import pytest
 
 from host.learning.empirical import EmpiricalDataError
+from host.cli import main
 from host.learning.empirical.compare import METHODS, case_split, cases_runs, findings, run_case, table
+from host.learning.empirical.fitting import fit_model
 from host.learning.empirical.schedule import cycles, segments
+from host.learning.documents import save_model
 
 FAST_GA = {"hclust-ga": {"population": 6, "generations": 3}}
 
@@ -26,7 +29,8 @@ def test_compare_needs_two_runs(make_slope):
 
 def test_every_method_side_by_side(three_runs):
     cases = cases_runs(three_runs, train=[0])
-    res = run_case(cases[0], METHODS, selector_params=FAST_GA, options={"stepwise": {"f_enter": 4.0, "f_remove": 2.0}})
+    res = run_case(cases[0], METHODS, selector_params=FAST_GA, options={"stepwise": {"f_enter": 4.0, "f_remove": 2.0},
+                                                                        "mr-poly": {"nut": "T1", "base": "T2"}})
     assert [r["method"] for r in res] == list(METHODS)
     ok = [r for r in res if not r.get("error")]
     assert [r["method"] for r in ok] == list(METHODS), [r.get("error") for r in res]
@@ -197,3 +201,40 @@ def test_paper_pipelines_select_then_fit_each_model(three_runs):
     assert res["ann"]["n_sensors"] == len(three_runs[0].temperatures.names)
     for r in res.values():
         assert r["mean_test_rmse_um"] >= 0 and r["mean_test_comprehensive_accuracy_pct"] is not None
+
+
+def test_compare_pools_training_runs(three_runs):
+    # Li 2017's verification fits on two speeds pooled and predicts the third
+    cases = cases_runs(three_runs, train=[(0, 1)])
+    assert len(cases) == 1 and [r.name for r in cases[0].train] == ["r0", "r1"] and [t[0] for t in cases[0].tests] == ["r2"]
+    res = run_case(cases[0], ["mlr"], robustness={"repeats": 1})
+    pooled = fit_model(three_runs[:2], "mlr", reference="run_start")
+    assert res[0]["coefficients"] == pytest.approx(dict(zip(pooled.sensors, pooled.coefficients.tolist())))
+    with pytest.raises(EmpiricalDataError, match="leaves no run to predict"):
+        cases_runs(three_runs, train=[(0, 1, 2)])
+
+
+def test_hclust_ga_row_has_no_intercept_by_default(three_runs):
+    # Li 2017 Eq. 16: y = sum b_s dT_s, no constant term
+    case = cases_runs(three_runs)[0]
+    plain = run_case(case, ["hclust-ga"], selector_params=FAST_GA, robustness={"repeats": 1})[0]
+    assert not plain.get("error") and plain["intercept"] == 0.0 and "without intercept" in plain["note"]
+    params = {"hclust-ga": dict(FAST_GA["hclust-ga"], intercept=True)}
+    withc = run_case(case, ["hclust-ga"], selector_params=params, robustness={"repeats": 1})[0]
+    assert withc["intercept"] != 0.0
+
+
+def test_predict_reports_max_and_min_residual(three_runs, tmp_path):
+    from host.data.runs import write_run
+
+    folder = write_run(three_runs[1], str(tmp_path / "r1"), decimals=8)
+    model = fit_model([three_runs[0]], "mlr")
+    save_model(model.to_document(), str(tmp_path / "m.json"))
+    assert main(["predict", str(tmp_path / "m.json"), folder, "--out", str(tmp_path / "p.csv"), "--json", str(tmp_path / "p.json")]) == 0
+    with open(tmp_path / "p.json") as fh:
+        rep = json.load(fh)
+    pred = np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1)[:, -1]
+    measured = np.loadtxt(os.path.join(folder, "errors.csv"), delimiter=",", skiprows=1)[:, 2]
+    r = measured - pred
+    assert rep["max_residual_um"] == pytest.approx(r.max(), abs=2e-4) and rep["min_residual_um"] == pytest.approx(r.min(), abs=2e-4)
+    assert rep["rmse_um"] == pytest.approx(np.sqrt(np.mean(r ** 2)), abs=2e-4)

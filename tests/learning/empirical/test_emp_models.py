@@ -269,3 +269,33 @@ def test_training_arrays_common_sensors_and_errors(make_slope):
         training_arrays([a], sensors=["T1", "T1"])
     with pytest.raises(EmpiricalDataError, match="T4.*not in temperatures.csv"):
         training_arrays([a, b], sensors=["T1", "T4"])
+
+
+def test_geometric_degree_is_exact(make_slope):
+    # Li 2021 fits a degree-5 polynomial to the cold sweep, S004 degree 4: the option fixes it
+    from host.learning.empirical.geometric import cold_points
+
+    run = make_slope(geo=(1.0, 0.01, -2e-5, 3e-8))
+    for n in (4, 5):
+        model = fit_model([run], method="mlr", geometric_degree=n)
+        doc = model.to_document()
+        assert doc["geometric"]["degree"] == n and len(doc["geometric"]["coefficients_um"]) == n + 1
+        assert model.statistics["geometric"]["criterion"] == "fixed"
+        P, e = cold_points([run])
+        ref = np.polynomial.polynomial.polyfit(P, e, n)  # independent least squares on the same cold points
+        np.testing.assert_allclose(model.predict(run)[: P.size], np.polynomial.polynomial.polyval(P, ref), atol=1e-6)
+    chosen = fit_model([run], method="mlr")
+    assert chosen.to_document()["geometric"]["degree"] == 3  # without the option the degree is chosen (here the truth)
+    with pytest.raises(EmpiricalDataError, match="geometric_degree must be an integer 1..6"):
+        fit_model([run], method="mlr", geometric_degree=7)
+    with pytest.raises(EmpiricalDataError, match="geometric_degree=6 needs at least 8 distinct positions"):
+        fit_model([_few_positions(make_slope)], method="mlr", geometric_degree=6)
+
+
+def _few_positions(make_slope):
+    from host.data.runs import Errors, Run
+
+    r = make_slope()
+    e = r.errors
+    keep = e.position_mm <= 300.0  # 7 of the 11 positions
+    return Run(r.meta, r.temperatures, Errors(e.time_s[keep], e.position_mm[keep], e.error_um[keep], None, None), name=r.name)

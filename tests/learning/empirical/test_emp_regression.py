@@ -259,3 +259,23 @@ def test_stepwise_selection_is_order_invariant(seed):
     s2 = Stepwise(f_enter=10, f_remove=5).fit(X[:, perm], y, [names[i] for i in perm])
     assert sorted(s1.selected_names_) == sorted(s2.selected_names_)
     assert set(s1.selected_names_) <= set(names)
+
+
+def test_stepwise_inequalities_are_the_papers():
+    """Fan & Guo 2017: a variable enters when F > F_E (and is deleted when F <= F_D). At F exactly F_E nothing
+    enters."""
+    rng = np.random.default_rng(11)
+    n = 40
+    X = rng.normal(size=(n, 3))
+    y = 2.0 * X[:, 0] + 0.3 * X[:, 1] + 0.5 * rng.normal(size=n)
+    # the first step's partial F of each sensor alone, by the textbook formula F = SSR / MSE (one regressor)
+    def single_F(j):
+        A = np.column_stack([np.ones(n), X[:, j]])
+        r = y - A @ np.linalg.lstsq(A, y, rcond=None)[0]
+        sse, sst = r @ r, ((y - y.mean()) ** 2).sum()
+        return (sst - sse) / (sse / (n - 2))
+    F0 = Stepwise(f_enter=1.0, f_remove=0.5).fit(X, y, ["a", "b", "c"]).history_[0]["F"]  # the estimator's own first F
+    assert F0 == pytest.approx(max(single_F(j) for j in range(3)), rel=1e-9)
+    with pytest.raises(EmpiricalDataError, match="no sensor reaches"):
+        Stepwise(f_enter=F0, f_remove=1.0).fit(X, y, ["a", "b", "c"])
+    assert Stepwise(f_enter=F0 * (1 - 1e-9), f_remove=1.0).fit(X, y, ["a", "b", "c"]).selected_names_[0] == "a"

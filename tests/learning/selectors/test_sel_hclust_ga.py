@@ -207,3 +207,17 @@ def test_to_json_is_strict():
     doc = Selection(["A"], "x", {"F": float("inf"), "r": np.float64(0.5), "k": np.int64(3), "v": np.array([1.0, np.nan])}).to_json()
     assert doc["reason"] == {"F": None, "r": 0.5, "k": 3, "v": [1.0, None]}
     json.dumps(doc, allow_nan=False)
+
+
+def test_k_all_keeps_every_given_sensor_as_comparison_group_4(arrays3):
+    # Li 2017 group 4: the sensors near the heat sources (and the environment) all go into the model
+    names = arrays3[0][2]
+    given = names[:4]
+    sel = select("hclust-ga", arrays3, sensors=given, k="all")
+    assert sel.sensors == given and sel.reason["every_sensor"] and sel.reason["ga"] is None
+    assert sel.reason["clusters_k"] == 4 and not sel.reason["intercept"]
+    # the model on them is Eq. 16 (no intercept) fitted on the training run: check the coefficients by lstsq
+    X, y, _ = arrays3[0]
+    idx = [names.index(s) for s in sel.reason["model"]["sensors"]]
+    b = np.linalg.lstsq(X[:, idx], y, rcond=None)[0]
+    np.testing.assert_allclose(sel.reason["model"]["coefficients"], b, rtol=1e-6, atol=1e-9)

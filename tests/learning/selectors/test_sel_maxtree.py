@@ -54,12 +54,13 @@ def _closure(S):
 
 
 def _cut(R, lam, names):
+    """The λ-cut classes as Li 2021's Table 3 reads them: together when the closure is above λ (or 1)."""
     p = len(names)
     seen, out = set(), []
     for i in range(p):
         if i in seen:
             continue
-        cls = [names[j] for j in range(p) if R[i, j] >= lam]
+        cls = [names[j] for j in range(p) if R[i, j] > lam or R[i, j] >= 1.0]
         seen.update(names.index(c) for c in cls)
         out.append(cls)
     return out
@@ -86,9 +87,10 @@ def test_edge_weights_are_the_partition_thresholds_and_intervals_give_the_cuts(s
     rng = np.random.default_rng(seed)
     for k, part in enumerate(tree.partitions):
         lo, hi = part.lambda_low, part.lambda_high
-        lams = [hi] + list(rng.uniform(lo, hi, 3)) + ([0.0] if k == 0 else [])
+        last = k == len(tree.partitions) - 1
+        lams = [lo] + list(rng.uniform(lo, hi, 3)) + ([1.0] if last else [])
         for lam in lams:
-            if k > 0 and lam <= lo:
+            if not last and lam >= hi:
                 continue
             assert tree.partition_at(lam) == part.clusters
             assert sorted(map(sorted, _cut(R, lam, names))) == sorted(map(sorted, part.clusters))
@@ -151,12 +153,12 @@ def test_bad_target_correlations():
         maximal_tree(C5, NAMES, [0.1, 0.2, 0.3, 0.4, 1.5])
 
 
-def test_paper_criterion_adds_sensors_only_for_a_significant_r2_gain(arrays3):
+def test_r2_change_criterion_adds_sensors_only_for_a_significant_r2_gain(arrays3):
     from scipy import stats
 
-    sel = select("maxtree", arrays3)
+    sel = select("maxtree", arrays3, criterion="r2-change")
     r = sel.reason
-    assert r["criterion_name"] == "paper"
+    assert r["criterion_name"] == "r2-change"
     n = r["samples"]
     ok = sorted([row for row in r["partitions"] if "skipped" not in row and row["p_F"] < 0.05], key=lambda row: len(row["representatives"]))
     # independent replay: partial F of the R² change, textbook form
@@ -172,17 +174,17 @@ def test_paper_criterion_adds_sensors_only_for_a_significant_r2_gain(arrays3):
     assert [st["partition"] for st in r["steps"]] == examined
 
 
-def test_one_dominant_sensor_is_kept_alone_by_the_paper_criterion():
+def test_one_dominant_sensor_is_kept_alone_by_the_r2_change_criterion():
     rng = np.random.default_rng(5)
     n = 60
     base = np.cumsum(rng.normal(size=n))
     X = np.column_stack([base + 0.3 * rng.normal(size=n) for _ in range(4)] + [rng.normal(size=n) for _ in range(3)])
     y = 2.0 * X[:, 0] + 0.5 * rng.normal(size=n)
     names = ["S%d" % (j + 1) for j in range(X.shape[1])]
-    paper = select("maxtree", (X, y, names))
+    forward = select("maxtree", (X, y, names), criterion="r2-change")
     loose = select("maxtree", (X, y, names), criterion="tolerance")
-    assert len(paper.sensors) <= len(loose.sensors)
-    assert "S1" in paper.sensors
+    assert len(forward.sensors) <= len(loose.sensors)
+    assert "S1" in forward.sensors
     with pytest.raises(SelectionError, match="criterion must be one of"):
         select("maxtree", (X, y, names), criterion="best")
 
@@ -228,9 +230,9 @@ def test_selection_plot_is_written(arrays3, tmp_path):
 def test_degenerate_intervals():
     one = maximal_tree(np.array([[1.0]]), ["A"])
     assert one.edges == [] and [(p.lambda_low, p.lambda_high, p.clusters) for p in one.partitions] == [(0.0, 1.0, [["A"]])]
-    # zero similarity: together only at λ = 0 exactly, the closed first interval [0, 0]
+    # zero similarity: the edge is cut from λ = 0 on ([0, 0) holds for no λ, so no partition joins them)
     zero = maximal_tree(np.eye(2), ["A", "B"])
-    assert [(p.lambda_low, p.lambda_high, p.clusters) for p in zero.partitions] == [(0.0, 0.0, [["A", "B"]]), (0.0, 1.0, [["A"], ["B"]])]
+    assert [(p.lambda_low, p.lambda_high, p.clusters) for p in zero.partitions] == [(0.0, 1.0, [["A"], ["B"]])]
     # signed similarity below 0 never joins for λ in [0, 1]
     neg = maximal_tree(np.array([[1.0, -0.5], [-0.5, 1.0]]), ["A", "B"], absolute=False)
     assert [(p.lambda_low, p.lambda_high, p.clusters) for p in neg.partitions] == [(0.0, 1.0, [["A"], ["B"]])]
@@ -243,3 +245,88 @@ def test_single_sensor_selection_and_plot(tmp_path):
     sel = select("maxtree", (X, y, ["A"]))
     assert sel.sensors == ["A"]
     assert sel.plot(str(tmp_path / "one.png"))
+
+
+# Li 2021 Table 6 (R² of the representative sets of Table 5, n = 8 slopes), Tables 7-8 (F, Sig. of sets 5 and 6)
+LI2021_TABLE5 = [["T5"], ["T5", "T11"], ["T5", "T7", "T11"], ["T2", "T5", "T7", "T11"], ["T1", "T2", "T5", "T7", "T11"],
+                 ["T1", "T2", "T5", "T7", "T9", "T11"], ["T1", "T2", "T5", "T6", "T7", "T9", "T11"]]
+LI2021_TABLE6_R2 = [0.963, 0.963, 0.971, 0.989, 0.997, 0.999]
+
+
+def _published_rows():
+    """Rows as choose_partition takes them, F and Sig. recomputed from the published R² (n = 8) by the textbook
+    formula F = (R²/k)/((1 − R²)/(n − k − 1)); sets of 7+ variables leave no residual degree of freedom."""
+    from scipy import stats
+
+    n, rows = 8, []
+    for i, reps in enumerate(LI2021_TABLE5):
+        k = len(reps)
+        row = {"partition": i, "representatives": reps}
+        if k + 1 >= n:
+            row["skipped"] = "no residual degree of freedom"
+        else:
+            r2 = LI2021_TABLE6_R2[i]
+            F = (r2 / k) / ((1 - r2) / (n - k - 1))
+            row.update(r2=r2, F=F, p_F=float(stats.f.sf(F, k, n - k - 1)), min_tolerance=0.5)
+        rows.append(row)
+    return rows
+
+
+def test_paper_rule_on_li2021_tables_6_to_8_picks_the_five_sensors():
+    from host.learning.empirical.selectors.maxtree import choose_partition
+
+    rows = _published_rows()
+    # the recomputed significance agrees with the printed one: 0.008 for five variables, 0.058 for six
+    assert rows[4]["p_F"] == pytest.approx(0.008, abs=0.001)
+    assert rows[5]["p_F"] == pytest.approx(0.058, abs=0.002)
+    chosen, reason = choose_partition(rows, 8)
+    assert chosen["representatives"] == ["T1", "T2", "T5", "T7", "T11"]
+    assert reason["criterion_name"] == "paper"
+    # the earlier reading (forward F test of the R² change) keeps one sensor on the same numbers
+    chosen, _ = choose_partition(_published_rows(), 8, criterion="r2-change")
+    assert chosen["representatives"] == ["T5"]
+
+
+def test_paper_rule_excludes_a_set_whose_variable_fails_spss_tolerance():
+    from host.learning.empirical.selectors.maxtree import choose_partition
+
+    rows = _published_rows()
+    rows[4]["min_tolerance"], rows[4]["min_tolerance_sensor"] = 5e-5, "T11"  # five-sensor set now collinear
+    chosen, _ = choose_partition(rows, 8)
+    assert chosen["representatives"] == ["T2", "T5", "T7", "T11"]
+    assert "tolerance exceeded" in rows[4]["skipped"] and "T11" in rows[4]["skipped"]
+
+
+def test_paper_rule_on_data_skips_nearly_collinear_representatives():
+    # C = A + 2B + tiny noise: the finest partition {A},{B},{C} has the best R² but C's tolerance is ~1e-7
+    rng = np.random.default_rng(3)
+    n = 80
+    A, B = np.cumsum(rng.normal(size=n)), np.cumsum(rng.normal(size=n))
+    Cs = A + 2 * B + 1e-3 * rng.normal(size=n)
+    X = np.column_stack([A, B, Cs])
+    y = A + 2 * B + 0.05 * rng.normal(size=n)
+    names = ["A", "B", "C"]
+    sel = select("maxtree", (X, y, names))
+    r = sel.reason
+    finest = [row for row in r["partitions"] if len(row["representatives"]) == 3][0]
+    assert "tolerance exceeded" in finest["skipped"]
+    # independent tolerance of C: 1 − R² of C on A and B
+    M = np.column_stack([np.ones(n), A, B])
+    res = Cs - M @ np.linalg.lstsq(M, Cs, rcond=None)[0]
+    assert finest["min_tolerance"] == pytest.approx(res @ res / ((Cs - Cs.mean()) @ (Cs - Cs.mean())), rel=1e-6)
+    assert len(sel.sensors) < 3
+    # without the tolerance check the rule would take the finest set (largest R²)
+    loose = select("maxtree", (X, y, names), min_tolerance=0.0)
+    assert loose.sensors == names
+    ok = [row for row in loose.reason["partitions"] if "skipped" not in row and row["p_F"] < 0.05]
+    assert loose.reason["r2"] == max(row["r2"] for row in ok)
+
+
+def test_intervals_are_written_as_li2021_table_3():
+    # Table 3: [0, 0.94943) all together, [0.94943, 0.96927) T11 apart: at lambda = the edge weight the edge is cut
+    C = np.array([[1.0, 0.95, 0.90], [0.95, 1.0, 0.85], [0.90, 0.85, 1.0]])
+    tree = maximal_tree(C, ["T1", "T2", "T3"])
+    assert tree.to_json()["interval_convention"].startswith("lambda in [lambda_low, lambda_high)")
+    assert tree.partition_at(0.90) == [["T1", "T2"], ["T3"]]  # the 0.90 edge is cut at lambda = 0.90
+    assert tree.partition_at(0.8999) == [["T1", "T2", "T3"]]
+    assert tree.partition_at(1.0) == [["T1"], ["T2"], ["T3"]]

@@ -22,8 +22,10 @@ Methods (docs/selection.md has the criteria and thresholds):
 
 ``"maxtree"``
     fuzzy clustering by the maximal-tree method on the pooled runs; params
-    ``alpha=0.05`` (F-test level), ``criterion="paper"`` (R² gains accepted by
-    the F test, coarse to fine) or ``"tolerance"`` (with ``r2_tolerance=0.01``:
+    ``alpha=0.05`` (F-test level), ``criterion="paper"`` (Li 2021: the largest
+    R² among significant sets whose variables pass SPSS's tolerance
+    ``min_tolerance=0.0001``), ``"r2-change"`` (R² gains accepted by the F test,
+    coarse to fine) or ``"tolerance"`` (with ``r2_tolerance=0.01``:
     R² slack before F decides), ``max_sensors=None``, ``absolute=True``
     (similarity |r| rather than r).  :func:`maximal_tree` is the same method on a precomputed
     correlation matrix.

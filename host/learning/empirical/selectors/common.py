@@ -92,18 +92,25 @@ def _subset(arr, sensors, label):
         raise SelectionError("%s has no sensor %s (has %s)" % (label, ", ".join(missing), ",".join(names)))
     idx = [names.index(s) for s in sensors]
     start = getattr(arr, "start", None)
-    return _keep_start((np.asarray(X, dtype=float)[:, idx], y, list(sensors)), arr, None if start is None else np.asarray(start)[idx])
+    log = arr.log_columns(idx) if hasattr(arr, "log_columns") else None
+    return _keep_start((np.asarray(X, dtype=float)[:, idx], y, list(sensors)), arr, None if start is None else np.asarray(start)[idx], log)
 
 
-def _keep_start(checked, original, start=None):
-    """``checked`` (X, y, names) keeps the start temperatures of a RunArrays (rises -> measured values)."""
+_SAME = object()  # _keep_start: the original's log, its columns unchanged
+
+
+def _keep_start(checked, original, start=None, log=_SAME):
+    """``checked`` (X, y, names) keeps the start temperatures and the temperature log of a RunArrays
+    (rises -> measured values; the whole log for correlations and distances)."""
     from host.learning.empirical.targets import RunArrays
 
     start = getattr(original, "start", None) if start is None else start
-    if start is None:
+    log = getattr(original, "log", None) if log is _SAME else log
+    if start is None and log is None:
         return checked
     X, y, names = checked
-    return RunArrays(X, y, names, getattr(original, "time_s", None), getattr(original, "run", None), np.asarray(start, dtype=float))
+    return RunArrays(X, y, names, getattr(original, "time_s", None), getattr(original, "run", None),
+                     None if start is None else np.asarray(start, dtype=float), log)
 
 
 def check_arrays(arr, label="data"):

@@ -47,11 +47,13 @@ DEFAULTS = {
     "max_clusters": 10,
     "max_combinations": 20000,
     "alpha": None,  # fixed distance weight (None: the GA chooses)
-    "k": None,  # fixed number of clusters (None: the GA chooses)
+    "k": None,  # fixed number of clusters (None: the GA chooses; "all": every candidate sensor, S002's group 4)
     "distance_on": "values",  # values | rises
     "normalisation": "max",  # max (Eq. 5) | minmax
     "intercept": False,  # Eq. 16 has none
+    "series": "log",  # log (every temperature sample of the training run) | targets (the sweep times)
 }
+SERIES = ("log", "targets")
 DISTANCE_ON = ("values", "rises")
 
 
@@ -164,9 +166,24 @@ def select_hclust_ga(arrays, context=None, **params):
     Xtr, ytr, names = train
     n, p = Xtr.shape
     k_max = min(prm["max_clusters"], p, n - 2)  # >= 1: check_arrays guarantees n >= 3
+    every = prm["k"] == "all"  # S002 comparison group 4: the given sensors (near the heat sources) all kept, one per cluster
+    if every:
+        if p > n - 2:
+            raise SelectionError("hclust-ga: k=all keeps all %d sensors, the training run has %d samples (needs at least %d)" % (p, n, p + 2))
+        prm["k"] = p
+        if prm["alpha"] is None:
+            prm["alpha"] = 1.0  # with one sensor per cluster the distance weight changes nothing
     prm["k"] = number("hclust-ga", "k", prm["k"], 1, min(p, n - 2), integer=True, allow_none=True)
-    # tuples without start temperatures are clustered as given; RunArrays of rises get their start back
-    cluster_X = getattr(train, "values", Xtr) if prm["distance_on"] == "values" else Xtr
+    if prm["series"] not in SERIES:
+        raise SelectionError("hclust-ga: series must be one of %s, got %r" % (", ".join(SERIES), prm["series"]))
+    # tuples without start temperatures are clustered as given; RunArrays of rises get their start back.
+    # Li 2017 computes D_e and D_r on the temperature series: every logged sample of the training run (series="log")
+    log = getattr(train, "log", None) if prm["series"] == "log" else None
+    base = Xtr if log is None else log[1]
+    start = getattr(train, "start", None)
+    cluster_X = (base if start is None else base + start) if prm["distance_on"] == "values" else base
+    series_on = ("temperature log of the training run: %d samples" % base.shape[0] if log is not None
+                 else "target times: %d samples%s" % (n, "" if prm["series"] == "targets" else " (no temperature log with these arrays)"))
     prob = RobustnessProblem(train, tests, float(prm["disturbance_C"]), prm["disturbance"], prm["seed"], prm["max_combinations"],
                              cluster_X=cluster_X, normalisation=prm["normalisation"], intercept=prm["intercept"])
     k_bits = max(1, math.ceil(math.log2(k_max))) if k_max > 1 else 1
@@ -202,7 +219,9 @@ def select_hclust_ga(arrays, context=None, **params):
         "alpha": alpha,
         "clusters_k": k,
         "fixed": {key: prm[key] for key in ("alpha", "k") if prm[key] is not None},
-        "distance_on": prm["distance_on"] if cluster_X is not Xtr or prm["distance_on"] == "rises" else "values as given (no start temperatures)",
+        "every_sensor": every,  # k=all: the candidates kept as given (comparison group 4), alpha irrelevant
+        "distance_on": prm["distance_on"] if start is not None or prm["distance_on"] == "rises" else "values as given (no start temperatures)",
+        "series": series_on,
         "normalisation": prm["normalisation"],
         "intercept": prm["intercept"],
         "clusters": [[names[j] for j in c] for c in clusters],

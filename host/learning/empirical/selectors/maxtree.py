@@ -7,9 +7,12 @@ edges lighter than λ leaves exactly the closure's λ-cut classes. So the only �
 values where the partition changes are the tree's edge weights, and the full list
 of distinct partitions over λ in [0, 1] comes from sorting them.
 
-Interval convention: a partition holds for λ in (lambda_low, lambda_high]; the
-first interval is closed at 0, [0, lambda_high]. At λ exactly equal to an edge
-weight that edge is kept (sensors i, j are together when similarity >= λ).
+Interval convention, as Li 2021 (Table 3) writes it: a partition holds for λ in
+[lambda_low, lambda_high); the last interval is closed at 1, [lambda_low, 1]. At λ
+exactly equal to an edge weight that edge is cut (sensors i, j stay together when
+their similarity is above λ); edges of weight 1 are never cut. (Before issue 23:
+(lambda_low, lambda_high], the edge kept at equality; the interval ends are the
+same numbers.)
 """
 from dataclasses import dataclass, field
 
@@ -46,8 +49,8 @@ class MaxTree:
     representative_rule: str
 
     def partition_at(self, lam):
-        """Clusters (lists of names) from cutting tree edges lighter than ``lam``."""
-        return _components(self.names, [(self.names.index(a), self.names.index(b)) for a, b, w in self.edges if w >= lam])
+        """Clusters (lists of names) from cutting the tree edges not heavier than ``lam`` (weight-1 edges are kept)."""
+        return _components(self.names, [(self.names.index(a), self.names.index(b)) for a, b, w in self.edges if w > lam or w >= 1.0])
 
     def to_json(self):
         return {
@@ -55,7 +58,7 @@ class MaxTree:
             "edges": [[a, b, float(w)] for a, b, w in self.edges],
             "partitions": [p.to_json() for p in self.partitions],
             "representative_rule": self.representative_rule,
-            "interval_convention": "lambda in (lambda_low, lambda_high]; the first interval is [0, lambda_high]",
+            "interval_convention": "lambda in [lambda_low, lambda_high) (Li 2021 Table 3); the last interval is [lambda_low, 1]",
         }
 
     def linkage(self):
@@ -217,6 +220,8 @@ def maximal_tree(corr, names, target_corr=None, absolute=True):
     lows = [0.0] + breaks
     partitions = []
     for lo, hi in zip(lows, highs):
+        if lo == hi:  # an edge of weight 0: [0, 0) holds for no λ (at λ = 0 that edge is already cut)
+            continue
         clusters = _components(names, [(i, j) for i, j, w in tree if w >= hi])
         partitions.append(Partition(float(lo), float(hi), clusters, [_representative(c, names, S, t) for c in clusters]))
     rule = "max |r| with the target" if t is not None else "max mean similarity to the other cluster members"
@@ -237,8 +242,32 @@ def _representative(cluster, names, S, t):
 
 # ---------------------------------------------------------------- selection on data
 
-DEFAULTS = {"alpha": 0.05, "criterion": "paper", "r2_tolerance": 0.01, "max_sensors": None, "absolute": True}
-CRITERIA = ("paper", "tolerance")
+DEFAULTS = {"alpha": 0.05, "criterion": "paper", "r2_tolerance": 0.01, "max_sensors": None, "absolute": True,
+            "min_tolerance": 1e-4, "correlation_on": "log"}
+CORRELATION_ON = ("log", "targets")
+CRITERIA = ("paper", "r2-change", "tolerance")
+# SPSS REGRESSION's default TOLERANCE: a variable whose 1 − R² on the other variables is below this is not entered,
+# so the set it belongs to cannot be fitted whole (Li 2021 §4.2 (5): "the tolerance is exceeded")
+SPSS_MIN_TOLERANCE = 1e-4
+
+
+def tolerances(X):
+    """Each column's tolerance 1 − R² of its regression (with intercept) on the other columns (SPSS's TOLERANCE).
+
+    One column: 1. A column that is an exact combination of the others: 0."""
+    X = np.asarray(X, dtype=float)
+    n, k = X.shape
+    out = []
+    for j in range(k):
+        if k == 1:
+            out.append(1.0)
+            continue
+        xj = X[:, j]
+        A = np.column_stack([np.ones(n), np.delete(X, j, axis=1)])
+        res = xj - A @ np.linalg.lstsq(A, xj, rcond=None)[0]
+        sst = float(((xj - xj.mean()) ** 2).sum())
+        out.append(max(0.0, float(res @ res) / sst) if sst > 0 else 0.0)
+    return out
 
 
 def r2_change_test(r2_small, k_small, r2_large, k_large, n):
@@ -260,11 +289,11 @@ def r2_change_test(r2_small, k_small, r2_large, k_large, n):
     return float(F), float(stats.f.sf(F, dk, df))
 
 
-def _choose_paper(ok, alpha, n):
-    """The paper's reading: the first set is the coarsest whose regression is significant at ``alpha``;
-    going to finer partitions, each next representative set must raise R² significantly over the
-    current one (F test of the R² change at ``alpha``); the first that does not ends the search,
-    as in forward selection with an F-to-enter. Returns (chosen row, steps)."""
+def _choose_r2_change(ok, alpha, n):
+    """``criterion="r2-change"`` (this project's reading before issue 23, not the paper's): the first set is the
+    coarsest whose regression is significant at ``alpha``; going to finer partitions, each next representative set
+    must raise R² significantly over the current one (F test of the R² change at ``alpha``); the first that does not
+    ends the search, as in forward selection with an F-to-enter. Returns (chosen row, steps)."""
     ok = sorted(ok, key=lambda r: (len(r["representatives"]), r["partition"]))
     cur = ok[0]
     steps = [{"partition": cur["partition"], "sensors": len(cur["representatives"]), "r2": cur["r2"], "accepted": True,
@@ -279,31 +308,83 @@ def _choose_paper(ok, alpha, n):
     return cur, steps
 
 
-def select_maxtree(arrays, context=None, **params):
-    """Choose the partition whose representatives regress best on the target.
+def choose_partition(rows, n, criterion="paper", alpha=0.05, r2_tolerance=0.01, min_tolerance=SPSS_MIN_TOLERANCE):
+    """The chosen row among evaluated representative sets -> (row, reason dict).
 
-    ``criterion="paper"`` (default): the sample R² of the representatives' regression
-    and F tests at ``alpha`` (0.05). The candidates are the partitions whose
-    regression F test is significant; from the coarsest of them towards finer ones,
-    a finer set replaces the current choice only when its R² gain over the current
-    set is significant (F test of the R² change at ``alpha``); the first finer set
-    that is not significantly better ends the search. So R² says what is better and
-    the F test whether it is better by more than chance.
-    ``criterion="tolerance"`` (this project's earlier rule, kept for comparison):
-    among significant partitions, those within ``r2_tolerance`` of the best R²
-    compete on F (the larger F wins); equal F goes to fewer sensors.
+    ``rows``: one dict per representative set with ``partition`` (an id), ``representatives`` (names), ``r2``,
+    ``F``, ``p_F`` and, for the paper rule, ``min_tolerance`` (the smallest tolerance of its variables); rows
+    with ``skipped`` are not candidates. The published numbers (Li 2021 Tables 6–8) can be passed as such rows.
+
+    * ``paper`` (Li 2021 §3.2 and §4.2 (5)): among the sets whose regression is significant at ``alpha``
+      and whose variables all pass SPSS's tolerance (``min_tolerance``, default 0.0001; a set with a variable
+      below it cannot be fitted whole: "the tolerance is exceeded"), the one whose R² is closest to 1;
+      equal R²: fewer sensors.
+    * ``r2-change``: forward F test of the R² change (:func:`_choose_r2_change`).
+    * ``tolerance``: within ``r2_tolerance`` of the best R², the largest F (equal F: fewer sensors).
+    """
+    if criterion not in CRITERIA:
+        raise SelectionError("maxtree: criterion must be one of %s, got %r" % (", ".join(CRITERIA), criterion))
+    reason = {"criterion_name": criterion}
+    if criterion == "paper":
+        for r in rows:
+            if "skipped" not in r and r.get("min_tolerance") is not None and r["min_tolerance"] < min_tolerance:
+                r["skipped"] = "tolerance exceeded: %s has tolerance %.3g < %g (SPSS excludes it, the set cannot be fitted whole)" % (
+                    r.get("min_tolerance_sensor", "a variable"), r["min_tolerance"], min_tolerance)
+    ok = [r for r in rows if "skipped" not in r and r.get("p_F") is not None and r["p_F"] < alpha]
+    if not ok:
+        return None, reason
+    best_r2 = max(r["r2"] for r in ok)
+    reason["best_r2"] = best_r2
+    if criterion == "paper":
+        chosen = max(ok, key=lambda r: (r["r2"], -len(r["representatives"]), -r["partition"]))
+        reason["criterion"] = ("Li 2021: among the representative sets whose regression is significant (p_F < alpha) and whose "
+                               "variables all pass the tolerance (min_tolerance, SPSS default), the largest R2 (closest to 1)")
+        reason["min_tolerance"] = min_tolerance
+    elif criterion == "r2-change":
+        chosen, steps = _choose_r2_change(ok, alpha, n)
+        reason["criterion"] = ("regression F test p < alpha; from the coarsest significant partition, a finer one replaces the choice "
+                               "only if its R2 gain is significant (F test of the R2 change, p < alpha); the first refusal stops")
+        reason["steps"] = steps
+    else:
+        cands = [r for r in ok if r["r2"] >= best_r2 - r2_tolerance]
+        chosen = max(cands, key=lambda r: (r["F"], -len(r["representatives"]), -r["partition"]))
+        reason["criterion"] = "F test p < alpha; R2 within r2_tolerance of the best; then largest F"
+        reason["r2_tolerance"] = r2_tolerance
+    return chosen, reason
+
+
+def select_maxtree(arrays, context=None, **params):
+    """Choose the partition whose representatives regress best on the target (:func:`choose_partition`).
+
+    ``criterion="paper"`` (default, Li 2021 §3.2/§4.2): the largest R² among the representative sets whose
+    regression F test is significant at ``alpha`` (0.05) and whose variables all have a tolerance
+    1 − R²_j >= ``min_tolerance`` (SPSS's 0.0001). ``criterion="r2-change"``: forward F test of the R² change
+    (this project's reading before issue 23). ``criterion="tolerance"`` (the earlier rule): within
+    ``r2_tolerance`` of the best R², the largest F.
     """
     prm = check_params("maxtree", params, DEFAULTS)
     prm["alpha"] = number("maxtree", "alpha", prm["alpha"], 0.0, 1.0)
     if prm["criterion"] not in CRITERIA:
         raise SelectionError("maxtree: criterion must be one of %s, got %r" % (", ".join(CRITERIA), prm["criterion"]))
     prm["r2_tolerance"] = number("maxtree", "r2_tolerance", prm["r2_tolerance"], 0.0, 1.0)
+    prm["min_tolerance"] = number("maxtree", "min_tolerance", prm["min_tolerance"], 0.0, 1.0)
     prm["max_sensors"] = number("maxtree", "max_sensors", prm["max_sensors"], 1, integer=True, allow_none=True)
     if not isinstance(prm["absolute"], bool):
         raise SelectionError("maxtree: absolute must be true or false, got %r" % (prm["absolute"],))
+    if prm["correlation_on"] not in CORRELATION_ON:
+        raise SelectionError("maxtree: correlation_on must be one of %s, got %r" % (", ".join(CORRELATION_ON), prm["correlation_on"]))
     X, y, names = pooled(arrays)
     n = X.shape[0]
-    C = np.corrcoef(X, rowvar=False).reshape(len(names), len(names))
+    # Li 2021 Eq. 11: the sensors' correlations over their temperature series, i.e. every logged sample (rises over
+    # each run's start, all runs pooled); the target is only known at the sweeps, so its correlations stay there
+    logs = [getattr(a, "log", None) for a in arrays]
+    if prm["correlation_on"] == "log" and all(lg is not None for lg in logs):
+        L = np.vstack([lg[1] for lg in logs])
+        similarity_on = "temperature log: %d samples (rises over each run's start, runs pooled)" % L.shape[0]
+    else:
+        L = X
+        similarity_on = "target times: %d samples%s" % (n, "" if prm["correlation_on"] == "targets" else " (no temperature log with these arrays)")
+    C = np.corrcoef(L, rowvar=False).reshape(len(names), len(names))
     t = np.array([np.corrcoef(X[:, j], y)[0, 1] for j in range(len(names))])
     tree = maximal_tree(C, names, target_corr=t, absolute=prm["absolute"])
     rows = []
@@ -315,32 +396,26 @@ def select_maxtree(arrays, context=None, **params):
         elif prm["max_sensors"] is not None and len(reps) > prm["max_sensors"]:
             row["skipped"] = "more than max_sensors=%d" % prm["max_sensors"]
         else:
-            st = ols_stats(X[:, [names.index(r) for r in reps]], y)
-            row.update(r2=st["r2"], adj_r2=st["adj_r2"], F=st["F"], p_F=st["p_F"], rmse=st["rmse"])
+            cols = X[:, [names.index(r) for r in reps]]
+            st = ols_stats(cols, y)
+            tol = tolerances(cols)
+            j = int(np.argmin(tol))
+            row.update(r2=st["r2"], adj_r2=st["adj_r2"], F=st["F"], p_F=st["p_F"], rmse=st["rmse"], min_tolerance=tol[j],
+                       min_tolerance_sensor=reps[j])
             if st["p_F"] is None:
                 row["skipped"] = "representatives are collinear (rank %d of %d)" % (st["rank"], len(reps) + 1)
         rows.append(row)
-    ok = [r for r in rows if "skipped" not in r and r["p_F"] < prm["alpha"]]
-    if not ok:
+    chosen, reason = choose_partition(rows, n, prm["criterion"], prm["alpha"], prm["r2_tolerance"], prm["min_tolerance"])
+    if chosen is None:
         raise SelectionError(
             "maxtree: no partition's representatives give a regression significant at alpha=%g (%d samples, %d sensors); more data or a different target is needed"
             % (prm["alpha"], n, len(names))
         )
-    best_r2 = max(r["r2"] for r in ok)
-    reason = {"criterion_name": prm["criterion"]}
-    if prm["criterion"] == "paper":
-        chosen, steps = _choose_paper(ok, prm["alpha"], n)
-        reason["criterion"] = ("regression F test p < alpha; from the coarsest significant partition, a finer one replaces the choice "
-                               "only if its R2 gain is significant (F test of the R2 change, p < alpha); the first refusal stops")
-        reason["steps"] = steps
-    else:
-        cands = [r for r in ok if r["r2"] >= best_r2 - prm["r2_tolerance"]]
-        chosen = max(cands, key=lambda r: (r["F"], -len(r["representatives"]), -r["partition"]))
-        reason["criterion"] = "F test p < alpha; R2 within r2_tolerance of the best; then largest F"
-        reason["r2_tolerance"] = prm["r2_tolerance"]
+    best_r2 = reason.pop("best_r2")
     part = tree.partitions[chosen["partition"]]
     sensors = [s for s in names if s in part.representatives]
     reason.update({
+        "similarity_on": similarity_on,
         "alpha": prm["alpha"],
         "best_r2": best_r2,
         "chosen_partition": chosen["partition"],

@@ -25,7 +25,7 @@ def select_stepwise(arrays, context=None, **params):
     sensors = [s for s in names if s in chosen]
     stats = est.statistics()
     reason = {
-        "criterion": "enter while the best partial F >= f_enter, remove while the worst partial F < f_remove",
+        "criterion": "enter while the best partial F > f_enter, remove while the worst partial F <= f_remove (Fan & Guo 2017)",
         "f_enter": float(prm["f_enter"]),
         "f_remove": float(prm["f_remove"]),
         "entry_order": list(est.selected_names_),
