@@ -54,4 +54,6 @@ NOT_ON_BOARD = {
     "wire.py": "the host's copy of the wire contract; board modules keep folded const copies",
     "linux_adapters.py": "CPython adapters of a Linux board (fcntl, ctypes, pyserial, smbus2)",
     "boards/linux.py": "the Linux board file, run under CPython (python -m firmware.main)",
+    "__init__.py": "CPython only: installs the const() stand-in (on the board firmware/ is a plain folder)",
+    "micropython_standin.py": "CPython's stand-in for the built-in micropython module (const)",
 }

@@ -6,6 +6,31 @@ import sys
 from host.cli.verbs import VERBS
 from host.errors import UserError, os_reason
 
+# Top-level modules a verb may need that an install can lack -> what to install (pyproject.toml, README:
+# the board-side install has no scientific stack; `tcomp[science]` adds it).
+INSTALL_OF_MODULE = {
+    "numpy": "tcomp[science]",
+    "scipy": "tcomp[science]",
+    "matplotlib": "tcomp[science]",
+    "serial": "tcomp (its dependency pyserial)",
+    "mpremote": "tcomp (its dependency mpremote)",
+    "pymodbus": "tcomp (its dependency pymodbus)",
+}
+
+
+class MissingInstall(UserError):
+    """A verb needs a module of an install (an extra) that is not there: names the module and what to install."""
+
+    def __init__(self, module):
+        super().__init__("this verb needs %s, which is not installed: pip install '%s'"
+                         % (module, INSTALL_OF_MODULE[module]))
+
+
+def _missing_install(exc):
+    """The MissingInstall for a ModuleNotFoundError of one of INSTALL_OF_MODULE's modules, else None."""
+    top = (exc.name or "").partition(".")[0]
+    return MissingInstall(top) if top in INSTALL_OF_MODULE else None
+
 
 def sensor_list(text, flag="--sensors"):
     """Comma-separated names -> list, None when the flag was not given; an empty list is a UserError."""
@@ -36,20 +61,38 @@ def build_parser(verb=None):
     for name, (module_name, summary) in VERBS.items():
         p = sub.add_parser(name, help=summary, description=summary)
         if name == verb:
-            module = importlib.import_module(module_name)
-            module.add_arguments(p)
+            try:  # the verb's module, and its arguments (some read tables of a room, e.g. simulate's effects)
+                module = importlib.import_module(module_name)
+                module.add_arguments(p)
+            except ModuleNotFoundError as exc:
+                missing = _missing_install(exc)
+                if missing is None:
+                    raise
+                raise missing from exc
             p.set_defaults(_run=module.run)
     return parser
 
 
 def main(argv=None):
     argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(_chosen_verb(argv))
+    verb = _chosen_verb(argv)
+    try:
+        parser = build_parser(verb)
+    except MissingInstall as exc:
+        print("tcomp %s: error: %s" % (verb, exc), file=sys.stderr)
+        return 2
     args = parser.parse_args(argv)
     try:
         return int(args._run(args) or 0)
     except UserError as exc:
         print("tcomp %s: error: %s" % (args.verb, exc), file=sys.stderr)
+        return 2
+    except ModuleNotFoundError as exc:
+        # a verb importing a missing extra's module inside run() (after its arguments parsed)
+        missing = _missing_install(exc)
+        if missing is None:
+            raise
+        print("tcomp %s: error: %s" % (args.verb, missing), file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         return 130

@@ -153,7 +153,7 @@ def test_every_cross_module_name_used_on_micropython_is_public():
 
 
 def test_no_module_tells_cpython_by_a_failing_micropython_import():
-    # micropython.py (the CPython shim for const) makes `import micropython` succeed on CPython too:
+    # firmware/micropython_standin.py (the CPython shim for const) makes `import micropython` succeed on CPython too:
     # a module that must know where it runs asks sys.implementation.name
     for fn in sorted(os.listdir(FW)):
         if fn.endswith(".py"):

@@ -1,14 +1,19 @@
 """tcomp hil --run RUN_DIR --table table.bin [--interpreter micropython|cpython] [--json OUT.json]
 
-The simulated rig lives with the HIL tests (hil_tests/rig, hil_tests/sim). This verb is the one
-production module that uses it, and it imports it inside run(): no other verb, nor `tcomp --help`,
-loads the rig (tests/test_layers.py holds this exception and nothing else).
+The simulated rig lives with the HIL tests (hil_tests/rig, hil_tests/sim). This verb reaches it through
+the entry point group ``tcomp.rig`` (pyproject.toml; the rig's side is hil_tests/rig/entry.py), looked up
+with importlib.metadata inside run(): host never imports hil_tests (tests/test_layers.py), and no other
+verb, nor `tcomp --help`, loads the rig.
 """
 
 import json
 import re
 import sys
 import time
+from importlib.metadata import entry_points
+
+RIG_GROUP = "tcomp.rig"
+RIG_ENTRY = "hil"
 
 _FAULT = re.compile(r"^(open|short|stuck|absent):([^@]+)@([0-9.]+)-([0-9.]+)$")
 
@@ -69,6 +74,20 @@ def _actions(faults):
     return acts
 
 
+def load_rig():
+    """The rig's module (``Rig``, ``RigError``, ``play``, ``rig_config``) by its entry point; a UserError
+    when no installed distribution offers it (``python -m host`` from a tree that was never installed)."""
+    from host.errors import UserError
+    found = [ep for ep in entry_points(group=RIG_GROUP) if ep.name == RIG_ENTRY]
+    if not found:
+        raise UserError("no HIL rig installed: no entry point %r in group %r (install tcomp from the checkout: "
+                        "make setup, or pip install -e .)" % (RIG_ENTRY, RIG_GROUP))
+    try:
+        return found[0].load()
+    except ImportError as exc:
+        raise UserError("the HIL rig's entry point %s does not import: %s" % (found[0].value, exc))
+
+
 def run(args):
     from host.outputs import Outputs
 
@@ -82,11 +101,11 @@ def run(args):
 
 def _hil(args, out):
     from firmware.table import TableError, parse_table
-    from hil_tests.rig.boards import rig_config
-    from hil_tests.rig.harness import Rig, RigError
-    from hil_tests.rig.play import play
-    from host.errors import UserError
     from host.data.runs import RunFormatError, load_run
+    from host.errors import UserError
+
+    rig_module = load_rig()
+    Rig, RigError, play, rig_config = rig_module.Rig, rig_module.RigError, rig_module.play, rig_module.rig_config
 
     if args.print_every < 0:
         raise UserError("--print-every %d: must be >= 0 (every Nth periodic frame; 0: none)" % args.print_every)
