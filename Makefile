@@ -23,7 +23,7 @@ MP32 := ports/linux32/build/micropython
 MP32_SRC := $(wildcard ports/linux32/*.c ports/linux32/*.h ports/linux32/Makefile ports/common/*.c ports/common/*.h \
                        ports/common/extmod/*.h ports/common/lib/*.py)
 
-.PHONY: setup demo test test-fast typecheck bench clean qemu-image
+.PHONY: setup demo test test-fast lint typecheck bench clean qemu-image
 
 setup: $(STAMP) $(STUBS_STAMP) sysdeps $(LCNC_STAMP) $(MP32) qemu-image
 
@@ -94,8 +94,13 @@ demo: setup
 test: setup
 	TCOMP_MICROPYTHON=$(abspath $(MP32)) OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 \
 	  $(BIN)/python -m pytest -q -n 2 --dist loadfile
-	$(MAKE) --no-print-directory typecheck
+	$(MAKE) --no-print-directory lint typecheck
 
+# ruff's rules and why: pyproject.toml [tool.ruff]
+lint: setup
+	$(BIN)/ruff check .
+
+# the firmware against MicroPython's stubs; host/ and models_export/ against their type hints (pyrightconfig.json)
 typecheck: setup
 	$(BIN)/python tools/typecheck_firmware.py
 

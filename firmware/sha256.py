@@ -27,7 +27,7 @@ def _ror(x, n):
     return ((x >> n) | (x << (32 - n))) & _M
 
 
-class sha256:  # noqa: N801 (hashlib's name)
+class sha256:  # lower case: hashlib's name, so the board code says sha256() either way
     def __init__(self, data=None):
         self._h = [0x6a09e667, 0xbb67ae85, 0x3c6ef372, 0xa54ff53a,
                    0x510e527f, 0x9b05688c, 0x1f83d9ab, 0x5be0cd19]

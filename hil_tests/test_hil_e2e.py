@@ -6,7 +6,6 @@ float model) + the RTD chain bound propagated through the model + half the
 not compared (the limiter lags a model that moves faster than the slew limit
 on purpose); at least 85 % of the rows must be compared.
 """
-import os
 
 import numpy as np
 import pytest

@@ -22,11 +22,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.data.runs import Motion, load_run  # noqa: E402
-from host.learning.screw import heat  # noqa: E402
-from host.learning.screw.identify import IdentifiabilityWarning  # noqa: E402
-from host.learning.screw.screwmodel import ScrewModel  # noqa: E402
-from host.learning.screw.reduced import reduction_error  # noqa: E402
+from host.data.runs import Motion, load_run
+from host.learning.screw import heat
+from host.learning.screw.identify import IdentifiabilityWarning
+from host.learning.screw.screwmodel import ScrewModel
+from host.learning.screw.reduced import reduction_error
 
 DEMO = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "data", "demo")
 THREE = ("v8000_r210_490", "v6500_r210_490", "v8000_r0_700")

@@ -9,8 +9,8 @@ import time
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.twin import EFFECTS, PROTOCOLS, simulate  # noqa: E402
-from host.twin.screw import ScrewGrid, ScrewIntegrator  # noqa: E402
+from host.twin import EFFECTS, PROTOCOLS, simulate
+from host.twin.screw import ScrewGrid, ScrewIntegrator
 
 
 def main():

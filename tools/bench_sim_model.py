@@ -14,10 +14,10 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.learning.empirical.fitting import fit_model  # noqa: E402
-from host.learning.screw.identify import IdentifiabilityWarning  # noqa: E402
-from host.learning.screw.screwmodel import ScrewModel  # noqa: E402
-from host.twin import LITERATURE_STATES, STILL_AIR, simulate_run  # noqa: E402
+from host.learning.empirical.fitting import fit_model
+from host.learning.screw.identify import IdentifiabilityWarning
+from host.learning.screw.screwmodel import ScrewModel
+from host.twin import LITERATURE_STATES, STILL_AIR, simulate_run
 
 FIT = "v8000_r210_490"
 HELD_OUT = ("v6500_r210_490", "v15000_r210_490", "v8000_r0_210", "v8000_r0_700", "mixed", "random")

@@ -4,7 +4,7 @@ import sys
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.cli import main  # noqa: E402
+from host.cli import main
 
 if __name__ == "__main__":
     sys.exit(main(["flash"] + sys.argv[1:]))

@@ -13,7 +13,7 @@ instead: the same keys, ranges and rules with terse messages (``config
 the key tables live there, so both read the same ranges.
 """
 
-from firmware.bootcfg import CHAN as _CHAN, DRIVERS, SERIAL as _SERIAL, TOP as _TOP, Channel, Config  # noqa: F401
+from firmware.bootcfg import CHAN as _CHAN, DRIVERS, SERIAL as _SERIAL, TOP as _TOP, Channel, Config
 
 
 def _err(where, msg):

@@ -108,7 +108,7 @@ def test_app_runs_on_cpython_adapters(tmp_path):
     assert b",T," in lines[1] and b",!40" in lines[1]  # asked before the first good reading
     ser.rx += b"$TC,S*56EA\r\n"
     app.run(max_cycles=12)
-    assert any(b",T," in l and b",25.00" in l for l in ser.tx.split(b"\r\n")[2:])
+    assert any(b",T," in ln and b",25.00" in ln for ln in ser.tx.split(b"\r\n")[2:])
 
 
 def test_spidev_adapter_ioctl_layout(monkeypatch):

@@ -45,7 +45,7 @@ def _problems(folder):
 
 
 def test_missing_column_names_file_and_line(run_dir, edit_csv):
-    edit_csv(run_dir, "errors.csv", lambda ls: [ls[0].replace("position_mm", "pos")] + [l for l in ls[1:]])
+    edit_csv(run_dir, "errors.csv", lambda ls: [ls[0].replace("position_mm", "pos")] + ls[1:])
     probs = _problems(run_dir)
     assert any("errors.csv line 1" in p and "missing column 'position_mm'" in p for p in probs), probs
 
@@ -133,7 +133,7 @@ def test_missing_file_and_all_problems_reported(run_dir, edit_csv):
 
 
 def test_wrong_cell_count_and_unknown_column(run_dir, edit_csv):
-    edit_csv(run_dir, "errors.csv", lambda ls: [ls[0] + ",speed"] + [l + ",1" for l in ls[1:]])
+    edit_csv(run_dir, "errors.csv", lambda ls: [ls[0] + ",speed"] + [line + ",1" for line in ls[1:]])
     assert any("unknown column 'speed'" in p for p in _problems(run_dir))
 
 

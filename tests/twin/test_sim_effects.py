@@ -86,7 +86,8 @@ def test_moving_convection_saturates_lower_and_faster():
     a, b = _far(off)[warm], _far(on)[warm]
     a, b = a - a[0], b - b[0]
     assert b.max() < 0.8 * a.max()
-    t63 = lambda y: off.sweep_s[warm][np.argmax(y >= 0.63 * y.max())]
+    def t63(y):
+        return off.sweep_s[warm][np.argmax(y >= 0.63 * y.max())]
     assert t63(b) < t63(a)
     # while the screw stands still h is the resting value: convection multiplier 1 in the cool-down,
     # except while a sweep turns the screw

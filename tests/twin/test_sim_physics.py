@@ -254,7 +254,8 @@ def test_structure_has_collinear_candidates_with_every_role():
     # own time constants: the slow bed lags the nut (air held still to see the heat's response alone)
     T = simulate("v8000_r0_700", None, **STILL_AIR).sensors_C
     nut, base = T[:, 0] - T[0, 0], T[:, 1] - T[0, 1]
-    t63 = lambda y: sim.t_s[np.argmax(y >= 0.63 * y[: int(180 * 60 / sim.params.dt_s)].max())]
+    def t63(y):
+        return sim.t_s[np.argmax(y >= 0.63 * y[: int(180 * 60 / sim.params.dt_s)].max())]
     assert t63(base) > 2 * t63(nut)
 
 

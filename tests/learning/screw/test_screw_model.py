@@ -9,7 +9,7 @@ import pytest
 from host.cli import main as tcomp
 from host.learning.documents import load_model, read_document
 from host.data.runs import write_run
-from host.learning.screw import heat, synth
+from host.learning.screw import synth
 from host.learning.screw.effects import BearingHeat, Effect, ParamSpec, ReversalError
 from host.learning.screw.screwmodel import ScrewModel
 from host.learning.screw.reduced import build_reduced, reduction_error, state_bound
