@@ -2,13 +2,11 @@
 the firmware takes its reference temperatures at the first cycle in which every needed sensor is good."""
 import random
 
-import pytest
 
 from fwhelpers import run_cycles
 
 
 def _table(base_ref):
-    pytest.importorskip("hil_tests.fixtures.samples")
     from models_export.export import export_model
     from hil_tests.fixtures.samples import restamp, screw_doc
     doc = screw_doc(random.Random(5), segments=8, dt_s=1.0, length_mm=500.0, feed_max_mm_min=12000.0)

@@ -8,7 +8,6 @@ from fwhelpers import cmd, frames, run_cycles
 
 @pytest.fixture(scope="module")
 def screw_table():
-    pytest.importorskip("hil_tests.fixtures.samples")
     from hil_tests.fixtures.samples import screw_doc
     from models_export.export import export_model
     doc = screw_doc(random.Random(3), segments=8, dt_s=1.0, length_mm=500.0, feed_max_mm_min=12000.0)

@@ -2,7 +2,7 @@
 
 Every finding of the hostile test is one case here: exit status 2, one clear line naming what and where,
 no traceback, no output file left behind and the inputs byte-identical. In-process through host.cli.main,
-as in test_host_badinput.py.
+as in tests/cli/test_cli_badinput.py.
 """
 import json
 import os

@@ -3,7 +3,7 @@
 ``Bridge.step(now_s, inputs)`` is called once per period by the HAL layer
 (``host/board/linuxcnc/halcomp.py``) with the controller's pins and returns the
 pins to write. Everything here runs on plain Python so that it is
-unit-tested without LinuxCNC (tests/host/test_linuxcnc_bridge.py); the
+unit-tested without LinuxCNC (tests/board/test_board_linuxcnc_bridge.py); the
 whole chain is tested in a real LinuxCNC in hil_tests/test_hil_linuxcnc.py.
 
 What LinuxCNC does with the pins (motion's external axis offsets, checked in

@@ -1,5 +1,6 @@
 """tcomp import: mapping strictness, and the bundled real data equals its source."""
 import csv
+import hashlib
 import json
 import os
 import subprocess
@@ -32,20 +33,33 @@ def test_bundled_real_run_is_valid_and_complete():
     assert run.meta["source"]["licence"] == "MIT"
 
 
-@pytest.mark.skipif(not os.path.exists(SOURCE), reason="shared/ reference data not beside the repo")
+# The source's values, fingerprinted: sha256 of the int64 (little-endian) array round(value * 1e6) of
+# fl_thermal.csv, rows in file order, columns in SOURCE_COLUMNS order (6 decimals is the source's precision).
+# Recorded from ../shared/data/fl_thermal/fl_thermal.csv; the test checks the bundled run against it in any
+# clone, and the fingerprint against the source itself wherever the source is beside the repo.
+SOURCE_COLUMNS = ["time_s", "spindle_rpm"] + ["ch%d_um" % i for i in range(1, 6)] + ["t%d_C" % i for i in range(1, 17)]
+SOURCE_VALUES_SHA256 = "adafe292d299edc3df5e7027bae1f7b24cb46c06d0591474952bd76ed08ef9bc"
+
+
+def _values_sha256(columns):
+    micro = np.rint(np.column_stack(columns) * 1e6).astype("<i8")
+    return hashlib.sha256(np.ascontiguousarray(micro).tobytes()).hexdigest()
+
+
 def test_bundled_real_run_equals_source():
-    with open(SOURCE) as fh:
-        rows = list(csv.reader(fh))
-    head = rows[0]
-    src = np.array(rows[1:], dtype=float)
     run = load_run(BUNDLED)
-    np.testing.assert_array_equal(run.temperatures.time_s, src[:, head.index("time_s")])
-    for i in range(1, 17):
-        np.testing.assert_allclose(run.temperatures.column("t%d" % i), src[:, head.index("t%d_C" % i)], atol=5e-7)
-    for i in range(1, 6):
-        rows_ = run.errors.channel == "ch%d" % i
-        np.testing.assert_allclose(run.errors.error_um[rows_], src[:, head.index("ch%d_um" % i)], atol=5e-7)
-    np.testing.assert_allclose(run.spindle.rpm, src[:, head.index("spindle_rpm")])
+    channel_rows = [run.errors.channel == "ch%d" % i for i in range(1, 6)]
+    for rows_ in channel_rows:  # one measurement per channel at every temperature time, in order
+        np.testing.assert_array_equal(run.errors.time_s[rows_], run.temperatures.time_s)
+    np.testing.assert_array_equal(run.spindle.time_s, run.temperatures.time_s)
+    bundled = ([run.temperatures.time_s, run.spindle.rpm] + [run.errors.error_um[r] for r in channel_rows]
+               + [run.temperatures.column("t%d" % i) for i in range(1, 17)])
+    assert _values_sha256(bundled) == SOURCE_VALUES_SHA256
+    if os.path.exists(SOURCE):  # the fingerprint is the source's (the shared reference copy is beside the repo)
+        with open(SOURCE) as fh:
+            rows = list(csv.reader(fh))
+        src = np.array(rows[1:], dtype=float)
+        assert _values_sha256([src[:, rows[0].index(c)] for c in SOURCE_COLUMNS]) == SOURCE_VALUES_SHA256
 
 
 def test_unmapped_column_is_an_error(tmp_path):
