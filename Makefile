@@ -30,7 +30,7 @@ setup: $(STAMP) $(STUBS_STAMP) sysdeps $(LCNC_STAMP) $(MP32) qemu-image
 $(STAMP): pyproject.toml constraints.txt
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -c constraints.txt -e '.[dev]'
+	$(BIN)/pip install -q -c constraints.txt -e '.[science,dev]'
 	touch $@
 
 # MicroPython stubs for type-checking the firmware live in their own folder:
