@@ -15,6 +15,7 @@ are missing).
 """
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -73,7 +74,13 @@ def main():
     host_side = [os.path.join(ROOT, "firmware", p) for p in sorted(not_on_board()) if p != "manifest.py"]
     mp = dict(common, include=board, typeshedPath=STUBS, stubPath=STUBS, pythonPlatform="Linux",
               extraPaths=[ROOT])
-    cp = dict(common, include=host_side, extraPaths=[ROOT], venvPath=ROOT, venv=".venv")
+    # `from micropython import const` under CPython: the stand-in firmware/micropython_standin.py is
+    # registered under that name only at run time (firmware/__init__.py), so pyright gets a one-module stub
+    # folder holding just MicroPython's micropython.pyi (the rest of .stubs would shadow CPython's time etc.)
+    cpython_stubs = os.path.join(STUBS, "cpython-side")
+    os.makedirs(cpython_stubs, exist_ok=True)
+    shutil.copy(os.path.join(STUBS, "micropython.pyi"), os.path.join(cpython_stubs, "micropython.pyi"))
+    cp = dict(common, include=host_side, extraPaths=[ROOT], venvPath=ROOT, venv=".venv", stubPath=cpython_stubs)
     rc = run(mp, "board files (firmware/manifest.py) vs MicroPython stubs")
     rc |= run(cp, "files left off the board (CPython)")
     return rc
