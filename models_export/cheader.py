@@ -11,7 +11,7 @@ assumed arithmetic (gcc, clang, arm-none-eabi, IAR, Keil all do so).
 """
 
 from firmware.table import COMMON, KINDS, POSITION, SCREW, SENSOR_FIELDS
-from models_export.tableformat import KIND_CODES, spec_names
+from models_export.tableformat import spec_names
 
 # Fraction bits of coefficients: recorded in the table for its readers, never used by the
 # evaluation (firmware/evaluate.py reads none of them; tests/export/test_export_table.py checks).

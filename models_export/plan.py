@@ -21,7 +21,7 @@ from models_export.certify import (
     int_iv, iv_abs, iv_add, iv_mul, iv_scale, limb_max, limbs, narrow_width, p2, rnd, top_limbs_needed,
 )
 
-from models_export.exact import power_chain  # noqa: E402
+from models_export.exact import power_chain
 
 ZERO = (F(0), F(0))
 

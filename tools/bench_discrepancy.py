@@ -26,11 +26,11 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.learning.discrepancy import unexplained  # noqa: E402
-from host.learning.discrepancy.report import residual_diagnostic  # noqa: E402
-from host.learning.discrepancy.family import ScrewFamily  # noqa: E402  (ScrewModel configurations, issue 19)
-from host.learning.discrepancy.workflow import discover  # noqa: E402
-from host.twin import EFFECTS, simulate_run  # noqa: E402
+from host.learning.discrepancy import unexplained
+from host.learning.discrepancy.report import residual_diagnostic
+from host.learning.discrepancy.family import ScrewFamily
+from host.learning.discrepancy.workflow import discover
+from host.twin import EFFECTS, simulate_run
 
 PROTOCOLS = ("v8000_r210_490", "v6500_r210_490", "v15000_r210_490", "v8000_r0_700")  # literature states 1, 2, 3, 5
 PAIRS = (("ambient_expansion", "moving_convection"), ("bearing_heat", "reversal_error"),

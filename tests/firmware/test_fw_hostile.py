@@ -25,7 +25,7 @@ import zlib
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from fwhelpers import TEST_KEY, cmd, frames, make_table, modbus_auth_block, provision, rig_app, run_cycles, scmd, \
-    tagged_chunk, table_fields
+    tagged_chunk
 from firmware import wire
 from firmware.crc16 import crc16_modbus
 

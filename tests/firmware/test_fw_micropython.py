@@ -100,7 +100,6 @@ print(acc, app.slot, app.cycles, "%08X" % app.status, app.auth.last)
 
 def _signed_lines(new, other):
     import hashlib
-    import zlib
     from fwhelpers import TEST_KEY, TEST_NONCE
     from host.board.linkauth import LinkSigner
     up = LinkSigner(TEST_KEY, 0, TEST_NONCE).upload_lines(new, 40)  # U,B (counter 1), the tagged chunks, U,C
