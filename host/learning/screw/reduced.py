@@ -61,6 +61,9 @@ def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
         "base_sensor": model.base_sensor_,
         "base_ref_C": model.base_ref_C_,
         "base_ref": getattr(model, "base_ref", "fixed"),
+        # errors referred to a sensor: E_m loses alpha*(T_R - T_R,ref)*P, a temperature-linear term (reference.py)
+        "error_reference": getattr(model, "error_reference_", "start"),
+        "error_reference_C": getattr(model, "error_reference_C_", None),
         "feed_max_mm_min": float(feed_max_mm_min),
         "state_max_K": state_bound(A, B, feed_max_mm_min / 60.0 * dt_s),
     }
