@@ -25,7 +25,9 @@ import numpy as np
 from scipy.optimize import least_squares, lsq_linear
 
 from host.learning.discrepancy.catalog import CATALOG, FEED_REF_MM_MIN
+from host.data.runs import START, common_error_reference
 from host.learning.screw import heat
+from host.learning.screw import reference as errref
 
 SEGMENTS = 20
 GEOMETRIC_DEGREE = 3
@@ -42,7 +44,7 @@ MAX_STEP_S = 120.0
 class Drive:
     """Everything about one run the fits need, computed once: time grid, nut travel, row mapping."""
 
-    def __init__(self, run, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE, air=True):
+    def __init__(self, run, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE, air=True, error_reference=None):
         if run.screw is None:
             raise ValueError("run %s: meta.json has no 'screw' block; the screw model needs the screw geometry" % run.name)
         e = run.errors
@@ -111,6 +113,15 @@ class Drive:
                 col = tt.column(name)
                 self.air_K = np.interp(t, tt.time_s, col) - np.interp(0.0, tt.time_s, col)
 
+        # the declared error reference (or the one a check tries instead): under a sensor reference the errors lack
+        # alpha*(T_R - T_R(0))*P, a fixed offset of the linear solve (host/learning/screw/reference.py)
+        self.error_reference = run.error_reference if error_reference is None else error_reference
+        self.reference_um = 0.0
+        if self.error_reference != START:
+            errref.check_reference_sensor([run], self.error_reference)
+            self.reference_um = errref.reference_um(self.alpha_per_K, errref.reference_K(run, self.error_reference, e.time_s),
+                                                    e.position_mm)
+
     def response(self, h, conv, heat_J=None, source_W=None, lam=None, air_K=None):
         """E_m (um) at the error rows for one heat input (or the air ``air_K`` on the grid), convection h
         (and conductivity lam) and multiplier conv."""
@@ -166,8 +177,10 @@ def _bounded_lstsq(X, y, lo, hi):
 class ScrewFamily:
     """Base screw model (E_m, no ambient term) plus effects from ``catalog``."""
 
-    def __init__(self, catalog=None, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE, free_lambda=True, air=True):
+    def __init__(self, catalog=None, segments=SEGMENTS, geometric_degree=GEOMETRIC_DEGREE, free_lambda=True, air=True,
+                 error_reference=None):
         self.free_lambda = free_lambda
+        self.error_reference = error_reference  # None: each run's declaration (meta.json error_reference)
         self.air = air
         self.catalog = dict(CATALOG if catalog is None else catalog)
         self.candidates = tuple(self.catalog)
@@ -178,13 +191,14 @@ class ScrewFamily:
     def drive(self, run):
         key = id(run)
         if key not in self._drives:
-            self._drives[key] = (run, Drive(run, self.segments, self.geometric_degree, air=self.air))
+            self._drives[key] = (run, Drive(run, self.segments, self.geometric_degree, air=self.air,
+                                            error_reference=self.error_reference))
         return self._drives[key][1]
 
     def used_sensors(self, run, effects=()):
         """The temperature columns the model with ``effects`` reads for ``run``."""
         d = self.drive(run)
-        used = {d.air_sensor} - {None}
+        used = {d.air_sensor, None if d.error_reference == START else d.error_reference} - {None}
         if "ambient_expansion" in effects:
             used.update(run.sensors_with_role("base")[:1])
         return used
@@ -261,7 +275,7 @@ class ScrewFamily:
             elif eff.hook == "output" and eff.columns is not None:
                 cols += list(np.asarray(eff.columns(drive), dtype=float).T)
         offset = 0.0 if drive.air_K is None else drive.response(h, conv, air_K=drive.air_K, lam=lam)
-        return np.column_stack(cols), offset
+        return np.column_stack(cols), offset - drive.reference_um
 
     # ------------------------------------------------------------ fit / predict
 
@@ -281,6 +295,8 @@ class ScrewFamily:
                     v = start.nonlinear[name]
                     x0[i] = np.log(v) if name in LOG_PARAMS else v
         x0 = np.clip(x0, lo + 1e-9 * (hi - lo), hi - 1e-9 * (hi - lo))
+        if self.error_reference is None:
+            common_error_reference(runs)  # one convention per fit: names the runs of each reference otherwise
         used = [(self.drive(r), m) for r, m in zip(runs, masks) if m is not None and np.any(m)]
         if not used:
             raise ValueError("no rows to fit on")
