@@ -375,6 +375,17 @@ def common_error_reference(runs):
     return next(iter(by), START)
 
 
+def check_model_reference(run, model_reference):
+    """ValueError when ``run``'s errors are referred otherwise than a model's training runs were.
+
+    A prediction and a measurement in different conventions differ by the expansion at the reference
+    temperature: comparing them would report that as model error."""
+    ref = run.error_reference
+    if ref != model_reference:
+        raise ValueError("%s: its errors are referred to %s (meta.json error_reference) but the model was fitted on errors "
+                         "referred to %s (docs/data-format.md)" % (run.path or run.name, json.dumps(ref), json.dumps(model_reference)))
+
+
 def load_meta(folder):
     path = os.path.join(folder, META)
     problems = _Problems()

@@ -11,7 +11,7 @@ import warnings
 
 import numpy as np
 
-from host.data.runs import START as RAW, common_error_reference
+from host.data.runs import START as RAW, check_model_reference, common_error_reference
 from host.learning.screw import heat
 from host.learning.screw import reference as errref
 from host.learning.screw.context import RunContext, check_run
@@ -181,12 +181,16 @@ class ScrewModel:
             raise ValueError("%s: the model's error reference %r is not in temperatures.csv" % (run.path or run.name, self.error_reference_))
         return errref.reference_K(run, self.error_reference_, times_s, self._reference_start(run))
 
+    def _check_inputs(self, ctx):
+        """Every temperature the model reads is logged over the error rows (the air enters on the model's grid, where
+        np.interp would silently hold the log's ends)."""
+        for name in self.input_sensors_():
+            if name not in ctx.run.temperatures.names:
+                raise ValueError("%s: the model's sensor %r is not in temperatures.csv" % (ctx.run_name, name))
+            ctx.sensor_at_rows(name)
+
     def _check_reference(self, run):
-        ref = run.error_reference
-        if ref != self.error_reference_:
-            raise ValueError("%s: its errors are referred to %r (meta.json error_reference) but the model was fitted on errors "
-                             "referred to %r; a prediction and a measurement in different conventions differ by the expansion "
-                             "at the reference temperature" % (run.path or run.name, ref, self.error_reference_))
+        check_model_reference(run, self.error_reference_)
 
     def _base_ref(self, run):
         if self.base_ref == "run_start":
@@ -330,6 +334,8 @@ class ScrewModel:
         fixed = {s.name: s.start for s in specs_all if s.name not in free}
         specs = [s for s in specs_all if s.name in free]
         ctxs = [self._context(r, self._rows(r)) for r in runs]
+        for c in ctxs:
+            self._check_inputs(c)
         for e in self.effects:
             if hasattr(e, "check"):
                 e.check(ctxs)
@@ -462,6 +468,7 @@ class ScrewModel:
         check_run(run, self.geometry_, require_nut=False)
         self._check_reference(run)
         ctx = self._context(run)
+        self._check_inputs(ctx)
         out = self.thermal_context(ctx) + self.geometric_um(ctx.positions_mm)
         bad = np.flatnonzero(~np.isfinite(out))
         if bad.size:
