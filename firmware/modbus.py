@@ -45,7 +45,8 @@ _IR_TEMPS = const(16)  # 16 x int16 0.01 degC, 0x8000 when faulty
 _IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
 _IR_AUTH_COUNTER = const(48)  # uint32: the last counter used (firmware.auth)
 _IR_AUTH_WHY = const(50)  # the last refusal (firmware.auth reason code)
-_N_INPUT = const(51)
+_IR_ERROR_REF = const(51)  # the table's error reference (header byte 58): 0 start (or no table: IR 12 = 0), 1 + i sensor i
+_N_INPUT = const(52)
 # holding registers
 _HR_ENABLE = const(0)  # 0/1
 _HR_SLEW = const(1)  # um/s, 1..10000
@@ -254,6 +255,8 @@ class ModbusLink:
             return self._half(1, a.auth.last, r - _IR_AUTH_COUNTER)
         if r == _IR_AUTH_WHY:
             return a.auth.why
+        if r == _IR_ERROR_REF:
+            return a.table.error_ref if a.table is not None else 0
         ch = a.channels
         if _IR_TEMPS <= r < _IR_TEMPS + 16:
             i = r - _IR_TEMPS

@@ -34,6 +34,12 @@ FIRMWARE_VERSION = "0.1.0"  # second field of the hello frame
 # reference temperatures come from: - none, S stored, L latched now, U latched unsaved, N/C/O pending
 # because the stored ones were missing/corrupt/foreign (firmware.app ref_state indexes this)
 REF_LETTERS = b"-SLUNCO"
+# hello fields (after the frame kind): the counter's index, then the error reference appended after it (issue 19):
+# "start" (the table's model was fitted on raw errors: offsets relative to the machine at its cold start), or the
+# sensor the errors were corrected to (offsets for a workpiece at its temperature), "-" without a table
+HELLO_COUNTER = const(9)
+HELLO_ERROR_REFERENCE = const(10)
+ERROR_REFERENCE_START = "start"
 FRAME_KINDS = "HOQTAE"  # hello, offsets, query answer, temperatures, acknowledgement, error
 COMMANDS = "PMQRSVULX"  # position, motion, query, reference, temperatures, hello, upload, latch, reset
 UPLOAD_STEPS = "BDCX"  # U,<step>: begin, data, commit, abort

@@ -13,7 +13,7 @@ import pytest
 import serial
 
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
-from host.board.link import StreamDecoder, command
+from host.board.link import HELLO_COUNTER, StreamDecoder, command
 
 pytestmark = [pytest.mark.rig, pytest.mark.micropython]
 
@@ -80,7 +80,7 @@ def test_tcomp_flash_then_board_runs_from_flash(tmp_path, demo_run, capfd):
             frames += _frames(ser, dec, 5.0, lambda fr: any(f.kind == "H" for f in fr))
             # the provisioned key authorises; without it the same command is refused
             signer = LinkSigner(key)
-            signer.observe([f for f in frames if f.kind == "H"][-1].fields[-1])
+            signer.observe([f for f in frames if f.kind == "H"][-1].fields[HELLO_COUNTER])
             ser.write(command("U", "X"))
             ser.write(signer.stream_line("U", "X"))
             replies = _frames(ser, dec, 5.0, lambda fr: sum(f.kind in ("A", "E") for f in fr) >= 2)

@@ -207,10 +207,12 @@ class LinkClient:
         return out
 
     def _observe_counter(self):
-        # the board's last counter is the last field of its newest hello (boot, V, table switch)
+        # the board's last counter is a field of its newest hello (boot, V, table switch)
+        from firmware.wire import HELLO_COUNTER
+
         for f in reversed(self.reader.frames):
             if f.kind == "H":
-                self.signer.observe(f.fields[-1])
+                self.signer.observe(f.fields[HELLO_COUNTER])
                 return
 
     def signed_line(self, *fields, extra=b""):

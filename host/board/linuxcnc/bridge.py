@@ -19,7 +19,7 @@ import math
 import time
 from dataclasses import dataclass, field
 
-from host.board.link import FALLBACK, StreamDecoder, command
+from host.board.link import FALLBACK, HELLO_COUNTER, StreamDecoder, command
 
 COUNT_UM = 0.1  # one eoffset count: the board's offset resolution (docs/protocol.md, 0.1 um)
 UM_PER_UNIT = {"mm": 1000.0, "inch": 25400.0}
@@ -115,8 +115,8 @@ class StreamLink:
             ex.latch = "ok:" + (f.fields[1] if len(f.fields) > 1 else "")
         elif f.kind == "H" and self.signer is not None and f.fields:
             try:
-                self.signer.observe(f.fields[-1])
-            except ValueError:
+                self.signer.observe(f.fields[HELLO_COUNTER])
+            except (IndexError, ValueError):
                 pass  # an old firmware's hello ends with the refs letter: no counter
         elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["5"], ["8"], ["9"]):
             # 5 state (no table, fixed references, sensor faulty), 8 auth (unsigned, bad tag,

@@ -39,6 +39,13 @@ def row(f):
     return r
 
 
+def error_reference_line(frame):
+    """The line `tcomp monitor` prints for a hello: which errors the board's table compensates."""
+    from host.board.link import describe_error_reference, hello_error_reference
+
+    return "error reference %s" % describe_error_reference(hello_error_reference(frame))
+
+
 def run(args):
     from host.errors import UserError
     from host.outputs import Outputs
@@ -59,7 +66,7 @@ def run(args):
 def _monitor(args, outputs):
     import serial
 
-    from host.board.link import PROTOCOL_VERSION, StreamDecoder, command
+    from host.board.link import HELLO_COUNTER, PROTOCOL_VERSION, StreamDecoder, command
     from host.errors import UserError
     try:
         ser = serial.serial_for_url(args.port, args.baud, timeout=0.1)
@@ -111,11 +118,13 @@ def _monitor(args, outputs):
                     raise UserError("%s: the board's hello frame says protocol version %s; this tcomp speaks %d "
                                     "(docs/protocol.md)" % (args.port, (f.fields or ["(none)"])[0], PROTOCOL_VERSION))
                 r = row(f)
+                if f.kind == "H":
+                    print(error_reference_line(f))
                 print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
                 if args.latch and not latch_sent and f.kind == "H":
-                    signer.observe(f.fields[-1])
+                    signer.observe(f.fields[HELLO_COUNTER])
                     ser.write(signer.stream_line("L"))
                     latch_sent = True
                 if latch_sent and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]
