@@ -20,7 +20,7 @@ import sys
 import tempfile
 import time
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # host/board/ -> the checkout
 BOARD_MANIFEST = os.path.join(ROOT, "firmware", "manifest.py")
 # -O3: the firmware has no assert and no __debug__ block, so the only thing -O3 drops is the line
 # number table (tracebacks name the function, not the line): 43.4 kB -> 40.0 kB for every board

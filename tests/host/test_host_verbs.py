@@ -41,6 +41,6 @@ def test_every_verb_module_has_arguments_and_run_and_every_module_is_registered(
         module = importlib.import_module(module_name)
         assert callable(module.add_arguments) and callable(module.run), verb
         assert summary and "\n" not in summary, verb
-    files = {f[:-3] for f in os.listdir(os.path.join(ROOT, "host", "commands"))
+    files = {f[:-3] for f in os.listdir(os.path.join(ROOT, "host", "cli", "verbs"))
              if f.endswith(".py") and not f.startswith("_")}
     assert files == {m.rpartition(".")[2] for m, _ in VERBS.values()}
