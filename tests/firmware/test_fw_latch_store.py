@@ -194,7 +194,7 @@ def test_unwritable_flash_keeps_the_latch_and_says_so(tmp_path):
     (tmp_path / "refs.bin.new").mkdir()  # opening the temp file for writing fails
     run_cycles(app, board, 5)
     assert _near(app.ev.ref[0], 23.5) and not app.unlatched
-    assert app.ref_state == 3 and _send(app, board, cmd(b"TC,V"))[0][-2] == "U"
+    assert app.ref_state == 3 and _send(app, board, cmd(b"TC,V"))[0][HELLO_REFS_AT] == "U"
 
 
 def test_L_relatches_and_persists(tmp_path):

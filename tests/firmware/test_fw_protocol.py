@@ -107,7 +107,7 @@ def test_hello_at_boot(tmp_path):
     assert int(h[7], 16) == app.table.crc
     assert h[8] == app.table.provenance[:8].hex().upper()
     # "-": fixed reference temperatures; "0": the last authorisation counter (a key is provisioned)
-    assert h[9:] == ["poly_slope", "X", "11", "-", "0"]
+    assert h[9:] == ["poly_slope", "X", "11", "-", "0", "start"]  # ..., refs, counter, error reference (issue 19)
 
 
 def test_no_table_hello_and_reason(tmp_path):

@@ -85,7 +85,7 @@ def test_warm_restart_restores_the_state_and_a_cold_one_would_not(tmp_path, scre
         app.link.poll(board.clock.t)
     at_reset = list(app.ev.T)
     app = App(board)
-    assert app.ev.T == at_reset and frames(board.serial.take())[1][-2] == "S"
+    assert app.ev.T == at_reset and frames(board.serial.take())[1][HELLO_REFS_AT] == "S"
     # without heat.bin (before issue 13, or a new board) the same restart starts cold
     os.remove(str(tmp_path / "heat.bin"))
     app, board, hello = _boot(tmp_path)
