@@ -24,7 +24,7 @@ def ambient_default(error_reference):
     """Whether E_e (α·(T_base − T_base,ref)·P) is in the default structure under ``error_reference``.
 
     Off under both. Under "start" E_m holds the screw at its own absolute temperature, which follows the air:
-    E_e on top counts the air's expansion twice (the α −40 %, q +65 % bias on effect-free runs,
+    E_e on top counts the air's expansion twice (α −42 %, q +70 % on effect-free runs,
     tools/bench_reference.py). Under a sensor reference the laser has already taken the expansion at T_R out
     of the errors and E_m is over T_R: E_e would put an air-driven expansion back that the data no longer
     hold. In both conventions a frame that really drifts with the base is a catalog effect
