@@ -72,6 +72,15 @@ def test_read_input_registers(dev):
         assert abs(s16(r[16 + i]) - (2000 + 100 * i)) <= 4  # 0.01 degC
     assert r[27:32] == [0x8000] * 5  # unused channels read as "no value"
     assert r[48:51] == [0, 0, 0]  # authorisation: last counter 0, no refusal yet
+    assert regs(ask(app, board, rtu(bytes([1, 4, 0, 51, 0, 1])))) == [0]  # error reference: start (the rig's table)
+
+
+def test_error_reference_register_names_the_tables_sensor(dev):
+    """Input register 51: 1 + i for a table whose model was fitted on errors corrected to sensor i (byte 58)."""
+    app, board = dev
+    app.table.error_ref = 3
+    assert regs(ask(app, board, rtu(bytes([1, 4, 0, 50, 0, 2])))) == [0, 3]
+    assert ask(app, board, rtu(bytes([1, 4, 0, 51, 0, 2])))[1] == 0x84  # 52 and beyond are not mapped
 
 
 def test_write_position_and_enable(dev):
