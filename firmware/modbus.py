@@ -46,7 +46,8 @@ _IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
 _IR_AUTH_COUNTER = const(48)  # uint32: the last counter used (firmware.auth)
 _IR_AUTH_WHY = const(50)  # the last refusal (firmware.auth reason code)
 _IR_NONCE = const(51)  # the session nonce (firmware.auth), high word first: every auth block's tag starts with it
-_N_INPUT = const(53)
+_IR_ERROR_REF = const(53)  # the table's error reference (header byte 58): 0 start (or no table: IR 12 = 0), 1 + i sensor i
+_N_INPUT = const(54)
 # holding registers
 _HR_ENABLE = const(0)  # 0/1
 _HR_SLEW = const(1)  # um/s, 1..10000
@@ -266,6 +267,8 @@ class ModbusLink:
             return a.auth.nonce_hi
         if r == _IR_NONCE + 1:
             return a.auth.nonce_lo
+        if r == _IR_ERROR_REF:
+            return a.table.error_ref if a.table is not None else 0
         ch = a.channels
         if _IR_TEMPS <= r < _IR_TEMPS + 16:
             i = r - _IR_TEMPS

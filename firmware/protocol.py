@@ -112,7 +112,7 @@ class StreamLink:
             self.error(_E_TABLE, slot.encode() + b" " + reason.encode())
 
     def hello(self):
-        """H,<protocol>,<firmware>,<slot>,<table crc32>,<provenance[:8] hex>,<kind>,<axis>,<channels>,<refs>."""
+        """H,<protocol>,<firmware>,<slot>,<table crc32>,<provenance[:8] hex>,<kind>,<axis>,<channels>,<refs>,<counter>,<error reference>."""
         a = self.app
         w = self.w
         w.begin(a.status, _H)
@@ -138,6 +138,13 @@ class StreamLink:
             w.text(b"-")
         w.hex(au.nonce_hi, 4)  # the session nonce every authorised command's tag starts with
         w._hex(au.nonce_lo, 4)
+        # appended after the nonce (firmware/wire.py HELLO_ERROR_REFERENCE): what the offsets compensate (table header byte 58)
+        if t is None:
+            w.text(b"-")
+        elif t.error_ref == 0:
+            w.text(b"start")
+        else:
+            w.text(t.sensors[t.error_ref - 1].encode())
         w.end()
 
     def offsets(self, kind, pos):

@@ -19,7 +19,7 @@ from micropython import const
 
 MAGIC = b"TCTB"
 NAME_FORBIDDEN = b",*$"  # besides non-printable bytes: the $TC frames' separators (names are sent in the hello)
-_VERSION = const(4)  # 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
+_VERSION = const(4)  # 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
 _AXIS_SIZE = const(8)
@@ -69,7 +69,9 @@ class Table:
     it are clamped), train_lo/train_hi (lists, milli-degC: the range the model was fitted over,
     inside the envelope; beyond it the model extrapolates), ref_mode (0: references fixed,
     1: certified for references latched anywhere in the envelope), edited (1: exported from a
-    model document whose recorded sha256 did not match), pos_lo/pos_hi/pos_ref (um),
+    model document whose recorded sha256 did not match), error_ref (the errors the model was fitted on:
+    0 raw, relative to the machine at the run's start; 1 + i corrected to sensor i's temperature),
+    pos_lo/pos_hi/pos_ref (um),
     cert_out/cert_ref/cert_slope (the certified output bounds),
     unit_code, provenance (32 bytes, the model document's sha256), crc,
     and the kind-specific coefficients documented in docs/table-format.md
@@ -84,6 +86,7 @@ class Table:
     unit_code: int
     ref_mode: int
     edited: int
+    error_ref: int  # 0: offsets relative to the machine at its cold start; 1 + i: to a workpiece at sensor i's temperature
     positional: int  # dynamic tables: 1 when the position block follows (slope target)
     cert_out: int
     cert_ref: int
@@ -135,8 +138,10 @@ def parse_table(buf, expected_sensors=None):
         raise TableError(REASON_UNIT, "%d" % buf[7])
     nwords = struct.unpack_from("<I", buf, 52)[0]
     for i in range(56, 64):
-        if buf[i] > (i < 58):  # the reference mode (0 or 1), the edited mark (0 or 1), then reserved zeros
+        if i != 58 and buf[i] > (i < 58):  # the reference mode (0 or 1), the edited mark (0 or 1), then reserved zeros
             raise TableError(REASON_FIELD, "header byte %d" % i)
+    if buf[58] > ns:  # the error reference: 0 the run's start, 1 + i sensor i
+        raise TableError(REASON_FIELD, "error reference %d (table has %d sensors)" % (buf[58], ns))
     payload = _HEADER_SIZE + ns * (_NAME_SIZE + _SENSOR_SIZE)
     if payload + 4 * nwords + 4 != n:
         raise TableError(REASON_LENGTH, "%d sensors, %d words" % (ns, nwords))
@@ -148,6 +153,7 @@ def parse_table(buf, expected_sensors=None):
     t.unit_code = buf[7]
     t.ref_mode = buf[56]
     t.edited = buf[57]
+    t.error_ref = buf[58]
     t.provenance = bytes(buf[12:44])
     t.axis = _name(buf, 44, _AXIS_SIZE)
     t.crc = stored

@@ -36,6 +36,14 @@ FIRMWARE_VERSION = "0.1.0"  # second field of the hello frame
 # reference temperatures come from: - none, S stored, L latched now, U latched unsaved, N/C/O pending
 # because the stored ones were missing/corrupt/foreign (firmware.app ref_state indexes this)
 REF_LETTERS = b"-SLUNCO"
+# hello fields (after the frame kind): the authorisation counter, the session nonce (issue 24), then the error
+# reference (issue 19): "start" (the table's model was fitted on raw errors: offsets relative to the machine at its
+# cold start), or the sensor the errors were corrected to (offsets for a workpiece at its temperature), "-" without
+# a table
+HELLO_COUNTER = const(9)
+HELLO_NONCE = const(10)
+HELLO_ERROR_REFERENCE = const(11)
+ERROR_REFERENCE_START = "start"
 FRAME_KINDS = "HOQTAE"  # hello, offsets, query answer, temperatures, acknowledgement, error
 COMMANDS = "PMQRSVULX"  # position, motion, query, reference, temperatures, hello, upload, latch, reset
 UPLOAD_STEPS = "BDCX"  # U,<step>: begin, data, commit, abort
@@ -88,7 +96,8 @@ IR_FAULTS = const(32)  # 16 x channel fault bits (firmware.channels F_*)
 IR_AUTH_COUNTER = const(48)  # uint32: the last counter used (firmware.auth)
 IR_AUTH_WHY = const(50)  # the last refusal (firmware.auth reason code)
 IR_NONCE = const(51)  # the session nonce (firmware.auth), high word first: every auth block's tag starts with it
-N_INPUT = const(53)
+IR_ERROR_REF = const(53)  # the table's error reference (header byte 58): 0 start (or no table), 1 + i sensor i
+N_INPUT = const(54)
 # holding registers
 HR_ENABLE = const(0)  # 0/1
 HR_SLEW = const(1)  # um/s, 1..10000

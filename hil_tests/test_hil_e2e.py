@@ -102,17 +102,30 @@ def test_board_hour_answers_identical_to_32_bit_port(tmp_path, demo_run):
     assert any(o != 0.0 for o, _ in got["qemu"])
 
 
-def test_e2e_screw_reduced_matches_reference(make_rig):
-    """Axis motion reported by position frames; the float reduced recurrence on the same travel."""
+@pytest.mark.parametrize("error_reference", ["start", "T2"])
+def test_e2e_screw_reduced_matches_reference(make_rig, error_reference):
+    """Axis motion reported by position frames; the float reduced recurrence on the same travel.
+
+    "T2": a sensor-referenced table (issue 19): the model was fitted on errors corrected to the air sensor
+    T2's temperature, so E_m is over T2 (- alpha*(T2 - T2,ref)*P) and the board says so in its hello."""
     from firmware.table import parse_table
     from hil_tests.fixtures.reference import Reference
+    from hil_tests.rig.boards import _finish
+    from host.board.link import hello_error_reference
     doc = screw_doc(["T1", "T2"])  # T1 base sensor, T2 the air the screw exchanges heat with
+    if error_reference != "start":
+        red = doc["thermal"]["reduced"]
+        red["error_reference"], red["error_reference_C"] = error_reference, doc["reference_C"][error_reference]
+        doc["error_reference"] = error_reference
+        doc = _finish(doc)
     ex = export(doc)
     table = parse_table(ex.table)
+    assert ex.report["error_reference"] == error_reference
     ref = Reference(doc, table)
     ref.settle([22000, 23000])  # the firmware settles on its first good air reading (2 K over the reference)
     rig = make_rig(rig_config(["T1", "T2"], n_ads=0), ex.table, temps={"T1": 22.0, "T2": 23.0})
     rig.run(500)
+    assert hello_error_reference(rig.request("V", kinds=("H",))) == error_reference
     dt = table.dt_ms
     # the firmware steps at table load + k*dt; positions are reported half a step later
     lo, hi = table.pos_lo + 50000, table.pos_hi - 50000
@@ -150,8 +163,10 @@ def test_e2e_screw_reduced_matches_reference(make_rig):
             if q.status & RATE_LIMITED:
                 continue  # the output moves at the slew limit (the reversal term steps at a change of direction)
             want = ref.offset([22000, 23000], pos)
-            # RTD conversion (<= 0.02 K) on the base term and on the air the screw follows
-            bound = ex.report["max_error_um"] + 2 * abs(doc["thermal"]["reduced"]["alpha_um_per_mm_per_K"]) * 0.02 * \
+            # RTD conversion (<= 0.02 K) on the base term and on the air the screw follows (and, referenced to
+            # the air sensor, on its - alpha slope too)
+            n_terms = 2 if error_reference == "start" else 3
+            bound = ex.report["max_error_um"] + n_terms * abs(doc["thermal"]["reduced"]["alpha_um_per_mm_per_K"]) * 0.02 * \
                 (pos / 1000.0) + 0.05 + 1e-9
             assert math.isfinite(want)
             assert abs(q.total_um - want) <= bound, "step %d: firmware %.2f, reference %.4f, bound %.4f" % (

@@ -13,6 +13,7 @@ from models_export.certify import (
 from models_export.document import FORMAT
 
 # dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
+START = "start"  # the raw-error reference of docs/data-format.md (the exporter sees documents, not runs)
 DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
 # "T<e>:<sensor>" (e = 2..4): the rise to the power e, source -4 - 3*i - (e - 2) (firmware Evaluator._inputs)
 POWER_PREFIXES = {"T2:": 2, "T3:": 3, "T4:": 4}
@@ -212,6 +213,20 @@ class Model:
                 bref = F(_num(red.get("base_ref_C"), "thermal.reduced.base_ref_C")) * 1000
                 self.ref[i] = rnd(bref)
                 self.ref_frac[i] = bref - rnd(bref)
+            eref = red.get("error_reference", START)
+            if eref != START:
+                # errors referred to sensor R: E_m lacks alpha*(T_R - T_R,ref)*P, one more temperature-linear
+                # coefficient (-alpha on R; 0 when R is also E_e's base sensor: the two cancel)
+                if eref not in self.sensors:
+                    raise ExportError("thermal.reduced.error_reference %r is not in sensors %r" % (eref, self.sensors))
+                i = self.sensors.index(eref)
+                rref = F(_num(red.get("error_reference_C"), "thermal.reduced.error_reference_C")) * 1000
+                if base == eref and rnd(rref) != self.ref[i]:
+                    raise ExportError("thermal.reduced.error_reference_C %r differs from base_ref_C %r for the same sensor %s"
+                                      % (red.get("error_reference_C"), red.get("base_ref_C"), eref))
+                self.b[i] -= alpha * F(OU_PER_UM, 1000 * 1000)
+                self.ref[i] = rnd(rref)
+                self.ref_frac[i] = rref - rnd(rref)
         for i in range(len(self.sensors)):
             self.b0 -= self.b[i] * self.ref_frac[i]
         if self.ref_mode:
@@ -220,6 +235,7 @@ class Model:
         else:
             self.d_lo = [lo - r for lo, r in zip(self.env_lo, self.ref)]
             self.d_hi = [hi - r for hi, r in zip(self.env_hi, self.ref)]
+        self._error_reference(doc)
         if self.kind == "dynamic":
             self._dyn_terms(doc, thermal, env, unit)
         geo = doc.get("geometric") if not self.direct else None
@@ -229,6 +245,19 @@ class Model:
         self.g = [F(_num(c, "geometric.coefficients_um[%d]" % j)) * OU_PER_UM / F(1000) ** j for j, c in enumerate(gc)]
         if len(self.g) - 1 > 6:
             raise ExportError("geometric degree %d: the table holds at most degree 6" % (len(self.g) - 1))
+
+    def _error_reference(self, doc):
+        """``error_ref``: 0 when the model was fitted on raw errors ("start", also a document without the field),
+        1 + i when on errors corrected to sensor i (table header byte 58, docs/table-format.md)."""
+        ref = doc.get("error_reference", START)
+        if ref == START:
+            self.error_ref, self.error_reference = 0, START
+            return
+        if not isinstance(ref, str) or ref not in self.sensors:
+            raise ExportError("error_reference %r: the model's errors are corrected to a sensor that is not one of its inputs "
+                              "(%s); the table names its reference by input, so refit with that sensor among the inputs"
+                              % (ref, ", ".join(self.sensors) or "none"))
+        self.error_ref, self.error_reference = 1 + self.sensors.index(ref), ref
 
     def _dyn_terms(self, doc, thermal, env, unit):
         """The filters in table units; their coefficients and state boxes are appended to b, d_lo, d_hi, b_names

@@ -106,7 +106,7 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
     edited = declared is not None and not verified
     prov = bytes.fromhex(actual)
     f.update(kind=model.kind, sensors=model.sensors, env_lo=model.env_lo, env_hi=model.env_hi, ref=model.ref,
-             train_lo=model.train_lo, train_hi=model.train_hi, ref_mode=model.ref_mode,
+             train_lo=model.train_lo, train_hi=model.train_hi, ref_mode=model.ref_mode, error_ref=model.error_ref,
              pos_lo=model.pos_lo, pos_hi=model.pos_hi, pos_ref=model.pos_ref, provenance=prov, edited=edited,
              axis=str(doc.get("axis") or "?"))
     try:
@@ -145,6 +145,8 @@ def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, e
     report = {
         "model_kind": model.kind,
         "document_kind": model.doc_kind,  # mr_poly is written as a dynamic table (models_export.exact.mr_poly_as_dynamic)
+        # what the offsets compensate: the machine relative to its cold start, or to a workpiece at this sensor's temperature
+        "error_reference": model.error_reference,
         "table_format": VERSION,  # the version byte of the table written (firmware/table.py owns it)
         "table_bytes": len(table),
         "crc32": "%08x" % crc32(table[:-4]),

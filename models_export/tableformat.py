@@ -97,8 +97,8 @@ def pack(f):
     out += prov
     out += _fixed(f["axis"], AXIS_SIZE, "axis name")
     out += struct.pack("<I", len(words))
-    out += struct.pack("<BB", f.get("ref_mode", 0), 1 if f.get("edited") else 0)
-    out += b"\x00" * 6
+    out += struct.pack("<BBB", f.get("ref_mode", 0), 1 if f.get("edited") else 0, f.get("error_ref", 0))
+    out += b"\x00" * 5
     for name in sensors:
         out += _fixed(name, NAME_SIZE, "sensor name")
     # the training range (format 3) defaults to the envelope: nothing extrapolates

@@ -34,7 +34,7 @@ EXTRAS = {
 def _fit(runs, **settings):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)
-        return ScrewModel(**settings).fit(runs)
+        return ScrewModel(**dict({"ambient": True}, **settings)).fit(runs)  # the runs hold ambient_expansion: E_e on
 
 
 def _rmse(model, runs):

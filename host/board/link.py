@@ -9,6 +9,7 @@ from dataclasses import dataclass, field
 
 from firmware import wire
 from firmware.wire import FALLBACK, HELD, PROTOCOL_VERSION, RATE_LIMITED, RECOVERING, SENSOR_MASK  # noqa: F401
+from firmware.wire import ERROR_REFERENCE_START, HELLO_COUNTER, HELLO_ERROR_REFERENCE  # noqa: F401
 
 # {bit: name} of the flag bits above the sensor bits, in bit order, read from the wire contract
 STATUS_BITS = dict(sorted((value, name) for name, value in vars(wire).items()
@@ -60,6 +61,22 @@ class Frame:
     @property
     def pos_um(self):
         return int(self.fields[1])
+
+
+def hello_error_reference(frame):
+    """The error reference an ``H`` frame reports: "start", a sensor name, "-" (no table), or None (a firmware before it)."""
+    return frame.fields[HELLO_ERROR_REFERENCE] if len(frame.fields) > HELLO_ERROR_REFERENCE else None
+
+
+def describe_error_reference(ref):
+    """What the offsets of a table with error reference ``ref`` compensate (docs/linuxcnc.md, "Error reference")."""
+    if ref is None:
+        return "not reported (a firmware before issue 19: raw errors)"
+    if ref == "-":
+        return "none (no table)"
+    if ref == ERROR_REFERENCE_START:
+        return "start: offsets bring the axis to its positions relative to the cold machine"
+    return "%s: offsets bring the axis to the positions of a workpiece at sensor %s's temperature" % (ref, ref)
 
 
 class FrameError(ValueError):

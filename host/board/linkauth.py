@@ -29,7 +29,7 @@ import hmac
 import os
 import struct
 
-from firmware.wire import MAX_COUNTER, TAG_BYTES  # the board checks the same sizes
+from firmware.wire import HELLO_COUNTER, HELLO_NONCE, MAX_COUNTER, TAG_BYTES  # the board checks the same sizes
 from host.board.link import body as stream_body, command_line
 
 KEY_BYTES = 32
@@ -42,10 +42,6 @@ class KeyFileError(ValueError):
 
 class CounterError(ValueError):
     """The board's counter or session nonce as reported cannot be used (names what is wrong)."""
-
-
-HELLO_COUNTER = 9  # the hello's fields after the type: ..., <refs>, <counter>, <session nonce> (docs/protocol.md)
-HELLO_NONCE = 10
 
 
 def counter_mark(mark=0):

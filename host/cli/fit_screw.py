@@ -3,9 +3,9 @@
 Options (``--option KEY=VALUE``, repeatable): segments, dt_s, free (comma list of
 q,h,lambda,c,alpha), geometric_degree (0..4 or auto), effects (comma list of
 host/learning/screw/effects.py names), nut_weight, reduced_segments, reduced_dt_s,
-feed_max_mm_min, ambient (on/off), air (auto, a sensor name, or off), base_ref (run_start/fixed), max_nfev,
+feed_max_mm_min, ambient (on/off/auto: E_e, off by default under either error reference), air (auto, a sensor name, or off), base_ref (run_start/fixed), max_nfev,
 fit_window (LO:HI seconds, either side may be empty: fit only on error rows in it).  ``--sensors NAME`` picks the base
-sensor of the E_e term; ``--channel`` the errors.csv channel.
+sensor of the E_e term (and switches E_e on unless ambient is given); ``--channel`` the errors.csv channel.
 """
 import json
 import warnings
@@ -39,8 +39,10 @@ def _fit_window(text):
         raise ValueError("expected LO:HI in seconds (e.g. 0:10800 or :10800)")
 
 
-def _on_off(text):
-    return choice("on", "off")(text) == "on"
+def _ambient(text):
+    """on, off, or auto (the default structure of the runs' error reference, docs/screw-model.md)."""
+    v = choice("on", "off", "auto")(text)
+    return "auto" if v == "auto" else v == "on"
 
 
 def _effects(text):
@@ -56,7 +58,7 @@ OPTIONS = {
     "geometric_degree": _geometric_degree, "effects": _effects, "nut_weight": number(float, 0.0, 1e6),
     "reduced_segments": number(int, 1, 32), "reduced_dt_s": number(float, 0.001, 3600.0),
     "feed_max_mm_min": number(float, maximum=MAX_FEED_MM_MIN, above=0.0),
-    "ambient": _on_off, "air": str,  # air: auto, a sensor name, or off
+    "ambient": _ambient, "air": str,  # air: auto, a sensor name, or off
     "max_nfev": number(int, 1, 100000), "base_ref": str, "fit_window": _fit_window,
 }
 
@@ -64,7 +66,10 @@ OPTIONS = {
 def format_report(model):
     st = model.statistics_
     lines = ["screw model: %d segments, dt %g s, geometric degree %d" % (model.geometry_.segments, model.dt_s, model.geometric_degree_),
-             "  air: %s (%s)" % (model.air_sensor_ or "constant", model.air_source_)]
+             "  air: %s (%s)" % (model.air_sensor_ or "constant", model.air_source_),
+             "  errors referred to: %s; E_e %s" % ("the machine at each run's start (raw)" if model.error_reference_ == "start"
+                                                   else "sensor %s (E_m over its temperature)" % model.error_reference_,
+                                                   "on (base sensor %s)" % model.base_sensor_ if model.base_sensor_ else "off")]
     for name, p in st["parameters"].items():
         if p.get("fixed"):
             lines.append("  %-22s %12.5g %-10s (fixed)" % (name, p["value"], p["unit"]))
@@ -103,6 +108,7 @@ def fit_command(args, out):
         if len(names) != 1:
             raise UserError("--model screw takes one --sensors name: the base sensor of the ambient term (got %s)" % args.sensors)
         kw["base_sensor"] = names[0]
+        kw.setdefault("ambient", True)  # naming E_e's sensor asks for E_e
     try:
         runs = load_runs(args.runs)
     except RunFormatError as exc:

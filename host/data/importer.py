@@ -20,13 +20,14 @@ Mapping (JSON, or built from command-line flags)::
 ``temperatures`` may also be a list of column names (name = column, role
 ``structure``) and ``errors`` a list (channel = column, position 0).
 """
+import json
 import math
 import os
 from collections import Counter
 
 import numpy as np
 
-from host.data.runs import (ERROR_LIMIT_UM, FORMAT, ROLES, TEMPERATURE_RANGE_C, CsvSyntaxError, Errors, Run, RunFormatError,
+from host.data.runs import (ERROR_LIMIT_UM, FORMAT, START, ROLES, TEMPERATURE_RANGE_C, CsvSyntaxError, Errors, Run, RunFormatError,
                        Spindle, Temperatures, parse_number, read_records, write_run)
 
 
@@ -270,6 +271,11 @@ def import_csv(source, mapping, mapping_where="mapping"):
     meta["channels"] = {s["channel"]: {"source_column": c, "position_mm": s["position_mm"], "scale": s["scale"]} for c, s in m["errors"].items()}
     meta["import"] = {"source": os.path.basename(source), "rows": int(n), "ignored_columns": m["ignore"]}
     meta.update(m["meta"])
+    ref = meta.get("error_reference", START)
+    if not (ref == START or (isinstance(ref, str) and ref in meta["sensors"])):
+        raise LogImportError("%s: error_reference %s is neither \"start\" (raw errors relative to the machine at the run's start) "
+                           "nor one of the imported sensors (%s) the errors were corrected to"
+                           % (mapping_where, json.dumps(ref), ", ".join(meta["sensors"])))
     name = os.path.splitext(os.path.basename(source))[0]
     return Run(meta, temps, errors, None, spindle, name=name)
 

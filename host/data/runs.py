@@ -29,6 +29,10 @@ ERROR_COLUMNS = ("time_s", "position_mm", "error_um")
 ERROR_OPTIONAL = ("direction", "channel")
 MOTION_COLUMNS = ("t_start_s", "t_end_s", "from_mm", "to_mm", "feed_mm_min")
 SPINDLE_COLUMNS = ("time_s", "rpm")
+# meta.json "error_reference": which temperature errors.csv is referred to (docs/data-format.md).
+# START: raw errors relative to the machine at the run's start (the default when the key is absent);
+# otherwise a sensor id of the run: the errors were corrected to that sensor's temperature.
+START = "start"
 
 
 class RunFormatError(ValueError):
@@ -125,6 +129,11 @@ class Run:
 
     def sensors_with_role(self, role):
         return [n for n, s in self.meta.get("sensors", {}).items() if s.get("role") == role]
+
+    @property
+    def error_reference(self):
+        """``"start"`` or the sensor id the errors are corrected to (meta.json ``error_reference``)."""
+        return error_reference(self.meta)
 
     @property
     def stroke_mm(self):
@@ -319,6 +328,7 @@ def _check_meta(path, meta, problems):
                 continue
             if s.get("role") not in ROLES:
                 problems.add(path, "sensors.%s.role is %r; expected one of %s" % (name, s.get("role"), ", ".join(ROLES)))
+    _check_error_reference(path, meta, problems)
     stroke = meta.get("stroke_mm")
     if stroke is not None and not _positive(stroke):
         problems.add(path, "key 'stroke_mm' must be a positive finite number (found %r)" % (stroke,))
@@ -334,6 +344,47 @@ def _check_meta(path, meta, problems):
             fe = screw.get("fixed_end_mm", 0)
             if not isinstance(fe, (int, float)) or isinstance(fe, bool) or not math.isfinite(fe):
                 problems.add(path, "screw.fixed_end_mm must be a finite number (found %r)" % (fe,))
+
+
+def error_reference(meta):
+    """The declared error reference of a run's meta: ``"start"`` when absent (load_run has validated it)."""
+    return meta.get("error_reference", START)
+
+
+def _check_error_reference(path, meta, problems):
+    ref = meta.get("error_reference", START)
+    sensors = meta.get("sensors") if isinstance(meta.get("sensors"), dict) else {}
+    if ref == START or (isinstance(ref, str) and ref in sensors):
+        return
+    problems.add(path, "key 'error_reference' is %s; expected \"start\" (raw errors relative to the machine at the run's "
+                 "start) or a sensor id of this run the errors are corrected to (%s)"
+                 % (json.dumps(ref), ", ".join(sensors) or "no sensors declared"))
+
+
+def common_error_reference(runs):
+    """The error reference all ``runs`` declare; ValueError naming the runs of each reference when they differ.
+
+    One fit mixes no conventions: a sensor-referenced error lacks the expansion a raw error holds, so a model
+    fitted on both would learn half of it."""
+    by = {}
+    for r in runs:
+        by.setdefault(r.error_reference, []).append(r.path or r.name)
+    if len(by) > 1:
+        raise ValueError("the runs declare different error references (meta.json 'error_reference'): %s; fit runs of one "
+                         "reference at a time (docs/data-format.md)"
+                         % "; ".join("%s: %s" % (json.dumps(k), ", ".join(v)) for k, v in by.items()))
+    return next(iter(by), START)
+
+
+def check_model_reference(run, model_reference):
+    """ValueError when ``run``'s errors are referred otherwise than a model's training runs were.
+
+    A prediction and a measurement in different conventions differ by the expansion at the reference
+    temperature: comparing them would report that as model error."""
+    ref = run.error_reference
+    if ref != model_reference:
+        raise ValueError("%s: its errors are referred to %s (meta.json error_reference) but the model was fitted on errors "
+                         "referred to %s (docs/data-format.md)" % (run.path or run.name, json.dumps(ref), json.dumps(model_reference)))
 
 
 def load_meta(folder):

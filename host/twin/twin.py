@@ -17,6 +17,7 @@ from host.twin.structure import NODES, lagged, node_temperatures
 
 DEFAULT_PROTOCOL = "v8000_r210_490"
 DEFAULT_NOISE_UM = 0.5
+START = _runs.START  # the raw-error convention (docs/data-format.md)
 GENERATOR = "host.sim/2"  # 2: own screw core in absolute temperature, drifting air, lagged sensors
 
 
@@ -43,12 +44,13 @@ class Simulation:
     err_direction: np.ndarray  # int8 or None
     err_thermal_um: np.ndarray  # screw expansion + ambient_expansion, no noise
     err_geometric_um: np.ndarray
-    err_um: np.ndarray  # what the interferometer reports
+    err_um: np.ndarray  # what the interferometer reports (in the convention error_reference)
     screw_x_mm: np.ndarray = None  # (N+1,) node coordinates, screw coordinate (fixed end 0)
     readings_true_C: np.ndarray = None  # (n+1, len(NODES)) the sensor readings before noise
     sweep_motion: np.ndarray = None  # (s, 5) the sweeps' own travel (heats the axis, not in motion.csv)
     air_rise_K: float = 0.0  # the seeded warming of the air
     hvac_period_min: float = 0.0  # the seeded HVAC cycle
+    error_reference: str = START  # "start" (raw errors) or the sensor the laser corrected them to
 
 
 def _protocol(protocol):
@@ -117,9 +119,12 @@ def heat_sources(t, motion, params, eff):
     return screw_J, speed, nut_W, conv
 
 
-def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, **overrides):
+def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, error_reference=START, **overrides):
     """Run the twin; returns a :class:`Simulation` (see simulate_run for the arguments)."""
     proto = _protocol(protocol)
+    names = [nd.name for nd in NODES]
+    if error_reference != START and error_reference not in names:
+        raise ValueError("error reference %r: expected %r or a sensor of the twin (%s)" % (error_reference, START, ", ".join(names)))
     params = make_params(**overrides)
     eff = resolve_effects(effects)
     if not (isinstance(noise_um, (int, float)) and math.isfinite(noise_um) and noise_um >= 0):
@@ -180,6 +185,13 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
         base = nodes[:, [nd.role for nd in NODES].index("base")]
         dbase = np.interp(et, t, base) - base[0]
         thermal = thermal + eff["ambient_expansion"] * params.alpha_um_mK * dbase * ep * 1e-3
+    if error_reference != START:
+        # The laser's material-temperature compensation: the displacement it measured from its datum (axis 0) is
+        # scaled to the material at the reference sensor's temperature, so the screw's expansion over that
+        # temperature is what remains (S004 Eq. 9). The laser reads its own probe at that point: the sensor's
+        # lagged temperature without the logger's noise. The screw starts uniform at T_screw[0].
+        probe = readings[:, [nd.name for nd in NODES].index(error_reference)]
+        thermal = thermal - params.alpha_um_mK * (np.interp(et, t, probe) - T_screw[0, 0]) * ep * 1e-3
     geo = geometric_um(ep, params)
     err = thermal + geo
     if "reversal_error" in eff:
@@ -191,7 +203,7 @@ def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_N
         proto, params, eff, int(seed), float(noise_um), t, air.C, T_screw, nodes, noisy, power, conv, motion,
         sweeps, et, ep, ed if "reversal_error" in eff else None, thermal, geo, err,
         screw_x_mm=grid.x_mm, readings_true_C=readings, sweep_motion=sweep_rows, air_rise_K=air.rise_K,
-        hvac_period_min=air.hvac_period_min,
+        hvac_period_min=air.hvac_period_min, error_reference=error_reference,
     )
 
 
@@ -234,6 +246,8 @@ def to_run(sim):
             "params": {k: _plain(v) for k, v in dataclasses.asdict(p).items()},
         },
     }
+    if sim.error_reference != START:  # absent means "start" (docs/data-format.md): raw runs keep their bytes
+        meta["error_reference"] = sim.error_reference
     if sim.protocol.drawn or sim.protocol.source:
         # the drawn moving states (what the seed produced) or the states read from the user's file
         meta["simulation"]["phases"] = [dataclasses.asdict(ph) for ph in sim.protocol.phases]
@@ -246,19 +260,22 @@ def to_run(sim):
     return _runs.Run(meta, temps, errors, motion, None, path=None, name=sim.protocol.name)
 
 
-def simulate_run(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, **overrides):
+def simulate_run(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, error_reference=START, **overrides):
     """Simulate one thermal test of the feed axis and return it as a :class:`host.data.runs.Run`.
 
     protocol: a name from PROTOCOLS (or a Protocol); effects: None, a list of
     names from EFFECTS (default magnitudes) or {name: magnitude}; seed: integer
     >= 0, same seed -> same run; noise_um: laser measurement noise (standard
-    deviation, um); overrides: any AxisParams field (e.g. h_W_m2K=20,
-    segments=40, temp_noise_K=0).
+    deviation, um); error_reference: "start" (raw errors, relative to the
+    machine at the run's start) or a sensor name (errors corrected to that
+    sensor's temperature, as a laser's material-temperature compensation does);
+    overrides: any AxisParams field (e.g. h_W_m2K=20, segments=40, temp_noise_K=0).
     """
-    return to_run(simulate(protocol, effects, seed, noise_um, **overrides))
+    return to_run(simulate(protocol, effects, seed, noise_um, error_reference, **overrides))
 
 
-def write_runs(out, protocols=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, **overrides):
+def write_runs(out, protocols=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, error_reference=START,
+               **overrides):
     """Simulate and write run folders; returns [(protocol name, folder)].
 
     One protocol writes the run into ``out`` itself; several ('all',
@@ -268,7 +285,7 @@ def write_runs(out, protocols=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=D
     written = []
     for proto in protos:
         folder = out if len(protos) == 1 else os.path.join(out, proto.name)
-        run = simulate_run(proto, effects, seed, noise_um, **overrides)
+        run = simulate_run(proto, effects, seed, noise_um, error_reference, **overrides)
         _runs.write_run(run, folder)
         written.append((proto.name, folder))
     return written

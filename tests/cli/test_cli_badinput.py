@@ -489,7 +489,7 @@ def test_predict_outside_the_temperature_log(capsys, tmp_path, model, screw_mode
     err = _fail(capsys, ["predict", model, short_log, "--out", str(tmp_path / "p.csv")])
     assert "outside the temperature log 0..30 s (no extrapolation)" in err
     err = _fail(capsys, ["predict", screw_model, short_log, "--out", str(tmp_path / "p.csv")])
-    assert "outside the temperature log 0..30 s (sensor T2; no extrapolation)" in err
+    assert "outside the temperature log 0..30 s (sensor T3; no extrapolation)" in err  # the air: E_e (T2) is off by default
 
 
 def test_fit_screw_outside_the_temperature_log(capsys, tmp_path, short_log):

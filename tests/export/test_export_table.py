@@ -56,7 +56,7 @@ def test_round_trip(exports, kind):
     ex = exports[kind]
     t = parse_table(ex.table, expected_sensors=len(ex.fields["sensors"]))
     f = ex.fields
-    assert t.kind == kind and t.version == 4 and t.unit_code == 1
+    assert t.kind == kind and t.version == 4 and t.unit_code == 1 and t.error_ref == 0
     assert t.axis == f["axis"] and t.sensors == f["sensors"] and t.provenance == f["provenance"]
     assert (t.env_lo, t.env_hi, t.ref) == (f["env_lo"], f["env_hi"], f["ref"])
     assert (t.train_lo, t.train_hi) == (f["train_lo"], f["train_hi"])
@@ -113,7 +113,7 @@ def test_specific_reasons(exports):
     assert reason(bytes(v2)) == REASON_VERSION
     assert reason(refresh_crc(v2)) == REASON_VERSION
     # tables of format 1 (before the screw's air channel), 2 (before the training range) and 3 (before the screw's
-    # effect terms and the power inputs of dynamic tables) are refused with a message that says to re-export
+    # effect terms, the power inputs of dynamic tables and the error reference) are refused with a message that says to re-export
     for old in (1, 2, 3):
         v1 = bytearray(buf)
         v1[4] = old
@@ -148,6 +148,14 @@ def test_specific_reasons(exports):
     r = bytearray(buf)
     r[60] = 1
     assert reason(refresh_crc(r)) == REASON_FIELD
+    # the error reference (byte 58) names one of the table's sensors (1..n) or the start (0)
+    e = bytearray(buf)
+    e[58] = n
+    assert parse_table(refresh_crc(e)).error_ref == n
+    e[58] = n + 1
+    with pytest.raises(TableError, match="error reference %d \\(table has %d sensors\\)" % (n + 1, n)) as exc:
+        parse_table(refresh_crc(e))
+    assert exc.value.reason == REASON_FIELD
     nm = bytearray(buf)
     nm[HEADER_SIZE + 15] = ord("x")  # first sensor name: garbage after the NUL
     with pytest.raises(TableError, match="NUL-padded"):

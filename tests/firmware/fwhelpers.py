@@ -145,6 +145,17 @@ def modbus_auth_block(app, req, key=TEST_KEY):
     return bytes([1, 16, 0, 8, 0, 10, 20]) + b"".join(v.to_bytes(2, "big") for v in regs)
 
 
+# positions in a hello split by frames() ("TC", seq, status, "H", then the fields): read from the start, since fields
+# are appended after the counter (docs/protocol.md, Versioning)
+def _hello_positions():
+    from firmware.wire import HELLO_COUNTER
+
+    return 4 + HELLO_COUNTER - 1, 4 + HELLO_COUNTER
+
+
+HELLO_REFS_AT, HELLO_COUNTER_AT = _hello_positions()
+
+
 def frames(data):
     """Split device output into frames, checking each CRC; returns lists of str fields."""
     from firmware.crc16 import crc16_ccitt

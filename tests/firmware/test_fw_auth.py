@@ -11,6 +11,7 @@ import pytest
 from hypothesis import given, settings, strategies as st
 
 from firmware.wire import UPLOADING
+from fwhelpers import HELLO_COUNTER_AT
 from fwhelpers import (tagged_chunk, cmd, compile_mpy, frames, make_table, provision, rig_app, run_cycles, run_micropython,
                        scmd, table_fields, TEST_KEY)
 
@@ -82,7 +83,7 @@ def test_unsigned_commands_are_refused_and_change_nothing(tmp_path, line):
 
 def test_board_without_key_refuses_even_a_signed_command(tmp_path):
     app, board = rig_app(tmp_path, key=None)
-    assert frames(board.serial.take())[0][-2] == "-"  # the hello: no key
+    assert frames(board.serial.take())[0][HELLO_COUNTER_AT] == "-"  # the hello: no key
     out = send(app, board, scmd(app, "U", "X"))
     assert out[0][3:7] == ["E", "8", "auth", "no key"]
 
@@ -103,7 +104,7 @@ def test_counter_survives_a_reset_with_one_write_per_64(tmp_path):
     assert writes == ["auth.bin", "auth.bin"] and app.auth.last == 70
     app = App(board)  # reset
     hello = frames(board.serial.take())[0]
-    assert hello[-2] == "130"  # the stored mark: 64 ahead of counter 66, the first beyond the mark of 65
+    assert hello[HELLO_COUNTER_AT] == "130"  # the stored mark: 64 ahead of counter 66, the first beyond the mark of 65
     assert send(app, board, lines[-1])[0][3:7] == ["E", "8", "auth", "replayed counter"]
     assert send(app, board, scmd(app, "U", "X", counter=130))[0][3:7] == ["E", "8", "auth", "replayed counter"]
     assert send(app, board, scmd(app, "U", "X"))[0][3:6] == ["A", "U", "X"]

@@ -13,6 +13,7 @@ import pytest
 
 import hashlib
 
+from fwhelpers import HELLO_REFS_AT
 from fwhelpers import (tagged_chunk, cmd, compile_mpy, frames, modbus_auth_block, provision, run_cycles, run_micropython, scmd,
                        table_fields)
 from firmware.wire import REF_PENDING
@@ -69,7 +70,7 @@ def _near(v, deg_c):
 
 def test_warm_restart_keeps_the_stored_references(tmp_path):
     app, board, hello = _boot(tmp_path, (23.5, 21.0), _table())
-    assert hello[-3] == "N"  # nothing stored yet: latch pending
+    assert hello[HELLO_REFS_AT] == "N"  # nothing stored yet: latch pending
     assert int(hello[2], 16) & REF_PENDING  # in the boot status
     saves = []
     save = app.store.save_refs
@@ -81,10 +82,10 @@ def test_warm_restart_keeps_the_stored_references(tmp_path):
     assert not app.status & REF_PENDING and app.ref_state == 2
     assert _stored(tmp_path) == (app.table.crc, latched)
     hello = _send(app, board, cmd(b"TC,V"))[0]
-    assert hello[-3] == "L"
+    assert hello[HELLO_REFS_AT] == "L"
     # watchdog reset mid-shift: the machine has warmed by 1.5 K
     app, board, hello = _boot(tmp_path, (25.0, 22.5))
-    assert hello[-3] == "S" and not int(hello[2], 16) & REF_PENDING
+    assert hello[HELLO_REFS_AT] == "S" and not int(hello[2], 16) & REF_PENDING
     assert app.ev.ref == latched
     app.store.save_refs = lambda t, r: pytest.fail("stored references are not written again")
     run_cycles(app, board, 20)
@@ -137,7 +138,7 @@ def test_missing_corrupt_or_foreign_file_latches_anew(tmp_path, content, letter)
     elif content is not None:
         (tmp_path / "refs.bin").write_bytes(content)
     app, board, hello = _boot(tmp_path, (24.0, 21.0), table)
-    assert hello[-3] == letter and app.unlatched
+    assert hello[HELLO_REFS_AT] == letter and app.unlatched
     assert app.ev.ref == [20000, 20000]  # the table's own until the latch
     run_cycles(app, board, 5)
     assert _near(app.ev.ref[0], 24.0) and app.ref_state == 2
@@ -165,7 +166,7 @@ def test_refs_new_left_by_a_cut_between_remove_and_rename_is_used(tmp_path):
     latched = list(app.ev.ref)
     os.rename(tmp_path / "refs.bin", tmp_path / "refs.bin.new")
     app, board, hello = _boot(tmp_path, (26.0, 22.0))
-    assert hello[-3] == "S" and app.ev.ref == latched
+    assert hello[HELLO_REFS_AT] == "S" and app.ev.ref == latched
 
 
 def test_complete_refs_new_is_newer_and_a_partial_one_is_ignored(tmp_path):
@@ -182,10 +183,10 @@ def test_complete_refs_new_is_newer_and_a_partial_one_is_ignored(tmp_path):
     (tmp_path / "refs.bin.new").write_bytes((tmp_path / "refs.bin").read_bytes())
     (tmp_path / "refs.bin").write_bytes(old)
     app, board, hello = _boot(tmp_path, (26.0, 22.0))
-    assert hello[-3] == "S" and app.ev.ref == newer
+    assert hello[HELLO_REFS_AT] == "S" and app.ev.ref == newer
     (tmp_path / "refs.bin.new").write_bytes(old[:-3])
     app, board, hello = _boot(tmp_path, (26.0, 22.0))
-    assert hello[-3] == "S" and app.ev.ref == _stored(tmp_path)[1] != newer
+    assert hello[HELLO_REFS_AT] == "S" and app.ev.ref == _stored(tmp_path)[1] != newer
 
 
 def test_unwritable_flash_keeps_the_latch_and_says_so(tmp_path):
@@ -193,7 +194,7 @@ def test_unwritable_flash_keeps_the_latch_and_says_so(tmp_path):
     (tmp_path / "refs.bin.new").mkdir()  # opening the temp file for writing fails
     run_cycles(app, board, 5)
     assert _near(app.ev.ref[0], 23.5) and not app.unlatched
-    assert app.ref_state == 3 and _send(app, board, cmd(b"TC,V"))[0][-3] == "U"
+    assert app.ref_state == 3 and _send(app, board, cmd(b"TC,V"))[0][HELLO_REFS_AT] == "U"
 
 
 def test_L_relatches_and_persists(tmp_path):
@@ -209,7 +210,7 @@ def test_L_relatches_and_persists(tmp_path):
     assert _stored(tmp_path) == (app.table.crc, app.ev.ref)
     relatched = list(app.ev.ref)
     app, board, hello = _boot(tmp_path, (25.0, 21.0))  # and it survives a restart
-    assert hello[-3] == "S" and app.ev.ref == relatched
+    assert hello[HELLO_REFS_AT] == "S" and app.ev.ref == relatched
 
 
 def test_L_latches_a_pending_table_at_once(tmp_path):
@@ -239,7 +240,7 @@ def test_L_with_a_needed_sensor_faulty_is_refused_and_changes_nothing(tmp_path):
 
 def test_L_with_fixed_references_or_no_table_is_refused(tmp_path):
     app, board, hello = _boot(tmp_path, (23.5, 21.0), _table(ref_mode=0))
-    assert hello[-3] == "-"
+    assert hello[HELLO_REFS_AT] == "-"
     run_cycles(app, board, 5)
     before = _state(app, tmp_path)
     out = _send(app, board, scmd(app, "L"))
@@ -247,7 +248,7 @@ def test_L_with_fixed_references_or_no_table_is_refused(tmp_path):
     assert _state(app, tmp_path) == before and before[3] is None
     (tmp_path / "table_a.bin").unlink()
     app, board, hello = _boot(tmp_path, (23.5, 21.0))
-    assert hello[-3] == "-" and app.table is None
+    assert hello[HELLO_REFS_AT] == "-" and app.table is None
     run_cycles(app, board, 2)
     out = _send(app, board, scmd(app, "L"))
     assert out[0][3:7] == ["E", "5", "state", "no table"], out
@@ -267,7 +268,7 @@ def test_new_table_upload_latches_anew(tmp_path):
         out = _send(app, board, tagged_chunk(app, off, new[off:off + 48]))
     out = _send(app, board, scmd(app, "U", "C", extra=hashlib.sha256(new).digest()))
     assert out[0][3:7] == ["A", "U", "C", "B"] and out[1][3] == "H"
-    assert out[1][-3] == "O" and app.unlatched  # the stored references belong to the old table
+    assert out[1][HELLO_REFS_AT] == "O" and app.unlatched  # the stored references belong to the old table
     assert _stored(tmp_path) == old
     run_cycles(app, board, 2)
     assert _near(app.ev.ref[0], 25.0)
@@ -378,6 +379,6 @@ def test_reset_command_restart_keeps_the_stored_references(tmp_path):
         app.link.poll(board.clock.t)
     app = App(board)
     out = frames(board.serial.take())
-    assert out[0][3:5] == ["A", "X"] and out[1][3] == "H" and out[1][-3] == "S", out
+    assert out[0][3:5] == ["A", "X"] and out[1][3] == "H" and out[1][HELLO_REFS_AT] == "S", out
     run_cycles(app, board, 5)
     assert app.ev.ref == latched and _near(app.ev.temps[0], 23.6)

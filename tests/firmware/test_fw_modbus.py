@@ -1,6 +1,8 @@
 """Modbus RTU slave: CRC, register map, writes, exceptions, ignored frames."""
 import struct
 
+from firmware.wire import IR_ERROR_REF, N_INPUT
+
 import pytest
 from hypothesis import given, settings, strategies as st
 
@@ -72,6 +74,17 @@ def test_read_input_registers(dev):
         assert abs(s16(r[16 + i]) - (2000 + 100 * i)) <= 4  # 0.01 degC
     assert r[27:32] == [0x8000] * 5  # unused channels read as "no value"
     assert r[48:51] == [0, 0, 0]  # authorisation: last counter 0, no refusal yet
+    assert regs(ask(app, board, rtu(bytes([1, 4, 0, IR_ERROR_REF, 0, 1])))) == [0]  # error reference: start (the rig's table)
+
+
+def test_error_reference_register_names_the_tables_sensor(dev):
+    """Input register IR_ERROR_REF (53, after the session nonce): 1 + i for a table whose model was fitted on errors
+    corrected to sensor i (byte 58)."""
+    app, board = dev
+    app.table.error_ref = 3
+    assert regs(ask(app, board, rtu(bytes([1, 4, 0, IR_ERROR_REF, 0, 1])))) == [3]
+    assert N_INPUT == IR_ERROR_REF + 1
+    assert ask(app, board, rtu(bytes([1, 4, 0, IR_ERROR_REF, 0, 2])))[1] == 0x84  # beyond it nothing is mapped
 
 
 def test_write_position_and_enable(dev):

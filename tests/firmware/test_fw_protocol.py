@@ -107,8 +107,8 @@ def test_hello_at_boot(tmp_path):
     assert int(h[7], 16) == app.table.crc
     assert h[8] == app.table.provenance[:8].hex().upper()
     # "-": fixed reference temperatures; "0": the last authorisation counter (a key is provisioned);
-    # then the session nonce the fakes' board drew at boot
-    assert h[9:] == ["poly_slope", "X", "11", "-", "0", TEST_NONCE.hex().upper()]
+    # then the session nonce the fakes' board drew at boot, then the error reference (issue 19)
+    assert h[9:] == ["poly_slope", "X", "11", "-", "0", TEST_NONCE.hex().upper(), "start"]
 
 
 def test_no_table_hello_and_reason(tmp_path):

@@ -10,7 +10,7 @@ import struct
 
 import pytest
 
-from fwhelpers import compile_mpy, frames, provision, run_cycles, run_micropython, scmd
+from fwhelpers import HELLO_REFS_AT, compile_mpy, frames, provision, run_cycles, run_micropython, scmd
 
 SAVE_MS = 600000
 TEMPS = (22.0, 23.0)  # T1 base sensor, T2 the air
@@ -60,7 +60,7 @@ def test_warm_restart_restores_the_state_and_a_cold_one_would_not(tmp_path, scre
     from firmware.app import App, Restart
     from firmware.warmstate import ref_tag
     app, board, hello = _boot(tmp_path, screw_table)
-    assert app.table.ref_mode == 1 and hello[-3] == "N"
+    assert app.table.ref_mode == 1 and hello[HELLO_REFS_AT] == "N"
     run_cycles(app, board, 3, dt=1000)
     settled = list(app.ev.T)
     recs = _records(tmp_path / "heat.bin")
@@ -75,7 +75,7 @@ def test_warm_restart_restores_the_state_and_a_cold_one_would_not(tmp_path, scre
     assert max(saves[-1]) > max(settled) + (1 << app.table.ft)  # more than 1 K of stored heat
     # power cut 5 min after the last write: the restart resumes from that write, not from cold
     app, board, hello = _boot(tmp_path)
-    assert hello[-3] == "S" and app.warm and app.ev.T == saves[-1]
+    assert hello[HELLO_REFS_AT] == "S" and app.warm and app.ev.T == saves[-1]
     run_cycles(app, board, 2, dt=1000)
     assert max(app.ev.T) > max(settled) + (1 << app.table.ft)  # not settled at the first good cycle
     # an X reset writes the state of that moment first
@@ -85,12 +85,12 @@ def test_warm_restart_restores_the_state_and_a_cold_one_would_not(tmp_path, scre
         app.link.poll(board.clock.t)
     at_reset = list(app.ev.T)
     app = App(board)
-    assert app.ev.T == at_reset and frames(board.serial.take())[1][-3] == "S"
+    assert app.ev.T == at_reset and frames(board.serial.take())[1][HELLO_REFS_AT] == "S"
     # without heat.bin (before issue 13, or a new board) the same restart starts cold
     os.remove(str(tmp_path / "heat.bin"))
     app, board, hello = _boot(tmp_path)
     run_cycles(app, board, 2, dt=1000)
-    assert hello[-3] == "S" and not app.warm and max(app.ev.T) < max(at_reset) - (1 << app.table.ft)
+    assert hello[HELLO_REFS_AT] == "S" and not app.warm and max(app.ev.T) < max(at_reset) - (1 << app.table.ft)
 
 
 def test_latch_is_a_cold_start_that_zeroes_the_stored_state(tmp_path, screw_table):
@@ -113,7 +113,7 @@ def test_latch_is_a_cold_start_that_zeroes_the_stored_state(tmp_path, screw_tabl
     newest = _records(tmp_path / "heat.bin")[-1]
     assert newest[3] == cold.T and newest[2] == ref_tag(app.ev.ref)
     app, board, hello = _boot(tmp_path, temps=(22.0, 23.3))  # a restart now resumes from the zeroed state
-    assert hello[-3] == "S" and app.ev.T == cold.T
+    assert hello[HELLO_REFS_AT] == "S" and app.ev.T == cold.T
 
 
 def test_power_cut_during_a_write_leaves_the_old_or_the_new_record(tmp_path, screw_table):

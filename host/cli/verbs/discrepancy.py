@@ -73,14 +73,26 @@ def _discrepancy(args, out):
     if not any(r.motion is not None and len(r.motion) for r in runs):
         raise UserError("none of the runs has a motion.csv; the screw model is driven by the axis motion (%s)"
                         % ", ".join(r.path or r.name for r in runs))
+    from host.learning.discrepancy import reference
+
     try:
+        # a wrong declaration first: an effect would otherwise absorb the expansion at the reference temperature
+        check = reference.check_declaration(runs, lambda ref: ScrewFamily(air=args.air == "auto", error_reference=ref),
+                                            alpha=alpha, min_gain=min_gain, jobs=args.jobs, log=print)
+        if check["suggested"] is not None:
+            candidates = []
         result = workflow.discover(runs, family, candidates=candidates, alpha=alpha, min_gain=min_gain,
                                    max_effects=args.max_effects, jobs=args.jobs, log=print)
+        result.reference = check
     except (ValueError, RuntimeError) as exc:
         raise UserError(str(exc))
     js = write_report(result, family, out.path(args.report) if args.report else None, json_path=out.path(args.json),
                       shown_folder=args.report)
-    print("named effects: %s" % (", ".join(result.effects) or "none (no catalog effect explains the gap)"))
+    if check["suggested"] is not None:
+        print("named effects: none: the declared error reference does not fit (suggested: %s); fix meta.json and run again"
+              % check["suggested"])
+    else:
+        print("named effects: %s" % (", ".join(result.effects) or "none (no catalog effect explains the gap)"))
     print("held-out RMSE %.3f -> %.3f um; %sJSON in %s" % (result.before.rmse(), result.after.rmse(),
                                                             "report in %s, " % args.report if args.report else "", args.json))
     for d in js.get("unexplained", []):

@@ -12,6 +12,9 @@ def add_arguments(p):
     p.add_argument("--spindle", help="spindle speed column (rpm)")
     p.add_argument("--ignore", action="append", default=[], metavar="COL", help="source column deliberately not imported (repeatable)")
     p.add_argument("--axis", help="axis letter for meta.json")
+    p.add_argument("--error-reference", metavar="start|SENSOR",
+                   help="what the errors are referred to (meta.json error_reference, docs/data-format.md): 'start' (raw, "
+                        "relative to the machine at the log's start; the default) or the sensor the laser corrected them to")
     p.add_argument("--json", help="write a summary of what was imported")
 
 
@@ -81,6 +84,11 @@ def run(args):
         mapping, where = _from_flags(args), "command line"
     if args.axis:
         mapping.setdefault("meta", {})["axis"] = args.axis
+    if args.error_reference is not None:
+        if not isinstance(mapping.get("meta", {}), dict):
+            raise UserError("%s: 'meta' must be an object, found %r" % (where, mapping["meta"]))
+        mapping.setdefault("meta", {})["error_reference"] = args.error_reference
+        where = "%s (with --error-reference)" % where
     with out:
         try:
             run_ = import_to_folder(args.source, mapping, out.path(args.out), where)

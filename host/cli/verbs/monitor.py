@@ -65,6 +65,13 @@ def row(f):
     return r
 
 
+def error_reference_line(frame):
+    """The line `tcomp monitor` prints for a hello: which errors the board's table compensates."""
+    from host.board.link import describe_error_reference, hello_error_reference
+
+    return "error reference %s" % describe_error_reference(hello_error_reference(frame))
+
+
 def run(args):
     from host.errors import UserError
     from host.outputs import Outputs
@@ -145,6 +152,8 @@ def _monitor(args, outputs):
                     raise UserError("%s: the board's hello frame says protocol version %s; this tcomp speaks %d "
                                     "(docs/protocol.md)" % (args.port, (f.fields or ["(none)"])[0], PROTOCOL_VERSION))
                 r = row(f)
+                if f.kind == "H":
+                    print(error_reference_line(f))
                 print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))

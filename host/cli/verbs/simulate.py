@@ -32,6 +32,9 @@ def add_arguments(p):
                    help="laser measurement noise, standard deviation in um (default 0.5)")
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="override an axis parameter (host.twin.AxisParams field, e.g. h_W_m2K=20); repeatable")
+    p.add_argument("--error-reference", default="start", metavar="start|SENSOR",
+                   help="errors.csv convention: 'start' (raw, relative to the machine at the run's start; default) or a sensor "
+                        "(e.g. T3): errors corrected to its temperature, as a laser's material-temperature compensation does")
     p.add_argument("--json", metavar="PATH", help="write a summary (runs, folders, file sha256, peak errors) as JSON")
 
 
@@ -148,7 +151,7 @@ def _simulate(args, out):
         check_protocol_list(args.protocol)
         effects = parse_effects(args.effects)
         overrides = parse_overrides(args.set)
-        written = write_runs(out.path(args.out), args.protocol, effects, args.seed, noise, **overrides)
+        written = write_runs(out.path(args.out), args.protocol, effects, args.seed, noise, args.error_reference, **overrides)
     except ValueError as exc:
         raise UserError(str(exc))
     summary = {"seed": args.seed, "noise_um": noise, "runs": []}

@@ -12,10 +12,12 @@ that is exported.
 What stays here is workflow logic: which candidates the runs can test (``applicable``), caveats
 (``note``) and which temperature columns the model reads (``used_sensors``).
 """
+import dataclasses
 import warnings
 
 import numpy as np
 
+from host.data.runs import START
 from host.learning.screw.effects import EFFECTS, make_effect
 from host.learning.screw.screwmodel import ScrewModel
 
@@ -36,7 +38,8 @@ FOLD_FTOL = 1e-7
 class ScrewFamily:
     """The screw model (E_m over the measured air, no E_e) plus effects from host/learning/screw/effects.py."""
 
-    def __init__(self, segments=SEGMENTS, dt_s=DT_S, geometric_degree=GEOMETRIC_DEGREE, air=True, candidates=CANDIDATES):
+    def __init__(self, segments=SEGMENTS, dt_s=DT_S, geometric_degree=GEOMETRIC_DEGREE, air=True, candidates=CANDIDATES,
+                 error_reference=None):
         unknown = [n for n in candidates if n not in EFFECTS]
         if unknown:
             raise ValueError("unknown effect(s) %s (the screw model's effects: %s)" % (", ".join(unknown), ", ".join(EFFECTS)))
@@ -45,6 +48,9 @@ class ScrewFamily:
         self.geometric_degree = geometric_degree
         self.air = air
         self.candidates = tuple(candidates)
+        # None: each run's declaration (meta.json error_reference); else the runs are read as if they declared it
+        # (host/learning/discrepancy/reference.py tries the other conventions this way)
+        self.error_reference = error_reference
 
     @property
     def catalog(self):
@@ -57,10 +63,16 @@ class ScrewFamily:
                           effects=[make_effect(n) for n in effects], air="auto" if self.air else "off", max_nfev=FOLD_MAX_NFEV,
                           ftol=FOLD_FTOL)
 
-    @staticmethod
-    def _moving(runs, masks):
+    def _declared(self, run):
+        """``run`` as the family reads it: with the overriding error reference in its meta, if one is set."""
+        if self.error_reference is None or run.error_reference == self.error_reference:
+            return run
+        return dataclasses.replace(run, meta=dict(run.meta, error_reference=self.error_reference))
+
+    def _moving(self, runs, masks):
         # the screw model is driven by the axis motion; a run without it carries no screw information
-        return [(r, m) for r, m in zip(runs, masks) if m is not None and np.any(m) and r.motion is not None and len(r.motion)]
+        return [(self._declared(r), m) for r, m in zip(runs, masks)
+                if m is not None and np.any(m) and r.motion is not None and len(r.motion)]
 
     def fit(self, runs, masks, effects, start=None):
         sel = self._moving(runs, masks)
@@ -86,7 +98,7 @@ class ScrewFamily:
     def predict(self, fitted, run):
         if run.motion is None or not len(run.motion):
             raise ValueError("run %s has no motion: the screw model cannot predict it" % run.name)
-        return fitted.predict(run)
+        return fitted.predict(self._declared(run))
 
     def used_sensors(self, run, effects=()):
         """The temperature columns the model with ``effects`` reads for ``run``."""
@@ -98,6 +110,9 @@ class ScrewFamily:
             used.update((amb or base)[:1])
         if "ambient_expansion" in effects:
             used.update(run.sensors_with_role("base")[:1])
+        ref = self._declared(run).error_reference
+        if ref != START:
+            used.add(ref)
         return used
 
     def applicable(self, runs, name):

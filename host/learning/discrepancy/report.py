@@ -146,6 +146,11 @@ def markdown(result, js, model_path=None, model_error=None):
     lines.append("")
     lines.append("Held-out RMSE: %.3f um before, %.3f um after." % (result.before.rmse(), result.after.rmse()))
     lines.append("")
+    if result.reference is not None:
+        from host.learning.discrepancy import reference
+
+        lines.append("**Error reference:** %s." % reference.report_line(result.reference))
+        lines.append("")
     lines.append("| run | RMSE before [um] | RMSE after [um] |")
     lines.append("|---|---|---|")
     for r in js["per_run"]:
@@ -227,8 +232,10 @@ def findings(result, family, model_path=None, model_error=None):
     """The JSON fields beyond ``result.as_json()``: model, model_error, evidence, unexplained, unexplained_all."""
     from host.learning.discrepancy import unexplained
 
+    from host.learning.discrepancy import reference
+
     diag = residual_diagnostic(result, family)
-    return {"model": model_path, "model_error": model_error, "evidence": evidence(result),
+    return {**reference.json_fields(result.reference), "model": model_path, "model_error": model_error, "evidence": evidence(result),
             "unexplained": unexplained.summary(diag),
             "unexplained_all": [{k: d[k] for k in ("signal", "partial_r", "rmse_share", "rmse_share_heldout", "above_threshold", "where")}
                                 for d in diag]}

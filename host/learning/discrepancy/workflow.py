@@ -123,6 +123,7 @@ class Result:
     rounds: list
     runs: list
     final_fit: object = None
+    reference: Optional[dict] = None  # host.learning.discrepancy.reference.check_declaration's finding, when run
 
     def as_json(self):
         cand = {}

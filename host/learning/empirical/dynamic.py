@@ -36,6 +36,7 @@ evaluation costs O(k³ · groups) whatever the number of samples.
 """
 import numpy as np
 
+from host.data.runs import START, check_model_reference
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.checks import check_predict_x, finite_or_none
 from models_export.document import FORMAT
@@ -369,7 +370,16 @@ class DynamicModel:
             return np.arange(len(run.errors))
         return _channel_rows(run, self.channel)
 
+    @property
+    def error_reference(self):
+        """The convention of the training errors ("start" for documents written before it was recorded)."""
+        return self.training.get("error_reference", START)
+
     def predict(self, run):
+        try:
+            check_model_reference(run, self.error_reference)
+        except ValueError as exc:
+            raise EmpiricalDataError(str(exc))
         e = run.errors
         out = np.full(len(e), np.nan)
         rows = self._rows(run)
@@ -380,7 +390,7 @@ class DynamicModel:
     def to_document(self):
         return {
             "format": FORMAT, "kind": self.kind, "method": self.method, "axis": self.axis, "channel": self.channel,
-            "sensors": list(self.sensors), "reference_C": dict(self.reference_C),
+            "sensors": list(self.sensors), "error_reference": self.error_reference, "reference_C": dict(self.reference_C),
             "geometric": None if self.target == "direct" else {"degree": int(self.geometric_coef.size - 1),
                                                                "coefficients_um": [float(c) for c in self.geometric_coef]},
             "thermal": {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": "run_start",

@@ -14,6 +14,7 @@ from host.learning.empirical.geometric import fit_geometric
 from host.learning.empirical.kinds import LinearDirectModel, NetworkModel, PolySlopeModel
 from host.learning.empirical.methods import CROSS_VALIDATED, make_estimator
 from host.learning.empirical.schedule import block_labels, cycles
+from host.data.runs import common_error_reference
 from host.learning.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
 
 ENVELOPE_MARGIN_K = 2.0
@@ -149,11 +150,14 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
                                          % (", ".join(outside), ", ".join(sensors)))
         sensors = pair
     arrays = training_arrays(runs, target=target, channel=channel, sensors=sensors, window=window, exclude=exclude)
+    error_reference = common_error_reference(runs)  # training_arrays has refused a mix
     names = arrays[0].names
     X, y = stack(arrays)
     if method == "dynamic":
-        return _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K,
+        model = _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K,
                             (geometric_max_degree, geometric_criterion, geometric_degree), cv_blocks, options)
+        model.training["error_reference"] = error_reference
+        return model
     est = make_estimator(method, fit_intercept=fit_intercept, **options)
     # cv-subset cross-validates over the groups; the ann validates on the last one
     groups = cv_groups(runs, arrays, cv_blocks) if method in CROSS_VALIDATED else None
@@ -176,6 +180,7 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
         "excluded_s": list(exclude) if exclude is not None else None,
         "n_samples": int(y.size),
         "rises": True,
+        "error_reference": error_reference,  # the convention of the targets (the model predicts errors in it)
         "fit_intercept": bool(fit_intercept),
         "candidate_sensors": list(names),
         "options": {k: v for k, v in options.items()},

@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from host.data.runs import START, check_model_reference
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.targets import _channel_rows
 from host.learning.documents import ModelFormatError
@@ -94,7 +95,16 @@ class _Base:
     def geometric(self, P):
         return np.zeros(np.shape(P))
 
+    @property
+    def error_reference(self):
+        """The convention of the training errors ("start" for documents written before it was recorded)."""
+        return self.training.get("error_reference", START)
+
     def predict(self, run):
+        try:
+            check_model_reference(run, self.error_reference)
+        except ValueError as exc:
+            raise EmpiricalDataError(str(exc))
         e = run.errors
         out = np.full(len(e), np.nan)
         rows = self._rows(run)
@@ -121,6 +131,7 @@ class _Base:
             "axis": self.axis,
             "channel": self.channel,
             "sensors": list(self.sensors),
+            "error_reference": self.error_reference,
             "reference_C": dict(self.reference_C),
             "envelope": self.envelope,
             "statistics": self.statistics,

@@ -24,6 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from host.data.runs import common_error_reference
 from host.learning.empirical import EmpiricalDataError
 
 TARGETS = ("slope", "direct")
@@ -250,6 +251,10 @@ def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True,
     runs = list(runs)
     if not runs:
         raise EmpiricalDataError("no run given")
+    try:
+        common_error_reference(runs)  # one convention per fit (docs/data-format.md)
+    except ValueError as exc:
+        raise EmpiricalDataError(str(exc))
     names = common_sensors(runs) if sensors is None else list(sensors)
     if len(set(names)) != len(names):
         raise EmpiricalDataError("sensor list has duplicates: %s" % ", ".join(names))

@@ -29,7 +29,8 @@ def _heating_end(run):
 def fit_models(fit_run, mlr_sensor_sets=None):
     """{label: fitted model} on the heating phase of ``fit_run``."""
     t_end = _heating_end(fit_run)
-    models = {"screw (base sensor + motion)": ScrewModel(fit_window=(None, t_end)).fit([fit_run])}
+    # E_e on: the bundled runs hold the frame's drift with the base (the twin's ambient_expansion), which E_e stands for
+    models = {"screw (base sensor + motion)": ScrewModel(ambient=True, fit_window=(None, t_end)).fit([fit_run])}
     from host.learning.empirical.fitting import fit_model
 
     def first(role):

@@ -73,6 +73,9 @@ def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
         "base_sensor": model.base_sensor_,
         "base_ref_C": model.base_ref_C_,
         "base_ref": getattr(model, "base_ref", "fixed"),
+        # errors referred to a sensor: E_m loses alpha*(T_R - T_R,ref)*P, a temperature-linear term (reference.py)
+        "error_reference": getattr(model, "error_reference_", "start"),
+        "error_reference_C": getattr(model, "error_reference_C_", None),
         "feed_max_mm_min": float(feed_max_mm_min),
         "ee_um_per_mm_per_K": float(1e3 * p.alpha_per_K) if model.base_sensor_ is not None else 0.0,
     }

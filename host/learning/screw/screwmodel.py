@@ -11,7 +11,9 @@ import warnings
 
 import numpy as np
 
+from host.data.runs import START as RAW, check_model_reference, common_error_reference
 from host.learning.screw import heat
+from host.learning.screw import reference as errref
 from host.learning.screw.context import RunContext, check_screw_run
 from host.learning.screw.effects import EFFECTS, Effect, ParamSpec
 from host.learning.screw.identify import IdentifiabilityWarning, fit_parameters
@@ -44,7 +46,8 @@ class ScrewModel:
     (names or aliases q, h, lambda, c, alpha; None = q, h, lambda, plus alpha when
     the runs' meta.json gives none and the base temperature varies); geometric_degree:
     0..4 or "auto" (CV/AIC); effects: Effect instances (host/learning/screw/effects.py);
-    channel: errors.csv channel; ambient: include E_e from the base sensor;
+    channel: errors.csv channel; ambient: include E_e from the base sensor (True/False, or "auto":
+    the default structure of the runs' error reference, host/learning/screw/reference.py ambient_default);
     nut_weight: weight (µm per K) of the nut-temperature residuals in the
     identification (0 = nut sensor only reported); reduced_segments, reduced_dt_s:
     the firmware recurrence; feed_max_mm_min: top feed for the reduced state bound
@@ -58,9 +61,13 @@ class ScrewModel:
     with role 'ambient'; else the base sensor, else a constant air, each fallback
     warned about in statistics.warnings), a sensor name, or "off" (constant air: the
     screw as a rise over a still air, the model before the air term); ftol: relative change of the cost that
-    ends the identification (the discrepancy workflow's fold fits use a looser one)."""
+    ends the identification (the discrepancy workflow's fold fits use a looser one).
 
-    def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient=True,
+    The runs' declared error reference (meta.json ``error_reference``) is read, not set: under a sensor
+    reference E_m is over that sensor's temperature (S004 Eq. 9, host/learning/screw/reference.py); runs of
+    different references are refused."""
+
+    def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient="auto",
                  nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200, base_sensor=None,
                  base_ref="run_start", fit_window=None, air="auto", ftol=1e-12):
         self.segments = segments
@@ -154,10 +161,38 @@ class ScrewModel:
             if self.base_sensor_ not in ctx.run.temperatures.names:
                 raise ValueError("%s: the model's base sensor %r is not in temperatures.csv" % (ctx.run_name, self.base_sensor_))
             E = E + 1e3 * base.alpha_per_K * (ctx.sensor_at_rows(self.base_sensor_) - self._base_ref(ctx.run)) * ctx.positions_mm
+        if self.error_reference_ != RAW:
+            if self.error_reference_ not in ctx.run.temperatures.names:
+                raise ValueError("%s: the model's error reference %r is not in temperatures.csv" % (ctx.run_name, self.error_reference_))
+            rise = ctx.sensor_at_rows(self.error_reference_) - self._reference_start(ctx.run)
+            E = E - errref.reference_um(base.alpha_per_K, rise, ctx.positions_mm)
         for e in self.effects:
             if hasattr(e, "error_um"):
                 E = E + e.error_um(ctx, eff[e.name])
         return E
+
+    def _reference_start(self, run):
+        """T_R,ref of a sensor-referenced model: the same start rule as E_e's base_ref."""
+        if self.base_ref == "run_start":
+            return float(run.temperatures.column(self.error_reference_)[0])
+        return self.error_reference_C_
+
+    def _reference_K(self, run, times_s):
+        """T_R − T_R,ref at ``times_s``."""
+        if self.error_reference_ not in run.temperatures.names:
+            raise ValueError("%s: the model's error reference %r is not in temperatures.csv" % (run.path or run.name, self.error_reference_))
+        return errref.reference_K(run, self.error_reference_, times_s, self._reference_start(run))
+
+    def _check_inputs(self, ctx):
+        """Every temperature the model reads is logged over the error rows (the air enters on the model's grid, where
+        np.interp would silently hold the log's ends)."""
+        for name in self.input_sensors_():
+            if name not in ctx.run.temperatures.names:
+                raise ValueError("%s: the model's sensor %r is not in temperatures.csv" % (ctx.run_name, name))
+            ctx.sensor_at_rows(name)
+
+    def _check_reference(self, run):
+        check_model_reference(run, self.error_reference_)
 
     def _base_ref(self, run):
         if self.base_ref == "run_start":
@@ -248,10 +283,12 @@ class ScrewModel:
             base = ["q_J_per_mm", "h_W_m2K", "lambda_W_mK"]
             screw = runs[0].meta.get("screw") or {}
             given = any(k in screw for k in ("alpha_per_K", "alpha_um_per_m_K"))
-            if not given and self.base_sensor_ is not None:
-                span = max(np.ptp(r.temperatures.column(self.base_sensor_)) for r in runs if self.base_sensor_ in r.temperatures.names)
-                if span >= BASE_ALPHA_MIN_SPAN_K:
-                    base.append("alpha_per_K")
+            # alpha has its own signal in a temperature-linear term: E_e's base sensor, or the error reference's
+            # sensor (its expansion is taken out of E_m), when that temperature moves
+            linear = [s for s in (self.base_sensor_, None if self.error_reference_ == RAW else self.error_reference_) if s]
+            spans = [np.ptp(r.temperatures.column(s)) for s in linear for r in runs if s in r.temperatures.names]
+            if not given and spans and max(spans) >= BASE_ALPHA_MIN_SPAN_K:
+                base.append("alpha_per_K")
         return base + ["%s.%s" % (e.name, s.name) for e in self.effects for s in e.parameters()]
 
     def fit(self, runs, row_masks=None, start=None, reduce=True):
@@ -272,6 +309,15 @@ class ScrewModel:
         for e in self.effects:
             if not isinstance(e, Effect):
                 raise ValueError("effects must be Effect instances (got %r)" % (e,))
+        if self.ambient not in (True, False, "auto"):
+            raise ValueError("ambient must be on, off or auto (got %r)" % (self.ambient,))
+        self.error_reference_ = common_error_reference(runs)
+        if self.error_reference_ != RAW:
+            errref.check_reference_sensor(runs, self.error_reference_)
+            self.error_reference_C_ = float(runs[0].temperatures.column(self.error_reference_)[0])
+        else:
+            self.error_reference_C_ = None
+        self.ambient_ = errref.ambient_default(self.error_reference_) if self.ambient == "auto" else bool(self.ambient)
         geo = heat.ScrewGeometry.from_meta(runs[0].meta, self.segments) if isinstance(runs[0].meta.get("screw"), dict) else None
         if geo is None:
             raise ValueError("%s: meta.json has no 'screw' block (length_mm, diameter_mm, lead_mm, fixed_end_mm)" % (runs[0].path or runs[0].name))
@@ -290,7 +336,7 @@ class ScrewModel:
             raise ValueError("%s: base sensor %r is not a column of temperatures.csv (columns: %s)"
                              % (runs[0].path or runs[0].name, self.base_sensor, ", ".join(runs[0].temperatures.names)))
         bases = [self.base_sensor] if self.base_sensor else runs[0].sensors_with_role("base")
-        self.base_sensor_ = next((b for b in bases if b in runs[0].temperatures.names), None) if self.ambient else None
+        self.base_sensor_ = next((b for b in bases if b in runs[0].temperatures.names), None) if self.ambient_ else None
         if self.base_sensor_ is not None:
             missing = [r.path or r.name for r in runs if self.base_sensor_ not in r.temperatures.names]
             if missing:
@@ -315,6 +361,8 @@ class ScrewModel:
         # what the effects' reduced forms read (effects.py reduce): the first run's role sensors and start readings
         self.first_roles_ = (ctxs[0].base_sensor, ctxs[0].ambient_sensor)
         self.run_start_C_ = {n: float(runs[0].temperatures.column(n)[0]) for n in runs[0].temperatures.names}
+        for c in ctxs:
+            self._check_inputs(c)
         for e in self.effects:
             if hasattr(e, "check"):
                 e.check(ctxs)
@@ -411,7 +459,8 @@ class ScrewModel:
         self.statistics_ = stats
         self.training_ = {"runs": [c.run_name for c in ctxs], "free": free, "segments": self.segments, "dt_s": self.dt_s,
                           "geometric_degree": self.geometric_degree, "nut_weight": self.nut_weight, "channel": self.channel,
-                          "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window, "air": self.air}
+                          "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window, "air": self.air,
+                          "ambient": self.ambient, "error_reference": self.error_reference_}
         feeds = np.concatenate([r.motion.feed_mm_min for r in runs])
         P_all = np.concatenate([P] + [np.r_[r.motion.from_mm, r.motion.to_mm] for r in runs])
         strokes = [float(r.meta["stroke_mm"]) for r in runs if isinstance(r.meta.get("stroke_mm"), (int, float))]
@@ -431,6 +480,11 @@ class ScrewModel:
             ta = np.concatenate([r.temperatures.column(self.air_sensor_) for r in runs])
             self.envelope_.setdefault("temperature_C", {})[self.air_sensor_] = [float(ta.min()) - BASE_ENVELOPE_MARGIN_K,
                                                                                  float(ta.max()) + BASE_ENVELOPE_MARGIN_K]
+            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+        if self.error_reference_ != RAW and self.error_reference_ not in self.envelope_.get("temperature_C", {}):
+            tr = np.concatenate([r.temperatures.column(self.error_reference_) for r in runs])
+            self.envelope_.setdefault("temperature_C", {})[self.error_reference_] = [float(tr.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                                       float(tr.max()) + BASE_ENVELOPE_MARGIN_K]
             self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
         if not reduce:
             self.reduced_ = None
@@ -457,7 +511,9 @@ class ScrewModel:
         if not hasattr(self, "geometry_"):
             raise ValueError("screw model: predict before fit (fit(runs) first, or load a fitted document)")
         check_screw_run(run, self.geometry_, require_nut=False)
+        self._check_reference(run)
         ctx = self._context(run)
+        self._check_inputs(ctx)
         out = self.thermal_context(ctx) + self.geometric_um(ctx.positions_mm)
         bad = np.flatnonzero(~np.isfinite(out))
         if bad.size:
@@ -477,6 +533,9 @@ class ScrewModel:
         if self.base_sensor_ is not None:
             tb = np.interp(t, run.temperatures.time_s, run.temperatures.column(self.base_sensor_))
             E = E + 1e3 * self.params_.alpha_per_K * (tb - self._base_ref(run))[:, None] * P[None, :]
+        if self.error_reference_ != RAW:
+            self._check_reference(run)
+            E = E - errref.reference_um(self.params_.alpha_per_K, self._reference_K(run, t)[:, None], P[None, :])
         return t, E + self.geometric_um(P)[None, :]
 
     # ------------------------------------------------------------ document
@@ -498,6 +557,8 @@ class ScrewModel:
             "air_sensor": self.air_sensor_,
             "air_ref_C": self.air_ref_C_,
             "air_source": self.air_source_,
+            "error_reference": self.error_reference_,
+            "error_reference_C": self.error_reference_C_,
             "reduced": self.reduced_,
         }
         return {
@@ -506,9 +567,10 @@ class ScrewModel:
             "axis": self.axis_,
             "channel": self.channel,
             "sensors": self.input_sensors_(),
-            "reference_C": {n: r for n, r in ((self.base_sensor_, self.base_ref_C_), (self.air_sensor_, self.air_ref_C_),
-                                              self._reduced_base())
-                            if n is not None},
+            "error_reference": self.error_reference_,
+            "reference_C": {n: r for n, r in ((self.error_reference_, self.error_reference_C_), (self.base_sensor_, self.base_ref_C_),
+                                              (self.air_sensor_, self.air_ref_C_), self._reduced_base())
+                            if n is not None and n != RAW},
             "geometric": {"degree": int(self.geometric_degree_), "coefficients_um": [float(c) for c in self.geometric_]},
             "thermal": thermal,
             "envelope": self.envelope_,
@@ -517,10 +579,10 @@ class ScrewModel:
         }
 
     def input_sensors_(self):
-        """The temperatures prediction reads: the base sensor (E_e), then the air sensor, then a sensor only an
-        effect reads (ambient_expansion without E_e: the reduced form's base term)."""
+        """The temperatures prediction reads: the base sensor (E_e), the air sensor, a sensor only an effect reads
+        (ambient_expansion without E_e: the reduced form's base term), then the error reference's sensor."""
         out = [self.base_sensor_] if self.base_sensor_ else []
-        for name in (self.air_sensor_, self._reduced_base()[0]):
+        for name in (self.air_sensor_, self._reduced_base()[0], None if self.error_reference_ == RAW else self.error_reference_):
             if name and name not in out:
                 out.append(name)
         return out
@@ -584,6 +646,14 @@ class ScrewModel:
             m.air = "auto" if m.air_sensor_ else "off"
             if m.air_sensor_ is not None and m.base_ref == "fixed" and not isinstance(m.air_ref_C_, (int, float)):
                 raise KeyError("thermal.air_ref_C")
+            # documents written before the error reference was data: raw errors ("start")
+            m.error_reference_ = th.get("error_reference", RAW)
+            m.error_reference_C_ = th.get("error_reference_C")
+            if m.error_reference_ != RAW and not isinstance(m.error_reference_, str):
+                raise TypeError("thermal.error_reference must be \"start\" or a sensor name, found %r" % (m.error_reference_,))
+            if m.error_reference_ != RAW and m.base_ref == "fixed" and not isinstance(m.error_reference_C_, (int, float)):
+                raise KeyError("thermal.error_reference_C")
+            m.ambient_ = m.base_sensor_ is not None
             m.reduced_ = th.get("reduced")
             gm = doc.get("geometric") or {"degree": 0, "coefficients_um": []}
             m.geometric_ = [float(c) for c in gm["coefficients_um"]]

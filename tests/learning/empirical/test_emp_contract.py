@@ -110,7 +110,7 @@ def _models():
     screw_run = synth.make_run()
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)
-        screw = ScrewModel(segments=10, dt_s=20.0).fit([screw_run])
+        screw = ScrewModel(ambient=True, segments=10, dt_s=20.0).fit([screw_run])
     cycles = conf.make_direct_run(name="cycles", n_sensors=3, spindle=True)  # the dynamic model cross-validates across cycles
     return {
         "poly_slope": (fit_model([slope], method="mlr", target="slope"), slope),
@@ -173,4 +173,4 @@ def test_predict_refuses_nan_temperatures(kind):
 def test_screw_predict_before_fit_is_a_clear_error():
     # the empirical kinds have no unfitted state: they are built from their coefficients
     with pytest.raises(ValueError, match="predict before fit"):
-        ScrewModel().predict(_model("screw")[1])
+        ScrewModel(ambient=True).predict(_model("screw")[1])

@@ -33,7 +33,7 @@ def demo_runs():
 def demo_model(demo_runs):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", IdentifiabilityWarning)
-        return ScrewModel().fit([demo_runs[DEMO_FIT]])
+        return ScrewModel(ambient=True).fit([demo_runs[DEMO_FIT]])
 
 
 @pytest.fixture(scope="session")
@@ -43,4 +43,4 @@ def synth_run():
 
 @pytest.fixture(scope="session")
 def synth_model(synth_run):
-    return ScrewModel().fit([synth_run])
+    return ScrewModel(ambient=True).fit([synth_run])

@@ -30,7 +30,7 @@ SEEDS = [3, 11, 29, 41, 57] if os.environ.get("TCOMP_SLOW") == "1" else [3]
 @pytest.mark.parametrize("seed", SEEDS)
 def test_noisy_recovery_within_reported_uncertainty(seed):
     run = synth.make_run(noise_um=0.5, seed=seed)
-    m = ScrewModel().fit([run])
+    m = ScrewModel(ambient=True).fit([run])
     st = m.statistics_["parameters"]
     for k, v in TRUE.items():
         assert abs(st[k]["value"] - v) <= 3.0 * st[k]["std"], (k, st[k], v)
@@ -41,7 +41,7 @@ def test_noisy_recovery_within_reported_uncertainty(seed):
 def test_several_runs_fit_together():
     short = dict(heat_s=2 * 3600.0, cool_s=3600.0, sweep_every_s=600.0)
     runs = [synth.make_run(4000, 210, 490, noise_um=0.2, seed=1, **short), synth.make_run(12000, 0, 700, noise_um=0.2, seed=2, **short)]
-    m = ScrewModel().fit(runs)
+    m = ScrewModel(ambient=True).fit(runs)
     assert [r["run"] for r in m.statistics_["runs"]] == [r.name for r in runs]
     for k, v in TRUE.items():
         assert m.values_[k] == pytest.approx(v, rel=0.05), k
@@ -51,11 +51,11 @@ def test_flat_direction_is_reported():
     # without base-temperature change alpha only appears as alpha*q: a flat direction
     run = synth.make_run(base_drift_K=0.0, heat_s=3600.0, cool_s=1800.0, sweep_every_s=600.0)
     with pytest.warns(IdentifiabilityWarning, match="flat direction.*(q_J_per_mm|alpha_per_K)"):
-        m = ScrewModel(free="q,alpha", geometric_degree=2, max_nfev=20).fit([run])
+        m = ScrewModel(ambient=True, free="q,alpha", geometric_degree=2, max_nfev=20).fit([run])
     flat = m.statistics_["flat_directions"]
     assert flat and {"q_J_per_mm", "alpha_per_K"} <= set(flat[0]["parameters"])
     # and by default alpha is then not freed
-    m2 = ScrewModel().fit([run])
+    m2 = ScrewModel(ambient=True).fit([run])
     assert "alpha_per_K" not in m2.free_ and m2.statistics_["parameters"]["alpha_per_K"]["fixed"]
 
 
@@ -70,24 +70,24 @@ def _copy(run, **changes):
 
 def test_bad_input_is_named(synth_run):
     with pytest.raises(ValueError, match="no motion"):
-        ScrewModel().fit([_copy(synth_run, motion=None)])
+        ScrewModel(ambient=True).fit([_copy(synth_run, motion=None)])
     empty = Motion(*(np.zeros(0) for _ in range(5)))
     with pytest.raises(ValueError, match="no motion"):
-        ScrewModel().fit([_copy(synth_run, motion=empty)])
+        ScrewModel(ambient=True).fit([_copy(synth_run, motion=empty)])
     meta = dict(synth_run.meta, sensors={k: dict(v, role="structure") if v["role"] == "nut" else v for k, v in synth_run.meta["sensors"].items()})
     with pytest.raises(ValueError, match="no sensor with role 'nut'"):
-        ScrewModel(nut_weight=1.0).fit([_copy(synth_run, meta=meta)])  # only the nut residual needs the nut sensor
+        ScrewModel(ambient=True, nut_weight=1.0).fit([_copy(synth_run, meta=meta)])  # only the nut residual needs the nut sensor
     meta = dict(synth_run.meta, screw=dict(synth_run.meta["screw"], length_mm=600))
     with pytest.raises(ValueError, match="shorter than the stroke"):
-        ScrewModel().fit([_copy(synth_run, meta=meta)])
+        ScrewModel(ambient=True).fit([_copy(synth_run, meta=meta)])
     meta = dict(synth_run.meta, screw=dict(synth_run.meta["screw"], fixed_end_mm=150))
     with pytest.raises(ValueError, match="shorter than the stroke"):
-        ScrewModel().fit([_copy(synth_run, meta=meta)])
+        ScrewModel(ambient=True).fit([_copy(synth_run, meta=meta)])
     meta = {k: v for k, v in synth_run.meta.items() if k != "screw"}
     with pytest.raises(ValueError, match="no 'screw' block"):
-        ScrewModel().fit([_copy(synth_run, meta=meta)])
+        ScrewModel(ambient=True).fit([_copy(synth_run, meta=meta)])
     with pytest.raises(ValueError, match="free="):
-        ScrewModel(free="q,zeta").fit([synth_run])
+        ScrewModel(ambient=True, free="q,zeta").fit([synth_run])
 
 
 def test_predict_rejects_runs_outside_the_screw(synth_model, synth_run):
@@ -102,14 +102,14 @@ def test_nut_sensor_without_a_column_is_named(synth_run):
     r.meta["sensors"]["T_extra_nut"] = {"role": "nut"}
     r.meta["sensors"]["T_nut"]["role"] = "structure"
     with pytest.raises(ValueError, match="T_extra_nut.*no column in temperatures.csv"):
-        ScrewModel(nut_weight=1.0).fit([r])
+        ScrewModel(ambient=True, nut_weight=1.0).fit([r])
 
 
 def test_fit_without_a_nut_sensor(synth_run, synth_model):
     # the nut sensor is not a prediction input (issue 16 item 8): a run without one fits the same model
     meta = dict(synth_run.meta, sensors={k: v for k, v in synth_run.meta["sensors"].items() if v["role"] != "nut"})
-    m = ScrewModel(free="q,h,lambda,alpha").fit([_copy(synth_run, meta=meta)])
+    m = ScrewModel(ambient=True, free="q,h,lambda,alpha").fit([_copy(synth_run, meta=meta)])
     assert m.nut_sensor_ is None and m.to_document()["thermal"]["nut_sensor"] is None
     assert m.statistics_["runs"][0]["nut_rise_rmse_K"] is None
-    ref = ScrewModel(free="q,h,lambda,alpha").fit([synth_run])
+    ref = ScrewModel(ambient=True, free="q,h,lambda,alpha").fit([synth_run])
     np.testing.assert_allclose(m.predict(synth_run), ref.predict(synth_run), atol=1e-9)

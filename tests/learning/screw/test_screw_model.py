@@ -45,7 +45,7 @@ def test_cli_fit_and_predict(tmp_path):
     for i, (f, lo, hi) in enumerate([(8000, 210, 490), (12000, 0, 700)]):
         runs.append(write_run(synth.make_run(f, lo, hi, heat_s=7200.0, cool_s=3600.0, noise_um=0.2, seed=i), str(tmp_path / ("r%d" % i))))
     out, rep = str(tmp_path / "m.json"), str(tmp_path / "fit.json")
-    assert tcomp(["fit", "--model", "screw", runs[0], "--out", out, "--json", rep, "--option", "reduced_segments=10",
+    assert tcomp(["fit", "--model", "screw", runs[0], "--out", out, "--json", rep, "--option", "reduced_segments=10", "--option", "ambient=on",
                   "--option", "fit_window=:7200"]) == 0
     doc = read_document(out)
     assert doc["kind"] == "screw" and doc["thermal"]["reduced"]["segments"] == 10
@@ -161,14 +161,14 @@ def test_reversal_effect_output_hook():
     n = len(run.errors)
     run.errors.direction = np.where(np.arange(n) % 2 == 0, 1, -1).astype(np.int8)
     run.errors.error_um = run.errors.error_um + 0.5 * 3.0 * run.errors.direction
-    m = ScrewModel(free="q", geometric_degree=2, effects=[ReversalError()]).fit([run])
+    m = ScrewModel(ambient=True, free="q", geometric_degree=2, effects=[ReversalError()]).fit([run])
     assert m.values_["reversal_error.b_um"] == pytest.approx(3.0, abs=0.05)
 
 
 def test_effects_plug_in_parameters_and_hooks(synth_run):
     run = synth.make_run(heat_s=5400.0, cool_s=1800.0, sweep_every_s=600.0)
-    base = ScrewModel(free="q,h", geometric_degree=2).fit([run])
-    m = ScrewModel(free="q,h", geometric_degree=2, effects=[BearingHeat()]).fit([run])
+    base = ScrewModel(ambient=True, free="q,h", geometric_degree=2).fit([run])
+    m = ScrewModel(ambient=True, free="q,h", geometric_degree=2, effects=[BearingHeat()]).fit([run])
     assert "bearing_heat.W_per_m_min" in m.free_
     assert abs(m.values_["bearing_heat.W_per_m_min"]) < 0.05  # data made without bearing heat
     assert m.values_["q_J_per_mm"] == pytest.approx(base.values_["q_J_per_mm"], rel=0.02)
@@ -191,7 +191,7 @@ def test_effects_plug_in_parameters_and_hooks(synth_run):
 def test_effect_checks_and_ambient_expansion_equals_the_base_term():
     run = synth.make_run(heat_s=3600.0, cool_s=1800.0, sweep_every_s=600.0)
     with pytest.raises(ValueError, match="reversal_error needs bidirectional sweeps"):
-        ScrewModel(free="q", effects=[ReversalError()]).fit([run])
+        ScrewModel(ambient=True, free="q", effects=[ReversalError()]).fit([run])
     from host.learning.screw.effects import AmbientExpansion
 
     m = ScrewModel(free="q,h,lambda", geometric_degree=2, ambient=False, effects=[AmbientExpansion()]).fit([run])
@@ -241,7 +241,7 @@ def test_air_falls_back_to_the_base_sensor_then_to_a_constant_air_and_says_so():
         r = _with_roles(simulate_run("v8000_r210_490", seed=5, noise_um=0.3), **roles)
         with _w.catch_warnings():
             _w.simplefilter("ignore", IdentifiabilityWarning)
-            m = ScrewModel(segments=12, dt_s=30.0).fit([r])
+            m = ScrewModel(ambient=True, segments=12, dt_s=30.0).fit([r])
         doc = m.to_document()
         assert (m.air_sensor_, m.air_source_, doc["thermal"]["air_source"]) == (sensor, source, source), roles
         notes = " ".join(m.statistics_["warnings"])

@@ -25,7 +25,7 @@ def test_noise_free_twin_run_recovers_parameters():
     # and discretises its own way (measured: q -1.3 %, h -1.6 %, lambda +4.6 %), so 3 % on q and h, 10 % on
     # lambda (the weakest-identified); alpha comes from meta.json there (not free)
     run = sim.simulate_run("v8000_r210_490", effects=["ambient_expansion"], seed=4, noise_um=0.0)
-    m = ScrewModel(air="auto").fit([run])
+    m = ScrewModel(ambient=True, air="auto").fit([run])
     tol = {"q_J_per_mm": 0.03, "h_W_m2K": 0.03, "lambda_W_mK": 0.10, "alpha_per_K": 0.02}
     for k, v in _truth().items():
         if k in m.free_:
