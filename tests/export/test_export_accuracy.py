@@ -9,11 +9,12 @@ import os
 import random
 
 import pytest
-from hypothesis import HealthCheck, Phase, given, settings
+from hypothesis import HealthCheck, assume, Phase, given, settings
 from hypothesis import strategies as st
 
 from firmware.evaluate import CLAMP_POSITION, CLAMP_STATE, CLAMP_TRAVEL, Evaluator
 from firmware.table import parse_table
+from models_export.certify import ExportError
 from models_export.document import FORMAT, document_hash
 from models_export import export_model
 from hil_tests.fixtures.reference import Reference
@@ -200,7 +201,13 @@ def _feed_travel(t, feed, lo, hi):
 def test_screw_reduced_within_certificate(seed, data):
     rng = random.Random(seed)
     doc = screw_doc(rng)
-    ex = export_model(doc)
+    try:
+        ex = export_model(doc)
+    except ExportError as exc:
+        # a random document whose certified error reaches the limit is refused: it never reaches a board
+        # (the effect terms of format 4 add to the budget); the property is about the tables that do
+        assert "is not below 0.1 um" in str(exc), exc
+        assume(False)
     r = ex.report
     assert r["max_error_um"] < 0.1
     t = parse_table(ex.table)
@@ -321,6 +328,13 @@ _SCREW_CACHE = {}
 
 
 def _screw_export(seed):
+    """The export of sample screw document ``seed``; a document the exporter refuses (its certified error reaches
+    the limit: the format-4 effect terms add to the budget) never reaches a board, so the example is dropped."""
     if seed not in _SCREW_CACHE:
-        _SCREW_CACHE[seed] = export_model(screw_doc(random.Random(seed)))
+        try:
+            _SCREW_CACHE[seed] = export_model(screw_doc(random.Random(seed)))
+        except ExportError as exc:
+            assert "is not below 0.1 um" in str(exc), exc
+            _SCREW_CACHE[seed] = None
+    assume(_SCREW_CACHE[seed] is not None)
     return _SCREW_CACHE[seed]

@@ -194,7 +194,7 @@ FLAGS = {
     "discrepancy": {"in": {"runs": "folder"}, "out": {"--json": "file", "--report": "folder"},
                     "other": "--base --air --candidates --alpha --min-gain --max-effects --jobs"},
     "export": {"in": {"model": "file"}, "out": {"--out": "file", "--report": "file", "--json": "file", "--c-header": "file"},
-               "other": "--ref-position-mm --allow-edited --envelope --envelope-margin"},
+               "other": "--ref-position-mm --allow-edited --envelope --envelope-margin --reduction-limit"},
     "fit": {"in": {"runs": "folder"}, "out": {"--out": "file", "--json": "file"},
             "other": "--model --sensors --channel --direct --no-intercept --option"},
     # --key is created when missing (after the flash), else read: an output that is never written over anything
@@ -203,7 +203,7 @@ FLAGS = {
     "hil": {"in": {"--run": "folder", "--table": "file", "--config": "file"}, "out": {"--json": "file"},
             "other": "--interpreter --fault --noise-uohm --warmup-s --print-every"},
     "import": {"in": {"source": "file", "--mapping": "file"}, "out": {"--out": "folder", "--json": "file"},
-               "other": "--time --time-scale --temp --error --spindle --ignore --axis"},
+               "other": "--time --time-scale --temp --error --spindle --ignore --axis --error-reference"},
     "linuxcnc": {"in": {"--port": "file", "--key": "file"}, "out": {},
                  "other": "--mode --baud --address --name --units --slew-um-per-s --period-ms --stale-ms --recover-ms "
                           "--cold-start --spindle"},
@@ -212,7 +212,7 @@ FLAGS = {
     "predict": {"in": {"model": "file", "run": "folder"}, "out": {"--out": "file", "--json": "file"}, "other": "--allow-edited"},
     "select": {"in": {"runs": "folder", "--corr": "file", "--target-corr": "file"}, "out": {"--json": "file", "--plot": "file"},
                "other": "--method --channel --target --sensors --split --option"},
-    "simulate": {"in": {}, "out": {"--out": "folder", "--json": "file"}, "other": "--protocol --effects --seed --noise-um --set"},
+    "simulate": {"in": {}, "out": {"--out": "folder", "--json": "file"}, "other": "--protocol --effects --seed --noise-um --set --error-reference"},
     "validate": {"in": {"runs": "folder"}, "out": {"--json": "file"}, "other": ""},
 }
 

@@ -42,7 +42,7 @@ class MRPoly:
         self.degree = degree
         self.fit_intercept = fit_intercept
 
-    def fit(self, X, y, names=None):
+    def fit(self, X, y, names=None, groups=None):
         if isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer)) or not 1 <= self.degree <= MAX_DEGREE:
             raise EmpiricalDataError("mr-poly: degree must be an integer 1..%d (S004: m <= 4), got %r" % (MAX_DEGREE, self.degree))
         X = np.asarray(X, dtype=float)

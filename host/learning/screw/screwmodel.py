@@ -14,6 +14,7 @@ import numpy as np
 from host.data.runs import START as RAW, check_model_reference, common_error_reference
 from host.learning.screw import heat
 from host.learning.screw import reference as errref
+from models_export.document import FORMAT
 from host.learning.screw.context import RunContext, check_screw_run
 from host.learning.screw.effects import EFFECTS, Effect, ParamSpec
 from host.learning.screw.identify import IdentifiabilityWarning, fit_parameters
@@ -562,6 +563,7 @@ class ScrewModel:
             "reduced": self.reduced_,
         }
         return {
+            "format": FORMAT,
             "kind": "screw",
             "method": "screw",
             "axis": self.axis_,

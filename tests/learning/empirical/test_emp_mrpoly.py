@@ -61,7 +61,7 @@ def test_fit_cli_writes_an_mr_poly_document_that_predicts_by_the_formula(make_sl
     folder = str(tmp_path / "s1")
     write_run(run, folder, decimals=10)
     out = str(tmp_path / "m1.json")
-    p = subprocess.run([sys.executable, "-m", "host.cli", "fit", folder, "--model", "mr-poly", "--option", "degree=4", "--out", out],
+    p = subprocess.run([sys.executable, "-m", "host", "fit", folder, "--model", "mr-poly", "--option", "degree=4", "--out", out],
                        capture_output=True, text=True)
     assert p.returncode == 0, p.stderr
     assert "S004 Eq. 12, nut T1, base T2, degree 4" in p.stdout
