@@ -11,6 +11,8 @@ import os
 
 import pytest
 
+from firmware.wire import HELLO_COUNTER
+
 from hil_tests.rig.boards import _finish, export, rig_config, screw_doc
 
 pytestmark = pytest.mark.rig
@@ -46,7 +48,7 @@ def test_power_cut_restart_keeps_the_offset_where_a_cold_state_would_drop(make_r
     rig.kill()  # power cut
     rig.start()
     hello = rig.request("V", kinds=("H",))
-    assert hello.fields[-2] == "S"
+    assert hello.fields[HELLO_COUNTER - 1] == "S"  # the refs letter, just before the counter
     rig.send("P", P_UM)
     warm = _settled_q(rig)
     rig.kill()

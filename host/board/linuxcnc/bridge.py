@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 
 from firmware.wire import (
     E_AUTH, E_BUSY, E_STATE, EX_DEVICE_FAILURE, HR_AUTH, HR_LATCH, HR_POSITION, HR_SLEW, HR_SPINDLE, IR_AUTH_COUNTER, IR_NONCE,
-    IR_POSITION, IR_SEQUENCE, IR_STATUS_HI, IR_STATUS_LO, IR_TOTAL,
+    IR_POSITION, IR_REFERENCE, IR_SEQUENCE, IR_STATUS_HI, IR_STATUS_LO, IR_TOTAL,
 )
 from host.board.link import FALLBACK, StreamDecoder, command_line
 
@@ -184,7 +184,7 @@ class ModbusLink:
             if spindle_rpm is not None and not w.isError():
                 r = spindle_rpm & 0xFFFFFFFF
                 w = self.client.write_registers(HR_SPINDLE, [r >> 16, r & 0xFFFF], device_id=self.address)
-            rr = self.client.read_input_registers(IR_STATUS_LO, count=IR_POSITION + 2, device_id=self.address)
+            rr = self.client.read_input_registers(IR_STATUS_LO, count=IR_REFERENCE + 2, device_id=self.address)  # 0..9: status to reference position
             if w.isError() or rr.isError():
                 ex.error = "modbus exception %s" % (w if w.isError() else rr)
             else:
