@@ -116,6 +116,11 @@ def _last_status(rig, n0):
 
 # --- stream attacks -------------------------------------------------------------------------------------------
 
+def _but_nonce(h):
+    """A hello's fields without the session nonce, which moves on with time."""
+    return h.fields[:wire.HELLO_NONCE] + h.fields[wire.HELLO_NONCE + 1:]
+
+
 def stream_unsigned(rig, tally):
     h0 = _hello(rig)
     other = LinkSigner(bytes(range(32)), rig.signer.counter, rig.signer.nonce)
@@ -123,7 +128,7 @@ def stream_unsigned(rig, tally):
                  other.stream_line("L"), other.stream_line("X"), other.stream_line("U", "B", 200, "0000ABCD")):
         new = _say(rig, line)
         h = _hello(rig)
-        ok = [f.kind for f in new] == ["E"] and new[0].fields[0] == "8" and h.fields[:-1] == h0.fields[:-1]
+        ok = [f.kind for f in new] == ["E"] and new[0].fields[0] == "8" and _but_nonce(h) == _but_nonce(h0)
         tally.count("unsigned", ok, (line, [f.raw for f in new]))
 
 

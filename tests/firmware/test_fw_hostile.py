@@ -313,7 +313,7 @@ def test_hole5_hello_never_reports_a_counter_above_max(mark):
     from pathlib import Path
     app, board = rig_app(Path(d), n_max=2, n_ads=1)
     hello = frames(board.serial.take())[0]
-    assert int(hello[-2]) <= wire.MAX_COUNTER
+    assert int(hello[4 + wire.HELLO_COUNTER]) <= wire.MAX_COUNTER  # frames() keeps TC, seq, status, kind first
     from host.board.linkauth import LinkSigner
     s = LinkSigner(TEST_KEY)
     s.observe_hello(hello[4:])  # the host takes it (no traceback in tcomp monitor --latch)

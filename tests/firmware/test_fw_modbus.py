@@ -109,7 +109,7 @@ def test_write_position_and_enable(dev):
 @pytest.mark.parametrize("req, code", [
     (bytes([1, 5, 0, 0, 0xFF, 0]), 1),  # write coil: illegal function
     (bytes([1, 43, 14, 1, 0]), 1),  # device identification: not implemented
-    (bytes([1, 4, 0, 45, 0, 9]), 2),  # beyond the input map
+    (bytes([1, 4, 0, N_INPUT - 8, 0, 9]), 2),  # beyond the input map
     (bytes([1, 4, 0, 15, 0, 1]), 2),  # the unmapped input register
     (bytes([1, 4, 0, 10, 0, 6]), 2),  # a range over it
     (bytes([1, 3, 0, 20, 0, 1]), 2),  # beyond the holding map (18-19: the spindle speed)

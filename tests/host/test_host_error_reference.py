@@ -86,15 +86,15 @@ def test_runs_of_different_references_in_one_fit_are_refused_by_name(tmp_path, c
 
 
 @pytest.mark.parametrize("tail, words", [
-    (",-,start", "start: offsets bring the axis to its positions relative to the cold machine"),
-    (",-,T3", "T3: offsets bring the axis to the positions of a workpiece at sensor T3's temperature"),
-    (",-,-", "none (no table)"),
-    (",-", "not reported"),
+    (",-,5E55104E,start", "start: offsets bring the axis to its positions relative to the cold machine"),
+    (",-,5E55104E,T3", "T3: offsets bring the axis to the positions of a workpiece at sensor T3's temperature"),
+    (",-,5E55104E,-", "none (no table)"),
+    (",-,5E55104E", "not reported"),
 ])
 def test_monitor_says_what_the_boards_offsets_compensate(tail, words):
     from host.board.link import crc16, parse_line
     from host.cli.verbs.monitor import error_reference_line
 
-    body = b"TC,0,009007FF,H,1,0.1.0,A,0ABCAE5F,0001020304050607,screw_reduced,X,3,S" + tail.encode()
+    body = b"TC,0,009007FF,H,2,0.1.0,A,0ABCAE5F,0001020304050607,screw_reduced,X,3,S" + tail.encode()
     frame = parse_line(b"$" + body + b"*%04X" % crc16(body))
     assert error_reference_line(frame).startswith("error reference ") and words in error_reference_line(frame)
