@@ -139,6 +139,14 @@ class _Base:
         }
 
     @staticmethod
+    def _target(thermal, kind):
+        """``thermal.target`` of a ``kind`` document whose thermal part is 'slope' or 'direct'; else ModelFormatError."""
+        target = thermal.get("target")
+        if target not in ("slope", "direct"):
+            raise ModelFormatError("%s model document: thermal.target must be 'slope' or 'direct', found %r" % (kind, target))
+        return target
+
+    @staticmethod
     def _common_args(doc):
         where = "%s model document" % doc.get("kind", "model")
         for key in ("thermal", "sensors", "reference_C"):
@@ -306,9 +314,7 @@ class NetworkModel(_Base):
         from host.learning.empirical.ann import ANN
 
         thermal, sensors, ref, kw = cls._common_args(doc)
-        target = thermal.get("target")
-        if target not in ("slope", "direct"):
-            raise ModelFormatError("ann model document: thermal.target must be 'slope' or 'direct', found %r" % (target,))
+        target = cls._target(thermal, "ann")
         net = thermal.get("network")
         if not isinstance(net, dict):
             raise ModelFormatError("ann model document lacks the object thermal.network")

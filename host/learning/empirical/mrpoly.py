@@ -131,9 +131,7 @@ class MRPolyModel(_Base):
     @classmethod
     def from_document(cls, doc):
         thermal, sensors, ref, kw = cls._common_args(doc)
-        target = thermal.get("target")
-        if target not in ("slope", "direct"):
-            raise ModelFormatError("mr_poly model document: thermal.target must be 'slope' or 'direct', found %r" % (target,))
+        target = cls._target(thermal, "mr_poly")
         if len(sensors) != 2 or thermal.get("nut_sensor") != sensors[0] or thermal.get("base_sensor") != sensors[1]:
             raise ModelFormatError("mr_poly model document: sensors must be [thermal.nut_sensor, thermal.base_sensor], found %r with %r, %r"
                                    % (sensors, thermal.get("nut_sensor"), thermal.get("base_sensor")))
