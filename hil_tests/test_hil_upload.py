@@ -61,7 +61,10 @@ def _power_cuts(make_rig, demo_run, trials, commit_window_s=0.02):
         cut = len(steps) + 5 if final else (rng.randrange(len(steps)) if trial % 2 else len(steps) - 1)
         killed = False
         with rig.free_run(chunk_ms=10, pace_s=0.0005):
-            for i, data in enumerate(steps):
+            i = -1
+            while i + 1 < len(steps):
+                i += 1
+                data = steps[i]  # read from the list in force: a stale upload replaces it below
                 k = len(rig.frames)
                 rig.write(data)
                 if i == cut:
