@@ -37,6 +37,17 @@ def _start_recorder(rig, out, *extra, period="0.05", preexec_fn=None):
                             preexec_fn=preexec_fn)
 
 
+def _wait_rows(out, n, p, timeout=60):
+    """Until the recorder has written ``n`` rows (the recorder's start-up takes real time the board does not wait)."""
+    path = os.path.join(out, "temperatures.csv")
+    end = time.monotonic() + timeout
+    while time.monotonic() < end and p.poll() is None:
+        if os.path.exists(path) and open(path).read().count("\n") > n:
+            return
+        time.sleep(0.05)
+    raise AssertionError("the recorder wrote fewer than %d rows (exit %r)" % (n, p.poll()))
+
+
 def _rig(make_rig, start_ms=0):
     rig = make_rig(rig_config(SENSORS), temps=START, start_ms=start_ms, open_port=False)
     rig.run(2000)
@@ -111,8 +122,7 @@ def test_an_interrupted_recording_is_a_valid_run(make_rig, tmp_path, how):
     out = tmp_path / "rec"
     p = _start_recorder(rig, out)
     with rig.free_run(chunk_ms=20, pace_s=0.001):
-        while rig.t_ms < 15000 and p.poll() is None:
-            time.sleep(0.05)
+        _wait_rows(out, 15, p)
         p.send_signal(getattr(signal, how))
         p.communicate(timeout=20)
         killed_at = rig.t_ms
@@ -135,8 +145,7 @@ def test_a_lost_board_ends_the_recording_with_a_message_and_a_valid_run(make_rig
     out = tmp_path / "rec"
     p = _start_recorder(rig, out)
     with rig.free_run(chunk_ms=20, pace_s=0.001):
-        while rig.t_ms < 10000 and p.poll() is None:
-            time.sleep(0.05)
+        _wait_rows(out, 10, p)
     rig.kill()  # power cut: the board answers nothing more
     t = time.monotonic()
     stdout, stderr = p.communicate(timeout=30)

@@ -79,8 +79,12 @@ def run(args):
         if name in sensors:
             raise UserError("--sensor %s: given twice" % name)
         sensors[name] = info
-    config_names = _config_names(args.config) if args.config else None
+    from host.outputs import Outputs
+    # the claim's checks only (never over the port or the config); the folder is written as it records, not staged
+    with Outputs([args.port, args.config]) as outputs:
+        outputs.folder(args.out)
     check_output_dir(args.out)
+    config_names = _config_names(args.config) if args.config else None
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
     try:
         return _record(args, sensors, config_names)
@@ -116,7 +120,7 @@ def _record(args, sensors, config_names):
         sys.stdout.flush()
         start = time.monotonic()
         due = start
-        t0_ms = None
+        last_ms = None
         while not (args.duration and time.monotonic() - start >= args.duration):
             try:
                 f = link.request("S", kinds="TH", timeout=args.link_timeout)
