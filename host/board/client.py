@@ -122,9 +122,11 @@ class BoardLink:
         return cls(ser, port, signer)
 
     # --- out -------------------------------------------------------------------------------
-    def write(self, data):
+    def write(self, data, flush=True):
+        """``flush=False`` for a caller on a deadline (the LinuxCNC bridge): the port's write timeout bounds it."""
         self.ser.write(data)
-        self.ser.flush()
+        if flush:
+            self.ser.flush()
 
     def send(self, *fields):
         self.write(command_line(*fields))
