@@ -210,7 +210,8 @@ FLAGS = {
     "monitor": {"in": {"--port": "file", "--key": "file"}, "out": {"--csv": "log", "--json": "file"},
                 "other": "--baud --count --duration --hello --latch --temperatures"},
     "record": {"in": {"--port": "file", "--config": "file"}, "out": {"--out": "folder"},
-               "other": "--baud --sensor --period --duration --link-timeout --notes"},
+               "other": "--baud --sensor --period --duration --link-timeout --notes --linuxcnc --hal-position "
+                        "--hal-velocity --hal-spindle --hal-name --units"},
     "predict": {"in": {"model": "file", "run": "folder"}, "out": {"--out": "file", "--json": "file"}, "other": "--allow-edited"},
     "select": {"in": {"runs": "folder", "--corr": "file", "--target-corr": "file"}, "out": {"--json": "file", "--plot": "file"},
                "other": "--method --channel --target --sensors --split --option"},

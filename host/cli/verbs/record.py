@@ -12,6 +12,8 @@ import signal
 import sys
 import time
 
+from host.data.runformat import MOTION, MOTION_COLUMNS, SPINDLE, SPINDLE_COLUMNS
+
 DEFAULT_PERIOD_S = 1.0
 _DECIMAL = re.compile(r"-?[0-9]{1,6}(\.[0-9]{1,6})?\Z")  # what the firmware prints for a good channel: degC.mmm
 
@@ -31,6 +33,19 @@ def add_arguments(p):
     p.add_argument("--link-timeout", type=float, default=5.0,
                    help="seconds without an answer to S after which the link counts as lost (default 5)")
     p.add_argument("--notes", default="", help="free text kept in meta.json 'notes'")
+    g = p.add_argument_group("LinuxCNC (--linuxcnc: sample HAL beside the temperatures into motion.csv and spindle.csv)")
+    g.add_argument("--linuxcnc", action="store_true",
+                   help="also read the axis position and velocity and the spindle speed from the running LinuxCNC's "
+                        "HAL at every sample: moves into motion.csv, speeds into spindle.csv")
+    g.add_argument("--hal-position", default="axis.x.pos-cmd", metavar="PIN",
+                   help="the axis position pin (machine units; default axis.x.pos-cmd)")
+    g.add_argument("--hal-velocity", default="joint.0.vel-cmd", metavar="PIN",
+                   help="the axis velocity pin (machine units/s; default joint.0.vel-cmd)")
+    g.add_argument("--hal-spindle", default="spindle.0.speed-out-abs", metavar="PIN",
+                   help="the spindle speed pin (rpm; default spindle.0.speed-out-abs)")
+    g.add_argument("--hal-name", default="tcomp-record", help="the HAL component this reader appears as "
+                                                              "(default tcomp-record)")
+    g.add_argument("--units", choices=("mm", "inch"), default="mm", help="the machine's linear units (default mm)")
 
 
 class _Terminated(Exception):
@@ -92,19 +107,40 @@ def run(args):
         signal.signal(signal.SIGTERM, previous)
 
 
+def _motion_row(r):
+    return "%.3f,%.3f,%.4f,%.4f,%.3f" % r
+
+
+def _sample_hal(writer, hal, motion, t):
+    """One HAL sample at host time ``t`` (s since time_s 0): closed moves into motion.csv, the speed into spindle.csv."""
+    position, velocity, rpm = hal.read()
+    writer.append(MOTION, MOTION_COLUMNS, [_motion_row(r) for r in motion.sample(t, position, velocity)])
+    writer.append(SPINDLE, SPINDLE_COLUMNS, ["%.3f,%.3f" % (t, abs(rpm))])
+
+
 def _record(args, sensors, config_names):
     import datetime
 
     import serial
 
     from host.board.client import BoardLink, ClockError, LinkError
-    from host.board.recorder import RecordStop, RunWriter, sensor_names
+    from host.board.recorder import RecordStop, RunWriter, faulty_channels, sensor_names
     from host.errors import UserError
 
+    hal = motion = None
+    if args.linuxcnc:
+        from host.board.linuxcnc.halsample import HalReader, MotionSegmenter
+        try:
+            hal = HalReader([args.hal_position, args.hal_velocity, args.hal_spindle], args.hal_name)
+        except (ImportError, ValueError) as exc:
+            raise UserError("--linuxcnc: %s" % exc)
+        motion = MotionSegmenter(args.units)
     try:
         link = BoardLink.open(args.port, args.baud)
         hello = link.read_hello(timeout=args.link_timeout)
     except LinkError as exc:
+        if hal is not None:
+            hal.close()
         raise UserError(str(exc))
     writer = None
     stop = None  # why the recording ended early (exit 1), None for the end asked for
@@ -119,9 +155,16 @@ def _record(args, sensors, config_names):
               % (args.port, hello.firmware, hello.channels, ", ".join(names), args.period, args.out))
         sys.stdout.flush()
         start = time.monotonic()
+        started_utc = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds")
         due = start
-        last_ms = None
+        last_ms = t0_ms = host_t0 = None
+        early_faults = []
+        faulty_before = 0
         while not (args.duration and time.monotonic() - start >= args.duration):
+            delay = due - time.monotonic()  # every request on the period's beat, whatever the last one brought
+            if delay > 0:
+                time.sleep(delay)
+            due = max(due, time.monotonic() - args.period) + args.period
             try:
                 f = link.request("S", kinds="TH", timeout=args.link_timeout)
             except LinkError:
@@ -132,6 +175,8 @@ def _record(args, sensors, config_names):
                 stop = "%s: the link is lost: %s" % (args.port, exc)
                 break
             link.take_frames()  # the periodic O frames and this answer: nothing else is kept
+            if t0_ms is None:  # the wall clock of the first answer (time_s 0), within the link's latency
+                started_utc = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds")
             if f.kind == "H":
                 stop = "%s: the board restarted (a boot hello arrived); its clock started again" % args.port
                 break
@@ -142,51 +187,67 @@ def _record(args, sensors, config_names):
                 skipped += 1
                 continue
             try:
+                if t0_ms is None:
+                    t0_ms, host_t0 = int(f.fields[0]), f.arrival  # time_s 0: the board's and this host's clock
                 ms = link.clock.extend(f.fields[0])
             except (ClockError, ValueError) as exc:
                 stop = "%s: %s" % (args.port, exc)
                 break
-            if writer is None:
-                t0_ms = int(f.fields[0])
-                wall = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="milliseconds")
-                meta = {"sensors": {nm: sensors[nm] for nm in names},
-                        "notes": args.notes,
-                        "source": "tcomp record",
-                        "record": {"started_utc": wall, "port": args.port, "period_s": args.period,
-                                   "t_ms_at_time_0": t0_ms,
-                                   "time_s": "the board's clock (t_ms, followed across its 2^30 ms wrap) since the "
-                                             "first sample, taken at started_utc"},
-                        "board": dict(hello.as_dict(), channel_names=names)}
-                try:
-                    writer = RunWriter(args.out, names, meta)
-                except RecordStop as exc:
-                    raise UserError(str(exc))
-                except OSError as exc:
-                    raise UserError("--out %s: cannot write: %s" % (args.out, exc.strerror or exc))
-            elif ms <= last_ms:
+            if last_ms is not None and ms <= last_ms:
                 continue  # the same cycle's temperatures again (a period shorter than the board's cycle)
             last_ms = ms
+            time_s = ms / 1000.0
             try:
-                if writer.sample(ms / 1000.0, values):
+                if writer is None:
+                    bad = faulty_channels(names, time_s, values)
+                    if bad:  # the run appears with its first good sample; these go into it then
+                        early_faults += bad
+                        faulty_before += 1
+                        continue
+                    meta = {"sensors": {nm: sensors[nm] for nm in names},
+                            "notes": args.notes,
+                            "source": "tcomp record",
+                            "record": {"started_utc": started_utc, "port": args.port, "period_s": args.period,
+                                       "t_ms_at_time_0": t0_ms,
+                                       "time_s": "the board's clock (t_ms, followed across its 2^30 ms wrap) since "
+                                                 "the first answer, taken at started_utc"},
+                            "board": dict(hello.as_dict(), channel_names=names)}
+                    if hal is not None:
+                        meta["record"]["linuxcnc"] = {
+                            "pins": dict(zip(("position", "velocity", "spindle"), hal.pins)), "units": args.units,
+                            "time_s": "this host's monotonic clock since the first answer (the board's and the "
+                                      "host's clocks drift apart by their crystals' tolerance, ~50 ppm)"}
+                    try:
+                        writer = RunWriter(args.out, names, meta, time_s, values, early_faults)
+                    except OSError as exc:
+                        raise UserError("--out %s: cannot write: %s" % (args.out, exc.strerror or exc))
                     n += 1
+                elif writer.sample(time_s, values):
+                    n += 1
+                if hal is not None:
+                    _sample_hal(writer, hal, motion, time.monotonic() - host_t0)
             except RecordStop as exc:
+                if writer is None:
+                    raise UserError(str(exc))
                 stop = str(exc)
                 break
-            due += args.period
-            delay = due - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
-            else:
-                due = time.monotonic()
     except (KeyboardInterrupt, _Terminated):
         pass
     finally:
         link.close()
+        if writer is not None and hal is not None:
+            try:
+                writer.append(MOTION, MOTION_COLUMNS, [_motion_row(r) for r in motion.finish()])
+            except RecordStop as exc:
+                stop = stop or str(exc)
+        if hal is not None:
+            hal.close()
         if writer is not None:
             writer.close()
-    faulty = writer.faulty_samples if writer else 0
+    faulty = writer.faulty_samples if writer else faulty_before
     if writer is None:
-        print("record: no sample recorded; %s not written" % args.out, file=sys.stderr)
+        print("record: no sample with every channel good (%d with a faulty channel); %s not written"
+              % (faulty, args.out), file=sys.stderr)
     else:
         print("%d samples in %s%s%s" % (n, args.out,
                                          ", %d with a faulty channel in %s" % (faulty, "board_faults.csv") if faulty else "",
