@@ -29,10 +29,11 @@ RAMP_MS = 60000
 TOLERANCE_C = 0.05
 
 
-def _start_recorder(rig, out, *extra, period="0.05", preexec_fn=None):
+def _start_recorder(rig, out, *extra, period="0.05", preexec_fn=None, sensors=None):
+    if sensors is None:
+        sensors = [a for s, r in zip(SENSORS, ("nut", "base", "ambient")) for a in ("--sensor", "%s=%s" % (s, r))]
     argv = [sys.executable, "-m", "host", "record", "--port", rig.port, "--out", str(out), "--period", period,
-            "--link-timeout", "3"] + [a for s, r in zip(SENSORS, ("nut", "base", "ambient"))
-                                      for a in ("--sensor", "%s=%s" % (s, r))]
+            "--link-timeout", "3"] + sensors
     return subprocess.Popen(argv + list(extra), cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             preexec_fn=preexec_fn)
 
@@ -178,3 +179,31 @@ def test_a_full_disk_ends_the_recording_with_whole_lines(make_rig, tmp_path):
     size = os.path.getsize(os.path.join(out, "temperatures.csv"))
     assert limit - 60 < size <= limit and len(rows) >= 20
     _check_against_chips(out, rows, ramp_from, 0)
+
+
+@pytest.mark.parametrize("interpreter", ["cpython"], indirect=True)
+def test_channel_names_come_from_the_board_config_and_must_match_the_board(make_rig, tmp_path):
+    rig, _ = _rig(make_rig)
+    cfg = tmp_path / "board.json"
+    cfg.write_text(json.dumps(rig_config(SENSORS)))
+    roles = ["--sensor", "T4=ambient:air", "--sensor", "T1=nut", "--sensor", "T2=base"]  # by name, any order
+
+    def record(out, *argv):
+        return subprocess.run([sys.executable, "-m", "host", "record", "--port", rig.port, "--out", str(out)]
+                              + list(argv), cwd=ROOT, capture_output=True, text=True, timeout=60)
+    with rig.free_run(chunk_ms=20, pace_s=0.001):
+        few = record(tmp_path / "few", "--sensor", "T1=nut", "--duration", "1")
+        missing = record(tmp_path / "m", "--config", str(cfg), "--sensor", "T1=nut", "--sensor", "T9=base")
+        p = _start_recorder(rig, tmp_path / "rec", "--config", str(cfg), "--duration", "3", sensors=roles)
+        stdout, stderr = p.communicate(timeout=60)
+    assert few.returncode == 2 and not os.path.exists(tmp_path / "few")
+    assert "the board reports 3 channels; give one --sensor NAME=ROLE per channel, in channel order (1 given: T1)" \
+        in few.stderr, few.stderr
+    assert missing.returncode == 2 and "missing T2, T4; not a channel of the board config: T9" in missing.stderr, \
+        missing.stderr
+    assert p.returncode == 0, stderr
+    _valid(tmp_path / "rec")
+    meta = json.loads(open(os.path.join(tmp_path / "rec", "meta.json")).read())
+    assert meta["board"]["channel_names"] == SENSORS and meta["errors_pending"] is True
+    assert meta["sensors"]["T4"] == {"role": "ambient", "location": "air"}
+    assert _rows(tmp_path / "rec")  # the config's channel order: time_s,T1,T2,T4
