@@ -179,3 +179,28 @@ def test_tcomp_monitor_latch_declares_a_cold_start(tmp_path, demo_run, capsys):
         assert result.get("rc") == rc, name
         out = capsys.readouterr().out
         assert said in out, out
+
+
+def test_tcomp_monitor_logs_temperatures(tmp_path, demo_run):
+    """``--temperatures S`` asks for the temperatures: T frames are logged with their t_ms and each channel's degC,
+    which are the temperatures the simulated chips were given (within the RTD chain, 0.05 degC)."""
+    from hil_tests.rig.harness import Rig
+    from host.cli import main as tcomp
+    temps = {"T1": 23.0, "T2": 24.5, "T4": 21.25}
+    log = tmp_path / "log.csv"
+    with Rig(rig_config(SENSORS), None, interpreter="cpython", workdir=str(tmp_path / "rig"), temps=temps,
+             open_port=False) as rig:
+        rig.run(3000)
+        result = {}
+        th = threading.Thread(target=lambda: result.setdefault("rc", tcomp(
+            ["monitor", "--port", rig.port, "--temperatures", "0.1", "--duration", "2", "--csv", str(log)])))
+        th.start()
+        with rig.free_run(chunk_ms=50, pace_s=0.001):
+            th.join(timeout=30)
+    assert result.get("rc") == 0
+    t = [r for r in csv.DictReader(log.open()) if r["kind"] == "T"]
+    assert len(t) >= 5
+    for r in t:
+        assert int(r["t_ms"]) >= 3000
+        values = [float(v) for v in r["fields"].split(",")]
+        assert max(abs(v - temps[s]) for s, v in zip(SENSORS, values)) <= 0.05 and len(values) == len(SENSORS), r

@@ -364,3 +364,71 @@ def test_linuxcnc_modbus_offsets_no_latch_without_cold_start(session):
     # function 06 to holding register 7 (latch) never sent: this was not a cold start
     assert b"\x01\x06\x00\x07" not in bytes(board.tap.bridge_raw)
     assert lc.get("tcomp.latch-state")["tcomp.latch-state"] == 0
+
+
+def test_record_samples_hal_beside_the_temperatures(tmp_path, table):
+    """``tcomp record --linuxcnc`` in a real LinuxCNC: the recorder holds the board's port (the bridge of the example
+    configuration gets a silent pty), reads the temperatures from the board and HAL's axis.x.pos-cmd,
+    joint.0.vel-cmd and spindle.0.speed-out-abs while MDI moves the axis and runs the spindle. The run validates;
+    motion.csv holds the two moves (ends, feeds, durations) and spindle.csv the speed."""
+    import signal
+    import tty
+
+    from host.data.runs import check_run, load_run
+    board = Board(str(tmp_path), table, "stream")
+    master, slave = os.openpty()
+    tty.setraw(master)
+    tty.setraw(slave)
+    lc = rec = None
+    out = tmp_path / "rec"
+    try:
+        lc = LinuxCNC(str(tmp_path), os.ttyname(slave), "stream", False, board.key_file)
+        lc("start")
+        x0 = lc.get("axis.x.pos-cmd")["axis.x.pos-cmd"]
+        env = dict(os.environ, RTAPI_UID=str(os.getuid() or 1000), RTAPI_FIFO_PATH=os.path.join(lc.rtapi, "fifo"))
+        rec = subprocess.Popen([os.path.join(VENV_BIN, "python"), "-m", "host", "record", "--port", board.tap.port,
+                                "--out", str(out), "--period", "0.1", "--sensor", "T1=nut", "--sensor", "T2=base",
+                                "--sensor", "T4=ambient", "--linuxcnc"],
+                               cwd=ROOT, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        end = time.monotonic() + 30
+        while not os.path.exists(os.path.join(out, "spindle.csv")) and rec.poll() is None and time.monotonic() < end:
+            time.sleep(0.1)
+        assert rec.poll() is None, rec.communicate()
+        time.sleep(1.0)
+        lc("mdi", cmd="M3 S1200")
+        lc("mdi", cmd="G1 X%g F6000" % (x0 + 300))
+        time.sleep(1.0)
+        lc("mdi", cmd="G1 X%g F3000" % (x0 + 100))
+        lc("mdi", cmd="M5")
+        time.sleep(1.0)
+        board.check()
+        rec.send_signal(signal.SIGINT)
+        stdout, stderr = rec.communicate(timeout=30)
+        assert rec.returncode == 0, stderr
+    finally:
+        if rec is not None and rec.poll() is None:
+            rec.kill()
+            rec.wait()
+        if lc is not None:
+            lc.close()
+        board.close()
+        os.close(master)
+        os.close(slave)
+    assert check_run(str(out)) == []
+    run = load_run(str(out))
+    m = run.motion
+    assert len(m) == 2, (m.t_start_s, m.from_mm, m.to_mm)
+    assert list(m.from_mm) == pytest.approx([x0, x0 + 300], abs=0.01)
+    assert list(m.to_mm) == pytest.approx([x0 + 300, x0 + 100], abs=0.01)
+    # the feeds as commanded (the mean sampled speed includes 50 ms of acceleration at 2000 mm/s^2 per end)
+    assert list(m.feed_mm_min) == pytest.approx([6000, 3000], rel=0.1)
+    # durations: 3 s and 4 s, to within the 0.1 s sampling at each end and a loaded host's lateness
+    assert list(m.t_end_s - m.t_start_s) == pytest.approx([3.0, 4.0], abs=0.5)
+    assert m.t_start_s[1] - m.t_end_s[0] >= 0.5  # the axis stood 1 s between the moves
+    rpm = run.spindle.rpm
+    assert max(rpm) == pytest.approx(1200) and rpm[0] == 0 and rpm[-1] == 0
+    t = run.spindle.time_s
+    for a, b in zip(m.t_start_s, m.t_end_s):  # the spindle ran through both moves (M3 before, M5 after them)
+        inside = (t > a) & (t < b)
+        assert inside.sum() >= 20 and (rpm[inside] == pytest.approx(1200))
+    assert len(run.temperatures.time_s) >= 50

@@ -94,7 +94,8 @@ HOST_ROOMS = {
     "host.data": (BASE, SCIENCE),
     "host.twin": (BASE + ("host.data",), SCIENCE),  # never the learning room: the twin must disagree on its own
     "host.learning": (BASE + ("host.data", "models_export", "firmware"), SCIENCE),
-    "host.board": (BASE + ("firmware", "models_export"), ()),
+    # the run-folder format's names (numpy-free) for the recorder (tcomp record), none of host.data's code
+    "host.board": (BASE + ("firmware", "models_export", "host.data.runformat"), ()),
     "host.cli": None,  # the top: any room
 }
 

@@ -24,12 +24,10 @@ import tempfile
 import threading
 import time
 import tty
-from typing import Any
-
 import serial
 
 from hil_tests.rig import interpreters
-from host.board.link import StreamDecoder, command_line
+from host.board.client import BoardLink, LinkError
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 MP_DIR = os.path.join(ROOT, "hil_tests", "mp")
@@ -93,21 +91,26 @@ def interpreter_cmd(name, heap=None):
 
 
 class SerialReader(threading.Thread):
-    """Drains a pyserial port into a decoder (stream mode) or a byte buffer (Modbus mode)."""
+    """Drains a pyserial port into its link's decoder (stream mode: ``link.feed``, host/board/client.py) or a byte
+    buffer (Modbus mode)."""
 
-    def __init__(self, ser, stream=True):
+    def __init__(self, ser, stream=True, link=None):
         super().__init__(daemon=True)
         self.ser = ser
         self.stream = stream
-        self.decoder = StreamDecoder()
-        self.frames = []
+        self.link = link if link is not None else BoardLink(ser)
+        self.frames = self.link.frames  # one list: what the reader decodes is what the client reads
         self.raw = bytearray()
-        self.lock = threading.Condition()
+        self.lock = self.link.lock
         self.stop = False
         self.last_rx = time.monotonic()
         self.busy = False
         self.rx_total = 0
         self.on_frame = None
+
+    @property
+    def decoder(self):
+        return self.link.decoder
 
     def _receive(self, fd):
         """Bytes that arrived within ~50 ms, b'' if none (``busy`` once there are some); OSError when
@@ -145,8 +148,7 @@ class SerialReader(threading.Thread):
                 self.last_rx = now
                 self.rx_total += len(data)
                 if self.stream:
-                    new = self.decoder.feed(data, now)
-                    self.frames.extend(new)
+                    new = self.link.feed(data, now)
                     if self.on_frame is not None:
                         for f in new:
                             self.on_frame(f)
@@ -178,66 +180,22 @@ class SerialReader(threading.Thread):
             time.sleep(0.0005)
 
 
-class LinkClient:
-    """The controller's side of the link, shared by every device under test (the rig, a real port):
-    needs ``ser`` (the pyserial port), ``reader`` (its SerialReader), ``advance``, ``t_ms`` and, for
-    commands that change the output, ``signer`` (host.board.linkauth.LinkSigner with the board's key)."""
+class LinkClient(BoardLink):
+    """The controller's side of the link for every device under test (the rig, a real port): host/board/client.py's
+    BoardLink, fed by a SerialReader thread, whose requests wait by ``advance`` (simulated time on the rig,
+    wall-clock time on a real port); ``t_ms`` says where the device's clock is."""
 
     request_step_ms = 10
     request_timeout_s = 10.0
-    ser: Any = None
-    reader: Any = None
-    signer: Any = None
-
-    def write(self, data):
-        self.ser.write(data)
-        self.ser.flush()
-
-    def send(self, *fields):
-        self.write(command_line(*fields))
-
-    @property
-    def frames(self):
-        return self.reader.frames
-
-    def take_frames(self):
-        with self.reader.lock:
-            out = list(self.reader.frames)
-            self.reader.frames.clear()
-        return out
-
-    def _observe_counter(self):
-        # the board's last counter and session nonce are in its newest hello (boot, V, table switch)
-        for f in reversed(self.reader.frames):
-            if f.kind == "H":
-                self.signer.observe_hello(f.fields)
-                return
-
-    def signed_line(self, *fields, extra=b""):
-        """A command that changes the output, authorised with the board's key."""
-        self._observe_counter()
-        return self.signer.stream_line(*fields, extra=extra)
-
-    def upload_lines(self, table):
-        self._observe_counter()
-        return self.signer.upload_lines(table)
-
-    def send_signed(self, *fields, extra=b""):
-        self.write(self.signed_line(*fields, extra=extra))
 
     def request(self, *fields, kinds=("Q", "A", "E", "H", "T"), step_ms=None, timeout=None):
         """Send a command and return the first reply frame of one of ``kinds`` that follows it."""
         step_ms = self.request_step_ms if step_ms is None else step_ms
         timeout = self.request_timeout_s if timeout is None else timeout
-        n0 = len(self.reader.frames)
-        self.send(*fields)
-        end = time.monotonic() + timeout
-        while time.monotonic() < end:
-            self.advance(step_ms)
-            for f in self.reader.frames[n0:]:
-                if f.kind in kinds:
-                    return f
-        raise RigError("no reply to %r within %.1f s (t=%d ms)" % (fields, timeout, self.t_ms))
+        try:
+            return BoardLink.request(self, *fields, kinds=kinds, timeout=timeout, step=lambda: self.advance(step_ms))
+        except LinkError:
+            raise RigError("no reply to %r within %.1f s (t=%d ms)" % (fields, timeout, self.t_ms))
 
 
 class Rig(LinkClient):
@@ -262,7 +220,7 @@ class Rig(LinkClient):
                 f.write(slot)
         from host.board.linkauth import LinkSigner, generate_key
         key = generate_key() if key is None else key
-        self.signer = LinkSigner(key) if key else None
+        BoardLink.__init__(self, None, signer=LinkSigner(key) if key else None)  # the port is opened below
         if key:
             with open(os.path.join(tdir, "key.bin"), "wb") as f:
                 f.write(key)
@@ -305,7 +263,7 @@ class Rig(LinkClient):
             return  # another client (pymodbus, mpremote) opens self.port
         baud = (self.config.get("serial") or {}).get("baud", 115200)
         self.ser = serial.serial_for_url(self.port, baud, timeout=0)
-        self.reader = SerialReader(self.ser, self.stream)
+        self.reader = SerialReader(self.ser, self.stream, link=self)
         self.reader.start()
 
     def start(self):
@@ -559,8 +517,8 @@ class Rig(LinkClient):
         return _Free()
 
     # --- the serial link (write, send, frames, take_frames: LinkClient) ----------------------
-    def write(self, data):
-        LinkClient.write(self, data)
+    def write(self, data, flush=True):
+        LinkClient.write(self, data, flush)
         self.serial_sent += len(data)
 
     def take_raw(self):

@@ -4,6 +4,7 @@ import time
 import serial
 
 from hil_tests.rig.harness import LinkClient, SerialReader
+from host.board.client import BoardLink
 
 
 class RealDut(LinkClient):
@@ -13,11 +14,12 @@ class RealDut(LinkClient):
 
     def __init__(self, port, baud=115200, key=None):
         """``key``: the board's key (host.board.linkauth.read_key), for commands that change the output."""
+        signer = None
         if key:
             from host.board.linkauth import LinkSigner
-            self.signer = LinkSigner(key)
-        self.ser = serial.serial_for_url(port, baud, timeout=0)  # a device path or a pySerial URL
-        self.reader = SerialReader(self.ser, True)
+            signer = LinkSigner(key)
+        BoardLink.__init__(self, serial.serial_for_url(port, baud, timeout=0), port, signer)  # a path or a pySerial URL
+        self.reader = SerialReader(self.ser, True, link=self)
         self.reader.start()
         self.t0 = time.monotonic()
 

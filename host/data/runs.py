@@ -15,20 +15,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-FORMAT = "tcomp-run/1"
-ROLES = ("nut", "base", "ambient", "bearing", "motor", "structure")
+from host.data.runformat import (  # noqa: F401  (the format's names, numpy-free for the board side's recorder)
+    ERROR_COLUMNS, ERROR_OPTIONAL, ERRORS, FORMAT, META, MOTION, MOTION_COLUMNS, ROLES, RUN_FILES, SPINDLE,
+    SPINDLE_COLUMNS, TEMPERATURES,
+)
 
-TEMPERATURES = "temperatures.csv"
-ERRORS = "errors.csv"
-MOTION = "motion.csv"
-SPINDLE = "spindle.csv"
-META = "meta.json"
-RUN_FILES = (META, TEMPERATURES, ERRORS, MOTION, SPINDLE)  # every file of a run folder; a run is written whole
-
-ERROR_COLUMNS = ("time_s", "position_mm", "error_um")
-ERROR_OPTIONAL = ("direction", "channel")
-MOTION_COLUMNS = ("t_start_s", "t_end_s", "from_mm", "to_mm", "feed_mm_min")
-SPINDLE_COLUMNS = ("time_s", "rpm")
 # meta.json "error_reference": which temperature errors.csv is referred to (docs/data-format.md).
 # START: raw errors relative to the machine at the run's start (the default when the key is absent);
 # otherwise a sensor id of the run: the errors were corrected to that sensor's temperature.
@@ -206,7 +197,7 @@ def read_records(fh, path):
     return out
 
 
-def _read_csv(path, required, optional, problems, text_columns=()):
+def _read_csv(path, required, optional, problems, text_columns=(), rows_pending=False):
     """Parse a numeric CSV strictly. Returns {column: list} or None if unreadable."""
     try:
         # utf-8-sig: spreadsheet programs (Excel) start a UTF-8 CSV with a byte-order mark
@@ -274,8 +265,10 @@ def _read_csv(path, required, optional, problems, text_columns=()):
                 if not math.isfinite(v):
                     problems.add("%s line %d column '%s'" % (path, lineno, col), "%r is not a finite number" % cell)
             data[col].append(v)
-    if len(rows) == 1:
-        problems.add(path, "no data rows after the header")
+    if len(rows) == 1 and not rows_pending:
+        problems.add(path, "no data rows after the header%s" % (
+            " (a recording whose laser sweeps are still to come declares meta.json \"errors_pending\": true)"
+            if os.path.basename(path) == ERRORS else ""))
     return data
 
 
@@ -329,6 +322,8 @@ def _check_meta(path, meta, problems):
             if s.get("role") not in ROLES:
                 problems.add(path, "sensors.%s.role is %r; expected one of %s" % (name, s.get("role"), ", ".join(ROLES)))
     _check_error_reference(path, meta, problems)
+    if "errors_pending" in meta and not isinstance(meta["errors_pending"], bool):
+        problems.add(path, "key 'errors_pending' must be true or false (found %s)" % json.dumps(meta["errors_pending"]))
     stroke = meta.get("stroke_mm")
     if stroke is not None and not _positive(stroke):
         problems.add(path, "key 'stroke_mm' must be a positive finite number (found %r)" % (stroke,))
@@ -451,7 +446,9 @@ def load_run(folder):
 
     # errors.csv
     epath = os.path.join(folder, ERRORS)
-    edata = _read_csv(epath, ERROR_COLUMNS, ERROR_OPTIONAL, problems, text_columns=("channel",))
+    # a recording (tcomp record) declares that its errors come later (tcomp import --errors --into): header only
+    pending = bool(meta) and meta.get("errors_pending") is True
+    edata = _read_csv(epath, ERROR_COLUMNS, ERROR_OPTIONAL, problems, text_columns=("channel",), rows_pending=pending)
     errors = None
     if edata is not None:
         _check_increasing(epath, "time_s", edata["time_s"], problems, strict=False)

@@ -160,3 +160,20 @@ def test_validate_cli_exit_status(run_dir, tmp_path, edit_csv):
     assert bad.returncode == 1
     assert "outside the stroke" in bad.stdout and "not a folder" in bad.stdout
     assert check_run(run_dir)
+
+
+def test_errors_pending_admits_a_header_only_errors_csv(run_dir, edit_csv, edit_meta):
+    """A recording (tcomp record) before its laser sweeps are merged declares meta.json errors_pending: only then may
+    errors.csv hold its header alone; the key is a boolean."""
+    edit_csv(run_dir, "errors.csv", lambda ls: ls[:1])
+    probs = _problems(run_dir)
+    assert any("errors.csv: no data rows after the header" in p and '"errors_pending": true' in p for p in probs), probs
+    edit_meta(run_dir, lambda m: m.update(errors_pending=True))
+    assert check_run(run_dir) == []
+    assert len(load_run(run_dir).errors.time_s) == 0
+    edit_meta(run_dir, lambda m: m.update(errors_pending="yes"))
+    probs = _problems(run_dir)
+    assert any("key 'errors_pending' must be true or false (found \"yes\")" in p for p in probs), probs
+    edit_csv(run_dir, "temperatures.csv", lambda ls: ls[:1])  # a temperatures.csv needs its rows all the same
+    edit_meta(run_dir, lambda m: m.update(errors_pending=True))
+    assert any("temperatures.csv: no data rows after the header" in p for p in _problems(run_dir))

@@ -208,7 +208,10 @@ FLAGS = {
                  "other": "--mode --baud --address --name --units --slew-um-per-s --period-ms --stale-ms --recover-ms "
                           "--cold-start --spindle"},
     "monitor": {"in": {"--port": "file", "--key": "file"}, "out": {"--csv": "log", "--json": "file"},
-                "other": "--baud --count --duration --hello --latch"},
+                "other": "--baud --count --duration --hello --latch --temperatures"},
+    "record": {"in": {"--port": "file", "--config": "file"}, "out": {"--out": "folder"},
+               "other": "--baud --sensor --period --duration --link-timeout --notes --linuxcnc --hal-position "
+                        "--hal-velocity --hal-spindle --hal-name --units"},
     "predict": {"in": {"model": "file", "run": "folder"}, "out": {"--out": "file", "--json": "file"}, "other": "--allow-edited"},
     "select": {"in": {"runs": "folder", "--corr": "file", "--target-corr": "file"}, "out": {"--json": "file", "--plot": "file"},
                "other": "--method --channel --target --sensors --split --option"},
@@ -232,6 +235,8 @@ BASE = {
     "hil": ["hil", "--run", "{--run}", "--table", "{--table}", "--config", "{--config}", "--json", "{@--json}"],
     "import": ["import", "{source}", "--mapping", "{--mapping}", "--out", "{@--out}", "--json", "{@--json}"],
     "monitor": ["monitor", "--port", "{--port}", "--key", "{--key}", "--duration", "0.2", "--csv", "{@--csv}", "--json", "{@--json}"],
+    "record": ["record", "--port", "{--port}", "--config", "{--config}", "--sensor", "T1=nut", "--duration", "0.2",
+               "--out", "{@--out}"],
     "predict": ["predict", "{model}", "{run}", "--out", "{@--out}", "--json", "{@--json}"],
     "select": ["select", "--method", "maxtree", "{runs}", "--corr", "{--corr}", "--target-corr", "{--target-corr}",
                "--json", "{@--json}", "--plot", "{@--plot}"],

@@ -20,7 +20,7 @@ BUILD_FILES = ("pyproject.toml", "setup.py", "README.md", "LICENSE")
 HIL_SHIPPED_FILES = ("hil_tests/__init__.py", "hil_tests/manifest.py")
 HIL_SHIPPED_FOLDERS = ("hil_tests/rig", "hil_tests/sim", "hil_tests/mp")
 DIST_INFO = "tcomp-0.1.0.dist-info"
-BOARD_VERBS = ("monitor", "linuxcnc", "flash")
+BOARD_VERBS = ("monitor", "linuxcnc", "flash", "record")
 
 
 def _py_files(folder):
@@ -97,6 +97,11 @@ def test_the_board_side_install_runs_the_board_verbs_without_numpy(board_venv, t
         assert res.returncode == 0 and res.stdout.startswith("usage: tcomp %s" % verb), (verb, res.stderr)
     res = _run(board_venv, "tcomp", "--help", cwd=tmp_path)
     assert res.returncode == 0 and "simulate" in res.stdout, res.stderr
+    # record's run imports (link client, run writer, the run format's names) reach the port without numpy
+    res = _run(board_venv, "tcomp", "record", "--port", "nosuch://x", "--out", str(tmp_path / "rec"), "--sensor",
+               "T1=nut", cwd=tmp_path)
+    assert res.returncode == 2 and res.stderr.strip() == "tcomp record: error: cannot open nosuch://x: invalid URL, " \
+        "protocol 'nosuch' not known", res.stderr
     for module in ("numpy", "scipy", "matplotlib", "micropython"):
         res = _run(board_venv, "python", "-c", "import " + module, cwd=tmp_path)
         assert res.returncode == 1 and "ModuleNotFoundError" in res.stderr, module

@@ -23,7 +23,8 @@ from firmware.wire import (
     E_AUTH, E_BUSY, E_STATE, EX_DEVICE_FAILURE, HR_AUTH, HR_LATCH, HR_POSITION, HR_SLEW, HR_SPINDLE, IR_AUTH_COUNTER, IR_NONCE,
     IR_POSITION, IR_REFERENCE, IR_SEQUENCE, IR_STATUS_HI, IR_STATUS_LO, IR_TOTAL,
 )
-from host.board.link import FALLBACK, StreamDecoder, command_line
+from host.board.client import BoardLink
+from host.board.link import FALLBACK, command_line
 
 COUNT_UM = 0.1  # one eoffset count: the board's offset resolution (docs/protocol.md, 0.1 um)
 UM_PER_UNIT = {"mm": 1000.0, "inch": 25400.0}
@@ -72,9 +73,8 @@ class StreamLink:
         self.want_hello = True
         self.reopen_s = reopen_s
         self.clock = clock
-        self.ser = None
+        self.link = None  # host.board.client.BoardLink on the open port
         self.next_open = 0.0
-        self.decoder = StreamDecoder()
         self.latch_pending = False
         self.latch_wanted = False  # a signed L waits for the hello that carries the session nonce it needs
 
@@ -93,26 +93,26 @@ class StreamLink:
         elif latch:
             out += command_line("L")
             self.latch_pending = True
+        link = None
         try:
-            if self.ser is None:
+            if self.link is None:
                 if self.clock() < self.next_open:
                     raise OSError("port closed after an error, reopening")
                 self.next_open = self.clock() + self.reopen_s
-                self.ser = self.open_port()
-                self.decoder = StreamDecoder()
-            self.ser.write(out)
-            data = self.ser.read(self.ser.in_waiting or 1)
-            while data:
-                for f in self.decoder.feed(data):
-                    self._frame(f, ex)
-                data = self.ser.read(self.ser.in_waiting) if self.ser.in_waiting else b""
+                self.link = BoardLink(self.open_port())
+            link = self.link
+            link.write(out, flush=False)  # the port's write timeout bounds it; a period must not wait for the UART
+            for f in link.receive():
+                self._frame(f, ex)
+            link.take_frames()  # handled above; the bridge keeps none
         except (OSError, ValueError) as exc:  # serial.SerialException is an OSError
             ex.error = str(exc) or type(exc).__name__
             self.latch_pending = False
             self.latch_wanted = False
             self.close()
-        while self.decoder.bad:
-            ex.malformed.append(self.decoder.bad.pop(0)[1])
+        if link is not None:
+            while link.decoder.bad:
+                ex.malformed.append(link.decoder.bad.pop(0)[1])
         return ex
 
     def _frame(self, f, ex):
@@ -135,7 +135,7 @@ class StreamLink:
             if self.latch_wanted:
                 self.latch_wanted = False
                 if line is not None:
-                    self.ser.write(line)
+                    self.link.write(line, flush=False)
                     self.latch_pending = True
         elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["%d" % E_STATE], ["%d" % E_AUTH], ["%d" % E_BUSY]):
             # 5 state (no table, fixed references, sensor faulty), 8 auth (unsigned, bad tag,
@@ -147,12 +147,9 @@ class StreamLink:
 
     def close(self):
         self.want_hello = True  # a board that comes back is asked for its hello (counter)
-        if self.ser is not None:
-            try:
-                self.ser.close()
-            except (OSError, ValueError):
-                pass
-            self.ser = None
+        if self.link is not None:
+            self.link.close()
+            self.link = None
 
 
 def _s16(v):

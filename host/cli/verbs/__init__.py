@@ -18,6 +18,7 @@ VERBS = {
     "linuxcnc": ("host.cli.verbs.linuxcnc", "userspace HAL component: apply the board's offset through LinuxCNC external axis offsets"),
     "monitor": ("host.cli.verbs.monitor", "decode the $TC stream of a board (a real port or a pty) into a table, optionally logged as CSV"),
     "predict": ("host.cli.verbs.predict", "predict the error at every row of a run's errors.csv with any saved model"),
+    "record": ("host.cli.verbs.record", "record a thermal test: poll the board's temperatures into a run folder, valid at every instant"),
     "select": ("host.cli.verbs.select", "choose temperature sensors (maximal-tree fuzzy clustering, stepwise partial F, hierarchical clustering + GA)"),
     "simulate": ("host.cli.verbs.simulate", "simulate thermal tests of a feed axis with the digital twin and write run folders"),
     "validate": ("host.cli.verbs.validate", "check run folders against the tcomp-run/1 format and print every problem (exit 1 if any)"),

@@ -1,4 +1,4 @@
-"""tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch]"""
+"""tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch] [--temperatures S]"""
 
 import csv
 import math
@@ -23,6 +23,10 @@ def add_arguments(p):
                         "report the answer; without --count/--duration stop at the answer (exit 1 if refused)")
     p.add_argument("--key", help="the board's key file (tcomp flash --key): --latch signs L with it (the board "
                                 "refuses an unsigned L when it has a key)")
+    p.add_argument("--temperatures", type=float, default=0.0, metavar="SECONDS",
+                   help="ask for the temperatures (S) every SECONDS: T frames are shown and logged with the others "
+                        "(t_ms, then the channels' degC in the fields column). To record a thermal test into a run "
+                        "folder use tcomp record")
     p.add_argument("--json", help="write {frames, malformed, rows: [decoded frames], bad: [reasons]} as JSON at the end")
 
 
@@ -59,6 +63,8 @@ def row(f):
     r = {"seq": f.seq, "kind": f.kind, "status": "%08X" % f.status, "flags": "|".join(flags),
          "t_ms": "", "pos_um": "", "total_um": "", "ref_offset_um": "", "slope_um_per_m": "",
          "fields": ",".join(f.fields)}
+    if f.kind == "T" and f.fields:  # temperatures (docs/protocol.md): t_ms, then degC.mmm or !<fault bits> per channel
+        r.update(t_ms=f.fields[0], fields=",".join(f.fields[1:]))
     if f.kind in ("O", "Q") and len(f.fields) >= 5:
         r.update(t_ms=f.fields[0], pos_um=f.fields[1], total_um=f.fields[2], ref_offset_um=f.fields[3],
                  slope_um_per_m=f.fields[4], fields="")
@@ -76,6 +82,8 @@ def run(args):
     from host.errors import UserError
     from host.outputs import Outputs
 
+    if not (math.isfinite(args.temperatures) and (args.temperatures == 0 or args.temperatures >= 0.05)):
+        raise UserError("--temperatures %s: must be a number of seconds >= 0.05 (0: never ask)" % args.temperatures)
     for flag, value in (("--baud", args.baud), ("--count", args.count), ("--duration", args.duration)):
         if not value >= (1 if flag == "--baud" else 0):
             raise UserError("%s %s: must be %s" % (flag, value, "a positive rate in bit/s" if flag == "--baud" else ">= 0 (0: no limit)"))
@@ -96,12 +104,12 @@ def _monitor(args, outputs):
     import serial
 
     from firmware.wire import E_AUTH, E_BUSY, E_STATE
-    from host.board.link import PROTOCOL_VERSION, StreamDecoder, command_line
+    from host.board.client import BoardLink, LinkError, check_protocol
     from host.errors import UserError
     try:
-        ser = serial.serial_for_url(args.port, args.baud, timeout=0.1)
-    except (serial.SerialException, OSError, ValueError) as exc:
-        raise UserError("cannot open %s: %s" % (args.port, exc))
+        link = BoardLink.open(args.port, args.baud, timeout=0.1)
+    except LinkError as exc:
+        raise UserError(str(exc))
     out = None
     writer = None
     rows = []
@@ -114,22 +122,23 @@ def _monitor(args, outputs):
         writer = csv.DictWriter(out, COLUMNS)
         if out.tell() == 0:
             writer.writeheader()
-    dec = StreamDecoder()
+    dec = link.decoder
     n = 0
     bad = 0
     start = time.monotonic()
+    next_s = start  # when temperatures (S) are asked for next, with --temperatures
     print("%6s %1s %8s %10s %10s %9s %9s %9s  %s" % ("seq", "", "status", "t_ms", "pos_um", "total_um",
                                                       "ref_um", "slope", "flags / fields"))
     latch = None  # the board's answer to L: "ok" or "refused"
     until_answer = args.latch and not (args.count or args.duration)
     from host.board.linkauth import signer_for_option
-    signer = signer_for_option(args.key)
+    signer = link.signer = signer_for_option(args.key)
     latch_sent = False
     try:
         if args.hello or signer is not None and args.latch:
-            ser.write(command_line("V"))  # a signed L needs the board's last counter, the hello's last field
+            link.send("V")  # a signed L needs the board's last counter, the hello's last field
         if args.latch and signer is None:
-            ser.write(command_line("L"))
+            link.send("L")
             latch_sent = True
         while not (args.count and n >= args.count) and not (args.duration and time.monotonic() - start
                                                                >= args.duration):
@@ -137,20 +146,24 @@ def _monitor(args, outputs):
                 break
             if until_answer and time.monotonic() - start >= LATCH_WAIT_S:
                 raise UserError("%s: no answer to L within %g s" % (args.port, LATCH_WAIT_S))
+            if args.temperatures and time.monotonic() >= next_s:
+                link.send("S")
+                next_s += args.temperatures
             try:
-                data = ser.read(4096)
+                new = link.receive()
             except serial.SerialException as exc:
                 raise UserError("%s: %s" % (args.port, exc))
-            if not data:
-                continue
-            for f in dec.feed(data, time.monotonic()):
+            link.take_frames()  # printed and logged here as they come; nothing is kept
+            for f in new:
                 why = offset_problem(f)
                 if why:
                     dec.bad.append((f.raw, why))
                     continue
-                if f.kind == "H" and f.fields[:1] != [str(PROTOCOL_VERSION)]:
-                    raise UserError("%s: the board's hello frame says protocol version %s; this tcomp speaks %d "
-                                    "(docs/protocol.md)" % (args.port, (f.fields or ["(none)"])[0], PROTOCOL_VERSION))
+                if f.kind == "H":
+                    try:
+                        check_protocol(f, args.port)
+                    except LinkError as exc:
+                        raise UserError(str(exc))
                 r = row(f)
                 if f.kind == "H":
                     print(error_reference_line(f))
@@ -159,11 +172,10 @@ def _monitor(args, outputs):
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
                 if args.latch and not latch_sent and f.kind == "H":
                     try:
-                        signer.observe_hello(f.fields)
-                        line = signer.stream_line("L")
+                        line = link.signed_line("L")  # for the session of this hello (the newest)
                     except ValueError as exc:  # host.board.linkauth.CounterError: the hello's counter or nonce
                         raise UserError("%s: --latch: %s" % (args.port, exc))
-                    ser.write(line)
+                    link.write(line)
                     latch_sent = True
                 if latch_sent and latch is None and (f.kind == "A" and f.fields[:1] == ["L"]
                                                      or f.kind == "E" and f.fields[:1] in (["%d" % E_STATE], ["%d" % E_AUTH],
@@ -188,7 +200,7 @@ def _monitor(args, outputs):
     except KeyboardInterrupt:
         pass
     finally:
-        ser.close()
+        link.close()
         if out:
             out.close()
     print("%d frames, %d malformed" % (n, bad))
