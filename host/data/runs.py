@@ -175,14 +175,14 @@ class CsvSyntaxError(ValueError):
     """A CSV file that cannot be split into cells unambiguously; the message names file and line."""
 
 
-def read_records(fh, path):
-    """[(line number, cells)] of an open CSV file, one record per physical line.
+def read_records(fh, path, delimiter=","):
+    """[(line number, cells)] of an open CSV file, one record per physical line (cells split at ``delimiter``).
 
     A quote opens a cell that may run over line ends; in a log, that is almost always a stray ``"`` that
     silently swallows the following rows. So a record spanning lines, a quote never closed, text after a
     closing quote and a cell over 128 KiB are all CsvSyntaxError naming the file and line.
     """
-    reader = csv.reader(fh, strict=True)
+    reader = csv.reader(fh, delimiter=delimiter, strict=True)
     out = []
     start = 1
     try:
