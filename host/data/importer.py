@@ -599,7 +599,9 @@ def import_csv(source, mapping, mapping_where="mapping"):
                              "nor one of the imported sensors (%s) the errors were corrected to"
                              % (mapping_where, json.dumps(ref), ", ".join(meta["sensors"])))
     name = os.path.splitext(os.path.basename(source))[0]
-    return Run(meta, temps, errors, None, spindle, name=name)
+    run = Run(meta, temps, errors, None, spindle, name=name)
+    run.dialect = table.dialect  # what the file was read as, for the command's summary (meta.json keeps it when not plain CSV)
+    return run
 
 
 class Sweeps:
@@ -692,7 +694,7 @@ def import_errors(source, mapping, mapping_where="mapping"):
     channel = None if m["channel"] is None else np.array([m["channel"]] * len(position), dtype=object)
     errors = Errors(sweep_time, position, error, direction, channel)
     record = {"source": os.path.basename(source), "layout": "long", "rows": int(len(position)), "sweeps": len(bounds),
-              "position_unit": m["position"]["unit"], "error_unit": m["error"]["unit"] or "um"}
+              "position_unit": m["position"]["unit"], "error_unit": m["error"]["unit"] or "um", "dialect": table.dialect}
     record.update(_import_record(table, m, gaps, start))
     return Sweeps(errors, time_s, cells.lines, start, record, m["meta"])
 
@@ -719,7 +721,8 @@ def _wide_errors(source, mapping, mapping_where):
                     np.tile(np.array([m["errors"][c]["channel"] for c in ecols], dtype=object), n))
     record = {"source": os.path.basename(source), "layout": "wide", "rows": int(n), "sweeps": int(n * len(ecols)),
               "channels": {s["channel"]: dict({"source_column": c, "position_mm": s["position_mm"], "scale": s["scale"]},
-                                              **({"unit": s["unit"]} if s["unit"] else {})) for c, s in m["errors"].items()}}
+                                              **({"unit": s["unit"]} if s["unit"] else {})) for c, s in m["errors"].items()},
+              "dialect": table.dialect}
     record.update(_import_record(table, m, gaps, start))
     return Sweeps(errors, np.repeat(time_s, len(ecols)), np.repeat(cells.lines, len(ecols)), start, record, m["meta"])
 

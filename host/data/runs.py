@@ -414,8 +414,20 @@ def check_run(folder):
     return []
 
 
-def load_run(folder):
-    """Load and validate one run folder; raise RunFormatError naming every problem."""
+def _has_error_rows(path):
+    """False when errors.csv is missing or holds a header only (a run recorded before its sweeps are merged)."""
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as fh:
+            return sum(1 for line in fh if line.strip()) > 1
+    except OSError:
+        return os.path.lexists(path)  # unreadable: let the loader name why
+
+
+def load_run(folder, errors_required=True):
+    """Load and validate one run folder; raise RunFormatError naming every problem.
+
+    ``errors_required=False`` (``tcomp import --errors --into``): a run whose errors.csv is missing or holds
+    only a header loads with ``errors`` None, ready to receive its sweeps; everything else is checked as always."""
     folder = os.fspath(folder)
     problems = _Problems()
     if not os.path.isdir(folder):
@@ -451,7 +463,9 @@ def load_run(folder):
 
     # errors.csv
     epath = os.path.join(folder, ERRORS)
-    edata = _read_csv(epath, ERROR_COLUMNS, ERROR_OPTIONAL, problems, text_columns=("channel",))
+    edata = None
+    if errors_required or _has_error_rows(epath):
+        edata = _read_csv(epath, ERROR_COLUMNS, ERROR_OPTIONAL, problems, text_columns=("channel",))
     errors = None
     if edata is not None:
         _check_increasing(epath, "time_s", edata["time_s"], problems, strict=False)
@@ -554,11 +568,7 @@ def write_run(run, folder, decimals=4):
 
         raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder (a run is written as a folder)", folder)
     os.makedirs(folder, exist_ok=True)
-    meta = dict(run.meta)
-    meta.setdefault("format", FORMAT)
-    with open(os.path.join(folder, META), "w", encoding="utf-8") as fh:
-        json.dump(meta, fh, indent=2)
-        fh.write("\n")
+    write_meta(run.meta, os.path.join(folder, META))
     t = run.temperatures
     _write_csv(
         os.path.join(folder, TEMPERATURES),
@@ -566,7 +576,27 @@ def write_run(run, folder, decimals=4):
         [t.time_s] + [t.values[:, j] for j in range(len(t.names))],
         [_g(3)] + [_g(decimals)] * len(t.names),
     )
-    e = run.errors
+    write_errors(run.errors, os.path.join(folder, ERRORS), decimals)
+    if run.motion is not None and len(run.motion):
+        m = run.motion
+        _write_csv(os.path.join(folder, MOTION), list(MOTION_COLUMNS), [m.t_start_s, m.t_end_s, m.from_mm, m.to_mm, m.feed_mm_min], [_g(3)] * 5)
+    if run.spindle is not None:
+        s = run.spindle
+        _write_csv(os.path.join(folder, SPINDLE), list(SPINDLE_COLUMNS), [s.time_s, s.rpm], [_g(3), _g(3)])
+    return folder
+
+
+def write_meta(meta, path):
+    """meta.json of a run (``format`` set when missing)."""
+    meta = dict(meta)
+    meta.setdefault("format", FORMAT)
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(meta, fh, indent=2)
+        fh.write("\n")
+
+
+def write_errors(e, path, decimals=4):
+    """errors.csv of a run: time to the millisecond, positions and errors to ``decimals``."""
     header, cols, fmts = list(ERROR_COLUMNS), [e.time_s, e.position_mm, e.error_um], [_g(3), _g(decimals), _g(decimals)]
     if e.direction is not None:
         header.append("direction")
@@ -576,11 +606,4 @@ def write_run(run, folder, decimals=4):
         header.append("channel")
         cols.append(e.channel)
         fmts.append(str)
-    _write_csv(os.path.join(folder, ERRORS), header, cols, fmts)
-    if run.motion is not None and len(run.motion):
-        m = run.motion
-        _write_csv(os.path.join(folder, MOTION), list(MOTION_COLUMNS), [m.t_start_s, m.t_end_s, m.from_mm, m.to_mm, m.feed_mm_min], [_g(3)] * 5)
-    if run.spindle is not None:
-        s = run.spindle
-        _write_csv(os.path.join(folder, SPINDLE), list(SPINDLE_COLUMNS), [s.time_s, s.rpm], [_g(3), _g(3)])
-    return folder
+    _write_csv(path, header, cols, fmts)
