@@ -195,7 +195,7 @@ def _normalise_wide(mapping, where, temperatures=True):
                              "columns too (import such a log with --out)" % where)
     if not temps and temperatures:
         raise LogImportError("%s: mapping needs at least one temperature column" % where)
-    if not errs:
+    if not errs and not temperatures:
         raise LogImportError("%s: mapping needs at least one error (displacement) column" % where)
     t_out = {}
     for col, spec in temps.items():
@@ -566,16 +566,18 @@ def import_csv(source, mapping, mapping_where="mapping"):
     for j, c in enumerate(tcols):
         _check_range(cells, c, tvals[:, j], lo, hi, "degC%s, the range of a Pt100 (IEC 60751)"
                      % ("" if m["temperatures"][c]["unit"] == "degC" else " once converted from %s" % m["temperatures"][c]["unit"]))
-    evals = np.column_stack([cells.column(c) * m["errors"][c]["scale"] for c in ecols])
-    for j, c in enumerate(ecols):
-        _check_range(cells, c, evals[:, j], -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
     temps = Temperatures(time_s, [m["temperatures"][c]["name"] for c in tcols], tvals)
     n = time_s.size
-    err_time = np.repeat(time_s, len(ecols))
-    err_pos = np.tile([m["errors"][c]["position_mm"] for c in ecols], n)
-    # The channel column is kept even for one channel: it records which probe it was.
-    channel = np.tile(np.array([m["errors"][c]["channel"] for c in ecols], dtype=object), n)
-    errors = Errors(err_time, err_pos, evals.reshape(-1), None, channel)
+    errors = None  # a log of temperatures only: its sweeps come from an instrument (tcomp import --errors FILE --into RUN)
+    if ecols:
+        evals = np.column_stack([cells.column(c) * m["errors"][c]["scale"] for c in ecols])
+        for j, c in enumerate(ecols):
+            _check_range(cells, c, evals[:, j], -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
+        err_time = np.repeat(time_s, len(ecols))
+        err_pos = np.tile([m["errors"][c]["position_mm"] for c in ecols], n)
+        # The channel column is kept even for one channel: it records which probe it was.
+        channel = np.tile(np.array([m["errors"][c]["channel"] for c in ecols], dtype=object), n)
+        errors = Errors(err_time, err_pos, evals.reshape(-1), None, channel)
     spindle = Spindle(time_s, cells.column(m["spindle"])) if m["spindle"] else None
     # Only what the user declared: no axis, no sensor location unless the mapping (or a flag) gives it.
     meta = {"format": FORMAT}
@@ -734,7 +736,7 @@ def import_to_folder(source, mapping, out, mapping_where="mapping"):
     from host.data.runs import load_run
 
     try:
-        load_run(out)
+        load_run(out, errors_required=run.errors is not None)
     except RunFormatError as exc:  # pragma: no cover - would be a bug in write_run
         raise LogImportError("imported run does not validate:\n%s" % exc)
     return run

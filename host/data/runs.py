@@ -576,7 +576,7 @@ def write_run(run, folder, decimals=4):
         [t.time_s] + [t.values[:, j] for j in range(len(t.names))],
         [_g(3)] + [_g(decimals)] * len(t.names),
     )
-    write_errors(run.errors, os.path.join(folder, ERRORS), decimals)
+    write_errors(run.errors, os.path.join(folder, ERRORS), decimals)  # None: the header only (docs/data-format.md)
     if run.motion is not None and len(run.motion):
         m = run.motion
         _write_csv(os.path.join(folder, MOTION), list(MOTION_COLUMNS), [m.t_start_s, m.t_end_s, m.from_mm, m.to_mm, m.feed_mm_min], [_g(3)] * 5)
@@ -596,7 +596,13 @@ def write_meta(meta, path):
 
 
 def write_errors(e, path, decimals=4):
-    """errors.csv of a run: time to the millisecond, positions and errors to ``decimals``."""
+    """errors.csv of a run: time to the millisecond, positions and errors to ``decimals``.
+
+    ``e`` None writes the header only: a run of temperatures awaiting its sweeps (``tcomp import --errors --into``),
+    which ``load_run`` refuses until they are merged."""
+    if e is None:
+        _write_csv(path, list(ERROR_COLUMNS), [], [])
+        return
     header, cols, fmts = list(ERROR_COLUMNS), [e.time_s, e.position_mm, e.error_um], [_g(3), _g(decimals), _g(decimals)]
     if e.direction is not None:
         header.append("direction")

@@ -248,13 +248,17 @@ def _report(args, run_, out):
     import json
 
     t = run_.temperatures
+    channels = run_.errors.channels() if run_.errors is not None else []
     print("%s -> %s: %d samples, %d temperatures, %d error channels, %.1f h"
-          % (args.source, args.out, t.time_s.size, len(t.names), len(run_.errors.channels()), (t.time_s[-1] - t.time_s[0]) / 3600))
+          % (args.source, args.out, t.time_s.size, len(t.names), len(channels), (t.time_s[-1] - t.time_s[0]) / 3600))
     _print_reading(run_.meta["import"], run_.dialect)
+    if run_.errors is None:
+        print("  no error columns: errors.csv holds its header only, and the run validates once an instrument's sweeps are "
+              "merged (tcomp import --errors FILE --into %s)" % args.out)
     if not run_.meta.get("axis"):
         print("  no axis declared (--axis or the mapping's meta.axis); meta.json has none")
     if args.json:
-        summary = {"out": args.out, "samples": int(t.time_s.size), "sensors": t.names, "channels": run_.errors.channels()}
+        summary = {"out": args.out, "samples": int(t.time_s.size), "sensors": t.names, "channels": channels}
         summary["dialect"] = run_.dialect
         summary.update({k: run_.meta["import"][k] for k in ("time", "gaps") if k in run_.meta["import"]})
         with out.open(args.json) as fh:
