@@ -240,7 +240,7 @@ def _print_reading(record, dialect):
     if g and g["policy"] == "drop":
         print("  gaps: %d rows dropped (empty cells: %s)" % (g["rows_dropped"], ", ".join("%s %d" % kv for kv in g["empty_cells"].items())))
     elif g:
-        print("  gaps: %d cells interpolated (%s)" % (sum(g["cells_interpolated"].values()),
+        print("  gaps: %d empty cells interpolated (%s)" % (sum(g["cells_interpolated"].values()),
                                                      ", ".join("%s %d" % kv for kv in g["cells_interpolated"].items())))
 
 
