@@ -74,8 +74,8 @@ def _merge_errors(old, new, run_errors_path):
         return new
     for col, a, b in (("direction", old.direction, new.direction), ("channel", old.channel, new.channel)):
         if (a is None) != (b is None):
-            raise LogImportError("%s %s a '%s' column and the merged sweeps %s; one errors.csv has one layout (map \"%s\" in the "
-                                 "mapping%s)" % (run_errors_path, "has" if a is not None else "has no", col,
+            raise LogImportError("%s has %s '%s' column and the merged sweeps %s; one errors.csv has one layout (map \"%s\" in the "
+                                 "mapping%s)" % (run_errors_path, "a" if a is not None else "no", col,
                                                  "do not" if a is not None else "do", col,
                                                  "" if col == "direction" else ", the name of the instrument's channel"))
     key = lambda e, i: (e.time_s[i], None if e.channel is None else e.channel[i], None if e.direction is None else int(e.direction[i]))  # noqa: E731
