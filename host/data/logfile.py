@@ -27,10 +27,6 @@ class LogFileError(ValueError):
     """A source-file problem; the message names the file, line and column."""
 
 
-def _shown(d):
-    return "tab" if d == "\t" else repr(d)
-
-
 class Table:
     """The header and rows of one export, split with its delimiter.
 
@@ -47,12 +43,6 @@ class Table:
     @property
     def dialect(self):
         return {"delimiter": self.delimiter, "decimal": self.decimal, "detected": list(self.detected)}
-
-    def describe(self):
-        """One phrase for the command's summary: what the file was read as, and what of it was detected."""
-        how = lambda what: "detected" if what in self.detected else "declared"  # noqa: E731
-        return "cells split at %s (%s), decimal %s %r (%s)" % (
-            DELIMITERS[self.delimiter], how("delimiter"), DECIMALS[self.decimal], self.decimal, how("decimal"))
 
 
 def _records(text, source, delimiter):

@@ -124,7 +124,7 @@ def _mapping(args):
         mapping, where = _load_mapping(args.mapping), args.mapping
         if not isinstance(mapping, dict):
             raise UserError("%s: mapping must be a JSON object" % where)
-        for flag in ("time", "time_scale"):
+        for flag in ("time", "time_scale", "spindle"):
             if getattr(args, flag) is not None:
                 raise UserError("--%s: the mapping %s gives the columns; set it there" % (flag.replace("_", "-"), where))
         for flag in ("temp", "error", "unit", "location", "ignore"):
