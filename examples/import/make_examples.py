@@ -44,9 +44,12 @@ def logger_iso():
 
 
 def laser_sweeps():
-    """One row per point: six bidirectional runs 0..700 mm every 100 mm, 4 s per point, errors in um (raw: NTE off)."""
+    """One row per point: six bidirectional runs 0..700 mm every 100 mm, 4 s per point, errors in um (raw: NTE off),
+    after a preamble of settings (the mapping's header_line skips it)."""
     rnd = random.Random(22)
-    lines = ["Run,Point,Target (mm),Direction,Date/Time,Error (µm),Air temp (°C),Material temp (°C),Pressure (mbar),Humidity (%)"]
+    lines = ["Linear positioning test export (ISO 230-2 style)", "Machine,Example mill,X axis", "Operator,-",
+             "Material expansion coefficient (ppm/°C),0.000", "Material temperature compensation,off", ""]
+    lines += ["Run,Point,Target (mm),Direction,Date/Time,Error (µm),Air temp (°C),Material temp (°C),Pressure (mbar),Humidity (%)"]
     for run in range(1, 7):
         t = 120.0 + (run - 1) * 1200.0
         point = 0

@@ -58,7 +58,7 @@ _NAME_UNITS = {
 DEFAULT_UNIT = {"error": "um", "position": "mm", "temperature": "degC", "time": "s"}
 _UNITS = {"error": ERROR_UNITS, "position": POSITION_UNITS, "temperature": TEMPERATURE_UNITS, "time": TIME_UNITS}
 
-_COMMON_KEYS = {"layout", "delimiter", "decimal", "time", "time_scale", "time_unit", "time_format", "timezone", "gaps", "ignore", "meta"}
+_COMMON_KEYS = {"layout", "header_line", "delimiter", "decimal", "time", "time_scale", "time_unit", "time_format", "timezone", "gaps", "ignore", "meta"}
 _WIDE_KEYS = _COMMON_KEYS | {"temperatures", "errors", "spindle"}
 _LONG_KEYS = _COMMON_KEYS | {"position", "error", "direction", "sweep", "channel"}
 
@@ -83,7 +83,7 @@ def _unit(kind, declared, col, where, what):
     name does not state another one; LogImportError naming the column and the unit to declare otherwise."""
     if declared is not None:
         unit = _ALIASES.get(declared, declared) if isinstance(declared, str) else declared
-        if unit not in _UNITS[kind]:
+        if not isinstance(unit, str) or unit not in _UNITS[kind]:
             raise LogImportError("%s: %s unit %r of column %r: expected one of %s" % (where, what, declared, col, ", ".join(_UNITS[kind])))
         return unit
     words = re.findall(r"[0-9A-Za-zµμ°]+", col)
@@ -150,6 +150,9 @@ def _normalise_common(mapping, where, keys):
         decimal = logfile.decimal_of(mapping.get("decimal", AUTO), where)
     except LogFileError as exc:
         raise LogImportError(str(exc))
+    header_line = mapping.get("header_line", 1)
+    if isinstance(header_line, bool) or not isinstance(header_line, int) or header_line < 1:
+        raise LogImportError("%s: 'header_line' must be the line number (1 = first) of the column names, found %r" % (where, header_line))
     gaps = mapping.get("gaps", "refuse")
     if gaps not in GAP_POLICIES:
         raise LogImportError("%s: 'gaps' is %r; expected \"refuse\" (the default: an empty cell is an error), \"drop\" (the row) "
@@ -175,7 +178,7 @@ def _normalise_common(mapping, where, keys):
         time_unit = _unit("time", mapping.get("time_unit"), mapping["time"], where, "time")
         time_scale = TIME_UNITS[time_unit]
     return {
-        "layout": layout, "delimiter": delimiter, "decimal": decimal, "gaps": gaps,
+        "layout": layout, "header_line": header_line, "delimiter": delimiter, "decimal": decimal, "gaps": gaps,
         "time": mapping["time"], "time_scale": time_scale, "time_unit": time_unit,
         "time_format": time_format, "timezone": mapping.get("timezone"),
         "ignore": list(ignore), "meta": dict(meta),
@@ -320,8 +323,8 @@ def _check_header(table, m, used):
     source, header = table.source, table.header
     dup = sorted(c for c, k in Counter(header).items() if k > 1)
     if dup:
-        raise LogImportError("%s line 1: column name(s) %s appear more than once in the header; rename them in the source"
-                             % (source, ", ".join(repr(h) for h in dup)))
+        raise LogImportError("%s line %d: column name(s) %s appear more than once in the header; rename them in the source"
+                             % (source, table.header_line, ", ".join(repr(h) for h in dup)))
     problems = []
     known, named = set(header), set(used + m["ignore"])
     for col in used + m["ignore"]:
@@ -329,12 +332,12 @@ def _check_header(table, m, used):
             hint = ""
             if len(header) == 1 and table.delimiter == ",":
                 hint = " (the header is one cell: is the file ';'- or tab-separated? declare \"delimiter\")"
-            problems.append("%s line 1: mapped column %r is not in the header (%s)%s" % (source, col, _shortened(header), hint))
+            problems.append("%s line %d: mapped column %r is not in the header (%s)%s" % (source, table.header_line, col, _shortened(header), hint))
             if hint:
                 break
     for col in header:
         if col not in named:
-            problems.append("%s line 1: column %r is neither mapped nor listed in 'ignore'" % (source, col))
+            problems.append("%s line %d: column %r is neither mapped nor listed in 'ignore'" % (source, table.header_line, col))
             if len(problems) > MAX_PROBLEMS:
                 problems.append("... (stopped after %d problems)" % MAX_PROBLEMS)
                 break
@@ -521,6 +524,8 @@ def _import_record(table, m, gaps, start):
     The plain CSV of the run format itself (comma, decimal point, no gaps, seconds) adds nothing, so a log
     imported before these existed imports to the same meta.json."""
     rec = {}
+    if table.header_line != 1:
+        rec["header_line"] = table.header_line
     if table.delimiter != "," or table.decimal != ".":
         rec["dialect"] = table.dialect
     if m["time_format"] is not None:
@@ -537,7 +542,7 @@ def _import_record(table, m, gaps, start):
 def _read(source, m, numeric, text=()):
     try:
         table = logfile.read_table(source, m["delimiter"], m["decimal"],
-                                   numeric_columns=([] if m["time_format"] else [m["time"]]) + list(numeric))
+                                   numeric_columns=([] if m["time_format"] else [m["time"]]) + list(numeric), header_line=m["header_line"])
     except LogFileError as exc:
         raise LogImportError(str(exc))
     _check_header(table, m, [m["time"]] + list(numeric) + list(text))
@@ -593,7 +598,15 @@ def import_csv(source, mapping, mapping_where="mapping"):
         meta["import"]["temperature_units"] = units
     meta["import"].update(_import_record(table, m, gaps, start))
     if start is not None:
+        if "start_time" in m["meta"]:
+            raise LogImportError("%s: meta 'start_time' is declared, but the time column's date-times give it (%s); remove it"
+                                 % (mapping_where, start))
         meta["start_time"] = start
+    elif "start_time" in m["meta"]:
+        try:  # a log of numbers whose start the user knows: declared, so it must be a date-time with its offset
+            logfile.parse_utc(m["meta"]["start_time"], "%s: meta 'start_time'" % mapping_where)
+        except LogFileError as exc:
+            raise LogImportError(str(exc))
     meta.update(m["meta"])
     ref = meta.get("error_reference", START)
     if not (ref == START or (isinstance(ref, str) and ref in meta["sensors"])):
@@ -618,6 +631,12 @@ class Sweeps:
 
     def groups(self):
         return self.errors.sweeps()
+
+
+def _no_start_time(m, where):
+    if "start_time" in m["meta"]:
+        raise LogImportError("%s: meta 'start_time' belongs to the run (the wall clock of its time 0); an error file's clock is "
+                             "aligned with it by its date-times or --clock-offset" % where)
 
 
 def _direction(cells, m):
@@ -657,6 +676,7 @@ def import_errors(source, mapping, mapping_where="mapping"):
     if layout == "wide":
         return _wide_errors(source, mapping, mapping_where)
     m = _normalise_long(mapping, mapping_where)
+    _no_start_time(m, mapping_where)
     m["where"] = mapping_where
     pcol, ecol = m["position"]["column"], m["error"]["column"]
     text = ([m["direction"]["column"]] if m["direction"] else []) + ([m["sweep"]] if m["sweep"] else [])
@@ -704,6 +724,7 @@ def import_errors(source, mapping, mapping_where="mapping"):
 def _wide_errors(source, mapping, mapping_where):
     """Probe columns sampled in time (the wide layout without temperatures): one sweep per channel and sample."""
     m = _normalise_wide(mapping, mapping_where, temperatures=False)
+    _no_start_time(m, mapping_where)
     if m["spindle"]:
         raise LogImportError("%s: --errors merges error sweeps; 'spindle' belongs to the run's own log" % mapping_where)
     m["where"] = mapping_where

@@ -32,9 +32,10 @@ class Table:
 
     ``dialect``: {"delimiter": ..., "decimal": ..., "detected": [what was detected rather than declared]}."""
 
-    def __init__(self, source, header, records, delimiter, decimal, detected):
+    def __init__(self, source, header, records, delimiter, decimal, detected, header_line=1):
         self.source = source
         self.header = header
+        self.header_line = header_line  # the file's line holding the header (lines before it: the export's preamble)
         self.records = records  # [(line number, cells)] after the header
         self.delimiter = delimiter
         self.decimal = decimal
@@ -45,10 +46,10 @@ class Table:
         return {"delimiter": self.delimiter, "decimal": self.decimal, "detected": list(self.detected)}
 
 
-def _records(text, source, delimiter):
+def _records(text, source, delimiter, first_line=1):
     import io
 
-    return read_records(io.StringIO(text, newline=""), source, delimiter)
+    return read_records(io.StringIO(text, newline=""), source, delimiter, first_line)
 
 
 def _split_consistently(records):
@@ -59,11 +60,11 @@ def _split_consistently(records):
     return all(len(row) == n for _, row in records[1:] if row)
 
 
-def _detect_delimiter(text, source):
+def _detect_delimiter(text, source, first_line):
     plausible, why_not = {}, []
     for d in DELIMITERS:
         try:
-            recs = _records(text, source, d)
+            recs = _records(text, source, d, first_line)
         except CsvSyntaxError as exc:
             why_not.append("%s: %s" % (DELIMITERS[d], exc))
             continue
@@ -75,12 +76,12 @@ def _detect_delimiter(text, source):
     if len(plausible) == 1:
         return next(iter(plausible.items()))
     if not plausible:
-        raise LogFileError("%s line 1: cannot tell how the cells are separated: no delimiter (comma, semicolon, tab) splits the "
+        raise LogFileError("%s line %d: cannot tell how the cells are separated: no delimiter (comma, semicolon, tab) splits the "
                            "header into two or more columns that every row agrees with%s; declare it (mapping \"delimiter\", "
-                           "or --delimiter)" % (source, (" (" + "; ".join(why_not) + ")") if why_not else ""))
-    raise LogFileError("%s line 1: ambiguous delimiter: the file splits consistently at %s (%s); declare which one "
+                           "or --delimiter)" % (source, first_line, (" (" + "; ".join(why_not) + ")") if why_not else ""))
+    raise LogFileError("%s line %d: ambiguous delimiter: the file splits consistently at %s (%s); declare which one "
                        "separates the cells (mapping \"delimiter\", or --delimiter)"
-                       % (source, " and at ".join(DELIMITERS[d] for d in plausible),
+                       % (source, first_line, " and at ".join(DELIMITERS[d] for d in plausible),
                           ", ".join("%d columns at %s" % (len(r[0][1]), DELIMITERS[d]) for d, r in plausible.items())))
 
 
@@ -109,8 +110,9 @@ def _detect_decimal(source, header, records, delimiter, numeric_columns):
     return "," if comma else "."
 
 
-def read_table(source, delimiter=AUTO, decimal=AUTO, numeric_columns=()):
-    """Read ``source`` (a path) into a Table; ``numeric_columns``: the mapped columns a decimal separator is detected on."""
+def read_table(source, delimiter=AUTO, decimal=AUTO, numeric_columns=(), header_line=1):
+    """Read ``source`` (a path) into a Table; ``numeric_columns``: the mapped columns a decimal separator is detected on;
+    ``header_line``: the line holding the column names (the lines before it, an export's preamble, are not read)."""
     try:
         # utf-8-sig: spreadsheet programs (Excel) start a UTF-8 CSV with a byte-order mark
         with open(source, newline="", encoding="utf-8-sig") as fh:
@@ -120,21 +122,26 @@ def read_table(source, delimiter=AUTO, decimal=AUTO, numeric_columns=()):
     except OSError as exc:
         raise LogFileError("%s: cannot be read (%s)" % (source, exc.strerror or exc))
     detected = []
+    lines = text.split("\n")
+    if header_line > 1:
+        if len(lines) < header_line or not "\n".join(lines[header_line - 1:]).strip():
+            raise LogFileError("%s: no line %d (the declared header_line); the file has %d lines" % (source, header_line, len(lines) - 1))
+        text = "\n".join(lines[header_line - 1:])
     try:
         if delimiter == AUTO:
-            delimiter, records = _detect_delimiter(text, source)
+            delimiter, records = _detect_delimiter(text, source, header_line)
             detected.append("delimiter")
         else:
-            records = _records(text, source, delimiter)
+            records = _records(text, source, delimiter, header_line)
     except CsvSyntaxError as exc:
         raise LogFileError(str(exc))
     if not records:
-        raise LogFileError("%s line 1: file is empty" % source)
+        raise LogFileError("%s line %d: file is empty" % (source, header_line))
     header = [h.strip() for h in records[0][1]]
     if decimal == AUTO:
         decimal = _detect_decimal(source, header, records[1:], delimiter, numeric_columns)
         detected.append("decimal")
-    return Table(source, header, records[1:], delimiter, decimal, detected)
+    return Table(source, header, records[1:], delimiter, decimal, detected, header_line)
 
 
 def parse_cell(cell, decimal):

@@ -175,8 +175,9 @@ class CsvSyntaxError(ValueError):
     """A CSV file that cannot be split into cells unambiguously; the message names file and line."""
 
 
-def read_records(fh, path, delimiter=","):
-    """[(line number, cells)] of an open CSV file, one record per physical line (cells split at ``delimiter``).
+def read_records(fh, path, delimiter=",", first_line=1):
+    """[(line number, cells)] of an open CSV file, one record per physical line (cells split at ``delimiter``;
+    ``first_line``: the file's line number of ``fh``'s first line, when lines before it were skipped).
 
     A quote opens a cell that may run over line ends; in a log, that is almost always a stray ``"`` that
     silently swallows the following rows. So a record spanning lines, a quote never closed, text after a
@@ -188,9 +189,9 @@ def read_records(fh, path, delimiter=","):
     try:
         for row in reader:
             if reader.line_num != start:
-                raise CsvSyntaxError("%s lines %d-%d: one quoted cell runs over %d lines (a stray '\"'? each row "
-                                     "of the log must be one line)" % (path, start, reader.line_num, reader.line_num - start + 1))
-            out.append((start, row))
+                raise CsvSyntaxError("%s lines %d-%d: one quoted cell runs over %d lines (a stray '\"'? each row of the log must "
+                                     "be one line)" % (path, start + first_line - 1, reader.line_num + first_line - 1, reader.line_num - start + 1))
+            out.append((start + first_line - 1, row))
             start = reader.line_num + 1
     except csv.Error as exc:
         text = str(exc)
@@ -202,7 +203,7 @@ def read_records(fh, path, delimiter=","):
             why = "text follows a closing quote in a cell (a stray '\"'?)"
         else:
             why = "not valid CSV (%s)" % text
-        raise CsvSyntaxError("%s line %d: %s" % (path, start, why))
+        raise CsvSyntaxError("%s line %d: %s" % (path, start + first_line - 1, why))
     return out
 
 
@@ -329,6 +330,9 @@ def _check_meta(path, meta, problems):
             if s.get("role") not in ROLES:
                 problems.add(path, "sensors.%s.role is %r; expected one of %s" % (name, s.get("role"), ", ".join(ROLES)))
     _check_error_reference(path, meta, problems)
+    if "start_time" in meta and not _is_utc_date_time(meta["start_time"]):
+        problems.add(path, "key 'start_time' must be an ISO 8601 date-time with its offset, e.g. \"2026-11-26T07:00:00Z\" "
+                     "(found %r)" % (meta["start_time"],))
     stroke = meta.get("stroke_mm")
     if stroke is not None and not _positive(stroke):
         problems.add(path, "key 'stroke_mm' must be a positive finite number (found %r)" % (stroke,))
@@ -344,6 +348,18 @@ def _check_meta(path, meta, problems):
             fe = screw.get("fixed_end_mm", 0)
             if not isinstance(fe, (int, float)) or isinstance(fe, bool) or not math.isfinite(fe):
                 problems.add(path, "screw.fixed_end_mm must be a finite number (found %r)" % (fe,))
+
+
+def _is_utc_date_time(text):
+    """An ISO 8601 date-time that carries its offset (meta.json ``start_time``: the wall clock of time_s = 0)."""
+    from datetime import datetime
+
+    if not isinstance(text, str):
+        return False
+    try:
+        return datetime.fromisoformat(text[:-1] + "+00:00" if text[-1:] in "zZ" else text).utcoffset() is not None
+    except ValueError:
+        return False
 
 
 def error_reference(meta):

@@ -319,3 +319,37 @@ def test_example_laser_sweeps_merge_into_the_iso_logger_run(tmp_path, capsys):
     assert run.temperatures.column("T_nut")[0] == 20.0  # 68.00 degF
     assert sorted({float(t) for t in run.errors.time_s})[:2] == [120.0, 152.0]  # 08:02:00 and 08:02:32 local, the run started 08:00
     assert run.meta["axis"] == "X" and run.error_reference == "start"
+
+
+def test_a_preamble_is_skipped_by_header_line_and_lines_keep_their_numbers(tmp_path):
+    src = _file(tmp_path, "Export of logger 7\nOperator,A. B.; C\n\nt;a;d\n0;20;1\n1;x;2\n")
+    with pytest.raises(LogImportError, match=r"log.csv line 6 column 'a': not a number: 'x'"):
+        import_csv(src, dict(TWO, header_line=4))
+    with pytest.raises(LogImportError, match=r"log.csv line 1: cannot tell how the cells are separated"):
+        import_csv(src, TWO)
+    with pytest.raises(LogImportError, match=r"no line 9 \(the declared header_line\)"):
+        import_csv(src, dict(TWO, header_line=9))
+    ok = _file(tmp_path, "Export of logger 7\n\nt;a;d\n0;20;1\n", "ok.csv")
+    assert import_csv(ok, dict(TWO, header_line=3)).meta["import"]["header_line"] == 3
+
+
+def test_start_time_is_given_by_date_times_or_declared_as_one(tmp_path):
+    src = _file(tmp_path, "t,a,d\n0,20,1\n60,21,2\n")
+    assert import_csv(src, dict(TWO, meta={"start_time": "2026-11-26T07:00:00Z"})).meta["start_time"] == "2026-11-26T07:00:00Z"
+    with pytest.raises(LogImportError, match=r"meta 'start_time': '2026-11-26 07:00' carries no time-zone offset"):
+        import_csv(src, dict(TWO, meta={"start_time": "2026-11-26 07:00"}))
+    stamped = _file(tmp_path, "t,a,d\n2026-11-26T08:00:00+01:00,20,1\n", "s.csv")
+    with pytest.raises(LogImportError, match=r"meta 'start_time' is declared, but the time column's date-times give it"):
+        import_csv(stamped, dict(TWO, time_format="iso8601", meta={"start_time": "2026-11-26T07:00:00Z"}))
+    with pytest.raises(LogImportError, match=r"meta 'start_time' belongs to the run"):
+        import_errors(_file(tmp_path, LASER, "l.csv"), dict(LASER_MAP, meta={"start_time": "2026-11-26T07:00:00Z"}))
+
+
+def test_the_run_format_checks_start_time(tmp_path):
+    from host.data.runs import RunFormatError, load_run, write_run
+
+    run = import_csv(_file(tmp_path, "t,a,d\n0,20,1\n"), TWO)
+    run.meta["start_time"] = "yesterday"
+    write_run(run, str(tmp_path / "run"))
+    with pytest.raises(RunFormatError, match=r"meta.json: key 'start_time' must be an ISO 8601 date-time with its offset"):
+        load_run(str(tmp_path / "run"))
