@@ -504,11 +504,16 @@ def _check_time_order(cells, m, time_s, raw, strict):
                                        for i, (a, b) in zip(back[:20], shown)))
 
 
-def _check_range(cells, col, converted, lo, hi, why):
+def _out_of_range(cells, col, converted, lo, hi, why):
+    """Messages for the first ten cells of ``col`` whose converted value lies outside lo..hi, naming the raw cell."""
     raw = cells.column(col)
-    problems = ["%s line %d column %r: %g is outside %g..%g %s (a logger fault or a wrong unit?)"
-                % (cells.source, cells.lines[i], col, raw[i], lo, hi, why)
-                for i in np.flatnonzero(~((converted >= lo) & (converted <= hi)))[:10]]
+    return ["%s line %d column %r: %g is outside %g..%g %s (a logger fault or a wrong unit?)"
+            % (cells.source, cells.lines[i], col, raw[i], lo, hi, why)
+            for i in np.flatnonzero(~((converted >= lo) & (converted <= hi)))[:10]]
+
+
+def _check_ranges(checks):
+    problems = [p for c in checks for p in _out_of_range(*c)]
     if problems:
         raise LogImportError("\n".join(problems))
 
@@ -568,16 +573,16 @@ def import_csv(source, mapping, mapping_where="mapping"):
         _interpolate(cells, time_s)
     lo, hi = TEMPERATURE_RANGE_C
     tvals = np.column_stack([_to_degc(cells.column(c), m["temperatures"][c]["unit"]) for c in tcols])
-    for j, c in enumerate(tcols):
-        _check_range(cells, c, tvals[:, j], lo, hi, "degC%s, the range of a Pt100 (IEC 60751)"
-                     % ("" if m["temperatures"][c]["unit"] == "degC" else " once converted from %s" % m["temperatures"][c]["unit"]))
+    evals = np.column_stack([cells.column(c) * m["errors"][c]["scale"] for c in ecols]) if ecols else None
+    units = {c: m["temperatures"][c]["unit"] for c in tcols}
+    _check_ranges([(cells, c, tvals[:, j], lo, hi, "degC%s, the range of a Pt100 (IEC 60751)"
+                    % ("" if units[c] == "degC" else " once converted from %s" % units[c])) for j, c in enumerate(tcols)]
+                  + [(cells, c, evals[:, j], -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
+                     for j, c in enumerate(ecols)])
     temps = Temperatures(time_s, [m["temperatures"][c]["name"] for c in tcols], tvals)
     n = time_s.size
     errors = None  # a log of temperatures only: its sweeps come from an instrument (tcomp import --errors FILE --into RUN)
     if ecols:
-        evals = np.column_stack([cells.column(c) * m["errors"][c]["scale"] for c in ecols])
-        for j, c in enumerate(ecols):
-            _check_range(cells, c, evals[:, j], -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
         err_time = np.repeat(time_s, len(ecols))
         err_pos = np.tile([m["errors"][c]["position_mm"] for c in ecols], n)
         # The channel column is kept even for one channel: it records which probe it was.
@@ -689,7 +694,7 @@ def import_errors(source, mapping, mapping_where="mapping"):
         _interpolate(cells, time_s)
     position = cells.column(pcol) * m["position"]["factor"]
     error = cells.column(ecol) * m["error"]["scale"]
-    _check_range(cells, ecol, error, -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once converted: no feed axis grows that much")
+    _check_ranges([(cells, ecol, error, -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once converted: no feed axis grows that much")])
     direction = _direction(cells, m)
     starts = _sweep_starts(cells, m, position, direction)
     bounds = list(zip(starts, starts[1:] + [len(position)]))
@@ -737,8 +742,8 @@ def _wide_errors(source, mapping, mapping_where):
     if gaps is not None and gaps["policy"] == "interpolate":
         _interpolate(cells, time_s)
     evals = np.column_stack([cells.column(c) * m["errors"][c]["scale"] for c in ecols])
-    for j, c in enumerate(ecols):
-        _check_range(cells, c, evals[:, j], -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
+    _check_ranges([(cells, c, evals[:, j], -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
+                   for j, c in enumerate(ecols)])
     n = time_s.size
     errors = Errors(np.repeat(time_s, len(ecols)), np.tile([m["errors"][c]["position_mm"] for c in ecols], n), evals.reshape(-1), None,
                     np.tile(np.array([m["errors"][c]["channel"] for c in ecols], dtype=object), n))
