@@ -598,9 +598,9 @@ def import_csv(source, mapping, mapping_where="mapping"):
     meta["channels"] = {s["channel"]: dict({"source_column": c, "position_mm": s["position_mm"], "scale": s["scale"]},
                                            **({"unit": s["unit"]} if s["unit"] else {})) for c, s in m["errors"].items()}
     meta["import"] = {"source": os.path.basename(source), "rows": int(n), "ignored_columns": m["ignore"]}
-    units = {c: s["unit"] for c, s in m["temperatures"].items() if s["declared"]}
-    if units:
-        meta["import"]["temperature_units"] = units
+    declared = {c: s["unit"] for c, s in m["temperatures"].items() if s["declared"]}
+    if declared:
+        meta["import"]["temperature_units"] = declared
     meta["import"].update(_import_record(table, m, gaps, start))
     if start is not None:
         if "start_time" in m["meta"]:

@@ -53,6 +53,16 @@ def test_flags_for_a_real_file(tmp_path, log, capsys):
     assert summary["dialect"] == {"delimiter": ";", "decimal": ",", "detected": ["decimal"]} and summary["gaps"]["rows_dropped"] == 1
 
 
+def test_header_line_flag_skips_a_preamble(tmp_path, capsys):
+    src = tmp_path / "pre.csv"
+    src.write_text("logger 7 export\n\n" + LOG)
+    out = str(tmp_path / "run")
+    assert main(["import", str(src), "--out", out, "--gaps", "drop", "--header-line", "3"] + FLAGS) == 0
+    assert load_run(out).meta["import"]["header_line"] == 3
+    assert "pre.csv line 2: cannot tell how the cells are separated" in _fail(
+        capsys, ["import", str(src), "--out", out, "--gaps", "drop", "--header-line", "2"] + FLAGS)
+
+
 def test_a_mm_column_without_unit_flag_is_refused(tmp_path, log, capsys):
     argv = ["import", log, "--out", str(tmp_path / "run"), "--gaps", "interpolate"] + FLAGS
     i = argv.index("--unit")

@@ -206,7 +206,7 @@ FLAGS = {
     # inputs are walked in tests/cli/test_cli_import.py
     "import": {"in": {"source": "file", "--mapping": "file"}, "out": {"--out": "folder", "--json": "file"},
                "other": "--time --time-scale --temp --error --spindle --ignore --axis --error-reference --errors --into "
-                        "--clock-offset --time-unit --time-format --timezone --delimiter --decimal --gaps --unit --location"},
+                        "--clock-offset --time-unit --time-format --timezone --header-line --delimiter --decimal --gaps --unit --location"},
     "linuxcnc": {"in": {"--port": "file", "--key": "file"}, "out": {},
                  "other": "--mode --baud --address --name --units --slew-um-per-s --period-ms --stale-ms --recover-ms "
                           "--cold-start --spindle"},

@@ -17,6 +17,7 @@ def add_arguments(p):
     p.add_argument("--time-format", metavar="iso8601|STRPTIME", help="the time column holds date-times: 'iso8601' or a strptime format "
                    "('%%d.%%m.%%Y %%H:%%M:%%S'); time_s counts from the first sample")
     p.add_argument("--timezone", metavar="TZ", help="clock of date-times without an offset: UTC, +01:00 or an IANA name (Europe/Berlin)")
+    p.add_argument("--header-line", type=int, metavar="N", help="line holding the column names (the export's preamble before it is skipped)")
     p.add_argument("--delimiter", metavar="auto|comma|semicolon|tab", help="cell separator (default: detected, and reported)")
     p.add_argument("--decimal", metavar="auto|point|comma", help="decimal separator (default: detected, and reported)")
     p.add_argument("--gaps", choices=("refuse", "drop", "interpolate"), help="empty cells: refuse (default), drop the row, or interpolate in time")
@@ -94,7 +95,7 @@ def _from_flags(args):
 
 
 # flag -> mapping key, for the settings a mapping may hold too (a flag fills a key the mapping leaves out; a clash is refused)
-_READING_FLAGS = (("delimiter", "delimiter"), ("decimal", "decimal"), ("gaps", "gaps"), ("time_format", "time_format"),
+_READING_FLAGS = (("header_line", "header_line"), ("delimiter", "delimiter"), ("decimal", "decimal"), ("gaps", "gaps"), ("time_format", "time_format"),
                   ("timezone", "timezone"), ("time_unit", "time_unit"))
 
 
