@@ -345,6 +345,9 @@ def _check_header(table, m, used):
         raise LogImportError("\n".join(problems))
 
 
+_DATE_TIME = re.compile(r"[0-9]{1,4}[-./][0-9]{1,2}[-./][0-9]{1,4}|[0-9]{1,2}:[0-9]{2}")
+
+
 class _Cells:
     """The mapped columns of a table: numbers (NaN where a cell is empty), texts, timestamps, with their line numbers."""
 
@@ -363,6 +366,10 @@ class _Cells:
                     try:
                         v = logfile.number(row[idx[col]], table.decimal, "%s line %d column %r" % (source, lineno, col))
                     except LogFileError as exc:
+                        if col == m["time"] and _DATE_TIME.match(row[idx[col]].strip()):
+                            # one message, not one per row: the whole column is date-times
+                            raise LogImportError("%s; the time column holds date-times: declare \"time_format\" (\"iso8601\", or a "
+                                                 "strptime format such as \"%%d.%%m.%%Y %%H:%%M:%%S\"; --time-format)" % exc)
                         problems.append(str(exc))
                         v = None
                     vals.append(math.nan if v is None else v)

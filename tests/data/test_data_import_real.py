@@ -116,6 +116,14 @@ def test_mixed_offsets_and_none_are_refused(tmp_path):
         import_csv(aware, dict(TWO, time_format="iso8601", timezone="UTC"))
 
 
+def test_date_times_without_time_format_say_so_once(tmp_path):
+    src = _file(tmp_path, "t,a,d\n" + "".join("2026-11-26T08:%02d:00Z,20,1\n" % k for k in range(60)))
+    with pytest.raises(LogImportError) as exc:
+        import_csv(src, TWO)
+    assert str(exc.value).count("\n") == 0 and "line 2 column 't': not a number: '2026-11-26T08:00:00Z'" in str(exc.value)
+    assert "the time column holds date-times: declare \"time_format\"" in str(exc.value)
+
+
 def test_strptime_format_and_a_bad_cell(tmp_path):
     src = _file(tmp_path, "t;a;d\n26.11.2026 08:00:00;20;1\n26.11.2026 08:01:30;20;1\n")
     fmt = dict(TWO, time_format="%d.%m.%Y %H:%M:%S", timezone="UTC")
