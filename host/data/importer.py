@@ -142,7 +142,7 @@ def _normalise_common(mapping, where, keys):
     meta = mapping.get("meta") or {}
     if not isinstance(meta, dict):
         raise LogImportError("%s: 'meta' must be an object, found %r" % (where, meta))
-    reserved = sorted(set(meta) & {"format", "sensors", "channels", "import", "error_imports"})
+    reserved = sorted(set(meta) & {"format", "sensors", "channels", "import", "error_imports", "errors_pending"})
     if reserved:
         raise LogImportError("%s: 'meta' may not set %s (the importer writes them from the mapping)" % (where, ", ".join(reserved)))
     try:
@@ -604,6 +604,8 @@ def import_csv(source, mapping, mapping_where="mapping"):
                        for s in m["temperatures"].values()}
     meta["channels"] = {s["channel"]: dict({"source_column": c, "position_mm": s["position_mm"], "scale": s["scale"]},
                                            **({"unit": s["unit"]} if s["unit"] else {})) for c, s in m["errors"].items()}
+    if errors is None:
+        meta["errors_pending"] = True  # errors.csv holds its header until the sweeps are merged (tcomp import --errors --into)
     meta["import"] = {"source": os.path.basename(source), "rows": int(n), "ignored_columns": m["ignore"]}
     declared = {c: s["unit"] for c, s in m["temperatures"].items() if s["declared"]}
     if declared:
@@ -769,7 +771,7 @@ def import_to_folder(source, mapping, out, mapping_where="mapping"):
     from host.data.runs import load_run
 
     try:
-        load_run(out, errors_required=run.errors is not None)
+        load_run(out)
     except RunFormatError as exc:  # pragma: no cover - would be a bug in write_run
         raise LogImportError("imported run does not validate:\n%s" % exc)
     return run

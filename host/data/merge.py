@@ -5,8 +5,9 @@ wrote the sweeps with its own clock. The clocks are aligned one declared way, ne
 
 - ``clock_offset_s`` given: run ``time_s`` = the file's time + offset. A file of numbers keeps its times as they
   are (x its unit); a file of date-times counts from its first sample, so the offset is the run time of that sample.
-- otherwise both clocks must be wall clocks: the file's date-times and the run's ``meta.json`` ``start_time``
-  (the UTC date-time of run time 0, written by ``tcomp import`` of a date-time log and by ``tcomp record``).
+- otherwise both clocks must be wall clocks: the file's date-times and the run's date-time of time 0: ``meta.json``
+  ``start_time`` (written by ``tcomp import`` of a date-time log), else a recording's ``record.started_utc``
+  (``tcomp record``, docs/recording.md).
 
 Every sweep must lie inside the run's temperature record (a model reads the temperatures at each sweep's
 time; outside it they would be extrapolated); those that do not are refused by line and time.
@@ -24,28 +25,41 @@ from host.data.logfile import LogFileError
 from host.data.runs import ERRORS, META, MOTION, SPINDLE, START, TEMPERATURES, Errors, RunFormatError, load_run, write_errors, write_meta
 
 
+def run_start_time(meta):
+    """(the wall clock of the run's time 0, the meta.json key holding it) or (None, "start_time").
+
+    ``start_time`` (tcomp import of a date-time log), else ``record.started_utc`` (tcomp record, docs/recording.md)."""
+    if meta.get("start_time") is not None:
+        return meta["start_time"], "start_time"
+    record = meta.get("record")
+    if isinstance(record, dict) and record.get("started_utc") is not None:
+        return record["started_utc"], "record.started_utc"
+    return None, "start_time"
+
+
 def _alignment(sweeps, run, clock_offset_s, source):
     """(offset_s, how) with run time_s = file time_s + offset_s."""
     meta_path = os.path.join(run.path, META)
-    run_start = run.meta.get("start_time")
+    run_start, start_key = run_start_time(run.meta)
     if clock_offset_s is not None:
         if sweeps.start_time is not None and run_start is not None:
-            raise LogImportError("%s and %s both carry wall-clock times (its date-times, 'start_time' %s): they align the clocks; "
-                                 "drop --clock-offset, or it would override them" % (source, meta_path, run_start))
+            raise LogImportError("%s and %s both carry wall-clock times (its date-times, '%s' %s): they align the clocks; "
+                                 "drop --clock-offset, or it would override them" % (source, meta_path, start_key, run_start))
         return float(clock_offset_s), "declared offset (--clock-offset)"
     if sweeps.start_time is None:
         raise LogImportError("%s: its times are numbers, not date-times, so nothing ties its clock to the run's; declare the offset "
                              "(--clock-offset S: run time_s = the file's time + S)" % source)
     if run_start is None:
-        raise LogImportError("%s has no 'start_time' (the date-time of run time 0), so the date-times of %s cannot be placed in it; "
+        raise LogImportError("%s has no 'start_time' (the date-time of run time 0; a recording's 'record.started_utc'), so the "
+                             "date-times of %s cannot be placed in it; "
                              "declare the offset (--clock-offset S: the run time_s of the file's first sample)" % (meta_path, source))
     try:
-        t0 = logfile.parse_utc(run_start, "%s 'start_time'" % meta_path)
+        t0 = logfile.parse_utc(run_start, "%s '%s'" % (meta_path, start_key))
         first = logfile.parse_utc(sweeps.start_time, source)
     except LogFileError as exc:
         raise LogImportError(str(exc))
-    return (first - t0).total_seconds(), "start times (%s 'start_time' %s, %s first sample %s)" % (
-        META, run_start, os.path.basename(source), sweeps.start_time)
+    return (first - t0).total_seconds(), "start times (%s '%s' %s, %s first sample %s)" % (
+        META, start_key, run_start, os.path.basename(source), sweeps.start_time)
 
 
 def _check_overlap(sweeps, run, offset_s, source):
@@ -94,8 +108,10 @@ def _merge_errors(old, new, run_errors_path):
 
 def _merge_meta(run, sweeps, record, source, mapping_where):
     meta = dict(run.meta)
+    meta.pop("errors_pending", None)  # the sweeps have come
+    has_errors = run.errors is not None and len(run.errors) > 0
     for k, v in sweeps.meta.items():
-        current = meta.get(k, START if (k == "error_reference" and run.errors is not None) else None)
+        current = meta.get(k, START if (k == "error_reference" and has_errors) else None)
         if current is not None and current != v:
             raise LogImportError("%s: meta %r is %r but %s says %r%s" % (
                 mapping_where, k, v, os.path.join(run.path, META), current,
@@ -109,7 +125,7 @@ def merge_into(run_folder, source, mapping, stage, mapping_where="mapping", cloc
     """Merge the sweeps of ``source`` into the run ``run_folder``; write its new errors.csv and meta.json into the
     folder ``stage`` (the caller renames them into place). Returns (summary dict, merged Errors)."""
     try:
-        run = load_run(run_folder, errors_required=False)
+        run = load_run(run_folder)
     except RunFormatError as exc:
         raise LogImportError("%s: not a valid run to merge into:\n%s" % (run_folder, exc))
     sweeps = import_errors(source, mapping, mapping_where)
@@ -117,13 +133,14 @@ def merge_into(run_folder, source, mapping, stage, mapping_where="mapping", cloc
     _check_overlap(sweeps, run, offset, source)
     new = sweeps.errors
     new = Errors(new.time_s + offset, new.position_mm, new.error_um, new.direction, new.channel)
-    merged = _merge_errors(run.errors, new, os.path.join(run_folder, ERRORS))
+    old = run.errors if run.errors is not None and len(run.errors) else None  # a header-only errors.csv holds no layout yet
+    merged = _merge_errors(old, new, os.path.join(run_folder, ERRORS))
     record = dict(sweeps.record, clock={"offset_s": offset, "aligned_by": how})
     meta = _merge_meta(run, sweeps, record, source, mapping_where)
     write_errors(merged, os.path.join(stage, ERRORS), decimals=6)
     write_meta(meta, os.path.join(stage, META))
     _validate(run_folder, stage)
-    return dict(record, into=run_folder, rows_before=0 if run.errors is None else len(run.errors), rows_after=len(merged)), merged
+    return dict(record, into=run_folder, rows_before=0 if old is None else len(old), rows_after=len(merged)), merged
 
 
 def _validate(run_folder, stage):

@@ -207,7 +207,7 @@ def read_records(fh, path, delimiter=",", first_line=1):
     return out
 
 
-def _read_csv(path, required, optional, problems, text_columns=()):
+def _read_csv(path, required, optional, problems, text_columns=(), rows_pending=False):
     """Parse a numeric CSV strictly. Returns {column: list} or None if unreadable."""
     try:
         # utf-8-sig: spreadsheet programs (Excel) start a UTF-8 CSV with a byte-order mark
@@ -275,8 +275,10 @@ def _read_csv(path, required, optional, problems, text_columns=()):
                 if not math.isfinite(v):
                     problems.add("%s line %d column '%s'" % (path, lineno, col), "%r is not a finite number" % cell)
             data[col].append(v)
-    if len(rows) == 1:
-        problems.add(path, "no data rows after the header")
+    if len(rows) == 1 and not rows_pending:
+        problems.add(path, "no data rows after the header%s" % (
+            " (a recording whose laser sweeps are still to come declares meta.json \"errors_pending\": true)"
+            if os.path.basename(path) == ERRORS else ""))
     return data
 
 
@@ -330,12 +332,14 @@ def _check_meta(path, meta, problems):
             if s.get("role") not in ROLES:
                 problems.add(path, "sensors.%s.role is %r; expected one of %s" % (name, s.get("role"), ", ".join(ROLES)))
     _check_error_reference(path, meta, problems)
-    if "start_time" in meta and not _is_utc_date_time(meta["start_time"]):
-        problems.add(path, "key 'start_time' must be an ISO 8601 date-time with its offset, e.g. \"2026-11-26T07:00:00Z\" "
-                     "(found %r)" % (meta["start_time"],))
+    if "errors_pending" in meta and not isinstance(meta["errors_pending"], bool):
+        problems.add(path, "key 'errors_pending' must be true or false (found %s)" % json.dumps(meta["errors_pending"]))
     stroke = meta.get("stroke_mm")
     if stroke is not None and not _positive(stroke):
         problems.add(path, "key 'stroke_mm' must be a positive finite number (found %r)" % (stroke,))
+    if "start_time" in meta and not _is_utc_date_time(meta["start_time"]):
+        problems.add(path, "key 'start_time' must be an ISO 8601 date-time with its offset, e.g. \"2026-11-26T07:00:00Z\" "
+                     "(found %r)" % (meta["start_time"],))
     screw = meta.get("screw")
     if screw is not None:
         if not isinstance(screw, dict):
@@ -430,20 +434,8 @@ def check_run(folder):
     return []
 
 
-def _has_error_rows(path):
-    """False when errors.csv is missing or holds a header only (a run recorded before its sweeps are merged)."""
-    try:
-        with open(path, newline="", encoding="utf-8-sig") as fh:
-            return sum(1 for line in fh if line.strip()) > 1
-    except OSError:
-        return os.path.lexists(path)  # unreadable: let the loader name why
-
-
-def load_run(folder, errors_required=True):
-    """Load and validate one run folder; raise RunFormatError naming every problem.
-
-    ``errors_required=False`` (``tcomp import --errors --into``): a run whose errors.csv is missing or holds
-    only a header loads with ``errors`` None, ready to receive its sweeps; everything else is checked as always."""
+def load_run(folder):
+    """Load and validate one run folder; raise RunFormatError naming every problem."""
     folder = os.fspath(folder)
     problems = _Problems()
     if not os.path.isdir(folder):
@@ -479,9 +471,9 @@ def load_run(folder, errors_required=True):
 
     # errors.csv
     epath = os.path.join(folder, ERRORS)
-    edata = None
-    if errors_required or _has_error_rows(epath):
-        edata = _read_csv(epath, ERROR_COLUMNS, ERROR_OPTIONAL, problems, text_columns=("channel",))
+    # a recording (tcomp record) declares that its errors come later (tcomp import --errors --into): header only
+    pending = bool(meta) and meta.get("errors_pending") is True
+    edata = _read_csv(epath, ERROR_COLUMNS, ERROR_OPTIONAL, problems, text_columns=("channel",), rows_pending=pending)
     errors = None
     if edata is not None:
         _check_increasing(epath, "time_s", edata["time_s"], problems, strict=False)
@@ -614,8 +606,8 @@ def write_meta(meta, path):
 def write_errors(e, path, decimals=4):
     """errors.csv of a run: time to the millisecond, positions and errors to ``decimals``.
 
-    ``e`` None writes the header only: a run of temperatures awaiting its sweeps (``tcomp import --errors --into``),
-    which ``load_run`` refuses until they are merged."""
+    ``e`` None writes the header only: a run of temperatures awaiting its sweeps (meta.json ``errors_pending``,
+    filled by ``tcomp import --errors --into``)."""
     if e is None:
         _write_csv(path, list(ERROR_COLUMNS), [], [])
         return

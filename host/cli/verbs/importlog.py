@@ -254,8 +254,8 @@ def _report(args, run_, out):
           % (args.source, args.out, t.time_s.size, len(t.names), len(channels), (t.time_s[-1] - t.time_s[0]) / 3600))
     _print_reading(run_.meta["import"], run_.dialect)
     if run_.errors is None:
-        print("  no error columns: errors.csv holds its header only, and the run validates once an instrument's sweeps are "
-              "merged (tcomp import --errors FILE --into %s)" % args.out)
+        print("  no error columns: errors.csv holds its header only (meta.json errors_pending) until an instrument's sweeps "
+              "are merged (tcomp import --errors FILE --into %s)" % args.out)
     if not run_.meta.get("axis"):
         print("  no axis declared (--axis or the mapping's meta.axis); meta.json has none")
     if args.json:
