@@ -566,34 +566,6 @@ def _g(decimals):
     return f
 
 
-def write_run(run, folder, decimals=4):
-    """Write ``run`` as a tcomp-run/1 folder (created if needed). Returns the folder.
-
-    Raises NotADirectoryError naming ``folder`` when it exists as a file (os.makedirs would only say "File exists").
-    """
-    if os.path.exists(folder) and not os.path.isdir(folder):
-        import errno
-
-        raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder (a run is written as a folder)", folder)
-    os.makedirs(folder, exist_ok=True)
-    write_meta(run.meta, os.path.join(folder, META))
-    t = run.temperatures
-    _write_csv(
-        os.path.join(folder, TEMPERATURES),
-        ["time_s"] + list(t.names),
-        [t.time_s] + [t.values[:, j] for j in range(len(t.names))],
-        [_g(3)] + [_g(decimals)] * len(t.names),
-    )
-    write_errors(run.errors, os.path.join(folder, ERRORS), decimals)  # None: the header only (docs/data-format.md)
-    if run.motion is not None and len(run.motion):
-        m = run.motion
-        _write_csv(os.path.join(folder, MOTION), list(MOTION_COLUMNS), [m.t_start_s, m.t_end_s, m.from_mm, m.to_mm, m.feed_mm_min], [_g(3)] * 5)
-    if run.spindle is not None:
-        s = run.spindle
-        _write_csv(os.path.join(folder, SPINDLE), list(SPINDLE_COLUMNS), [s.time_s, s.rpm], [_g(3), _g(3)])
-    return folder
-
-
 def write_meta(meta, path):
     """meta.json of a run (``format`` set when missing)."""
     meta = dict(meta)
@@ -621,3 +593,32 @@ def write_errors(e, path, decimals=4):
         cols.append(e.channel)
         fmts.append(str)
     _write_csv(path, header, cols, fmts)
+
+
+def write_run(run, folder, decimals=4):
+    """Write ``run`` as a tcomp-run/1 folder (created if needed). Returns the folder.
+
+    Raises NotADirectoryError naming ``folder`` when it exists as a file (os.makedirs would only say "File exists").
+    """
+    if os.path.exists(folder) and not os.path.isdir(folder):
+        import errno
+
+        raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder (a run is written as a folder)", folder)
+    os.makedirs(folder, exist_ok=True)
+    write_meta(run.meta, os.path.join(folder, META))
+    t = run.temperatures
+    _write_csv(
+        os.path.join(folder, TEMPERATURES),
+        ["time_s"] + list(t.names),
+        [t.time_s] + [t.values[:, j] for j in range(len(t.names))],
+        [_g(3)] + [_g(decimals)] * len(t.names),
+    )
+    write_errors(run.errors, os.path.join(folder, ERRORS), decimals)  # None: the header only (docs/data-format.md)
+    if run.motion is not None and len(run.motion):
+        m = run.motion
+        _write_csv(os.path.join(folder, MOTION), list(MOTION_COLUMNS), [m.t_start_s, m.t_end_s, m.from_mm, m.to_mm, m.feed_mm_min], [_g(3)] * 5)
+    if run.spindle is not None:
+        s = run.spindle
+        _write_csv(os.path.join(folder, SPINDLE), list(SPINDLE_COLUMNS), [s.time_s, s.rpm], [_g(3), _g(3)])
+    return folder
+
