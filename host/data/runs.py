@@ -621,4 +621,3 @@ def write_run(run, folder, decimals=4):
         s = run.spindle
         _write_csv(os.path.join(folder, SPINDLE), list(SPINDLE_COLUMNS), [s.time_s, s.rpm], [_g(3), _g(3)])
     return folder
-
