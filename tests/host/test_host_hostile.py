@@ -202,9 +202,9 @@ FLAGS = {
               "out": {"--key": "file"}, "other": "--table-dir --no-firmware --reset --dry-run"},
     "hil": {"in": {"--run": "folder", "--table": "file", "--config": "file"}, "out": {"--json": "file"},
             "other": "--interpreter --fault --noise-uohm --warmup-s --print-every"},
-    # --errors (input) and --into (output folder) are the merge form, a second argv: their outputs against their
-    # inputs are walked in tests/cli/test_cli_import.py
     "import": {"in": {"source": "file", "--mapping": "file"}, "out": {"--out": "folder", "--json": "file"},
+               # --errors (input) and --into (output folder) are the merge form, a second argv: its outputs against its
+               # inputs are walked in tests/cli/test_cli_import.py
                "other": "--time --time-scale --temp --error --spindle --ignore --axis --error-reference --errors --into "
                         "--clock-offset --time-unit --time-format --timezone --header-line --delimiter --decimal --gaps --unit --location"},
     "linuxcnc": {"in": {"--port": "file", "--key": "file"}, "out": {},
