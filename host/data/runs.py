@@ -166,22 +166,23 @@ class CsvSyntaxError(ValueError):
     """A CSV file that cannot be split into cells unambiguously; the message names file and line."""
 
 
-def read_records(fh, path):
-    """[(line number, cells)] of an open CSV file, one record per physical line.
+def read_records(fh, path, delimiter=",", first_line=1):
+    """[(line number, cells)] of an open CSV file, one record per physical line (cells split at ``delimiter``;
+    ``first_line``: the file's line number of ``fh``'s first line, when lines before it were skipped).
 
     A quote opens a cell that may run over line ends; in a log, that is almost always a stray ``"`` that
     silently swallows the following rows. So a record spanning lines, a quote never closed, text after a
     closing quote and a cell over 128 KiB are all CsvSyntaxError naming the file and line.
     """
-    reader = csv.reader(fh, strict=True)
+    reader = csv.reader(fh, delimiter=delimiter, strict=True)
     out = []
     start = 1
     try:
         for row in reader:
             if reader.line_num != start:
-                raise CsvSyntaxError("%s lines %d-%d: one quoted cell runs over %d lines (a stray '\"'? each row "
-                                     "of the log must be one line)" % (path, start, reader.line_num, reader.line_num - start + 1))
-            out.append((start, row))
+                raise CsvSyntaxError("%s lines %d-%d: one quoted cell runs over %d lines (a stray '\"'? each row of the log must "
+                                     "be one line)" % (path, start + first_line - 1, reader.line_num + first_line - 1, reader.line_num - start + 1))
+            out.append((start + first_line - 1, row))
             start = reader.line_num + 1
     except csv.Error as exc:
         text = str(exc)
@@ -193,7 +194,7 @@ def read_records(fh, path):
             why = "text follows a closing quote in a cell (a stray '\"'?)"
         else:
             why = "not valid CSV (%s)" % text
-        raise CsvSyntaxError("%s line %d: %s" % (path, start, why))
+        raise CsvSyntaxError("%s line %d: %s" % (path, start + first_line - 1, why))
     return out
 
 
@@ -327,6 +328,9 @@ def _check_meta(path, meta, problems):
     stroke = meta.get("stroke_mm")
     if stroke is not None and not _positive(stroke):
         problems.add(path, "key 'stroke_mm' must be a positive finite number (found %r)" % (stroke,))
+    if "start_time" in meta and not _is_utc_date_time(meta["start_time"]):
+        problems.add(path, "key 'start_time' must be an ISO 8601 date-time with its offset, e.g. \"2026-11-26T07:00:00Z\" "
+                     "(found %r)" % (meta["start_time"],))
     screw = meta.get("screw")
     if screw is not None:
         if not isinstance(screw, dict):
@@ -339,6 +343,18 @@ def _check_meta(path, meta, problems):
             fe = screw.get("fixed_end_mm", 0)
             if not isinstance(fe, (int, float)) or isinstance(fe, bool) or not math.isfinite(fe):
                 problems.add(path, "screw.fixed_end_mm must be a finite number (found %r)" % (fe,))
+
+
+def _is_utc_date_time(text):
+    """An ISO 8601 date-time that carries its offset (meta.json ``start_time``: the wall clock of time_s = 0)."""
+    from datetime import datetime
+
+    if not isinstance(text, str):
+        return False
+    try:
+        return datetime.fromisoformat(text[:-1] + "+00:00" if text[-1:] in "zZ" else text).utcoffset() is not None
+    except ValueError:
+        return False
 
 
 def error_reference(meta):
@@ -541,6 +557,35 @@ def _g(decimals):
     return f
 
 
+def write_meta(meta, path):
+    """meta.json of a run (``format`` set when missing)."""
+    meta = dict(meta)
+    meta.setdefault("format", FORMAT)
+    with open(path, "w", encoding="utf-8") as fh:
+        json.dump(meta, fh, indent=2)
+        fh.write("\n")
+
+
+def write_errors(e, path, decimals=4):
+    """errors.csv of a run: time to the millisecond, positions and errors to ``decimals``.
+
+    ``e`` None writes the header only: a run of temperatures awaiting its sweeps (meta.json ``errors_pending``,
+    filled by ``tcomp import --errors --into``)."""
+    if e is None:
+        _write_csv(path, list(ERROR_COLUMNS), [], [])
+        return
+    header, cols, fmts = list(ERROR_COLUMNS), [e.time_s, e.position_mm, e.error_um], [_g(3), _g(decimals), _g(decimals)]
+    if e.direction is not None:
+        header.append("direction")
+        cols.append(e.direction)
+        fmts.append(lambda d: "%+d" % d)
+    if e.channel is not None:
+        header.append("channel")
+        cols.append(e.channel)
+        fmts.append(str)
+    _write_csv(path, header, cols, fmts)
+
+
 def write_run(run, folder, decimals=4):
     """Write ``run`` as a tcomp-run/1 folder (created if needed). Returns the folder.
 
@@ -551,11 +596,7 @@ def write_run(run, folder, decimals=4):
 
         raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder (a run is written as a folder)", folder)
     os.makedirs(folder, exist_ok=True)
-    meta = dict(run.meta)
-    meta.setdefault("format", FORMAT)
-    with open(os.path.join(folder, META), "w", encoding="utf-8") as fh:
-        json.dump(meta, fh, indent=2)
-        fh.write("\n")
+    write_meta(run.meta, os.path.join(folder, META))
     t = run.temperatures
     _write_csv(
         os.path.join(folder, TEMPERATURES),
@@ -563,17 +604,7 @@ def write_run(run, folder, decimals=4):
         [t.time_s] + [t.values[:, j] for j in range(len(t.names))],
         [_g(3)] + [_g(decimals)] * len(t.names),
     )
-    e = run.errors
-    header, cols, fmts = list(ERROR_COLUMNS), [e.time_s, e.position_mm, e.error_um], [_g(3), _g(decimals), _g(decimals)]
-    if e.direction is not None:
-        header.append("direction")
-        cols.append(e.direction)
-        fmts.append(lambda d: "%+d" % d)
-    if e.channel is not None:
-        header.append("channel")
-        cols.append(e.channel)
-        fmts.append(str)
-    _write_csv(os.path.join(folder, ERRORS), header, cols, fmts)
+    write_errors(run.errors, os.path.join(folder, ERRORS), decimals)  # None: the header only (docs/data-format.md)
     if run.motion is not None and len(run.motion):
         m = run.motion
         _write_csv(os.path.join(folder, MOTION), list(MOTION_COLUMNS), [m.t_start_s, m.t_end_s, m.from_mm, m.to_mm, m.feed_mm_min], [_g(3)] * 5)

@@ -105,3 +105,18 @@ def test_import_cli_with_flags(tmp_path):
     bad = subprocess.run([sys.executable, "-m", "host", "import", src, "--out", str(out), "--time", "min", "--temp", "nut", "--error", "probe"],
                          capture_output=True, text=True)
     assert bad.returncode == 2 and "neither mapped" in bad.stderr
+
+
+def test_bundled_real_run_regenerates_byte_identical(tmp_path):
+    """The documented command (data/fl_thermal/README.md) rebuilds data/fl_thermal byte for byte: the importer's
+    handling of real files (dialects, date-times, gaps, units) leaves a plain CSV's import as it was."""
+    if not os.path.exists(SOURCE):
+        pytest.skip("the shared reference copy %s is not beside this clone" % SOURCE)
+    from host.data.importer import import_to_folder
+
+    out = str(tmp_path / "fl")
+    with open(os.path.join(ROOT, "data", "fl_thermal_mapping.json")) as fh:
+        import_to_folder(SOURCE, json.load(fh), out)
+    for f in ("meta.json", "temperatures.csv", "errors.csv", "spindle.csv"):
+        with open(os.path.join(out, f), "rb") as a, open(os.path.join(BUNDLED, f), "rb") as b:
+            assert a.read() == b.read(), f

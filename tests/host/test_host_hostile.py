@@ -203,7 +203,10 @@ FLAGS = {
     "hil": {"in": {"--run": "folder", "--table": "file", "--config": "file"}, "out": {"--json": "file"},
             "other": "--interpreter --fault --noise-uohm --warmup-s --print-every"},
     "import": {"in": {"source": "file", "--mapping": "file"}, "out": {"--out": "folder", "--json": "file"},
-               "other": "--time --time-scale --temp --error --spindle --ignore --axis --error-reference"},
+               # --errors (input) and --into (output folder) are the merge form, a second argv: its outputs against its
+               # inputs are walked in tests/cli/test_cli_import.py
+               "other": "--time --time-scale --temp --error --spindle --ignore --axis --error-reference --errors --into "
+                        "--clock-offset --time-unit --time-format --timezone --header-line --delimiter --decimal --gaps --unit --location"},
     "linuxcnc": {"in": {"--port": "file", "--key": "file"}, "out": {},
                  "other": "--mode --baud --address --name --units --slew-um-per-s --period-ms --stale-ms --recover-ms "
                           "--cold-start --spindle"},

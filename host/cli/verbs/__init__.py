@@ -14,7 +14,7 @@ VERBS = {
     "fit": ("host.cli.verbs.fit", "fit a thermal-error model (mlr, pcr, stepwise, cv-subset, ann, dynamic: host/learning/empirical; screw: host/learning/screw) and save it"),
     "flash": ("host.cli.verbs.flash", "copy the firmware, a board file and a table onto a MicroPython board with mpremote"),
     "hil": ("host.cli.verbs.hil", "run the firmware on the HIL rig, driven by a run folder; query it at every errors.csv row"),
-    "import": ("host.cli.verbs.importlog", "turn a plain CSV log (time, temperatures, displacements, spindle) into a tcomp run folder"),
+    "import": ("host.cli.verbs.importlog", "turn a logger's CSV export into a run folder, or merge a laser's sweeps into one (--errors --into)"),
     "linuxcnc": ("host.cli.verbs.linuxcnc", "userspace HAL component: apply the board's offset through LinuxCNC external axis offsets"),
     "monitor": ("host.cli.verbs.monitor", "decode the $TC stream of a board (a real port or a pty) into a table, optionally logged as CSV"),
     "predict": ("host.cli.verbs.predict", "predict the error at every row of a run's errors.csv with any saved model"),
