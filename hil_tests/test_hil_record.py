@@ -111,7 +111,7 @@ def test_record_follows_the_chips_across_the_clock_wrap(make_rig, tmp_path):
     assert t0 + 1000 * times[0] < WRAP < t0 + 1000 * times[-1], (t0, times[0], times[-1])  # the wrap is inside
     from firmware.wire import FIRMWARE_VERSION
     assert meta["board"]["firmware"] == FIRMWARE_VERSION and meta["board"]["channel_names"] == SENSORS
-    assert meta["sensors"]["T1"]["role"] == "nut" and meta["record"]["started_utc"].endswith("+00:00")
+    assert meta["sensors"]["T1"]["role"] == "nut" and meta["start_time"].endswith("+00:00")
     assert "%d samples in" % len(rows) in stdout
 
 

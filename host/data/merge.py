@@ -6,8 +6,7 @@ wrote the sweeps with its own clock. The clocks are aligned one declared way, ne
 - ``clock_offset_s`` given: run ``time_s`` = the file's time + offset. A file of numbers keeps its times as they
   are (x its unit); a file of date-times counts from its first sample, so the offset is the run time of that sample.
 - otherwise both clocks must be wall clocks: the file's date-times and the run's date-time of time 0: ``meta.json``
-  ``start_time`` (written by ``tcomp import`` of a date-time log), else a recording's ``record.started_utc``
-  (``tcomp record``, docs/recording.md).
+  ``start_time`` (written by ``tcomp import`` of a date-time log and by ``tcomp record``, docs/recording.md).
 
 Every sweep must lie inside the run's temperature record (a model reads the temperatures at each sweep's
 time; outside it they would be extrapolated); those that do not are refused by line and time.
@@ -28,13 +27,8 @@ from host.data.runs import ERRORS, META, MOTION, SPINDLE, START, TEMPERATURES, E
 def run_start_time(meta):
     """(the wall clock of the run's time 0, the meta.json key holding it) or (None, "start_time").
 
-    ``start_time`` (tcomp import of a date-time log), else ``record.started_utc`` (tcomp record, docs/recording.md)."""
-    if meta.get("start_time") is not None:
-        return meta["start_time"], "start_time"
-    record = meta.get("record")
-    if isinstance(record, dict) and record.get("started_utc") is not None:
-        return record["started_utc"], "record.started_utc"
-    return None, "start_time"
+    ``start_time``: written by tcomp import of a date-time log and by tcomp record (docs/recording.md)."""
+    return meta.get("start_time"), "start_time"
 
 
 def _alignment(sweeps, run, clock_offset_s, source):
@@ -50,7 +44,7 @@ def _alignment(sweeps, run, clock_offset_s, source):
         raise LogImportError("%s: its times are numbers, not date-times, so nothing ties its clock to the run's; declare the offset "
                              "(--clock-offset S: run time_s = the file's time + S)" % source)
     if run_start is None:
-        raise LogImportError("%s has no 'start_time' (the date-time of run time 0; a recording's 'record.started_utc'), so the "
+        raise LogImportError("%s has no 'start_time' (the date-time of run time 0), so the "
                              "date-times of %s cannot be placed in it; "
                              "declare the offset (--clock-offset S: the run time_s of the file's first sample)" % (meta_path, source))
     try:

@@ -132,17 +132,17 @@ def test_the_temperature_record_is_untouched(tmp_path):
     assert json.load(open(os.path.join(run, "meta.json")))["start_time"] == "2026-11-26T07:00:00Z"
 
 
-def test_a_recording_is_aligned_by_its_started_utc(tmp_path):
-    """A run written by tcomp record: errors.csv's header only, errors_pending, the wall clock in record.started_utc."""
+def test_a_recording_is_aligned_by_its_start_time(tmp_path):
+    """A run written by tcomp record: errors.csv's header only, errors_pending, the wall clock in start_time."""
     run = _run(tmp_path, "t,T1\n0,20\n3600,21\n", {"time": "t", "temperatures": ["T1"]})
     meta_path = os.path.join(run, "meta.json")
     meta = json.load(open(meta_path))
     assert meta["errors_pending"] is True and open(os.path.join(run, "errors.csv")).read() == "time_s,position_mm,error_um\n"
-    meta["record"] = {"started_utc": "2026-11-26T07:00:00.250+00:00"}
+    meta["start_time"] = "2026-11-26T07:00:00.250+00:00"
     with open(meta_path, "w") as fh:
         json.dump(meta, fh)
     summary = _merge(run, _sweeps(tmp_path))
-    assert summary["clock"]["aligned_by"].startswith("start times (meta.json 'record.started_utc'")
+    assert summary["clock"]["aligned_by"].startswith("start times (meta.json 'start_time'")
     r = load_run(run)
     np.testing.assert_array_equal(r.errors.time_s, [599.75, 599.75, 2399.75, 2399.75])
     assert "errors_pending" not in r.meta

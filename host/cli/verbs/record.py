@@ -144,7 +144,7 @@ def _record(args, sensors, config_names):
         raise UserError(str(exc))
     writer = None
     stop = None  # why the recording ended early (exit 1), None for the end asked for
-    n = skipped = 0
+    skipped = 0
     try:
         try:
             names = sensor_names(hello.channels or 0, sensors, config_names)
@@ -207,10 +207,11 @@ def _record(args, sensors, config_names):
                     meta = {"sensors": {nm: sensors[nm] for nm in names},
                             "notes": args.notes,
                             "source": "tcomp record",
-                            "record": {"started_utc": started_utc, "port": args.port, "period_s": args.period,
+                            "start_time": started_utc,
+                            "record": {"port": args.port, "period_s": args.period,
                                        "t_ms_at_time_0": t0_ms,
                                        "time_s": "the board's clock (t_ms, followed across its 2^30 ms wrap) since "
-                                                 "the first answer, taken at started_utc"},
+                                                 "the first answer, taken at start_time"},
                             "board": dict(hello.as_dict(), channel_names=names)}
                     if hal is not None:
                         meta["record"]["linuxcnc"] = {
@@ -221,9 +222,8 @@ def _record(args, sensors, config_names):
                         writer = RunWriter(args.out, names, meta, time_s, values, early_faults)
                     except OSError as exc:
                         raise UserError("--out %s: cannot write: %s" % (args.out, exc.strerror or exc))
-                    n += 1
-                elif writer.sample(time_s, values):
-                    n += 1
+                else:
+                    writer.sample(time_s, values)
                 if hal is not None:
                     _sample_hal(writer, hal, motion, time.monotonic() - host_t0)
             except RecordStop as exc:
@@ -249,7 +249,8 @@ def _record(args, sensors, config_names):
         print("record: no sample with every channel good (%d with a faulty channel); %s not written"
               % (faulty, args.out), file=sys.stderr)
     else:
-        print("%d samples in %s%s%s" % (n, args.out,
+        # the rows the file holds: a Ctrl-C between a sample's write and a counter's increment cannot make them disagree
+        print("%d samples in %s%s%s" % (writer.temperatures.rows, args.out,
                                          ", %d with a faulty channel in %s" % (faulty, "board_faults.csv") if faulty else "",
                                          ", %d malformed frames skipped" % skipped if skipped else ""))
     if stop:
