@@ -188,6 +188,10 @@ def world(tmp_path, valid):
 # log), and the rest. A verb or flag added without a row here fails test_every_flag_of_every_verb_is_classified,
 # so the walk below always covers every verb.
 FLAGS = {
+    # tcomp board runs until Ctrl-C: not walked. --port is a symlink it makes, never over an existing file
+    # (refused) or a live link (refused; a dangling one is replaced); --key is read, or created when missing
+    "board": {"in": {"--run": "folder", "--table": "file", "--config": "file", "--key": "file"}, "out": {},
+              "other": "--port --room-c --interpreter --noise-uohm --speed"},
     "compare": {"in": {"runs": "folder"}, "out": {"--json": "file", "--plots": "folder"},
                 "other": "--channel --direct --sensors --methods --train --split-h --noise-C --offset-C --repeats "
                          "--reference --option --no-intercept"},

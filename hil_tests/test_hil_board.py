@@ -1,0 +1,119 @@
+"""`tcomp board`: a simulated board a user starts, on a pty, until Ctrl-C (host/cli/verbs/board.py,
+hil_tests/rig/liveboard.py). End to end as a user runs it: start it in its own process, read the pty's
+link from its first line, `tcomp monitor --port LINK --duration 3` reads offsets from it, Ctrl-C stops it
+cleanly (exit 0, link removed, no process left)."""
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from hil_tests.rig.boards import export, poly_slope_for_run
+
+pytestmark = [pytest.mark.rig, pytest.mark.micropython]
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def _start(argv):
+    p = subprocess.Popen([sys.executable, "-m", "host", "board"] + argv, cwd=ROOT, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True, start_new_session=True)
+    first = p.stdout.readline()
+    return p, first
+
+
+def _stop(p):
+    p.send_signal(signal.SIGINT)
+    try:
+        out, err = p.communicate(timeout=30)
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGKILL)
+        p.communicate()
+        raise AssertionError("tcomp board did not stop within 30 s of Ctrl-C")
+    return out, err
+
+
+def test_board_monitor_reads_offsets_then_ctrl_c_stops_it(tmp_path, demo_run, capsys):
+    from hil_tests.rig import interpreters
+    from host.cli import main as tcomp
+    interpreters.get().require()
+    sensors = ["T1", "T2", "T4"]
+    (tmp_path / "t.bin").write_bytes(export(poly_slope_for_run(demo_run, sensors, seed=41)).table)
+    link = str(tmp_path / "ttyBOARD")
+    key = tmp_path / "board.key"
+    p, first = _start(["--port", link, "--run", os.path.join(ROOT, "data", "demo", "mixed"),
+                       "--table", str(tmp_path / "t.bin"), "--key", str(key)])
+    try:
+        assert first.startswith("board: /dev/pts/"), first + (p.stderr.read() if p.poll() is not None else "")
+        pty = first.split()[1]
+        assert os.path.realpath(link) == os.path.realpath(pty)
+        assert len(bytes.fromhex(key.read_text().strip())) == 32 and key.stat().st_mode & 0o777 == 0o600
+        time.sleep(2.0)  # frames nobody read meanwhile are dropped, not queued for the monitor
+        capsys.readouterr()
+        rc = tcomp(["monitor", "--port", link, "--duration", "3", "--json", str(tmp_path / "m.json")])
+        text = capsys.readouterr().out
+        assert rc == 0, text
+        got = json.loads((tmp_path / "m.json").read_text())
+        rows = [line.split() for line in text.splitlines() if " O " in line]
+        assert got["bad"] == [] and got["malformed"] == 0, got
+        assert len(rows) >= 2, text  # one O frame per simulated second, in real time
+        t_ms = [int(r[3]) for r in rows]
+        assert all(b - a == 1000 for a, b in zip(t_ms, t_ms[1:])), t_ms
+        assert min(t_ms) >= 2000  # the board's present, not a backlog from its boot
+        assert all(r[5] not in ("nan", "0.0") for r in rows), rows  # offsets: the table's, from the run's temperatures
+    finally:
+        out, err = _stop(p)
+    assert p.returncode == 0, err
+    assert "board stopped" in out, out
+    assert not os.path.lexists(link)
+    assert "Traceback" not in err, err
+
+
+def test_board_steady_room_from_config_without_table(tmp_path):
+    """--config without a table, --room-c: the board runs with no table; its sensors read the room (S -> T)."""
+    import serial
+
+    from hil_tests.rig import interpreters
+    from hil_tests.rig.boards import rig_config
+    from host.board.link import StreamDecoder, command_line
+    interpreters.get().require()
+    cfg = rig_config(["A", "B"], n_ads=1)
+    (tmp_path / "board.json").write_text(json.dumps(cfg))
+    p, first = _start(["--config", str(tmp_path / "board.json"), "--room-c", "31.5"])
+    try:
+        assert first.startswith("board: /dev/pts/") and "no table" in first, first
+        with serial.Serial(first.split()[1], 115200, timeout=0) as ser:
+            dec = StreamDecoder()
+            frames = []
+            end = time.monotonic() + 15
+            while time.monotonic() < end and len([f for f in frames if f.kind == "O"]) < 2:
+                frames += dec.feed(ser.read(4096))  # two seconds of the board: every channel has read
+                time.sleep(0.05)
+            ser.write(command_line("S"))
+            while time.monotonic() < end and not any(f.kind == "T" for f in frames):
+                frames += dec.feed(ser.read(4096))
+                time.sleep(0.05)
+        temps = [f for f in frames if f.kind == "T"]
+        assert temps, frames
+        # T,<t_ms>,<ch0>,<ch1> in deg C (docs/protocol.md): both channels read the room within the noise
+        values = [float(v) for v in temps[0].fields[1:]]
+        assert len(values) == 2 and all(abs(v - 31.5) < 0.05 for v in values), temps[0].fields
+    finally:
+        out, err = _stop(p)
+    assert p.returncode == 0, err
+
+
+def test_board_names_the_make_target_when_the_interpreter_is_not_built(tmp_path, monkeypatch, capsys):
+    from hil_tests.rig import interpreters, liveboard
+    from host.cli import main as tcomp
+    monkeypatch.delenv("TCOMP_MICROPYTHON", raising=False)
+    monkeypatch.setattr(interpreters.KINDS["linux32"], "path", str(tmp_path / "nothing" / "micropython"))
+    assert tcomp(["board", "--room-c", "20", "--config", str(tmp_path / "none.json")]) == 2
+    err = capsys.readouterr().err
+    assert "make setup" in err and "not built" in err, err
+    monkeypatch.setattr(liveboard, "QEMU_IMAGE", str(tmp_path / "no-image.elf"))
+    assert tcomp(["board", "--interpreter", "qemu", "--config", str(tmp_path / "none.json")]) == 2
+    err = capsys.readouterr().err
+    assert "make qemu-image" in err, err
