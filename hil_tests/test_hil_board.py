@@ -71,23 +71,22 @@ def test_board_monitor_reads_offsets_then_ctrl_c_stops_it(tmp_path, demo_run, ca
     assert "Traceback" not in err, err
 
 
-def test_board_steady_room_from_config_without_table(tmp_path):
-    """--config without a table, --room-c: the board runs with no table; its sensors read the room (S -> T)."""
+@pytest.mark.parametrize("interpreter,example", [("micropython", "rig.json"), ("qemu", "mps2_an385.json")])
+def test_board_steady_room_from_an_example_config_without_table(interpreter, example):
+    """--config examples/boards/X.json without a table, --room-c: the board boots from the example, runs with no
+    table, and its sensors read the room (S -> T); on the 32-bit port and on the emulated Cortex-M3."""
     import serial
 
-    from hil_tests.rig import interpreters
-    from hil_tests.rig.boards import rig_config
     from host.board.link import StreamDecoder, command_line
-    interpreters.get().require()
-    cfg = rig_config(["A", "B"], n_ads=1)
-    (tmp_path / "board.json").write_text(json.dumps(cfg))
-    p, first = _start(["--config", str(tmp_path / "board.json"), "--room-c", "31.5"])
+    config = os.path.join(ROOT, "examples", "boards", example)
+    names = [c["name"] for c in json.load(open(config))["channels"]]
+    p, first = _start(["--config", config, "--room-c", "31.5", "--interpreter", interpreter])
     try:
-        assert first.startswith("board: /dev/pts/") and "no table" in first, first
+        assert first.startswith("board: /dev/pts/") and "no table" in first, first + p.stderr.read()
         with serial.Serial(first.split()[1], 115200, timeout=0) as ser:
             dec = StreamDecoder()
             frames = []
-            end = time.monotonic() + 15
+            end = time.monotonic() + 20
             while time.monotonic() < end and len([f for f in frames if f.kind == "O"]) < 2:
                 frames += dec.feed(ser.read(4096))  # two seconds of the board: every channel has read
                 time.sleep(0.05)
@@ -97,9 +96,10 @@ def test_board_steady_room_from_config_without_table(tmp_path):
                 time.sleep(0.05)
         temps = [f for f in frames if f.kind == "T"]
         assert temps, frames
-        # T,<t_ms>,<ch0>,<ch1> in deg C (docs/protocol.md): both channels read the room within the noise
+        assert all(f.status & 0x200000 for f in frames if f.kind == "O")  # NO_TABLE (firmware/wire.py)
+        # T,<t_ms>,<ch0>,<ch1>,... in deg C (docs/protocol.md): every channel reads the room within the noise
         values = [float(v) for v in temps[0].fields[1:]]
-        assert len(values) == 2 and all(abs(v - 31.5) < 0.05 for v in values), temps[0].fields
+        assert len(values) == len(names) and all(abs(v - 31.5) < 0.05 for v in values), temps[0].fields
     finally:
         out, err = _stop(p)
     assert p.returncode == 0, err
