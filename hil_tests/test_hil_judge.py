@@ -98,3 +98,36 @@ def test_a_wrong_table_is_judged_far_off(tmp_path, models, capsys):
     assert b["against_measurement"]["rmse_um"] > 3 * g["against_measurement"]["rmse_um"]
     assert b["against_host_model"]["max_abs_um"] > measured_span  # twice the thermal part, far beyond the limiter
     assert g["against_host_model"]["max_abs_um"] < 0.5 * b["against_host_model"]["max_abs_um"]
+
+
+def test_channels_of_a_multi_channel_run_are_judged_by_name(tmp_path, capsys):
+    """data/fl_thermal has five errors channels; the dynamic table models ch1 (its document's channel): every
+    channel is judged by name against the measurement, only ch1 against the host model."""
+    from hil_tests.rig import interpreters
+    interpreters.get().require()
+    run = os.path.join(ROOT, "data", "fl_thermal")
+    doc = os.path.join(ROOT, "hil_tests", "fixtures", "dynamic_fl_thermal_ch1.json")
+    assert tcomp(["export", doc, "--out", str(tmp_path / "d.bin")]) == 0
+    capsys.readouterr()
+    assert tcomp(["hil", "--run", run, "--table", str(tmp_path / "d.bin"), "--model", doc, "--duration", "300",
+                  "--print-every", "0", "--json", str(tmp_path / "h.json")]) == 0
+    printed = capsys.readouterr().out
+    d = json.loads((tmp_path / "h.json").read_text())
+    with open(os.path.join(run, "errors.csv"), newline="") as f:
+        rows = [r for r in csv.DictReader(f) if float(r["time_s"]) <= 300]
+    names = sorted({r["channel"] for r in rows})
+    assert names == ["ch1", "ch2", "ch3", "ch4", "ch5"]
+    j = d["judge"]
+    assert j["output"] == "ch1" and sorted(j["channels"]) == names
+    board = np.array([a["offset_um"] for a in d["answers"]])
+    for name in names:
+        mask = np.array([r["channel"] == name for r in rows])
+        r = np.array([float(x["error_um"]) for x in rows])[mask] - board[mask]
+        c = j["channels"][name]
+        assert c["rows"] == int(mask.sum()) and c["against_measurement"]["rmse_um"] == pytest.approx(
+            float(np.sqrt(np.mean(r ** 2))), abs=1e-9)
+        assert (c["against_host_model"] is None) == (name != "ch1")
+        assert ("channel %s: %d rows" % (name, mask.sum())) in printed
+    assert j["channels"]["ch1"]["against_host_model"]["rmse_um"] < 0.2
+    assert "channel ch2: %d rows (the board computes ch1)" % j["channels"]["ch2"]["rows"] in printed
+    assert [a["channel"] for a in d["answers"]] == [r["channel"] for r in rows]

@@ -120,8 +120,9 @@ def _stats(residuals):
 
 
 def judge(run, answers, host_um, model=None):
-    """{"residuals": what each is, "channels": {name: {rows, held_or_fallback, against_measurement,
-    against_host_model, host_model_against_measurement}}} (docs/hil.md, "Judging")."""
+    """{"output": the channel the board computes, "residuals": what each is, "channels": {name: {rows,
+    held_or_fallback, against_measurement, against_host_model, host_model_against_measurement}}}
+    (docs/hil.md, "Judging")."""
     import numpy as np
     e = run.errors
     board = np.array([a["offset_um"] for a in answers], dtype=float)
@@ -138,7 +139,8 @@ def judge(run, answers, host_um, model=None):
             entry["against_host_model"] = _stats(board[rows] - host_um[rows])
             entry["host_model_against_measurement"] = _stats(measured[rows] - host_um[rows])
         out[name] = entry
-    return {"residuals": {"against_measurement": "measured - board (um)",
+    return {"output": output_name(run, model),
+            "residuals": {"against_measurement": "measured - board (um)",
                           "against_host_model": "board - host model (um)",
                           "host_model_against_measurement": "measured - host model (um)"},
             "channels": out}
@@ -166,6 +168,8 @@ def report_lines(verdict):
     lines = []
     for name, c in verdict["channels"].items():
         extra = ", %d held or in fallback" % c["held_or_fallback"] if c["held_or_fallback"] else ""
+        if name != verdict["output"]:
+            extra += " (the board computes %s)" % verdict["output"]
         lines.append("channel %s: %d rows%s" % (name, c["rows"], extra))
         for key, what in (("against_measurement", "board vs measured (measured - board)"),
                           ("host_model_against_measurement", "host model vs measured (measured - host)"),
