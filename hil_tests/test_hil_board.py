@@ -117,3 +117,77 @@ def test_board_names_the_make_target_when_the_interpreter_is_not_built(tmp_path,
     assert tcomp(["board", "--interpreter", "qemu", "--config", str(tmp_path / "none.json")]) == 2
     err = capsys.readouterr().err
     assert "make qemu-image" in err, err
+
+
+def _quick_start():
+    """The commands of README.md's quick start block, comments dropped."""
+    text = open(os.path.join(ROOT, "README.md"), encoding="utf-8").read()
+    block = text.split("## Quick start", 1)[1].split("```", 2)[1]
+    return [line.split("  #", 1)[0].strip() for line in block.splitlines()
+            if line.strip() and not line.lstrip().startswith("#")]
+
+
+def test_readme_quick_start_runs_as_written(tmp_path, capsys):
+    """Every command of the README's quick start, in order, with out/ and /tmp/ttyTC moved into tmp_path:
+    fit, export, hil (judged), board in its own process, monitor on it, Ctrl-C."""
+    import shlex
+
+    from hil_tests.rig import interpreters
+    from host.cli import main as tcomp
+    interpreters.get().require()
+    commands = _quick_start()
+    assert commands[0] == "mkdir -p out" and [c.split()[1] for c in commands[1:]] == [
+        "fit", "export", "hil", "board", "monitor"], commands
+    os.makedirs(tmp_path / "out")
+    board = None
+    try:
+        for line in commands[1:]:
+            argv = [w.replace("out/", str(tmp_path / "out") + "/").replace("/tmp/ttyTC", str(tmp_path / "ttyTC"))
+                    .replace("data/demo", os.path.join(ROOT, "data", "demo")) for w in shlex.split(line)[1:]]
+            if argv[0] == "board":
+                board, first = _start(argv[1:])
+                assert first.startswith("board: /dev/pts/"), first
+                time.sleep(1.0)
+                continue
+            if argv[0] == "monitor":
+                argv[argv.index("--duration") + 1] = "3"  # the README's 10 s, shortened
+            capsys.readouterr()
+            assert tcomp(argv) == 0, line
+            printed = capsys.readouterr().out
+            if argv[0] == "hil":
+                assert "board vs host model" in printed and "board vs measured" in printed
+            if argv[0] == "monitor":
+                assert len([r for r in printed.splitlines() if " O " in r]) >= 2, printed
+    finally:
+        if board is not None:
+            _stop(board)
+    assert board is not None and board.returncode == 0
+
+
+def test_board_refuses_bad_input_before_starting(tmp_path, demo_run, capsys):
+    """One line naming what is wrong, before any board starts, and nothing written."""
+    from hil_tests.rig import interpreters
+    from hil_tests.rig.boards import rig_config
+    from host.cli import main as tcomp
+    interpreters.get().require()
+    (tmp_path / "t.bin").write_bytes(export(poly_slope_for_run(demo_run, ["T1", "T2", "T4"], seed=41)).table)
+    (tmp_path / "ab.json").write_text(json.dumps(rig_config(["A", "B"])))
+    (tmp_path / "taken").write_text("a file of the user's")
+    (tmp_path / "bad.key").write_text("not a key\n")
+    table, ab = str(tmp_path / "t.bin"), str(tmp_path / "ab.json")
+    cases = [
+        (["--table", table, "--port", str(tmp_path / "taken")], "exists and is not a symlink"),
+        (["--table", table, "--config", ab], "sensor(s) T1, T2, T4 have no channel in the board config"),
+        (["--config", ab, "--run", os.path.join(ROOT, "data", "demo", "mixed")],
+         "the board's channel(s) A, B are not columns of its temperatures.csv"),
+        (["--table", table, "--speed", "0"], "--speed 0: must be above 0"),
+        (["--table", table, "--key", str(tmp_path / "bad.key")], "not a board key"),
+        (["--room-c", "20"], "give --config"),
+    ]
+    before = sorted(os.listdir(tmp_path))
+    for argv, words in cases:
+        assert tcomp(["board"] + argv) == 2, argv
+        err = capsys.readouterr().err
+        assert words in err and len(err.strip().splitlines()) == 1, (argv, err)
+    assert sorted(os.listdir(tmp_path)) == before
+    assert (tmp_path / "taken").read_text() == "a file of the user's"
