@@ -191,3 +191,45 @@ def test_board_refuses_bad_input_before_starting(tmp_path, demo_run, capsys):
         assert words in err and len(err.strip().splitlines()) == 1, (argv, err)
     assert sorted(os.listdir(tmp_path)) == before
     assert (tmp_path / "taken").read_text() == "a file of the user's"
+
+
+def test_board_in_modbus_mode_answers_a_modbus_master_in_real_time(tmp_path, demo_run):
+    """examples/boards/rig.json switched to Modbus RTU: a pymodbus master (as `tcomp linuxcnc --mode modbus`
+    uses) reads the table in force, the room's temperatures and a cycle counter that runs at the wall clock."""
+    from pymodbus.client import ModbusSerialClient
+
+    from hil_tests.rig import interpreters
+    interpreters.get().require()
+    cfg = json.load(open(os.path.join(ROOT, "examples", "boards", "rig.json")))
+    cfg["serial"]["mode"] = "modbus"
+    (tmp_path / "mb.json").write_text(json.dumps(cfg))
+    table = export(poly_slope_for_run(demo_run, ["T1", "T2", "T4"], seed=41)).table
+    (tmp_path / "t.bin").write_bytes(table)
+    p, first = _start(["--config", str(tmp_path / "mb.json"), "--table", str(tmp_path / "t.bin"), "--room-c", "24"])
+    try:
+        assert first.startswith("board: /dev/pts/") and "modbus" in first, first
+        time.sleep(2.0)
+        client = ModbusSerialClient(first.split()[1], baudrate=115200, timeout=1.0, retries=1)
+        assert client.connect()
+        try:
+            info = client.read_input_registers(10, count=5, device_id=1)
+            temps = client.read_input_registers(16, count=3, device_id=1)
+            seq = []
+            for _ in range(2):
+                rr = client.read_input_registers(2, count=1, device_id=1)
+                assert not rr.isError(), rr
+                seq.append((time.monotonic(), rr.registers[0]))
+                time.sleep(1.0)
+        finally:
+            client.close()
+        assert not info.isError() and not temps.isError(), (info, temps)
+        from firmware.table import parse_table
+        crc = parse_table(table).crc
+        assert info.registers[:4] == [crc >> 16, crc & 0xFFFF, 1, 3], info.registers  # the table in slot A, 3 channels
+        assert all(abs(v - 2400) <= 5 for v in temps.registers), temps.registers  # 0.01 deg C: the room's 24
+        (t0, s0), (t1, s1) = seq
+        rate = ((s1 - s0) % 65536) / (t1 - t0)  # cycles per wall second: 10 at cycle_ms 100 in real time
+        assert 7 <= rate <= 13, rate
+    finally:
+        _stop(p)
+    assert p.returncode == 0
