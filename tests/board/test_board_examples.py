@@ -99,3 +99,15 @@ def test_documented_defaults_are_the_boot_checks():
             range_cell = cells[5].replace(" ", "")
             assert str(lo) in range_cell.replace("\u2212", "-"), (key, lo, cells[5])
             assert str(hi) in range_cell, (key, hi, cells[5])
+
+
+def test_host_check_refuses_an_excitation_between_the_chips_steps():
+    """idac_ua 300 passes the 10..1500 range but the ADS122C04 has steps: the board's driver would stop the boot;
+    the host check says so before anything is flashed. A MAX31865 channel ignores the key."""
+    cfg = json.load(open(os.path.join(EXAMPLES, "rig.json")))
+    cfg["channels"][2]["idac_ua"] = 300
+    with pytest.raises(ValueError, match=r"channels\[2\]\.idac_ua: 300 is not one of the ADS122C04's excitation "
+                                         r"steps 10, 50, 100, 250, 500, 1000, 1500 uA"):
+        load_config(cfg)
+    cfg["channels"][2]["idac_ua"] = 1000
+    assert load_config(cfg).channels[2].idac_ua == 1000
