@@ -183,6 +183,7 @@ def test_board_refuses_bad_input_before_starting(tmp_path, demo_run, capsys):
         (["--table", table, "--speed", "0"], "--speed 0: must be above 0"),
         (["--table", table, "--key", str(tmp_path / "bad.key")], "not a board key"),
         (["--room-c", "20"], "give --config"),
+        (["--table", table, "--room-c", "95"], "--room-c 95: outside the board's plausible range -20..80 deg C"),
     ]
     before = sorted(os.listdir(tmp_path))
     for argv, words in cases:

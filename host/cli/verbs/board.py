@@ -161,8 +161,8 @@ def run(args):
         raise UserError("--speed %g: must be above 0 and at most 100 (simulated seconds per wall second)" % args.speed)
     if args.noise_uohm < 0:
         raise UserError("--noise-uohm must be >= 0 (found %d)" % args.noise_uohm)
-    if args.room_c is not None and not (-50.0 <= args.room_c <= 150.0):
-        raise UserError("--room-c %g: outside -50..150 deg C (the Pt100 chain's range on the rig)" % args.room_c)
+    if args.room_c is not None and not math.isfinite(args.room_c):
+        raise UserError("--room-c %g: must be a finite temperature in deg C" % args.room_c)
     rig = load_rig()
     problem = rig.board_problem(args.interpreter)
     if problem:
@@ -170,6 +170,10 @@ def run(args):
     data, table = _read_table(args.table) if args.table else (None, None)
     cfg = _read_config(args.config, rig.rig_config, table)
     channels = [c["name"] for c in cfg["channels"]]
+    lo_mC, hi_mC = cfg.get("plausible_mC", (-20000, 80000))
+    if args.room_c is not None and not lo_mC <= args.room_c * 1000 <= hi_mC:
+        raise UserError("--room-c %g: outside the board's plausible range %g..%g deg C (config plausible_mC): every "
+                        "channel would read as faulty" % (args.room_c, lo_mC / 1000.0, hi_mC / 1000.0))
     schedule = _Schedule(channels, args.run, 20.0 if args.room_c is None else args.room_c)
     if args.port:
         _claim_link(args.port)
