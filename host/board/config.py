@@ -56,6 +56,13 @@ def _channel(i, d):
     c.cs = d.get("cs")
     if c.filter_hz not in (50, 60):
         raise _err(w + "filter_hz", "must be 50 or 60")
+    if c.driver == "ads122c04" and "idac_ua" in d:
+        # the range check above admits any value in 10..1500; the chip has steps, and the driver refuses the
+        # others when the board builds the channel, which stops the boot (said here, before anything is flashed)
+        from firmware.ads122c04 import IDAC_UA
+        if c.idac_ua not in IDAC_UA[1:]:
+            raise _err(w + "idac_ua", "%d is not one of the ADS122C04's excitation steps %s uA"
+                       % (c.idac_ua, ", ".join(str(v) for v in IDAC_UA[1:])))
     if c.lead_mohm and c.wires != 2:
         raise _err(w + "lead_mohm", "lead correction is for 2-wire sensors (wires=%d)" % c.wires)
     return c

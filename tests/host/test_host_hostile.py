@@ -188,6 +188,10 @@ def world(tmp_path, valid):
 # log), and the rest. A verb or flag added without a row here fails test_every_flag_of_every_verb_is_classified,
 # so the walk below always covers every verb.
 FLAGS = {
+    # tcomp board runs until Ctrl-C: not walked. --port is a symlink it makes, never over an existing file
+    # (refused) or a live link (refused; a dangling one is replaced); --key is read, or created when missing
+    "board": {"in": {"--run": "folder", "--table": "file", "--config": "file", "--key": "file"}, "out": {},
+              "other": "--port --room-c --interpreter --noise-uohm --speed"},
     "compare": {"in": {"runs": "folder"}, "out": {"--json": "file", "--plots": "folder"},
                 "other": "--channel --direct --sensors --methods --train --split-h --noise-C --offset-C --repeats "
                          "--reference --option --no-intercept"},
@@ -200,8 +204,8 @@ FLAGS = {
     # --key is created when missing (after the flash), else read: an output that is never written over anything
     "flash": {"in": {"--table": "file", "--config": "file", "--board": "file", "--port": "file", "--mpremote": "file"},
               "out": {"--key": "file"}, "other": "--table-dir --no-firmware --reset --dry-run"},
-    "hil": {"in": {"--run": "folder", "--table": "file", "--config": "file"}, "out": {"--json": "file"},
-            "other": "--interpreter --fault --noise-uohm --warmup-s --print-every"},
+    "hil": {"in": {"--run": "folder", "--table": "file", "--config": "file", "--model": "file"}, "out": {"--json": "file"},
+            "other": "--interpreter --fault --noise-uohm --warmup-s --print-every --duration --raw"},
     "import": {"in": {"source": "file", "--mapping": "file"}, "out": {"--out": "folder", "--json": "file"},
                # --errors (input) and --into (output folder) are the merge form, a second argv: its outputs against its
                # inputs are walked in tests/cli/test_cli_import.py
@@ -225,7 +229,8 @@ FLAGS = {
 # where each input lives in the world, and a valid call naming every input ({FLAG}) and output ({@FLAG})
 INPUT_FILES = {"runs": "run", "run": "run", "--run": "run", "model": "m.json", "--table": "t.bin", "--config": "cfg.json",
                "--board": "board.py", "--port": "port", "--mpremote": "mpremote", "source": "log.csv",
-               "--mapping": "map.json", "--corr": "corr.csv", "--target-corr": "tcorr.csv", "--key": "k.key"}
+               "--mapping": "map.json", "--corr": "corr.csv", "--target-corr": "tcorr.csv", "--key": "k.key",
+               "--model": "m.json"}
 OUTPUT_NAMES = {"--json": "o.json", "--plots": "plots", "--report": "report", "--out": "out", "--c-header": "t.h",
                 "--key": "new.key", "--csv": "log2.csv", "--plot": "p.png"}
 BASE = {
@@ -235,7 +240,8 @@ BASE = {
     "fit": ["fit", "--model", "mlr", "{runs}", "--out", "{@--out}", "--json", "{@--json}"],
     "flash": ["flash", "--port", "{--port}", "--table", "{--table}", "{config}", "--mpremote", "{--mpremote}",
               "--key", "{@--key}", "--dry-run", "--no-firmware"],
-    "hil": ["hil", "--run", "{--run}", "--table", "{--table}", "--config", "{--config}", "--json", "{@--json}"],
+    "hil": ["hil", "--run", "{--run}", "--table", "{--table}", "--config", "{--config}", "--model", "{--model}",
+            "--json", "{@--json}"],
     "import": ["import", "{source}", "--mapping", "{--mapping}", "--out", "{@--out}", "--json", "{@--json}"],
     "monitor": ["monitor", "--port", "{--port}", "--key", "{--key}", "--duration", "0.2", "--csv", "{@--csv}", "--json", "{@--json}"],
     "record": ["record", "--port", "{--port}", "--config", "{--config}", "--sensor", "T1=nut", "--duration", "0.2",

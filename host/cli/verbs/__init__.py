@@ -8,6 +8,7 @@ module here plus one row below.
 
 # verb -> (module, one-line summary); listed alphabetically, as `tcomp --help` shows them
 VERBS = {
+    "board": ("host.cli.verbs.board", "start a simulated board (the firmware on simulated chips) on a pty, driven by a run's temperatures or a steady room, for monitor, record, linuxcnc"),
     "compare": ("host.cli.verbs.compare", "fit MLR, PCR, stepwise, the sensor selectors, ANN, PPR and the dynamic model on one run, predict the others, with a robustness check"),
     "discrepancy": ("host.cli.verbs.discrepancy", "find where the screw model and the measurements disagree, name the missing physical effect(s), refit (held-out evidence)"),
     "export": ("host.cli.verbs.export", "quantise a model into the firmware's integer coefficient table, with a certificate of integer safety and accuracy"),

@@ -304,14 +304,20 @@ def run(args):
     tmp = tempfile.mkdtemp(prefix="tcomp-flash-")
     keep = False
     try:
-        files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware, key,
-                            key is not None and created)
+        # A dry run keeps its staged files for the user: the key is never among them (no copy of a secret left in
+        # a temporary folder); its command provisions no key, which the note below says.
+        staged_key = None if args.dry_run else key
+        files, tdir = stage(tmp, args.table, args.config, args.board, args.table_dir, not args.no_firmware,
+                            staged_key, staged_key is not None and created)
         argv = command(args.port, files, _mpremote(args.mpremote), args.reset)
         if args.dry_run:
             # The printed command copies these staged files: they stay until the user has used (or dropped) it.
             keep = True
             print(" ".join(repr(a) if ("\n" in a or " " in a) else a for a in argv))
             print("tcomp flash: the files of this command are kept in %s; delete it when done" % tmp, file=sys.stderr)
+            if key is not None:
+                print("tcomp flash: the key of --key %s is not staged on a dry run: this command does not provision "
+                      "it (run without --dry-run to do so)" % args.key, file=sys.stderr)
             return 0
         n = sum(len(v) for v in files.values())
         probe(args.port, _mpremote(args.mpremote))

@@ -1,4 +1,9 @@
-"""tcomp hil --run RUN_DIR --table table.bin [--interpreter micropython|cpython] [--json OUT.json]
+"""tcomp hil --run RUN_DIR --table table.bin [--model MODEL.json] [--duration S] [--interpreter micropython|cpython|qemu]
+[--json OUT.json]
+
+Judges the board: its answer at every errors.csv row against the measurement (the row's error) and, with
+--model, against the host model's predict of that row: RMSE and largest residual per errors channel
+(hil_judge.py; the JSON's ``judge`` block, docs/hil.md "Judging").
 
 The simulated rig lives with the HIL tests (hil_tests/rig, hil_tests/sim). This verb reaches it through
 the entry point group ``tcomp.rig`` (pyproject.toml; the rig's side is hil_tests/rig/entry.py), looked up
@@ -33,6 +38,12 @@ def add_arguments(p):
     p.add_argument("--warmup-s", type=float, default=60.0, help="simulated seconds before the run's t=0")
     p.add_argument("--print-every", type=int, default=60,
                    help="print every Nth periodic O frame (all other frames are printed); 0: none")
+    p.add_argument("--model", help="the model document the table was exported from: the board is also judged "
+                                   "against its predict (host model) at every errors.csv row")
+    p.add_argument("--duration", type=float, default=None, metavar="S",
+                   help="simulate only the first S seconds of the run (from its first temperature sample)")
+    p.add_argument("--raw", action="store_true",
+                   help="print the frames as they arrive on the wire ($TC lines) instead of labelled lines")
 
 
 def _faults(specs, sensors, end_s):
@@ -91,7 +102,7 @@ def load_rig():
 def run(args):
     from host.outputs import Outputs
 
-    with Outputs([args.run, args.table, args.config]) as out:
+    with Outputs([args.run, args.table, args.config, args.model]) as out:
         if args.json:
             out.file(args.json, "--json")
         rc = _hil(args, out)
@@ -113,6 +124,10 @@ def _hil(args, out):
         run_ = load_run(args.run)
     except RunFormatError as exc:
         raise UserError(str(exc))
+    from host.cli import hil_judge
+    if args.duration is not None:
+        run_ = hil_judge.first_seconds(run_, args.duration, args.run)
+    model = hil_judge.read_model(args.model) if args.model else None
     try:
         with open(args.table, "rb") as f:
             data = f.read()
@@ -159,6 +174,16 @@ def _hil(args, out):
     else:
         cfg = rig_config(sensors, n_ads=1 if len(sensors) > 1 else 0)
     faults = _faults(args.fault, sensors, end_s)
+    if model is not None:
+        host_um = hil_judge.host_predict(model, run_, args.model, args.run, sensors)
+    else:
+        host_um = None
+    if table.error_ref != hil_judge.error_ref_code(run_.error_reference, sensors):
+        print("tcomp hil: warning: the table's error reference (%s) is not the run's (%s): the residual against "
+              "the measurement compares different errors" % (hil_judge.error_ref_name(table.error_ref, sensors),
+                                                             run_.error_reference), file=sys.stderr)
+    channel_names = [c.get("name") for c in cfg["channels"]]
+    output_name = hil_judge.output_name(run_, model)
     screw = table.kind == "screw_reduced"
     dyn = table.kind == "dynamic"  # its inputs: the run's spindle speed (P) and feed (M); filters from the run's start (L)
     every = args.print_every
@@ -169,7 +194,7 @@ def _hil(args, out):
             count["O"] += 1
             if not every or count["O"] % every:
                 return
-        print(f.raw.decode("ascii", "replace"))
+        print(f.raw.decode("ascii", "replace") if args.raw else hil_judge.label(f, channel_names, output_name))
         sys.stdout.flush()
 
     t0 = time.monotonic()
@@ -186,12 +211,16 @@ def _hil(args, out):
     except RigError as exc:
         raise UserError("the firmware did not survive: %s" % exc)
     wall = time.monotonic() - t0
-    summary = {"answers": [{k: a[k] for k in ("time_s", "position_mm", "offset_um", "status")} for a in answers],
+    judge = hil_judge.judge(run_, answers, host_um, model)
+    summary = {"answers": hil_judge.answer_rows(run_, answers, host_um, model),
            "frames": n, "faults": faults, "malformed_frames": bad, "interpreter": args.interpreter,
            "table": {"kind": table.kind, "crc32": "%08X" % table.crc, "sensors": sensors},
-           "simulated_s": sim_s, "wall_s": round(wall, 3)}
+           "simulated_s": sim_s, "wall_s": round(wall, 3),
+           "duration_s": args.duration, "model": args.model, "judge": judge}
     print("%s: %d answers, %d frames (%d malformed), %.0f s simulated in %.1f s on %s" % (
         args.run, len(answers), n, bad, sim_s, wall, args.interpreter))
+    for line in hil_judge.report_lines(judge):
+        print(line)
     if args.json:
         with out.open(args.json) as f:
             json.dump(summary, f, indent=1)
