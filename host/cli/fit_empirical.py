@@ -41,6 +41,7 @@ OPTIONS = {
     "swaps": boolean,  # dynamic
     "use_spindle": boolean,  # dynamic
     "use_feed": boolean,  # dynamic
+    "observer": boolean,  # dynamic: estimate the lag states from the sensors when a board starts (observer.py)
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
     "base": str,  # mr-poly: base sensor (default: role "base")

@@ -485,6 +485,6 @@ class DynamicModel:
             missing = [s for s in sensors if not num((doc.get("reference_C") or {}).get(s))]
             if missing:
                 raise ModelFormatError("dynamic model document: thermal.observer needs reference_C of sensor %s (a number, °C)" % missing[0])
-            observer = Observer.from_document(th["observer"], out, sensors)
+            observer = Observer.from_document(th["observer"], out)
         return cls(out, coefs, th["intercept"], th["target"], doc.get("channel"), geo, doc.get("method", "dynamic"), doc.get("axis"),
                    doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"), th.get("dt_s"), observer)

@@ -12,11 +12,19 @@ moment it starts:
 1. Inputs are referenced to a fixed temperature, the training's ``reference_C``
    (u = T − reference_C), not to the run's first sample, so that a rise does not
    depend on when the board was switched on.
-2. Each lag state is estimated from the model's sensors by a static linear map
-   fitted on the training runs, where the true states are known (the filters
-   run through each training run from its cold start):
+2. Each lag state is estimated from what the board reads at that moment, its
+   filter inputs u_i (the model sensors' rises over reference_C, and the
+   spindle speed, its square and the feed where the model uses them), by a
+   static linear map fitted on the training runs, where the true states are
+   known (the filters run through each training run from its cold start):
 
-       ŷ_j = c_j + Σ_s G_js · (T_s − reference_C[s])      (least squares)
+       ŷ_j = Σ_i G_ji · u_i                                  (least squares)
+
+   There is no constant term: a machine at rest at its reference temperatures
+   (every u_i = 0) has every state at zero, so a cold start is exactly the
+   model's own start from rest. (A constant term lowers the training residual
+   but moves that start: on FL_THERMAL it put 4-21 µm RMS of error into the
+   first 4 h of a cold start; docs/empirical.md has the variants tried.)
 
    At power-on the filters start at ŷ_j; from then on they run as the model was
    fitted (no correction is injected afterwards, so once settled the board
@@ -52,7 +60,8 @@ class Observer:
     """Static estimate of every lag state from the model's sensors (see the module doc).
 
     ``states``: one entry per model term with τ > 0, in term order: {"term": index,
-    "offset": c_j, "gains": {sensor: G_js}, "bound": E_j, "rms": RMS residual}.
+    "gains": {signal: G_ji}, "bound": E_j, "rms": RMS residual}; signals are the
+    model's ("T:<sensor>" = T − reference_C, "spindle_krpm", "spindle_krpm2", "feed_m_min").
     ``settle_s``: when the start-error bound B(t) reaches ``tolerance``.
     """
 
@@ -61,21 +70,18 @@ class Observer:
         self.settle_s = float(settle_s)
         self.tolerance = float(tolerance)
 
-    def initial_states(self, model, temps_C):
-        """{term index: ŷ_j} from absolute temperatures {sensor: °C} read at power-on."""
-        out = {}
-        for s in self.states:
-            out[s["term"]] = s["offset"] + sum(g * (temps_C[name] - model.reference_C[name]) for name, g in s["gains"].items())
-        return out
+    def initial_states(self, u):
+        """{term index: ŷ_j} from the filter inputs {signal: value} read at power-on."""
+        return {s["term"]: sum(g * u[name] for name, g in s["gains"].items()) for s in self.states}
 
     def to_document(self):
         return {"method": "static_state_estimate", "tolerance": self.tolerance, "settle_s": self.settle_s,
-                "states": [{"term": int(s["term"]), "offset": float(s["offset"]),
+                "states": [{"term": int(s["term"]),
                             "gains": {k: float(v) for k, v in s["gains"].items()},
                             "bound": float(s["bound"]), "rms": float(s["rms"])} for s in self.states]}
 
     @classmethod
-    def from_document(cls, obs, terms, sensors):
+    def from_document(cls, obs, terms):
         import math
 
         from host.learning.documents import ModelFormatError
@@ -97,15 +103,19 @@ class Observer:
             raise ModelFormatError("%s.states must list one object per lag term (thermal.terms with tau_s > 0), in term order: "
                                    "terms %s" % (where, lagged))
         for i, s in enumerate(states):
-            for key in ("offset", "bound", "rms"):
-                if not num(s.get(key)) or (key != "offset" and s[key] < 0):
-                    raise ModelFormatError("%s.states[%d].%s must be a finite number%s, found %r"
-                                           % (where, i, key, "" if key == "offset" else " >= 0", s.get(key)))
+            for key in ("bound", "rms"):
+                if not num(s.get(key)) or s[key] < 0:
+                    raise ModelFormatError("%s.states[%d].%s must be a finite number >= 0, found %r" % (where, i, key, s.get(key)))
             g = s.get("gains")
-            if not isinstance(g, dict) or any(k not in sensors for k in g) or not all(num(v) for v in g.values()):
-                raise ModelFormatError("%s.states[%d].gains must map model sensors (%s) to finite numbers, found %r"
-                                       % (where, i, ", ".join(sensors), g))
+            if not isinstance(g, dict) or any(k not in signals_of(terms) for k in g) or not all(num(v) for v in g.values()):
+                raise ModelFormatError("%s.states[%d].gains must map the model's signals (%s) to finite numbers, found %r"
+                                       % (where, i, ", ".join(signals_of(terms)), g))
         return cls(states, obs["settle_s"], obs["tolerance"])
+
+
+def signals_of(terms):
+    """The distinct signals of ``terms`` in first-use order: the observer's regressors."""
+    return list(dict.fromkeys(n for n, _ in terms))
 
 
 def inputs(model, run):
@@ -169,8 +179,7 @@ def board_terms(model, runs, observer=True):
     machine at its reference). Returns (t, columns (n, terms)).
     """
     t, sig = _chain(model, runs)
-    T0 = {s: sig["T:" + s][0] + model.reference_C[s] for s in model.sensors}
-    est = model.observer.initial_states(model, T0) if observer and model.observer is not None else {}
+    est = model.observer.initial_states({n: sig[n][0] for n in signals_of(model.terms)}) if observer and model.observer is not None else {}
     cols = np.empty((t.size, len(model.terms)))
     for j, (name, tau) in enumerate(model.terms):
         y0 = est.get(j, sig[name][0])
@@ -190,6 +199,7 @@ def fit_observer(model, runs, spans=None, exclude=None, tolerance=SETTLE_TOLERAN
     fitted on, e.g. a held-out period, must not shape its observer either).
     """
     lagged = [j for j, (_, tau) in enumerate(model.terms) if tau > 0]
+    names = signals_of(model.terms)
     A, Y = [], []
     for i, r in enumerate(runs):
         t, sig = inputs(model, r)
@@ -202,7 +212,7 @@ def fit_observer(model, runs, spans=None, exclude=None, tolerance=SETTLE_TOLERAN
         Yr = (np.column_stack([_filter_from(t, sig[model.terms[j][0]], model.terms[j][1], sig[model.terms[j][0]][0]) for j in lagged])
               if lagged else np.zeros((t.size, 0)))
         Y.append(Yr[keep])
-        A.append(np.column_stack([np.ones(t.size)] + [sig["T:" + s] for s in model.sensors])[keep])
+        A.append(np.column_stack([sig[n] for n in names])[keep])
     A, Y = np.vstack(A), np.vstack(Y)
     if A.shape[0] < A.shape[1] + 1:
         raise EmpiricalDataError("dynamic: %d training samples cannot fit the observer's %d coefficients per state" % (A.shape[0], A.shape[1]))
@@ -212,7 +222,7 @@ def fit_observer(model, runs, spans=None, exclude=None, tolerance=SETTLE_TOLERAN
     for k, j in enumerate(lagged):
         coef = np.linalg.lstsq(A, Y[:, k], rcond=None)[0]
         res = Y[:, k] - A @ coef
-        states.append({"term": j, "offset": float(coef[0]), "gains": dict(zip(model.sensors, (float(v) for v in coef[1:]))),
+        states.append({"term": j, "gains": dict(zip(names, (float(v) for v in coef))),
                        "bound": float(np.abs(res).max()), "rms": float(np.sqrt(np.mean(res**2)))})
     return Observer(states, settle_time(model, states, tolerance, scale), tolerance)
 
