@@ -20,8 +20,8 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.data.runs import load_run, time_slice  # noqa: E402
-from host.learning.empirical.fitting import fit_model  # noqa: E402
+from host.data.runs import load_run, time_slice
+from host.learning.empirical.fitting import fit_model
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SPLIT_H = 32.13  # start of FL_THERMAL's 5th spindle cycle (docs/results.md)
