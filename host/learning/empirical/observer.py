@@ -62,20 +62,27 @@ class Observer:
     ``states``: one entry per model term with τ > 0, in term order: {"term": index,
     "gains": {signal: G_ji}, "bound": E_j, "rms": RMS residual}; signals are the
     model's ("T:<sensor>" = T − reference_C, "spindle_krpm", "spindle_krpm2", "feed_m_min").
-    ``settle_s``: when the start-error bound B(t) reaches ``tolerance``.
+    ``settle_s``: when the start-error bound B(t) reaches ``tolerance`` (µm); ``scale``:
+    µm of offset per unit of the model's thermal output (1 for a direct model, the
+    largest training position in mm for a slope model).
     """
 
-    def __init__(self, states, settle_s, tolerance=SETTLE_TOLERANCE_UM):
+    def __init__(self, states, settle_s, tolerance=SETTLE_TOLERANCE_UM, scale=1.0):
         self.states = [dict(s) for s in states]
         self.settle_s = float(settle_s)
         self.tolerance = float(tolerance)
+        self.scale = float(scale)
+
+    def start_error_bound(self, model, elapsed_s=0.0):
+        """B(elapsed_s) in µm (module doc)."""
+        return start_error_bound(model, self.states, elapsed_s, self.scale)
 
     def initial_states(self, u):
         """{term index: ŷ_j} from the filter inputs {signal: value} read at power-on."""
         return {s["term"]: sum(g * u[name] for name, g in s["gains"].items()) for s in self.states}
 
     def to_document(self):
-        return {"method": "static_state_estimate", "tolerance": self.tolerance, "settle_s": self.settle_s,
+        return {"method": "static_state_estimate", "tolerance": self.tolerance, "settle_s": self.settle_s, "scale": self.scale,
                 "states": [{"term": int(s["term"]),
                             "gains": {k: float(v) for k, v in s["gains"].items()},
                             "bound": float(s["bound"]), "rms": float(s["rms"])} for s in self.states]}
@@ -94,9 +101,9 @@ class Observer:
             raise ModelFormatError("%s must be an object" % where)
         if obs.get("method") != "static_state_estimate":
             raise ModelFormatError("%s.method must be 'static_state_estimate', found %r" % (where, obs.get("method")))
-        for key in ("tolerance", "settle_s"):
-            if not num(obs.get(key)) or obs[key] < 0:
-                raise ModelFormatError("%s.%s must be a number >= 0, found %r" % (where, key, obs.get(key)))
+        for key in ("tolerance", "settle_s", "scale"):
+            if not num(obs.get(key)) or obs[key] < 0 or (key == "scale" and obs[key] == 0):
+                raise ModelFormatError("%s.%s must be a number %s, found %r" % (where, key, "> 0" if key == "scale" else ">= 0", obs.get(key)))
         states = obs.get("states")
         lagged = [j for j, (_, tau) in enumerate(terms) if tau > 0]
         if not isinstance(states, list) or [s.get("term") if isinstance(s, dict) else None for s in states] != lagged:
@@ -110,7 +117,7 @@ class Observer:
             if not isinstance(g, dict) or any(k not in signals_of(terms) for k in g) or not all(num(v) for v in g.values()):
                 raise ModelFormatError("%s.states[%d].gains must map the model's signals (%s) to finite numbers, found %r"
                                        % (where, i, ", ".join(signals_of(terms)), g))
-        return cls(states, obs["settle_s"], obs["tolerance"])
+        return cls(states, obs["settle_s"], obs["tolerance"], obs["scale"])
 
 
 def signals_of(terms):
@@ -224,7 +231,7 @@ def fit_observer(model, runs, spans=None, exclude=None, tolerance=SETTLE_TOLERAN
         res = Y[:, k] - A @ coef
         states.append({"term": j, "gains": dict(zip(names, (float(v) for v in coef))),
                        "bound": float(np.abs(res).max()), "rms": float(np.sqrt(np.mean(res**2)))})
-    return Observer(states, settle_time(model, states, tolerance, scale), tolerance)
+    return Observer(states, settle_time(model, states, tolerance, scale), tolerance, scale)
 
 
 def start_error_bound(model, states, elapsed_s, scale=1.0):

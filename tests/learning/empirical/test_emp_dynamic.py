@@ -97,6 +97,7 @@ def test_document_round_trip_command_line_and_bad_documents(make_direct, tmp_pat
                         (lambda d: d["thermal"]["observer"].update(method="kalman"), "static_state_estimate"),
                         (lambda d: d["thermal"]["observer"]["states"].pop(), "one object per lag term"),
                         (lambda d: d["thermal"]["observer"]["states"][0].update(bound=-1), "bound"),
+                        (lambda d: d["thermal"]["observer"].update(scale=0), "scale"),
                         (lambda d: d["thermal"]["observer"]["states"][0]["gains"].update(t9=1.0), "gains"),
                         (lambda d: d["thermal"].update(terms=[]), "non-empty")):
         bad = json.loads(open(out).read())
