@@ -125,3 +125,19 @@ def test_settle_time_is_where_the_start_error_bound_meets_the_tolerance(machine_
     assert bound(s) <= 0.01 < bound(s - 1.0)
     assert model.observer.settle_s == settle_time(model, states, tolerance=1.0)
     assert settle_time(model, states, tolerance=bound(0.0)) == 0.0
+
+
+def test_history_is_refused_where_no_state_can_be_carried(machine_and_model, tmp_path):
+    run, model = machine_and_model
+    split = 13 * 3600.0
+    a, b = write_run(time_slice(run, 0.0, split), str(tmp_path / "a")), write_run(time_slice(run, split), str(tmp_path / "b"))
+    mlr = str(tmp_path / "mlr.json")
+    assert main(["fit", "--model", "mlr", "--direct", "--channel", "ch1", a, "--out", mlr]) == 0
+    assert main(["predict", mlr, b, "--history", a, "--out", str(tmp_path / "p.csv")]) == 2
+    # a dynamic model without an observer reads rises over each run's own start: no state to carry either
+    doc = model.to_document()
+    doc["thermal"] = {k: v for k, v in doc["thermal"].items() if k != "observer"}
+    doc["thermal"]["reference"] = "run_start"
+    plain = type(model).from_document(doc)
+    with pytest.raises(EmpiricalDataError, match="no observer"):
+        plain.predict(time_slice(run, split), history=time_slice(run, 0.0, split))
