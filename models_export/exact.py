@@ -98,6 +98,12 @@ class Model:
         self.direct = self.kind == "linear_direct" or (self.kind == "dynamic" and thermal.get("target") == "direct")
         if self.kind == "dynamic" and thermal.get("target") not in ("direct", "slope"):
             raise ExportError("thermal.target must be 'direct' or 'slope', found %r" % (thermal.get("target"),))
+        if self.kind == "dynamic" and thermal.get("observer") is not None:
+            # The firmware starts a fixed-reference table's filters in equilibrium with its first reading, not at the
+            # observer's estimate: the board would compute another model than tcomp predict. Refused until the table
+            # carries the observer (issue 21).
+            raise ExportError("thermal.observer: the firmware does not evaluate the dynamic model's observer yet, so the board would "
+                              "not compute what tcomp predict does; fit with --option observer=false to export this model")
         if thermal.get("reference", "fixed") not in ("fixed", "run_start"):
             raise ExportError("thermal.reference must be 'fixed' or 'run_start', found %r" % (thermal.get("reference"),))
         # "run_start": the firmware may latch the references at a cold start (Evaluator.latch_references),

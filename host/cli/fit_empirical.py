@@ -41,6 +41,7 @@ OPTIONS = {
     "swaps": boolean,  # dynamic
     "use_spindle": boolean,  # dynamic
     "use_feed": boolean,  # dynamic
+    "observer": boolean,  # dynamic: estimate the lag states from the sensors when a board starts (observer.py)
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
     "base": str,  # mr-poly: base sensor (default: role "base")
@@ -106,6 +107,12 @@ def fit_command(args, out):
             est.ridge_, est.n_groups_, est.cv_score, est.cv_rmse_, est.rsquared_, est.rmse_))
         for (sig, tau), c in zip(est.terms_, est.coef_):
             print("  %+.5g x lag(%s, tau %g s)" % (c, sig, tau))
+        obs = getattr(model, "observer", None)
+        if obs is not None:
+            worst = max(obs.states, key=lambda st: abs(model.term_coefficients[st["term"]]) * st["bound"], default=None)
+            print("  observer: lag states estimated from the inputs at a start; start-error bound %.3g um, within %.3g um after "
+                  "%.0f min (SETTLING)%s" % (obs.start_error_bound(model), obs.tolerance, obs.settle_s / 60,
+                                             "" if worst is None else "; largest share: lag(%s, tau %g s)" % model.terms[worst["term"]]))
     elif args.model == "mr-poly":
         terms = " ".join("%+.5g*dTn^%d" % (a, j + 1) for j, a in enumerate(est.nut_coef_))
         print("  S004 Eq. 12, nut %s, base %s, degree %d: s = %.5g %s %+.5g*dTb; fit R2=%.4f RMSE=%.4g" % (

@@ -612,3 +612,30 @@ def write_run(run, folder, decimals=4):
         s = run.spindle
         _write_csv(os.path.join(folder, SPINDLE), list(SPINDLE_COLUMNS), [s.time_s, s.rpm], [_g(3), _g(3)])
     return folder
+
+
+def time_slice(run, t0, t1=math.inf):
+    """The part of ``run`` logged in t0 <= time_s <= t1, on the same clock: what a logger (and a board)
+    switched on at t0 and off at t1 would have recorded. The spindle speed in force at t0 is kept as a
+    sample at t0; a motion interval is kept when it overlaps the span (cut to it)."""
+    T = run.temperatures
+    m = (T.time_s >= t0) & (T.time_s <= t1)
+    if m.sum() < 2:
+        raise ValueError("%s: fewer than 2 temperature samples in %g..%g s" % (run.path or run.name, t0, t1))
+    temps = Temperatures(T.time_s[m], list(T.names), T.values[m])
+    E = run.errors
+    me = (E.time_s >= t0) & (E.time_s <= t1)
+    errors = Errors(E.time_s[me], E.position_mm[me], E.error_um[me], None if E.direction is None else E.direction[me],
+                    None if E.channel is None else E.channel[me])
+    spindle = None
+    if run.spindle is not None:
+        S = run.spindle
+        i = int(np.searchsorted(S.time_s, t0, side="right")) - 1
+        later = (S.time_s > t0) & (S.time_s <= t1)
+        spindle = Spindle(np.concatenate([[t0], S.time_s[later]]), np.concatenate([[S.rpm[i] if i >= 0 else 0.0], S.rpm[later]]))
+    motion = None
+    if run.motion is not None:
+        M = run.motion
+        k = (M.t_end_s > t0) & (M.t_start_s < t1)
+        motion = Motion(np.maximum(M.t_start_s[k], t0), np.minimum(M.t_end_s[k], t1), M.from_mm[k], M.to_mm[k], M.feed_mm_min[k])
+    return Run(run.meta, temps, errors, motion, spindle, path=None, name="%s[%g..%g s]" % (run.name, t0, t1))

@@ -1,9 +1,13 @@
-"""tcomp predict MODEL.json RUN --out PRED.csv"""
+"""tcomp predict MODEL.json RUN [--history EARLIER_RUN] --out PRED.csv"""
 
 
 def add_arguments(p):
     p.add_argument("model", help="model document (tcomp-model/1 JSON)")
     p.add_argument("run", help="run folder")
+    p.add_argument("--history", metavar="EARLIER_RUN",
+                   help="dynamic models: a run folder logged before RUN on the same clock (it ends at or before RUN's first "
+                        "temperature sample); the model's states run through it first, as on a board that was not restarted. "
+                        "Without it the board starts at RUN's first sample (with the model's observer, if it has one)")
     p.add_argument("--out", required=True, help="CSV: time_s,position_mm[,direction][,channel],predicted_um")
     p.add_argument("--json", help="also write summary statistics (RMSE, max and min residual against the measured errors) as JSON")
     p.add_argument("--allow-edited", dest="allow_edited", action="store_true",
@@ -14,7 +18,7 @@ def add_arguments(p):
 def run(args):
     from host.outputs import Outputs
 
-    with Outputs([args.model, args.run]) as out:
+    with Outputs([args.model, args.run] + ([args.history] if args.history else [])) as out:
         out.file(args.out, "--out")
         if args.json:
             out.file(args.json, "--json")
@@ -47,6 +51,7 @@ def _predict(args, out):
             # the check tcomp export makes, after the fields' own checks (which name the field), with its words
             raise UserError("%s: %s" % (args.model, edited_reason(declared, actual)))
         run_ = load_run(args.run)
+        history = load_run(args.history) if args.history else None
     except (ModelFormatError, RunFormatError) as exc:
         raise UserError(str(exc))
     if edited:
@@ -56,10 +61,13 @@ def _predict(args, out):
     rows = np.arange(len(e))
     if getattr(model, "channel", None) and e.channel is not None:
         rows = np.flatnonzero(e.channel == model.channel)
+    if history is not None and getattr(model, "kind", None) != "dynamic":
+        raise UserError("--history %s: only a dynamic model carries a state from one run into the next; %s is a %s model"
+                        % (args.history, args.model, getattr(model, "kind", "static")))
     try:
-        pred = np.asarray(model.predict(run_), dtype=float)
-    except ValueError as exc:  # the run lacks what the model needs (a sensor, motion, a channel)
-        raise UserError("%s cannot be predicted with %s: %s" % (args.run, args.model, exc))
+        pred = np.asarray(model.predict(run_) if history is None else model.predict(run_, history=history), dtype=float)
+    except ValueError as exc:  # the run lacks what the model needs (a sensor, motion, a channel), or the history does not precede it
+        raise UserError("%s cannot be predicted with %s%s: %s" % (args.run, args.model, " after %s" % args.history if history is not None else "", exc))
     if pred.shape != (len(e),):
         raise UserError("model returned %s predictions for %d rows of %s" % (pred.shape, len(e), args.run))
     header = ["time_s", "position_mm"] + (["direction"] if e.direction is not None else []) + (["channel"] if e.channel is not None else []) + ["predicted_um"]
@@ -83,6 +91,7 @@ def _predict(args, out):
           % (args.model, args.run, len(e), rmse, rmax, rmin))
     if args.json:
         with out.open(args.json) as fh:
-            json.dump({"model": args.model, "run": args.run, "rows": int(len(e)), "rmse_um": rmse,
+            json.dump({"model": args.model, "run": args.run, **({"history": args.history} if history is not None else {}),
+                       "rows": int(len(e)), "rmse_um": rmse,
                        "provenance": "edited" if edited else "verified" if declared is not None else "none",
                        "max_residual_um": rmax, "min_residual_um": rmin}, fh, indent=2)

@@ -330,18 +330,23 @@ class DynamicRegression:
 class DynamicModel:
     """Model document kind ``dynamic`` (docs/model-format.md): δ = b0 + Σ b_j·L_τj[u_j], direct or slope.
 
-    Inputs are referenced to the evaluated run's start (``thermal.reference`` is
-    "run_start"): the filters start at rest when the board latches its
-    reference temperatures, so a run must be logged from that moment.
+    Without an observer (documents written before issue 21, or fitted with
+    ``observer=false``) inputs are referenced to the evaluated run's start
+    (``thermal.reference`` is "run_start"): the filters start at rest when the
+    board latches its reference temperatures, so a run must be logged from that
+    moment. With one (``thermal.observer``, host/learning/empirical/observer.py)
+    the reference is "fixed" (T − reference_C) and the lag states start at the
+    observer's estimate from the first sample's temperatures: a board switched on
+    at the run's first sample, on a warm machine or not.
     """
 
     kind = "dynamic"
-    reference = "run_start"
     coefficients = None  # not a linear function of the temperatures
     intercept = 0.0
 
     def __init__(self, terms, coefficients, intercept, target="direct", channel=None, geometric_coef=(0.0,), method="dynamic", axis=None,
-                 reference_C=None, envelope=None, statistics=None, training=None, dt_s=None):
+                 reference_C=None, envelope=None, statistics=None, training=None, dt_s=None, observer=None):
+        self.observer = observer  # observer.Observer or None (filters from rest at the run start)
         self.dt_s = dt_s  # the filters' step on the board (the training runs' sample interval); None: not recorded
         self.terms = [(str(n), float(tau)) for n, tau in terms]
         self.term_coefficients = np.asarray(coefficients, dtype=float)
@@ -357,8 +362,26 @@ class DynamicModel:
         self.statistics = statistics or {}
         self.training = training or {}
 
-    def thermal_at(self, run, times):
-        return self.intercept + features(run, self.terms, times) @ self.term_coefficients
+    @property
+    def reference(self):
+        return "run_start" if self.observer is None else "fixed"
+
+    def thermal_at(self, run, times, history=None):
+        """Thermal output at ``times`` of ``run``; ``history``: earlier runs (oldest first) the states run through first."""
+        if self.observer is None and not history:
+            return self.intercept + features(run, self.terms, times) @ self.term_coefficients
+        from host.learning.empirical.observer import board_terms
+
+        if self.observer is None:
+            raise EmpiricalDataError("dynamic: this model has no observer (thermal.reference 'run_start': its inputs are rises over "
+                                     "the run's own start), so a history cannot carry its states into the run; refit it to get one")
+        t, cols = board_terms(self, list(history or []) + [run])
+        times = np.atleast_1d(np.asarray(times, dtype=float))
+        t_run = run.temperatures.time_s
+        if times.size and (times.min() < t_run[0] or times.max() > t_run[-1]):
+            bad = times[(times < t_run[0]) | (times > t_run[-1])][0]
+            raise EmpiricalDataError("%s: time %g s is outside the temperature log %g..%g s (no extrapolation)" % (run.name, bad, t_run[0], t_run[-1]))
+        return self.intercept + np.column_stack([np.interp(times, t, cols[:, j]) for j in range(cols.shape[1])]) @ self.term_coefficients
 
     def geometric(self, P):
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
@@ -375,7 +398,12 @@ class DynamicModel:
         """The convention of the training errors ("start" for documents written before it was recorded)."""
         return self.training.get("error_reference", START)
 
-    def predict(self, run):
+    def predict(self, run, history=None):
+        """Predicted errors of ``run`` as a board switched on at its first sample computes them (with its
+        observer, if the model has one); ``history``: a run or list of runs (oldest first, ending before
+        ``run`` starts, one clock) the board ran through first, without a restart."""
+        if history is not None and not isinstance(history, (list, tuple)):
+            history = [history]
         try:
             check_model_reference(run, self.error_reference)
         except ValueError as exc:
@@ -383,7 +411,7 @@ class DynamicModel:
         e = run.errors
         out = np.full(len(e), np.nan)
         rows = self._rows(run)
-        th = self.thermal_at(run, e.time_s[rows])
+        th = self.thermal_at(run, e.time_s[rows], history)
         out[rows] = self.geometric(e.position_mm[rows]) + th * e.position_mm[rows] if self.target == "slope" else th
         return out
 
@@ -393,8 +421,9 @@ class DynamicModel:
             "sensors": list(self.sensors), "error_reference": self.error_reference, "reference_C": dict(self.reference_C),
             "geometric": None if self.target == "direct" else {"degree": int(self.geometric_coef.size - 1),
                                                                "coefficients_um": [float(c) for c in self.geometric_coef]},
-            "thermal": {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": "run_start",
+            "thermal": {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": self.reference,
                         "intercept": self.intercept, **({"dt_s": self.dt_s} if self.dt_s is not None else {}),
+                        **({"observer": self.observer.to_document()} if self.observer is not None else {}),
                         "terms": [{"signal": n, "tau_s": tau, "coefficient": float(c)} for (n, tau), c in zip(self.terms, self.term_coefficients)]},
             "envelope": self.envelope, "statistics": self.statistics, "training": self.training,
         }
@@ -413,8 +442,9 @@ class DynamicModel:
             raise ModelFormatError("dynamic model document lacks the object 'thermal'")
         if th.get("target") not in ("direct", "slope"):
             raise ModelFormatError("dynamic model document: thermal.target must be 'direct' or 'slope', found %r" % (th.get("target"),))
-        if th.get("reference", "run_start") != "run_start":
-            raise ModelFormatError("dynamic model document: thermal.reference must be 'run_start' (the filters start at rest), found %r" % (th.get("reference"),))
+        if th.get("reference", "run_start") != ("run_start" if th.get("observer") is None else "fixed"):
+            raise ModelFormatError("dynamic model document: thermal.reference must be 'run_start' (the filters start at rest) without "
+                                   "thermal.observer, 'fixed' (T - reference_C) with it; found %r" % (th.get("reference"),))
         if not num(th.get("intercept")):
             raise ModelFormatError("dynamic model document: thermal.intercept must be a finite number, found %r" % (th.get("intercept"),))
         terms = th.get("terms")
@@ -447,5 +477,14 @@ class DynamicModel:
                 raise ModelFormatError("dynamic model document: field '%s' must be an object or null, found %s" % (key, type(doc.get(key)).__name__))
         if th.get("dt_s") is not None and not (num(th["dt_s"]) and th["dt_s"] > 0):
             raise ModelFormatError("dynamic model document: thermal.dt_s must be a number > 0 (seconds), found %r" % (th.get("dt_s"),))
+        observer = None
+        if th.get("observer") is not None:
+            from host.learning.empirical.observer import Observer
+
+            sensors = list(dict.fromkeys(n[2:] for n, _ in out if n.startswith("T:")))
+            missing = [s for s in sensors if not num((doc.get("reference_C") or {}).get(s))]
+            if missing:
+                raise ModelFormatError("dynamic model document: thermal.observer needs reference_C of sensor %s (a number, °C)" % missing[0])
+            observer = Observer.from_document(th["observer"], out)
         return cls(out, coefs, th["intercept"], th["target"], doc.get("channel"), geo, doc.get("method", "dynamic"), doc.get("axis"),
-                   doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"), th.get("dt_s"))
+                   doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"), th.get("dt_s"), observer)

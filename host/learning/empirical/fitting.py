@@ -155,7 +155,7 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     X, y = stack(arrays)
     if method == "dynamic":
         model = _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K,
-                            (geometric_max_degree, geometric_criterion, geometric_degree), cv_blocks, options)
+                            (geometric_max_degree, geometric_criterion, geometric_degree), cv_blocks, options, exclude)
         model.training["error_reference"] = error_reference
         return model
     est = make_estimator(method, fit_intercept=fit_intercept, **options)
@@ -240,7 +240,7 @@ def _sample_interval(runs):
     return float(np.round(np.median(dts) * 1000) / 1000) if dts.size else None
 
 
-def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options):
+def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options, exclude=None):
     """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/learning/empirical/dynamic.py)."""
     from host.learning.empirical.dynamic import TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
 
@@ -250,6 +250,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         raise EmpiricalDataError("dynamic: taus_s must be time constants >= 0 s, got %r" % (taus,))
     use_spindle = bool(opts.pop("use_spindle", True))
     use_feed = bool(opts.pop("use_feed", True))
+    use_observer = opts.pop("observer", True)
+    if not isinstance(use_observer, bool):
+        raise EmpiricalDataError("dynamic: observer must be true or false, got %r" % (use_observer,))
     names = arrays[0].names
     F, terms = candidate_matrix(runs, [a.time_s for a in arrays], names, taus, use_spindle, use_feed)
     groups = cv_groups(runs, arrays, cv_blocks)
@@ -276,6 +279,14 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     model = DynamicModel(est.terms_, est.coef_, est.intercept_, target, channel, geo.coef_ if geo is not None else (0.0,), "dynamic",
                          runs[0].meta.get("axis"), dict(zip(used, np.atleast_1d(start).tolist())), env, stats, training,
                          _sample_interval(runs))
+    if use_observer:
+        # the lag states estimated from the sensors when a board starts (host/learning/empirical/observer.py),
+        # fitted on the training samples only (window, exclude): never on what is held out
+        from host.learning.empirical.observer import fit_observer
+
+        # the observer's tolerance is in um of offset: a slope (um/mm) times the largest training position
+        scale = 1.0 if target == "direct" else float(max(np.nanmax(np.abs(r.errors.position_mm)) for r in runs))
+        model.observer = fit_observer(model, runs, spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=scale)
     model.estimator_ = est
     model.arrays_ = arrays
     model.geometric_ = geo

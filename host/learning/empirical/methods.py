@@ -35,7 +35,7 @@ COMPARE_METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset"
                    "maxtree-ann", "dynamic", "mr-poly")
 # fitting options of a method beyond its estimator's parameters: how fit_model builds its candidates
 # (host/learning/empirical/fitting.py _fit_dynamic)
-CANDIDATE_OPTIONS = {"dynamic": ("taus_s", "use_spindle", "use_feed"), "mr-poly": ("nut", "base")}
+CANDIDATE_OPTIONS = {"dynamic": ("taus_s", "use_spindle", "use_feed", "observer"), "mr-poly": ("nut", "base")}
 COMPARE_DEFAULT = tuple(m for m in COMPARE_METHODS if m != "maxtree-mlr")  # maxtree-mlr is maxtree under the paper's name
 
 

@@ -79,15 +79,26 @@ def test_document_round_trip_command_line_and_bad_documents(make_direct, tmp_pat
     assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", "--sensors", "t1,t2", folder, "--out", out,
                  "--option", "taus_s=0/1800/3600/7200", "--option", "max_sensors=2"]) == 0
     doc = json.loads(open(out).read())
-    assert doc["kind"] == "dynamic" and doc["thermal"]["reference"] == "run_start"
+    # the default fit carries an observer, and then references the inputs to reference_C (issue 21)
+    assert doc["kind"] == "dynamic" and doc["thermal"]["reference"] == "fixed" and doc["thermal"]["observer"]["states"]
     assert set(doc["sensors"]) <= {"t1", "t2"} and doc["training"]["candidate_sensors"] == ["t1", "t2"]
     assert main(["predict", out, folder, "--out", str(tmp_path / "p.csv"), "--json", str(tmp_path / "p.json")]) == 0
     assert json.loads(open(str(tmp_path / "p.json")).read())["rmse_um"] < 0.1
-    model = load_model(out)
+    # without an observer: rises over the run's start, filters from rest
+    plain = str(tmp_path / "plain.json")
+    assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", "--sensors", "t1,t2", folder, "--out", plain,
+                 "--option", "taus_s=0/1800/3600/7200", "--option", "max_sensors=2", "--option", "observer=false"]) == 0
+    assert "observer" not in json.loads(open(plain).read())["thermal"]
+    model = load_model(plain)
     np.testing.assert_allclose(model.predict(run), model.intercept + features(run, model.terms, run.errors.time_s) @ model.term_coefficients)
     for mutate, msg in ((lambda d: d["thermal"]["terms"][0].update(signal="rpm"), "signal"),
                         (lambda d: d["thermal"]["terms"][0].update(tau_s=-1), "tau_s"),
-                        (lambda d: d["thermal"].update(reference="fixed"), "run_start"),
+                        (lambda d: d["thermal"].update(reference="run_start"), "'fixed'"),
+                        (lambda d: d["thermal"]["observer"].update(method="kalman"), "static_state_estimate"),
+                        (lambda d: d["thermal"]["observer"]["states"].pop(), "one object per lag term"),
+                        (lambda d: d["thermal"]["observer"]["states"][0].update(bound=-1), "bound"),
+                        (lambda d: d["thermal"]["observer"].update(scale=0), "scale"),
+                        (lambda d: d["thermal"]["observer"]["states"][0]["gains"].update(t9=1.0), "gains"),
                         (lambda d: d["thermal"].update(terms=[]), "non-empty")):
         bad = json.loads(open(out).read())
         mutate(bad)

@@ -1,0 +1,259 @@
+"""The dynamic model's lag states recovered from the sensors when a board starts on a warm machine.
+
+A dynamic model (host/learning/empirical/dynamic.py) carries a state: each lag
+term's filter output y_j = L_τj[u_j], with time constants up to hours. Started at
+rest, as the run-start convention does, the state is right only on a machine
+that is itself at rest; a board switched on (or reset) on a warm machine then
+predicts from a zero state, and the error lasts as long as the longest lag.
+
+The observer replaces "at rest" by an estimate from what the board reads at the
+moment it starts:
+
+1. Inputs are referenced to a fixed temperature, the training's ``reference_C``
+   (u = T − reference_C), not to the run's first sample, so that a rise does not
+   depend on when the board was switched on.
+2. Each lag state is estimated from what the board reads at that moment, its
+   filter inputs u_i (the model sensors' rises over reference_C, and the
+   spindle speed, its square and the feed where the model uses them), by a
+   static linear map fitted on the training runs, where the true states are
+   known (the filters run through each training run from its cold start):
+
+       ŷ_j = Σ_i G_ji · u_i                                  (least squares)
+
+   There is no constant term: a machine at rest at its reference temperatures
+   (every u_i = 0) has every state at zero, so a cold start is exactly the
+   model's own start from rest. (A constant term lowers the training residual
+   but moves that start: on FL_THERMAL it put 4-21 µm RMS of error into the
+   first 4 h of a cold start; docs/empirical.md has the variants tried.)
+
+   At power-on the filters start at ŷ_j; from then on they run as the model was
+   fitted (no correction is injected afterwards, so once settled the board
+   computes exactly the fitted model).
+3. Its largest residual on the training runs, E_j = max |y_j − ŷ_j|, bounds the
+   start error of state j (on conditions like the training's); the filter
+   forgets it as exp(−t/τ_j). The prediction's start error is then bounded by
+
+       B(t) = Σ_j |b_j| · E_j · exp(−t/τ_j)
+
+   and the observer is *settling* while B(t) > ``SETTLE_TOLERANCE``. The time at
+   which B falls to the tolerance, ``settle_s``, is computed once here and
+   recorded in the model document: the board's SETTLING flag is the elapsed time
+   since it started compared with it.
+
+Why not a fixed-gain output injection running for ever (a steady-state Kalman
+filter): the difference between a restarted and an uninterrupted board would
+then decay at the observer's rate, but any gain that makes it decay within
+30 min turns every lag longer than ~30 min into a blend of the static estimate,
+i.e. the model loses exactly the memory that made it better than a static one.
+What the sensors cannot say about the past is not recoverable from them; the
+observer states how much is missing (E_j) and for how long it matters.
+"""
+import numpy as np
+
+from host.learning.empirical import EmpiricalDataError
+from host.learning.empirical.dynamic import FEED, SPINDLE, signals
+
+SETTLE_TOLERANCE_UM = 1.0  # the issue's restart goal: within 1 um of an uninterrupted board
+
+
+class Observer:
+    """Static estimate of every lag state from the model's sensors (see the module doc).
+
+    ``states``: one entry per model term with τ > 0, in term order: {"term": index,
+    "gains": {signal: G_ji}, "bound": E_j, "rms": RMS residual}; signals are the
+    model's ("T:<sensor>" = T − reference_C, "spindle_krpm", "spindle_krpm2", "feed_m_min").
+    ``settle_s``: when the start-error bound B(t) reaches ``tolerance`` (µm); ``scale``:
+    µm of offset per unit of the model's thermal output (1 for a direct model, the
+    largest training position in mm for a slope model).
+    """
+
+    def __init__(self, states, settle_s, tolerance=SETTLE_TOLERANCE_UM, scale=1.0):
+        self.states = [dict(s) for s in states]
+        self.settle_s = float(settle_s)
+        self.tolerance = float(tolerance)
+        self.scale = float(scale)
+
+    def start_error_bound(self, model, elapsed_s=0.0):
+        """B(elapsed_s) in µm (module doc)."""
+        return start_error_bound(model, self.states, elapsed_s, self.scale)
+
+    def initial_states(self, u):
+        """{term index: ŷ_j} from the filter inputs {signal: value} read at power-on."""
+        return {s["term"]: sum(g * u[name] for name, g in s["gains"].items()) for s in self.states}
+
+    def to_document(self):
+        return {"method": "static_state_estimate", "tolerance": self.tolerance, "settle_s": self.settle_s, "scale": self.scale,
+                "states": [{"term": int(s["term"]),
+                            "gains": {k: float(v) for k, v in s["gains"].items()},
+                            "bound": float(s["bound"]), "rms": float(s["rms"])} for s in self.states]}
+
+    @classmethod
+    def from_document(cls, obs, terms):
+        import math
+
+        from host.learning.documents import ModelFormatError
+
+        def num(v):
+            return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+        where = "dynamic model document: thermal.observer"
+        if not isinstance(obs, dict):
+            raise ModelFormatError("%s must be an object" % where)
+        if obs.get("method") != "static_state_estimate":
+            raise ModelFormatError("%s.method must be 'static_state_estimate', found %r" % (where, obs.get("method")))
+        for key in ("tolerance", "settle_s", "scale"):
+            if not num(obs.get(key)) or obs[key] < 0 or (key == "scale" and obs[key] == 0):
+                raise ModelFormatError("%s.%s must be a number %s, found %r" % (where, key, "> 0" if key == "scale" else ">= 0", obs.get(key)))
+        states = obs.get("states")
+        lagged = [j for j, (_, tau) in enumerate(terms) if tau > 0]
+        if not isinstance(states, list) or [s.get("term") if isinstance(s, dict) else None for s in states] != lagged:
+            raise ModelFormatError("%s.states must list one object per lag term (thermal.terms with tau_s > 0), in term order: "
+                                   "terms %s" % (where, lagged))
+        for i, s in enumerate(states):
+            for key in ("bound", "rms"):
+                if not num(s.get(key)) or s[key] < 0:
+                    raise ModelFormatError("%s.states[%d].%s must be a finite number >= 0, found %r" % (where, i, key, s.get(key)))
+            g = s.get("gains")
+            if not isinstance(g, dict) or any(k not in signals_of(terms) for k in g) or not all(num(v) for v in g.values()):
+                raise ModelFormatError("%s.states[%d].gains must map the model's signals (%s) to finite numbers, found %r"
+                                       % (where, i, ", ".join(signals_of(terms)), g))
+        return cls(states, obs["settle_s"], obs["tolerance"], obs["scale"])
+
+
+def signals_of(terms):
+    """The distinct signals of ``terms`` in first-use order: the observer's regressors."""
+    return list(dict.fromkeys(n for n, _ in terms))
+
+
+def inputs(model, run):
+    """Time base and every filter input {signal: (n,)} with temperatures referenced to ``reference_C`` (fixed)."""
+    t, sig = signals(run, model.sensors)
+    for s in model.sensors:
+        if s not in model.reference_C:
+            raise EmpiricalDataError("dynamic: the observer needs reference_C of sensor %s (the model document lacks it)" % s)
+        sig["T:" + s] = np.asarray(run.temperatures.column(s), dtype=float) - model.reference_C[s]
+    return t, sig
+
+
+def _chain(model, runs):
+    """Inputs of consecutive runs on one clock, as one record (each run must start at or after the previous one's end)."""
+    parts = [inputs(model, r) for r in runs]
+    for (ta, _), (tb, _), a, b in zip(parts, parts[1:], runs, runs[1:]):
+        if ta[-1] > tb[0]:
+            raise EmpiricalDataError("%s ends at %g s, after %s starts at %g s: a history must end before (or when) the run "
+                                     "starts, both times on one clock (temperatures.csv time_s)" % (a.path or a.name, ta[-1], b.path or b.name, tb[0]))
+    t = np.concatenate([p[0][:-1] if k + 1 < len(parts) and p[0][-1] == parts[k + 1][0][0] else p[0] for k, p in enumerate(parts)])
+    sig = {}
+    for name, _ in model.terms:
+        cols = []
+        for k, (tk, sk) in enumerate(parts):
+            if name not in sk:
+                what = "spindle.csv" if name in SPINDLE else "motion.csv" if name == FEED else "temperatures.csv"
+                raise EmpiricalDataError("%s: the dynamic model needs the signal %s (from %s), which the run lacks" % (runs[k].name, name, what))
+            drop = k + 1 < len(parts) and tk[-1] == parts[k + 1][0][0]
+            cols.append(sk[name][:-1] if drop else sk[name])
+        sig[name] = np.concatenate(cols)
+        bad = np.flatnonzero(~np.isfinite(sig[name]))
+        if bad.size:
+            raise EmpiricalDataError("signal %s reads NaN/inf at %g s; no prediction from it" % (name, t[bad[0]]))
+    return t, sig
+
+
+def _filter_from(t, u, tau_s, y0):
+    """First-order lag of u from y0 at t[0] (the recurrence of dynamic.lag_filter, zero-order hold)."""
+    if tau_s <= 0:
+        return np.asarray(u, dtype=float).copy()
+    from scipy.signal import lfilter
+
+    a = 1.0 - np.exp(-np.diff(t) / float(tau_s))
+    dt = np.diff(t)
+    if dt.size and np.allclose(dt, dt[0], rtol=1e-9, atol=1e-9):
+        # y[k] = (1 − a)·y[k−1] + a·u[k−1]; with numerator [0, a] the output at k = 0 is the state zi = y0
+        y, _ = lfilter([0.0, a[0]], [1.0, -(1.0 - a[0])], u, zi=[y0])
+        return y
+    y = np.empty(t.size)
+    y[0] = y0
+    for k in range(1, t.size):
+        y[k] = y[k - 1] + a[k - 1] * (u[k - 1] - y[k - 1])
+    return y
+
+
+def board_terms(model, runs, observer=True):
+    """Term columns over the chained runs' time base as a board switched on at the first run's first sample computes them.
+
+    ``observer``: start each lag state at the observer's estimate (True) or at the
+    steady state of the first inputs (False: y_j = u_j, which is "at rest" for a
+    machine at its reference). Returns (t, columns (n, terms)).
+    """
+    t, sig = _chain(model, runs)
+    est = model.observer.initial_states({n: sig[n][0] for n in signals_of(model.terms)}) if observer and model.observer is not None else {}
+    cols = np.empty((t.size, len(model.terms)))
+    for j, (name, tau) in enumerate(model.terms):
+        y0 = est.get(j, sig[name][0])
+        cols[:, j] = _filter_from(t, sig[name], tau, y0)
+    return t, cols
+
+
+def fit_observer(model, runs, spans=None, exclude=None, tolerance=SETTLE_TOLERANCE_UM, scale=1.0):
+    """Fit the static state estimate of ``model``'s lag states on its training runs -> Observer.
+
+    The true states on each training run are the filters run through it from its
+    first sample, started in equilibrium with the first inputs (the cold start the
+    training assumes). ``scale``: the thermal output's size in µm per model unit
+    (1 for a direct model; a slope model's largest position in mm), so that the
+    tolerance is in µm of offset. ``spans``: per run, the (first, last) training time; samples
+    outside it, or inside ``exclude`` = (lo, hi), do not enter the fit (what the model was not
+    fitted on, e.g. a held-out period, must not shape its observer either).
+    """
+    lagged = [j for j, (_, tau) in enumerate(model.terms) if tau > 0]
+    names = signals_of(model.terms)
+    A, Y = [], []
+    for i, r in enumerate(runs):
+        t, sig = inputs(model, r)
+        keep = np.ones(t.size, dtype=bool)
+        if spans is not None:
+            keep &= (t >= spans[i][0]) & (t <= spans[i][1])
+        if exclude is not None:
+            lo, hi = exclude
+            keep &= ~((t >= (-np.inf if lo is None else lo)) & (t < (np.inf if hi is None else hi)))
+        Yr = (np.column_stack([_filter_from(t, sig[model.terms[j][0]], model.terms[j][1], sig[model.terms[j][0]][0]) for j in lagged])
+              if lagged else np.zeros((t.size, 0)))
+        Y.append(Yr[keep])
+        A.append(np.column_stack([sig[n] for n in names])[keep])
+    A, Y = np.vstack(A), np.vstack(Y)
+    if A.shape[0] < A.shape[1] + 1:
+        raise EmpiricalDataError("dynamic: %d training samples cannot fit the observer's %d coefficients per state" % (A.shape[0], A.shape[1]))
+    if not np.isfinite(A).all() or not np.isfinite(Y).all():
+        raise EmpiricalDataError("dynamic: NaN/inf in the training inputs; the observer cannot be fitted")
+    states = []
+    for k, j in enumerate(lagged):
+        coef = np.linalg.lstsq(A, Y[:, k], rcond=None)[0]
+        res = Y[:, k] - A @ coef
+        states.append({"term": j, "gains": dict(zip(names, (float(v) for v in coef))),
+                       "bound": float(np.abs(res).max()), "rms": float(np.sqrt(np.mean(res**2)))})
+    return Observer(states, settle_time(model, states, tolerance, scale), tolerance, scale)
+
+
+def start_error_bound(model, states, elapsed_s, scale=1.0):
+    """B(t) in µm: the bound of the prediction's start error ``elapsed_s`` after the board started (module doc)."""
+    out = 0.0
+    for s in states:
+        tau = model.terms[s["term"]][1]
+        out += abs(model.term_coefficients[s["term"]]) * s["bound"] * np.exp(-elapsed_s / tau)
+    return out * scale
+
+
+def settle_time(model, states, tolerance=SETTLE_TOLERANCE_UM, scale=1.0):
+    """Smallest elapsed time (s, to 1 s) at which start_error_bound <= tolerance; B decreases monotonically."""
+    if start_error_bound(model, states, 0.0, scale) <= tolerance:
+        return 0.0
+    lo, hi = 0.0, 1.0
+    while start_error_bound(model, states, hi, scale) > tolerance:
+        lo, hi = hi, hi * 2.0
+    while hi - lo > 1.0:
+        mid = 0.5 * (lo + hi)
+        if start_error_bound(model, states, mid, scale) > tolerance:
+            lo = mid
+        else:
+            hi = mid
+    return float(np.ceil(hi))
