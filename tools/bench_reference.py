@@ -20,7 +20,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from host.learning.discrepancy import reference, workflow
-from host.learning.discrepancy.screw_family import ScrewFamily
+from host.learning.discrepancy.family import ScrewFamily
 from host.learning.screw.screwmodel import ScrewModel
 from host.twin import simulate_run
 
