@@ -88,8 +88,9 @@ def format_report(model):
                      "RMS %.3f um, max %.3f um" % (red["segments"], red["dt_s"], run, e["rms_um"], e["max_um"],
                                                    e.get("rows_rms_um", float("nan")), e.get("rows_max_um", float("nan"))))
     for name, why in (red.get("omitted_reasons") or {}).items():
-        lines.append("  WARNING: effect %s has no reduced form (%s): tcomp export refuses the model if leaving it out "
-                     "costs more than its reduction limit" % (name, why))
+        what = "option" if name == "air_lag_s" else "effect"  # the air sensor's lag is a setting, not a catalog effect
+        lines.append("  WARNING: %s %s has no reduced form (%s): tcomp export refuses the model if leaving it out "
+                     "costs more than its reduction limit" % (what, name, why))
     lines.append("  reduced state bound %.2f K at feed %g mm/min" % (red["state_max_K"], red["feed_max_mm_min"]))
     for w in st["warnings"]:
         lines.append("  WARNING: " + w)
