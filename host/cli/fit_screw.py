@@ -3,7 +3,8 @@
 Options (``--option KEY=VALUE``, repeatable): segments, dt_s, free (comma list of
 q,h,lambda,c,alpha), geometric_degree (0..4 or auto), effects (comma list of
 host/learning/screw/effects.py names), nut_weight, reduced_segments, reduced_dt_s,
-feed_max_mm_min, ambient (on/off/auto: E_e, off by default under either error reference), air (auto, a sensor name, or off), base_ref (run_start/fixed), max_nfev,
+feed_max_mm_min, ambient (on/off/auto: E_e, off by default under either error reference), air (auto, a sensor name, or off),
+air_lag_s (the air sensor's time constant in s: the model takes the air the reading lags behind; 0 default), base_ref (run_start/fixed), max_nfev,
 fit_window (LO:HI seconds, either side may be empty: fit only on error rows in it).  ``--sensors NAME`` picks the base
 sensor of the E_e term (and switches E_e on unless ambient is given); ``--channel`` the errors.csv channel.
 """
@@ -14,6 +15,7 @@ from host import options
 from host.options import choice, number
 from host.learning.screw.effects import make_effect
 from host.learning.screw.identify import IdentifiabilityWarning
+from host.learning.screw.screwmodel import MAX_AIR_LAG_S
 
 MAX_SEGMENTS = 1000  # full model; the reduced one is bounded by the table (32)
 MIN_DT_S, MAX_DT_S = 0.1, 600.0
@@ -59,6 +61,7 @@ OPTIONS = {
     "reduced_segments": number(int, 1, 32), "reduced_dt_s": number(float, 0.001, 3600.0),
     "feed_max_mm_min": number(float, maximum=MAX_FEED_MM_MIN, above=0.0),
     "ambient": _ambient, "air": str,  # air: auto, a sensor name, or off
+    "air_lag_s": number(float, 0.0, MAX_AIR_LAG_S),
     "max_nfev": number(int, 1, 100000), "base_ref": str, "fit_window": _fit_window,
 }
 
@@ -85,8 +88,9 @@ def format_report(model):
                      "RMS %.3f um, max %.3f um" % (red["segments"], red["dt_s"], run, e["rms_um"], e["max_um"],
                                                    e.get("rows_rms_um", float("nan")), e.get("rows_max_um", float("nan"))))
     for name, why in (red.get("omitted_reasons") or {}).items():
-        lines.append("  WARNING: effect %s has no reduced form (%s): tcomp export refuses the model if leaving it out "
-                     "costs more than its reduction limit" % (name, why))
+        what = "option" if name == "air_lag_s" else "effect"  # the air sensor's lag is a setting, not a catalog effect
+        lines.append("  WARNING: %s %s has no reduced form (%s): tcomp export refuses the model if leaving it out "
+                     "costs more than its reduction limit" % (what, name, why))
     lines.append("  reduced state bound %.2f K at feed %g mm/min" % (red["state_max_K"], red["feed_max_mm_min"]))
     for w in st["warnings"]:
         lines.append("  WARNING: " + w)

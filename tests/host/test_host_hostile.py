@@ -557,7 +557,7 @@ def test_hole9_no_call_ends_in_a_traceback(world):
 
 @PROPERTY
 @given(key=st.sampled_from(["segments", "dt_s", "nut_weight", "reduced_segments", "reduced_dt_s", "feed_max_mm_min",
-                            "max_nfev"]),
+                            "max_nfev", "air_lag_s"]),
        text=st.one_of(st.floats(allow_nan=True, allow_infinity=True).map(repr), st.integers(-10 ** 30, 10 ** 30).map(str),
                       st.text(max_size=12)))
 def test_property_hole9_screw_options_are_bounded(key, text):
@@ -573,7 +573,8 @@ def test_property_hole9_screw_options_are_bounded(key, text):
         return
     assert math.isfinite(value)
     limits = {"segments": (2, 1000), "dt_s": (0.1, 600), "nut_weight": (0, 1e6), "reduced_segments": (1, 32),
-              "reduced_dt_s": (0.001, 3600), "feed_max_mm_min": (1e-300, 1e6), "max_nfev": (1, 100000)}
+              "reduced_dt_s": (0.001, 3600), "feed_max_mm_min": (1e-300, 1e6), "max_nfev": (1, 100000),
+              "air_lag_s": (0, 3600)}
     lo, hi = limits[key]
     assert lo <= value <= hi
 

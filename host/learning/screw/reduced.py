@@ -91,6 +91,11 @@ def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
         raise NoReducedForm("%s: negative heat per mm of travel %r K/mm: no certified state bound"
                             % (", ".join(bad) or "travel_heat_K_per_mm", min(heat_u)))
     out["state_max_K"] = state_bound(A, B, feed_max_mm_min / 60.0 * dt_s, heat_u)
+    if getattr(model, "air_lag_s_", 0.0) > 0:
+        # the recurrence's air weights c0, c1 are convex (>= 0): the de-lag's derivative would make them negative and
+        # lose the state envelope the exporter certifies; the reduction error below shows what the raw air costs
+        omitted["air_lag_s"] = ("the air sensor's lag (%g s) needs negative air weights in the recurrence; the firmware "
+                                "feeds the sensor's reading" % model.air_lag_s_)
     if omitted:
         out["omitted_effects"] = list(omitted)
         out["omitted_reasons"] = omitted
@@ -173,14 +178,15 @@ def reduced_error_um(reduced, T, positions_mm, base_rise_K=None):
 
 def reduced_predict(model, run, spread=False):
     """The reduced form's error at every row of ``run.errors`` (µm), as the board evaluates it: the latest state
-    (a step at t0 + k·dt), α·Σ T_i·overlap_i(P) + ee·(T_b − T_b,ref)·P + the reversal term by the row's direction
+    (a step at t0 + k·dt), α·Σ T_i·overlap_i(P) + ee·(T_b − T_b,ref)·P − α·(T_R − T_R,ref)·P under a sensor error
+    reference R + the reversal term by the row's direction
     (none in the feed/range mode, which has no direction) + the geometric polynomial."""
     red = model.reduced_
     ctx = model._context(run)
     t0 = ctx.t_grid[0]
     dt = red["dt_s"]
     n = int(np.floor((ctx.t_grid[-1] - t0) / dt + 1e-9))
-    air = model.air_K(ctx)
+    air = model.air_K(ctx, delag=False)  # the firmware's air input: the sensor's reading
     if air is not None:
         air = np.interp(t0 + dt * np.arange(n + 1), ctx.t_grid, air)
     _, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread, air_K=air)
@@ -194,6 +200,13 @@ def reduced_predict(model, run, spread=False):
         ref = float(tb.column(base)[0]) if red.get("base_ref") == "run_start" else float(red["base_ref_C"])
         ee = red.get("ee_um_per_mm_per_K", red["alpha_um_per_mm_per_K"])
         E = E + ee * (np.interp(e.time_s, tb.time_s, tb.column(base)) - ref) * P
+    eref = red.get("error_reference", "start")
+    if eref not in (None, "start"):
+        # errors corrected to sensor R: the table's -alpha coefficient on R (models_export/exact.py), from the same
+        # start rule as the base term
+        tr = run.temperatures
+        ref = float(tr.column(eref)[0]) if red.get("base_ref") == "run_start" else float(red["error_reference_C"])
+        E = E - red["alpha_um_per_mm_per_K"] * (np.interp(e.time_s, tr.time_s, tr.column(eref)) - ref) * P
     if red.get("reversal_um") and e.direction is not None and not spread:
         E = E + red["reversal_um"] * e.direction
     return E + model.geometric_um(P)
@@ -213,7 +226,7 @@ def reduction_error(model, run, positions=21, spread=False):
     rises = model.simulate_context(ctx_full)
     t0 = ctx_full.t_grid[0]
     n = int(np.floor((ctx_full.t_grid[-1] - t0) / red["dt_s"] + 1e-9))
-    air = model.air_K(ctx_full)
+    air = model.air_K(ctx_full, delag=False)
     if air is not None:
         air = np.interp(t0 + red["dt_s"] * np.arange(n + 1), ctx_full.t_grid, air)
     t, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread, air_K=air)

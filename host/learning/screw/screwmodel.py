@@ -31,6 +31,35 @@ BOUNDS = {
 START = {"q_J_per_mm": 0.1, "h_W_m2K": 15.0}
 MAX_GEOMETRIC_DEGREE = 4
 BASE_ALPHA_MIN_SPAN_K = 0.5  # base-temperature span below which alpha is not identified (no E_e signal)
+# The air sensor's lag (air_lag_s): its reading's derivative is taken over a 300 s moving average. The logger's
+# noise (0.01 K at 10 s on the twin) differentiated sample to sample and times a 150 s lag is 0.2 K of white noise
+# in the air input, an error in the regressor that biased alpha by +7 % / -16 % (start / T3, tools/bench_reference.py);
+# 300 s is short against the air's drifts (HVAC periods of 15 min and more) and removes that noise.
+AIR_LAG_SMOOTH_S = 300.0
+MAX_AIR_LAG_S = 3600.0
+
+
+def delagged(time_s, reading, lag_s, smooth_s=AIR_LAG_SMOOTH_S):
+    """The temperature a first-order sensor of time constant ``lag_s`` lags behind: T = reading + lag·d(reading)/dt,
+    the derivative of the reading's moving average over ``smooth_s`` (uneven sampling: averaged by time)."""
+    t = np.asarray(time_s, dtype=float)
+    x = np.asarray(reading, dtype=float)
+    if t.size < 3:
+        return x.copy()
+    half = 0.5 * smooth_s
+    # moving average by time: the integral of the piecewise-linear reading over [t - half, t + half] (ends held)
+    cum = np.concatenate([[0.0], np.cumsum(0.5 * (x[1:] + x[:-1]) * np.diff(t))])
+
+    def integral(s):
+        s = np.clip(s, t[0], t[-1])
+        i = np.clip(np.searchsorted(t, s, side="right") - 1, 0, t.size - 2)
+        ds = s - t[i]
+        slope = (x[i + 1] - x[i]) / (t[i + 1] - t[i])
+        return cum[i] + ds * (x[i] + 0.5 * slope * ds)
+
+    lo, hi = np.clip(t - half, t[0], t[-1]), np.clip(t + half, t[0], t[-1])
+    avg = (integral(hi) - integral(lo)) / np.maximum(hi - lo, 1e-12)
+    return x + lag_s * np.gradient(avg, t)
 
 
 def _resolve(name):
@@ -61,7 +90,11 @@ class ScrewModel:
     air: the air temperature the screw exchanges heat with: "auto" (the first sensor
     with role 'ambient'; else the base sensor, else a constant air, each fallback
     warned about in statistics.warnings), a sensor name, or "off" (constant air: the
-    screw as a rise over a still air, the model before the air term); ftol: relative change of the cost that
+    screw as a rise over a still air, the model before the air term); air_lag_s: the air sensor's own time
+    constant (s, first order, from its datasheet or a step test; 0 = the
+    sensor is the air): the screw exchanges heat with the air, not with the sensor's lagged reading, so the model
+    takes the air as reading + air_lag_s · d(reading)/dt (the derivative of the reading averaged over
+    AIR_LAG_SMOOTH_S); ftol: relative change of the cost that
     ends the identification (the discrepancy workflow's fold fits use a looser one).
 
     The runs' declared error reference (meta.json ``error_reference``) is read, not set: under a sensor
@@ -70,7 +103,7 @@ class ScrewModel:
 
     def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient="auto",
                  nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200, base_sensor=None,
-                 base_ref="run_start", fit_window=None, air="auto", ftol=1e-12):
+                 base_ref="run_start", fit_window=None, air="auto", ftol=1e-12, air_lag_s=0.0):
         self.segments = segments
         self.dt_s = dt_s
         self.free = free
@@ -88,6 +121,7 @@ class ScrewModel:
         self.fit_window = fit_window
         self.air = air
         self.ftol = ftol
+        self.air_lag_s = air_lag_s
 
     # ------------------------------------------------------------ parameters
 
@@ -117,18 +151,24 @@ class ScrewModel:
     def _context(self, run, rows=None):
         return RunContext(run, self.geometry_, self.dt_s, rows=rows)
 
-    def air_K(self, ctx):
+    def air_K(self, ctx, delag=True):
         """Air temperature over the model's reference on the context's grid (None: constant air).
 
         The reference is the air at the run's start (base_ref "run_start": the screw starts in
-        equilibrium at 0) or ``air_ref_C_`` (base_ref "fixed": it starts at the air's offset)."""
+        equilibrium at 0) or ``air_ref_C_`` (base_ref "fixed": it starts at the air's offset).
+        delag: with ``air_lag_s_`` > 0, the air the sensor lags behind (:func:`delagged`); False: the
+        sensor's reading itself (what the firmware's air input is)."""
         name = getattr(self, "air_sensor_", None)
         if name is None:
             return None
         if name not in ctx.run.temperatures.names:
             raise ValueError("%s: the model's air sensor %r is not in temperatures.csv" % (ctx.run_name, name))
         tt = ctx.run.temperatures
-        air = np.interp(ctx.t_grid, tt.time_s, tt.column(name))
+        col = tt.column(name)
+        lag = getattr(self, "air_lag_s_", 0.0)
+        if delag and lag > 0:
+            col = delagged(tt.time_s, col, lag)
+        air = np.interp(ctx.t_grid, tt.time_s, col)
         return air - (float(tt.column(name)[0]) if self.base_ref == "run_start" else self.air_ref_C_)
 
     def simulate_context(self, ctx, allvals=None):
@@ -312,6 +352,10 @@ class ScrewModel:
                 raise ValueError("effects must be Effect instances (got %r)" % (e,))
         if self.ambient not in (True, False, "auto"):
             raise ValueError("ambient must be on, off or auto (got %r)" % (self.ambient,))
+        if not (isinstance(self.air_lag_s, (int, float)) and not isinstance(self.air_lag_s, bool)
+                and 0 <= self.air_lag_s <= MAX_AIR_LAG_S):
+            raise ValueError("air_lag_s must be a number of seconds in 0..%g (got %r)" % (MAX_AIR_LAG_S, self.air_lag_s))
+        self.air_lag_s_ = float(self.air_lag_s)
         self.error_reference_ = common_error_reference(runs)
         if self.error_reference_ != RAW:
             errref.check_reference_sensor(runs, self.error_reference_)
@@ -461,7 +505,7 @@ class ScrewModel:
         self.training_ = {"runs": [c.run_name for c in ctxs], "free": free, "segments": self.segments, "dt_s": self.dt_s,
                           "geometric_degree": self.geometric_degree, "nut_weight": self.nut_weight, "channel": self.channel,
                           "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window, "air": self.air,
-                          "ambient": self.ambient, "error_reference": self.error_reference_}
+                          "ambient": self.ambient, "error_reference": self.error_reference_, "air_lag_s": self.air_lag_s_}
         feeds = np.concatenate([r.motion.feed_mm_min for r in runs])
         P_all = np.concatenate([P] + [np.r_[r.motion.from_mm, r.motion.to_mm] for r in runs])
         strokes = [float(r.meta["stroke_mm"]) for r in runs if isinstance(r.meta.get("stroke_mm"), (int, float))]
@@ -558,6 +602,7 @@ class ScrewModel:
             "air_sensor": self.air_sensor_,
             "air_ref_C": self.air_ref_C_,
             "air_source": self.air_source_,
+            "air_lag_s": self.air_lag_s_,
             "error_reference": self.error_reference_,
             "error_reference_C": self.error_reference_C_,
             "reduced": self.reduced_,
@@ -646,6 +691,11 @@ class ScrewModel:
             m.air_ref_C_ = th.get("air_ref_C")
             m.air_source_ = th.get("air_source", "off" if m.air_sensor_ is None else "document")
             m.air = "auto" if m.air_sensor_ else "off"
+            # documents written before the air sensor's lag was modelled: the reading is the air
+            m.air_lag_s_ = float(th.get("air_lag_s", 0.0))
+            if not 0 <= m.air_lag_s_ <= MAX_AIR_LAG_S:
+                raise ValueError("thermal.air_lag_s must be 0..%g s" % MAX_AIR_LAG_S)
+            m.air_lag_s = m.air_lag_s_
             if m.air_sensor_ is not None and m.base_ref == "fixed" and not isinstance(m.air_ref_C_, (int, float)):
                 raise KeyError("thermal.air_ref_C")
             # documents written before the error reference was data: raw errors ("start")
