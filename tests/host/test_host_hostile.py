@@ -160,6 +160,8 @@ def valid(tmp_path_factory):
     files["map.json"] = json.dumps({"time": "time_s", "temperatures": ["T1", "T2"], "errors": ["T3"]}).encode()
     files["corr.csv"] = b"T1,T2,T3\n1,0.9,0.5\n0.9,1,0.4\n0.5,0.4,1\n"
     files["tcorr.csv"] = b"sensor,r\nT1,0.9\nT2,0.5\nT3,0.1\n"
+    files["board.csv"] = b"time_s,position_mm,offset_um\n" + b"".join(
+        b"%g,%g,0\n" % (t, p) for t, p in zip(np.repeat(np.arange(0.0, 7200.0, 600.0), 6), np.tile(np.linspace(0, 500, 6), 12)))
     files["port"] = b""  # a port given as a plain file: it is read, so it is an input
     files["mpremote"] = b"#!/bin/sh\nexit 0\n"
     return files
@@ -188,6 +190,8 @@ def world(tmp_path, valid):
 # log), and the rest. A verb or flag added without a row here fails test_every_flag_of_every_verb_is_classified,
 # so the walk below always covers every verb.
 FLAGS = {
+    "check": {"in": {"--model": "file", "--run": "folder", "--board-log": "file"}, "out": {"--json": "file"},
+              "other": "--board-t0-ms --max-dt-s --position-tol-mm --limit-um --allow-edited"},
     "compare": {"in": {"runs": "folder"}, "out": {"--json": "file", "--plots": "folder"},
                 "other": "--channel --direct --sensors --methods --train --split-h --noise-C --offset-C --repeats "
                          "--reference --option --no-intercept"},
@@ -210,6 +214,7 @@ FLAGS = {
     "monitor": {"in": {"--port": "file", "--key": "file"}, "out": {"--csv": "log", "--json": "file"},
                 "other": "--baud --count --duration --hello --latch"},
     "predict": {"in": {"model": "file", "run": "folder"}, "out": {"--out": "file", "--json": "file"}, "other": "--allow-edited"},
+    "report": {"in": {"runs": "folder", "--model": "file"}, "out": {"--out": "folder"}, "other": "--allow-edited"},
     "select": {"in": {"runs": "folder", "--corr": "file", "--target-corr": "file"}, "out": {"--json": "file", "--plot": "file"},
                "other": "--method --channel --target --sensors --split --option"},
     "simulate": {"in": {}, "out": {"--out": "folder", "--json": "file"}, "other": "--protocol --effects --seed --noise-um --set --error-reference"},
@@ -219,10 +224,12 @@ FLAGS = {
 # where each input lives in the world, and a valid call naming every input ({FLAG}) and output ({@FLAG})
 INPUT_FILES = {"runs": "run", "run": "run", "--run": "run", "model": "m.json", "--table": "t.bin", "--config": "cfg.json",
                "--board": "board.py", "--port": "port", "--mpremote": "mpremote", "source": "log.csv",
-               "--mapping": "map.json", "--corr": "corr.csv", "--target-corr": "tcorr.csv", "--key": "k.key"}
+               "--mapping": "map.json", "--model": "m.json", "--board-log": "board.csv", "--corr": "corr.csv", "--target-corr": "tcorr.csv", "--key": "k.key"}
 OUTPUT_NAMES = {"--json": "o.json", "--plots": "plots", "--report": "report", "--out": "out", "--c-header": "t.h",
                 "--key": "new.key", "--csv": "log2.csv", "--plot": "p.png"}
 BASE = {
+    "check": ["check", "--model", "{--model}", "--run", "{--run}", "--board-log", "{--board-log}", "--limit-um", "100",
+              "--json", "{@--json}"],
     "compare": ["compare", "{runs}", "--split-h", "1", "--methods", "mlr", "--json", "{@--json}", "--plots", "{@--plots}"],
     "discrepancy": ["discrepancy", "{runs}", "--json", "{@--json}", "--report", "{@--report}"],
     "export": ["export", "{model}", "--out", "{@--out}", "--report", "{@--report}", "--json", "{@--json}", "--c-header", "{@--c-header}"],
@@ -233,6 +240,7 @@ BASE = {
     "import": ["import", "{source}", "--mapping", "{--mapping}", "--out", "{@--out}", "--json", "{@--json}"],
     "monitor": ["monitor", "--port", "{--port}", "--key", "{--key}", "--duration", "0.2", "--csv", "{@--csv}", "--json", "{@--json}"],
     "predict": ["predict", "{model}", "{run}", "--out", "{@--out}", "--json", "{@--json}"],
+    "report": ["report", "{runs}", "--model", "{--model}", "--out", "{@--out}"],
     "select": ["select", "--method", "maxtree", "{runs}", "--corr", "{--corr}", "--target-corr", "{--target-corr}",
                "--json", "{@--json}", "--plot", "{@--plot}"],
     "simulate": ["simulate", "--protocol", "idle", "--out", "{@--out}", "--json", "{@--json}"],
