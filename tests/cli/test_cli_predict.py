@@ -63,3 +63,21 @@ def test_predict_says_what_compare_scores_for_the_same_model(tmp_path, capsys):
         else:  # compare's default scores another reference: its note says so
             assert abs(rmse - view["thermal"]["rmse_um"]) > 1e-3
             assert any("--reference run_start" in n and "tcomp predict" in n for n in doc["findings"])
+
+
+def test_fit_t_min_t_max_train_on_part_of_a_run(tmp_path, capsys):
+    run = load_run(TRAIN)
+    t = np.unique(run.errors.time_s)
+    lo, hi = float(t[2]), float(t[10])  # sweeps 2..9
+    a, b = str(tmp_path / "a.json"), str(tmp_path / "b.json")
+    assert main(["fit", "--model", "mlr", TRAIN, "--sensors", "T1,T2", "--t-min", repr(lo), "--t-max", repr(hi), "--out", a]) == 0
+    assert main(["fit", "--model", "mlr", TRAIN, "--sensors", "T1,T2", "--option", "t_min_s=%r" % lo,
+                 "--option", "t_max_s=%r" % hi, "--out", b]) == 0
+    da, db = json.load(open(a)), json.load(open(b))
+    assert da["training"]["window_s"] == [lo, hi] and da["thermal"] == db["thermal"]
+    assert da["statistics"]["n_samples"] == 8  # one slope per sweep in [lo, hi)
+    capsys.readouterr()
+    assert main(["fit", "--model", "mlr", TRAIN, "--t-max", "100", "--option", "t_max_s=50", "--out", a]) == 2
+    assert "set the same training window" in capsys.readouterr().err
+    assert main(["fit", "--model", "screw", TRAIN, "--t-min", "5", "--t-max", "5", "--out", a]) == 2
+    assert "the training window is empty" in capsys.readouterr().err
