@@ -200,7 +200,7 @@ FLAGS = {
     "export": {"in": {"model": "file"}, "out": {"--out": "file", "--report": "file", "--json": "file", "--c-header": "file"},
                "other": "--ref-position-mm --allow-edited --envelope --envelope-margin --reduction-limit"},
     "fit": {"in": {"runs": "folder"}, "out": {"--out": "file", "--json": "file"},
-            "other": "--model --sensors --channel --direct --no-intercept --option"},
+            "other": "--model --sensors --channel --direct --no-intercept --t-min --t-max --option"},
     # --key is created when missing (after the flash), else read: an output that is never written over anything
     "flash": {"in": {"--table": "file", "--config": "file", "--board": "file", "--port": "file", "--mpremote": "file"},
               "out": {"--key": "file"}, "other": "--table-dir --no-firmware --reset --dry-run"},
