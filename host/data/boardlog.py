@@ -7,7 +7,9 @@ Two layouts are read (docs/check.md):
   so the caller must say which tick was run time 0 (``board_t0_ms``); the counter's wrap at 2^30 ms
   (docs/protocol.md) is unwrapped, a tick that goes back by less than half the wrap is refused as a reset.
 - an aligned log with columns ``time_s``, ``position_mm``, ``offset_um`` (run time, axis position, the board's
-  offset), e.g. the answers of `tcomp hil --json` or a log already put on the run's clock.
+  offset), a log already put on the run's clock;
+- the JSON `tcomp hil --json` writes: its ``answers`` (``time_s``, ``position_mm``, ``offset_um``) are the
+  firmware's offsets at every errors.csv row of the run it played, on that run's clock.
 
 Nothing is guessed: a missing column, a cell that is not a number or a time that goes backwards is a
 ``BoardLogError`` naming the file and line.
@@ -50,8 +52,40 @@ def _number(path, line, column, cell):
     return v
 
 
+def _read_hil_json(path, fh):
+    import json
+
+    try:
+        doc = json.load(fh)
+    except json.JSONDecodeError as exc:
+        raise BoardLogError("%s line %d column %d: invalid JSON (%s)" % (path, exc.lineno, exc.colno, exc.msg))
+    answers = doc.get("answers") if isinstance(doc, dict) else None
+    if not isinstance(answers, list) or not answers:
+        raise BoardLogError("%s: a JSON board log is tcomp hil --json output, with a non-empty list 'answers'" % path)
+    cols = {k: [] for k in ALIGNED_COLUMNS}
+    for i, a in enumerate(answers):
+        for k in ALIGNED_COLUMNS:
+            v = a.get(k) if isinstance(a, dict) else None
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise BoardLogError("%s: answers[%d].%s is %r, not a finite number (the board gave no offset there?)"
+                                    % (path, i, k, v))
+            cols[k].append(float(v))
+        if i and cols["time_s"][-1] < cols["time_s"][-2]:
+            raise BoardLogError("%s: answers[%d].time_s %g goes back from %g; the log must be in time order"
+                                % (path, i, cols["time_s"][-1], cols["time_s"][-2]))
+    return BoardLog(np.asarray(cols["time_s"]), np.asarray(cols["position_mm"]), np.asarray(cols["offset_um"]), "hil")
+
+
 def read_board_log(path, board_t0_ms=None):
     """The offsets of a board log on the run's clock (see the module doc); BoardLogError names what is wrong."""
+    if path.lower().endswith(".json"):
+        if board_t0_ms is not None:
+            raise BoardLogError("%s is tcomp hil output, already on the run's clock: --board-t0-ms does not apply" % path)
+        try:
+            with open(path, encoding="utf-8") as fh:
+                return _read_hil_json(path, fh)
+        except (OSError, UnicodeDecodeError) as exc:
+            raise BoardLogError("%s: cannot be read (%s)" % (path, getattr(exc, "strerror", None) or exc))
     try:
         with open(path, encoding="utf-8", newline="") as fh:
             records = read_records(fh, path)

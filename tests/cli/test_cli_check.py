@@ -123,3 +123,22 @@ def test_check_names_a_missing_channel_and_position(model, tmp_path, capsys):
     assert "errors.csv has no channel 'Y'" in err and "its channels: X1" in err
     err = _fails(capsys, ["check", "--model", model, "--run", CHECK, "--limit-um", "0"])
     assert "--limit-um 0.0: must be a positive number" in err
+
+
+def test_check_reads_the_answers_of_tcomp_hil(model, tmp_path, capsys):
+    t, p, e = _errors()
+    residual = 0.2 * np.cos(np.arange(t.size))
+    answers = [{"time_s": float(a), "position_mm": float(b), "offset_um": round(float(c - r), 1), "status": "00800000"}
+               for a, b, c, r in zip(t, p, e, residual)]
+    log = str(tmp_path / "hil.json")
+    json.dump({"answers": answers, "frames": 1}, open(log, "w"))
+    out = str(tmp_path / "c.json")
+    assert main(["check", "--model", model, "--run", CHECK, "--board-log", log, "--limit-um", "1", "--json", out]) == 0
+    c = json.load(open(out))["channels"]["error"]
+    r = e - np.array([a["offset_um"] for a in answers])
+    assert c["compensated"]["rmse_um"] == pytest.approx(np.sqrt(np.mean(r ** 2)), rel=1e-9)
+    assert c["board_vs_model"]["rows"] == t.size
+    answers[7]["offset_um"] = None
+    json.dump({"answers": answers}, open(log, "w"))
+    err = _fails(capsys, ["check", "--model", model, "--run", CHECK, "--board-log", log, "--limit-um", "1"])
+    assert "answers[7].offset_um is None" in err

@@ -14,8 +14,9 @@ def add_arguments(p):
     p.add_argument("--model", required=True, help="the model document the board's table was exported from")
     p.add_argument("--run", required=True, help="the check run folder (measured errors and temperatures)")
     p.add_argument("--board-log", dest="board_log", metavar="LOG.csv",
-                   help="the board's offsets during the check: tcomp monitor --csv output (needs --board-t0-ms) or a CSV "
-                        "time_s,position_mm,offset_um on the run's clock; without it the host model's predictions are used")
+                   help="the board's offsets during the check: tcomp monitor --csv output (needs --board-t0-ms), a CSV "
+                        "time_s,position_mm,offset_um on the run's clock, or tcomp hil --json output (.json); without it "
+                        "the host model's predictions are used")
     p.add_argument("--board-t0-ms", dest="board_t0_ms", type=int, metavar="MS",
                    help="the board's t_ms at the run's time 0 (a tcomp monitor log only)")
     p.add_argument("--max-dt-s", dest="max_dt_s", type=float, default=DEFAULT_MAX_DT_S,
@@ -90,8 +91,14 @@ def _check(args, out):
         before.pop("r2")  # of "predicting zero": not a figure of anything
         after = figures(e.error_um[rows], offset[rows])
         channels[name] = {"rows": int(rows.size), "uncompensated": before, "compensated": after,
+                          # the board's offset against the host model's prediction: quantisation, sensor noise, or a
+                          # table that is not this model's (rmse_um etc. of board offset - host prediction)
+                          "board_vs_model": figures(offset[rows], predicted[rows]) if args.board_log else None,
                           "reduction_percent": 100.0 * (1.0 - after["rmse_um"] / before["rmse_um"]) if before["rmse_um"] > 0 else None,
                           "pass": bool(after["max_abs_residual_um"] <= args.limit_um)}
+    for c in channels.values():
+        if c["board_vs_model"]:
+            c["board_vs_model"].pop("r2")
     not_checked = [c for c in e.channels() if c not in channels] if e.channel is not None else []
     passed = all(c["pass"] for c in channels.values())
     print("tcomp check: %s against %s; limit %g µm on max |measured - offset|" % (args.run, source, args.limit_um))
@@ -100,6 +107,9 @@ def _check(args, out):
         print("  %s: %d rows; uncompensated RMSE %.3f µm, max |e| %.3f µm; compensated RMSE %.3f µm, max |r| %.3f µm: %s"
               % (name if name != NO_CHANNEL else "errors", c["rows"], b["rmse_um"], b["max_abs_residual_um"], a["rmse_um"],
                  a["max_abs_residual_um"], "pass" if c["pass"] else "FAIL"))
+        if c["board_vs_model"]:
+            print("    board offset - host model: RMSE %.3f µm, max |d| %.3f µm" % (
+                c["board_vs_model"]["rmse_um"], c["board_vs_model"]["max_abs_residual_um"]))
     if not_checked:
         print("  not checked (the model compensates %s only): %s" % (wanted, ", ".join(not_checked)))
     print("tcomp check: %s" % ("PASS" if passed else "FAIL"))
