@@ -58,3 +58,15 @@ def test_report_after_compensation_is_the_residual_of_predict(tmp_path, capsys):
 def test_report_never_writes_into_a_run(tmp_path, capsys):
     rc = main(["report", CHECK, "--out", os.path.dirname(CHECK)])
     assert rc == 2 and "the folder holds the input" in capsys.readouterr().err
+
+
+def test_report_groups_channels_and_directions(make_run, tmp_path, capsys):
+    run = make_run(bidirectional=True, channels=["X1", "X2"])
+    run.errors.error_um = run.errors.error_um * np.where(run.errors.channel == "X1", 1.0, 2.0)  # X2 drifts twice as much
+    t_last = float(run.errors.time_s.max())
+    out = str(tmp_path / "rep")
+    assert main(["report", write_run(run, str(tmp_path / "r")), "--out", out]) == 0
+    groups = json.load(open(os.path.join(out, "report.json")))["runs"][0]["groups"]
+    assert [g["group"] for g in groups] == ["X1 forward", "X2 reverse"]
+    for g, k in zip(groups, (1.0, 2.0)):
+        assert g["before"]["positioning_change"]["max_positioning_change_um"] == pytest.approx(k * 0.01 * 700 * t_last / 7200.0)
