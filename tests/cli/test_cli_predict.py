@@ -81,3 +81,24 @@ def test_fit_t_min_t_max_train_on_part_of_a_run(tmp_path, capsys):
     assert "set the same training window" in capsys.readouterr().err
     assert main(["fit", "--model", "screw", TRAIN, "--t-min", "5", "--t-max", "5", "--out", a]) == 2
     assert "the training window is empty" in capsys.readouterr().err
+
+
+def test_predict_on_a_training_run_splits_fitted_and_held_out_rows(tmp_path, capsys):
+    model = str(tmp_path / "m.json")
+    t_max = 10800.0
+    assert main(["fit", "--model", "mlr", TRAIN, "--sensors", FEW, "--t-max", "%g" % t_max, "--out", model]) == 0
+    out, js = str(tmp_path / "p.csv"), str(tmp_path / "p.json")
+    capsys.readouterr()
+    assert main(["predict", model, TRAIN, "--out", out, "--json", js]) == 0
+    assert "held-out rows" in capsys.readouterr().out
+    with open(out) as fh:
+        rows = list(csv.DictReader(fh))
+    t = np.array([float(r["time_s"]) for r in rows])
+    r = np.array([float(r["residual_um"]) for r in rows])
+    split = json.load(open(js))["training_split"]
+    assert split["held_out"]["rows"] == int(np.sum(t >= t_max)) > 0
+    assert split["held_out"]["rmse_um"] == pytest.approx(np.sqrt(np.mean(r[t >= t_max] ** 2)), abs=1e-4)
+    assert split["fitted"]["rmse_um"] == pytest.approx(np.sqrt(np.mean(r[t < t_max] ** 2)), abs=1e-4)
+    # another run than the training run: no split (every row is held out)
+    assert main(["predict", model, TEST, "--out", out, "--json", js]) == 0
+    assert json.load(open(js))["training_split"] is None

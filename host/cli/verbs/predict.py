@@ -64,6 +64,9 @@ def _predict(args, out):
                   % (c, f["rows"], f["rmse_um"], f["max_residual_um"], f["min_residual_um"], f["r2"]))
     if len(used) < len(e):
         print("  %d rows of other channels left out (the model predicts %s)" % (len(e) - len(used), getattr(model, "channel", None)))
+    split = _training_split(model, args.run, e, used, pred)
+    if split:
+        print("  " + split["note"])
     compare_view = _compare_view(model, run_)
     if compare_view:
         print("  " + compare_view["note"])
@@ -73,7 +76,33 @@ def _predict(args, out):
                        "rmse_um": overall["rmse_um"], "provenance": provenance,
                        "max_residual_um": overall["max_residual_um"], "min_residual_um": overall["min_residual_um"],
                        "max_abs_residual_um": overall["max_abs_residual_um"], "r2": overall["r2"],
-                       "channels": channels, "compare_view": compare_view}, fh, indent=2)
+                       "channels": channels, "training_split": split, "compare_view": compare_view}, fh, indent=2)
+
+
+def _training_split(model, run_path, e, used, pred):
+    """Figures of the rows the model was fitted on and of the held-out rest, when the run is one of its training
+    runs and the fit had a time window (tcomp fit --t-min/--t-max): an RMSE over both mixes fit and prediction,
+    and `tcomp compare --split-h` scores only the held-out part. None otherwise."""
+    import os
+
+    from host.learning.empirical.targets import in_window
+    from host.learning.residuals import figures
+
+    training = getattr(model, "training", None) or getattr(model, "training_", None) or {}
+    window = training.get("window_s") or training.get("fit_window_s")
+    runs = [os.path.realpath(r) for r in training.get("runs") or [] if isinstance(r, str)]
+    if not window or os.path.realpath(run_path) not in runs:
+        return None
+    inside = in_window(e.time_s[used], tuple(window))
+    fitted, held = used[inside], used[~inside]
+    out = {"window_s": list(window), "fitted": figures(e.error_um[fitted], pred[fitted]),
+           "held_out": figures(e.error_um[held], pred[held])}
+    lo = "the start" if window[0] is None else "%g s" % window[0]
+    hi = "the end" if window[1] is None else "%g s" % window[1]
+    out["note"] = ("%s is a training run, fitted on %s..%s: the %d rows fitted on RMSE %.3f um, the %d held-out rows "
+                   "RMSE %.3f um (tcomp compare --split-h scores the held-out part)"
+                   % (run_path, lo, hi, fitted.size, out["fitted"]["rmse_um"], held.size, out["held_out"]["rmse_um"]))
+    return out
 
 
 def _compare_view(model, run_):
@@ -96,10 +125,10 @@ def _compare_view(model, run_):
         s = score_model(model, run_)
     except EmpiricalDataError as exc:
         return {"reference": reference, "thermal": None, "note": "tcomp compare could not score this run: %s" % exc}
-    what = ("the thermal part on the %d rows after the cold sweep (measured minus the run's own cold sweep)" % s["n"]
-            if model.target == "slope" else "the %d rows of the model's channel" % s["n"])
-    note = ("tcomp compare --reference %s scores this model RMSE %.3f um on %s; predict scores the whole error of every "
-            "row.%s" % (reference, s["rmse_um"], what,
+    what = ("the thermal part on the %d rows after the cold sweep (measured minus the run's own cold sweep); predict "
+            "scores the whole error of every row" % s["n"] if model.target == "slope"
+            else "the %d rows of the model's channel, as predict does" % s["n"])
+    note = ("tcomp compare --reference %s scores this model RMSE %.3f um on %s.%s" % (reference, s["rmse_um"], what,
                         " compare's default --reference run_start takes each run's rises from its own first sample, not "
                         "this model's saved reference_C: its figure differs by that too" if reference == "fixed" else ""))
     return {"reference": reference, "thermal": {k: s[k] for k in ("n", "rmse_um", "max_residual_um", "min_residual_um")},
