@@ -41,6 +41,10 @@ OPTIONS = {
     "swaps": boolean,  # dynamic
     "use_spindle": boolean,  # dynamic
     "use_feed": boolean,  # dynamic
+    "selection": str,  # dynamic: forward | loo (how sensors, lags and penalty are scored)
+    "forward_blocks": number(int, 3),  # dynamic: forward chaining over N equal time blocks of one run
+    "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
+    "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
     "base": str,  # mr-poly: base sensor (default: role "base")

@@ -242,7 +242,8 @@ def _sample_interval(runs):
 
 def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options):
     """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/learning/empirical/dynamic.py)."""
-    from host.learning.empirical.dynamic import TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
+    from host.learning.empirical import forward
+    from host.learning.empirical.dynamic import TAU_MAX_FRACTION, TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
 
     opts = dict(options)
     taus = tuple(float(v) for v in opts.pop("taus_s", TAUS_S))
@@ -250,14 +251,52 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         raise EmpiricalDataError("dynamic: taus_s must be time constants >= 0 s, got %r" % (taus,))
     use_spindle = bool(opts.pop("use_spindle", True))
     use_feed = bool(opts.pop("use_feed", True))
+    forward_blocks = opts.pop("forward_blocks", None)
+    forward_state = opts.pop("forward_state", FORWARD_STATE)
+    if forward_state not in FORWARD_STATES:
+        raise EmpiricalDataError("dynamic: forward_state must be one of %s, got %r" % (", ".join(FORWARD_STATES), forward_state))
+    lag_bound = _lag_bound(arrays, opts.pop("tau_max_fraction", TAU_MAX_FRACTION))
+    lag_bound["excluded_taus_s"] = [v for v in taus if v > lag_bound["max_tau_s"]]
+    taus = tuple(v for v in taus if v <= lag_bound["max_tau_s"])
+    if not taus:
+        raise EmpiricalDataError("dynamic: every time constant in taus_s (%s s) exceeds %g s, the longest the training span of %.0f s "
+                                 "can identify (tau_max_fraction=%g); give shorter taus_s or longer training data"
+                                 % ("/".join("%g" % v for v in lag_bound["excluded_taus_s"]), lag_bound["max_tau_s"],
+                                    lag_bound["training_span_s"], lag_bound["fraction"]))
     names = arrays[0].names
     F, terms = candidate_matrix(runs, [a.time_s for a in arrays], names, taus, use_spindle, use_feed)
-    groups = cv_groups(runs, arrays, cv_blocks)
+    selection = opts.get("selection", "forward")
+    labels, blocks, fc_error = None, None, None
     try:
-        est = DynamicRegression(fit_intercept=fit_intercept, **opts).fit(F, y, terms, groups=groups)
+        labels, blocks = forward.forward_blocks(runs, arrays, forward_blocks)
+    except EmpiricalDataError as exc:
+        if selection == "forward":
+            raise EmpiricalDataError("dynamic: %s" % exc)
+        fc_error = str(exc)
+    if selection == "forward":
+        if cv_blocks is not None:
+            raise EmpiricalDataError("dynamic: cv_blocks sets the groups of selection=loo; forward chaining takes forward_blocks=N")
+        groups = labels
+    else:
+        groups = cv_groups(runs, arrays, cv_blocks)
+    try:
+        est = DynamicRegression(fit_intercept=fit_intercept, **opts)
     except TypeError as exc:
         raise EmpiricalDataError("dynamic: %s" % exc)
+    if selection == "forward" and forward_state == "switched_on" and len(runs) == 1:
+        # score each block on the columns a board switched on at its start computes (several runs: each run already is)
+        held = {}
+        for b in blocks[1:]:
+            rows = labels == b["block"]
+            Fk, _ = candidate_matrix([forward.block_run(runs, b)], [np.concatenate([a.time_s for a in arrays])[rows]], names, taus,
+                                     use_spindle, use_feed)
+            held[b["block"]] = (Fk, y[rows])
+        est.with_block_columns(held)
+    est.fit(F, y, terms, groups=groups)
     stats = est.statistics()
+    stats["lag_bound"] = lag_bound
+    if selection == "forward":
+        stats["forward_state"] = forward_state
     used = [n[2:] for n, _ in est.terms_ if n.startswith("T:")]
     used = list(dict.fromkeys(used))
     start = np.mean([start_temperatures(r, used) for r in runs], axis=0) if used else []
@@ -279,4 +318,28 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     model.estimator_ = est
     model.arrays_ = arrays
     model.geometric_ = geo
+    if blocks is None:
+        stats["forward_chaining"] = {"error": fc_error}
+    else:
+        def refit(k):
+            b0, coef = est.coefficients_on(labels < k)
+            return DynamicModel(est.terms_, coef, b0, target, channel, model.geometric_coef, "dynamic", model.axis,
+                                training={"error_reference": common_error_reference(runs)})
+
+        stats["forward_chaining"] = forward.forward_chaining(runs, blocks, refit, target)
+        stats["forward_chaining"]["structure"] = ("terms and penalty as chosen on all training data; coefficients refitted on the "
+                                                  "blocks before each scored block")
     return model
+
+
+FORWARD_STATES = ("switched_on", "continuous")
+FORWARD_STATE = "continuous"  # how the selection scores a block (docs/empirical.md: why not yet switched_on)
+
+
+def _lag_bound(arrays, fraction):
+    """The longest time constant the training data can identify: ``fraction`` x the longest training run's span."""
+    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 < fraction <= 1:
+        raise EmpiricalDataError("dynamic: tau_max_fraction must be a number in (0, 1], got %r" % (fraction,))
+    span = max(float(a.time_s.max() - a.time_s.min()) for a in arrays)
+    return {"fraction": float(fraction), "training_span_s": span, "max_tau_s": float(fraction) * span,
+            "rule": "a lag tau is a candidate only when tau <= fraction x the longest training run's span (4 tau: 98 % of a step response)"}
