@@ -251,7 +251,10 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         raise EmpiricalDataError("dynamic: taus_s must be time constants >= 0 s, got %r" % (taus,))
     use_spindle = bool(opts.pop("use_spindle", True))
     use_feed = bool(opts.pop("use_feed", True))
+    # N equal time blocks of one run: forward_blocks, or cv_blocks (its meaning for the other cross-validated methods)
     forward_blocks = opts.pop("forward_blocks", None)
+    if forward_blocks is None and opts.get("selection", "forward") == "forward":
+        forward_blocks = cv_blocks
     forward_state = opts.pop("forward_state", FORWARD_STATE)
     if forward_state not in FORWARD_STATES:
         raise EmpiricalDataError("dynamic: forward_state must be one of %s, got %r" % (", ".join(FORWARD_STATES), forward_state))
@@ -274,8 +277,6 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
             raise EmpiricalDataError("dynamic: %s" % exc)
         fc_error = str(exc)
     if selection == "forward":
-        if cv_blocks is not None:
-            raise EmpiricalDataError("dynamic: cv_blocks sets the groups of selection=loo; forward chaining takes forward_blocks=N")
         groups = labels
     else:
         groups = cv_groups(runs, arrays, cv_blocks)

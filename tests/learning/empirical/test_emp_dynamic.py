@@ -67,7 +67,11 @@ def test_sensor_limit_and_settings_are_enforced(make_direct):
         with pytest.raises(EmpiricalDataError, match=msg):
             DynamicRegression(**kw).fit(F, run.errors.error_um, terms, groups)
     with pytest.raises(EmpiricalDataError, match="at least 2 groups"):
-        DynamicRegression().fit(F, run.errors.error_um, terms, np.zeros(t.size))
+        DynamicRegression(selection="loo").fit(F, run.errors.error_um, terms, np.zeros(t.size))
+    with pytest.raises(EmpiricalDataError, match="at least 3 time blocks"):
+        DynamicRegression().fit(F, run.errors.error_um, terms, (t > t[-1] / 2).astype(int))
+    with pytest.raises(EmpiricalDataError, match="selection must be one of forward, loo"):
+        DynamicRegression(selection="kfold").fit(F, run.errors.error_um, terms, groups)
 
 
 def test_document_round_trip_command_line_and_bad_documents(make_direct, tmp_path):
