@@ -221,6 +221,9 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
             res["selection"] = info["selection"]
         if "note" in info:
             res["note"] = info["note"]
+        # forward chaining (host/learning/empirical/forward.py): fitted on the blocks before each block of the training data,
+        # scored on that block as its own run; in the model's statistics (dynamic, linear models), else why not
+        res["forward_chaining"] = st.get("forward_chaining") or {"error": "no forward-chaining refit for %s (network, mr-poly)" % method}
         res["coefficients"] = None if model.coefficients is None else dict(zip(model.sensors, model.coefficients.tolist()))
         res["intercept"] = model.intercept
         res["train"] = score_model(model, case.train[0], case.window)

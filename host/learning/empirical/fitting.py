@@ -118,7 +118,7 @@ def cv_groups(runs, arrays, cv_blocks=None):
 
 def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
               reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
-              cv_blocks=None, exclude=None, geometric_degree=None, **options):
+              cv_blocks=None, exclude=None, geometric_degree=None, forward_chaining=True, **options):
     """Fit ``method`` (an ESTIMATORS name, or dynamic) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
@@ -134,6 +134,8 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     ``geometric_max_degree`` by ``geometric_criterion``).
     ``method="mr-poly"``: S004's Eq. 12 on the nut and base sensors (roles, or ``nut=``/``base=`` options;
     host/learning/empirical/mrpoly.py).
+    ``forward_chaining``: add ``statistics.forward_chaining`` (host/learning/empirical/forward.py) to linear and dynamic
+    models; its own refits pass False.
     """
     runs = list(runs)
     if not runs:
@@ -155,7 +157,7 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     X, y = stack(arrays)
     if method == "dynamic":
         model = _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K,
-                            (geometric_max_degree, geometric_criterion, geometric_degree), cv_blocks, options)
+                            (geometric_max_degree, geometric_criterion, geometric_degree), cv_blocks, options, forward_chaining)
         model.training["error_reference"] = error_reference
         return model
     est = make_estimator(method, fit_intercept=fit_intercept, **options)
@@ -210,6 +212,13 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
         model.geometric_ = geo
     model.estimator_ = est
     model.arrays_ = arrays
+    if forward_chaining and exclude is None and coefs is not None and method != "mr-poly":
+        from host.learning.empirical.forward import linear_forward_chaining
+
+        try:
+            stats["forward_chaining"] = linear_forward_chaining(model, runs, target, channel, fit_intercept, window)
+        except EmpiricalDataError as exc:
+            stats["forward_chaining"] = {"error": str(exc)}
     return model
 
 
@@ -240,7 +249,7 @@ def _sample_interval(runs):
     return float(np.round(np.median(dts) * 1000) / 1000) if dts.size else None
 
 
-def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options):
+def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options, report_forward=True):
     """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/learning/empirical/dynamic.py)."""
     from host.learning.empirical import forward
     from host.learning.empirical.dynamic import TAU_MAX_FRACTION, TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
@@ -319,7 +328,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     model.estimator_ = est
     model.arrays_ = arrays
     model.geometric_ = geo
-    if blocks is None:
+    if not report_forward:
+        pass
+    elif blocks is None:
         stats["forward_chaining"] = {"error": fc_error}
     else:
         def refit(k):

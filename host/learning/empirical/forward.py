@@ -134,3 +134,26 @@ def forward_chaining(runs, blocks, refit, target="direct"):
     return {"rule": RULE, "score": "whole error (slope: geometric + thermal)" if target == "slope" else "error of the channel",
             "blocks": len(blocks), "scored": out, "rmse_um": [f["rmse_um"] for f in out],
             "worst_um": max(f["rmse_um"] for f in out), "pooled_um": float(np.sqrt(sq / n_all))}
+
+
+def linear_forward_chaining(model, runs, target="slope", channel=None, fit_intercept=True, window=None):
+    """``forward_chaining`` statistics of a static linear model: MLR on the model's own sensors refitted on the blocks
+    before each scored block (the document contract: temperatures over the fixed reference, so a board switched on at
+    a block's start predicts as one that never stopped). Its sensor choice was made on all training data."""
+    from host.learning.empirical.fitting import fit_model
+    from host.learning.empirical.targets import training_arrays
+
+    runs = list(runs)
+    arrays = training_arrays(runs, target, channel, list(model.sensors), window=window)
+    labels, blocks = forward_blocks(runs, arrays)
+    start = {b["block"]: b["t_start_s"] for b in blocks}
+    lo = None if window is None else window[0]
+
+    def refit(k):
+        if len(runs) >= 2:
+            return fit_model(runs[:k], "mlr", target, channel, list(model.sensors), fit_intercept, forward_chaining=False)
+        return fit_model(runs, "mlr", target, channel, list(model.sensors), fit_intercept, window=(lo, start[k]), forward_chaining=False)
+
+    out = forward_chaining(runs, blocks, refit, target)
+    out["structure"] = "the method's sensors as chosen on all training data; MLR on them refitted on the blocks before each scored block"
+    return out
