@@ -15,16 +15,18 @@ an input held constant over each sample interval Δt (zero-order hold):
     y[k] = y[k−1] + (1 − exp(−Δt/τ)) · (u[k−1] − y[k−1])
 
 Structure selection (which signals, which time constants) is a greedy forward
-search with sequential replacement, scored by leave-one-group-out
-cross-validation: groups are the training runs or, for one run, its spindle
-cycles (host/learning/empirical/schedule.py). At each step the candidate term (signal, τ)
-that lowers the CV score most is added while the gain is at least ``min_gain``
-(1 %, relative); after each addition, single exchanges of a chosen term for any
-other are made while they lower the score. At most ``max_sensors`` distinct
-temperature sensors (5) and ``max_terms`` terms (8). The score is the *worst*
-held-out group's RMSE (``cv_score="worst"``; "pooled" is the RMSE over all
-held-out samples): a compensation model has to hold on every operating
-condition, not on average. The time constants come from the grid ``taus_s``, so
+search with sequential replacement, scored by forward-chaining validation
+(``selection="forward"``, the default since issue 21: the groups are time blocks
+in ascending order, block k scored by the fit on blocks < k, the pooled RMSE;
+host/learning/empirical/forward.py) or by leave-one-group-out cross-validation
+(``selection="loo"``: groups are the training runs or, for one run, its spindle
+cycles, host/learning/empirical/schedule.py; the *worst* held-out group's RMSE:
+a compensation model has to hold on every operating condition). At each step the
+candidate term (signal, τ) that lowers the score most is added while the gain is
+at least ``min_gain`` (1 %, relative); after each addition, single exchanges of
+a chosen term for any other are made while they lower the score. At most
+``max_sensors`` distinct temperature sensors (5) and ``max_terms`` terms (8).
+``cv_score`` overrides the score ("worst" or "pooled"). The time constants come from the grid ``taus_s``, so
 "identified" means chosen by cross-validation among them. Coefficients are
 ridge least squares on RMS-scaled terms, the penalty chosen from ``ridge`` by
 the same cross-validation (0 is plain least squares); lag-filtered copies of one
@@ -179,8 +181,13 @@ class DynamicRegression:
     (signal, tau_s). Parameters (keyword-only): ``max_sensors`` (distinct
     temperature sensors, default 5), ``max_terms`` (default 8), ``min_gain``
     (relative CV reduction a term must bring, default 0.01), ``cv_score``
-    ("worst" or "pooled"), ``swaps`` (sequential replacement), ``ridge`` (a value
-    or a grid chosen by CV), ``fit_intercept``.
+    ("worst" or "pooled"; None: pooled for forward, worst for loo), ``swaps``
+    (sequential replacement), ``ridge`` (a value or a grid chosen by CV),
+    ``selection`` ("forward": ``groups`` are time blocks in ascending order, each
+    block k >= 1 scored by the fit on blocks < k; "loo": leave each group out),
+    ``fit_intercept``. :meth:`with_block_columns` gives forward blocks their
+    switched-on columns. Also learned: ``fold_rmse_`` and ``fold_labels_`` (the
+    chosen structure's score per scored block or group).
     Learned: ``selected_`` (column indices), ``terms_``, ``coef_``,
     ``intercept_``, ``ridge_``, ``cv_rmse_``, ``cv_by_ridge_``, ``history_``,
     ``rmse_``, ``rsquared_``, ``n_samples_``, ``n_groups_``.
