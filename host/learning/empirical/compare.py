@@ -21,8 +21,9 @@ again with disturbed temperatures (robustness). Methods:
 ``maxtree-pcr``    maximal-tree selection, then PCR on the chosen sensors
 ``maxtree-ann``    maximal-tree selection, then the network on them
 ``dynamic``        lag-filtered temperatures and spindle speed / feed, ≤ 5
-                   sensors and the time constants chosen by cross-validation
-                   across cycles or runs (dynamic.py)
+                   sensors, time constants and penalty chosen by
+                   forward-chaining validation over cycles or runs
+                   (dynamic.py, forward.py)
 ``mr-poly``        S004's multiple-regression model (Eq. 12): degree-4
                    polynomial of the nut rise plus the base rise (mrpoly.py)
 =================  ==========================================================
