@@ -250,7 +250,8 @@ def _sample_interval(runs):
 
 
 def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options, report_forward=True):
-    """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/learning/empirical/dynamic.py)."""
+    """``method="dynamic"``: lag-filtered signals chosen by forward chaining (default) or leave-one-group-out
+    (host/learning/empirical/dynamic.py, forward.py); lags bounded by the training span."""
     from host.learning.empirical import forward
     from host.learning.empirical.dynamic import TAU_MAX_FRACTION, TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
 
@@ -328,11 +329,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     model.estimator_ = est
     model.arrays_ = arrays
     model.geometric_ = geo
-    if not report_forward:
-        pass
-    elif blocks is None:
+    if report_forward and blocks is None:
         stats["forward_chaining"] = {"error": fc_error}
-    else:
+    elif report_forward:
         def refit(k):
             b0, coef = est.coefficients_on(labels < k)
             return DynamicModel(est.terms_, coef, b0, target, channel, model.geometric_coef, "dynamic", model.axis,
