@@ -144,13 +144,16 @@ def test_compare_runs_the_dynamic_model_with_its_settings(make_direct, tmp_path)
     assert main(base + ["--option", "dynamic.bogus=1"]) == 2
 
 
+ISSUE16 = {"selection": "loo", "ridge": (0.0, 1e-3, 1e-2), "tau_max_fraction": 1.0}  # the dynamic model's choice before issue 21
+
+
 @pytest.mark.slow
 def test_goal_leave_one_cycle_out_at_most_0p8_of_mlr16():
     """Issue 16's goal on the real FL_THERMAL test: under leave-one-cycle-out over all six spindle cycles
-    (every choice made inside each fold), the dynamic model whose structure is chosen by leave-one-cycle-out
-    (selection=loo, the default before issue 21) has a pooled held-out RMSE at most 0.8 x that of MLR on all 16
-    sensors. CI checks ch4, the closest channel; TCOMP_SLOW=1 all five. The forward-chaining default's
-    leave-one-cycle-out figures are in docs/results.md (tools/results_forward.py --loco): not all <= 0.8."""
+    (every choice made inside each fold), the dynamic model chosen as before issue 21 (selection=loo, ridge grid
+    0/0.001/0.01, no lag bound) has a pooled held-out RMSE at most 0.8 x that of MLR on all 16 sensors. CI checks
+    ch4, the closest channel (0.75); TCOMP_SLOW=1 all five. Issue 21's defaults give 0.37 0.47 0.76 0.86 0.95 here
+    (and 0.80 on ch4 with selection=loo alone): docs/results.md, issue 21 section."""
     from host.learning.empirical.compare import leave_one_cycle_out
     from host.data.runs import load_run
 
@@ -158,7 +161,7 @@ def test_goal_leave_one_cycle_out_at_most_0p8_of_mlr16():
     channels = ["ch1", "ch2", "ch3", "ch4", "ch5"] if os.environ.get("TCOMP_SLOW") == "1" else ["ch4"]
     ratios = {}
     for ch in channels:
-        out = leave_one_cycle_out(run, channel=ch, methods=("mlr", "dynamic"), options={"dynamic": {"selection": "loo"}})
+        out = leave_one_cycle_out(run, channel=ch, methods=("mlr", "dynamic"), options={"dynamic": ISSUE16})
         assert len(out["cycles"]) == 6 and len(out["methods"]["dynamic"]["folds"]) == 6
         ratios[ch] = out["ratio_to_mlr"]["dynamic"]
     assert all(r <= 0.8 for r in ratios.values()), ratios
