@@ -39,7 +39,7 @@ LABELS = {
     "maxtree-mlr": "maximal-tree selector + MLR (the same as maxtree)",
     "maxtree-pcr": "maximal-tree selector + PCR (the paper's pipeline)",
     "maxtree-ann": "maximal-tree selector + network",
-    "dynamic": "dynamic: lag-filtered temperature rises and spindle speed, ≤ 5 sensors and time constants by cross-validation across cycles",
+    "dynamic": "dynamic: lag-filtered temperature rises and spindle speed, ≤ 5 sensors, time constants and penalty by forward-chaining validation over cycles",
 }
 
 
@@ -224,17 +224,22 @@ def render_demo(L, folder):
 
 
 PAPERS_BEGIN, PAPERS_END = "<!-- papers: begin -->", "<!-- papers: end -->"
+# issue 21's held-out figures, written from tools/results_forward.py's output
+FORWARD_BEGIN, FORWARD_END = "<!-- forward: begin -->", "<!-- forward: end -->"
 
 
 def _papers_section(path):
-    """The hand-written per-paper section of ``path`` (between the markers), kept when the file is regenerated:
-    its numbers come from other commands, each named in it."""
+    """The sections of ``path`` made by other commands (the per-paper one, issue 21's forward one; between their
+    markers), kept when the file is regenerated: each names the command its numbers come from."""
     if not os.path.exists(path):
         return ""
     with open(path, encoding="utf-8") as fh:
         text = fh.read()
-    a, b = text.find(PAPERS_BEGIN), text.find(PAPERS_END)
-    return text[a:b + len(PAPERS_END)] + "\n" if 0 <= a < b else ""
+    out = ""
+    for begin, end in ((PAPERS_BEGIN, PAPERS_END), (FORWARD_BEGIN, FORWARD_END)):
+        a, b = text.find(begin), text.find(end)
+        out += text[a:b + len(end)] + "\n" if 0 <= a < b else ""
+    return out
 
 
 def main(argv=None):

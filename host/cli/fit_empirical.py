@@ -42,6 +42,10 @@ OPTIONS = {
     "use_spindle": boolean,  # dynamic
     "use_feed": boolean,  # dynamic
     "observer": boolean,  # dynamic: estimate the lag states from the sensors when a board starts (observer.py)
+    "selection": str,  # dynamic: forward | loo (how sensors, lags and penalty are scored)
+    "forward_blocks": number(int, 3),  # dynamic: forward chaining over N equal time blocks of one run
+    "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
+    "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
     "base": str,  # mr-poly: base sensor (default: role "base")
@@ -103,8 +107,9 @@ def fit_command(args, out):
             print("  best %d-sensor subset %s: CV RMSE %.4g" % (k, ",".join(v["sensors"]), v["cv_rmse"]))
         print(est.mlr_.summary())
     elif args.model == "dynamic":
-        print("  ridge %g chosen by cross-validation over %d groups (%s score %.4g); fit R2=%.4f RMSE=%.4g" % (
-            est.ridge_, est.n_groups_, est.cv_score, est.cv_rmse_, est.rsquared_, est.rmse_))
+        how = "forward chaining over %d time blocks" if est.selection == "forward" else "leave-one-group-out over %d groups"
+        print("  terms and ridge %g chosen by %s (%s score %.4g); fit R2=%.4f RMSE=%.4g" % (
+            est.ridge_, how % est.n_groups_, est.cv_score_, est.cv_rmse_, est.rsquared_, est.rmse_))
         for (sig, tau), c in zip(est.terms_, est.coef_):
             print("  %+.5g x lag(%s, tau %g s)" % (c, sig, tau))
         obs = getattr(model, "observer", None)
@@ -113,6 +118,10 @@ def fit_command(args, out):
             print("  observer: lag states estimated from the inputs at a start; start-error bound %.3g um, within %.3g um after "
                   "%.0f min (SETTLING)%s" % (obs.start_error_bound(model), obs.tolerance, obs.settle_s / 60,
                                              "" if worst is None else "; largest share: lag(%s, tau %g s)" % model.terms[worst["term"]]))
+        lb = model.statistics.get("lag_bound", {})
+        if lb.get("excluded_taus_s"):
+            print("  lags %s s left out: longer than %g x the training span (%.0f s)" % (
+                "/".join("%g" % v for v in lb["excluded_taus_s"]), lb["fraction"], lb["training_span_s"]))
     elif args.model == "mr-poly":
         terms = " ".join("%+.5g*dTn^%d" % (a, j + 1) for j, a in enumerate(est.nut_coef_))
         print("  S004 Eq. 12, nut %s, base %s, degree %d: s = %.5g %s %+.5g*dTb; fit R2=%.4f RMSE=%.4g" % (
@@ -126,6 +135,12 @@ def fit_command(args, out):
         print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (
             est.n_components_, est.eigenvalues_.size, 100 * est.cumulative_variance_ratio_[est.n_components_ - 1], 100 * est.variance_threshold))
         print("  R2=%.4f adj R2=%.4f F=%.4g (p=%.3g) residual std error=%.4g" % (est.rsquared_, est.rsquared_adj_, est.fvalue_, est.f_pvalue_, est.resid_std_err_))
+    fc = model.statistics.get("forward_chaining")
+    if fc and "rmse_um" in fc:
+        print("  forward chaining (fit on the past, predict the next of %d blocks switched on at its start): RMSE %s um; worst %.4g, "
+              "pooled %.4g" % (fc["blocks"], " ".join("%.4g" % v for v in fc["rmse_um"]), fc["worst_um"], fc["pooled_um"]))
+    elif fc:
+        print("  forward chaining not scored: %s" % fc["error"])
     if args.json:
         with out.open(args.json) as fh:
             json.dump({"model": args.out, "kind": doc["kind"], "method": args.model, "sensors": model.sensors,

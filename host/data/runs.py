@@ -398,6 +398,48 @@ def check_model_reference(run, model_reference):
                          "referred to %s (docs/data-format.md)" % (run.path or run.name, json.dumps(ref), json.dumps(model_reference)))
 
 
+def slice_run(run, t_start_s, t_end_s=None):
+    """The part of ``run`` with t_start_s <= time < t_end_s as a run of its own: what a board switched on at
+    ``t_start_s`` would have seen (forward-chaining validation, a restart on a warm machine).
+
+    Times stay as logged (not shifted to 0). The temperature log starts at its first sample at or after
+    ``t_start_s``, and errors.csv keeps only rows from that sample on (a model cannot be evaluated before
+    its first temperature). The errors keep their values: they stay referred to the machine at the
+    original run's start (meta.json ``error_reference``), which is the error the board must correct.
+    The spindle speed in force at the slice's start (the last spindle.csv sample at or before it) is
+    carried to the slice's first temperature time; motion intervals are clipped to the slice.
+    ValueError when the slice holds fewer than 2 temperature samples or no error row.
+    """
+    t = np.asarray(run.temperatures.time_s, dtype=float)
+    hi = np.inf if t_end_s is None else float(t_end_s)
+    keep = (t >= float(t_start_s)) & (t < hi)
+    name = "%s[%g..%s s]" % (run.name, float(t_start_s), "end" if t_end_s is None else "%g" % hi)
+    if keep.sum() < 2:
+        raise ValueError("%s: the slice holds %d temperature sample(s); a run needs at least 2" % (name, int(keep.sum())))
+    t0 = float(t[keep][0])
+    temps = Temperatures(t[keep].copy(), list(run.temperatures.names), np.array(run.temperatures.values[keep], dtype=float))
+    e = run.errors
+    rows = (e.time_s >= t0) & (e.time_s < hi)
+    if not rows.any():
+        raise ValueError("%s: no errors.csv row in the slice" % name)
+    errors = Errors(e.time_s[rows].copy(), e.position_mm[rows].copy(), e.error_um[rows].copy(),
+                    None if e.direction is None else e.direction[rows].copy(), None if e.channel is None else e.channel[rows].copy())
+    spindle = None
+    if run.spindle is not None:
+        st, rpm = run.spindle.time_s, run.spindle.rpm
+        inside = (st > t0) & (st < hi)
+        before = np.flatnonzero(st <= t0)
+        held = rpm[before[-1]] if before.size else 0.0  # no sample yet: the spindle is taken as standing, as signals() does
+        spindle = Spindle(np.r_[t0, st[inside]], np.r_[held, rpm[inside]])
+    motion = None
+    if run.motion is not None:
+        m = run.motion
+        on = (m.t_end_s > t0) & (m.t_start_s < hi)
+        motion = Motion(np.maximum(m.t_start_s[on], t0), np.minimum(m.t_end_s[on], hi), m.from_mm[on].copy(), m.to_mm[on].copy(),
+                        m.feed_mm_min[on].copy())
+    return Run(dict(run.meta), temps, errors, motion, spindle, path=None, name=name)
+
+
 def load_meta(folder):
     path = os.path.join(folder, META)
     problems = _Problems()

@@ -21,8 +21,9 @@ again with disturbed temperatures (robustness). Methods:
 ``maxtree-pcr``    maximal-tree selection, then PCR on the chosen sensors
 ``maxtree-ann``    maximal-tree selection, then the network on them
 ``dynamic``        lag-filtered temperatures and spindle speed / feed, ≤ 5
-                   sensors and the time constants chosen by cross-validation
-                   across cycles or runs (dynamic.py)
+                   sensors, time constants and penalty chosen by
+                   forward-chaining validation over cycles or runs
+                   (dynamic.py, forward.py)
 ``mr-poly``        S004's multiple-regression model (Eq. 12): degree-4
                    polynomial of the nut rise plus the base rise (mrpoly.py)
 =================  ==========================================================
@@ -221,6 +222,9 @@ def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, 
             res["selection"] = info["selection"]
         if "note" in info:
             res["note"] = info["note"]
+        # forward chaining (host/learning/empirical/forward.py): fitted on the blocks before each block of the training data,
+        # scored on that block as its own run; in the model's statistics (dynamic, linear models), else why not
+        res["forward_chaining"] = st.get("forward_chaining") or {"error": "no forward-chaining refit for %s (network, mr-poly)" % method}
         res["coefficients"] = None if model.coefficients is None else dict(zip(model.sensors, model.coefficients.tolist()))
         res["intercept"] = model.intercept
         res["train"] = score_model(model, case.train[0], case.window)

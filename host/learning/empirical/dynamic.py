@@ -15,16 +15,18 @@ an input held constant over each sample interval Δt (zero-order hold):
     y[k] = y[k−1] + (1 − exp(−Δt/τ)) · (u[k−1] − y[k−1])
 
 Structure selection (which signals, which time constants) is a greedy forward
-search with sequential replacement, scored by leave-one-group-out
-cross-validation: groups are the training runs or, for one run, its spindle
-cycles (host/learning/empirical/schedule.py). At each step the candidate term (signal, τ)
-that lowers the CV score most is added while the gain is at least ``min_gain``
-(1 %, relative); after each addition, single exchanges of a chosen term for any
-other are made while they lower the score. At most ``max_sensors`` distinct
-temperature sensors (5) and ``max_terms`` terms (8). The score is the *worst*
-held-out group's RMSE (``cv_score="worst"``; "pooled" is the RMSE over all
-held-out samples): a compensation model has to hold on every operating
-condition, not on average. The time constants come from the grid ``taus_s``, so
+search with sequential replacement, scored by forward-chaining validation
+(``selection="forward"``, the default since issue 21: the groups are time blocks
+in ascending order, block k scored by the fit on blocks < k, the pooled RMSE;
+host/learning/empirical/forward.py) or by leave-one-group-out cross-validation
+(``selection="loo"``: groups are the training runs or, for one run, its spindle
+cycles, host/learning/empirical/schedule.py; the *worst* held-out group's RMSE:
+a compensation model has to hold on every operating condition). At each step the
+candidate term (signal, τ) that lowers the score most is added while the gain is
+at least ``min_gain`` (1 %, relative); after each addition, single exchanges of
+a chosen term for any other are made while they lower the score. At most
+``max_sensors`` distinct temperature sensors (5) and ``max_terms`` terms (8).
+``cv_score`` overrides the score ("worst" or "pooled"). The time constants come from the grid ``taus_s``, so
 "identified" means chosen by cross-validation among them. Coefficients are
 ridge least squares on RMS-scaled terms, the penalty chosen from ``ridge`` by
 the same cross-validation (0 is plain least squares); lag-filtered copies of one
@@ -43,7 +45,19 @@ from models_export.document import FORMAT
 
 # 0 (the signal itself), 15 min .. 16 h: from a sensor's own lag to two 8 h heating/cooling cycles of a machine structure
 TAUS_S = (0.0, 900.0, 1800.0, 3600.0, 7200.0, 14400.0, 28800.0, 57600.0)
-RIDGE = (0.0, 1e-3, 1e-2)  # penalty per sample on RMS-scaled terms, chosen by the same cross-validation
+# penalty per sample on RMS-scaled terms, chosen by the same validation; 0.1 and 1 (issue 21) bound the gains: lagged copies of
+# hot sensors fitted with large cancelling coefficients (33 x lag(T11, 8 h)) extrapolate badly into the next duty cycle
+RIDGE = (0.0, 1e-3, 1e-2, 1e-1, 1.0)
+# how the structure and the penalty are scored: "forward" (default) fits on the blocks before each block and scores that
+# block (host/learning/empirical/forward.py); "loo" leaves each group (run or spindle cycle) out in turn, as before issue 21
+SELECTIONS = ("forward", "loo")
+# forward: the pooled held-out RMSE (the first folds are fitted on little data; the worst fold would be the first one
+# whatever the structure); loo: the worst group, so that a model holds on every operating condition
+DEFAULT_SCORE = {"forward": "pooled", "loo": "worst"}
+MIN_BLOCKS = 3  # forward chaining: at least two scored blocks, so no single period decides the structure
+# a lag is kept as a candidate only when the training span shows its response settle: a first-order lag reaches 98 % of a
+# step after 4 τ, so τ <= span / 4 (docs/empirical.md)
+TAU_MAX_FRACTION = 0.25
 
 
 def lag_filter(time_s, u, tau_s):
@@ -167,8 +181,13 @@ class DynamicRegression:
     (signal, tau_s). Parameters (keyword-only): ``max_sensors`` (distinct
     temperature sensors, default 5), ``max_terms`` (default 8), ``min_gain``
     (relative CV reduction a term must bring, default 0.01), ``cv_score``
-    ("worst" or "pooled"), ``swaps`` (sequential replacement), ``ridge`` (a value
-    or a grid chosen by CV), ``fit_intercept``.
+    ("worst" or "pooled"; None: pooled for forward, worst for loo), ``swaps``
+    (sequential replacement), ``ridge`` (a value or a grid chosen by CV),
+    ``selection`` ("forward": ``groups`` are time blocks in ascending order, each
+    block k >= 1 scored by the fit on blocks < k; "loo": leave each group out),
+    ``fit_intercept``. :meth:`with_block_columns` gives forward blocks their
+    switched-on columns. Also learned: ``fold_rmse_`` and ``fold_labels_`` (the
+    chosen structure's score per scored block or group).
     Learned: ``selected_`` (column indices), ``terms_``, ``coef_``,
     ``intercept_``, ``ridge_``, ``cv_rmse_``, ``cv_by_ridge_``, ``history_``,
     ``rmse_``, ``rsquared_``, ``n_samples_``, ``n_groups_``.
@@ -176,9 +195,12 @@ class DynamicRegression:
 
     method = "dynamic"
 
-    def __init__(self, *, max_sensors=5, max_terms=8, min_gain=0.01, cv_score="worst", swaps=True, ridge=RIDGE, fit_intercept=True):
+    def __init__(self, *, max_sensors=5, max_terms=8, min_gain=0.01, cv_score=None, swaps=True, ridge=RIDGE, selection="forward",
+                 fit_intercept=True):
         self.ridge = ridge
         self.cv_score = cv_score
+        self.selection = selection
+        self.block_columns = None
         self.swaps = swaps
         self.max_sensors = max_sensors
         self.max_terms = max_terms
@@ -192,7 +214,10 @@ class DynamicRegression:
         if names is None or groups is None:
             raise EmpiricalDataError("dynamic: fit needs the candidates' (signal, tau) terms and the cross-validation groups")
         F, terms = X, names
-        if self.cv_score not in ("worst", "pooled"):
+        if self.selection not in SELECTIONS:
+            raise EmpiricalDataError("dynamic: selection must be one of %s, got %r" % (", ".join(SELECTIONS), self.selection))
+        self.cv_score_ = DEFAULT_SCORE[self.selection] if self.cv_score is None else self.cv_score
+        if self.cv_score_ not in ("worst", "pooled"):
             raise EmpiricalDataError("dynamic: cv_score must be 'worst' or 'pooled', got %r" % (self.cv_score,))
         grid = [self.ridge] if np.isscalar(self.ridge) else list(self.ridge)
         if not grid or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 for v in grid):
@@ -206,7 +231,9 @@ class DynamicRegression:
         for k, v in best.items():
             setattr(self, k, v)
         self.cv_by_ridge_ = tried
-        r = y - self.predict(np.asarray(F, dtype=float)[:, self.selected_])
+        self._y = np.asarray(y, dtype=float)
+        self._F_selected = np.asarray(F, dtype=float)[:, self.selected_]
+        r = y - self.predict(self._F_selected)
         self.rmse_ = float(np.sqrt(np.mean(r**2)))
         sst = float(((y - np.mean(y)) ** 2).sum())
         self.rsquared_ = 1.0 - float(r @ r) / sst if sst > 0 else float("nan")
@@ -222,9 +249,16 @@ class DynamicRegression:
         F = np.asarray(F, dtype=float)
         y = np.asarray(y, dtype=float)
         groups = np.asarray(groups)
-        labels = np.unique(groups)
-        if labels.size < 2:
+        labels = np.unique(groups)  # forward: block labels ascend with time (host/learning/empirical/forward.py)
+        forward = self.selection == "forward"
+        if not forward and labels.size < 2:
             raise EmpiricalDataError("dynamic: cross-validation needs at least 2 groups (runs or spindle cycles), got %d" % labels.size)
+        if forward and labels.size < MIN_BLOCKS:
+            raise EmpiricalDataError("dynamic: forward-chaining validation needs at least %d time blocks (runs or spindle cycles; "
+                                     "%d scored), got %d; give forward_blocks=N or selection=loo" % (MIN_BLOCKS, MIN_BLOCKS - 1, labels.size))
+        held_cols = self.block_columns or {}
+        if forward and set(held_cols) - set(labels.tolist()):
+            raise EmpiricalDataError("dynamic: block_columns name blocks %s that are not among the groups" % sorted(set(held_cols) - set(labels.tolist())))
         if not np.isfinite(F).all() or not np.isfinite(y).all():
             raise EmpiricalDataError("dynamic: NaN/inf in the signals or the target")
         o = int(bool(self.fit_intercept))
@@ -238,6 +272,22 @@ class DynamicRegression:
         Gall = sum(g[0] for g in G)
         call = sum(g[1] for g in G)
         n_all = len(y)
+        # folds: (training Gram, training moment, training samples, held-out (Gram, moment, y'y, samples))
+        folds = []
+        if forward:
+            for k in range(1, labels.size):
+                if labels[k] in held_cols:  # the block as a board switched on at its start computes it
+                    Fk, yk = held_cols[labels[k]]
+                    Ak = np.column_stack([np.ones(len(yk)), Fk]) if o else np.asarray(Fk, dtype=float)
+                    Ak = Ak / scale
+                    if not np.isfinite(Ak).all():
+                        raise EmpiricalDataError("dynamic: NaN/inf in the switched-on columns of block %s" % labels[k])
+                    held = (Ak.T @ Ak, Ak.T @ yk, float(yk @ yk), int(len(yk)))
+                else:
+                    held = G[k]
+                folds.append((sum(g[0] for g in G[:k]), sum(g[1] for g in G[:k]), sum(g[3] for g in G[:k]), held))
+        else:
+            folds = [(Gall - Gv, call - cv_, n_all - nv, (Gv, cv_, yy, nv)) for Gv, cv_, yy, nv in G]
 
         def penalty(idx, n):
             # ridge on the scaled terms, never on the intercept
@@ -246,18 +296,25 @@ class DynamicRegression:
                 P[0, 0] = 0.0
             return P
 
-        def cv(cols):
+        def fold_sse(cols):
+            """Held-out squared error of every fold, or None when a training Gram matrix is singular."""
             idx = ([0] if o else []) + [c + o for c in cols]
             sse = []
-            for Gv, cv_, yy, nv in G:
-                M = (Gall - Gv)[np.ix_(idx, idx)] + penalty(idx, n_all - nv)
+            for Gt, ct, nt, (Gv, cv_, yy, nv) in folds:
+                M = Gt[np.ix_(idx, idx)] + penalty(idx, nt)
                 if np.linalg.cond(M) > 1e12:
-                    return np.inf
-                beta = np.linalg.solve(M, (call - cv_)[idx])
+                    return None
+                beta = np.linalg.solve(M, ct[idx])
                 sse.append(max(yy - 2 * beta @ cv_[idx] + beta @ Gv[np.ix_(idx, idx)] @ beta, 0.0))
-            if self.cv_score == "worst":
-                return float(max(np.sqrt(s / g[3]) for s, g in zip(sse, G)))
-            return float(np.sqrt(sum(sse) / n_all))
+            return sse
+
+        def cv(cols):
+            sse = fold_sse(cols)
+            if sse is None:
+                return np.inf
+            if self.cv_score_ == "worst":
+                return float(max(np.sqrt(s / f[3][3]) for s, f in zip(sse, folds)))
+            return float(np.sqrt(sum(sse) / sum(f[3][3] for f in folds)))
 
         def sensor_of(j):
             return terms[j][0][2:] if terms[j][0].startswith("T:") else None
@@ -307,9 +364,32 @@ class DynamicRegression:
             raise EmpiricalDataError("dynamic: no lag-filtered term lowers the cross-validation error by %.0f %%" % (100 * self.min_gain))
         idx = ([0] if o else []) + [c + o for c in selected]
         beta = np.linalg.solve(Gall[np.ix_(idx, idx)] + penalty(idx, n_all), call[idx]) / scale[idx]
-        return {"intercept_": float(beta[0]) if o else 0.0, "coef_": beta[o:], "selected_": selected,
+        sse = fold_sse(selected) or [np.nan] * len(folds)
+        fold_rmse = [float(np.sqrt(s / f[3][3])) for s, f in zip(sse, folds)]
+        return {"intercept_": float(beta[0]) if o else 0.0, "coef_": beta[o:], "selected_": selected, "fold_rmse_": fold_rmse,
+                "scale_": scale[idx], "fold_labels_": labels[1:].tolist() if forward else labels.tolist(),
                 "terms_": [(terms[j][0], float(terms[j][1])) for j in selected], "cv_rmse": current, "cv_rmse_": current,
                 "history_": history, "n_samples_": n_all, "n_groups_": int(labels.size), "ridge_": ridge}
+
+    def with_block_columns(self, columns):
+        """Score forward block ``label`` on ``columns[label] = (F_k, y_k)``: the candidate columns as a board switched on at
+        the block's start computes them (host/learning/empirical/forward.py), instead of the rows of ``X`` (filters
+        running since the run start). Returns self."""
+        self.block_columns = dict(columns)
+        return self
+
+    def coefficients_on(self, rows):
+        """(intercept, coefficients) of the chosen terms refitted on the samples ``rows`` (a mask over the fitted samples)
+        with the chosen penalty and the same column scaling: the fit of one forward-chaining fold."""
+        rows = np.asarray(rows, dtype=bool)
+        o = int(bool(self.fit_intercept))
+        A = self._F_selected[rows]
+        A = (np.column_stack([np.ones(A.shape[0]), A]) if o else A) / self.scale_
+        P = self.ridge_ * int(rows.sum()) * np.eye(A.shape[1])
+        if o:
+            P[0, 0] = 0.0
+        beta = np.linalg.solve(A.T @ A + P, A.T @ self._y[rows]) / self.scale_
+        return (float(beta[0]) if o else 0.0), beta[o:]
 
     def predict(self, F):
         """``F``: the selected terms' signals, one column per ``terms_`` entry."""
@@ -319,7 +399,9 @@ class DynamicRegression:
     def statistics(self):
         return {
             "n_samples": int(self.n_samples_), "r2": finite_or_none(self.rsquared_), "rmse": finite_or_none(self.rmse_), "cv_rmse": finite_or_none(self.cv_rmse_),
-            "cv_groups": self.n_groups_, "cv_score": self.cv_score, "history": self.history_, "ridge": self.ridge_,
+            "cv_groups": self.n_groups_, "cv_score": self.cv_score_, "selection": self.selection, "history": self.history_, "ridge": self.ridge_,
+            "selection_folds": [{"block" if self.selection == "forward" else "group": int(g) if isinstance(g, (int, np.integer)) else g,
+                                 "rmse": finite_or_none(r)} for g, r in zip(self.fold_labels_, self.fold_rmse_)],
             "cv_by_ridge": {str(k): finite_or_none(v) for k, v in self.cv_by_ridge_.items()},
             "terms": [{"signal": n, "tau_s": tau, "coefficient": finite_or_none(c)} for (n, tau), c in zip(self.terms_, self.coef_)],
             "sensors_used": sorted({n[2:] for n, _ in self.terms_ if n.startswith("T:")}),

@@ -118,7 +118,7 @@ def cv_groups(runs, arrays, cv_blocks=None):
 
 def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
               reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
-              cv_blocks=None, exclude=None, geometric_degree=None, **options):
+              cv_blocks=None, exclude=None, geometric_degree=None, forward_chaining=True, **options):
     """Fit ``method`` (an ESTIMATORS name, or dynamic) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).
@@ -134,6 +134,8 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     ``geometric_max_degree`` by ``geometric_criterion``).
     ``method="mr-poly"``: S004's Eq. 12 on the nut and base sensors (roles, or ``nut=``/``base=`` options;
     host/learning/empirical/mrpoly.py).
+    ``forward_chaining``: add ``statistics.forward_chaining`` (host/learning/empirical/forward.py) to linear and dynamic
+    models; its own refits pass False.
     """
     runs = list(runs)
     if not runs:
@@ -155,7 +157,7 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
     X, y = stack(arrays)
     if method == "dynamic":
         model = _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, envelope_margin_K,
-                            (geometric_max_degree, geometric_criterion, geometric_degree), cv_blocks, options, exclude)
+                            (geometric_max_degree, geometric_criterion, geometric_degree), cv_blocks, options, exclude, forward_chaining)
         model.training["error_reference"] = error_reference
         return model
     est = make_estimator(method, fit_intercept=fit_intercept, **options)
@@ -210,6 +212,13 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
         model.geometric_ = geo
     model.estimator_ = est
     model.arrays_ = arrays
+    if forward_chaining and exclude is None and coefs is not None and method != "mr-poly":
+        from host.learning.empirical.forward import linear_forward_chaining
+
+        try:
+            stats["forward_chaining"] = linear_forward_chaining(model, runs, target, channel, fit_intercept, window)
+        except EmpiricalDataError as exc:
+            stats["forward_chaining"] = {"error": str(exc)}
     return model
 
 
@@ -240,9 +249,11 @@ def _sample_interval(runs):
     return float(np.round(np.median(dts) * 1000) / 1000) if dts.size else None
 
 
-def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options, exclude=None):
-    """``method="dynamic"``: lag-filtered signals chosen by cross-validation (host/learning/empirical/dynamic.py)."""
-    from host.learning.empirical.dynamic import TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
+def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options, exclude=None, report_forward=True):
+    """``method="dynamic"``: lag-filtered signals chosen by forward chaining (default) or leave-one-group-out
+    (host/learning/empirical/dynamic.py, forward.py); lags bounded by the training span."""
+    from host.learning.empirical import forward
+    from host.learning.empirical.dynamic import TAU_MAX_FRACTION, TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
 
     opts = dict(options)
     taus = tuple(float(v) for v in opts.pop("taus_s", TAUS_S))
@@ -253,14 +264,53 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     use_observer = opts.pop("observer", True)
     if not isinstance(use_observer, bool):
         raise EmpiricalDataError("dynamic: observer must be true or false, got %r" % (use_observer,))
+    # N equal time blocks of one run: forward_blocks, or cv_blocks (its meaning for the other cross-validated methods)
+    forward_blocks = opts.pop("forward_blocks", None)
+    if forward_blocks is None and opts.get("selection", "forward") == "forward":
+        forward_blocks = cv_blocks
+    forward_state = opts.pop("forward_state", FORWARD_STATE)
+    if forward_state not in FORWARD_STATES:
+        raise EmpiricalDataError("dynamic: forward_state must be one of %s, got %r" % (", ".join(FORWARD_STATES), forward_state))
+    lag_bound = _lag_bound(arrays, opts.pop("tau_max_fraction", TAU_MAX_FRACTION))
+    lag_bound["excluded_taus_s"] = [v for v in taus if v > lag_bound["max_tau_s"]]
+    taus = tuple(v for v in taus if v <= lag_bound["max_tau_s"])
+    if not taus:
+        raise EmpiricalDataError("dynamic: every time constant in taus_s (%s s) exceeds %g s, the longest the training span of %.0f s "
+                                 "can identify (tau_max_fraction=%g); give shorter taus_s or longer training data"
+                                 % ("/".join("%g" % v for v in lag_bound["excluded_taus_s"]), lag_bound["max_tau_s"],
+                                    lag_bound["training_span_s"], lag_bound["fraction"]))
     names = arrays[0].names
     F, terms = candidate_matrix(runs, [a.time_s for a in arrays], names, taus, use_spindle, use_feed)
-    groups = cv_groups(runs, arrays, cv_blocks)
+    selection = opts.get("selection", "forward")
+    labels, blocks, fc_error = None, None, None
     try:
-        est = DynamicRegression(fit_intercept=fit_intercept, **opts).fit(F, y, terms, groups=groups)
+        labels, blocks = forward.forward_blocks(runs, arrays, forward_blocks)
+    except EmpiricalDataError as exc:
+        if selection == "forward":
+            raise EmpiricalDataError("dynamic: %s" % exc)
+        fc_error = str(exc)
+    if selection == "forward":
+        groups = labels
+    else:
+        groups = cv_groups(runs, arrays, cv_blocks)
+    try:
+        est = DynamicRegression(fit_intercept=fit_intercept, **opts)
     except TypeError as exc:
         raise EmpiricalDataError("dynamic: %s" % exc)
+    if selection == "forward" and forward_state == "switched_on" and len(runs) == 1:
+        # score each block on the columns a board switched on at its start computes (several runs: each run already is)
+        held = {}
+        for b in blocks[1:]:
+            rows = labels == b["block"]
+            Fk, _ = candidate_matrix([forward.block_run(runs, b)], [np.concatenate([a.time_s for a in arrays])[rows]], names, taus,
+                                     use_spindle, use_feed)
+            held[b["block"]] = (Fk, y[rows])
+        est.with_block_columns(held)
+    est.fit(F, y, terms, groups=groups)
     stats = est.statistics()
+    stats["lag_bound"] = lag_bound
+    if selection == "forward":
+        stats["forward_state"] = forward_state
     used = [n[2:] for n, _ in est.terms_ if n.startswith("T:")]
     used = list(dict.fromkeys(used))
     start = np.mean([start_temperatures(r, used) for r in runs], axis=0) if used else []
@@ -279,15 +329,51 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     model = DynamicModel(est.terms_, est.coef_, est.intercept_, target, channel, geo.coef_ if geo is not None else (0.0,), "dynamic",
                          runs[0].meta.get("axis"), dict(zip(used, np.atleast_1d(start).tolist())), env, stats, training,
                          _sample_interval(runs))
+    # the observer's tolerance is in um of offset: a slope (um/mm) times the largest training position
+    obs_scale = 1.0 if target == "direct" else float(max(np.nanmax(np.abs(r.errors.position_mm)) for r in runs))
     if use_observer:
         # the lag states estimated from the sensors when a board starts (host/learning/empirical/observer.py),
         # fitted on the training samples only (window, exclude): never on what is held out
         from host.learning.empirical.observer import fit_observer
 
-        # the observer's tolerance is in um of offset: a slope (um/mm) times the largest training position
-        scale = 1.0 if target == "direct" else float(max(np.nanmax(np.abs(r.errors.position_mm)) for r in runs))
-        model.observer = fit_observer(model, runs, spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=scale)
+        model.observer = fit_observer(model, runs, spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=obs_scale)
     model.estimator_ = est
     model.arrays_ = arrays
     model.geometric_ = geo
+    if report_forward and blocks is None:
+        stats["forward_chaining"] = {"error": fc_error}
+    elif report_forward:
+        def refit(k):
+            b0, coef = est.coefficients_on(labels < k)
+            m = DynamicModel(est.terms_, coef, b0, target, channel, model.geometric_coef, "dynamic", model.axis,
+                             reference_C=model.reference_C, training={"error_reference": common_error_reference(runs)})
+            if use_observer:
+                # the board scored on block k starts with an observer fitted on the blocks before it, as the model's own
+                # was on all of them (reference_C: the training runs' start temperatures, as the model's)
+                from host.learning.empirical.observer import fit_observer
+
+                past = [b for b in blocks if b["block"] < k]
+                if len(runs) >= 2:
+                    m.observer = fit_observer(m, runs[:k], exclude=exclude, scale=obs_scale)
+                else:
+                    span = [(min(b["t_start_s"] for b in past), max(b["t_end_s"] for b in past))]
+                    m.observer = fit_observer(m, runs, spans=span, exclude=exclude, scale=obs_scale)
+            return m
+
+        stats["forward_chaining"] = forward.forward_chaining(runs, blocks, refit, target)
+        stats["forward_chaining"]["structure"] = ("terms and penalty as chosen on all training data; coefficients refitted on the "
+                                                  "blocks before each scored block")
     return model
+
+
+FORWARD_STATES = ("switched_on", "continuous")
+FORWARD_STATE = "continuous"  # how the selection scores a block (docs/empirical.md: why not yet switched_on)
+
+
+def _lag_bound(arrays, fraction):
+    """The longest time constant the training data can identify: ``fraction`` x the longest training run's span."""
+    if isinstance(fraction, bool) or not isinstance(fraction, (int, float)) or not 0 < fraction <= 1:
+        raise EmpiricalDataError("dynamic: tau_max_fraction must be a number in (0, 1], got %r" % (fraction,))
+    span = max(float(a.time_s.max() - a.time_s.min()) for a in arrays)
+    return {"fraction": float(fraction), "training_span_s": span, "max_tau_s": float(fraction) * span,
+            "rule": "a lag tau is a candidate only when tau <= fraction x the longest training run's span (4 tau: 98 % of a step response)"}

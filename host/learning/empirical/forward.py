@@ -1,0 +1,159 @@
+"""Forward-chaining validation: fit on the past, score on the next block, for every block.
+
+Leave-one-cycle-out lets a model be fitted on cycles *after* the one it is
+scored on, and scores it with filters that have run since the run's cold start.
+Neither holds on a machine: a model is fitted once, on what has happened, and
+then predicts what comes next, often after the board was switched on on a warm
+machine. Forward chaining measures that:
+
+* the training data are cut into **blocks in time order**: with several
+  training runs, each run is a block (in the order given, which must be time
+  order); with one run, its spindle cycles (host/learning/empirical/schedule.py:
+  each cycle a new duty, the "next regime" a model must predict), a cycle cut
+  to less than a quarter of the longest merged into the one before it; with no
+  spindle log, ``FORWARD_BLOCKS`` (4) equal time blocks; ``forward_blocks=N``
+  asks for N equal time blocks instead. At least ``MIN_BLOCKS`` (3) blocks, so
+  at least two are scored and no single period decides;
+* for every block k >= 1 the model is fitted on blocks 0..k-1 only and scored
+  on block k **as its own run**: :func:`host.data.runs.slice_run` cuts the run
+  at the block's first sample, and the model's ``predict`` is called on that
+  run, i.e. as a board switched on at the block's start computes it (its state
+  and its latched reference start there). That call is the interface to the
+  model's state handling: a model with an observer is scored with it;
+* reported: per block its samples, RMSE, and the same model's RMSE with its
+  filters running since the run start (``continuous_rmse_um``), then the worst
+  block and the pooled RMSE over every scored sample.
+"""
+import numpy as np
+
+from host.data.runs import slice_run
+from host.learning.empirical import EmpiricalDataError
+from host.learning.empirical.schedule import block_labels, cycles
+
+FORWARD_BLOCKS = 4  # equal time blocks of one run without a spindle log
+MIN_BLOCKS = 3  # two scored blocks at least (the same rule as dynamic.py's selection)
+RULE = ("blocks in time order: the training runs (several runs), else the spindle cycles of the run (a cycle under a quarter "
+        "of the longest joins the one before), else %d equal time blocks (forward_blocks=N: N equal time blocks); block k >= 1 "
+        "scored by the model fitted on blocks < k, predicting block k as its own run (a board switched on at its start)" % FORWARD_BLOCKS)
+
+
+def forward_blocks(runs, arrays, forward_blocks=None):
+    """Blocks of the stacked training samples -> (labels (n,) ascending in time, [block dict]).
+
+    Each block: ``{"block": k, "run": i, "t_start_s", "t_end_s"}`` (its first and last target time).
+    """
+    from host.learning.empirical.fitting import merge_small_groups
+
+    runs, arrays = list(runs), list(arrays)
+    if len(arrays) >= 2:
+        if forward_blocks is not None:
+            raise EmpiricalDataError("forward_blocks applies to a single training run; with %d runs each run is a block" % len(arrays))
+        # runs carry no absolute clock: the order given is the time order (documented)
+        labels = np.concatenate([np.full(a.y.size, i) for i, a in enumerate(arrays)])
+    else:
+        t = arrays[0].time_s
+        if forward_blocks is not None:
+            k = forward_blocks
+            if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < MIN_BLOCKS:
+                raise EmpiricalDataError("forward_blocks must be an integer >= %d, got %r" % (MIN_BLOCKS, k))
+            labels = block_labels(t, np.linspace(t.min(), t.max(), int(k) + 1)[1:-1])
+        elif runs[0].spindle is None:
+            labels = block_labels(t, np.linspace(t.min(), t.max(), FORWARD_BLOCKS + 1)[1:-1])
+        else:
+            labels = merge_small_groups(block_labels(t, [c["t_start_s"] for c in cycles(runs[0])[1:]]))
+        labels = np.unique(labels, return_inverse=True)[1].reshape(-1)  # 0..K-1, ascending in time
+    labels = np.asarray(labels, dtype=int)
+    blocks = []
+    offset = 0
+    for i, a in enumerate(arrays):
+        lab = labels[offset:offset + a.y.size]
+        for k in np.unique(lab):
+            tk = a.time_s[lab == k]
+            blocks.append({"block": int(k), "run": i, "t_start_s": float(tk.min()), "t_end_s": float(tk.max())})
+        offset += a.y.size
+    if len(blocks) < MIN_BLOCKS:
+        raise EmpiricalDataError("forward-chaining validation needs at least %d time blocks (%d scored), got %d (%s); give "
+                                 "forward_blocks=N for one run, or more runs" % (MIN_BLOCKS, MIN_BLOCKS - 1, len(blocks), RULE))
+    return labels, blocks
+
+
+def folds(labels):
+    """[(k, training mask, scored mask)] for every block k >= 1: training = blocks before k, scored = block k."""
+    labels = np.asarray(labels)
+    return [(int(k), labels < k, labels == k) for k in np.unique(labels)[1:]]
+
+
+def block_run(runs, block):
+    """Block ``block`` of the training runs as its own run: from its first target time's temperature sample to its
+    last target time (a whole run when the runs are the blocks)."""
+    run = runs[block["run"]]
+    if len(runs) >= 2:
+        return run
+    tt = np.asarray(run.temperatures.time_s, dtype=float)
+    i0 = max(int(np.searchsorted(tt, block["t_start_s"], side="right")) - 1, 0)
+    i1 = int(np.searchsorted(tt, block["t_end_s"], side="left"))  # the first sample at or after the last target time
+    end = None if i1 + 1 >= tt.size else float(tt[i1 + 1])
+    try:
+        return slice_run(run, float(tt[i0]), end)
+    except ValueError as exc:
+        raise EmpiricalDataError(str(exc))
+
+
+def block_residuals(model, run, block):
+    """(measured, predicted) of ``model.predict(run)`` over the rows of ``run`` inside ``block``'s time span."""
+    pred = model.predict(run)
+    rows = model._rows(run)
+    t = run.errors.time_s[rows]
+    rows = rows[(t >= block["t_start_s"]) & (t <= block["t_end_s"])]
+    rows = rows[np.isfinite(pred[rows])]
+    if not rows.size:
+        raise EmpiricalDataError("%s: no prediction in block %d" % (run.name, block["block"]))
+    return run.errors.error_um[rows], pred[rows]
+
+
+def forward_chaining(runs, blocks, refit, target="direct"):
+    """Score ``refit(k)`` (a model fitted on blocks < k) on every block k >= 1 -> the ``forward_chaining`` statistics.
+
+    The model predicts block k as its own run (:func:`block_run`) and, for comparison, with its filters running since
+    the start of the block's training run (``continuous_rmse_um``). For slope targets the score is on the whole error
+    (geometric + thermal, as ``comprehensive`` in scoring.py): a block has no cold sweep of its own.
+    """
+    out, sq, n_all = [], 0.0, 0
+    for b in blocks:
+        if b["block"] == 0:
+            continue
+        model = refit(b["block"])
+        m, p = block_residuals(model, block_run(runs, b), b)
+        mc, pc = block_residuals(model, runs[b["run"]], b)
+        r = m - p
+        out.append({"block": b["block"], "run": b["run"], "t_start_s": b["t_start_s"], "t_end_s": b["t_end_s"], "n": int(r.size),
+                    "rmse_um": float(np.sqrt(np.mean(r ** 2))), "continuous_rmse_um": float(np.sqrt(np.mean((mc - pc) ** 2))),
+                    "rms_measured_um": float(np.sqrt(np.mean(m ** 2)))})
+        sq += float(r @ r)
+        n_all += r.size
+    return {"rule": RULE, "score": "whole error (slope: geometric + thermal)" if target == "slope" else "error of the channel",
+            "blocks": len(blocks), "scored": out, "rmse_um": [f["rmse_um"] for f in out],
+            "worst_um": max(f["rmse_um"] for f in out), "pooled_um": float(np.sqrt(sq / n_all))}
+
+
+def linear_forward_chaining(model, runs, target="slope", channel=None, fit_intercept=True, window=None):
+    """``forward_chaining`` statistics of a static linear model: MLR on the model's own sensors refitted on the blocks
+    before each scored block (the document contract: temperatures over the fixed reference, so a board switched on at
+    a block's start predicts as one that never stopped). Its sensor choice was made on all training data."""
+    from host.learning.empirical.fitting import fit_model
+    from host.learning.empirical.targets import training_arrays
+
+    runs = list(runs)
+    arrays = training_arrays(runs, target, channel, list(model.sensors), window=window)
+    labels, blocks = forward_blocks(runs, arrays)
+    start = {b["block"]: b["t_start_s"] for b in blocks}
+    lo = None if window is None else window[0]
+
+    def refit(k):
+        if len(runs) >= 2:
+            return fit_model(runs[:k], "mlr", target, channel, list(model.sensors), fit_intercept, forward_chaining=False)
+        return fit_model(runs, "mlr", target, channel, list(model.sensors), fit_intercept, window=(lo, start[k]), forward_chaining=False)
+
+    out = forward_chaining(runs, blocks, refit, target)
+    out["structure"] = "the method's sensors as chosen on all training data; MLR on them refitted on the blocks before each scored block"
+    return out

@@ -1,0 +1,136 @@
+"""Forward-chaining validation (issue 21): blocks in time order, folds that never see the scored block, the switched-on
+score equal to the model's own predict, the statistics in fit/compare JSON, the lag bound, and run slicing."""
+import json
+
+import numpy as np
+import pytest
+
+from host.cli import main
+from host.data.runs import Errors, slice_run, write_run
+from host.learning.empirical import EmpiricalDataError
+from host.learning.empirical.dynamic import DynamicRegression, lag_filter, signals
+from host.learning.empirical.fitting import fit_model
+from host.learning.empirical.forward import block_run, folds, forward_blocks
+from host.learning.empirical.targets import training_arrays
+
+TAUS = (0.0, 1800.0, 3600.0)
+
+
+def _lagged_run(make_direct):
+    """ch1 = 3·lag(t1 rise, 1 h) + 2·lag(krpm, 30 min) + noise, five spindle cycles of 2 h."""
+    run = make_direct(spindle=True, n_sensors=3, channels=("ch1",))
+    t, sig = signals(run, ["t1"])
+    y = 3 * lag_filter(t, sig["T:t1"], 3600) + 2 * lag_filter(t, sig["spindle_krpm"], 1800)
+    y = y + np.random.default_rng(1).normal(0, 0.02, t.size)
+    run.errors = Errors(t.copy(), np.zeros(t.size), y, None, np.array(["ch1"] * t.size, dtype=object))
+    return run
+
+
+def test_blocks_are_the_cycles_in_time_order_and_folds_train_on_the_past_only(make_direct):
+    run = _lagged_run(make_direct)
+    arrays = training_arrays([run], "direct", "ch1")
+    labels, blocks = forward_blocks([run], arrays)
+    t = arrays[0].time_s
+    assert [b["block"] for b in blocks] == list(range(5))  # five spindle cycles
+    assert all(a["t_end_s"] < b["t_start_s"] for a, b in zip(blocks, blocks[1:]))
+    assert np.all(np.diff(labels) >= 0)  # labels ascend with time
+    fs = folds(labels)
+    assert [k for k, _, _ in fs] == [1, 2, 3, 4]
+    for k, train, scored in fs:
+        assert train.any() and scored.any() and not (train & scored).any()
+        assert t[train].max() < t[scored].min()  # the fit never sees the scored block, nor anything after it
+    # N equal time blocks on request; too few blocks are refused, naming the rule
+    labels4, _ = forward_blocks([run], arrays, forward_blocks=4)
+    assert np.unique(labels4).tolist() == [0, 1, 2, 3]
+    with pytest.raises(EmpiricalDataError, match="forward_blocks must be an integer >= 3"):
+        forward_blocks([run], arrays, forward_blocks=2)
+
+
+def test_a_relation_that_changes_in_the_last_block_is_scored_as_unpredictable():
+    """y = u in the first blocks and −u in the last: a fold fitted on the past predicts +u there (RMSE 2·rms(u)).
+    A leaky split whose training includes the scored block would fit part of the sign change and score lower."""
+    rng = np.random.default_rng(3)
+    n = 400
+    u = np.sin(np.arange(n) / 7.0) + 0.1 * rng.normal(size=n)
+    blocks = np.repeat(np.arange(4), n // 4)
+    y = np.where(blocks == 3, -u, u)
+    est = DynamicRegression(min_gain=0.0, max_terms=1, ridge=0.0, fit_intercept=False).fit(u[:, None], y, [("T:a", 0.0)], blocks)
+    assert est.fold_labels_ == [1, 2, 3]
+    last = blocks == 3
+    assert est.fold_rmse_[-1] == pytest.approx(2 * np.sqrt(np.mean(u[last] ** 2)), rel=1e-9)
+    assert est.fold_rmse_[0] == pytest.approx(0.0, abs=1e-9)
+    # the assertion discriminates: a fit that had seen the last block would score it lower
+    b_leaky = float(u @ y) / float(u @ u)
+    assert np.sqrt(np.mean((y[last] - b_leaky * u[last]) ** 2)) < 0.9 * est.fold_rmse_[-1]
+    # leave-one-out fits the first group on the later ones, the changed last block among them: it sees the future
+    loo = DynamicRegression(min_gain=0.0, max_terms=1, ridge=0.0, fit_intercept=False, selection="loo").fit(u[:, None], y, [("T:a", 0.0)], blocks)
+    assert loo.fold_rmse_[0] > 0.2
+
+
+def test_switched_on_selection_scores_blocks_as_the_models_own_predict_does(make_direct):
+    """The selection's switched-on columns are the ones predict computes on the block as its own run: the score the
+    structure was chosen by equals the reported forward-chaining score from predict, block by block. When the model's
+    state handling at switch-on changes (an observer), this fails until the selection's columns follow it."""
+    run = _lagged_run(make_direct)
+    model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, forward_state="switched_on")
+    st = model.statistics
+    assert st["selection"] == "forward" and st["forward_state"] == "switched_on"
+    fc = st["forward_chaining"]
+    assert [f["block"] for f in fc["scored"]] == model.estimator_.fold_labels_ == [1, 2, 3, 4]
+    np.testing.assert_allclose(model.estimator_.fold_rmse_, fc["rmse_um"], rtol=1e-8)
+    # the block run starts at the block: its filters and rises start there, unlike the continuous run's
+    b = {"block": 2, "run": 0, "t_start_s": 14400.0, "t_end_s": 21540.0}
+    cut = block_run([run], b)
+    assert cut.temperatures.time_s[0] == 14400.0 and cut.temperatures.time_s[-1] >= 21540.0
+    assert all(f["rmse_um"] != f["continuous_rmse_um"] for f in fc["scored"])
+
+
+def test_forward_chaining_statistics_in_fit_and_compare_json(make_direct, tmp_path):
+    folder = write_run(_lagged_run(make_direct), str(tmp_path / "run"))
+    out = str(tmp_path / "dyn.json")
+    assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "taus_s=0/1800/3600"]) == 0
+    fc = json.loads(open(out).read())["statistics"]["forward_chaining"]
+    assert fc["blocks"] == 5 and len(fc["rmse_um"]) == 4 and fc["worst_um"] == max(fc["rmse_um"])
+    n = [f["n"] for f in fc["scored"]]
+    assert fc["pooled_um"] == pytest.approx(np.sqrt(sum(k * r ** 2 for k, r in zip(n, fc["rmse_um"])) / sum(n)))
+    assert "switched on" in fc["rule"]
+    mlr = str(tmp_path / "mlr.json")
+    assert main(["fit", "--model", "mlr", "--direct", "--channel", "ch1", folder, "--out", mlr]) == 0
+    assert len(json.loads(open(mlr).read())["statistics"]["forward_chaining"]["rmse_um"]) == 4
+    cmp = str(tmp_path / "cmp.json")
+    assert main(["compare", folder, "--split-h", "8.5", "--direct", "--channel", "ch1", "--methods", "mlr,dynamic", "--repeats", "1",
+                 "--option", "dynamic.taus_s=[0,1800,3600]", "--json", cmp]) == 0
+    res = {r["method"]: r for r in json.loads(open(cmp).read())["results"]}
+    for m in ("mlr", "dynamic"):
+        # t < 8.5 h: five cycle starts, the last 20 min joined to the cycle before (under a quarter of the longest)
+        assert len(res[m]["forward_chaining"]["rmse_um"]) == 3, m
+
+
+def test_lags_beyond_a_quarter_of_the_training_span_are_excluded(make_direct):
+    run = _lagged_run(make_direct)  # 10 h: lags up to 2.5 h
+    model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 3600, 14400, 28800))
+    lb = model.statistics["lag_bound"]
+    assert lb["max_tau_s"] == pytest.approx(0.25 * (run.errors.time_s.max() - run.errors.time_s.min()))
+    assert lb["excluded_taus_s"] == [14400.0, 28800.0]
+    assert all(tau <= lb["max_tau_s"] for _, tau in model.terms)
+    assert model.training["taus_s"] == [0.0, 3600.0]
+    with pytest.raises(EmpiricalDataError, match="exceeds .* the longest the training span"):
+        fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(14400,))
+    # a larger fraction admits the 4 h lag, and says so
+    wide = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 3600, 14400), tau_max_fraction=0.5)
+    assert wide.statistics["lag_bound"]["excluded_taus_s"] == [] and 14400.0 in wide.training["taus_s"]
+
+
+def test_slice_run_is_a_board_switched_on_at_the_cut(make_direct):
+    run = _lagged_run(make_direct)
+    cut = slice_run(run, 7230.0, 14400.0)
+    assert cut.temperatures.time_s[0] == 7260.0 and cut.temperatures.time_s[-1] == 14340.0  # 60 s samples at or after the cut
+    assert cut.errors.time_s[0] == 7260.0
+    rows = (run.errors.time_s >= 7260.0) & (run.errors.time_s < 14400.0)
+    np.testing.assert_array_equal(cut.errors.error_um, run.errors.error_um[rows])  # errors keep the run's reference
+    # the spindle speed in force at the cut (2000 rpm from 7800 s; at 7260 s it stands) and every change inside
+    assert cut.spindle.time_s[0] == 7260.0 and cut.spindle.rpm[0] == 0.0
+    late = slice_run(run, 8000.0)
+    assert late.spindle.rpm[0] == 2000.0 and late.spindle.time_s[0] == 8040.0
+    with pytest.raises(ValueError, match="at least 2"):
+        slice_run(run, 35990.0)

@@ -1,0 +1,151 @@
+"""Held-out figures of issue 21 on FL_THERMAL: the dynamic model fitted with `tcomp fit` defaults, predicting the future.
+
+    .venv/bin/python tools/results_forward.py [--run data/fl_thermal] [--split-h 32.129 --split-h 24.129]
+        [--channels ch1,...] [--option KEY=VALUE ...] [--loco] [--json OUT]
+
+For each split and channel, every model is fitted on t < split with the defaults
+of `tcomp fit` (no setting tuned to the split; ``--option`` passes dynamic
+settings, to measure a variant), and scored on t >= split. Printed, as a
+Markdown table, the held-out RMSE and its ratio to MLR-16 (plain MLR on all 16
+temperatures) for:
+
+(a) the dynamic model switched on at the split: its ``predict`` on the run cut
+    at the split (host/data/runs.py slice_run), a board with no history. This
+    figure changes when the model's state handling (issue 21's observer) changes:
+    re-run the script after merging it;
+(b) the same model with its filters running since 0 h (``predict`` on the whole
+    run, scored after the split);
+(c) the best static model with <= 5 sensors among cv-subset and stepwise (picked
+    on the held-out part, as in the issue's table: an upper bound of what a
+    user's choice gets), switched on at the split (a fixed temperature
+    reference, so (a) and (b) are the same for it);
+
+and, with ``--loco``, the leave-one-cycle-out ratios (every choice made inside
+each fold) of cv-subset and the dynamic model. Every number printed comes from
+this run of the script.
+"""
+import argparse
+import json
+import os
+import sys
+import time
+
+import numpy as np
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+sys.path.insert(0, ROOT)
+
+from host.data.runs import load_run, slice_run  # noqa: E402
+from host.learning.empirical.compare import leave_one_cycle_out  # noqa: E402
+from host.learning.empirical.fitting import fit_model  # noqa: E402
+from host.learning.empirical.forward import block_residuals  # noqa: E402
+
+STATIC = ("cv-subset", "stepwise")
+
+
+def _rmse(pair):
+    m, p = pair
+    return float(np.sqrt(np.mean((m - p) ** 2)))
+
+
+def held_out(run, split_s, channel, dyn_options):
+    """{figure: RMSE µm} of one channel on t >= split_s, and the fitted models' descriptions."""
+    block = {"block": 1, "run": 0, "t_start_s": split_s, "t_end_s": float(run.errors.time_s.max())}
+    cut = slice_run(run, split_s)
+    out, info = {}, {}
+    mlr = fit_model([run], "mlr", "direct", channel, window=(None, split_s), reference="fixed")
+    out["mlr16"] = _rmse(block_residuals(mlr, run, block))
+    t0 = time.perf_counter()
+    dyn = fit_model([run], "dynamic", "direct", channel, window=(None, split_s), **dyn_options)
+    info["dynamic_fit_s"] = time.perf_counter() - t0
+    out["dynamic_switched_on"] = _rmse(block_residuals(dyn, cut, block))
+    out["dynamic_continuous"] = _rmse(block_residuals(dyn, run, block))
+    st = dyn.statistics
+    info["dynamic_terms"] = [[n, tau, float(c)] for (n, tau), c in zip(dyn.terms, dyn.term_coefficients)]
+    info["dynamic_sensors"] = list(dyn.sensors)
+    info["dynamic_ridge"] = st.get("ridge")
+    info["forward_chaining_pooled_um"] = st["forward_chaining"].get("pooled_um")
+    best = None
+    for m in STATIC:
+        try:
+            s = fit_model([run], m, "direct", channel, window=(None, split_s), reference="fixed")
+        except Exception as exc:  # a method that fails on this split is reported, not hidden
+            info["%s_error" % m] = str(exc)
+            continue
+        if len(s.sensors) > 5:
+            continue
+        r = _rmse(block_residuals(s, cut, block))
+        if best is None or r < best[0]:
+            best = (r, m, list(s.sensors))
+    if best:
+        out["static_le5"] = best[0]
+        info["static_le5"] = {"method": best[1], "sensors": best[2]}
+    return out, info
+
+
+def main(argv=None):
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--run", default=os.path.join(ROOT, "data", "fl_thermal"))
+    ap.add_argument("--split-h", type=float, action="append", help="split times in hours (default 32.129 and 24.129: cycle starts)")
+    ap.add_argument("--channels", default="ch1,ch2,ch3,ch4,ch5")
+    ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", help="a dynamic setting (JSON value), e.g. selection=\"loo\"")
+    ap.add_argument("--loco", action="store_true", help="also leave-one-cycle-out (5 channels x 6 folds: about 20 min more on the loaded 2-core machine)")
+    ap.add_argument("--json", help="write every figure as JSON")
+    args = ap.parse_args(argv)
+    opts = {}
+    for item in args.option:
+        k, _, v = item.partition("=")
+        try:
+            opts[k] = json.loads(v)
+        except json.JSONDecodeError:
+            opts[k] = v
+    run = load_run(args.run)
+    channels = args.channels.split(",")
+    splits = args.split_h or [32.129166666666666, 24.129166666666666]
+    report = {"run": args.run, "dynamic_options": opts, "splits": {}}
+    for h in splits:
+        split_s = round(h * 3600 / 15) * 15.0  # on the 15 s sample grid
+        rows = {}
+        for ch in channels:
+            rows[ch] = held_out(run, split_s, ch, opts)
+            print("split %.2f h %s done" % (h, ch), file=sys.stderr, flush=True)
+        report["splits"]["%.2f" % h] = rows
+        print("\nSplit at %.2f h (fit on t < %.2f h, score t >= %.2f h); dynamic settings: %s\n" % (h, h, h, opts or "tcomp fit defaults"))
+        print("| figure | %s |" % " | ".join(channels))
+        print("|---|%s" % ("---|" * len(channels)))
+        print("| MLR-16 held-out RMSE µm | %s |" % " | ".join("%.2f" % rows[c][0]["mlr16"] for c in channels))
+        for key, label in (("dynamic_switched_on", "(a) dynamic, switched on at the split"), ("dynamic_continuous", "(b) dynamic, filters since 0 h"),
+                           ("static_le5", "(c) best static ≤ 5 sensors")):
+            print("| %s, ratio to MLR-16 | %s |" % (label, " | ".join(
+                "%.2f (%.2f µm)" % (rows[c][0][key] / rows[c][0]["mlr16"], rows[c][0][key]) if key in rows[c][0] else "–" for c in channels)))
+        print("\n| channel | dynamic terms (signal, τ s, coefficient) | ridge | static ≤ 5 |")
+        print("|---|---|---|---|")
+        for c in channels:
+            i = rows[c][1]
+            print("| %s | %s | %s | %s |" % (c, ", ".join("%s %g s %.3g" % tuple(t) for t in i["dynamic_terms"]), i["dynamic_ridge"],
+                                             "%s: %s" % (i["static_le5"]["method"], ", ".join(i["static_le5"]["sensors"])) if "static_le5" in i else "–"))
+    if args.loco:
+        loco = {}
+        for ch in channels:
+            loco[ch] = leave_one_cycle_out(run, ch, methods=("mlr", "cv-subset", "dynamic"), options={"dynamic": opts})
+            print("leave-one-cycle-out %s done" % ch, file=sys.stderr, flush=True)
+        report["leave_one_cycle_out"] = {ch: {"ratio_to_mlr": v["ratio_to_mlr"], "rmse_um": {m: r["rmse_um"] for m, r in v["methods"].items()}}
+                                         for ch, v in loco.items()}
+        print("\nLeave-one-cycle-out (6 cycles), pooled held-out RMSE ratio to MLR-16\n")
+        print("| method | %s |" % " | ".join(channels))
+        print("|---|%s" % ("---|" * len(channels)))
+        for m in ("cv-subset", "dynamic"):
+            print("| %s | %s |" % (m, " | ".join("%.2f" % loco[c]["ratio_to_mlr"][m] for c in channels)))
+    if args.json:
+        from host.outputs import Outputs
+
+        with Outputs([args.run]) as out:
+            out.file(args.json, "--json")
+            with out.open(args.json) as fh:
+                json.dump(report, fh, indent=1)
+            out.commit()
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
