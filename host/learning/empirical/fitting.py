@@ -297,6 +297,12 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         est = DynamicRegression(fit_intercept=fit_intercept, **opts)
     except TypeError as exc:
         raise EmpiricalDataError("dynamic: %s" % exc)
+    if forward_state == "switched_on" and use_observer:
+        # the switched-on columns start each candidate filter from rest at the block, as a board without observer does;
+        # the observer's start (fitted per fold and per candidate term) is not modelled in the selection yet
+        raise EmpiricalDataError("dynamic: forward_state=switched_on scores each block with filters started from rest, but this "
+                                 "model's board starts them at its observer's estimate; give observer=false with it, or "
+                                 "forward_state=continuous (the default)")
     if selection == "forward" and forward_state == "switched_on" and len(runs) == 1:
         # score each block on the columns a board switched on at its start computes (several runs: each run already is)
         held = {}

@@ -70,9 +70,12 @@ def test_a_relation_that_changes_in_the_last_block_is_scored_as_unpredictable():
 def test_switched_on_selection_scores_blocks_as_the_models_own_predict_does(make_direct):
     """The selection's switched-on columns are the ones predict computes on the block as its own run: the score the
     structure was chosen by equals the reported forward-chaining score from predict, block by block. When the model's
-    state handling at switch-on changes (an observer), this fails until the selection's columns follow it."""
+    state handling at switch-on changes (an observer), this fails until the selection's columns follow it: with the
+    observer (issue 21) switched_on is refused until they do, and checked here without it."""
     run = _lagged_run(make_direct)
-    model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, forward_state="switched_on")
+    with pytest.raises(EmpiricalDataError, match="observer=false"):  # the selection does not model the observer's start
+        fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, forward_state="switched_on")
+    model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, forward_state="switched_on", observer=False)
     st = model.statistics
     assert st["selection"] == "forward" and st["forward_state"] == "switched_on"
     fc = st["forward_chaining"]

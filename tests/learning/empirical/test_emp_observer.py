@@ -48,8 +48,11 @@ def _machine(hours=20.0):
 @pytest.fixture(scope="module")
 def machine_and_model():
     run = _machine()
+    # the structure chosen by leave-one-cycle-out, as when these checks were written: they test the observer's
+    # estimate for a given structure (forward-chaining selection picks another here, on which the warm start at 2.5 h
+    # is 4.4 um off against 3.0 um from rest: recorded in docs/empirical.md)
     model = fit_model([run], "dynamic", target="direct", channel="ch1", window=(None, 16 * 3600.0),
-                      taus_s=(0, 1800, 3600, 7200), max_terms=4)
+                      taus_s=(0, 1800, 3600, 7200), max_terms=4, selection="loo")
     return run, model
 
 
@@ -59,7 +62,7 @@ def test_a_cold_start_at_the_reference_is_the_start_from_rest(machine_and_model)
     states = model.observer.initial_states({"T:t1": 0.0, "T:t2": 0.0, "spindle_krpm": 0.0, "spindle_krpm2": 0.0})
     assert states and all(v == 0.0 for v in states.values())
     plain = fit_model([run], "dynamic", target="direct", channel="ch1", window=(None, 16 * 3600.0),
-                      taus_s=(0, 1800, 3600, 7200), max_terms=4, observer=False)
+                      taus_s=(0, 1800, 3600, 7200), max_terms=4, selection="loo", observer=False)
     assert plain.observer is None and plain.terms == model.terms
     np.testing.assert_allclose(model.predict(run), plain.predict(run), atol=1e-9)
 
