@@ -20,7 +20,7 @@ import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.data.runs import load_run, time_slice
+from host.data.runs import load_run, slice_run
 from host.learning.empirical.fitting import fit_model
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -49,7 +49,7 @@ def restart_figures(model, run, reset_s, scale):
     """Deviation (um) of a board reset at reset_s from the uninterrupted one, observer on and off."""
     t = run.temperatures.time_s
     times = t[t >= reset_s]
-    warm = time_slice(run, reset_s)
+    warm = slice_run(run, reset_s)
     full = model.thermal_at(run, times) * scale
     out = {}
     for name, m in (("on", model), ("off", without_observer(model))):
@@ -83,8 +83,8 @@ def main():
     t0 = time.perf_counter()
     run = load_run(os.path.join(ROOT, "data", "fl_thermal"))
     split = SPLIT_H * 3600.0
-    held = time_slice(run, split)
-    before = time_slice(run, 0.0, split)
+    held = slice_run(run, split)
+    before = slice_run(run, 0.0, split)
     models = {}
     print("FL_THERMAL, fit t < %.2f h (tcomp fit defaults), held out t >= %.2f h: RMSE um (ratio to MLR-16)" % (SPLIT_H, SPLIT_H))
     print("%4s %8s | %-22s | %-22s | %-22s | %s" % ("ch", "MLR-16", "switched on, observer", "switched on, no observer",

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from host.cli import main
-from host.data.runs import Errors, Run, Spindle, Temperatures, time_slice, write_run
+from host.data.runs import Errors, Run, Spindle, Temperatures, slice_run, write_run
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.fitting import fit_model
 from host.learning.empirical.observer import settle_time, start_error_bound
@@ -72,7 +72,7 @@ def test_a_board_switched_on_warm_starts_near_the_uninterrupted_state(machine_an
     truth = run.errors.error_um
     for hours in (2.5, 6.0, 10.5, 13.0):  # running, stopped, running, stopped: all inside the training span
         k = int(hours * 3600 / DT)
-        warm = time_slice(run, hours * 3600.0)
+        warm = slice_run(run, hours * 3600.0)
         uninterrupted = model.predict(run)[k:]
         observed = model.predict(warm)
         # the observer's start error is within the bound it records (its largest training residual per state)
@@ -90,12 +90,12 @@ def test_a_board_switched_on_warm_starts_near_the_uninterrupted_state(machine_an
 def test_history_carries_the_states_as_an_uninterrupted_board(machine_and_model, tmp_path):
     run, model = machine_and_model
     split = 13 * 3600.0
-    before, after = time_slice(run, 0.0, split), time_slice(run, split)
+    before, after = slice_run(run, 0.0, split), slice_run(run, split)
     k = int(split / DT)
     np.testing.assert_allclose(model.predict(after, history=before), model.predict(run)[k:], atol=1e-9)
     # a history that does not end before the run starts is refused, naming both
-    with pytest.raises(EmpiricalDataError, match=r"ends at 46800 s, after .* starts at 43200 s"):
-        model.predict(time_slice(run, 12 * 3600.0), history=before)
+    with pytest.raises(EmpiricalDataError, match=r"ends at 46740 s, after .* starts at 43200 s"):
+        model.predict(slice_run(run, 12 * 3600.0), history=before)
     # the command line: --history gives the uninterrupted board's predictions; a late history exits 2
     doc = str(tmp_path / "dyn.json")
     with open(doc, "w") as fh:
@@ -133,7 +133,7 @@ def test_settle_time_is_where_the_start_error_bound_meets_the_tolerance(machine_
 def test_history_is_refused_where_no_state_can_be_carried(machine_and_model, tmp_path):
     run, model = machine_and_model
     split = 13 * 3600.0
-    a, b = write_run(time_slice(run, 0.0, split), str(tmp_path / "a")), write_run(time_slice(run, split), str(tmp_path / "b"))
+    a, b = write_run(slice_run(run, 0.0, split), str(tmp_path / "a")), write_run(slice_run(run, split), str(tmp_path / "b"))
     mlr = str(tmp_path / "mlr.json")
     assert main(["fit", "--model", "mlr", "--direct", "--channel", "ch1", a, "--out", mlr]) == 0
     assert main(["predict", mlr, b, "--history", a, "--out", str(tmp_path / "p.csv")]) == 2
@@ -143,4 +143,4 @@ def test_history_is_refused_where_no_state_can_be_carried(machine_and_model, tmp
     doc["thermal"]["reference"] = "run_start"
     plain = type(model).from_document(doc)
     with pytest.raises(EmpiricalDataError, match="no observer"):
-        plain.predict(time_slice(run, split), history=time_slice(run, 0.0, split))
+        plain.predict(slice_run(run, split), history=slice_run(run, 0.0, split))
