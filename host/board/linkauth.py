@@ -23,6 +23,10 @@ uploads a table)::
 Key file: the 32-byte key as 64 hex digits and a newline, mode 0600,
 created by `tcomp flash --key FILE` when FILE does not exist.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
 import binascii
 import hashlib
 import hmac
@@ -55,7 +59,7 @@ def generate_key():
     return os.urandom(KEY_BYTES)
 
 
-def read_key(path):
+def read_key(path: str) -> bytes:
     """The key in ``path`` (64 hex digits); KeyFileError naming the file otherwise."""
     try:
         with open(path, "rb") as f:
@@ -71,7 +75,7 @@ def read_key(path):
     return key
 
 
-def signer_for_option(path, flag="--key"):
+def signer_for_option(path: str | None, flag: str = "--key") -> LinkSigner | None:
     """The LinkSigner of a verb's ``--key FILE`` (None without one); a bad file is a UserError naming it."""
     if not path:
         return None
@@ -82,7 +86,7 @@ def signer_for_option(path, flag="--key"):
         raise UserError("%s %s" % (flag, exc))
 
 
-def write_key(path, key):
+def write_key(path: str, key: bytes) -> None:
     """Create ``path`` holding ``key`` (mode 0600); an existing file is never replaced."""
     tmp = "%s.tmp-%d" % (path, os.getpid())
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
@@ -94,7 +98,7 @@ def write_key(path, key):
         os.unlink(tmp)
 
 
-def stream_line(fields):
+def stream_line(fields: Sequence[bytes | str | int]) -> bytes:
     """``$TC,<fields>*CRC\\r\\n`` (host/board/link.py's codec)."""
     return command_line(*fields)
 
@@ -109,7 +113,7 @@ class LinkSigner:
         self.counter = counter
         self.nonce = nonce  # the board's session nonce (4 bytes), from its hello or Modbus IR 51-52
 
-    def __repr__(self):  # never the key
+    def __repr__(self) -> str:  # never the key
         return "LinkSigner(counter=%d)" % self.counter
 
     def observe(self, counter, nonce=None):
@@ -150,7 +154,7 @@ class LinkSigner:
                                "protocol (docs/protocol.md)" % len(fields))
         self.observe(fields[HELLO_COUNTER], fields[HELLO_NONCE])
 
-    def next_counter(self):
+    def next_counter(self) -> int:
         if self.counter >= MAX_COUNTER:
             raise CounterError("the board's counter reached %d, the largest: provision a new key "
                                "(tcomp flash --key NEWFILE, docs/protocol.md)" % MAX_COUNTER)
@@ -189,7 +193,7 @@ class LinkSigner:
         out.append(self.stream_line("U", "C", extra=hashlib.sha256(table).digest(), bound=upload_id))
         return out
 
-    def modbus_auth(self, address, start, values):
+    def modbus_auth(self, address: int, start: int, values: Sequence[int]) -> list[int]:
         """Holding registers 8..17 (counter high/low word, 8 tag words) authorising the next write
         of ``values`` to holding registers ``start``.. at slave ``address``."""
         prefix = self._prefix()

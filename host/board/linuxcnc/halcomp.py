@@ -4,6 +4,12 @@ Only this module imports LinuxCNC's ``hal`` (Debian linuxcnc-uspace puts it in
 /usr/lib/python3/dist-packages; ``make setup`` links it into the venv).
 Pins (prefix = component name, default ``tcomp``) are listed in PINS and in docs/linuxcnc.md.
 """
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import Any
+from typing import TYPE_CHECKING
 import sys
 
 from host.board.linuxcnc.bridge import Inputs, run_loop
@@ -31,7 +37,7 @@ PINS = (
 )
 
 
-def import_hal():
+def import_hal() -> ModuleType:
     try:
         import hal
     except ImportError as exc:
@@ -40,7 +46,7 @@ def import_hal():
     return hal
 
 
-def component(name):
+def component(name: str) -> Any:
     hal = import_hal()
     comp = hal.component(name)
     for pin, typ, direction, _ in PINS:
@@ -48,7 +54,7 @@ def component(name):
     return comp
 
 
-def serve(comp, bridge, period_s):
+def serve(comp: Any, bridge: Bridge, period_s: float) -> None:
     """Run until HAL unloads the component (KeyboardInterrupt) or SIGTERM."""
     ins = [(p, a) for p, _, d, a in PINS if d == "IN"]
     outs = [(p, a) for p, _, d, a in PINS if d == "OUT"]
