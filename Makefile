@@ -103,6 +103,7 @@ lint: setup
 # the firmware against MicroPython's stubs; host/ and models_export/ against their type hints (pyrightconfig.json)
 typecheck: setup
 	$(BIN)/python tools/typecheck_firmware.py
+	$(BIN)/python tools/typecheck_host.py
 
 bench: setup
 	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) CPU=cortex-m0plus >/dev/null
