@@ -30,6 +30,9 @@ import numpy as np
 from host.data.runs import (ERROR_LIMIT_UM, FORMAT, START, ROLES, TEMPERATURE_RANGE_C, CsvSyntaxError, Errors, Run, RunFormatError,
                        Spindle, Temperatures, parse_number, read_records, write_run)
 
+if TYPE_CHECKING:
+    from host.data.runs import Run
+
 
 class LogImportError(ValueError):
     """A mapping or source file problem; the message names file, line and column."""
@@ -176,7 +179,7 @@ def _shortened(header, n=20):
     return ",".join(header) if len(header) <= n else "%s,... (%d columns)" % (",".join(header[:n]), len(header))
 
 
-def import_csv(source, mapping, mapping_where="mapping"):
+def import_csv(source: str, mapping: dict[str, Any], mapping_where: str = "mapping") -> Run:
     """Read ``source`` (CSV path) with ``mapping``; return a Run (not yet written)."""
     m = _normalise_mapping(mapping, mapping_where)
     try:
@@ -280,7 +283,7 @@ def import_csv(source, mapping, mapping_where="mapping"):
     return Run(meta, temps, errors, None, spindle, name=name)
 
 
-def import_to_folder(source, mapping, out, mapping_where="mapping"):
+def import_to_folder(source: str, mapping: dict[str, Any], out: str, mapping_where: str = "mapping") -> Run:
     run = import_csv(source, mapping, mapping_where)
     write_run(run, out, decimals=6)
     # Round-trip through the loader so a written folder is always a valid run.

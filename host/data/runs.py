@@ -5,6 +5,12 @@ optionally ``motion.csv`` and ``spindle.csv``. Loading validates everything and
 raises :class:`RunFormatError` listing every problem, each naming file, line and
 column; nothing is silently dropped.
 """
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from typing import Any
+from numpy.typing import ArrayLike
 import csv
 import json
 import math
@@ -38,7 +44,7 @@ START = "start"
 class RunFormatError(ValueError):
     """A run folder that does not follow tcomp-run/1. ``problems`` lists every finding."""
 
-    def __init__(self, problems):
+    def __init__(self, problems: list[str]) -> None:
         self.problems = list(problems)
         super().__init__("\n".join(self.problems))
 
@@ -49,10 +55,10 @@ class Temperatures:
     names: list  # sensor names in CSV column order
     values: np.ndarray  # (n, len(names)) in degC
 
-    def column(self, name):
+    def column(self, name: str) -> np.ndarray:
         return self.values[:, self.names.index(name)]
 
-    def at(self, t, names=None):
+    def at(self, t: ArrayLike, names: Sequence[str] | None = None) -> np.ndarray:
         """Temperatures linearly interpolated at times ``t`` -> (len(t), len(names))."""
         names = self.names if names is None else list(names)
         t = np.atleast_1d(np.asarray(t, dtype=float))
@@ -67,13 +73,13 @@ class Errors:
     time_s: np.ndarray
     position_mm: np.ndarray
     error_um: np.ndarray
-    direction: np.ndarray = None  # int8 +1/-1, or None when unidirectional
-    channel: np.ndarray = None  # object array of str, or None
+    direction: np.ndarray | None = None  # int8 +1/-1, or None when unidirectional
+    channel: np.ndarray | None = None  # object array of str, or None
 
-    def __len__(self):
+    def __len__(self) -> int:
         return self.time_s.size
 
-    def sweeps(self):
+    def sweeps(self) -> list[np.ndarray]:
         """Row-index arrays, one per (measurement time, channel, direction) group, in file order."""
         keys = [self.time_s]
         if self.channel is not None:
@@ -85,7 +91,7 @@ class Errors:
             groups.setdefault(key, []).append(i)
         return [np.asarray(v) for v in groups.values()]
 
-    def channels(self):
+    def channels(self) -> list[str]:
         if self.channel is None:
             return []
         seen = []
@@ -103,7 +109,7 @@ class Motion:
     to_mm: np.ndarray
     feed_mm_min: np.ndarray
 
-    def __len__(self):
+    def __len__(self) -> int:
         return self.t_start_s.size
 
 
@@ -118,16 +124,16 @@ class Run:
     meta: dict
     temperatures: Temperatures
     errors: Errors
-    motion: Motion = None
-    spindle: Spindle = None
-    path: str = None
+    motion: Motion | None = None
+    spindle: Spindle | None = None
+    path: str | None = None
     name: str = field(default="run")
 
     @property
-    def sensors(self):
+    def sensors(self) -> dict[str, dict[str, Any]]:
         return dict(self.meta.get("sensors", {}))
 
-    def sensors_with_role(self, role):
+    def sensors_with_role(self, role: str) -> list[str]:
         return [n for n, s in self.meta.get("sensors", {}).items() if s.get("role") == role]
 
     @property
@@ -140,7 +146,7 @@ class Run:
         return self.meta.get("stroke_mm")
 
     @property
-    def screw(self):
+    def screw(self) -> dict[str, Any] | None:
         return self.meta.get("screw")
 
 
@@ -164,7 +170,7 @@ _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-
 CELL_LIMIT = csv.field_size_limit()  # 131072 characters (128 KiB), Python's csv default, kept as our limit
 
 
-def parse_number(cell):
+def parse_number(cell: str) -> float:
     """float(cell) for a plain ASCII decimal number (nan/inf included, for the caller to name); ValueError otherwise."""
     if not _NUMBER.fullmatch(cell):
         raise ValueError("not a number: %r" % cell)
@@ -175,7 +181,7 @@ class CsvSyntaxError(ValueError):
     """A CSV file that cannot be split into cells unambiguously; the message names file and line."""
 
 
-def read_records(fh, path):
+def read_records(fh: Iterable[str], path: str) -> list[tuple[int, list[str]]]:
     """[(line number, cells)] of an open CSV file, one record per physical line.
 
     A quote opens a cell that may run over line ends; in a log, that is almost always a stray ``"`` that
@@ -405,7 +411,7 @@ def load_meta(folder):
     return meta
 
 
-def check_run(folder):
+def check_run(folder: str) -> list[str]:
     """Every problem with a run folder, as a list of messages (empty when valid)."""
     try:
         load_run(folder)
@@ -414,7 +420,7 @@ def check_run(folder):
     return []
 
 
-def load_run(folder):
+def load_run(folder: str) -> Run:
     """Load and validate one run folder; raise RunFormatError naming every problem."""
     folder = os.fspath(folder)
     problems = _Problems()
@@ -508,10 +514,11 @@ def load_run(folder):
 
     if problems:
         raise RunFormatError(problems.items)
+    assert meta is not None and temps is not None and errors is not None  # each is read, or a problem was named
     return Run(meta, temps, errors, motion, spindle, path=folder, name=os.path.basename(os.path.normpath(folder)))
 
 
-def load_runs(folders):
+def load_runs(folders: Iterable[str]) -> list[Run]:
     """Load several runs; one folder given twice is refused: its samples would count twice and inflate every statistic."""
     seen = {}
     for f in folders:
@@ -544,7 +551,7 @@ def _g(decimals):
     return f
 
 
-def write_run(run, folder, decimals=4):
+def write_run(run: Run, folder: str, decimals: int = 4) -> str:
     """Write ``run`` as a tcomp-run/1 folder (created if needed). Returns the folder.
 
     Raises NotADirectoryError naming ``folder`` when it exists as a file (os.makedirs would only say "File exists").
@@ -567,7 +574,9 @@ def write_run(run, folder, decimals=4):
         [_g(3)] + [_g(decimals)] * len(t.names),
     )
     e = run.errors
-    header, cols, fmts = list(ERROR_COLUMNS), [e.time_s, e.position_mm, e.error_um], [_g(3), _g(decimals), _g(decimals)]
+    header: list[str] = list(ERROR_COLUMNS)
+    cols = [e.time_s, e.position_mm, e.error_um]
+    fmts: list[Callable[[Any], str]] = [_g(3), _g(decimals), _g(decimals)]
     if e.direction is not None:
         header.append("direction")
         cols.append(e.direction)
