@@ -25,6 +25,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+if TYPE_CHECKING:
+    from host.twin.axis import AxisParams
+
 
 @dataclass(frozen=True)
 class Phase:
@@ -121,7 +124,7 @@ RANDOM_MOVING_MIN = 240.0
 RANDOM_COOL_MIN = 60.0
 
 
-def draw_phases(rng, stroke_mm):
+def draw_phases(rng: np.random.Generator, stroke_mm: float) -> tuple[Phase, ...]:
     """Random moving states for RANDOM_MOVING_MIN minutes, then a cool-down.
 
     Each state: 10-40 min (whole minutes) at a feed of 2000-15000 mm/min (steps of
@@ -149,7 +152,7 @@ def draw_phases(rng, stroke_mm):
     return tuple(phases)
 
 
-def concrete(protocol, rng, stroke_mm):
+def concrete(protocol: Protocol, rng: np.random.Generator, stroke_mm: float) -> Protocol:
     """``protocol`` with its phases drawn from ``rng`` (a ``drawn`` template) or unchanged.
 
     The result keeps ``drawn=True`` so the run records its phases (meta.json).
@@ -223,7 +226,7 @@ def check_protocol(protocol, stroke_mm):
         raise ValueError("; ".join(problems))
 
 
-def schedule(protocol, params):
+def schedule(protocol: Protocol, params: AxisParams) -> tuple[np.ndarray, np.ndarray]:
     """Sweep times and motion intervals of ``protocol``.
 
     Returns (sweep_times_s, motion) with motion an (k, 5) array of rows

@@ -1,4 +1,10 @@
 """The feed-axis digital twin: protocol + effects + seed -> one simulated run."""
+
+from __future__ import annotations
+
+from typing import Any
+from numpy.typing import ArrayLike
+from typing import TYPE_CHECKING
 import dataclasses
 import math
 import os
@@ -14,6 +20,10 @@ from host.twin.effects import resolve_effects
 from host.twin.protocols import PROTOCOLS, Protocol, concrete, read_protocol_csv, resolve_protocols, schedule
 from host.twin.screw import ScrewGrid, ScrewIntegrator, contact_travel, expansion_um
 from host.twin.structure import NODES, lagged, node_temperatures
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
+    from host.twin.effects import EffectsSpec
 
 DEFAULT_PROTOCOL = "v8000_r210_490"
 DEFAULT_NOISE_UM = 0.5
@@ -41,7 +51,7 @@ class Simulation:
     sweep_s: np.ndarray
     err_time_s: np.ndarray
     err_position_mm: np.ndarray
-    err_direction: np.ndarray  # int8 or None
+    err_direction: np.ndarray | None  # int8 or None
     err_thermal_um: np.ndarray  # screw expansion + ambient_expansion, no noise
     err_geometric_um: np.ndarray
     err_um: np.ndarray  # what the interferometer reports (in the convention error_reference)
@@ -72,12 +82,12 @@ def _rngs(seed, name):
     return [np.random.default_rng(s) for s in ss.spawn(4)]
 
 
-def geometric_um(positions_mm, params):
+def geometric_um(positions_mm: ArrayLike, params: AxisParams) -> np.ndarray:
     u = np.asarray(positions_mm, dtype=float) / params.stroke_mm
-    return sum(c * u**k for k, c in enumerate(params.geometric_um))
+    return sum((c * u**k for k, c in enumerate(params.geometric_um)), np.zeros_like(u))
 
 
-def sweep_travel(sweeps, params, t_end):
+def sweep_travel(sweeps: np.ndarray, params: AxisParams, t_end: float) -> np.ndarray:
     """The sweeps' own motion (s, 5): the nut runs from the first to the last target and back.
 
     A sweep stops at every target for the laser reading; its heat is that of
@@ -94,7 +104,7 @@ def sweep_travel(sweeps, params, t_end):
     return np.asarray(rows, dtype=float).reshape(-1, 5)
 
 
-def heat_sources(t, motion, params, eff):
+def heat_sources(t: np.ndarray, motion: np.ndarray, params: AxisParams, eff: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per-step heat of the axis from its motion rows (k, 5).
 
     Returns (screw_J (n, N+1) friction energy into each screw volume, speed (n,)
@@ -220,7 +230,7 @@ def _plain(v):
     return v
 
 
-def to_run(sim):
+def to_run(sim: Simulation) -> Run:
     """The tcomp-run/1 :class:`host.data.runs.Run` of a :class:`Simulation`."""
     p = sim.params
     meta = {
