@@ -6,6 +6,9 @@ from host import options
 from host.learning.empirical import EmpiricalDataError
 from host.options import boolean, number, numbers
 
+if TYPE_CHECKING:
+    from host.outputs import Outputs
+
 # --option KEY=VALUE settings understood by fit_command, with their converters (host/options.py); a
 # minimum is the smallest meaningful value, below which the estimator would fail obscurely or accept nonsense.
 # Which method a key belongs to is not written here: it is the method's estimator parameters and candidate
@@ -47,7 +50,7 @@ OPTIONS = {
 }
 
 
-def parse_options(pairs, method):
+def parse_options(pairs: Iterable[str] | None, method: str) -> dict[str, Any]:
     """--option KEY=VALUE list -> dict, rejecting unknown keys and options of other methods."""
     from host.errors import UserError
     from host.learning.empirical.methods import FIT_METHODS, method_options
@@ -63,7 +66,7 @@ def parse_options(pairs, method):
     return out
 
 
-def fit_command(args, out):
+def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     """Fit, print the report, write ``args.out`` (and ``args.json``) through ``out`` (host.outputs.Outputs)."""
     from host.errors import UserError
     from host.learning.empirical.fitting import fit_model

@@ -7,6 +7,11 @@ feed_max_mm_min, ambient (on/off/auto: E_e, off by default under either error re
 fit_window (LO:HI seconds, either side may be empty: fit only on error rows in it).  ``--sensors NAME`` picks the base
 sensor of the E_e term (and switches E_e on unless ambient is given); ``--channel`` the errors.csv channel.
 """
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING
 import json
 import warnings
 
@@ -63,7 +68,7 @@ OPTIONS = {
 }
 
 
-def format_report(model):
+def format_report(model: ScrewModel) -> str:
     st = model.statistics_
     lines = ["screw model: %d segments, dt %g s, geometric degree %d" % (model.geometry_.segments, model.dt_s, model.geometric_degree_),
              "  air: %s (%s)" % (model.air_sensor_ or "constant", model.air_source_),
@@ -93,7 +98,7 @@ def format_report(model):
     return "\n".join(lines)
 
 
-def fit_command(args, out):
+def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     """Fit, print the report, write ``args.out`` (and ``args.json``) through ``out`` (host.outputs.Outputs)."""
     from host.errors import UserError
     from host.learning.documents import save_model

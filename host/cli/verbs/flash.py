@@ -1,5 +1,11 @@
 """tcomp flash --port PORT [--table table.bin] [--config board.json | --board board.py] [--key board.key]"""
 
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable
+from typing import Any
+
 import json
 import os
 import re
@@ -10,7 +16,7 @@ import tempfile
 
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", required=True, help="serial port of the board (e.g. /dev/ttyACM0, or a pty)")
     p.add_argument("--table", help="coefficient table (tcomp export) installed as slot A and made active")
     g = p.add_mutually_exclusive_group()
@@ -235,7 +241,7 @@ def board_key(path, dry_run=False):
         raise UserError(str(exc))
 
 
-def unwired_sensors(table_sensors, cfg):
+def unwired_sensors(table_sensors: Iterable[str], cfg: dict[str, Any]) -> list[str]:
     """Table sensors without a channel of the same name in board config ``cfg`` (a dict), in table order.
 
     The firmware refuses such a table with its generic reason "sensor count mismatch"; checked here first,
@@ -245,7 +251,7 @@ def unwired_sensors(table_sensors, cfg):
     return [s for s in table_sensors if s not in wired]
 
 
-def command(port, files, mpremote="mpremote", reset=False):
+def command(port: str, files: dict[str, list[str]], mpremote: str = "mpremote", reset: bool = False) -> list[str]:
     """One mpremote invocation (``resume``: no soft reset on connect) that creates the directories
     and copies every file."""
     dirs = sorted({d for d in files if d})

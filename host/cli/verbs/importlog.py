@@ -1,7 +1,11 @@
 """tcomp import CSV --out DIR (--mapping MAP.json | --time COL --temp COL... --error COL...)"""
 
+from __future__ import annotations
 
-def add_arguments(p):
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", help="CSV log with a header row")
     p.add_argument("--out", required=True, help="run folder to write")
     p.add_argument("--mapping", help="JSON mapping of source columns (see host/data/importer.py and docs/data-format.md)")
@@ -52,7 +56,7 @@ def _from_flags(args):
     return mapping
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     import json
 
     import math

@@ -1,17 +1,26 @@
 """tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch]"""
 
+from __future__ import annotations
+
+import argparse
+from typing import Any
+from typing import TYPE_CHECKING
+
 import csv
 import math
 import re
 import sys
 import time
 
+if TYPE_CHECKING:
+    from host.board.link import Frame
+
 LATCH_WAIT_S = 5.0  # the firmware answers L within one cycle (cycle_ms, 100 ms by default)
-COLUMNS = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_offset_um", "slope_um_per_m",
+COLUMNS: tuple[str, ...] = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_offset_um", "slope_um_per_m",
            "fields")
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", required=True, help="serial port or pySerial URL (e.g. /dev/ttyACM0, socket://host:port, spy:///dev/ttyACM0, loop://)")
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     p.add_argument("--csv", help="append every decoded frame to this CSV file")

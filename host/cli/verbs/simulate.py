@@ -1,5 +1,11 @@
 """tcomp simulate --out DIR [--protocol NAME] [--effects a,b=2] [--seed N]"""
 
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable
+from typing import Any
+
 
 def _epilog():
     from host.twin import EFFECTS, LITERATURE_STATES, PROTOCOLS
@@ -17,7 +23,7 @@ def _epilog():
     return "\n".join(lines)
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     import argparse
 
     p.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -64,7 +70,7 @@ def parse_effects(text):
     return out
 
 
-def parse_overrides(items):
+def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
     """['h_W_m2K=20', 'positions_mm=0,100,700'] -> typed overrides for host.twin.make_params."""
     import dataclasses
 
@@ -119,7 +125,7 @@ def _sha256(path):
         return hashlib.sha256(fh.read()).hexdigest()
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.outputs import Outputs
 
     from host.data.runs import RUN_FILES
