@@ -338,7 +338,7 @@ def _array(name, values):
     return "static const int32_t tcomp_%s[%d] = {%s};\n" % (name, len(vals), body)
 
 
-def c_header(ex, guard="TCOMP_TABLE_H"):
+def c_header(ex: Export, guard: str = "TCOMP_TABLE_H") -> str:
     f = ex.fields
     r = ex.report
     kind = f["kind"]

@@ -5,6 +5,10 @@ The exporter depends on the document format only, never on the host classes that
 host/learning/documents.py (save, load by kind), the fitting code that writes documents and the
 HIL fixtures all take the format tag, the kinds and the hash from here.
 """
+
+from __future__ import annotations
+
+from typing import Any
 import hashlib
 import json
 import math
@@ -13,13 +17,13 @@ FORMAT = "tcomp-model/1"  # the value of a document's "format" key
 DOCUMENT_KINDS = ("poly_slope", "linear_direct", "screw", "ann", "dynamic", "mr_poly")  # the values of its "kind" key
 
 
-def canonical(doc):
+def canonical(doc: dict[str, Any]) -> bytes:
     """The document without its provenance block as canonical JSON bytes (sorted keys, no spaces)."""
     body = {k: v for k, v in doc.items() if k != "provenance"}
     return json.dumps(body, sort_keys=True, separators=(",", ":")).encode()
 
 
-def document_hash(doc):
+def document_hash(doc: dict[str, Any]) -> str:
     """sha256 hex of the document without its provenance block."""
     return hashlib.sha256(canonical(doc)).hexdigest()
 

@@ -4,6 +4,12 @@
 quantises and certifies what it holds with models_export.certify's interval arithmetic. The document's hash is
 models_export.document's job.
 """
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+from typing import TYPE_CHECKING
 import math
 from fractions import Fraction as F
 
@@ -11,6 +17,9 @@ from models_export.certify import (
     ACC, LIMITS_UM, OU_PER_UM, ExportError, Recorder, frac_bits, iv_add, iv_mul, narrow_width, p2, rnd, top_limbs_needed,
 )
 from models_export.document import FORMAT
+
+if TYPE_CHECKING:
+    from models_export.certify import Interval, Num
 
 # dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
 START = "start"  # the raw-error reference of docs/data-format.md (the exporter sees documents, not runs)
@@ -73,7 +82,7 @@ def _obj(value, where):
 class Model:
     """The model document reduced to exact numbers in table units (see docs/table-format.md)."""
 
-    def __init__(self, doc, ref_position_mm=None, envelope=None, margin_K=DEFAULT_ENVELOPE_MARGIN_K):
+    def __init__(self, doc: dict[str, Any], ref_position_mm: float | None = None, envelope: Mapping[str, tuple[float, float]] | None = None, margin_K: float = DEFAULT_ENVELOPE_MARGIN_K) -> None:
         """``envelope``: {sensor: (lo_C, hi_C)}, the certified envelope for those sensors (it must
         contain the training range); the others get the training range widened by ``margin_K``."""
         if doc.get("format") != FORMAT:
@@ -371,21 +380,21 @@ class Model:
         return self.sensors.index(name)
 
     # real ranges ----------------------------------------------------------
-    def s_range(self):
+    def s_range(self) -> Interval:
         lo = hi = self.b0
         for b, a, c in zip(self.b, self.d_lo, self.d_hi):
             lo += min(b * a, b * c)
             hi += max(b * a, b * c)
         return (lo, hi)
 
-    def s_bound(self):
+    def s_bound(self) -> Num:
         """Bound of |every partial sum| of S."""
         return abs(self.b0) + sum(abs(b) * max(abs(a), abs(c)) for b, a, c in zip(self.b, self.d_lo, self.d_hi))
 
-    def p_iv(self):
+    def p_iv(self) -> Interval:
         return (F(self.pos_lo), F(self.pos_hi))
 
-    def horner_range(self, j):
+    def horner_range(self, j: int) -> Interval:
         """Sound interval of h_j(p) = sum_{k>=j} g_k p^(k-j) over the position envelope (interval Horner)."""
         P = self.p_iv()
         h = (self.g[-1], self.g[-1])

@@ -1,4 +1,9 @@
 """export_model: quantise + certify + pack; the report the CLI writes."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
 import math
 
 from firmware.crc32 import crc32
@@ -14,14 +19,14 @@ class Export:
     ({accumulator: (lo, hi)} certified intervals of the firmware's checked accumulators, ACC_*), ``errors_ou``
     ({output: (lo, hi)} certified integer-minus-model intervals, output units)."""
 
-    def __init__(self, fields, table, report, accs, errors_ou):
+    def __init__(self, fields: dict[str, Any], table: bytes, report: dict[str, Any], accs: dict[int, tuple[int, int]], errors_ou: dict[str, Any]) -> None:
         self.fields = fields
         self.table = table
         self.report = report
         self.accs = accs
         self.errors_ou = errors_ou
 
-    def c_header(self, guard="TCOMP_TABLE_H"):
+    def c_header(self, guard: str = "TCOMP_TABLE_H") -> str:
         from models_export.cheader import c_header
 
         return c_header(self, guard)
