@@ -1,11 +1,11 @@
 """Type-check host/ and models_export/ (``make typecheck``, after the firmware's check).
 
-Two checks over the folders pyproject.toml's [tool.pyright] ``include`` lists:
-1. every public function has type hints: each parameter (but self/cls) and the return. Public means a
-   name without a leading underscore (dunders count) in a module or class without one, nested
-   functions aside: what another module may call.
-2. pyright (pinned in constraints.txt) in its basic mode checks the hints against the code and the
-   calls against the hints.
+Two checks (pyproject.toml names the folders):
+1. every public function of [tool.tcomp.typecheck] ``hinted`` has type hints: each parameter (but
+   self/cls) and the return. Public means a name without a leading underscore (dunders count) in a
+   module or class without one, nested functions aside: what another module may call.
+2. pyright (pinned in constraints.txt) in its basic mode over [tool.pyright] ``include`` checks the
+   hints against the code and the calls against the hints.
 
 Exit status: 0 when both pass, 1 otherwise.
 """
@@ -19,10 +19,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 PYRIGHT = os.path.join(ROOT, ".venv", "bin", "pyright")
 
 
-def checked_paths():
-    """The files and folders pyproject.toml gives pyright to check."""
+def hinted_paths():
+    """The files and folders whose public functions must all have hints (pyproject.toml)."""
     with open(os.path.join(ROOT, "pyproject.toml"), "rb") as fh:
-        return tomllib.load(fh)["tool"]["pyright"]["include"]
+        return tomllib.load(fh)["tool"]["tcomp"]["typecheck"]["hinted"]
 
 
 def public_functions(source):
@@ -69,7 +69,7 @@ def python_files(path):
 
 def main():
     missing = []
-    for path in checked_paths():
+    for path in hinted_paths():
         for rel in python_files(path):
             with open(os.path.join(ROOT, rel), encoding="utf-8") as fh:
                 missing += ["%s: %s" % (rel, m) for m in missing_hints(fh.read())]
