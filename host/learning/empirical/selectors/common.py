@@ -1,5 +1,6 @@
 """What every selector shares: the result type, the error type, input checking."""
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -26,7 +27,7 @@ class Selection:
         self._plotter(path)
         return path
 
-    def to_json(self):
+    def to_json(self) -> dict[str, Any]:
         """Strict-JSON dict: numpy scalars become Python numbers, inf/NaN become None."""
         return plain({"method": self.method, "sensors": list(self.sensors), "reason": self.reason})
 
