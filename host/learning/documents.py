@@ -5,6 +5,10 @@ Each kind's class lives with the code that fits it; this module only maps
 Every class has ``from_document(doc)``, ``to_document()`` and ``predict(run)``
 (one predicted error in µm per row of ``run.errors``, in file order).
 """
+
+from __future__ import annotations
+
+from typing import Any
 import importlib
 import json
 import time
@@ -28,7 +32,7 @@ class ModelFormatError(ValueError):
     pass
 
 
-def save_model(doc, path):
+def save_model(doc: dict[str, Any], path: str) -> dict[str, Any]:
     doc = dict(doc)
     doc["format"] = FORMAT
     doc["provenance"] = {
@@ -42,7 +46,7 @@ def save_model(doc, path):
     return doc
 
 
-def read_document(path):
+def read_document(path: str) -> dict[str, Any]:
     try:
         with open(path, encoding="utf-8") as fh:
             doc = json.load(fh)
@@ -71,7 +75,7 @@ def model_class(kind):
     return getattr(importlib.import_module(module), name)
 
 
-def load_model(path_or_doc):
+def load_model(path_or_doc: str | dict[str, Any]) -> Any:
     """Model object from a document path (or an already read document); errors name the path."""
     if isinstance(path_or_doc, str):
         path, doc = path_or_doc, read_document(path_or_doc)
