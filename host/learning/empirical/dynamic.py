@@ -34,8 +34,6 @@ coefficients from cancelling each other out of the training range.
 Scoring uses per-group Gram matrices of the candidate columns, so one CV
 evaluation costs O(k³ · groups) whatever the number of samples.
 """
-from typing import Any
-
 import numpy as np
 
 from host.data.runs import START, check_model_reference
@@ -341,10 +339,6 @@ class DynamicModel:
     reference = "run_start"
     coefficients = None  # not a linear function of the temperatures
     intercept = 0.0
-    # set by fitting.fit_model (the other kinds declare them in kinds._Base): what the fit learned
-    estimator_: Any = None
-    arrays_: Any = None
-    geometric_: Any = None
 
     def __init__(self, terms, coefficients, intercept, target="direct", channel=None, geometric_coef=(0.0,), method="dynamic", axis=None,
                  reference_C=None, envelope=None, statistics=None, training=None, dt_s=None):
