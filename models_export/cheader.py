@@ -10,8 +10,15 @@ sign, left shifts as multiplications. Right shift of a negative int32_t is
 assumed arithmetic (gcc, clang, arm-none-eabi, IAR, Keil all do so).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 from firmware.table import COMMON, KINDS, POSITION, SCREW, SENSOR_FIELDS
 from models_export.tableformat import spec_names
+
+if TYPE_CHECKING:
+    from models_export.export import Export
 
 # Fraction bits of coefficients: recorded in the table for its readers, never used by the
 # evaluation (firmware/evaluate.py reads none of them; tests/export/test_export_table.py checks).

@@ -31,6 +31,9 @@ from models_export.certify import (
 
 from models_export.exact import power_chain
 
+if TYPE_CHECKING:
+    from models_export.exact import Model
+
 ZERO = (F(0), F(0))
 
 

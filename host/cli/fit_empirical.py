@@ -1,5 +1,11 @@
 """``tcomp fit --model`` for the empirical methods (host/learning/empirical/methods.py FIT_METHODS; arguments
 defined in host/cli/verbs/fit.py)."""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable
+from typing import Any
+from typing import TYPE_CHECKING
 import json
 
 from host import options

@@ -20,6 +20,10 @@ from host.options import choice, number
 from host.learning.screw.effects import make_effect
 from host.learning.screw.identify import IdentifiabilityWarning
 
+if TYPE_CHECKING:
+    from host.learning.screw.screwmodel import ScrewModel
+    from host.outputs import Outputs
+
 MAX_SEGMENTS = 1000  # full model; the reduced one is bounded by the table (32)
 MIN_DT_S, MAX_DT_S = 0.1, 600.0
 MAX_FEED_MM_MIN = 1e6  # 1 km/min, far above any machine-tool feed (rapid traverses reach ~1e5)

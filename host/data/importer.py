@@ -20,6 +20,10 @@ Mapping (JSON, or built from command-line flags)::
 ``temperatures`` may also be a list of column names (name = column, role
 ``structure``) and ``errors`` a list (channel = column, position 0).
 """
+
+from __future__ import annotations
+
+from typing import Any
 import json
 import math
 import os
@@ -29,9 +33,6 @@ import numpy as np
 
 from host.data.runs import (ERROR_LIMIT_UM, FORMAT, START, ROLES, TEMPERATURE_RANGE_C, CsvSyntaxError, Errors, Run, RunFormatError,
                        Spindle, Temperatures, parse_number, read_records, write_run)
-
-if TYPE_CHECKING:
-    from host.data.runs import Run
 
 
 class LogImportError(ValueError):

@@ -19,6 +19,10 @@ moving states in sequence with a laser sweep after each, not on a clock
 (``sweeps_after_phases``). A user's own schedule of that kind is a CSV file
 (:func:`read_protocol_csv`, ``tcomp simulate --protocol FILE.csv``).
 """
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
 import csv
 import os
 from dataclasses import dataclass

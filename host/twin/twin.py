@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-from typing import Any
 from numpy.typing import ArrayLike
 from typing import TYPE_CHECKING
 import dataclasses
@@ -23,7 +22,6 @@ from host.twin.structure import NODES, lagged, node_temperatures
 
 if TYPE_CHECKING:
     from host.data.runs import Run
-    from host.twin.effects import EffectsSpec
 
 DEFAULT_PROTOCOL = "v8000_r210_490"
 DEFAULT_NOISE_UM = 0.5

@@ -365,7 +365,7 @@ class Bridge:
             self.log("L refused: %s%s" % (why, ", retrying" if self.latch_tries_left else ""))
 
     # --- one period ---------------------------------------------------------------------------
-    def step(self, now: float, inp: Inputs) -> Outputs:
+    def step(self, now: float, inp: Inputs) -> BridgeOutputs:
         dt = 0.0 if self.last_now is None else min(now - self.last_now, self.max_dt_s)
         self.last_now = now
         if self.last_new_s is None:
@@ -443,7 +443,7 @@ class Bridge:
                 self.clear_since = None
 
 
-def run_loop(bridge: Bridge, read_inputs: Callable[[], Inputs], write_outputs: Callable[[Outputs], None], period_s: float = 0.05, clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+def run_loop(bridge: Bridge, read_inputs: Callable[[], Inputs], write_outputs: Callable[[BridgeOutputs], None], period_s: float = 0.05, clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
              running: Callable[[], bool] = lambda: True) -> None:
     """Call ``bridge.step`` every ``period_s`` with the inputs read, write the outputs."""
     next_t = clock()

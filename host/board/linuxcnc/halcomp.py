@@ -14,6 +14,9 @@ import sys
 
 from host.board.linuxcnc.bridge import Inputs, run_loop
 
+if TYPE_CHECKING:
+    from host.board.linuxcnc.bridge import Bridge
+
 # (pin, type, direction, Inputs/BridgeOutputs attribute)
 PINS = (
     ("position", "FLOAT", "IN", "position"),

@@ -1,5 +1,9 @@
 """tcomp fit --model KIND RUN... --out MODEL.json"""
 
+from __future__ import annotations
+
+import argparse
+
 from host.learning.empirical.methods import FIT_METHODS as EMPIRICAL  # the empirical methods with a document form
 
 

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-from typing import Any
 from typing import TYPE_CHECKING
 
 import csv
@@ -13,7 +12,7 @@ import sys
 import time
 
 if TYPE_CHECKING:
-    from host.board.link import Frame
+    pass
 
 LATCH_WAIT_S = 5.0  # the firmware answers L within one cycle (cycle_ms, 100 ms by default)
 COLUMNS: tuple[str, ...] = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_offset_um", "slope_um_per_m",

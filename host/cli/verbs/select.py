@@ -1,5 +1,9 @@
 """tcomp select --method maxtree|stepwise|hclust-ga RUN... --json OUT  |  tcomp select --method maxtree --corr CORR.csv --json OUT"""
 
+from __future__ import annotations
+
+import argparse
+
 from host.learning.empirical.methods import SELECTORS as METHODS
 
 
