@@ -83,7 +83,7 @@ class _Target:
         self.real = _real(shown)
         self.device = not folder and _is_device(shown)
         self.stage = None
-        self.owned = ()
+        self.owned: tuple[str, ...] = ()
 
 
 class Outputs:

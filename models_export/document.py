@@ -28,7 +28,7 @@ def document_hash(doc: dict[str, Any]) -> str:
     return hashlib.sha256(canonical(doc)).hexdigest()
 
 
-def provenance(doc):
+def provenance(doc: dict[str, Any]) -> tuple[str, str | None]:
     """(actual sha256, the recorded provenance.sha256 or None). A recorded hash that differs from the actual one
     means the document was edited after it was saved: export refuses it and predict refuses it alike, unless
     told (``--allow-edited``)."""
@@ -37,7 +37,7 @@ def provenance(doc):
     return document_hash(doc), declared
 
 
-def edited_reason(declared, actual):
+def edited_reason(declared: str | None, actual: str) -> str:
     """The one sentence both export and predict give for an edited document."""
     return ("provenance.sha256 %.16s... does not match the document (actual %.16s...): it was edited after it was "
             "saved; re-save it, or use it marked as edited (--allow-edited)" % (declared, actual))
@@ -58,7 +58,7 @@ def _non_finite(value, where):
     return None
 
 
-def document_problem(doc):
+def document_problem(doc: dict[str, Any]) -> str | None:
     """What makes ``doc`` say something other than what predict and export would use, or None.
 
     Checked for every kind before either reads it: a sensor listed twice, a coefficient of no listed sensor

@@ -28,7 +28,8 @@ DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
 POWER_PREFIXES = {"T2:": 2, "T3:": 3, "T4:": 4}
 
 
-def power_chain(rec, x_iv, e, L, n, sh2, sh, name, acc):
+def power_chain(rec: Recorder, x_iv: Interval, e: int, L: int, n: int, sh2: int, sh: int, name: str,
+                acc: int) -> tuple[Interval, Interval, list[Interval]]:
     """Integer interval and error interval of the firmware's power x**e / 2**(sh2 + sh*(e - 2)) of an exact integer
     rise x, formed one floored factor at a time (Evaluator._inputs), recorded on ``rec`` as accumulator ``acc``;
     also the interval of every left factor (for the limb bound)."""
@@ -43,7 +44,7 @@ def power_chain(rec, x_iv, e, L, n, sh2, sh, name, acc):
     return v, err, cs
 
 
-def mr_poly_as_dynamic(doc):
+def mr_poly_as_dynamic(doc: dict[str, Any]) -> dict[str, Any]:
     """An ``mr_poly`` document (S004's Eq. 12, host/learning/empirical/mrpoly.py) as the ``dynamic`` table that evaluates it:
     every filter has tau = 0 (its input passes through) and reads the nut rise, its powers, or the base rise."""
     th = _obj(doc.get("thermal"), "thermal")

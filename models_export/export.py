@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 import math
 
@@ -37,7 +38,7 @@ def _provenance(doc):
     return provenance(doc)
 
 
-def reduction(doc, limit_um=DEFAULT_REDUCTION_LIMIT_UM):
+def reduction(doc: dict[str, Any], limit_um: float = DEFAULT_REDUCTION_LIMIT_UM) -> dict[str, Any] | None:
     """The certificate's reduction part for a screw document (None for other kinds): the reduced form the firmware
     evaluates against the full model the document was fitted as, on the training runs, from
     thermal.reduced.reduction_error_um (host/learning/screw/reduced.py reduction_certificate). Raises ExportError
@@ -80,8 +81,9 @@ def reduction(doc, limit_um=DEFAULT_REDUCTION_LIMIT_UM):
     return out
 
 
-def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, envelope=None,
-                 margin_K=DEFAULT_ENVELOPE_MARGIN_K, reduction_limit_um=DEFAULT_REDUCTION_LIMIT_UM):
+def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limit_um: float | None = None, allow_edited: bool = False,
+                 envelope: Mapping[str, tuple[float, float]] | None = None, margin_K: float = DEFAULT_ENVELOPE_MARGIN_K,
+                 reduction_limit_um: float = DEFAULT_REDUCTION_LIMIT_UM) -> Export:
     """Quantise and certify ``doc`` (a tcomp-model/1 dict). Raises ExportError.
 
     A screw model's reduced form must be within ``reduction_limit_um`` (RMS on the training runs) of the full model

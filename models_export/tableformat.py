@@ -21,7 +21,7 @@ from firmware.table import (AXIS_SIZE, CERT, HEADER_SIZE, KINDS, MAGIC, NAME_FOR
 KIND_CODES = {name: code for code, name in KINDS.items()}  # the firmware's table owns the codes
 
 
-def spec_names(spec):
+def spec_names(spec: str) -> list[tuple[str, bool]]:
     """The field names of one section spec of firmware/table.py, in order, each as (name, is_list);
     the per-sensor group ``@`` gives PER_SENSOR's names as lists."""
     out = []

@@ -7,10 +7,11 @@ Two checks (pyproject.toml names the folders):
 2. pyright (pinned in constraints.txt) in its basic mode over [tool.pyright] ``include`` checks the
    hints against the code and the calls against the hints.
 
-Exit status: 0 when both pass, 1 otherwise.
+Exit status: 0 when both pass, 1 otherwise (2 if the MicroPython stubs are missing).
 """
 import ast
 import os
+import shutil
 import subprocess
 import sys
 import tomllib
@@ -67,7 +68,22 @@ def python_files(path):
                 yield os.path.relpath(os.path.join(here, f), ROOT)
 
 
+def micropython_stub():
+    """.stubs/cpython-side/micropython.pyi, MicroPython's own (make setup installs .stubs), for [tool.pyright]
+    stubPath: the firmware modules host imports say ``from micropython import const``; without the stub the
+    constants they define would be Unknown to pyright. False (with the reason printed) when .stubs is missing."""
+    stubs = os.path.join(ROOT, ".stubs")
+    if not os.path.exists(os.path.join(stubs, "micropython.pyi")):
+        print("MicroPython stubs missing in %s: run `make setup`" % stubs)
+        return False
+    os.makedirs(os.path.join(stubs, "cpython-side"), exist_ok=True)
+    shutil.copy(os.path.join(stubs, "micropython.pyi"), os.path.join(stubs, "cpython-side", "micropython.pyi"))
+    return True
+
+
 def main():
+    if not micropython_stub():
+        return 2
     missing = []
     for path in hinted_paths():
         for rel in python_files(path):

@@ -30,7 +30,7 @@ def body(fields: Iterable[bytes | str | int]) -> bytes:
     return b"TC," + b",".join(f if isinstance(f, bytes) else str(f).encode() for f in fields)
 
 
-def command_line(*fields):
+def command_line(*fields: bytes | str | int) -> bytes:
     """``$TC,<fields>*CRC\\r\\n`` as bytes."""
     b = body(fields)
     return b"$" + b + b"*%04X\r\n" % crc16(b)
@@ -67,12 +67,12 @@ class Frame:
         return int(self.fields[1])
 
 
-def hello_error_reference(frame):
+def hello_error_reference(frame: Frame) -> str | None:
     """The error reference an ``H`` frame reports: "start", a sensor name, "-" (no table), or None (a firmware before it)."""
     return frame.fields[HELLO_ERROR_REFERENCE] if len(frame.fields) > HELLO_ERROR_REFERENCE else None
 
 
-def describe_error_reference(ref):
+def describe_error_reference(ref: str | None) -> str:
     """What the offsets of a table with error reference ``ref`` compensate (docs/linuxcnc.md, "Error reference")."""
     if ref is None:
         return "not reported (a firmware before issue 19: raw errors)"

@@ -48,14 +48,14 @@ class CounterError(ValueError):
     """The board's counter or session nonce as reported cannot be used (names what is wrong)."""
 
 
-def counter_mark(mark=0):
+def counter_mark(mark: int = 0) -> bytes:
     """``auth.bin`` holding ``mark`` as the board's last counter (firmware/auth.py's format, written here
     independently): staged with a new key, so the new key's counters start from ``mark``."""
     b = b"TA\x01" + struct.pack("<I", mark)
     return b + struct.pack("<H", binascii.crc_hqx(b, 0xFFFF))
 
 
-def generate_key():
+def generate_key() -> bytes:
     return os.urandom(KEY_BYTES)
 
 
@@ -106,7 +106,7 @@ def stream_line(fields: Sequence[bytes | str | int]) -> bytes:
 class LinkSigner:
     """Signs commands for one board. ``counter`` is the last one used (the board's, or ours)."""
 
-    def __init__(self, key, counter=0, nonce=None):
+    def __init__(self, key: bytes, counter: int = 0, nonce: bytes | None = None) -> None:
         if len(key) != KEY_BYTES:
             raise ValueError("a board key is %d bytes" % KEY_BYTES)
         self._key = bytes(key)
@@ -116,7 +116,7 @@ class LinkSigner:
     def __repr__(self) -> str:  # never the key
         return "LinkSigner(counter=%d)" % self.counter
 
-    def observe(self, counter, nonce=None):
+    def observe(self, counter: int | str | bytes | None, nonce: int | str | bytes | None = None) -> None:
         """Take note of the board's last counter ('-' or None if it has no key) and session nonce
         (8 hex digits, 4 bytes or the uint32); CounterError naming what is wrong with either."""
         if isinstance(counter, bytes):
@@ -147,7 +147,7 @@ class LinkSigner:
                 raise CounterError("the board's session nonce is not 4 bytes")
             self.nonce = bytes(nonce)
 
-    def observe_hello(self, fields):
+    def observe_hello(self, fields: Sequence[str]) -> None:
         """The counter and session nonce of a hello frame's fields (after its type)."""
         if len(fields) <= HELLO_NONCE:
             raise CounterError("the board's hello has no session nonce (%d fields): its firmware speaks an older "
@@ -167,10 +167,10 @@ class LinkSigner:
                                "registers 51-52 first")
         return self.nonce
 
-    def tag(self, message, extra=b"", prefix=b""):
+    def tag(self, message: bytes, extra: bytes = b"", prefix: bytes = b"") -> bytes:
         return hmac.new(self._key, prefix + message + extra, hashlib.sha256).digest()[:TAG_BYTES]
 
-    def stream_fields(self, *fields, extra=b"", bound=None):
+    def stream_fields(self, *fields: bytes | str | int, extra: bytes = b"", bound: bytes | None = None) -> tuple[bytes | str | int, ...]:
         """``fields`` + (counter, tag hex) for a command that changes the output; the tag starts with the
         session nonce, or ``bound`` (an upload's id)."""
         prefix = self._prefix() if bound is None else bound
@@ -178,10 +178,10 @@ class LinkSigner:
         fields = tuple(fields) + (ctr,)
         return fields + (self.tag(stream_body(fields), extra, prefix).hex().upper(),)
 
-    def stream_line(self, *fields, extra=b"", bound=None):
+    def stream_line(self, *fields: bytes | str | int, extra: bytes = b"", bound: bytes | None = None) -> bytes:
         return stream_line(self.stream_fields(*fields, extra=extra, bound=bound))
 
-    def upload_lines(self, table, chunk=UPLOAD_CHUNK):
+    def upload_lines(self, table: bytes, chunk: int = UPLOAD_CHUNK) -> list[bytes]:
         """Every line of a table upload: U,B signed in this session; each U,D chunk and U,C tagged with
         the upload's id (the nonce and U,B's counter), so they belong to this U,B and no other."""
         begin = self.stream_fields("U", "B", len(table), "%08X" % binascii.crc32(table))

@@ -96,7 +96,9 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     except TypeError as exc:
         raise UserError("bad --option for %s: %s" % (args.model, exc))
     doc = save_model(model.to_document(), out.path(args.out))
-    est = model.estimator_
+    # DynamicModel's fitted attributes are set by fitting.fit_model but not declared in dynamic.py (being changed
+    # by others; declared there later)
+    est = model.estimator_  # pyright: ignore[reportAttributeAccessIssue]
     print("%s %s model of %s on %d run(s), %d samples: sensors %s" % (
         args.model, model.kind, args.channel or "the error", len(runs), est.n_samples_, ",".join(model.sensors)))
     if args.model == "mlr":

@@ -11,7 +11,7 @@ sensor of the E_e term (and switches E_e on unless ambient is given); ``--channe
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any, cast
 import json
 import warnings
 
@@ -88,7 +88,7 @@ def format_report(model: ScrewModel) -> str:
         nut = "no nut sensor" if r["nut_rise_rmse_K"] is None else "nut rise RMSE %.2f K" % r["nut_rise_rmse_K"]
         lines.append("  run %s: %d rows, RMSE %.3f um, max |residual| %.3f um, %s"
                      % (r["run"], r["rows"], r["rmse_um"], r["max_abs_residual_um"], nut))
-    red = model.reduced_
+    red = cast("dict[str, Any]", model.reduced_)  # fit(reduce=True), the CLI's call, always sets it
     for run, e in red["reduction_error_um"].items():
         lines.append("  reduced (%d segments, dt %g s) vs full on %s: RMS %.3f um, max %.3f um (E_m); at the error rows "
                      "RMS %.3f um, max %.3f um" % (red["segments"], red["dt_s"], run, e["rms_um"], e["max_um"],
@@ -133,5 +133,5 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     print(format_report(model))
     if args.json:
         with out.open(args.json) as fh:
-            json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": model.reduced_["reduction_error_um"]}, fh, indent=2)
+            json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": cast("dict[str, Any]", model.reduced_)["reduction_error_um"]}, fh, indent=2)
     return 0

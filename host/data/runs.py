@@ -137,12 +137,12 @@ class Run:
         return [n for n, s in self.meta.get("sensors", {}).items() if s.get("role") == role]
 
     @property
-    def error_reference(self):
+    def error_reference(self) -> str:
         """``"start"`` or the sensor id the errors are corrected to (meta.json ``error_reference``)."""
         return error_reference(self.meta)
 
     @property
-    def stroke_mm(self):
+    def stroke_mm(self) -> float | None:
         return self.meta.get("stroke_mm")
 
     @property
@@ -352,7 +352,7 @@ def _check_meta(path, meta, problems):
                 problems.add(path, "screw.fixed_end_mm must be a finite number (found %r)" % (fe,))
 
 
-def error_reference(meta):
+def error_reference(meta: dict[str, Any]) -> str:
     """The declared error reference of a run's meta: ``"start"`` when absent (load_run has validated it)."""
     return meta.get("error_reference", START)
 
@@ -367,7 +367,7 @@ def _check_error_reference(path, meta, problems):
                  % (json.dumps(ref), ", ".join(sensors) or "no sensors declared"))
 
 
-def common_error_reference(runs):
+def common_error_reference(runs: Iterable[Run]) -> str:
     """The error reference all ``runs`` declare; ValueError naming the runs of each reference when they differ.
 
     One fit mixes no conventions: a sensor-referenced error lacks the expansion a raw error holds, so a model
@@ -382,7 +382,7 @@ def common_error_reference(runs):
     return next(iter(by), START)
 
 
-def check_model_reference(run, model_reference):
+def check_model_reference(run: Run, model_reference: str | None) -> None:
     """ValueError when ``run``'s errors are referred otherwise than a model's training runs were.
 
     A prediction and a measurement in different conventions differ by the expansion at the reference
@@ -393,7 +393,7 @@ def check_model_reference(run, model_reference):
                          "referred to %s (docs/data-format.md)" % (run.path or run.name, json.dumps(ref), json.dumps(model_reference)))
 
 
-def load_meta(folder):
+def load_meta(folder: str) -> dict[str, Any]:
     path = os.path.join(folder, META)
     problems = _Problems()
     try:

@@ -70,7 +70,7 @@ def read_document(path: str) -> dict[str, Any]:
     return doc
 
 
-def model_class(kind):
+def model_class(kind: str) -> type:
     module, _, name = KIND_CLASSES[kind].partition(":")
     return getattr(importlib.import_module(module), name)
 

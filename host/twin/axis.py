@@ -85,7 +85,7 @@ class AxisParams:
         """m = sqrt(h*perimeter/(lambda*A)) of the 1-D fin equation."""
         return math.sqrt(self.h_W_m2K * self.perimeter_m / (self.conductivity_W_mK * self.section_m2))
 
-    def checked(self):
+    def checked(self) -> AxisParams:
         problems = []
         positive = (
             "stroke_mm", "screw_length_mm", "screw_diameter_mm", "lead_mm", "density_kg_m3",

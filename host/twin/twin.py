@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from numpy.typing import ArrayLike
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 import dataclasses
 import math
 import os
@@ -22,6 +22,7 @@ from host.twin.structure import NODES, lagged, node_temperatures
 
 if TYPE_CHECKING:
     from host.data.runs import Run
+    from host.twin.effects import EffectsSpec
 
 DEFAULT_PROTOCOL = "v8000_r210_490"
 DEFAULT_NOISE_UM = 0.5
@@ -53,9 +54,9 @@ class Simulation:
     err_thermal_um: np.ndarray  # screw expansion + ambient_expansion, no noise
     err_geometric_um: np.ndarray
     err_um: np.ndarray  # what the interferometer reports (in the convention error_reference)
-    screw_x_mm: np.ndarray = None  # (N+1,) node coordinates, screw coordinate (fixed end 0)
-    readings_true_C: np.ndarray = None  # (n+1, len(NODES)) the sensor readings before noise
-    sweep_motion: np.ndarray = None  # (s, 5) the sweeps' own travel (heats the axis, not in motion.csv)
+    screw_x_mm: np.ndarray | None = None  # (N+1,) node coordinates, screw coordinate (fixed end 0)
+    readings_true_C: np.ndarray | None = None  # (n+1, len(NODES)) the sensor readings before noise
+    sweep_motion: np.ndarray | None = None  # (s, 5) the sweeps' own travel (heats the axis, not in motion.csv)
     air_rise_K: float = 0.0  # the seeded warming of the air
     hvac_period_min: float = 0.0  # the seeded HVAC cycle
     error_reference: str = START  # "start" (raw errors) or the sensor the laser corrected them to
@@ -127,7 +128,8 @@ def heat_sources(t: np.ndarray, motion: np.ndarray, params: AxisParams, eff: dic
     return screw_J, speed, nut_W, conv
 
 
-def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, error_reference=START, **overrides):
+def simulate(protocol: str | Protocol = DEFAULT_PROTOCOL, effects: EffectsSpec = None, seed: int = 0, noise_um: float = DEFAULT_NOISE_UM,
+             error_reference: str = START, **overrides: Any) -> Simulation:
     """Run the twin; returns a :class:`Simulation` (see simulate_run for the arguments)."""
     proto = _protocol(protocol)
     names = [nd.name for nd in NODES]
@@ -268,7 +270,8 @@ def to_run(sim: Simulation) -> Run:
     return _runs.Run(meta, temps, errors, motion, None, path=None, name=sim.protocol.name)
 
 
-def simulate_run(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, error_reference=START, **overrides):
+def simulate_run(protocol: str | Protocol = DEFAULT_PROTOCOL, effects: EffectsSpec = None, seed: int = 0, noise_um: float = DEFAULT_NOISE_UM,
+                 error_reference: str = START, **overrides: Any) -> Run:
     """Simulate one thermal test of the feed axis and return it as a :class:`host.data.runs.Run`.
 
     protocol: a name from PROTOCOLS (or a Protocol); effects: None, a list of
@@ -282,8 +285,8 @@ def simulate_run(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAU
     return to_run(simulate(protocol, effects, seed, noise_um, error_reference, **overrides))
 
 
-def write_runs(out, protocols=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, error_reference=START,
-               **overrides):
+def write_runs(out: str, protocols: str | Protocol = DEFAULT_PROTOCOL, effects: EffectsSpec = None, seed: int = 0,
+               noise_um: float = DEFAULT_NOISE_UM, error_reference: str = START, **overrides: Any) -> list[tuple[str, str]]:
     """Simulate and write run folders; returns [(protocol name, folder)].
 
     One protocol writes the run into ``out`` itself; several ('all',

@@ -81,7 +81,7 @@ class StreamLink:
         self.want_hello = True
         self.reopen_s = reopen_s
         self.clock = clock
-        self.ser = None
+        self.ser: Any = None  # a pyserial port (untyped) once open_port succeeds
         self.next_open = 0.0
         self.decoder = StreamDecoder()
         self.latch_pending = False
@@ -177,7 +177,7 @@ class ModbusLink:
         self.address = address
         self.signer = signer
 
-    def slew_um_per_s(self):
+    def slew_um_per_s(self) -> int | None:
         """The board's slew limit (holding register HR_SLEW), or None if it cannot be read."""
         try:
             rr = self.client.read_holding_registers(HR_SLEW, count=1, device_id=self.address)

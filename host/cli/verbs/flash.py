@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import argparse
 from collections.abc import Iterable
-from typing import Any
+from typing import Any, cast
 
 import json
 import os
@@ -43,7 +43,8 @@ def _mpremote(explicit):
     return here if os.path.exists(here) else (shutil.which("mpremote") or "mpremote")
 
 
-def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=True, key=None, new_key=False):
+def stage(dest: str, table: str | None = None, config: str | None = None, board: str | None = None, table_dir: str | None = None,
+          firmware: bool = True, key: bytes | None = None, new_key: bool = False) -> tuple[dict[str, list[str]], str]:
     """Lay out the board's flash under ``dest``; returns {remote dir: [local files]} and the table dir.
     ``key``: the board key (bytes), staged as ``<table dir>/key.bin`` (mode 0600); ``new_key``: it was
     just created, so ``auth.bin`` is staged too, starting its counters at 0 (re-provisioning,
@@ -145,7 +146,7 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
 _BOARD_NAME = re.compile(r"[A-Za-z0-9_.-]+\Z")
 
 
-def board_dir(text, where):
+def board_dir(text: str, where: str) -> str:
     """A folder on the board's flash as mpremote names it (``tables``, ``/data/tables``), without the slashes
     around it; UserError for an empty path, '.' or '..' parts (the staged copy would land outside its folder:
     ``../../etc`` is /etc of this computer) or characters outside letters, digits and ``_.-``."""
@@ -188,7 +189,7 @@ def _plain_expression(node):
     return True
 
 
-def board_file_config(path):
+def board_file_config(path: str) -> dict[str, Any] | None:
     """The ``CONFIG = {...}`` dict at the top level of board file ``path`` (firmware/boards/*.py have one), validated;
     None when the file has none that can be read without running the file. A file that is not Python is a UserError."""
     import ast
@@ -224,7 +225,7 @@ def board_file_config(path):
     return None
 
 
-def board_key(path, dry_run=False):
+def board_key(path: str, dry_run: bool = False) -> tuple[bytes, bool]:
     """The key in ``path``: (key, created). A missing file gets a new random key, which the caller writes to ``path``
     (write_key) only once the board holds it: a dry run or a failed flash leaves no key file behind."""
     from host.errors import UserError, check_output
@@ -288,7 +289,7 @@ def _run_mpremote(argv, port, timeout, what):
     return p
 
 
-def probe(port, mpremote):
+def probe(port: str, mpremote: str) -> None:
     """Ask the board on ``port`` to print a word through its REPL, within PROBE_TIMEOUT_S: a port nobody answers
     is an error in seconds, before any file is copied or any key written."""
     from host.errors import UserError
@@ -298,7 +299,7 @@ def probe(port, mpremote):
         raise UserError("%s: no MicroPython REPL answered (mpremote printed %r)" % (port, p.stdout.strip()[-200:]))
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.errors import UserError
     if not (args.table or args.config or args.board or args.key or not args.no_firmware):
         raise UserError("nothing to flash: give --table, --config, --board or --key, or drop --no-firmware")
@@ -326,7 +327,7 @@ def run(args):
         if created:
             from host.board.linkauth import write_key
             try:
-                write_key(args.key, key)
+                write_key(args.key, cast(bytes, key))  # created: board_key made one
             except OSError as exc:
                 raise UserError("the board now holds a new key, but --key %s cannot be written: %s; flash again with "
                                 "a --key path you can write" % (args.key, exc.strerror or exc))

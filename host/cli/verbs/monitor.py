@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import csv
 import math
@@ -12,6 +12,7 @@ import sys
 import time
 
 if TYPE_CHECKING:
+    from host.board.link import Frame
     pass
 
 LATCH_WAIT_S = 5.0  # the firmware answers L within one cycle (cycle_ms, 100 ms by default)
@@ -41,7 +42,7 @@ OFFSET_FIELDS = (("t_ms", _INTEGER), ("pos_um", _INTEGER), ("total_um", _DECIMAL
                  ("slope_um_per_m", _DECIMAL))
 
 
-def offset_problem(f):
+def offset_problem(f: Frame) -> str | None:
     """Why an O or Q frame's fields are not the offsets docs/protocol.md defines (None when they are).
 
     A frame with a good CRC can still carry 'nan' or '1e999' (a faulty or foreign board): such a frame is
@@ -58,7 +59,7 @@ def offset_problem(f):
     return None
 
 
-def row(f):
+def row(f: Frame) -> dict[str, Any]:
     """A decoded frame as the monitor's columns."""
     from host.board.link import SENSOR_MASK, STATUS_BITS
     flags = [n for bit, n in STATUS_BITS.items() if f.status & bit]
@@ -73,14 +74,14 @@ def row(f):
     return r
 
 
-def error_reference_line(frame):
+def error_reference_line(frame: Frame) -> str:
     """The line `tcomp monitor` prints for a hello: which errors the board's table compensates."""
     from host.board.link import describe_error_reference, hello_error_reference
 
     return "error reference %s" % describe_error_reference(hello_error_reference(frame))
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.errors import UserError
     from host.outputs import Outputs
 
@@ -165,7 +166,7 @@ def _monitor(args, outputs):
                 print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
-                if args.latch and not latch_sent and f.kind == "H":
+                if args.latch and not latch_sent and f.kind == "H" and signer is not None:  # (no signer: L sent above)
                     try:
                         signer.observe_hello(f.fields)
                         line = signer.stream_line("L")

@@ -44,7 +44,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", metavar="PATH", help="write a summary (runs, folders, file sha256, peak errors) as JSON")
 
 
-def parse_effects(text):
+def parse_effects(text: str) -> dict[str, float | None]:
     """'a,b=2.5' -> {'a': None, 'b': 2.5}; raises ValueError naming the bad item (a magnitude that is not a
     finite number, an effect given twice)."""
     import math
@@ -103,7 +103,7 @@ def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
 MAX_NOISE_UM = 1000.0  # 1 mm: a laser that noisy measures nothing; beyond, errors leave the run format's range
 
 
-def check_protocol_list(text):
+def check_protocol_list(text: str) -> None:
     """Refuse a protocol named twice in ``--protocol`` (directly, or by a name and a group that holds it):
     it would be simulated once, and one protocol writes the run into DIR itself, not DIR/<protocol>/."""
     from host.twin import LITERATURE_STATES, PROTOCOLS
