@@ -133,7 +133,7 @@ class MovingConvection(Effect):
                             "propagator A is fixed and it has no state x speed product")
 
 
-class ReversalError(Effect):
+class ReversalEffect(Effect):
     """Backlash-like offset: +b/2 on +1 sweeps, −b/2 on −1 sweeps (bidirectional data)."""
 
     name = "reversal_error"
@@ -196,7 +196,7 @@ class AmbientExpansion(Effect):
         return {"sensor": self.sensor}
 
 
-EFFECTS = {cls.name: cls for cls in (BearingHeat, SpeedDependentHeat, MovingConvection, ReversalError, AmbientExpansion)}
+EFFECTS = {cls.name: cls for cls in (BearingHeat, SpeedDependentHeat, MovingConvection, ReversalEffect, AmbientExpansion)}
 
 
 def make_effect(name, **settings):
