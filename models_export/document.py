@@ -14,7 +14,7 @@ import json
 import math
 
 FORMAT = "tcomp-model/1"  # the value of a document's "format" key
-DOCUMENT_KINDS = ("poly_slope", "linear_direct", "screw", "ann", "dynamic", "mr_poly")  # the values of its "kind" key
+DOCUMENT_KINDS = ("poly_slope", "linear_direct", "screw", "ann", "dynamic", "mr_poly", "ppr")  # the values of its "kind" key
 
 
 def canonical(doc: dict[str, Any]) -> bytes:

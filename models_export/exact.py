@@ -21,6 +21,13 @@ from models_export.document import FORMAT
 if TYPE_CHECKING:
     from models_export.certify import Interval, Num
 
+# document kinds predict reads but no table kind of the firmware evaluates, and why (docs/model-format.md)
+NOT_EXPORTABLE = {
+    "ppr": "its ridge functions are natural cubic splines of projections of the rises, which no firmware table kind "
+           "evaluates (a table holds fixed coefficients of poly_slope, linear_direct, screw or dynamic form); predict "
+           "reads it, and for the board fit a method that exports (mlr, pcr, stepwise, cv-subset, dynamic, mr-poly, screw)",
+}
+
 # dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
 START = "start"  # the raw-error reference of docs/data-format.md (the exporter sees documents, not runs)
 DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
@@ -94,6 +101,8 @@ class Model:
             doc = mr_poly_as_dynamic(doc)
             kind = "dynamic"
         self.kind = "screw_reduced" if kind == "screw" else kind
+        if kind in NOT_EXPORTABLE:
+            raise ExportError("a %s model cannot be exported: %s" % (kind, NOT_EXPORTABLE[kind]))
         if self.kind not in LIMITS_UM:
             raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw, dynamic, mr_poly)" % (kind,))
         sensors = doc.get("sensors") or []

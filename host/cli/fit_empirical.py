@@ -53,6 +53,9 @@ OPTIONS = {
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
     "base": str,  # mr-poly: base sensor (default: role "base")
+    "n_terms": number(int, 1),  # ppr: ridge terms
+    "knots": number(int, 3),  # ppr: spline knots per ridge function
+    "backfit_passes": number(int, 0),  # ppr
 }
 
 
@@ -126,6 +129,11 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
             est.hidden_size_, est.validation_, est.size_rule,
             ", ".join("%d: %.4g / %.4f" % (h, v ** 2, est.validation_r2_[h]) for h, v in sorted(est.validation_rmse_.items()))))
         print("  fit on all training samples: R2=%.4f RMSE=%.4g; best epoch %d" % (est.rsquared_, est.rmse_, est.best_epoch_))
+    elif args.model == "ppr":
+        print("  %d ridge terms, %d knots each, %d backfit pass(es); fit R2=%.4f RMSE=%.4g" % (
+            len(est.terms_), est.knots, est.backfit_passes, est.rsquared_, est.rmse_))
+        for m, t in enumerate(est.terms_):
+            print("  term %d direction (standardised rises): %s" % (m + 1, " ".join("%s %+.3f" % (s, a) for s, a in zip(est.names_, t.a))))
     else:
         print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (
             est.n_components_, est.eigenvalues_.size, 100 * est.cumulative_variance_ratio_[est.n_components_ - 1], 100 * est.variance_threshold))

@@ -23,6 +23,7 @@ KIND_CLASSES = {
     "linear_direct": "host.learning.empirical.kinds:LinearDirectModel",
     "screw": "host.learning.screw.screwmodel:ScrewModel",
     "ann": "host.learning.empirical.kinds:NetworkModel",
+    "ppr": "host.learning.empirical.kinds:PPRModel",
     "dynamic": "host.learning.empirical.dynamic:DynamicModel",
     "mr_poly": "host.learning.empirical.mrpoly:MRPolyModel",
 }

@@ -11,14 +11,14 @@ import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.geometric import fit_geometric
-from host.learning.empirical.kinds import LinearDirectModel, NetworkModel, PolySlopeModel
+from host.learning.empirical.kinds import LinearDirectModel, NetworkModel, PolySlopeModel, PPRModel
 from host.learning.empirical.methods import CROSS_VALIDATED, make_estimator
 from host.learning.empirical.schedule import block_labels, cycles
 from host.data.runs import common_error_reference
 from host.learning.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
 
 ENVELOPE_MARGIN_K = 2.0
-NONLINEAR = ("ann", "ppr")  # estimators that are not a linear function of the rises: NetworkModel
+NONLINEAR = {"ann": NetworkModel, "ppr": PPRModel}  # estimators that are not a linear function of the rises: their model class
 
 
 def _envelope(runs, arrays, sensors, margin, target, channel):
@@ -198,13 +198,13 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
                             geometric_coef=geo.coef_ if geo is not None else (0.0,), **kw)
         model.geometric_ = geo
     elif target == "direct":
-        model = NetworkModel(used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
+        model = NONLINEAR[method](used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
     else:
         geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion, geometric_degree)
         stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_,
                               "criterion": geometric_criterion if geometric_degree is None else "fixed"}
         if method in NONLINEAR:
-            model = NetworkModel(used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
+            model = NONLINEAR[method](used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
         else:
             model = PolySlopeModel(used, coefs, est.intercept_, ref, geometric_coef=geo.coef_, **kw)
         model.geometric_ = geo

@@ -24,7 +24,7 @@ ESTIMATORS = {
 }
 CROSS_VALIDATED = ("cv-subset", "ann", "dynamic")  # fit reads groups (host/learning/empirical/fitting.py cv_groups)
 # estimators whose fitted model has no model-document kind yet: `tcomp compare` runs them, `tcomp fit` cannot save them
-NO_DOCUMENT = {"ppr": "a projection pursuit regression has no model-document kind yet (docs/model-format.md)"}
+NO_DOCUMENT: dict[str, str] = {}  # method -> why (none left since ppr got its kind)
 FIT_METHODS = tuple(m for m in ESTIMATORS if m not in NO_DOCUMENT)  # `tcomp fit --model` (besides screw)
 
 SELECTORS = ("maxtree", "stepwise", "hclust-ga")  # `tcomp select --method` (host/learning/empirical/selectors)

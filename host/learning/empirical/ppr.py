@@ -125,6 +125,30 @@ class PPR:
         Z = (X - self.x_mean_) / self.x_scale_
         return self.y_mean_ + sum(t(Z) for t in self.terms_)
 
+    def ridges(self):
+        """The fitted model as plain lists (the ``ppr`` model document's ``thermal.ridges``): the standardisation,
+        ȳ, and each term's unit direction, spline knots and spline coefficients (natural_spline_basis)."""
+        return {
+            "input_offset": [float(v) for v in self.x_mean_],
+            "input_scale": [float(v) for v in self.x_scale_],
+            "output_offset": float(self.y_mean_),
+            "terms": [{"direction": [float(v) for v in t.a], "knots": [float(v) for v in t.knots],
+                       "coefficients": [float(v) for v in t.beta]} for t in self.terms_],
+        }
+
+    @classmethod
+    def from_ridges(cls, ridges):
+        """A PPR predicting with a ``ridges()`` dict (no training data; host/learning/empirical/kinds.py
+        PPRModel.from_document checks the dict first)."""
+        terms = ridges["terms"]
+        self = cls(n_terms=len(terms), knots=len(terms[0]["knots"]))
+        self.x_mean_ = np.asarray(ridges["input_offset"], dtype=float)
+        self.x_scale_ = np.asarray(ridges["input_scale"], dtype=float)
+        self.y_mean_ = float(ridges["output_offset"])
+        self.terms_ = [_Ridge(np.asarray(t["direction"], dtype=float), np.asarray(t["knots"], dtype=float),
+                              np.asarray(t["coefficients"], dtype=float)) for t in terms]
+        return self
+
     def statistics(self):
         return {
             "n_samples": int(self.n_samples_),
