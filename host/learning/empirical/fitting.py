@@ -7,6 +7,12 @@ sensor, the absolute temperatures and the rises seen over the training span
 the run declares its stroke, else the measured position range; a direct model
 has its fixed measuring position.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
@@ -16,6 +22,10 @@ from host.learning.empirical.methods import CROSS_VALIDATED, make_estimator
 from host.learning.empirical.schedule import block_labels, cycles
 from host.data.runs import common_error_reference
 from host.learning.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
+    from host.learning.empirical.targets import RunArrays
 
 ENVELOPE_MARGIN_K = 2.0
 NONLINEAR = {"ann": NetworkModel, "ppr": PPRModel}  # estimators that are not a linear function of the rises: their model class
@@ -56,7 +66,7 @@ def _envelope(runs, arrays, sensors, margin, target, channel):
     }
 
 
-def select_columns(arrays, sensors):
+def select_columns(arrays: Sequence[RunArrays], sensors: Sequence[str]) -> list[RunArrays]:
     """RunArrays restricted to ``sensors`` (a new list, same runs)."""
     from host.learning.empirical.targets import RunArrays
 
@@ -71,7 +81,7 @@ def select_columns(arrays, sensors):
     return out
 
 
-def merge_small_groups(groups, fraction=0.25):
+def merge_small_groups(groups: np.ndarray, fraction: float = 0.25) -> np.ndarray:
     """Merge groups smaller than ``fraction`` of the largest into the group before them in time.
 
     A training window that ends just after a cycle starts would otherwise make
@@ -88,7 +98,7 @@ def merge_small_groups(groups, fraction=0.25):
     return groups
 
 
-def cv_groups(runs, arrays, cv_blocks=None):
+def cv_groups(runs: Sequence[Run], arrays: Sequence[RunArrays], cv_blocks: int | None = None) -> np.ndarray:
     """Cross-validation group of every stacked sample.
 
     Several runs: the run. One run: ``cv_blocks`` equal-length contiguous time
@@ -116,9 +126,7 @@ def cv_groups(runs, arrays, cv_blocks=None):
     return g
 
 
-def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
-              reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
-              cv_blocks=None, exclude=None, geometric_degree=None, **options):
+def fit_model(runs: Sequence[Run], method: str = "mlr", target: str = "slope", channel: str | None = None, sensors: Sequence[str] | None = None, fit_intercept: bool = True, window: tuple[float | None, float | None] | None = None, reference: str = "fixed", envelope_margin_K: float = ENVELOPE_MARGIN_K, geometric_max_degree: int = 5, geometric_criterion: str = "cv", cv_blocks: int | None = None, exclude: tuple[float, float] | None = None, geometric_degree: int | None = None, **options: Any) -> Any:
     """Fit ``method`` (an ESTIMATORS name, or dynamic) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).

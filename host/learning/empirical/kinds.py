@@ -18,6 +18,12 @@ training runs' typical start state.
 ``predict(run)`` returns one value per row of ``run.errors`` in file order;
 rows of other channels than the model's are NaN.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from numpy.typing import ArrayLike
+
 import math
 from typing import Any
 
@@ -209,12 +215,12 @@ class LinearDirectModel(_Base):
     kind = "linear_direct"
     target = "direct"
 
-    def predict_rises(self, R):
+    def predict_rises(self, R: ArrayLike) -> np.ndarray:
         return self.intercept + np.asarray(R, dtype=float) @ self.coefficients
 
     thermal = predict_rises
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         doc = self._common_doc()
         doc["geometric"] = None
         doc["thermal"] = {
@@ -225,7 +231,7 @@ class LinearDirectModel(_Base):
         return doc
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> LinearDirectModel:
         thermal, sensors, ref, kw = cls._common_args(doc)
         coefs, b0 = _thermal_terms(doc, thermal, sensors, "coefficients_um_per_K", "intercept_um")
         return cls(sensors, coefs, b0, ref, **kw)
@@ -237,20 +243,20 @@ class PolySlopeModel(_Base):
     kind = "poly_slope"
     target = "slope"
 
-    def __init__(self, sensors, coefficients, intercept, reference_C, geometric_coef=(0.0,), **kw):
+    def __init__(self, sensors: Sequence[str], coefficients: ArrayLike, intercept: float, reference_C: dict[str, float], geometric_coef: ArrayLike = (0.0,), **kw: Any) -> None:
         super().__init__(sensors, coefficients, intercept, reference_C, **kw)
         self.geometric_coef = np.asarray(geometric_coef, dtype=float)
 
-    def slope(self, R):
+    def slope(self, R: ArrayLike) -> np.ndarray:
         """Thermal slope s(T) in µm/mm for rises R (n, p)."""
         return self.intercept + np.asarray(R, dtype=float) @ self.coefficients
 
     thermal = slope
 
-    def geometric(self, P):
+    def geometric(self, P: ArrayLike) -> np.ndarray:
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         doc = self._common_doc()
         doc["geometric"] = {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]}
         doc["thermal"] = {
@@ -261,7 +267,7 @@ class PolySlopeModel(_Base):
         return doc
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> PolySlopeModel:
         thermal, sensors, ref, kw = cls._common_args(doc)
         coefs, b0 = _thermal_terms(doc, thermal, sensors, "coefficients_um_per_mm_per_K", "intercept_um_per_mm")
         return cls(sensors, coefs, b0, ref, geometric_coef=_geometric_from_document(doc, "poly_slope"), **kw)
@@ -284,7 +290,7 @@ class NetworkModel(_Base):
 
     kind = "ann"
 
-    def __init__(self, sensors, estimator, reference_C, target="direct", geometric_coef=(0.0,), **kw):
+    def __init__(self, sensors: Sequence[str], estimator: Any, reference_C: dict[str, float], target: str = "direct", geometric_coef: ArrayLike = (0.0,), **kw: Any) -> None:
         super().__init__(sensors, None, 0.0, reference_C, **kw)
         if target not in ("slope", "direct"):
             raise EmpiricalDataError("target must be slope or direct, got %r" % (target,))
@@ -292,13 +298,13 @@ class NetworkModel(_Base):
         self.estimator_ = estimator
         self.geometric_coef = np.asarray(geometric_coef, dtype=float)
 
-    def thermal(self, R):
+    def thermal(self, R: ArrayLike) -> np.ndarray:
         return self.estimator_.predict(np.asarray(R, dtype=float).reshape(-1, len(self.sensors)))
 
-    def geometric(self, P):
+    def geometric(self, P: ArrayLike) -> np.ndarray:
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         if not hasattr(self.estimator_, "network"):
             raise ModelFormatError("a %s model has no document form (only ann networks are saved)" % self.method)
         doc = self._common_doc()
@@ -309,7 +315,7 @@ class NetworkModel(_Base):
         return doc
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> NetworkModel:
         from host.learning.empirical.ann import ANN
 
         thermal, sensors, ref, kw = cls._common_args(doc)
@@ -351,7 +357,7 @@ class PPRModel(NetworkModel):
 
     kind = "ppr"
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         doc = self._common_doc()
         doc["geometric"] = (None if self.target == "direct"
                             else {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]})
@@ -360,7 +366,7 @@ class PPRModel(NetworkModel):
         return doc
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> PPRModel:
         from host.learning.empirical.ppr import PPR
 
         thermal, sensors, ref, kw = cls._common_args(doc)
