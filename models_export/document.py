@@ -43,7 +43,7 @@ def edited_reason(declared: str | None, actual: str) -> str:
             "saved; re-save it, or use it marked as edited (--allow-edited)" % (declared, actual))
 # Blocks that define what a model predicts (statistics and training may hold NaN, e.g. an undefined p-value).
 DEFINING_BLOCKS = ("sensors", "reference_C", "envelope", "geometric", "thermal")
-_COEFFICIENTS = {"poly_slope": "coefficients_um_per_mm_per_K", "linear_direct": "coefficients_um_per_K"}
+_COEFFICIENTS: dict[str | None, str] = {"poly_slope": "coefficients_um_per_mm_per_K", "linear_direct": "coefficients_um_per_K"}
 
 
 def _non_finite(value, where):

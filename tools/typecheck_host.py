@@ -1,7 +1,7 @@
 """Type-check host/ and models_export/ (``make typecheck``, after the firmware's check).
 
 Two checks (pyproject.toml names the folders):
-1. every public function of [tool.tcomp.typecheck] ``hinted`` has type hints: each parameter (but
+1. every public function of [tool.tcomp.typecheck] ``hinted`` (but the files listed in ``exempt``) has type hints: each parameter (but
    self/cls) and the return. Public means a name without a leading underscore (dunders count) in a
    module or class without one, nested functions aside: what another module may call.
 2. pyright (pinned in constraints.txt) in its basic mode over [tool.pyright] ``include`` checks the
@@ -21,9 +21,10 @@ PYRIGHT = os.path.join(ROOT, ".venv", "bin", "pyright")
 
 
 def hinted_paths():
-    """The files and folders whose public functions must all have hints (pyproject.toml)."""
+    """(the files and folders whose public functions must all have hints, the files exempt from it), pyproject.toml."""
     with open(os.path.join(ROOT, "pyproject.toml"), "rb") as fh:
-        return tomllib.load(fh)["tool"]["tcomp"]["typecheck"]["hinted"]
+        table = tomllib.load(fh)["tool"]["tcomp"]["typecheck"]
+    return table["hinted"], table.get("exempt", [])
 
 
 def public_functions(source):
@@ -85,8 +86,13 @@ def main():
     if not micropython_stub():
         return 2
     missing = []
-    for path in hinted_paths():
+    hinted, exempt = hinted_paths()
+    for rel in exempt:
+        print("%s: exempt from the hint check (pyproject.toml [tool.tcomp.typecheck] exempt says why)" % rel)
+    for path in hinted:
         for rel in python_files(path):
+            if rel in exempt:
+                continue
             with open(os.path.join(ROOT, rel), encoding="utf-8") as fh:
                 missing += ["%s: %s" % (rel, m) for m in missing_hints(fh.read())]
     for m in missing:

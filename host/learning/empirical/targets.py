@@ -237,7 +237,7 @@ class RunArrays:
         return "RunArrays(run=%r, n=%d, sensors=%d)" % (self.run, self.y.size, len(self.names))
 
 
-def in_window(t: np.ndarray, window: tuple[float | None, float | None] | None) -> np.ndarray:
+def in_window(t: np.ndarray, window: tuple[float | None, float | None]) -> np.ndarray:
     """Mask of the times with lo <= t < hi for ``window`` = (lo, hi); either end may be None (unbounded)."""
     lo, hi = window
     keep = np.ones(np.shape(t), bool)
