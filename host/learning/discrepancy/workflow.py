@@ -131,7 +131,7 @@ class Result:
     after: HeldOut
     rounds: list
     runs: list
-    final_fit: object = None
+    final_fit: Any = None  # the family's fitted object (duck-typed, Family); the screw family's is a ScrewModel
     reference: Optional[dict] = None  # host.learning.discrepancy.reference.check_declaration's finding, when run
 
     def as_json(self) -> dict[str, Any]:

@@ -175,8 +175,9 @@ def check_params(method: str, params: Mapping[str, Any], allowed: Mapping[str, A
     return out
 
 
-def number(method: str, name: str, value: Any, lo: float | None = None, hi: float | None = None, integer: bool = False, allow_none: bool = False) -> float | int | None:
+def number(method: str, name: str, value: Any, lo: float | None = None, hi: float | None = None, integer: bool = False, allow_none: bool = False) -> Any:
     """A numeric parameter checked against its range (CLI --option values arrive as JSON)."""
+    # -> Any: an int when ``integer``, else a float, None only when ``allow_none``: each caller knows which it asked for
     if value is None and allow_none:
         return None
     ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
