@@ -79,7 +79,7 @@ def state_errors(models: Mapping[str, Any], fit_run: Run, runs: Sequence[Run]) -
     return rows
 
 
-def summary(rows: Sequence[Mapping[str, Any]]) -> dict[str, float]:
+def summary(rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
     """Mean RMSE over the unseen states per model."""
     out = {}
     for m in sorted({r["model"] for r in rows}):

@@ -57,8 +57,9 @@ def _is_run(obj):
     return hasattr(obj, "temperatures") and hasattr(obj, "errors")
 
 
-def as_arrays(data: Any, target: str = "slope", channel: str | None = None, sensors: Any = None) -> tuple[list[tuple[np.ndarray, np.ndarray, list[str]]], list[str]]:
+def as_arrays(data: Any, target: str = "slope", channel: str | None = None, sensors: Any = None) -> tuple[list[Any], list[str]]:
     """Normalise runs or ``(X, y, names)`` tuples to a checked list of tuples plus run labels."""
+    # list[Any]: (X, y, names) tuples, or targets.RunArrays (which unpack as one and carry the temperature log)
     if _is_run(data) or (hasattr(data, "X") and hasattr(data, "y")):
         data = [data]  # one Run or one targets.RunArrays
     elif isinstance(data, tuple) and len(data) == 3 and not _is_run(data[0]) and np.ndim(data[0]) == 2:

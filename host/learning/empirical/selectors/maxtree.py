@@ -257,7 +257,7 @@ CRITERIA = ("paper", "r2-change", "tolerance")
 SPSS_MIN_TOLERANCE = 1e-4
 
 
-def tolerances(X: np.ndarray) -> np.ndarray:
+def tolerances(X: np.ndarray) -> list[float]:
     """Each column's tolerance 1 − R² of its regression (with intercept) on the other columns (SPSS's TOLERANCE).
 
     One column: 1. A column that is an exact combination of the others: 0."""
