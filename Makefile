@@ -100,9 +100,10 @@ test: setup
 lint: setup
 	$(BIN)/ruff check .
 
-# the firmware against MicroPython's stubs; host/ and models_export/ against their type hints (pyrightconfig.json)
+# the firmware against MicroPython's stubs; host/ and models_export/ against their type hints (pyproject.toml [tool.pyright])
 typecheck: setup
 	$(BIN)/python tools/typecheck_firmware.py
+	$(BIN)/python tools/typecheck_host.py
 
 bench: setup
 	@$(MAKE) --no-print-directory -s -C ports/mps2 MPY_TOP=$(abspath $(MPY_TOP)) CPU=cortex-m0plus >/dev/null

@@ -3,17 +3,21 @@
 The bottom of the host: library modules (outputs, options, the board link) raise ``UserError``, and the CLI
 (host/cli) prints it as one line without a traceback."""
 
+from __future__ import annotations
+
+from typing import IO, Any
+
 
 class UserError(Exception):
     """A problem with the user's input (file, flag, data): printed without a traceback."""
 
 
-def os_reason(exc):
+def os_reason(exc: OSError) -> str:
     """The reason an OSError gives, for a one-line message."""
     return exc.strerror or str(exc)
 
 
-def check_output(path, flag="--out"):
+def check_output(path: str, flag: str = "--out") -> None:
     """Raise UserError unless ``path`` can be created as a file; call it before long work starts."""
     import os
 
@@ -26,7 +30,7 @@ def check_output(path, flag="--out"):
         raise UserError("%s %s: not writable" % (flag, path))
 
 
-def check_output_dir(path, flag="--out"):
+def check_output_dir(path: str, flag: str = "--out") -> None:
     """Raise UserError unless ``path`` is, or can be created as, a folder (parents included)."""
     import os
 
@@ -41,7 +45,7 @@ def check_output_dir(path, flag="--out"):
         raise UserError("%s %s: %s is not writable" % (flag, path, probe))
 
 
-def open_output(path, mode="w", **kwargs):
+def open_output(path: str, mode: str = "w", **kwargs: Any) -> IO[Any]:
     """``open(path, mode)`` for an output file; an OSError becomes "cannot write PATH: reason"."""
     if "b" not in mode:
         kwargs.setdefault("encoding", "utf-8")

@@ -4,13 +4,21 @@ A verb passes a table ``{key: converter}``; a converter turns the text after ``=
 raises ValueError with the reason, which becomes "--option KEY='TEXT': reason". Without a table
 any key is accepted and the value is read as JSON (numbers, true/false, lists) or kept as a word.
 """
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Mapping
+from typing import Any
 import json
 import math
 
 from host.errors import UserError
 
+# text after '=' -> value; ValueError with the reason when the text is not one
+Converter = Callable[[str], Any]
 
-def split_option(item, expected="KEY=VALUE", flag="--option"):
+
+def split_option(item: str, expected: str = "KEY=VALUE", flag: str = "--option") -> tuple[str, str]:
     """'KEY=VALUE' -> (KEY, VALUE) stripped; UserError when the '=' or the key is missing."""
     key, sep, value = item.partition("=")
     key = key.strip()
@@ -19,7 +27,7 @@ def split_option(item, expected="KEY=VALUE", flag="--option"):
     return key, value.strip()
 
 
-def json_or_word(text):
+def json_or_word(text: str) -> Any:
     """A value read as JSON when it is JSON (3, 0.5, true, [1,2]), else the plain word (offset)."""
     try:
         return json.loads(text)
@@ -27,7 +35,8 @@ def json_or_word(text):
         return text
 
 
-def number(kind, minimum=None, maximum=None, above=None):
+def number(kind: Callable[[str], float], minimum: float | None = None, maximum: float | None = None,
+           above: float | None = None) -> Converter:
     """Converter to a finite ``kind`` (int or float): at least ``minimum``, at most ``maximum``, more than
     ``above``, each when given. A bound is what keeps a typo (segments=100000) from a 1 GiB array or a
     negative feed from a meaningless model: an option that sizes memory or has a physical sign has one."""
@@ -48,7 +57,7 @@ def number(kind, minimum=None, maximum=None, above=None):
     return convert
 
 
-def numbers(kind, minimum=None):
+def numbers(kind: Callable[[str], float], minimum: float | None = None) -> Converter:
     """Converter to a list of ``number(kind, minimum)`` values separated by '/' (e.g. 0/1800/7200)."""
     one = number(kind, minimum)
 
@@ -60,7 +69,7 @@ def numbers(kind, minimum=None):
     return convert
 
 
-def boolean(text):
+def boolean(text: str) -> bool:
     """Converter accepting true or false (any case)."""
     word = text.lower()
     if word not in ("true", "false"):
@@ -68,7 +77,7 @@ def boolean(text):
     return word == "true"
 
 
-def choice(*words):
+def choice(*words: str) -> Converter:
     """Converter accepting one of ``words``."""
     def convert(text):
         if text not in words:
@@ -77,7 +86,7 @@ def choice(*words):
     return convert
 
 
-def parse_options(items, converters=None, flag="--option"):
+def parse_options(items: Iterable[str] | None, converters: Mapping[str, Converter] | None = None, flag: str = "--option") -> dict[str, Any]:
     """``--option`` items -> {key: value}; a bad item is a UserError naming it and the reason."""
     out = {}
     for item in items or ():

@@ -16,6 +16,12 @@ be renamed onto: they are written first at commit, before any rename.
 A folder output may name the files that make one whole (a run folder's): writing
 it into an existing folder then removes the ones of the older whole it did not rewrite.
 """
+
+from __future__ import annotations
+
+from collections.abc import Iterable
+from types import TracebackType
+from typing import IO, Any, Literal
 import errno
 import os
 import shutil
@@ -77,25 +83,25 @@ class _Target:
         self.real = _real(shown)
         self.device = not folder and _is_device(shown)
         self.stage = None
-        self.owned = ()
+        self.owned: tuple[str, ...] = ()
 
 
 class Outputs:
     """``with Outputs(inputs) as out:`` claim outputs, write through ``out.path``/``out.open``, then ``out.commit()``."""
 
-    def __init__(self, inputs=()):
+    def __init__(self, inputs: Iterable[str | None] = ()) -> None:
         self._inputs = [(p, _real(p)) for p in inputs if p]
         self._targets = []
         self._committed = False
 
     # ------------------------------------------------------------ claims, before the work
 
-    def file(self, path, flag="--out"):
+    def file(self, path: str, flag: str = "--out") -> str:
         """Claim ``path`` as an output file; UserError when it cannot be written or would hit an input or output."""
         check_output(path, flag)
         return self._claim(_Target(flag, path, folder=False))
 
-    def folder(self, path, flag="--out", owned=()):
+    def folder(self, path: str, flag: str = "--out", owned: Iterable[str] = ()) -> str:
         """Claim ``path`` as an output folder (created at commit; files already in it stay unless rewritten).
 
         ``owned``: file names that together make one thing the command writes whole (a run folder's files,
@@ -106,7 +112,7 @@ class Outputs:
         t.owned = tuple(owned)
         return self._claim(t)
 
-    def log(self, path, flag):
+    def log(self, path: str, flag: str) -> str:
         """Claim ``path`` as a log the command appends to as it goes (not staged: what was logged stays)."""
         check_output(path, flag)
         return self._claim(_Target(flag, path, folder=False))
@@ -137,7 +143,7 @@ class Outputs:
                 return t
         raise KeyError("%s was not claimed as an output" % path)
 
-    def path(self, path):
+    def path(self, path: str) -> str:
         """Where to write the claimed output ``path`` now (a hidden temporary beside it, same extension)."""
         t = self._target(path)
         if t.stage is None:
@@ -163,13 +169,13 @@ class Outputs:
         os.close(fd)
         return stage
 
-    def open(self, path, mode="w", **kwargs):
+    def open(self, path: str, mode: str = "w", **kwargs: Any) -> IO[Any]:
         """``open`` on the staging file of the claimed output ``path``."""
         if "b" not in mode:
             kwargs.setdefault("encoding", "utf-8")
         return open(self.path(path), mode, **kwargs)
 
-    def shown(self, staged):
+    def shown(self, staged: str) -> str:
         """The user's path for a path inside a staging folder (for messages and recorded paths)."""
         for t in self._targets:
             if t.folder and t.stage and _inside(staged, t.stage):
@@ -178,7 +184,7 @@ class Outputs:
 
     # ------------------------------------------------------------ commit or discard
 
-    def commit(self):
+    def commit(self) -> None:
         """Rename every staged output into place (devices written first); on failure remove what is staged."""
         current = None
         try:
@@ -237,7 +243,7 @@ class Outputs:
                             os.remove(stale)  # part of the older whole this one replaces
                 _fsync(dest)
 
-    def discard(self):
+    def discard(self) -> None:
         """Remove every staging file and folder (after a commit only the leftovers of devices and merged folders)."""
         for t in self._targets:
             if t.stage is None:
@@ -251,10 +257,10 @@ class Outputs:
                     pass
             t.stage = None
 
-    def __enter__(self):
+    def __enter__(self) -> Outputs:
         return self
 
-    def __exit__(self, kind, exc, tb):
+    def __exit__(self, kind: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> Literal[False]:
         if not self._committed:
             self.discard()
         if isinstance(exc, OSError) and not isinstance(exc, UserError) and exc.errno in (errno.ENOSPC, errno.EDQUOT, errno.EFBIG, errno.EIO):

@@ -27,6 +27,11 @@ monotone and stays below such a v). The exporter finds v with a float solve
 of (I - |A|) v = rho, inflates it, and verifies v >= |A| v + rho exactly; if
 no such v exists (|A| not contracting) it refuses to export.
 """
+
+from __future__ import annotations
+
+from fractions import Fraction
+from typing import Union
 import math
 from fractions import Fraction as F
 
@@ -43,12 +48,17 @@ LIMITS_UM = {"poly_slope": 0.05, "linear_direct": 0.05, "screw_reduced": 0.1, "d
 DEFAULT_REDUCTION_LIMIT_UM = 0.5
 
 
+# an exact number of the analysis, and a closed interval of them (lo, hi)
+Num = Union[int, Fraction]
+Interval = tuple[Num, Num]
+
+
 class ExportError(ValueError):
     """The model cannot be exported; the message names the term and the reason."""
 
 
 # ------------------------------------------------------------------ helpers
-def frac_bits(bound, limit, cap=MAX_FRAC):
+def frac_bits(bound: Num, limit: Num, cap: int = MAX_FRAC) -> int:
     """Largest f <= cap with bound * 2**f <= limit (bound a non-negative Fraction)."""
     bound = F(bound)
     if bound == 0:
@@ -64,50 +74,50 @@ def frac_bits(bound, limit, cap=MAX_FRAC):
     return min(f, cap)
 
 
-def p2(k):
+def p2(k: int) -> Fraction:
     return F(2) ** k
 
 
-def rnd(x):
+def rnd(x: Num) -> int:
     """Round a Fraction to the nearest int (half away from zero)."""
     x = F(x)
     return int(math.floor(x + F(1, 2))) if x >= 0 else -int(math.floor(-x + F(1, 2)))
 
 
-def iv_mul(a, b):
+def iv_mul(a: Interval, b: Interval) -> Interval:
     c = (a[0] * b[0], a[0] * b[1], a[1] * b[0], a[1] * b[1])
     return (min(c), max(c))
 
 
-def iv_add(*ivs):
+def iv_add(*ivs: Interval) -> Interval:
     return (sum(i[0] for i in ivs), sum(i[1] for i in ivs))
 
 
-def iv_scale(a, k):
+def iv_scale(a: Interval, k: Num) -> Interval:
     return iv_mul(a, (F(k), F(k)))
 
 
-def iv_abs(a):
+def iv_abs(a: Interval) -> Num:
     return max(abs(a[0]), abs(a[1]))
 
 
-def int_iv(real_iv, err_iv):
+def int_iv(real_iv: Interval, err_iv: Interval) -> tuple[int, int]:
     """Integer interval holding real + err."""
     return (math.floor(real_iv[0] + err_iv[0]), math.ceil(real_iv[1] + err_iv[1]))
 
 
-def limbs(x, L, n):
+def limbs(x: Interval, L: int, n: int) -> list[tuple[int, int]]:
     """Intervals of the limbs of x (an int interval) split as the firmware's _mul does."""
     out = [(0, (1 << L) - 1)] * (n - 1)
     out.append((x[0] >> (L * (n - 1)), x[1] >> (L * (n - 1))))
     return out
 
 
-def limb_max(x, L, n):
+def limb_max(x: Interval, L: int, n: int) -> int:
     return max(max(abs(a), abs(b)) for a, b in limbs(x, L, n))
 
 
-def top_limbs_needed(x, L, narrow):
+def top_limbs_needed(x: Interval, L: int, narrow: Num) -> int | None:
     """Smallest limb count n such that narrow * |top limb| <= PROD."""
     for n in range(1, 7):
         top = max(abs(x[0] >> (L * (n - 1))), abs(x[1] >> (L * (n - 1))))
@@ -116,7 +126,7 @@ def top_limbs_needed(x, L, narrow):
     return None
 
 
-def narrow_width(narrow):
+def narrow_width(narrow: Num) -> int:
     """Limb width L for a wide operand multiplied by |narrow| <= narrow: narrow * (2**L - 1) <= PROD."""
     if narrow <= 0:
         return 29
@@ -126,7 +136,7 @@ def narrow_width(narrow):
     return L
 
 
-def fit_coef(value, limbmax, base_frac, cap=62):
+def fit_coef(value: Fraction, limbmax: Num, base_frac: int, cap: int = 62) -> tuple[int, int]:
     """Quantise ``value`` (a Fraction) as q = round(value * 2**(base_frac + sh)) with the largest
     shift sh <= cap such that |q| * limbmax <= PROD. Returns (q, sh); (0, 0) for a zero value."""
     if value == 0:
@@ -145,12 +155,12 @@ def fit_coef(value, limbmax, base_frac, cap=62):
 class Recorder:
     """Interval of every checked firmware accumulator (firmware/evaluate.py ACC_*), and the peak |integer| each named term produces."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.accs = {}
         self.peaks = {}
         self.where = {}
 
-    def note(self, acc_id, lo, hi, term):
+    def note(self, acc_id: int, lo: Num, hi: Num, term: str) -> None:
         cur = self.accs.get(acc_id)
         self.accs[acc_id] = (lo, hi) if cur is None else (min(cur[0], lo), max(cur[1], hi))
         m = max(abs(lo), abs(hi))
@@ -161,7 +171,7 @@ class Recorder:
                               "small-int limit 2^30; the model cannot be made integer-safe over its envelope"
                               % (term, m, math.log2(m)))
 
-    def mul(self, acc_id, c, x, L, n, sh, term):
+    def mul(self, acc_id: int, c: Interval, x: Interval, L: int, n: int, sh: int, term: str) -> tuple[tuple[int, int], int]:
         """Mirror of Evaluator._mul: returns (result interval, number of flooring shifts)."""
         rlo = rhi = 0
         s = sh
@@ -182,16 +192,16 @@ class Recorder:
             s -= L
         return (rlo, rhi), floors
 
-    def headroom(self, term):
+    def headroom(self, term: str) -> float:
         m = self.peaks.get(term, 0)
         return 30.0 - math.log2(m) if m > 0 else 30.0
 
 
-def floor_err(k):
+def floor_err(k: int) -> Interval:
     """Error interval of k flooring right shifts."""
     return (F(-k), F(0))
 
 
-def center(err):
+def center(err: Interval) -> int:
     """Integer bias that centres an error interval on zero (subtracted from the value)."""
     return rnd(-(err[0] + err[1]) / 2)

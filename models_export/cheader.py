@@ -10,8 +10,15 @@ sign, left shifts as multiplications. Right shift of a negative int32_t is
 assumed arithmetic (gcc, clang, arm-none-eabi, IAR, Keil all do so).
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 from firmware.table import COMMON, KINDS, POSITION, SCREW, SENSOR_FIELDS
 from models_export.tableformat import spec_names
+
+if TYPE_CHECKING:
+    from models_export.export import Export
 
 # Fraction bits of coefficients: recorded in the table for its readers, never used by the
 # evaluation (firmware/evaluate.py reads none of them; tests/export/test_export_table.py checks).
@@ -338,7 +345,7 @@ def _array(name, values):
     return "static const int32_t tcomp_%s[%d] = {%s};\n" % (name, len(vals), body)
 
 
-def c_header(ex, guard="TCOMP_TABLE_H"):
+def c_header(ex: Export, guard: str = "TCOMP_TABLE_H") -> str:
     f = ex.fields
     r = ex.report
     kind = f["kind"]

@@ -5,26 +5,30 @@ The exporter depends on the document format only, never on the host classes that
 host/learning/documents.py (save, load by kind), the fitting code that writes documents and the
 HIL fixtures all take the format tag, the kinds and the hash from here.
 """
+
+from __future__ import annotations
+
+from typing import Any
 import hashlib
 import json
 import math
 
 FORMAT = "tcomp-model/1"  # the value of a document's "format" key
-DOCUMENT_KINDS = ("poly_slope", "linear_direct", "screw", "ann", "dynamic", "mr_poly")  # the values of its "kind" key
+DOCUMENT_KINDS = ("poly_slope", "linear_direct", "screw", "ann", "dynamic", "mr_poly", "ppr")  # the values of its "kind" key
 
 
-def canonical(doc):
+def canonical(doc: dict[str, Any]) -> bytes:
     """The document without its provenance block as canonical JSON bytes (sorted keys, no spaces)."""
     body = {k: v for k, v in doc.items() if k != "provenance"}
     return json.dumps(body, sort_keys=True, separators=(",", ":")).encode()
 
 
-def document_hash(doc):
+def document_hash(doc: dict[str, Any]) -> str:
     """sha256 hex of the document without its provenance block."""
     return hashlib.sha256(canonical(doc)).hexdigest()
 
 
-def provenance(doc):
+def provenance(doc: dict[str, Any]) -> tuple[str, str | None]:
     """(actual sha256, the recorded provenance.sha256 or None). A recorded hash that differs from the actual one
     means the document was edited after it was saved: export refuses it and predict refuses it alike, unless
     told (``--allow-edited``)."""
@@ -33,13 +37,13 @@ def provenance(doc):
     return document_hash(doc), declared
 
 
-def edited_reason(declared, actual):
+def edited_reason(declared: str | None, actual: str) -> str:
     """The one sentence both export and predict give for an edited document."""
     return ("provenance.sha256 %.16s... does not match the document (actual %.16s...): it was edited after it was "
             "saved; re-save it, or use it marked as edited (--allow-edited)" % (declared, actual))
 # Blocks that define what a model predicts (statistics and training may hold NaN, e.g. an undefined p-value).
 DEFINING_BLOCKS = ("sensors", "reference_C", "envelope", "geometric", "thermal")
-_COEFFICIENTS = {"poly_slope": "coefficients_um_per_mm_per_K", "linear_direct": "coefficients_um_per_K"}
+_COEFFICIENTS: dict[str | None, str] = {"poly_slope": "coefficients_um_per_mm_per_K", "linear_direct": "coefficients_um_per_K"}
 
 
 def _non_finite(value, where):
@@ -54,7 +58,7 @@ def _non_finite(value, where):
     return None
 
 
-def document_problem(doc):
+def document_problem(doc: dict[str, Any]) -> str | None:
     """What makes ``doc`` say something other than what predict and export would use, or None.
 
     Checked for every kind before either reads it: a sensor listed twice, a coefficient of no listed sensor

@@ -4,6 +4,12 @@
 quantises and certifies what it holds with models_export.certify's interval arithmetic. The document's hash is
 models_export.document's job.
 """
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+from typing import TYPE_CHECKING
 import math
 from fractions import Fraction as F
 
@@ -12,6 +18,16 @@ from models_export.certify import (
 )
 from models_export.document import FORMAT
 
+if TYPE_CHECKING:
+    from models_export.certify import Interval, Num
+
+# document kinds predict reads but no table kind of the firmware evaluates, and why (docs/model-format.md)
+NOT_EXPORTABLE = {
+    "ppr": "its ridge functions are natural cubic splines of projections of the rises, which no firmware table kind "
+           "evaluates (a table holds fixed coefficients of poly_slope, linear_direct, screw or dynamic form); predict "
+           "reads it, and for the board fit a method that exports (mlr, pcr, stepwise, cv-subset, dynamic, mr-poly, screw)",
+}
+
 # dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
 START = "start"  # the raw-error reference of docs/data-format.md (the exporter sees documents, not runs)
 DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
@@ -19,7 +35,8 @@ DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
 POWER_PREFIXES = {"T2:": 2, "T3:": 3, "T4:": 4}
 
 
-def power_chain(rec, x_iv, e, L, n, sh2, sh, name, acc):
+def power_chain(rec: Recorder, x_iv: Interval, e: int, L: int, n: int, sh2: int, sh: int, name: str,
+                acc: int) -> tuple[Interval, Interval, list[Interval]]:
     """Integer interval and error interval of the firmware's power x**e / 2**(sh2 + sh*(e - 2)) of an exact integer
     rise x, formed one floored factor at a time (Evaluator._inputs), recorded on ``rec`` as accumulator ``acc``;
     also the interval of every left factor (for the limb bound)."""
@@ -34,7 +51,7 @@ def power_chain(rec, x_iv, e, L, n, sh2, sh, name, acc):
     return v, err, cs
 
 
-def mr_poly_as_dynamic(doc):
+def mr_poly_as_dynamic(doc: dict[str, Any]) -> dict[str, Any]:
     """An ``mr_poly`` document (S004's Eq. 12, host/learning/empirical/mrpoly.py) as the ``dynamic`` table that evaluates it:
     every filter has tau = 0 (its input passes through) and reads the nut rise, its powers, or the base rise."""
     th = _obj(doc.get("thermal"), "thermal")
@@ -73,7 +90,7 @@ def _obj(value, where):
 class Model:
     """The model document reduced to exact numbers in table units (see docs/table-format.md)."""
 
-    def __init__(self, doc, ref_position_mm=None, envelope=None, margin_K=DEFAULT_ENVELOPE_MARGIN_K):
+    def __init__(self, doc: dict[str, Any], ref_position_mm: float | None = None, envelope: Mapping[str, tuple[float, float]] | None = None, margin_K: float = DEFAULT_ENVELOPE_MARGIN_K) -> None:
         """``envelope``: {sensor: (lo_C, hi_C)}, the certified envelope for those sensors (it must
         contain the training range); the others get the training range widened by ``margin_K``."""
         if doc.get("format") != FORMAT:
@@ -84,6 +101,8 @@ class Model:
             doc = mr_poly_as_dynamic(doc)
             kind = "dynamic"
         self.kind = "screw_reduced" if kind == "screw" else kind
+        if kind in NOT_EXPORTABLE:
+            raise ExportError("a %s model cannot be exported: %s" % (kind, NOT_EXPORTABLE[kind]))
         if self.kind not in LIMITS_UM:
             raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw, dynamic, mr_poly)" % (kind,))
         sensors = doc.get("sensors") or []
@@ -377,21 +396,21 @@ class Model:
         return self.sensors.index(name)
 
     # real ranges ----------------------------------------------------------
-    def s_range(self):
+    def s_range(self) -> Interval:
         lo = hi = self.b0
         for b, a, c in zip(self.b, self.d_lo, self.d_hi):
             lo += min(b * a, b * c)
             hi += max(b * a, b * c)
         return (lo, hi)
 
-    def s_bound(self):
+    def s_bound(self) -> Num:
         """Bound of |every partial sum| of S."""
         return abs(self.b0) + sum(abs(b) * max(abs(a), abs(c)) for b, a, c in zip(self.b, self.d_lo, self.d_hi))
 
-    def p_iv(self):
+    def p_iv(self) -> Interval:
         return (F(self.pos_lo), F(self.pos_hi))
 
-    def horner_range(self, j):
+    def horner_range(self, j: int) -> Interval:
         """Sound interval of h_j(p) = sum_{k>=j} g_k p^(k-j) over the position envelope (interval Horner)."""
         P = self.p_iv()
         h = (self.g[-1], self.g[-1])

@@ -1,4 +1,9 @@
 """export_model: quantise + certify + pack; the report the CLI writes."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
 import math
 
 from firmware.crc32 import crc32
@@ -14,14 +19,14 @@ class Export:
     ({accumulator: (lo, hi)} certified intervals of the firmware's checked accumulators, ACC_*), ``errors_ou``
     ({output: (lo, hi)} certified integer-minus-model intervals, output units)."""
 
-    def __init__(self, fields, table, report, accs, errors_ou):
+    def __init__(self, fields: dict[str, Any], table: bytes, report: dict[str, Any], accs: dict[int, tuple[int, int]], errors_ou: dict[str, Any]) -> None:
         self.fields = fields
         self.table = table
         self.report = report
         self.accs = accs
         self.errors_ou = errors_ou
 
-    def c_header(self, guard="TCOMP_TABLE_H"):
+    def c_header(self, guard: str = "TCOMP_TABLE_H") -> str:
         from models_export.cheader import c_header
 
         return c_header(self, guard)
@@ -33,7 +38,7 @@ def _provenance(doc):
     return provenance(doc)
 
 
-def reduction(doc, limit_um=DEFAULT_REDUCTION_LIMIT_UM):
+def reduction(doc: dict[str, Any], limit_um: float = DEFAULT_REDUCTION_LIMIT_UM) -> dict[str, Any] | None:
     """The certificate's reduction part for a screw document (None for other kinds): the reduced form the firmware
     evaluates against the full model the document was fitted as, on the training runs, from
     thermal.reduced.reduction_error_um (host/learning/screw/reduced.py reduction_certificate). Raises ExportError
@@ -76,8 +81,9 @@ def reduction(doc, limit_um=DEFAULT_REDUCTION_LIMIT_UM):
     return out
 
 
-def export_model(doc, ref_position_mm=None, limit_um=None, allow_edited=False, envelope=None,
-                 margin_K=DEFAULT_ENVELOPE_MARGIN_K, reduction_limit_um=DEFAULT_REDUCTION_LIMIT_UM):
+def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limit_um: float | None = None, allow_edited: bool = False,
+                 envelope: Mapping[str, tuple[float, float]] | None = None, margin_K: float = DEFAULT_ENVELOPE_MARGIN_K,
+                 reduction_limit_um: float = DEFAULT_REDUCTION_LIMIT_UM) -> Export:
     """Quantise and certify ``doc`` (a tcomp-model/1 dict). Raises ExportError.
 
     A screw model's reduced form must be within ``reduction_limit_um`` (RMS on the training runs) of the full model

@@ -6,11 +6,19 @@ interval of every output; afterwards ``f`` holds the table fields
 contributions and ``rec`` (a certify.Recorder) the accumulator intervals and headroom
 (models_export.certify explains the argument).
 """
+
+from __future__ import annotations
+
+from fractions import Fraction
+from typing import Any
+from models_export.certify import Interval, Num
+from typing import TYPE_CHECKING
 import math
 from fractions import Fraction as F
 
 import numpy as np
 
+# the names firmware/evaluate.py publishes on CPython only (its globals() loop): invisible to pyright
 from firmware.evaluate import (
     ACC_AMUL, ACC_BMUL, ACC_CMUL, ACC_CUM, ACC_CUMMUL, ACC_D, ACC_DE, ACC_DMUL, ACC_DX, ACC_FEEDMUL, ACC_GEO,
     ACC_GEOMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW, ACC_ROWMUL, ACC_S, ACC_SEGMUL,
@@ -22,6 +30,9 @@ from models_export.certify import (
 )
 
 from models_export.exact import power_chain
+
+if TYPE_CHECKING:
+    from models_export.exact import Model
 
 ZERO = (F(0), F(0))
 
@@ -51,19 +62,19 @@ def _round_out(err, f, r=None):
 
 
 class Planner:
-    def __init__(self, model):
+    def __init__(self, model: Model) -> None:
         self.m = model
         self.rec = Recorder()
         self.f = {}
         self.terms = []  # dicts: name, scale, key (recorder key), err_ou (contribution in output units, 0.01 um)
 
-    def term(self, name, scale, err_ou, key=None):
+    def term(self, name: str, scale: int, err_ou: Num, key: str | None = None) -> None:
         """Record one term's error contribution to the offset; ``err_ou`` is in output units (0.01 um), never in
         accumulator units: callers divide accumulator-scale errors by 2**fo (export.py reports err_ou / 100 um)."""
         self.terms.append({"name": name, "scale": scale, "key": key or name, "err_ou": F(err_ou)})
 
     # ------------------------------------------------------------ S = S0 + sum b*d
-    def s_block(self, fS, out_factor):
+    def s_block(self, fS: int, out_factor: Num) -> tuple[Interval, Interval]:
         """Temperature-linear accumulator at scale 2**fS; out_factor converts its error to output units."""
         m, rec, f = self.m, self.rec, self.f
         n = len(m.sensors)
@@ -107,7 +118,7 @@ class Planner:
         return S_iv, eS
 
     # ------------------------------------------------------------ dynamic
-    def dyn_filters(self):
+    def dyn_filters(self) -> list[Interval]:
         """Quantise every lag filter and certify its state; returns the per-term error interval of the integer state
         against the exact recurrence on the exact inputs (state units).
 
@@ -182,7 +193,7 @@ class Planner:
                                   "state_error_units": float(v[0]), "state_frac_bits": fy})
         return out
 
-    def dyn_coefficients(self, fS, y_err, out_factor, parts):
+    def dyn_coefficients(self, fS: int, y_err: list[Interval], out_factor: Num, parts: list[Any]) -> None:
         """bY[j] x Y[j] into S (scale 2**fS); parts gets (result, name, scale, |quantisation|, error interval)."""
         m, f, rec = self.m, self.f, self.rec
         n = len(m.sensors)
@@ -201,7 +212,7 @@ class Planner:
             self.term(t["name"], fS + sh, (iv_abs(quant) + iv_abs(iv_scale(y_err[j], qv))) * out_factor)
 
     # ------------------------------------------------------------ kinds
-    def linear_direct(self):
+    def linear_direct(self) -> dict[str, Interval]:
         m, f, rec = self.m, self.f, self.rec
         bound = max(m.s_bound(), iv_abs(m.s_range()))
         fo = frac_bits(bound, ACC, cap=24)
@@ -218,7 +229,7 @@ class Planner:
         self.term("output rounding (2^-%d)" % fo, fo, F(1, 2), key="output")
         return {"offset": err_out, "ref_offset": err_out, "slope": ZERO}
 
-    def positional(self):
+    def positional(self) -> dict[str, Interval]:
         m, f, rec = self.m, self.f, self.rec
         screw = m.kind == "screw_reduced"
         P = m.p_iv()
@@ -320,7 +331,7 @@ class Planner:
         f["cert_slope"] = _mag(((sl[0] + rK) >> fK, (sl[1] + rK) >> fK))
         return {"offset": err_out, "ref_offset": err_ref_out, "slope": err_sl_out}
 
-    def horner(self, fo, PM):
+    def horner(self, fo: int, PM: int) -> tuple[Interval, Interval]:
         m, f, rec = self.m, self.f, self.rec
         d = len(m.g) - 1
         fr = [fo]
@@ -358,7 +369,7 @@ class Planner:
         return h, err
 
     # ------------------------------------------------------------ screw_reduced
-    def screw_prepare(self):
+    def screw_prepare(self) -> Fraction:
         """Read thermal.reduced; returns the bound of the segment elongation in output units."""
         m, f = self.m, self.f
         red = m.red
@@ -452,7 +463,7 @@ class Planner:
             raise ExportError("thermal.reduced.air_ref_C lies outside the air sensor's envelope %r" % (name,))
         return i, c0, c1, d_air
 
-    def screw_state(self, fo):
+    def screw_state(self, fo: int) -> tuple[Interval, Interval]:
         """Recurrence, state error certificate, cum/segslope; returns (seg(p) interval, seg(p) error interval).
 
         Tries 2..5 state limbs (more limbs: finer C = A - I, more multiplications per step) and keeps
@@ -701,7 +712,7 @@ class Planner:
         f.update(G2=G2, shG2=shG2, H=H, shH=shH, fh=fh, Lx=Lx, nx=nx, shX=shX)
         return seg_iv, err_seg
 
-    def screw_chord(self, seg_iv, err_seg, fo, fK):
+    def screw_chord(self, seg_iv: Interval, err_seg: Interval, fo: int, fK: int) -> tuple[Interval, Interval]:
         """slope += KC * (seg(pos_hi) - seg(pos_lo)): the chord of the segment elongation over the envelope."""
         m, f, rec = self.m, self.f, self.rec
         de = (seg_iv[0] - seg_iv[1], seg_iv[1] - seg_iv[0])

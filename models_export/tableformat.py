@@ -6,6 +6,11 @@ it is firmware/table.py's section specs (``model_sections``, ``CERT``,
 ``PER_SENSOR``, ``SENSOR_FIELDS``), the ones the loader reads by, so the two
 cannot drift apart.
 """
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
 import struct
 import types
 
@@ -16,7 +21,7 @@ from firmware.table import (AXIS_SIZE, CERT, HEADER_SIZE, KINDS, MAGIC, NAME_FOR
 KIND_CODES = {name: code for code, name in KINDS.items()}  # the firmware's table owns the codes
 
 
-def spec_names(spec):
+def spec_names(spec: str) -> list[tuple[str, bool]]:
     """The field names of one section spec of firmware/table.py, in order, each as (name, is_list);
     the per-sensor group ``@`` gives PER_SENSOR's names as lists."""
     out = []
@@ -32,7 +37,7 @@ def spec_names(spec):
     return out
 
 
-def payload_words(f):
+def payload_words(f: Mapping[str, Any]) -> list[tuple[str, int]]:
     """The payload as a list of (name, int) in table order; the certificate closes it."""
     t = types.SimpleNamespace(**{k: v for k, v in f.items() if isinstance(k, str) and k.isidentifier()})
     out = []
@@ -79,7 +84,7 @@ def _fixed(text, size, what):
     return raw + b"\x00" * (size - len(raw))
 
 
-def pack(f):
+def pack(f: Mapping[str, Any]) -> bytes:
     """Serialise a fields dict to table bytes (header, sensors, payload words, CRC-32)."""
     words = payload_words(f)
     for name, v in words:

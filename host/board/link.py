@@ -4,6 +4,10 @@ Used by ``tcomp monitor`` and by the HIL rig (hil_tests/rig). It is written
 independently of the firmware's frame code: CRC-16/CCITT-FALSE comes from
 ``binascii.crc_hqx``, so a firmware CRC bug cannot cancel itself out.
 """
+
+from __future__ import annotations
+
+from collections.abc import Iterable
 import binascii
 from dataclasses import dataclass, field
 
@@ -17,16 +21,16 @@ STATUS_BITS = dict(sorted((value, name) for name, value in vars(wire).items()
                           and value & (value - 1) == 0))
 
 
-def crc16(body):
+def crc16(body: bytes) -> int:
     return binascii.crc_hqx(body, 0xFFFF)
 
 
-def body(fields):
+def body(fields: Iterable[bytes | str | int]) -> bytes:
     """``TC,<fields>``: the bytes the CRC covers (and an authorised command's tag, up to its counter)."""
     return b"TC," + b",".join(f if isinstance(f, bytes) else str(f).encode() for f in fields)
 
 
-def command_line(*fields):
+def command_line(*fields: bytes | str | int) -> bytes:
     """``$TC,<fields>*CRC\\r\\n`` as bytes."""
     b = body(fields)
     return b"$" + b + b"*%04X\r\n" % crc16(b)
@@ -42,7 +46,7 @@ class Frame:
     arrival: float = 0.0
     extra: dict = field(default_factory=dict)
 
-    def status_names(self):
+    def status_names(self) -> list[str]:
         names = [n for bit, n in STATUS_BITS.items() if self.status & bit]
         sensors = self.status & SENSOR_MASK
         if sensors:
@@ -51,24 +55,24 @@ class Frame:
 
     # O / Q frames: t_ms, pos_um, total um, offset at ref um, slope um/m
     @property
-    def t_ms(self):
+    def t_ms(self) -> int:
         return int(self.fields[0])
 
     @property
-    def total_um(self):
+    def total_um(self) -> float:
         return float(self.fields[2])
 
     @property
-    def pos_um(self):
+    def pos_um(self) -> int:
         return int(self.fields[1])
 
 
-def hello_error_reference(frame):
+def hello_error_reference(frame: Frame) -> str | None:
     """The error reference an ``H`` frame reports: "start", a sensor name, "-" (no table), or None (a firmware before it)."""
     return frame.fields[HELLO_ERROR_REFERENCE] if len(frame.fields) > HELLO_ERROR_REFERENCE else None
 
 
-def describe_error_reference(ref):
+def describe_error_reference(ref: str | None) -> str:
     """What the offsets of a table with error reference ``ref`` compensate (docs/linuxcnc.md, "Error reference")."""
     if ref is None:
         return "not reported (a firmware before issue 19: raw errors)"
@@ -83,7 +87,7 @@ class FrameError(ValueError):
     pass
 
 
-def parse_line(line):
+def parse_line(line: bytes) -> Frame:
     """One line without CR LF -> Frame; FrameError naming what is wrong."""
     if not line.startswith(b"$") or len(line) < 9 or line[-5:-4] != b"*":
         raise FrameError("not a $...*XXXX frame: %r" % line[:80])
@@ -103,11 +107,11 @@ def parse_line(line):
 class StreamDecoder:
     """Feed bytes, get frames; keeps malformed lines in ``bad``."""
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.buf = bytearray()
         self.bad = []
 
-    def feed(self, data, arrival=0.0):
+    def feed(self, data: bytes, arrival: float = 0.0) -> list[Frame]:
         self.buf += data
         out = []
         while True:

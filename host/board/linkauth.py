@@ -23,6 +23,10 @@ uploads a table)::
 Key file: the 32-byte key as 64 hex digits and a newline, mode 0600,
 created by `tcomp flash --key FILE` when FILE does not exist.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
 import binascii
 import hashlib
 import hmac
@@ -44,18 +48,18 @@ class CounterError(ValueError):
     """The board's counter or session nonce as reported cannot be used (names what is wrong)."""
 
 
-def counter_mark(mark=0):
+def counter_mark(mark: int = 0) -> bytes:
     """``auth.bin`` holding ``mark`` as the board's last counter (firmware/auth.py's format, written here
     independently): staged with a new key, so the new key's counters start from ``mark``."""
     b = b"TA\x01" + struct.pack("<I", mark)
     return b + struct.pack("<H", binascii.crc_hqx(b, 0xFFFF))
 
 
-def generate_key():
+def generate_key() -> bytes:
     return os.urandom(KEY_BYTES)
 
 
-def read_key(path):
+def read_key(path: str) -> bytes:
     """The key in ``path`` (64 hex digits); KeyFileError naming the file otherwise."""
     try:
         with open(path, "rb") as f:
@@ -71,7 +75,7 @@ def read_key(path):
     return key
 
 
-def signer_for_option(path, flag="--key"):
+def signer_for_option(path: str | None, flag: str = "--key") -> LinkSigner | None:
     """The LinkSigner of a verb's ``--key FILE`` (None without one); a bad file is a UserError naming it."""
     if not path:
         return None
@@ -82,7 +86,7 @@ def signer_for_option(path, flag="--key"):
         raise UserError("%s %s" % (flag, exc))
 
 
-def write_key(path, key):
+def write_key(path: str, key: bytes) -> None:
     """Create ``path`` holding ``key`` (mode 0600); an existing file is never replaced."""
     tmp = "%s.tmp-%d" % (path, os.getpid())
     fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o600)
@@ -94,7 +98,7 @@ def write_key(path, key):
         os.unlink(tmp)
 
 
-def stream_line(fields):
+def stream_line(fields: Sequence[bytes | str | int]) -> bytes:
     """``$TC,<fields>*CRC\\r\\n`` (host/board/link.py's codec)."""
     return command_line(*fields)
 
@@ -102,17 +106,17 @@ def stream_line(fields):
 class LinkSigner:
     """Signs commands for one board. ``counter`` is the last one used (the board's, or ours)."""
 
-    def __init__(self, key, counter=0, nonce=None):
+    def __init__(self, key: bytes, counter: int = 0, nonce: bytes | None = None) -> None:
         if len(key) != KEY_BYTES:
             raise ValueError("a board key is %d bytes" % KEY_BYTES)
         self._key = bytes(key)
         self.counter = counter
         self.nonce = nonce  # the board's session nonce (4 bytes), from its hello or Modbus IR 51-52
 
-    def __repr__(self):  # never the key
+    def __repr__(self) -> str:  # never the key
         return "LinkSigner(counter=%d)" % self.counter
 
-    def observe(self, counter, nonce=None):
+    def observe(self, counter: int | str | bytes | None, nonce: int | str | bytes | None = None) -> None:
         """Take note of the board's last counter ('-' or None if it has no key) and session nonce
         (8 hex digits, 4 bytes or the uint32); CounterError naming what is wrong with either."""
         if isinstance(counter, bytes):
@@ -143,14 +147,14 @@ class LinkSigner:
                 raise CounterError("the board's session nonce is not 4 bytes")
             self.nonce = bytes(nonce)
 
-    def observe_hello(self, fields):
+    def observe_hello(self, fields: Sequence[str]) -> None:
         """The counter and session nonce of a hello frame's fields (after its type)."""
         if len(fields) <= HELLO_NONCE:
             raise CounterError("the board's hello has no session nonce (%d fields): its firmware speaks an older "
                                "protocol (docs/protocol.md)" % len(fields))
         self.observe(fields[HELLO_COUNTER], fields[HELLO_NONCE])
 
-    def next_counter(self):
+    def next_counter(self) -> int:
         if self.counter >= MAX_COUNTER:
             raise CounterError("the board's counter reached %d, the largest: provision a new key "
                                "(tcomp flash --key NEWFILE, docs/protocol.md)" % MAX_COUNTER)
@@ -163,10 +167,10 @@ class LinkSigner:
                                "registers 51-52 first")
         return self.nonce
 
-    def tag(self, message, extra=b"", prefix=b""):
+    def tag(self, message: bytes, extra: bytes = b"", prefix: bytes = b"") -> bytes:
         return hmac.new(self._key, prefix + message + extra, hashlib.sha256).digest()[:TAG_BYTES]
 
-    def stream_fields(self, *fields, extra=b"", bound=None):
+    def stream_fields(self, *fields: bytes | str | int, extra: bytes = b"", bound: bytes | None = None) -> tuple[bytes | str | int, ...]:
         """``fields`` + (counter, tag hex) for a command that changes the output; the tag starts with the
         session nonce, or ``bound`` (an upload's id)."""
         prefix = self._prefix() if bound is None else bound
@@ -174,10 +178,10 @@ class LinkSigner:
         fields = tuple(fields) + (ctr,)
         return fields + (self.tag(stream_body(fields), extra, prefix).hex().upper(),)
 
-    def stream_line(self, *fields, extra=b"", bound=None):
+    def stream_line(self, *fields: bytes | str | int, extra: bytes = b"", bound: bytes | None = None) -> bytes:
         return stream_line(self.stream_fields(*fields, extra=extra, bound=bound))
 
-    def upload_lines(self, table, chunk=UPLOAD_CHUNK):
+    def upload_lines(self, table: bytes, chunk: int = UPLOAD_CHUNK) -> list[bytes]:
         """Every line of a table upload: U,B signed in this session; each U,D chunk and U,C tagged with
         the upload's id (the nonce and U,B's counter), so they belong to this U,B and no other."""
         begin = self.stream_fields("U", "B", len(table), "%08X" % binascii.crc32(table))
@@ -189,7 +193,7 @@ class LinkSigner:
         out.append(self.stream_line("U", "C", extra=hashlib.sha256(table).digest(), bound=upload_id))
         return out
 
-    def modbus_auth(self, address, start, values):
+    def modbus_auth(self, address: int, start: int, values: Sequence[int]) -> list[int]:
         """Holding registers 8..17 (counter high/low word, 8 tag words) authorising the next write
         of ``values`` to holding registers ``start``.. at slave ``address``."""
         prefix = self._prefix()

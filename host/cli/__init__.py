@@ -1,4 +1,8 @@
 """The ``tcomp`` console command: the verbs come from the registry in host.cli.verbs, imported lazily."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
 import argparse
 import importlib
 import sys
@@ -21,7 +25,7 @@ INSTALL_OF_MODULE = {
 class MissingInstall(UserError):
     """A verb needs a module of an install (an extra) that is not there: names the module and what to install."""
 
-    def __init__(self, module):
+    def __init__(self, module: str) -> None:
         super().__init__("this verb needs %s, which is not installed: pip install '%s'"
                          % (module, INSTALL_OF_MODULE[module]))
 
@@ -32,7 +36,7 @@ def _missing_install(exc):
     return MissingInstall(top) if top in INSTALL_OF_MODULE else None
 
 
-def sensor_list(text, flag="--sensors"):
+def sensor_list(text: str | None, flag: str = "--sensors") -> list[str] | None:
     """Comma-separated names -> list, None when the flag was not given; an empty list is a UserError."""
     if text is None:
         return None
@@ -50,7 +54,7 @@ def _chosen_verb(argv):
     return None
 
 
-def build_parser(verb=None):
+def build_parser(verb: str | None = None) -> argparse.ArgumentParser:
     """The ``tcomp`` parser; only ``verb``'s module is imported (for its arguments), the others stay unloaded."""
     parser = argparse.ArgumentParser(
         prog="tcomp",
@@ -73,7 +77,7 @@ def build_parser(verb=None):
     return parser
 
 
-def main(argv=None):
+def main(argv: Sequence[str] | None = None) -> int:
     argv = sys.argv[1:] if argv is None else list(argv)
     verb = _chosen_verb(argv)
     try:

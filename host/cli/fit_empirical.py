@@ -1,10 +1,19 @@
 """``tcomp fit --model`` for the empirical methods (host/learning/empirical/methods.py FIT_METHODS; arguments
 defined in host/cli/verbs/fit.py)."""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable
+from typing import Any
+from typing import TYPE_CHECKING
 import json
 
 from host import options
 from host.learning.empirical import EmpiricalDataError
 from host.options import boolean, number, numbers
+
+if TYPE_CHECKING:
+    from host.outputs import Outputs
 
 # --option KEY=VALUE settings understood by fit_command, with their converters (host/options.py); a
 # minimum is the smallest meaningful value, below which the estimator would fail obscurely or accept nonsense.
@@ -49,10 +58,13 @@ OPTIONS = {
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
     "base": str,  # mr-poly: base sensor (default: role "base")
+    "n_terms": number(int, 1),  # ppr: ridge terms
+    "knots": number(int, 3),  # ppr: spline knots per ridge function
+    "backfit_passes": number(int, 0),  # ppr
 }
 
 
-def parse_options(pairs, method):
+def parse_options(pairs: Iterable[str] | None, method: str) -> dict[str, Any]:
     """--option KEY=VALUE list -> dict, rejecting unknown keys and options of other methods."""
     from host.errors import UserError
     from host.learning.empirical.methods import FIT_METHODS, method_options
@@ -68,7 +80,7 @@ def parse_options(pairs, method):
     return out
 
 
-def fit_command(args, out):
+def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     """Fit, print the report, write ``args.out`` (and ``args.json``) through ``out`` (host.outputs.Outputs)."""
     from host.errors import UserError
     from host.learning.empirical.fitting import fit_model
@@ -92,7 +104,9 @@ def fit_command(args, out):
     except TypeError as exc:
         raise UserError("bad --option for %s: %s" % (args.model, exc))
     doc = save_model(model.to_document(), out.path(args.out))
-    est = model.estimator_
+    # DynamicModel's fitted attributes are set by fitting.fit_model but not declared in dynamic.py (being changed
+    # by others; declared there later)
+    est = model.estimator_  # pyright: ignore[reportAttributeAccessIssue]
     print("%s %s model of %s on %d run(s), %d samples: sensors %s" % (
         args.model, model.kind, args.channel or "the error", len(runs), est.n_samples_, ",".join(model.sensors)))
     if args.model == "mlr":
@@ -131,6 +145,11 @@ def fit_command(args, out):
             est.hidden_size_, est.validation_, est.size_rule,
             ", ".join("%d: %.4g / %.4f" % (h, v ** 2, est.validation_r2_[h]) for h, v in sorted(est.validation_rmse_.items()))))
         print("  fit on all training samples: R2=%.4f RMSE=%.4g; best epoch %d" % (est.rsquared_, est.rmse_, est.best_epoch_))
+    elif args.model == "ppr":
+        print("  %d ridge terms, %d knots each, %d backfit pass(es); fit R2=%.4f RMSE=%.4g" % (
+            len(est.terms_), est.knots, est.backfit_passes, est.rsquared_, est.rmse_))
+        for m, t in enumerate(est.terms_):
+            print("  term %d direction (standardised rises): %s" % (m + 1, " ".join("%s %+.3f" % (s, a) for s, a in zip(est.names_, t.a))))
     else:
         print("  %d of %d components kept (cumulative explained variance %.1f %%, threshold %.0f %%)" % (
             est.n_components_, est.eigenvalues_.size, 100 * est.cumulative_variance_ratio_[est.n_components_ - 1], 100 * est.variance_threshold))

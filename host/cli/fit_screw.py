@@ -8,6 +8,11 @@ air_lag_s (the air sensor's time constant in s: the model takes the air the read
 fit_window (LO:HI seconds, either side may be empty: fit only on error rows in it).  ``--sensors NAME`` picks the base
 sensor of the E_e term (and switches E_e on unless ambient is given); ``--channel`` the errors.csv channel.
 """
+
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING, Any, cast
 import json
 import warnings
 
@@ -16,6 +21,10 @@ from host.options import choice, number
 from host.learning.screw.effects import make_effect
 from host.learning.screw.identify import IdentifiabilityWarning
 from host.learning.screw.screwmodel import MAX_AIR_LAG_S
+
+if TYPE_CHECKING:
+    from host.learning.screw.screwmodel import ScrewModel
+    from host.outputs import Outputs
 
 MAX_SEGMENTS = 1000  # full model; the reduced one is bounded by the table (32)
 MIN_DT_S, MAX_DT_S = 0.1, 600.0
@@ -66,7 +75,7 @@ OPTIONS = {
 }
 
 
-def format_report(model):
+def format_report(model: ScrewModel) -> str:
     st = model.statistics_
     lines = ["screw model: %d segments, dt %g s, geometric degree %d" % (model.geometry_.segments, model.dt_s, model.geometric_degree_),
              "  air: %s (%s)" % (model.air_sensor_ or "constant", model.air_source_),
@@ -82,7 +91,7 @@ def format_report(model):
         nut = "no nut sensor" if r["nut_rise_rmse_K"] is None else "nut rise RMSE %.2f K" % r["nut_rise_rmse_K"]
         lines.append("  run %s: %d rows, RMSE %.3f um, max |residual| %.3f um, %s"
                      % (r["run"], r["rows"], r["rmse_um"], r["max_abs_residual_um"], nut))
-    red = model.reduced_
+    red = cast("dict[str, Any]", model.reduced_)  # fit(reduce=True), the CLI's call, always sets it
     for run, e in red["reduction_error_um"].items():
         lines.append("  reduced (%d segments, dt %g s) vs full on %s: RMS %.3f um, max %.3f um (E_m); at the error rows "
                      "RMS %.3f um, max %.3f um" % (red["segments"], red["dt_s"], run, e["rms_um"], e["max_um"],
@@ -97,7 +106,7 @@ def format_report(model):
     return "\n".join(lines)
 
 
-def fit_command(args, out):
+def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     """Fit, print the report, write ``args.out`` (and ``args.json``) through ``out`` (host.outputs.Outputs)."""
     from host.errors import UserError
     from host.learning.documents import save_model
@@ -128,5 +137,5 @@ def fit_command(args, out):
     print(format_report(model))
     if args.json:
         with out.open(args.json) as fh:
-            json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": model.reduced_["reduction_error_um"]}, fh, indent=2)
+            json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": cast("dict[str, Any]", model.reduced_)["reduction_error_um"]}, fh, indent=2)
     return 0

@@ -16,6 +16,10 @@ Two layouts:
 Units are declared per column, never guessed: a column whose name says another unit than the default
 (``ch1_mm`` with no ``unit``) is refused naming the column and the unit to declare.
 """
+
+from __future__ import annotations
+
+from typing import Any
 import json
 import math
 import os
@@ -764,7 +768,7 @@ def _wide_errors(source, mapping, mapping_where):
     return Sweeps(errors, np.repeat(time_s, len(ecols)), np.repeat(cells.lines, len(ecols)), start, record, m["meta"])
 
 
-def import_to_folder(source, mapping, out, mapping_where="mapping"):
+def import_to_folder(source: str, mapping: dict[str, Any], out: str, mapping_where: str = "mapping") -> Run:
     run = import_csv(source, mapping, mapping_where)
     write_run(run, out, decimals=6)
     # Round-trip through the loader so a written folder is always a valid run.

@@ -5,6 +5,12 @@ optionally ``motion.csv`` and ``spindle.csv``. Loading validates everything and
 raises :class:`RunFormatError` listing every problem, each naming file, line and
 column; nothing is silently dropped.
 """
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+from numpy.typing import ArrayLike
 import csv
 import json
 import math
@@ -29,7 +35,7 @@ START = "start"
 class RunFormatError(ValueError):
     """A run folder that does not follow tcomp-run/1. ``problems`` lists every finding."""
 
-    def __init__(self, problems):
+    def __init__(self, problems: list[str]) -> None:
         self.problems = list(problems)
         super().__init__("\n".join(self.problems))
 
@@ -40,10 +46,10 @@ class Temperatures:
     names: list  # sensor names in CSV column order
     values: np.ndarray  # (n, len(names)) in degC
 
-    def column(self, name):
+    def column(self, name: str) -> np.ndarray:
         return self.values[:, self.names.index(name)]
 
-    def at(self, t, names=None):
+    def at(self, t: ArrayLike, names: Sequence[str] | None = None) -> np.ndarray:
         """Temperatures linearly interpolated at times ``t`` -> (len(t), len(names))."""
         names = self.names if names is None else list(names)
         t = np.atleast_1d(np.asarray(t, dtype=float))
@@ -58,13 +64,13 @@ class Errors:
     time_s: np.ndarray
     position_mm: np.ndarray
     error_um: np.ndarray
-    direction: np.ndarray = None  # int8 +1/-1, or None when unidirectional
-    channel: np.ndarray = None  # object array of str, or None
+    direction: np.ndarray | None = None  # int8 +1/-1, or None when unidirectional
+    channel: np.ndarray | None = None  # object array of str, or None
 
-    def __len__(self):
+    def __len__(self) -> int:
         return self.time_s.size
 
-    def sweeps(self):
+    def sweeps(self) -> list[np.ndarray]:
         """Row-index arrays, one per (measurement time, channel, direction) group, in file order."""
         keys = [self.time_s]
         if self.channel is not None:
@@ -76,7 +82,7 @@ class Errors:
             groups.setdefault(key, []).append(i)
         return [np.asarray(v) for v in groups.values()]
 
-    def channels(self):
+    def channels(self) -> list[str]:
         if self.channel is None:
             return []
         seen = []
@@ -94,7 +100,7 @@ class Motion:
     to_mm: np.ndarray
     feed_mm_min: np.ndarray
 
-    def __len__(self):
+    def __len__(self) -> int:
         return self.t_start_s.size
 
 
@@ -109,29 +115,29 @@ class Run:
     meta: dict
     temperatures: Temperatures
     errors: Errors
-    motion: Motion = None
-    spindle: Spindle = None
-    path: str = None
+    motion: Motion | None = None
+    spindle: Spindle | None = None
+    path: str | None = None
     name: str = field(default="run")
 
     @property
-    def sensors(self):
+    def sensors(self) -> dict[str, dict[str, Any]]:
         return dict(self.meta.get("sensors", {}))
 
-    def sensors_with_role(self, role):
+    def sensors_with_role(self, role: str) -> list[str]:
         return [n for n, s in self.meta.get("sensors", {}).items() if s.get("role") == role]
 
     @property
-    def error_reference(self):
+    def error_reference(self) -> str:
         """``"start"`` or the sensor id the errors are corrected to (meta.json ``error_reference``)."""
         return error_reference(self.meta)
 
     @property
-    def stroke_mm(self):
+    def stroke_mm(self) -> float | None:
         return self.meta.get("stroke_mm")
 
     @property
-    def screw(self):
+    def screw(self) -> dict[str, Any] | None:
         return self.meta.get("screw")
 
 
@@ -155,7 +161,7 @@ _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?|[+-
 CELL_LIMIT = csv.field_size_limit()  # 131072 characters (128 KiB), Python's csv default, kept as our limit
 
 
-def parse_number(cell):
+def parse_number(cell: str) -> float:
     """float(cell) for a plain ASCII decimal number (nan/inf included, for the caller to name); ValueError otherwise."""
     if not _NUMBER.fullmatch(cell):
         raise ValueError("not a number: %r" % cell)
@@ -372,7 +378,7 @@ def _check_error_reference(path, meta, problems):
                  % (json.dumps(ref), ", ".join(sensors) or "no sensors declared"))
 
 
-def common_error_reference(runs):
+def common_error_reference(runs: Iterable[Run]) -> str:
     """The error reference all ``runs`` declare; ValueError naming the runs of each reference when they differ.
 
     One fit mixes no conventions: a sensor-referenced error lacks the expansion a raw error holds, so a model
@@ -387,7 +393,7 @@ def common_error_reference(runs):
     return next(iter(by), START)
 
 
-def check_model_reference(run, model_reference):
+def check_model_reference(run: Run, model_reference: str | None) -> None:
     """ValueError when ``run``'s errors are referred otherwise than a model's training runs were.
 
     A prediction and a measurement in different conventions differ by the expansion at the reference
@@ -456,7 +462,7 @@ def load_meta(folder):
     return meta
 
 
-def check_run(folder):
+def check_run(folder: str) -> list[str]:
     """Every problem with a run folder, as a list of messages (empty when valid)."""
     try:
         load_run(folder)
@@ -465,7 +471,7 @@ def check_run(folder):
     return []
 
 
-def load_run(folder):
+def load_run(folder: str) -> Run:
     """Load and validate one run folder; raise RunFormatError naming every problem."""
     folder = os.fspath(folder)
     problems = _Problems()
@@ -561,10 +567,11 @@ def load_run(folder):
 
     if problems:
         raise RunFormatError(problems.items)
+    assert meta is not None and temps is not None and errors is not None  # each is read, or a problem was named
     return Run(meta, temps, errors, motion, spindle, path=folder, name=os.path.basename(os.path.normpath(folder)))
 
 
-def load_runs(folders):
+def load_runs(folders: Iterable[str]) -> list[Run]:
     """Load several runs; one folder given twice is refused: its samples would count twice and inflate every statistic."""
     seen = {}
     for f in folders:

@@ -5,6 +5,10 @@ Each kind's class lives with the code that fits it; this module only maps
 Every class has ``from_document(doc)``, ``to_document()`` and ``predict(run)``
 (one predicted error in µm per row of ``run.errors``, in file order).
 """
+
+from __future__ import annotations
+
+from typing import Any
 import importlib
 import json
 import time
@@ -19,6 +23,7 @@ KIND_CLASSES = {
     "linear_direct": "host.learning.empirical.kinds:LinearDirectModel",
     "screw": "host.learning.screw.screwmodel:ScrewModel",
     "ann": "host.learning.empirical.kinds:NetworkModel",
+    "ppr": "host.learning.empirical.kinds:PPRModel",
     "dynamic": "host.learning.empirical.dynamic:DynamicModel",
     "mr_poly": "host.learning.empirical.mrpoly:MRPolyModel",
 }
@@ -28,7 +33,7 @@ class ModelFormatError(ValueError):
     pass
 
 
-def save_model(doc, path):
+def save_model(doc: dict[str, Any], path: str) -> dict[str, Any]:
     doc = dict(doc)
     doc["format"] = FORMAT
     doc["provenance"] = {
@@ -42,7 +47,7 @@ def save_model(doc, path):
     return doc
 
 
-def read_document(path):
+def read_document(path: str) -> dict[str, Any]:
     try:
         with open(path, encoding="utf-8") as fh:
             doc = json.load(fh)
@@ -66,12 +71,12 @@ def read_document(path):
     return doc
 
 
-def model_class(kind):
+def model_class(kind: str) -> type:
     module, _, name = KIND_CLASSES[kind].partition(":")
     return getattr(importlib.import_module(module), name)
 
 
-def load_model(path_or_doc):
+def load_model(path_or_doc: str | dict[str, Any]) -> Any:
     """Model object from a document path (or an already read document); errors name the path."""
     if isinstance(path_or_doc, str):
         path, doc = path_or_doc, read_document(path_or_doc)

@@ -11,9 +11,17 @@ T_air(t) = ambient_mean_C + drift(t) + ripple(t) + wander(t) [+ optional daily c
   standard deviation of ambient_wander_K (doors, people);
 * ambient_day_amplitude_K * cos(2*pi*(hour - ambient_peak_hour)/24), off by default.
 """
+
+from __future__ import annotations
+
+from numpy.typing import ArrayLike
+from typing import TYPE_CHECKING
 from dataclasses import dataclass
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from host.twin.axis import AxisParams
 
 
 # parameter overrides that hold the air constant at ambient_mean_C (no drift, ripple, wander or daily
@@ -37,7 +45,7 @@ def _ramp(u):
     return 0.5 * (1.0 - np.cos(np.pi * u))
 
 
-def air_C(t_s, start_hour, params, rng):
+def air_C(t_s: ArrayLike, start_hour: float, params: AxisParams, rng: np.random.Generator) -> Air:
     """The air of a run starting at wall-clock ``start_hour``, sampled at ``t_s``: an :class:`Air`."""
     t_s = np.asarray(t_s, dtype=float)
     # draws in a fixed order: the same seed gives the same air whatever the parameters

@@ -5,6 +5,10 @@ ball screw 800 mm x 32 mm with 10 mm lead fixed at axis position 0. Values and
 their sources are listed in docs/twin.md. Any field can be overridden by
 keyword through ``simulate_run(**overrides)``.
 """
+
+from __future__ import annotations
+
+from typing import Any
 import dataclasses
 import math
 from dataclasses import dataclass
@@ -65,23 +69,23 @@ class AxisParams:
     # ---------------------------------------------------------- derived
 
     @property
-    def section_m2(self):
+    def section_m2(self) -> float:
         return math.pi * (self.screw_diameter_mm * 1e-3) ** 2 / 4
 
     @property
-    def perimeter_m(self):
+    def perimeter_m(self) -> float:
         return math.pi * self.screw_diameter_mm * 1e-3
 
     @property
-    def time_constant_s(self):
+    def time_constant_s(self) -> float:
         """Convective time constant of a uniformly warm screw at rest, rho*c*d/(4*h)."""
         return self.density_kg_m3 * self.heat_capacity_J_kgK * self.screw_diameter_mm * 1e-3 / (4 * self.h_W_m2K)
 
-    def fin_parameter_per_m(self):
+    def fin_parameter_per_m(self) -> float:
         """m = sqrt(h*perimeter/(lambda*A)) of the 1-D fin equation."""
         return math.sqrt(self.h_W_m2K * self.perimeter_m / (self.conductivity_W_mK * self.section_m2))
 
-    def checked(self):
+    def checked(self) -> AxisParams:
         problems = []
         positive = (
             "stroke_mm", "screw_length_mm", "screw_diameter_mm", "lead_mm", "density_kg_m3",
@@ -139,7 +143,7 @@ class AxisParams:
 FIELDS = tuple(f.name for f in dataclasses.fields(AxisParams))
 
 
-def make_params(**overrides):
+def make_params(**overrides: Any) -> AxisParams:
     """AxisParams with ``overrides`` applied; unknown names raise ValueError listing the valid ones."""
     unknown = sorted(k for k in overrides if k not in FIELDS)
     if unknown:

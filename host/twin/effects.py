@@ -6,7 +6,15 @@ docs use exactly these keys.  ``EFFECTS[name]`` is an :class:`Effect` with the
 default magnitude, its unit, a one-line physical definition and the sign of its
 action on the output ("direction"), which tests/twin checks.
 """
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
+
+
+# what resolve_effects accepts: None, 'a,b', names, or {name: magnitude or None (the default)}
+EffectsSpec = Mapping[str, 'float | None'] | Iterable[str] | str | None
 
 
 @dataclass(frozen=True)
@@ -70,7 +78,7 @@ EFFECTS = {
 NON_NEGATIVE = ("ambient_expansion", "speed_dependent_heat", "bearing_heat", "sensor_lag")
 
 
-def resolve_effects(effects):
+def resolve_effects(effects: EffectsSpec) -> dict[str, float]:
     """Normalise ``effects`` to {name: magnitude} for the effects that are on.
 
     Accepts None, a comma-separated string, an iterable of names (default

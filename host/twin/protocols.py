@@ -19,11 +19,18 @@ moving states in sequence with a laser sweep after each, not on a clock
 (``sweeps_after_phases``). A user's own schedule of that kind is a CSV file
 (:func:`read_protocol_csv`, ``tcomp simulate --protocol FILE.csv``).
 """
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
 import csv
 import os
 from dataclasses import dataclass
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from host.twin.axis import AxisParams
 
 
 @dataclass(frozen=True)
@@ -48,11 +55,11 @@ class Protocol:
     source_lines: tuple = ()  # the file's line of each phase (error messages name it)
 
     @property
-    def minutes(self):
+    def minutes(self) -> float:
         """The phases' minutes (without the stops of sweeps_after_phases, see duration_s)."""
         return sum(p.minutes for p in self.phases)
 
-    def duration_s(self, params):
+    def duration_s(self, params: AxisParams) -> float:
         """Length of the run: the phases, plus one sweep stop per phase when the sweeps follow the phases."""
         extra = len(self.phases) * params.sweep_duration_min * 60.0 if self.sweeps_after_phases else 0.0
         return self.minutes * 60.0 + extra
@@ -121,7 +128,7 @@ RANDOM_MOVING_MIN = 240.0
 RANDOM_COOL_MIN = 60.0
 
 
-def draw_phases(rng, stroke_mm):
+def draw_phases(rng: np.random.Generator, stroke_mm: float) -> tuple[Phase, ...]:
     """Random moving states for RANDOM_MOVING_MIN minutes, then a cool-down.
 
     Each state: 10-40 min (whole minutes) at a feed of 2000-15000 mm/min (steps of
@@ -149,7 +156,7 @@ def draw_phases(rng, stroke_mm):
     return tuple(phases)
 
 
-def concrete(protocol, rng, stroke_mm):
+def concrete(protocol: Protocol, rng: np.random.Generator, stroke_mm: float) -> Protocol:
     """``protocol`` with its phases drawn from ``rng`` (a ``drawn`` template) or unchanged.
 
     The result keeps ``drawn=True`` so the run records its phases (meta.json).
@@ -159,7 +166,7 @@ def concrete(protocol, rng, stroke_mm):
     return Protocol(protocol.name, protocol.description, draw_phases(rng, stroke_mm), protocol.start_hour, drawn=True)
 
 
-def read_protocol_csv(path, start_hour=9.0):
+def read_protocol_csv(path: str, start_hour: float = 9.0) -> Protocol:
     """A user's schedule: header ``duration_min,feed_mm_min,from_mm,to_mm``, one row per state (feed 0: idle,
     its range is not used), a laser sweep at the start and after every row. The protocol is named after the
     file (its name without .csv). ValueError names the file, line and column of the first problem."""
@@ -203,7 +210,7 @@ def read_protocol_csv(path, start_hour=9.0):
                     start_hour, sweeps_after_phases=True, source=path, source_lines=tuple(lines))
 
 
-def check_protocol(protocol, stroke_mm):
+def check_protocol(protocol: Protocol, stroke_mm: float) -> None:
     problems = []
     if not protocol.phases:
         problems.append("protocol %r has no phases" % protocol.name)
@@ -223,7 +230,7 @@ def check_protocol(protocol, stroke_mm):
         raise ValueError("; ".join(problems))
 
 
-def schedule(protocol, params):
+def schedule(protocol: Protocol, params: AxisParams) -> tuple[np.ndarray, np.ndarray]:
     """Sweep times and motion intervals of ``protocol``.
 
     Returns (sweep_times_s, motion) with motion an (k, 5) array of rows
@@ -268,7 +275,7 @@ def schedule(protocol, params):
     return np.asarray(sweeps, dtype=float), motion
 
 
-def resolve_protocols(spec):
+def resolve_protocols(spec: str | Protocol) -> list[Protocol]:
     """Protocols from 'all', 'literature', a name, a CSV file (``*.csv``, :func:`read_protocol_csv`) or a
     comma-separated list of those."""
     if isinstance(spec, Protocol):

@@ -20,15 +20,22 @@ Equation of node i (volume width w_i, insulated screw ends):
 
     rho*c*A*w_i dT_i/dt = lambda*A/dx * sum_j (T_j - T_i) - g(t)*h*pi*d*w_i*(T_i - T_air) + Q_i(t)
 """
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
 import math
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from host.twin.axis import AxisParams
 
 
 class ScrewGrid:
     """Nodes, volumes and conductances of the vertex-centred grid of an AxisParams."""
 
-    def __init__(self, params):
+    def __init__(self, params: AxisParams) -> None:
         N = params.segments
         L = params.screw_length_mm
         self.n_nodes = N + 1
@@ -47,7 +54,7 @@ class ScrewGrid:
         mid = 0.5 * (self.x_mm[1:] + self.x_mm[:-1])
         self.bounds_mm = np.concatenate([[-np.inf], mid, [np.inf]])
 
-    def conduction(self):
+    def conduction(self) -> np.ndarray:
         """Conduction matrix K (W/K): (K T)_i = sum_j G (T_i - T_j); rows sum to 0 (insulated ends)."""
         n, G = self.n_nodes, self.link_W_K
         K = np.zeros((n, n))
@@ -80,7 +87,7 @@ def _below(bounds, lo, hi, nut_mm):
     return np.where(np.isposinf(b), (hi - lo)[:, None], full)
 
 
-def contact_travel(bounds_mm, t_edges, t_start, t_end, a_mm, b_mm, feed_mm_min, nut_mm):
+def contact_travel(bounds_mm: np.ndarray, t_edges: np.ndarray, t_start: float, t_end: float, a_mm: float, b_mm: float, feed_mm_min: float, nut_mm: float) -> np.ndarray:
     """Nut travel (mm) credited to each volume in each step for one reciprocating interval: (n_steps, n_vol).
 
     The nut centre starts at a_mm at t_start, runs to b_mm and back at the feed
@@ -120,14 +127,14 @@ MAX_SUBSTEPS = 100000  # Crank-Nicolson sub-steps in one step: beyond, the step 
 class ScrewIntegrator:
     """Crank-Nicolson stepping of the grid, with the step maps cached per convection multiplier."""
 
-    def __init__(self, grid, dt_s, tau_s):
+    def __init__(self, grid: ScrewGrid, dt_s: float, tau_s: float) -> None:
         self.grid = grid
         self.dt = float(dt_s)
         self.K = grid.conduction()
         self._maps = {}
         self.tau_s = tau_s
 
-    def substeps(self, g):
+    def substeps(self, g: float) -> int:
         """Sub-steps per step: h*lambda_max <= 2 (monotone CN, Gershgorin bound) and h <= tau/50."""
         C, H = self.grid.capacity_J_K, self.grid.mantle_W_K
         lam = np.max((np.abs(self.K).sum(axis=1) + g * H) / C)
@@ -139,7 +146,7 @@ class ScrewIntegrator:
                              "heat_capacity_J_kgK, segments, sensor time constants)" % (lam, need, self.dt, MAX_SUBSTEPS))
         return max(1, int(math.ceil(self.dt * lam / 2.0 - 1e-12)), int(math.ceil(50.0 * self.dt / (self.tau_s / g))))
 
-    def maps(self, g):
+    def maps(self, g: float) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(P, Q, A0, A1) with T(k+1) = P T(k) + Q power(k) + A0 T_air(k) + A1 T_air(k+1) for one whole step."""
         hit = self._maps.get(g)
         if hit is not None:
@@ -163,7 +170,7 @@ class ScrewIntegrator:
         self._maps[g] = hit = (P, Q, A0, A1)
         return hit
 
-    def run(self, air_edges_C, power_W, conv_mult):
+    def run(self, air_edges_C: np.ndarray, power_W: np.ndarray, conv_mult: np.ndarray) -> np.ndarray:
         """Node temperatures (n_steps + 1, n_nodes), starting uniform at the air's first value.
 
         power_W: (n_steps, n_nodes) heat input held over each step; conv_mult:
@@ -189,7 +196,7 @@ class ScrewIntegrator:
         return T
 
 
-def expansion_um(x_mm, T_C, T0_C, positions_mm, alpha_um_mK):
+def expansion_um(x_mm: np.ndarray, T_C: np.ndarray, T0_C: float | np.ndarray, positions_mm: np.ndarray, alpha_um_mK: float) -> np.ndarray:
     """alpha * integral_0^x (T - T0) dx at each position, with T linear between nodes: (n_times, n_pos).
 
     x_mm: node coordinates; T_C: (n_times, n_nodes); positions in screw coordinate.

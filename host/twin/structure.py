@@ -12,6 +12,10 @@ A sensor is a small body of its own on the point it measures (a sheathed Pt100 i
 a bore or a clamp, an air probe): its reading lags the point's temperature with the
 sensor's own time constant ``sensor_s``, exact for a temperature linear between samples.
 """
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
 import math
 from dataclasses import dataclass
 
@@ -52,7 +56,7 @@ NODES = (
 )
 
 
-def node_temperatures(power_W, T_air_edges, dt, nodes=NODES):
+def node_temperatures(power_W: Mapping[str, np.ndarray], T_air_edges: np.ndarray, dt: float, nodes: Sequence[Node] = NODES) -> np.ndarray:
     """True node temperatures (n_steps + 1, len(nodes)) at the step edges.
 
     power_W: {source: (n_steps,)} held over each step; T_air_edges (n_steps + 1,)
@@ -84,7 +88,7 @@ def node_temperatures(power_W, T_air_edges, dt, nodes=NODES):
     return T
 
 
-def lagged(values, tau_s, dt):
+def lagged(values: np.ndarray, tau_s: float | Sequence[float] | np.ndarray, dt: float) -> np.ndarray:
     """First-order lag (time constants ``tau_s``: a number or one per column) of ``values`` (n, k).
 
     Exact for an input linear between samples: y(k+1) = a*y(k) + (1-a)*u(k) + b*(u(k+1) - u(k)),

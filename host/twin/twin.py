@@ -1,4 +1,9 @@
 """The feed-axis digital twin: protocol + effects + seed -> one simulated run."""
+
+from __future__ import annotations
+
+from numpy.typing import ArrayLike
+from typing import TYPE_CHECKING, Any
 import dataclasses
 import math
 import os
@@ -14,6 +19,10 @@ from host.twin.effects import resolve_effects
 from host.twin.protocols import PROTOCOLS, Protocol, concrete, read_protocol_csv, resolve_protocols, schedule
 from host.twin.screw import ScrewGrid, ScrewIntegrator, contact_travel, expansion_um
 from host.twin.structure import NODES, lagged, node_temperatures
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
+    from host.twin.effects import EffectsSpec
 
 DEFAULT_PROTOCOL = "v8000_r210_490"
 DEFAULT_NOISE_UM = 0.5
@@ -41,13 +50,13 @@ class Simulation:
     sweep_s: np.ndarray
     err_time_s: np.ndarray
     err_position_mm: np.ndarray
-    err_direction: np.ndarray  # int8 or None
+    err_direction: np.ndarray | None  # int8 or None
     err_thermal_um: np.ndarray  # screw expansion + ambient_expansion, no noise
     err_geometric_um: np.ndarray
     err_um: np.ndarray  # what the interferometer reports (in the convention error_reference)
-    screw_x_mm: np.ndarray = None  # (N+1,) node coordinates, screw coordinate (fixed end 0)
-    readings_true_C: np.ndarray = None  # (n+1, len(NODES)) the sensor readings before noise
-    sweep_motion: np.ndarray = None  # (s, 5) the sweeps' own travel (heats the axis, not in motion.csv)
+    screw_x_mm: np.ndarray | None = None  # (N+1,) node coordinates, screw coordinate (fixed end 0)
+    readings_true_C: np.ndarray | None = None  # (n+1, len(NODES)) the sensor readings before noise
+    sweep_motion: np.ndarray | None = None  # (s, 5) the sweeps' own travel (heats the axis, not in motion.csv)
     air_rise_K: float = 0.0  # the seeded warming of the air
     hvac_period_min: float = 0.0  # the seeded HVAC cycle
     error_reference: str = START  # "start" (raw errors) or the sensor the laser corrected them to
@@ -72,12 +81,12 @@ def _rngs(seed, name):
     return [np.random.default_rng(s) for s in ss.spawn(4)]
 
 
-def geometric_um(positions_mm, params):
+def geometric_um(positions_mm: ArrayLike, params: AxisParams) -> np.ndarray:
     u = np.asarray(positions_mm, dtype=float) / params.stroke_mm
-    return sum(c * u**k for k, c in enumerate(params.geometric_um))
+    return sum((c * u**k for k, c in enumerate(params.geometric_um)), np.zeros_like(u))
 
 
-def sweep_travel(sweeps, params, t_end):
+def sweep_travel(sweeps: np.ndarray, params: AxisParams, t_end: float) -> np.ndarray:
     """The sweeps' own motion (s, 5): the nut runs from the first to the last target and back.
 
     A sweep stops at every target for the laser reading; its heat is that of
@@ -94,7 +103,7 @@ def sweep_travel(sweeps, params, t_end):
     return np.asarray(rows, dtype=float).reshape(-1, 5)
 
 
-def heat_sources(t, motion, params, eff):
+def heat_sources(t: np.ndarray, motion: np.ndarray, params: AxisParams, eff: dict[str, float]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Per-step heat of the axis from its motion rows (k, 5).
 
     Returns (screw_J (n, N+1) friction energy into each screw volume, speed (n,)
@@ -119,7 +128,8 @@ def heat_sources(t, motion, params, eff):
     return screw_J, speed, nut_W, conv
 
 
-def simulate(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, error_reference=START, **overrides):
+def simulate(protocol: str | Protocol = DEFAULT_PROTOCOL, effects: EffectsSpec = None, seed: int = 0, noise_um: float = DEFAULT_NOISE_UM,
+             error_reference: str = START, **overrides: Any) -> Simulation:
     """Run the twin; returns a :class:`Simulation` (see simulate_run for the arguments)."""
     proto = _protocol(protocol)
     names = [nd.name for nd in NODES]
@@ -220,7 +230,7 @@ def _plain(v):
     return v
 
 
-def to_run(sim):
+def to_run(sim: Simulation) -> Run:
     """The tcomp-run/1 :class:`host.data.runs.Run` of a :class:`Simulation`."""
     p = sim.params
     meta = {
@@ -260,7 +270,8 @@ def to_run(sim):
     return _runs.Run(meta, temps, errors, motion, None, path=None, name=sim.protocol.name)
 
 
-def simulate_run(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, error_reference=START, **overrides):
+def simulate_run(protocol: str | Protocol = DEFAULT_PROTOCOL, effects: EffectsSpec = None, seed: int = 0, noise_um: float = DEFAULT_NOISE_UM,
+                 error_reference: str = START, **overrides: Any) -> Run:
     """Simulate one thermal test of the feed axis and return it as a :class:`host.data.runs.Run`.
 
     protocol: a name from PROTOCOLS (or a Protocol); effects: None, a list of
@@ -274,8 +285,8 @@ def simulate_run(protocol=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAU
     return to_run(simulate(protocol, effects, seed, noise_um, error_reference, **overrides))
 
 
-def write_runs(out, protocols=DEFAULT_PROTOCOL, effects=None, seed=0, noise_um=DEFAULT_NOISE_UM, error_reference=START,
-               **overrides):
+def write_runs(out: str, protocols: str | Protocol = DEFAULT_PROTOCOL, effects: EffectsSpec = None, seed: int = 0,
+               noise_um: float = DEFAULT_NOISE_UM, error_reference: str = START, **overrides: Any) -> list[tuple[str, str]]:
     """Simulate and write run folders; returns [(protocol name, folder)].
 
     One protocol writes the run into ``out`` itself; several ('all',

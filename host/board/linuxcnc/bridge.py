@@ -15,6 +15,12 @@ position, the axis does not move). So the bridge closes its loop on
 ``eoffset-request`` (what motion has taken) and writes count changes only
 while motion can take them.
 """
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+from typing import TYPE_CHECKING
 import math
 import time
 from dataclasses import dataclass, field
@@ -25,6 +31,9 @@ from firmware.wire import (
 )
 from host.board.client import BoardLink
 from host.board.link import FALLBACK, command_line
+
+if TYPE_CHECKING:
+    from host.board.linkauth import LinkSigner
 
 COUNT_UM = 0.1  # one eoffset count: the board's offset resolution (docs/protocol.md, 0.1 um)
 UM_PER_UNIT = {"mm": 1000.0, "inch": 25400.0}
@@ -63,7 +72,7 @@ class StreamLink:
     and ``Q,<pos>`` (the board's offset at this position, now) and decodes whatever arrived (Q answers
     and periodic O frames)."""
 
-    def __init__(self, open_port, reopen_s=1.0, clock=time.monotonic, signer=None):
+    def __init__(self, open_port: Callable[[], Any], reopen_s: float = 1.0, clock: Callable[[], float] = time.monotonic, signer: LinkSigner | None = None) -> None:
         """``open_port()`` returns an open pyserial-like port (timeout 0); it is called again, at most
         every ``reopen_s``, after the port failed (a USB board unplugged and back). ``signer``
         (host.board.linkauth.LinkSigner with the board's key) signs ``L``; the board's last counter comes
@@ -78,7 +87,7 @@ class StreamLink:
         self.latch_pending = False
         self.latch_wanted = False  # a signed L waits for the hello that carries the session nonce it needs
 
-    def exchange(self, pos_um, latch=False, spindle_rpm=None):
+    def exchange(self, pos_um: int, latch: bool = False, spindle_rpm: int | None = None) -> Exchange:
         ex = Exchange()
         p = command_line("P", pos_um) if spindle_rpm is None else command_line("P", pos_um, spindle_rpm)
         out = p + command_line("Q", pos_um)
@@ -145,7 +154,7 @@ class StreamLink:
             if f.fields[0] == "%d" % E_AUTH:
                 self.want_hello = True  # the counter may be behind the board's
 
-    def close(self):
+    def close(self) -> None:
         self.want_hello = True  # a board that comes back is asked for its hello (counter)
         if self.link is not None:
             self.link.close()
@@ -160,12 +169,12 @@ class ModbusLink:
     """Modbus RTU mode (pymodbus master): write the position (holding 3-4) and, when given, the
     spindle speed (holding 18-19, int32 written whole), read input 0-9 (firmware/wire.py's register map)."""
 
-    def __init__(self, client, address=1, signer=None):
+    def __init__(self, client: Any, address: int = 1, signer: LinkSigner | None = None) -> None:
         self.client = client
         self.address = address
         self.signer = signer
 
-    def slew_um_per_s(self):
+    def slew_um_per_s(self) -> int | None:
         """The board's slew limit (holding register HR_SLEW), or None if it cannot be read."""
         try:
             rr = self.client.read_holding_registers(HR_SLEW, count=1, device_id=self.address)
@@ -173,7 +182,7 @@ class ModbusLink:
             return None
         return None if rr.isError() else rr.registers[0]
 
-    def exchange(self, pos_um, latch=False, spindle_rpm=None):
+    def exchange(self, pos_um: int, latch: bool = False, spindle_rpm: int | None = None) -> Exchange:
         ex = Exchange()
         p = pos_um & 0xFFFFFFFF
         try:
@@ -206,7 +215,7 @@ class ModbusLink:
             ex.error = str(exc) or type(exc).__name__
         return ex
 
-    def close(self):
+    def close(self) -> None:
         self.client.close()
 
 
@@ -220,14 +229,14 @@ class OffsetRamp:
     the slew limit times the elapsed time: never a step.
     """
 
-    def __init__(self, slew_um_per_s):
+    def __init__(self, slew_um_per_s: float) -> None:
         if not slew_um_per_s > 0:
             raise ValueError("slew limit must be > 0 um/s, got %r" % (slew_um_per_s,))
         self.slew = float(slew_um_per_s)
         self.out_um = 0.0
         self.tracking = False
 
-    def step(self, target_um, dt_s, healthy):
+    def step(self, target_um: float, dt_s: float, healthy: bool) -> float:
         if healthy and self.tracking:
             self.out_um = target_um
             return self.out_um
@@ -241,7 +250,7 @@ class OffsetRamp:
             self.tracking = False
         return self.out_um
 
-    def restart(self):
+    def restart(self) -> None:
         """Motion zeroes its external offset when the machine is switched on: start again from zero."""
         self.out_um = 0.0
         self.tracking = False
@@ -284,8 +293,8 @@ class Bridge:
     a bridge descheduled by a loaded host ramps more slowly, never in a step.
     """
 
-    def __init__(self, link, slew_um_per_s, units="mm", stale_s=1.0, recover_s=1.0, cold_start=False,
-                 log=None, latch_retry_s=1.0, latch_tries=10, max_dt_s=0.1, send_spindle=False):
+    def __init__(self, link: StreamLink | ModbusLink, slew_um_per_s: float, units: str = "mm", stale_s: float = 1.0, recover_s: float = 1.0, cold_start: bool = False,
+                 log: Callable[[str], None] | None = None, latch_retry_s: float = 1.0, latch_tries: int = 10, max_dt_s: float = 0.1, send_spindle: bool = False) -> None:
         if units not in UM_PER_UNIT:
             raise ValueError("units must be one of %s, got %r" % (", ".join(UM_PER_UNIT), units))
         self.link = link
@@ -353,7 +362,7 @@ class Bridge:
             self.log("L refused: %s%s" % (why, ", retrying" if self.latch_tries_left else ""))
 
     # --- one period ---------------------------------------------------------------------------
-    def step(self, now, inp):
+    def step(self, now: float, inp: Inputs) -> BridgeOutputs:
         dt = 0.0 if self.last_now is None else min(now - self.last_now, self.max_dt_s)
         self.last_now = now
         if self.last_new_s is None:
@@ -393,7 +402,7 @@ class Bridge:
             code |= STALE
         self._track_fault(now, code)
         healthy = self.fault_code == 0
-        target = self.reading.total_um if healthy else 0.0
+        target = self.reading.total_um if healthy and self.reading is not None else 0.0  # healthy: a reading
         ready = inp.machine_on and inp.homed
         if not inp.machine_on or (ready and not self.was_on):
             self.ramp.restart()
@@ -431,8 +440,8 @@ class Bridge:
                 self.clear_since = None
 
 
-def run_loop(bridge, read_inputs, write_outputs, period_s=0.05, clock=time.monotonic, sleep=time.sleep,
-             running=lambda: True):
+def run_loop(bridge: Bridge, read_inputs: Callable[[], Inputs], write_outputs: Callable[[BridgeOutputs], None], period_s: float = 0.05, clock: Callable[[], float] = time.monotonic, sleep: Callable[[float], None] = time.sleep,
+             running: Callable[[], bool] = lambda: True) -> None:
     """Call ``bridge.step`` every ``period_s`` with the inputs read, write the outputs."""
     next_t = clock()
     while running():

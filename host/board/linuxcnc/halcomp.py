@@ -4,9 +4,18 @@ Only this module imports LinuxCNC's ``hal`` (Debian linuxcnc-uspace puts it in
 /usr/lib/python3/dist-packages; ``make setup`` links it into the venv).
 Pins (prefix = component name, default ``tcomp``) are listed in PINS and in docs/linuxcnc.md.
 """
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import Any
+from typing import TYPE_CHECKING
 import sys
 
 from host.board.linuxcnc.bridge import Inputs, run_loop
+
+if TYPE_CHECKING:
+    from host.board.linuxcnc.bridge import Bridge
 
 # (pin, type, direction, Inputs/BridgeOutputs attribute)
 PINS = (
@@ -31,7 +40,7 @@ PINS = (
 )
 
 
-def import_hal():
+def import_hal() -> ModuleType:
     try:
         import hal
     except ImportError as exc:
@@ -40,7 +49,7 @@ def import_hal():
     return hal
 
 
-def component(name):
+def component(name: str) -> Any:
     hal = import_hal()
     comp = hal.component(name)
     for pin, typ, direction, _ in PINS:
@@ -48,7 +57,7 @@ def component(name):
     return comp
 
 
-def serve(comp, bridge, period_s):
+def serve(comp: Any, bridge: Bridge, period_s: float) -> None:
     """Run until HAL unloads the component (KeyboardInterrupt) or SIGTERM."""
     ins = [(p, a) for p, _, d, a in PINS if d == "IN"]
     outs = [(p, a) for p, _, d, a in PINS if d == "OUT"]

@@ -1,7 +1,11 @@
 """tcomp compare RUN... --json OUT [--plots DIR]"""
 
+from __future__ import annotations
 
-def add_arguments(p):
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="+", metavar="RUN", help="run folders (fit on one, predict the others), or one run with --split-h")
     p.add_argument("--json", required=True, metavar="OUT", help="write every result (metrics, sensors, statistics) as JSON")
     p.add_argument("--plots", metavar="DIR", help="write PNG plots (curves, residuals, scree, selections, summary)")
@@ -61,7 +65,7 @@ def _method_options(items, methods):
     return options, selector
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.errors import UserError
     from host.learning.empirical.compare import METHODS
     from host.outputs import Outputs

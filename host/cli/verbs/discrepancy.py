@@ -1,7 +1,11 @@
 """tcomp discrepancy RUN... [--base screw] --json OUT.json [--report DIR] [--air auto|off]"""
 
+from __future__ import annotations
 
-def add_arguments(p):
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="+", metavar="RUN", help="run folders (>= 2: leave-one-run-out; 1: two-block time split)")
     p.add_argument("--base", default="screw", choices=("screw",), help="base model: the screw model with E_m only (default)")
     p.add_argument("--json", required=True, help="write the findings as JSON (effects, held-out RMSEs, localization, candidates)")
@@ -15,7 +19,7 @@ def add_arguments(p):
     p.add_argument("--jobs", type=int, default=None, help="worker processes for candidate fits (default: up to 2)")
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.outputs import Outputs
 
     with Outputs(args.runs) as out:

@@ -1,8 +1,13 @@
 """tcomp export MODEL.json --out table.bin [--report report.json] [--json summary.json] [--c-header table.h] [--allow-edited]
     [--envelope SENSOR=LO:HI[,SENSOR=LO:HI...]]... [--envelope-margin K] [--reduction-limit UM]"""
 
+from __future__ import annotations
 
-def add_arguments(p):
+import argparse
+from collections.abc import Iterable
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="model document (tcomp-model/1 JSON: poly_slope, linear_direct, screw or dynamic)")
     p.add_argument("--out", required=True, help="table file to write (docs/table-format.md)")
     p.add_argument("--report", help="write the certificate as JSON (max_error_um, min_headroom_bits, terms, envelope)")
@@ -27,7 +32,7 @@ def add_arguments(p):
                         "(default 15, docs/firmware.md \"Operating envelope\")")
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     import math
 
     from host.errors import UserError
@@ -55,7 +60,7 @@ def run(args):
     return 0
 
 
-def parse_envelope(values):
+def parse_envelope(values: Iterable[str]) -> dict[str, tuple[float, float]]:
     """``--envelope`` values ("T1=10:60", "T1=10:60,T2=15:45", repeatable) -> {sensor: (lo, hi)} in degC."""
     import math
 

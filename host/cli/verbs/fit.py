@@ -1,9 +1,13 @@
 """tcomp fit --model KIND RUN... --out MODEL.json"""
 
+from __future__ import annotations
+
+import argparse
+
 from host.learning.empirical.methods import FIT_METHODS as EMPIRICAL  # the empirical methods with a document form
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="+", metavar="RUN", help="run folders to fit on")
     p.add_argument("--model", required=True, choices=EMPIRICAL + ("screw",))
     p.add_argument("--out", required=True, help="model document to write (docs/model-format.md)")
@@ -19,7 +23,7 @@ def add_arguments(p):
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", help="method-specific setting (repeatable)")
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.cli import sensor_list
     from host.outputs import Outputs
 

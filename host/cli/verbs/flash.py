@@ -1,5 +1,11 @@
 """tcomp flash --port PORT [--table table.bin] [--config board.json | --board board.py] [--key board.key]"""
 
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable
+from typing import Any, cast
+
 import json
 import os
 import re
@@ -10,7 +16,7 @@ import tempfile
 
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", required=True, help="serial port of the board (e.g. /dev/ttyACM0, or a pty)")
     p.add_argument("--table", help="coefficient table (tcomp export) installed as slot A and made active")
     g = p.add_mutually_exclusive_group()
@@ -37,7 +43,8 @@ def _mpremote(explicit):
     return here if os.path.exists(here) else (shutil.which("mpremote") or "mpremote")
 
 
-def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=True, key=None, new_key=False):
+def stage(dest: str, table: str | None = None, config: str | None = None, board: str | None = None, table_dir: str | None = None,
+          firmware: bool = True, key: bytes | None = None, new_key: bool = False) -> tuple[dict[str, list[str]], str]:
     """Lay out the board's flash under ``dest``; returns {remote dir: [local files]} and the table dir.
     ``key``: the board key (bytes), staged as ``<table dir>/key.bin`` (mode 0600); ``new_key``: it was
     just created, so ``auth.bin`` is staged too, starting its counters at 0 (re-provisioning,
@@ -139,7 +146,7 @@ def stage(dest, table=None, config=None, board=None, table_dir=None, firmware=Tr
 _BOARD_NAME = re.compile(r"[A-Za-z0-9_.-]+\Z")
 
 
-def board_dir(text, where):
+def board_dir(text: str, where: str) -> str:
     """A folder on the board's flash as mpremote names it (``tables``, ``/data/tables``), without the slashes
     around it; UserError for an empty path, '.' or '..' parts (the staged copy would land outside its folder:
     ``../../etc`` is /etc of this computer) or characters outside letters, digits and ``_.-``."""
@@ -182,7 +189,7 @@ def _plain_expression(node):
     return True
 
 
-def board_file_config(path):
+def board_file_config(path: str) -> dict[str, Any] | None:
     """The ``CONFIG = {...}`` dict at the top level of board file ``path`` (firmware/boards/*.py have one), validated;
     None when the file has none that can be read without running the file. A file that is not Python is a UserError."""
     import ast
@@ -218,7 +225,7 @@ def board_file_config(path):
     return None
 
 
-def board_key(path, dry_run=False):
+def board_key(path: str, dry_run: bool = False) -> tuple[bytes, bool]:
     """The key in ``path``: (key, created). A missing file gets a new random key, which the caller writes to ``path``
     (write_key) only once the board holds it: a dry run or a failed flash leaves no key file behind."""
     from host.errors import UserError, check_output
@@ -235,7 +242,7 @@ def board_key(path, dry_run=False):
         raise UserError(str(exc))
 
 
-def unwired_sensors(table_sensors, cfg):
+def unwired_sensors(table_sensors: Iterable[str], cfg: dict[str, Any]) -> list[str]:
     """Table sensors without a channel of the same name in board config ``cfg`` (a dict), in table order.
 
     The firmware refuses such a table with its generic reason "sensor count mismatch"; checked here first,
@@ -245,7 +252,7 @@ def unwired_sensors(table_sensors, cfg):
     return [s for s in table_sensors if s not in wired]
 
 
-def command(port, files, mpremote="mpremote", reset=False):
+def command(port: str, files: dict[str, list[str]], mpremote: str = "mpremote", reset: bool = False) -> list[str]:
     """One mpremote invocation (``resume``: no soft reset on connect) that creates the directories
     and copies every file."""
     dirs = sorted({d for d in files if d})
@@ -282,7 +289,7 @@ def _run_mpremote(argv, port, timeout, what):
     return p
 
 
-def probe(port, mpremote):
+def probe(port: str, mpremote: str) -> None:
     """Ask the board on ``port`` to print a word through its REPL, within PROBE_TIMEOUT_S: a port nobody answers
     is an error in seconds, before any file is copied or any key written."""
     from host.errors import UserError
@@ -292,7 +299,7 @@ def probe(port, mpremote):
         raise UserError("%s: no MicroPython REPL answered (mpremote printed %r)" % (port, p.stdout.strip()[-200:]))
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.errors import UserError
     if not (args.table or args.config or args.board or args.key or not args.no_firmware):
         raise UserError("nothing to flash: give --table, --config, --board or --key, or drop --no-firmware")
@@ -326,7 +333,7 @@ def run(args):
         if created:
             from host.board.linkauth import write_key
             try:
-                write_key(args.key, key)
+                write_key(args.key, cast(bytes, key))  # created: board_key made one
             except OSError as exc:
                 raise UserError("the board now holds a new key, but --key %s cannot be written: %s; flash again with "
                                 "a --key path you can write" % (args.key, exc.strerror or exc))

@@ -11,6 +11,11 @@ with importlib.metadata inside run(): host never imports hil_tests (tests/test_l
 verb, nor `tcomp --help`, loads the rig.
 """
 
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
 import json
 import re
 import sys
@@ -23,7 +28,7 @@ RIG_ENTRY = "hil"
 _FAULT = re.compile(r"^(open|short|stuck|absent):([^@]+)@([0-9.]+)-([0-9.]+)$")
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--run", required=True, help="run folder (twin or measured) whose temperatures drive the chips")
     p.add_argument("--table", required=True, help="coefficient table (tcomp export)")
     p.add_argument("--interpreter", choices=("micropython", "cpython", "qemu"), default="micropython",
@@ -85,7 +90,7 @@ def _actions(faults):
     return acts
 
 
-def load_rig():
+def load_rig() -> Any:
     """The rig's module (``Rig``, ``RigError``, ``play``, ``rig_config``) by its entry point; a UserError
     when no installed distribution offers it (``python -m host`` from a tree that was never installed)."""
     from host.errors import UserError
@@ -99,7 +104,7 @@ def load_rig():
         raise UserError("the HIL rig's entry point %s does not import: %s" % (found[0].value, exc))
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.outputs import Outputs
 
     with Outputs([args.run, args.table, args.config, args.model]) as out:

@@ -1,6 +1,7 @@
 """tcomp import CSV --out DIR (--mapping MAP.json | --time COL --temp COL... --error COL...)
 tcomp import --errors FILE.csv --into RUN --mapping MAP.json [--clock-offset S]"""
 
+from __future__ import annotations
 
 def add_arguments(p):
     p.add_argument("source", nargs="?", help="CSV log with a header row (with --out)")

@@ -1,7 +1,11 @@
 """tcomp linuxcnc --port PORT [--mode stream|modbus] ...: the LinuxCNC bridge (docs/linuxcnc.md)."""
 
+from __future__ import annotations
 
-def add_arguments(p):
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", required=True, help="serial port of the board (e.g. /dev/ttyACM0)")
     p.add_argument("--mode", choices=("stream", "modbus"), default="stream",
                    help="the board's serial mode (its config serial.mode; default stream)")
@@ -46,7 +50,7 @@ def _log(msg):
     print("tcomp linuxcnc %s: %s" % (time.strftime("%H:%M:%S"), msg), file=sys.stderr, flush=True)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     import serial
 
     from firmware.bootcfg import TOP

@@ -1,17 +1,26 @@
 """tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch] [--temperatures S]"""
 
+from __future__ import annotations
+
+import argparse
+from typing import TYPE_CHECKING, Any
+
 import csv
 import math
 import re
 import sys
 import time
 
+if TYPE_CHECKING:
+    from host.board.link import Frame
+    pass
+
 LATCH_WAIT_S = 5.0  # the firmware answers L within one cycle (cycle_ms, 100 ms by default)
-COLUMNS = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_offset_um", "slope_um_per_m",
+COLUMNS: tuple[str, ...] = ("seq", "kind", "status", "flags", "t_ms", "pos_um", "total_um", "ref_offset_um", "slope_um_per_m",
            "fields")
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", required=True, help="serial port or pySerial URL (e.g. /dev/ttyACM0, socket://host:port, spy:///dev/ttyACM0, loop://)")
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     p.add_argument("--csv", help="append every decoded frame to this CSV file")
@@ -37,7 +46,7 @@ OFFSET_FIELDS = (("t_ms", _INTEGER), ("pos_um", _INTEGER), ("total_um", _DECIMAL
                  ("slope_um_per_m", _DECIMAL))
 
 
-def offset_problem(f):
+def offset_problem(f: Frame) -> str | None:
     """Why an O or Q frame's fields are not the offsets docs/protocol.md defines (None when they are).
 
     A frame with a good CRC can still carry 'nan' or '1e999' (a faulty or foreign board): such a frame is
@@ -54,7 +63,7 @@ def offset_problem(f):
     return None
 
 
-def row(f):
+def row(f: Frame) -> dict[str, Any]:
     """A decoded frame as the monitor's columns."""
     from host.board.link import SENSOR_MASK, STATUS_BITS
     flags = [n for bit, n in STATUS_BITS.items() if f.status & bit]
@@ -71,14 +80,14 @@ def row(f):
     return r
 
 
-def error_reference_line(frame):
+def error_reference_line(frame: Frame) -> str:
     """The line `tcomp monitor` prints for a hello: which errors the board's table compensates."""
     from host.board.link import describe_error_reference, hello_error_reference
 
     return "error reference %s" % describe_error_reference(hello_error_reference(frame))
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.errors import UserError
     from host.outputs import Outputs
 
@@ -170,7 +179,7 @@ def _monitor(args, outputs):
                 print("%6d %1s %8s %10s %10s %9s %9s %9s  %s" % (
                     f.seq, f.kind, r["status"], r["t_ms"], r["pos_um"], r["total_um"], r["ref_offset_um"],
                     r["slope_um_per_m"], (r["flags"] + " " + r["fields"]).strip()))
-                if args.latch and not latch_sent and f.kind == "H":
+                if args.latch and not latch_sent and f.kind == "H" and signer is not None:  # (no signer: L sent above)
                     try:
                         line = link.signed_line("L")  # for the session of this hello (the newest)
                     except ValueError as exc:  # host.board.linkauth.CounterError: the hello's counter or nonce

@@ -1,7 +1,11 @@
 """tcomp predict MODEL.json RUN [--history EARLIER_RUN] --out PRED.csv"""
 
+from __future__ import annotations
 
-def add_arguments(p):
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("model", help="model document (tcomp-model/1 JSON)")
     p.add_argument("run", help="run folder")
     p.add_argument("--history", metavar="EARLIER_RUN",
@@ -19,7 +23,7 @@ def add_arguments(p):
                         "after it was saved), as tcomp export --allow-edited does; the JSON records it")
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.outputs import Outputs
 
     with Outputs([args.model, args.run] + ([args.history] if args.history else [])) as out:

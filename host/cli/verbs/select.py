@@ -1,9 +1,13 @@
 """tcomp select --method maxtree|stepwise|hclust-ga RUN... --json OUT  |  tcomp select --method maxtree --corr CORR.csv --json OUT"""
 
+from __future__ import annotations
+
+import argparse
+
 from host.learning.empirical.methods import SELECTORS as METHODS
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="*", metavar="RUN", help="run folders (not with --corr)")
     p.add_argument("--method", required=True, choices=METHODS)
     p.add_argument("--json", required=True, metavar="OUT", help="write the selection (sensors, method, reason) as JSON")
@@ -18,7 +22,7 @@ def add_arguments(p):
     p.add_argument("--target-corr", metavar="TCORR.csv", help="with --corr: sensor,r rows (optional header line) for the representatives")
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     import json
 
     from host.errors import UserError

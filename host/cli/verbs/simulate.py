@@ -1,5 +1,11 @@
 """tcomp simulate --out DIR [--protocol NAME] [--effects a,b=2] [--seed N]"""
 
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterable
+from typing import Any
+
 
 def _epilog():
     from host.twin import EFFECTS, LITERATURE_STATES, PROTOCOLS
@@ -17,7 +23,7 @@ def _epilog():
     return "\n".join(lines)
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     import argparse
 
     p.formatter_class = argparse.RawDescriptionHelpFormatter
@@ -38,7 +44,7 @@ def add_arguments(p):
     p.add_argument("--json", metavar="PATH", help="write a summary (runs, folders, file sha256, peak errors) as JSON")
 
 
-def parse_effects(text):
+def parse_effects(text: str) -> dict[str, float | None]:
     """'a,b=2.5' -> {'a': None, 'b': 2.5}; raises ValueError naming the bad item (a magnitude that is not a
     finite number, an effect given twice)."""
     import math
@@ -64,7 +70,7 @@ def parse_effects(text):
     return out
 
 
-def parse_overrides(items):
+def parse_overrides(items: Iterable[str]) -> dict[str, Any]:
     """['h_W_m2K=20', 'positions_mm=0,100,700'] -> typed overrides for host.twin.make_params."""
     import dataclasses
 
@@ -97,7 +103,7 @@ def parse_overrides(items):
 MAX_NOISE_UM = 1000.0  # 1 mm: a laser that noisy measures nothing; beyond, errors leave the run format's range
 
 
-def check_protocol_list(text):
+def check_protocol_list(text: str) -> None:
     """Refuse a protocol named twice in ``--protocol`` (directly, or by a name and a group that holds it):
     it would be simulated once, and one protocol writes the run into DIR itself, not DIR/<protocol>/."""
     from host.twin import LITERATURE_STATES, PROTOCOLS
@@ -119,7 +125,7 @@ def _sha256(path):
         return hashlib.sha256(fh.read()).hexdigest()
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.outputs import Outputs
 
     from host.data.runs import RUN_FILES

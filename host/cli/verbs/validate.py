@@ -1,12 +1,16 @@
 """tcomp validate RUN..."""
 
+from __future__ import annotations
 
-def add_arguments(p):
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="+", metavar="RUN", help="run folders")
     p.add_argument("--json", help="write {run: [problems]} as JSON")
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     import json
 
     from host.outputs import Outputs

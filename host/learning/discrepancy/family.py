@@ -12,6 +12,12 @@ that is exported.
 What stays here is workflow logic: which candidates the runs can test (``applicable``), caveats
 (``note``) and which temperature columns the model reads (``used_sensors``).
 """
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import TYPE_CHECKING
+
 import dataclasses
 import warnings
 
@@ -20,6 +26,9 @@ import numpy as np
 from host.data.runs import START
 from host.learning.screw.effects import EFFECTS, make_effect
 from host.learning.screw.screwmodel import ScrewModel
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 # 20 segments and 60 s steps (the air linear within a step, the heat of a step's exact travel): the held-out
 # RMSEs within 0.01 um of 20 s steps on the twin's scenarios (bearing_heat: 0.647 vs 0.646 um) at a quarter of
@@ -38,8 +47,7 @@ FOLD_FTOL = 1e-7
 class ScrewFamily:
     """The screw model (E_m over the measured air, no E_e) plus effects from host/learning/screw/effects.py."""
 
-    def __init__(self, segments=SEGMENTS, dt_s=DT_S, geometric_degree=GEOMETRIC_DEGREE, air=True, candidates=CANDIDATES,
-                 error_reference=None):
+    def __init__(self, segments: int = SEGMENTS, dt_s: float = DT_S, geometric_degree: int = GEOMETRIC_DEGREE, air: bool = True, candidates: Sequence[str] = CANDIDATES, error_reference: str | None = None) -> None:
         unknown = [n for n in candidates if n not in EFFECTS]
         if unknown:
             raise ValueError("unknown effect(s) %s (the screw model's effects: %s)" % (", ".join(unknown), ", ".join(EFFECTS)))
@@ -53,11 +61,11 @@ class ScrewFamily:
         self.error_reference = error_reference
 
     @property
-    def catalog(self):
+    def catalog(self) -> dict[str, type]:
         """The effects the workflow can name: the screw model's own (effects.EFFECTS)."""
         return {n: EFFECTS[n] for n in self.candidates}
 
-    def model(self, effects):
+    def model(self, effects: Iterable[str]) -> ScrewModel:
         """The ScrewModel configuration for the effect names ``effects`` (not fitted)."""
         return ScrewModel(segments=self.segments, dt_s=self.dt_s, ambient=False, geometric_degree=self.geometric_degree,
                           effects=[make_effect(n) for n in effects], air="auto" if self.air else "off", max_nfev=FOLD_MAX_NFEV,
@@ -74,7 +82,7 @@ class ScrewFamily:
         return [(self._declared(r), m) for r, m in zip(runs, masks)
                 if m is not None and np.any(m) and r.motion is not None and len(r.motion)]
 
-    def fit(self, runs, masks, effects, start=None):
+    def fit(self, runs: Sequence[Run], masks: Sequence[np.ndarray | None], effects: Iterable[str], start: ScrewModel | None = None) -> ScrewModel:
         sel = self._moving(runs, masks)
         if not sel:
             raise ValueError("no rows of a run with motion to fit on")
@@ -83,7 +91,7 @@ class ScrewFamily:
             return self.model(effects).fit([r for r, _ in sel], row_masks=[m for _, m in sel],
                                            start=None if start is None else start.values_, reduce=False)
 
-    def fit_final(self, runs, effects, start=None):
+    def fit_final(self, runs: Sequence[Run], effects: Iterable[str], start: ScrewModel | None = None) -> ScrewModel:
         """The configuration fitted on every row of every run with motion, with its reduced form: the model written."""
         sel = self._moving(runs, [np.ones(len(r.errors), bool) for r in runs])
         if not sel:
@@ -95,12 +103,12 @@ class ScrewFamily:
             model.ftol = 1e-12
             return model.fit([r for r, _ in sel], start=None if start is None else start.values_)
 
-    def predict(self, fitted, run):
+    def predict(self, fitted: ScrewModel, run: Run) -> np.ndarray:
         if run.motion is None or not len(run.motion):
             raise ValueError("run %s has no motion: the screw model cannot predict it" % run.name)
         return fitted.predict(self._declared(run))
 
-    def used_sensors(self, run, effects=()):
+    def used_sensors(self, run: Run, effects: Iterable[str] = ()) -> set[str]:
         """The temperature columns the model with ``effects`` reads for ``run``."""
         names = run.temperatures.names
         used = set()
@@ -115,7 +123,7 @@ class ScrewFamily:
             used.add(ref)
         return used
 
-    def applicable(self, runs, name):
+    def applicable(self, runs: Sequence[Run], name: str) -> str | None:
         """None, or why the effect cannot be tested on ``runs``."""
         if name in ("speed_dependent_heat", "bearing_heat", "moving_convection"):
             if not any(r.motion is not None and len(r.motion) for r in runs):
@@ -136,7 +144,7 @@ class ScrewFamily:
                 return "all runs move at one feed; a feed-dependent heat is not identifiable"
         return None
 
-    def note(self, runs, name):
+    def note(self, runs: Sequence[Run], name: str) -> str | None:
         """A caveat about testing ``name`` on these runs with leave-one-run-out, or None."""
         if name != "speed_dependent_heat" or len(runs) < 2:
             return None

@@ -9,9 +9,18 @@ the mean square that is one constant bias) and ``slope_in_position`` (share of
 the variance a straight line in position, fitted per sweep, explains: the mark
 of a missing expansion term).
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+from typing import TYPE_CHECKING
 import numpy as np
 
 from host.learning.discrepancy.stats import sweep_ids
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 ZONES = ("near", "middle", "far")
 
@@ -25,7 +34,7 @@ def _state_label(iv, motion):
     return "%g mm/min %g-%g mm" % (motion.feed_mm_min[iv], min(motion.from_mm[iv], motion.to_mm[iv]), max(motion.from_mm[iv], motion.to_mm[iv]))
 
 
-def row_factors(run):
+def row_factors(run: Run) -> dict[str, np.ndarray]:
     """Labels per error row of ``run``: dict factor -> array of str."""
     e = run.errors
     n = len(e)
@@ -54,7 +63,7 @@ def row_factors(run):
     return out
 
 
-def eta_squared(values, labels):
+def eta_squared(values: np.ndarray, labels: np.ndarray) -> tuple[float, list[Any]]:
     """Share of the variance of ``values`` explained by the group means of ``labels``."""
     v = np.asarray(values, dtype=float)
     ok = np.isfinite(v)
@@ -97,7 +106,7 @@ def _slope_share(runs, residuals):
     return expl / tot if tot > 0 else 0.0
 
 
-def localize(runs, residuals):
+def localize(runs: Sequence[Run], residuals: Sequence[np.ndarray]) -> list[dict[str, Any]]:
     """Localization table: list of {factor, share, groups[, worst]}, largest share first.
 
     ``residuals``: one array per run, aligned with ``run.errors`` (NaN = not scored).
@@ -127,7 +136,7 @@ def localize(runs, residuals):
     return out
 
 
-def residual_map(run, residual):
+def residual_map(run: Run, residual: np.ndarray) -> dict[int, tuple[np.ndarray, np.ndarray, np.ndarray]]:
     """Residual on a (sweep time x position) grid per direction, for plots.
 
     Returns dict direction -> (times_s, positions_mm, grid[n_times, n_positions]) with NaN holes.

@@ -13,15 +13,24 @@ Candidates: ``"start"`` and every sensor with role ``ambient`` or ``base`` that 
 material probe sits: the air by the axis or the machine's base). Other sensors are not tried: a wrong
 reference to, say, the motor flange is not a convention any laser software offers.
 """
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
 import math
 
 from host.data.runs import START, common_error_reference
 from host.learning.discrepancy import stats, workflow
 
+if TYPE_CHECKING:
+    from host.data.runs import Run
+
 PROBE_ROLES = ("ambient", "base")
 
 
-def candidates(runs):
+def candidates(runs: Sequence[Run]) -> list[str]:
     """The references worth trying on ``runs``: "start" and the ambient/base sensors every run logs."""
     out = [START]
     for role in PROBE_ROLES:
@@ -31,7 +40,7 @@ def candidates(runs):
     return out
 
 
-def check_declaration(runs, make_family, alpha=workflow.ALPHA, min_gain=workflow.MIN_GAIN, jobs=None, log=None):
+def check_declaration(runs: Sequence[Run], make_family: Callable[[str | None], Any], alpha: float = workflow.ALPHA, min_gain: float = workflow.MIN_GAIN, jobs: int | None = None, log: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Held-out base-model RMSE under the declared reference and each other candidate.
 
     ``make_family(error_reference)`` returns the base model family fitting under that reference (None: the runs'
@@ -67,7 +76,7 @@ def check_declaration(runs, make_family, alpha=workflow.ALPHA, min_gain=workflow
     return out
 
 
-def json_fields(check):
+def json_fields(check: dict[str, Any] | None) -> dict[str, Any]:
     """The discrepancy JSON's fields: ``error_reference_suggested`` only when the declaration does not fit."""
     if check is None:
         return {}
@@ -82,7 +91,7 @@ def _name(ref):
     return "start (raw)" if ref == START else "sensor %s" % ref
 
 
-def report_line(check):
+def report_line(check: dict[str, Any]) -> str:
     """One line: the held-out RMSE under the declared reference and the best other, and the verdict."""
     declared, rmse = check["declared"], check["rmse_um"]
     others = sorted((r for r in rmse if r != declared), key=lambda r: rmse[r])

@@ -1,4 +1,9 @@
 """Outputs of the discrepancy workflow: JSON, the final model document, plots, a Markdown report."""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
 import json
 import math
 import os
@@ -7,8 +12,11 @@ import numpy as np
 
 from host.learning.discrepancy.localize import residual_map
 
+if TYPE_CHECKING:
+    from host.learning.discrepancy.workflow import Result
 
-def final_model_document(result):
+
+def final_model_document(result: Result) -> dict[str, Any]:
     """The model document of the workflow's final fit: host/learning/screw's ScrewModel with the named effects,
     fitted on every run (its reduced firmware form included), with the held-out figures that validated it."""
     model = result.final_fit
@@ -25,7 +33,7 @@ def final_model_document(result):
     return doc
 
 
-def write_json(result, path, extra=None):
+def write_json(result: Result, path: str, extra: dict[str, Any] | None = None) -> dict[str, Any]:
     out = result.as_json()
     if extra:
         out.update(extra)
@@ -44,7 +52,7 @@ def _plt():
     return plt
 
 
-def plot_residual_maps(result, path):
+def plot_residual_maps(result: Result, path: str) -> None:
     """Held-out residual over sweep time x position, per run (rows) before/after (columns)."""
     plt = _plt()
     runs = result.runs
@@ -84,7 +92,7 @@ def _label_states(ax, m):
             last = state
 
 
-def evidence(result):
+def evidence(result: Result) -> list[dict[str, Any]]:
     """Per named effect: the round, where the residual was, what improved."""
     out = []
     for k, rnd in enumerate(result.rounds):
@@ -110,7 +118,7 @@ def evidence(result):
     return out
 
 
-def plot_error_curves(result, family, path):
+def plot_error_curves(result: Result, family: Any, path: str) -> None:
     """Measured error and held-out predictions (base, final) at a few sweeps per run."""
     plt = _plt()
     runs = result.runs
@@ -137,7 +145,7 @@ def plot_error_curves(result, family, path):
     plt.close(fig)
 
 
-def markdown(result, js, model_path=None, model_error=None):
+def markdown(result: Result, js: dict[str, Any], model_path: str | None = None, model_error: str | None = None) -> str:
     lines = ["# Discrepancy report", ""]
     lines.append("Runs: %s. Held-out scheme: %s." % (", ".join(r.name for r in result.runs),
                                                      "leave-one-run-out" if len(result.runs) > 1 else "two-block time split"))
@@ -217,7 +225,7 @@ def markdown(result, js, model_path=None, model_error=None):
     return "\n".join(lines) + "\n"
 
 
-def residual_diagnostic(result, family):
+def residual_diagnostic(result: Result, family: Any) -> Any:
     """host.learning.discrepancy.unexplained on the final model's held-out residual (all signals, strongest first)."""
     from host.learning.discrepancy import unexplained
 
@@ -228,7 +236,7 @@ def residual_diagnostic(result, family):
     return unexplained.diagnose(result.runs, result.after.residuals, used)
 
 
-def findings(result, family, model_path=None, model_error=None):
+def findings(result: Result, family: Any, model_path: str | None = None, model_error: str | None = None) -> dict[str, Any]:
     """The JSON fields beyond ``result.as_json()``: model, model_error, evidence, unexplained, unexplained_all."""
     from host.learning.discrepancy import unexplained
 
@@ -241,7 +249,7 @@ def findings(result, family, model_path=None, model_error=None):
                                 for d in diag]}
 
 
-def write_report(result, family, folder, json_path=None, shown_folder=None):
+def write_report(result: Result, family: Any, folder: str | None, json_path: str | None = None, shown_folder: str | None = None) -> dict[str, Any]:
     """JSON (``json_path``), model.json, plots and report.md in ``folder`` (None: the JSON alone); returns the JSON dict.
 
     ``shown_folder``: the folder's name as recorded in the report, when ``folder`` is a staging place.

@@ -13,19 +13,24 @@ between sweeps of the same run. The statistic gets the Harvey-Leybourne-Newbold
 small-sample correction and is referred to Student's t with N-1 degrees of
 freedom (N = number of sweeps). One-sided: H1 is "the candidate predicts better".
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
 import math
 
 import numpy as np
 from scipy import stats as _st
 
 
-def sweep_ids(time_s):
+def sweep_ids(time_s: np.ndarray) -> np.ndarray:
     """Integer id of each row's sweep (rows sharing one measurement time), in time order."""
     _, inv = np.unique(np.asarray(time_s, dtype=float), return_inverse=True)
     return inv.ravel()
 
 
-def sweep_losses(residuals, time_s):
+def sweep_losses(residuals: np.ndarray, time_s: np.ndarray) -> np.ndarray:
     """Mean squared residual per sweep, in time order -> (n_sweeps,)."""
     r = np.asarray(residuals, dtype=float)
     ids = sweep_ids(time_s)
@@ -36,12 +41,12 @@ def sweep_losses(residuals, time_s):
     return ss[keep] / n[keep]
 
 
-def bartlett_lag(n):
+def bartlett_lag(n: int) -> int:
     """Newey-West bandwidth: floor(4 (n/100)^(2/9)), at least 1."""
     return max(1, int(math.floor(4.0 * (n / 100.0) ** (2.0 / 9.0))))
 
 
-def long_run_variance(groups, lag=None):
+def long_run_variance(groups: Sequence[np.ndarray], lag: int | None = None) -> float:
     """Newey-West long-run variance of series split in independent groups (runs).
 
     ``groups`` is a list of 1-D arrays; the mean is pooled, autocovariances are
@@ -65,7 +70,7 @@ def long_run_variance(groups, lag=None):
     return max(lrv, gamma[0] * 1e-12)
 
 
-def dm_test(loss_base, loss_cand, lag=None, log=False):
+def dm_test(loss_base: Sequence[np.ndarray], loss_cand: Sequence[np.ndarray], lag: int | None = None, log: bool = False) -> dict[str, Any]:
     """One-sided Diebold-Mariano test that the candidate's held-out loss is lower.
 
     ``loss_base``/``loss_cand``: lists (one per run) of per-sweep losses in time
@@ -99,7 +104,7 @@ def dm_test(loss_base, loss_cand, lag=None, log=False):
     return {"statistic": float(stat), "p_value": p, "n_sweeps": int(n), "mean_diff": mean, "lag": int(lag)}
 
 
-def holm_adjust(p_values):
+def holm_adjust(p_values: Sequence[float]) -> np.ndarray:
     """Holm-Bonferroni adjusted p-values (family-wise error control), same order as given."""
     p = np.asarray(p_values, dtype=float)
     m = p.size
@@ -112,7 +117,7 @@ def holm_adjust(p_values):
     return adj
 
 
-def rmse(residuals):
+def rmse(residuals: np.ndarray) -> float:
     r = np.asarray(residuals, dtype=float)
     r = r[np.isfinite(r)]
     return float(np.sqrt(np.mean(r ** 2))) if r.size else float("nan")

@@ -23,7 +23,16 @@ the gap differs from run to run, as it does when the base model's parameters hav
 bent to absorb part of it. A signal is reported as unexplained structure when
 |partial_r| >= MIN_PARTIAL_R (how it was chosen: docs/discrepancy.md).
 """
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from typing import Any
+from typing import TYPE_CHECKING
 import numpy as np
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 RATE_WINDOW_S = 600.0
 FEED_WINDOW_S = 1800.0
@@ -58,7 +67,7 @@ def _recent_feed(motion, t):
     return busy @ np.asarray(motion.feed_mm_min, float) / FEED_WINDOW_S
 
 
-def signals(run, used_sensors=()):
+def signals(run: Run, used_sensors: Iterable[str] = ()) -> dict[str, np.ndarray]:
     """{name: (n_rows,) regressor} for one run."""
     e = run.errors
     t = e.time_s
@@ -98,7 +107,7 @@ def _perp(N, x):
     return x - N @ beta
 
 
-def diagnose(runs, residuals, used_sensors=()):
+def diagnose(runs: Sequence[Run], residuals: Sequence[np.ndarray], used_sensors: Iterable[str] = ()) -> list[dict[str, Any]]:
     """All signals, strongest first: [{"signal", "partial_r", "rmse_share", "above_threshold", "where"}].
 
     residuals: per run, held-out residual per row of run.errors (NaN where not tested)."""
@@ -163,12 +172,12 @@ def _where(runs, keep, part):
     return "%s (%.0f %%), %s (%.0f %%)" % (ph, 100 * ms[phase == ph].sum() / tot, labels[th], 100 * ms[third == th].sum() / tot)
 
 
-def summary(items):
+def summary(items: Iterable[dict[str, Any]]) -> list[dict[str, Any]]:
     """The JSON list ``unexplained``: signals above the thresholds, strongest first."""
     return [{"signal": d["signal"], "partial_r": d["partial_r"], "rmse_share": d["rmse_share"]} for d in items if d["above_threshold"]]
 
 
-def text(items, rmse_um):
+def text(items: Sequence[dict[str, Any]], rmse_um: float) -> list[str]:
     """Lines for report.md."""
     hits = [d for d in items if d["above_threshold"]]
     if not hits:

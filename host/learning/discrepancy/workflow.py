@@ -10,6 +10,12 @@ leave-one-run-out when there are two or more runs, otherwise a blocked time
 split of the single run into two halves of its sweeps, each predicted by the
 model fitted on the other half.
 """
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING
+
 import math
 import multiprocessing as mp
 import os
@@ -21,6 +27,9 @@ import numpy as np
 
 from host.learning.discrepancy import stats
 from host.learning.discrepancy.localize import localize
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 # Thresholds, chosen from the null distribution over seeds (docs/discrepancy.md,
 # tools/bench_discrepancy.py): family-wise alpha over the candidates of one round,
@@ -59,10 +68,10 @@ class HeldOut:
     residuals: list  # per run, aligned with run.errors; NaN where never tested
     fits: list  # per fold
 
-    def rmse(self):
+    def rmse(self) -> float:
         return stats.rmse(np.concatenate(self.residuals))
 
-    def rmse_per_run(self):
+    def rmse_per_run(self) -> list[float]:
         return [stats.rmse(r) for r in self.residuals]
 
 
@@ -84,7 +93,7 @@ class Candidate:
     single_p_value: Optional[float] = None
     single_rmse_um: Optional[float] = None
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, Any]:
         # a candidate that could not be tested (skipped, fit failed) reports score 0 and p 1:
         # nothing was added, nothing was shown; the reason is in "skipped"/"error"
         untested = not math.isfinite(self.score)
@@ -122,10 +131,10 @@ class Result:
     after: HeldOut
     rounds: list
     runs: list
-    final_fit: object = None
+    final_fit: Any = None  # the family's fitted object (duck-typed, Family); the screw family's is a ScrewModel
     reference: Optional[dict] = None  # host.learning.discrepancy.reference.check_declaration's finding, when run
 
-    def as_json(self):
+    def as_json(self) -> dict[str, Any]:
         cand = {}
         # one entry per catalog effect: its figures from the round it was accepted in,
         # or from the last round it was tested in
@@ -172,7 +181,7 @@ def _num(v):
 # ---------------------------------------------------------------- folds
 
 
-def make_folds(runs):
+def make_folds(runs: Sequence[Run]) -> list[Fold]:
     """Leave-one-run-out for >= 2 runs; a two-block time split of the sweeps for one run."""
     if len(runs) >= 2:
         for r in runs:
@@ -319,8 +328,7 @@ def _try_pairs(pool, runs, folds, effects, current, singles, rnd, alpha, min_gai
     return tuple(order), ho
 
 
-
-def discover(runs, family, candidates=None, alpha=ALPHA, min_gain=MIN_GAIN, max_effects=None, jobs=None, base_effects=(), log=None):
+def discover(runs: Sequence[Run], family: Any, candidates: Sequence[str] | None = None, alpha: float = ALPHA, min_gain: float = MIN_GAIN, max_effects: int | None = None, jobs: int | None = None, base_effects: Sequence[str] = (), log: Callable[[str], None] | None = None) -> Result:
     """Find the catalog effects the base model is missing, one per round.
 
     Returns a :class:`Result`. ``candidates`` defaults to ``family.candidates``.

@@ -39,6 +39,12 @@ training part only (early stopping needs the validation part untouched);
 ``statistics()`` reports the fit on all training data, the validation RMSE,
 MSE and R² of every size and the epochs used.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
@@ -62,8 +68,7 @@ class ANN:
 
     method = "ann"
 
-    def __init__(self, *, hidden_sizes=(3, 4, 5, 6, 7), validation="auto", validation_fraction=0.2, max_epochs=3000, patience=200,
-                 learning_rate=0.01, seed=0, size_rule="smallest_near_best", size_tolerance=0.05, fit_intercept=True):
+    def __init__(self, *, hidden_sizes: Sequence[int] = (3, 4, 5, 6, 7), validation: str = "auto", validation_fraction: float = 0.2, max_epochs: int = 3000, patience: int = 200, learning_rate: float = 0.01, seed: int = 0, size_rule: str = "smallest_near_best", size_tolerance: float = 0.05, fit_intercept: bool = True) -> None:
         self.hidden_sizes = hidden_sizes
         self.validation = validation
         self.size_rule = size_rule
@@ -100,7 +105,7 @@ class ANN:
         lo = min(mse.values())
         return min(h for h, v in mse.items() if v <= lo * (1.0 + float(self.size_tolerance)))
 
-    def fit(self, X, y, names=None, groups=None):
+    def fit(self, X: np.ndarray, y: np.ndarray, names: Sequence[str] | None = None, groups: np.ndarray | None = None) -> ANN:
         sizes = self._check()
         X, y, names = check_xy(X, y, names, None, "ANN")
         n, p = X.shape
@@ -277,12 +282,12 @@ class ANN:
         W, b, v, c = best[1]
         return (W, b, v, float(c)), best[0], epoch, best[2]
 
-    def predict(self, X):
+    def predict(self, X: np.ndarray) -> np.ndarray:
         X = check_predict_x(self, X, "W_", lambda: self.W_.shape[1])
         Z = (X - self.x_mean_) / self.x_scale_
         return self.y_mean_ + self.y_scale_ * (np.tanh(Z @ self.W_.T + self.b_) @ self.v_ + self.c_)
 
-    def statistics(self):
+    def statistics(self) -> dict[str, Any]:
         return {
             "n_samples": int(self.n_samples_),
             "n_train": self.n_train_,
@@ -304,7 +309,7 @@ class ANN:
             "r2_adj": None, "F": None, "F_p": None, "residual_std_error": finite_or_none(self.rmse_),
         }
 
-    def network(self):
+    def network(self) -> dict[str, Any]:
         """The fitted network as plain lists (the model document's ``thermal.network``)."""
         return {
             "activation": "tanh",
@@ -319,7 +324,7 @@ class ANN:
         }
 
     @classmethod
-    def from_network(cls, net):
+    def from_network(cls, net: dict[str, Any]) -> ANN:
         """An ANN predicting with the weights of a ``network()`` dict (no training data)."""
         self = cls()
         self.x_mean_ = np.asarray(net["input_offset"], dtype=float)

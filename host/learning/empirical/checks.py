@@ -3,12 +3,18 @@
 The bottom of the estimators: it imports none of them, they all import it (docs/empirical.md).
 Bad input raises :class:`host.learning.empirical.EmpiricalDataError` naming the sensor and sample.
 """
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
 
 
-def column_names(names, p):
+def column_names(names: Sequence[str] | None, p: int) -> list[str]:
     if names is None:
         return ["x%d" % (j + 1) for j in range(p)]
     names = [str(n) for n in names]
@@ -17,7 +23,7 @@ def column_names(names, p):
     return names
 
 
-def check_xy(X, y, names=None, n_params=None, what="regression"):
+def check_xy(X: Any, y: Any, names: Sequence[str] | None = None, n_params: int | None = None, what: str = "regression") -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Validate a design: 2-D finite X, 1-D finite y of the same length, no constant column.
 
     ``n_params`` is the number of fitted parameters; at least one more sample is
@@ -52,7 +58,7 @@ def check_xy(X, y, names=None, n_params=None, what="regression"):
     return X, y, names
 
 
-def check_predict_x(est, X, fitted, n_columns):
+def check_predict_x(est: Any, X: Any, fitted: str, n_columns: Callable[[], int]) -> np.ndarray:
     """``X`` for ``est.predict`` as a 2-D float array. EmpiricalDataError when ``est`` has no attribute
     ``fitted`` yet (predict before fit), X holds NaN/inf, or its column count is not ``n_columns()``."""
     if not hasattr(est, fitted):
@@ -69,7 +75,7 @@ def check_predict_x(est, X, fitted, n_columns):
     return X
 
 
-def finite_or_none(x):
+def finite_or_none(x: float) -> float | None:
     """``x`` as a float for a JSON report, or None when it is NaN or infinite (JSON has neither)."""
     x = float(x)
     return x if np.isfinite(x) else None

@@ -36,6 +36,12 @@ published protocol, so its *selection* has seen the other runs; the report
 says so), in ``case_split`` it gets the training window cut into its spindle
 cycles, so nothing held out is seen.
 """
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from typing import TYPE_CHECKING
+
 import time
 from dataclasses import dataclass, field
 from typing import Any, Optional
@@ -51,6 +57,9 @@ from host.learning.empirical.fitting import fit_model
 from host.learning.empirical.methods import COMPARE_METHODS as METHODS
 from host.learning.empirical.methods import COMPARE_SELECTORS as SELECTORS
 from host.learning.empirical.methods import PIPELINES
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 ROBUSTNESS = {"noise_C": 0.2, "offset_C": 0.5, "seed": 0, "repeats": 5}
 
 
@@ -66,7 +75,7 @@ class Case:
     summary_tests: Optional[list] = None  # labels averaged into the mean metrics (None: all tests)
 
 
-def cases_runs(runs, train=(0,)):
+def cases_runs(runs: Sequence[Run], train: Sequence[int | tuple[int, ...]] = (0,)) -> list[Case]:
     """One case per entry of ``train``: an index (fit on that run) or a tuple of indices (fit on those runs pooled,
     as Li 2017's verification pools two speeds); every other run is a test."""
     runs = list(runs)
@@ -91,7 +100,7 @@ def cases_runs(runs, train=(0,)):
     return out
 
 
-def case_split(run, split_s, target="direct", channel=None, sensors=None, test_windows=None):
+def case_split(run: Run, split_s: float, target: str = "direct", channel: str | None = None, sensors: Sequence[str] | None = None, test_windows: Sequence[tuple[float | None, float | None]] | None = None) -> Case:
     """Fit on run times < split_s, test on >= split_s (and on each extra window in ``test_windows``)."""
     from host.learning.empirical.schedule import cycles
     from host.learning.empirical.targets import training_arrays
@@ -182,8 +191,7 @@ def _fit(method, case, target, channel, sensors, fit_intercept, options, selecto
     return model, info
 
 
-def run_case(case, methods=METHODS, target="slope", channel=None, sensors=None, fit_intercept=True, options=None,
-             selector_params=None, robustness=None, keep_models=False, reference="run_start"):
+def run_case(case: Case, methods: Sequence[str] = METHODS, target: str = "slope", channel: str | None = None, sensors: Sequence[str] | None = None, fit_intercept: bool = True, options: Mapping[str, dict[str, Any]] | None = None, selector_params: Mapping[str, dict[str, Any]] | None = None, robustness: Mapping[str, Any] | None = None, keep_models: bool = False, reference: str = "run_start") -> list[dict[str, Any]]:
     """Fit and evaluate every method on one case -> list of result dicts (one per method).
 
     ``reference="run_start"`` (default) evaluates every run with temperature rises
@@ -262,7 +270,7 @@ def _mean_metrics(ms):
     return out
 
 
-def findings(results):
+def findings(results: Sequence[Mapping[str, Any]]) -> list[str]:
     """Plain statements from the numbers: PCR vs MLR on other conditions, who degrades least, best method."""
     out = []
     by_case = {}
@@ -286,7 +294,7 @@ def findings(results):
     return out
 
 
-def table(results):
+def table(results: Sequence[Mapping[str, Any]]) -> str:
     """Plain-text table: one row per case, method and test."""
     lines = ["%-28s %-10s %3s %-26s %9s %9s %9s %8s %10s" % ("case", "method", "n", "test", "RMSE um", "max um", "min um", "acc %", "disturbed")]
     for r in results:
@@ -301,12 +309,12 @@ def table(results):
     return "\n".join(lines)
 
 
-def public(results):
+def public(results: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     """Results without the in-memory objects (JSON-ready)."""
     return [{k: v for k, v in r.items() if not k.startswith("_")} for r in results]
 
 
-def write_plots(results, cases, out_dir, target, channel=None):
+def write_plots(results: Sequence[Mapping[str, Any]], cases: Sequence[Case], out_dir: str, target: str, channel: str | None = None) -> list[str]:
     """Curves, residuals, scree, selector and summary plots for every case into ``out_dir``. Returns paths."""
     import os
 
@@ -344,7 +352,7 @@ def write_plots(results, cases, out_dir, target, channel=None):
 LOCO_METHODS = ("mlr", "cv-subset", "dynamic")
 
 
-def leave_one_cycle_out(run, channel=None, target="direct", methods=LOCO_METHODS, sensors=None, options=None, progress=None):
+def leave_one_cycle_out(run: Run, channel: str | None = None, target: str = "direct", methods: Sequence[str] = LOCO_METHODS, sensors: Sequence[str] | None = None, options: Mapping[str, dict[str, Any]] | None = None, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
     """Every method fitted with one spindle cycle left out and evaluated on it, for every cycle in turn.
 
     Returns {"cycles": [...], "methods": {method: {"folds": [metrics per held-out cycle], "rmse_um": pooled RMSE,

@@ -7,18 +7,28 @@ sensor, the absolute temperatures and the rises seen over the training span
 the run declares its stroke, else the measured position range; a direct model
 has its fixed measuring position.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.geometric import fit_geometric
-from host.learning.empirical.kinds import LinearDirectModel, NetworkModel, PolySlopeModel
+from host.learning.empirical.kinds import LinearDirectModel, NetworkModel, PolySlopeModel, PPRModel
 from host.learning.empirical.methods import CROSS_VALIDATED, make_estimator
 from host.learning.empirical.schedule import block_labels, cycles
 from host.data.runs import common_error_reference
 from host.learning.empirical.targets import _channel_rows, stack, start_temperatures, training_arrays
 
+if TYPE_CHECKING:
+    from host.data.runs import Run
+    from host.learning.empirical.targets import RunArrays
+
 ENVELOPE_MARGIN_K = 2.0
-NONLINEAR = ("ann", "ppr")  # estimators that are not a linear function of the rises: NetworkModel
+NONLINEAR = {"ann": NetworkModel, "ppr": PPRModel}  # estimators that are not a linear function of the rises: their model class
 
 
 def _envelope(runs, arrays, sensors, margin, target, channel):
@@ -56,7 +66,7 @@ def _envelope(runs, arrays, sensors, margin, target, channel):
     }
 
 
-def select_columns(arrays, sensors):
+def select_columns(arrays: Sequence[RunArrays], sensors: Sequence[str]) -> list[RunArrays]:
     """RunArrays restricted to ``sensors`` (a new list, same runs)."""
     from host.learning.empirical.targets import RunArrays
 
@@ -71,7 +81,7 @@ def select_columns(arrays, sensors):
     return out
 
 
-def merge_small_groups(groups, fraction=0.25):
+def merge_small_groups(groups: np.ndarray, fraction: float = 0.25) -> np.ndarray:
     """Merge groups smaller than ``fraction`` of the largest into the group before them in time.
 
     A training window that ends just after a cycle starts would otherwise make
@@ -88,7 +98,7 @@ def merge_small_groups(groups, fraction=0.25):
     return groups
 
 
-def cv_groups(runs, arrays, cv_blocks=None):
+def cv_groups(runs: Sequence[Run], arrays: Sequence[RunArrays], cv_blocks: int | None = None) -> np.ndarray:
     """Cross-validation group of every stacked sample.
 
     Several runs: the run. One run: ``cv_blocks`` equal-length contiguous time
@@ -200,13 +210,13 @@ def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fi
                             geometric_coef=geo.coef_ if geo is not None else (0.0,), **kw)
         model.geometric_ = geo
     elif target == "direct":
-        model = NetworkModel(used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
+        model = NONLINEAR[method](used, est, ref, "direct", **kw) if method in NONLINEAR else LinearDirectModel(used, coefs, est.intercept_, ref, **kw)
     else:
         geo = fit_geometric(runs, channel, geometric_max_degree, geometric_criterion, geometric_degree)
         stats["geometric"] = {"degree": int(geo.degree_), "rmse_um": geo.rmse_, "selection": geo.scores_,
                               "criterion": geometric_criterion if geometric_degree is None else "fixed"}
         if method in NONLINEAR:
-            model = NetworkModel(used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
+            model = NONLINEAR[method](used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
         else:
             model = PolySlopeModel(used, coefs, est.intercept_, ref, geometric_coef=geo.coef_, **kw)
         model.geometric_ = geo

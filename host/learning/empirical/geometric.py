@@ -8,10 +8,20 @@ degrees of freedom is fitted, and the one with the smallest leave-one-out
 cross-validation error (PRESS, exact via the hat matrix) is kept (``criterion="aic"``:
 smallest AIC = m·ln(RSS/m) + 2(d+1)). Ties go to the lower degree.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+from numpy.typing import ArrayLike
+
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.targets import sweep_slopes
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 MAX_DEGREE = 6  # the table's geometric polynomial holds at most degree 6 (firmware/table.py)
 
@@ -21,12 +31,12 @@ class GeometricPolynomial:
 
     ``degree=N`` fixes the degree (Li 2021 uses 5, S004 4) instead of choosing one up to ``max_degree``."""
 
-    def __init__(self, max_degree=5, criterion="cv", degree=None):
+    def __init__(self, max_degree: int = 5, criterion: str = "cv", degree: int | None = None) -> None:
         self.max_degree = max_degree
         self.criterion = criterion
         self.degree = degree
 
-    def fit(self, position_mm, error_um):
+    def fit(self, position_mm: ArrayLike, error_um: ArrayLike) -> GeometricPolynomial:
         if self.degree is not None and (isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer))
                                         or not 1 <= self.degree <= MAX_DEGREE):
             raise EmpiricalDataError("geometric: geometric_degree must be an integer 1..%d (the table holds degree %d), got %r"
@@ -85,14 +95,14 @@ class GeometricPolynomial:
         self.rmse_ = float(np.sqrt(np.mean((err - self.predict(pos)) ** 2)))
         return self
 
-    def predict(self, position_mm):
+    def predict(self, position_mm: ArrayLike) -> np.ndarray:
         return np.polynomial.polynomial.polyval(np.asarray(position_mm, dtype=float), self.coef_)
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         return {"degree": int(self.degree_), "coefficients_um": [float(c) for c in self.coef_]}
 
 
-def cold_points(runs, channel=None):
+def cold_points(runs: Sequence[Run], channel: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Positions and errors of every run's cold sweep(s) (first sweep of each direction)."""
     P, e = [], []
     for r in runs:
@@ -107,7 +117,7 @@ def cold_points(runs, channel=None):
     return np.concatenate(P), np.concatenate(e)
 
 
-def fit_geometric(runs, channel=None, max_degree=5, criterion="cv", degree=None):
+def fit_geometric(runs: Sequence[Run], channel: str | None = None, max_degree: int = 5, criterion: str = "cv", degree: int | None = None) -> GeometricPolynomial:
     """GeometricPolynomial fitted to the cold sweeps of ``runs`` (``degree``: exactly that degree)."""
     P, e = cold_points(runs, channel)
     return GeometricPolynomial(max_degree, criterion, degree).fit(P, e)

@@ -18,6 +18,12 @@ training runs' typical start state.
 ``predict(run)`` returns one value per row of ``run.errors`` in file order;
 rows of other channels than the model's are NaN.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from numpy.typing import ArrayLike
+
 import math
 from typing import Any
 
@@ -209,12 +215,12 @@ class LinearDirectModel(_Base):
     kind = "linear_direct"
     target = "direct"
 
-    def predict_rises(self, R):
+    def predict_rises(self, R: ArrayLike) -> np.ndarray:
         return self.intercept + np.asarray(R, dtype=float) @ self.coefficients
 
     thermal = predict_rises
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         doc = self._common_doc()
         doc["geometric"] = None
         doc["thermal"] = {
@@ -225,7 +231,7 @@ class LinearDirectModel(_Base):
         return doc
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> LinearDirectModel:
         thermal, sensors, ref, kw = cls._common_args(doc)
         coefs, b0 = _thermal_terms(doc, thermal, sensors, "coefficients_um_per_K", "intercept_um")
         return cls(sensors, coefs, b0, ref, **kw)
@@ -237,20 +243,20 @@ class PolySlopeModel(_Base):
     kind = "poly_slope"
     target = "slope"
 
-    def __init__(self, sensors, coefficients, intercept, reference_C, geometric_coef=(0.0,), **kw):
+    def __init__(self, sensors: Sequence[str], coefficients: ArrayLike, intercept: float, reference_C: dict[str, float], geometric_coef: ArrayLike = (0.0,), **kw: Any) -> None:
         super().__init__(sensors, coefficients, intercept, reference_C, **kw)
         self.geometric_coef = np.asarray(geometric_coef, dtype=float)
 
-    def slope(self, R):
+    def slope(self, R: ArrayLike) -> np.ndarray:
         """Thermal slope s(T) in µm/mm for rises R (n, p)."""
         return self.intercept + np.asarray(R, dtype=float) @ self.coefficients
 
     thermal = slope
 
-    def geometric(self, P):
+    def geometric(self, P: ArrayLike) -> np.ndarray:
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         doc = self._common_doc()
         doc["geometric"] = {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]}
         doc["thermal"] = {
@@ -261,7 +267,7 @@ class PolySlopeModel(_Base):
         return doc
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> PolySlopeModel:
         thermal, sensors, ref, kw = cls._common_args(doc)
         coefs, b0 = _thermal_terms(doc, thermal, sensors, "coefficients_um_per_mm_per_K", "intercept_um_per_mm")
         return cls(sensors, coefs, b0, ref, geometric_coef=_geometric_from_document(doc, "poly_slope"), **kw)
@@ -279,13 +285,12 @@ class NetworkModel(_Base):
     """An estimator that is not linear in the rises (ann, ppr): thermal part = estimator.predict(R).
 
     ``target`` "slope": δ(P, T) = geometric(P) + f(R)·P; "direct": δ(T) = f(R).
-    Only the ann has a document (kind ``ann``); other estimators live in memory
-    for ``tcomp compare``.
+    Its document is the ann's (kind ``ann``); PPRModel below is the ppr's.
     """
 
     kind = "ann"
 
-    def __init__(self, sensors, estimator, reference_C, target="direct", geometric_coef=(0.0,), **kw):
+    def __init__(self, sensors: Sequence[str], estimator: Any, reference_C: dict[str, float], target: str = "direct", geometric_coef: ArrayLike = (0.0,), **kw: Any) -> None:
         super().__init__(sensors, None, 0.0, reference_C, **kw)
         if target not in ("slope", "direct"):
             raise EmpiricalDataError("target must be slope or direct, got %r" % (target,))
@@ -293,13 +298,13 @@ class NetworkModel(_Base):
         self.estimator_ = estimator
         self.geometric_coef = np.asarray(geometric_coef, dtype=float)
 
-    def thermal(self, R):
+    def thermal(self, R: ArrayLike) -> np.ndarray:
         return self.estimator_.predict(np.asarray(R, dtype=float).reshape(-1, len(self.sensors)))
 
-    def geometric(self, P):
+    def geometric(self, P: ArrayLike) -> np.ndarray:
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         if not hasattr(self.estimator_, "network"):
             raise ModelFormatError("a %s model has no document form (only ann networks are saved)" % self.method)
         doc = self._common_doc()
@@ -310,7 +315,7 @@ class NetworkModel(_Base):
         return doc
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> NetworkModel:
         from host.learning.empirical.ann import ANN
 
         thermal, sensors, ref, kw = cls._common_args(doc)
@@ -340,3 +345,58 @@ class NetworkModel(_Base):
                 raise ModelFormatError("ann model document: thermal.network.%s must be a finite number, found %r" % (key, net.get(key)))
         geo = _geometric_from_document(doc, "ann") if target == "slope" else (0.0,)
         return cls(sensors, ANN.from_network(net), ref, target=target, geometric_coef=geo, **kw)
+
+
+class PPRModel(NetworkModel):
+    """A projection pursuit regression (ppr.py) as a document (kind ``ppr``): thermal part = ȳ + Σ g_m(a_m·z).
+
+    ``thermal.ridges`` holds what PPR.predict reads (ppr.py PPR.ridges): each term's unit direction on the
+    standardised rises, its natural-spline knots and coefficients. Predict reads it back; export refuses it:
+    a ridge function is a spline of a projection, which no table kind of the firmware evaluates.
+    """
+
+    kind = "ppr"
+
+    def to_document(self) -> dict[str, Any]:
+        doc = self._common_doc()
+        doc["geometric"] = (None if self.target == "direct"
+                            else {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]})
+        doc["thermal"] = {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": self.reference,
+                          "ridges": self.estimator_.ridges()}
+        return doc
+
+    @classmethod
+    def from_document(cls, doc: dict[str, Any]) -> PPRModel:
+        from host.learning.empirical.ppr import PPR
+
+        thermal, sensors, ref, kw = cls._common_args(doc)
+        target = cls._target(thermal, "ppr")
+        ridges = thermal.get("ridges")
+        if not isinstance(ridges, dict):
+            raise ModelFormatError("ppr model document lacks the object thermal.ridges")
+        p = len(sensors)
+
+        def numbers(v, size, where):
+            if not isinstance(v, list) or not all(_is_number(x) for x in v) or (size is not None and len(v) != size):
+                raise ModelFormatError("ppr model document: thermal.ridges.%s must be a list of %s finite numbers"
+                                       % (where, size if size is not None else "at least 3"))
+            return v
+
+        numbers(ridges.get("input_offset"), p, "input_offset")
+        if any(x <= 0 for x in numbers(ridges.get("input_scale"), p, "input_scale")):
+            raise ModelFormatError("ppr model document: thermal.ridges.input_scale values must be > 0")
+        if not _is_number(ridges.get("output_offset")):
+            raise ModelFormatError("ppr model document: thermal.ridges.output_offset must be a finite number, found %r"
+                                   % (ridges.get("output_offset"),))
+        terms = ridges.get("terms")
+        if not isinstance(terms, list) or not terms or not all(isinstance(t, dict) for t in terms):
+            raise ModelFormatError("ppr model document: thermal.ridges.terms must be a non-empty list of objects")
+        for m, t in enumerate(terms):
+            numbers(t.get("direction"), p, "terms[%d].direction" % m)
+            knots = numbers(t.get("knots"), None, "terms[%d].knots" % m)
+            if len(knots) < 3 or any(b <= a for a, b in zip(knots, knots[1:])):
+                # the natural spline basis divides by the distance of each knot to the last
+                raise ModelFormatError("ppr model document: thermal.ridges.terms[%d].knots must be at least 3 increasing numbers" % m)
+            numbers(t.get("coefficients"), len(knots), "terms[%d].coefficients" % m)
+        geo = _geometric_from_document(doc, "ppr") if target == "slope" else (0.0,)
+        return cls(sensors, PPR.from_ridges(ridges), ref, target=target, geometric_coef=geo, **kw)

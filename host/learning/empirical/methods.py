@@ -5,6 +5,11 @@ Imports no numpy (the CLI builds its parsers from it); the estimator classes are
 is made. Below it: regression.py, ann.py, ppr.py, dynamic.py, and at the bottom checks.py, which
 they all share. docs/empirical.md describes the methods.
 """
+
+from __future__ import annotations
+
+from typing import Any
+
 import importlib
 
 from host.learning.empirical import EmpiricalDataError
@@ -24,7 +29,7 @@ ESTIMATORS = {
 }
 CROSS_VALIDATED = ("cv-subset", "ann", "dynamic")  # fit reads groups (host/learning/empirical/fitting.py cv_groups)
 # estimators whose fitted model has no model-document kind yet: `tcomp compare` runs them, `tcomp fit` cannot save them
-NO_DOCUMENT = {"ppr": "a projection pursuit regression has no model-document kind yet (docs/model-format.md)"}
+NO_DOCUMENT: dict[str, str] = {}  # method -> why (none left since ppr got its kind)
 FIT_METHODS = tuple(m for m in ESTIMATORS if m not in NO_DOCUMENT)  # `tcomp fit --model` (besides screw)
 
 SELECTORS = ("maxtree", "stepwise", "hclust-ga")  # `tcomp select --method` (host/learning/empirical/selectors)
@@ -41,7 +46,7 @@ CANDIDATE_OPTIONS = {"dynamic": ("taus_s", "use_spindle", "use_feed", "observer"
 COMPARE_DEFAULT = tuple(m for m in COMPARE_METHODS if m != "maxtree-mlr")  # maxtree-mlr is maxtree under the paper's name
 
 
-def estimator_class(method):
+def estimator_class(method: str) -> type:
     """The estimator class of ``method`` (a key of ESTIMATORS)."""
     if method not in ESTIMATORS:
         raise EmpiricalDataError("unknown regression method %r (known: %s)" % (method, ", ".join(ESTIMATORS)))
@@ -49,19 +54,19 @@ def estimator_class(method):
     return getattr(importlib.import_module(module), name)
 
 
-def make_estimator(method, fit_intercept=True, **options):
+def make_estimator(method: str, fit_intercept: bool = True, **options: Any) -> Any:
     """Estimator for ``method`` in ESTIMATORS with method-specific options (e.g. f_enter=100)."""
     return estimator_class(method)(fit_intercept=fit_intercept, **options)
 
 
-def estimator_parameters(method):
+def estimator_parameters(method: str) -> tuple[str, ...]:
     """The keyword parameters of ``method``'s estimator besides fit_intercept: what `--option` may set for it."""
     import inspect
     params = inspect.signature(estimator_class(method).__init__).parameters
     return tuple(k for k, p in params.items() if p.kind == p.KEYWORD_ONLY and k != "fit_intercept")
 
 
-def method_options(method):
+def method_options(method: str) -> tuple[str, ...]:
     """Everything `--option` may set for ``method``: its estimator's parameters, its CANDIDATE_OPTIONS and,
     when it cross-validates, cv_blocks (fit_model's cross-validation groups)."""
     return estimator_parameters(method) + CANDIDATE_OPTIONS.get(method, ()) + (("cv_blocks",) if method in CROSS_VALIDATED else ())

@@ -11,6 +11,13 @@ rise (scaled to unit RMS for conditioning, mapped back exactly) and the base ris
 On the board the model is a ``dynamic`` table whose filters all have τ = 0 (they pass their input through)
 and read the nut rise, its powers and the base rise (models_export/exact.py; docs/table-format.md).
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+from numpy.typing import ArrayLike
+
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
@@ -18,10 +25,13 @@ from host.learning.empirical.kinds import _Base, _geometric_from_document, _is_n
 from host.learning.empirical.checks import check_predict_x, check_xy, finite_or_none as _f
 from host.learning.documents import ModelFormatError
 
+if TYPE_CHECKING:
+    from host.data.runs import Run
+
 MAX_DEGREE = 4  # S004 (m <= 4); the board's power inputs go to the fourth
 
 
-def features(R, degree):
+def features(R: np.ndarray, degree: int) -> np.ndarray:
     """(n, degree + 1) design: nut rise, its powers 2..degree, base rise (columns of R: nut, base)."""
     R = np.asarray(R, dtype=float).reshape(-1, 2)
     d = R[:, 0]
@@ -38,11 +48,11 @@ class MRPoly:
 
     method = "mr-poly"
 
-    def __init__(self, *, degree=MAX_DEGREE, fit_intercept=True):
+    def __init__(self, *, degree: int = MAX_DEGREE, fit_intercept: bool = True) -> None:
         self.degree = degree
         self.fit_intercept = fit_intercept
 
-    def fit(self, X, y, names=None, groups=None):
+    def fit(self, X: np.ndarray, y: np.ndarray, names: Sequence[str] | None = None, groups: np.ndarray | None = None) -> MRPoly:
         if isinstance(self.degree, bool) or not isinstance(self.degree, (int, np.integer)) or not 1 <= self.degree <= MAX_DEGREE:
             raise EmpiricalDataError("mr-poly: degree must be an integer 1..%d (S004: m <= 4), got %r" % (MAX_DEGREE, self.degree))
         X = np.asarray(X, dtype=float)
@@ -74,11 +84,11 @@ class MRPoly:
         self.rmse_ = float(np.sqrt(np.mean(res ** 2)))
         return self
 
-    def predict(self, X):
+    def predict(self, X: np.ndarray) -> np.ndarray:
         X = check_predict_x(self, X, "nut_coef_", lambda: 2)
         return self.intercept_ + features(X, self.nut_coef_.size) @ np.append(self.nut_coef_, self.base_coef_)
 
-    def statistics(self):
+    def statistics(self) -> dict[str, Any]:
         return {"n_samples": self.n_samples_, "r2": _f(self.rsquared_), "rmse": _f(self.rmse_), "degree": int(self.nut_coef_.size),
                 "nut_sensor": self.names_[0], "base_sensor": self.names_[1]}
 
@@ -88,7 +98,7 @@ class MRPolyModel(_Base):
 
     kind = "mr_poly"
 
-    def __init__(self, sensors, nut_coefficients, base_coefficient, intercept, reference_C, target="slope", geometric_coef=(0.0,), **kw):
+    def __init__(self, sensors: Sequence[str], nut_coefficients: ArrayLike, base_coefficient: float, intercept: float, reference_C: dict[str, float], target: str = "slope", geometric_coef: ArrayLike = (0.0,), **kw: Any) -> None:
         super().__init__(sensors, None, intercept, reference_C, **kw)
         if len(self.sensors) != 2:
             raise EmpiricalDataError("mr_poly: sensors must be [nut, base], got %r" % (self.sensors,))
@@ -102,16 +112,16 @@ class MRPolyModel(_Base):
         self.geometric_coef = np.asarray(geometric_coef, dtype=float)
 
     @property
-    def degree(self):
+    def degree(self) -> int:
         return int(self.nut_coefficients.size)
 
-    def thermal(self, R):
+    def thermal(self, R: np.ndarray) -> np.ndarray:
         return self.intercept + features(R, self.degree) @ np.append(self.nut_coefficients, self.base_coefficient)
 
-    def geometric(self, P):
+    def geometric(self, P: ArrayLike) -> np.ndarray:
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         doc = self._common_doc()
         doc["geometric"] = (None if self.target == "direct"
                             else {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]})
@@ -129,7 +139,7 @@ class MRPolyModel(_Base):
         return doc
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> MRPolyModel:
         thermal, sensors, ref, kw = cls._common_args(doc)
         target = cls._target(thermal, "mr_poly")
         if len(sensors) != 2 or thermal.get("nut_sensor") != sensors[0] or thermal.get("base_sensor") != sensors[1]:
@@ -149,7 +159,7 @@ class MRPolyModel(_Base):
         return cls(sensors, a, thermal["base_coefficient"], thermal["intercept"], ref, target=target, geometric_coef=geo, **kw)
 
 
-def role_sensors(runs, nut=None, base=None):
+def role_sensors(runs: Sequence[Run], nut: str | None = None, base: str | None = None) -> list[str]:
     """[nut, base] sensor names: given, else the first sensor with role "nut" / "base" in the first run's meta.json."""
     out = []
     for role, given in (("nut", nut), ("base", base)):

@@ -1,7 +1,16 @@
 """PNG plots of the empirical models (matplotlib, Agg). Every title names the data shown."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from host.learning.empirical.scoring import thermal_pairs
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 
 def _plt():
@@ -13,7 +22,7 @@ def _plt():
     return plt
 
 
-def plot_curves(model, run, path, title, window=None, max_sweeps=12):
+def plot_curves(model: Any, run: Run, path: str, title: str, window: tuple[float | None, float | None] | None = None, max_sweeps: int = 12) -> str:
     """Measured vs predicted thermal error: per sweep over position (poly_slope) or over time (linear_direct)."""
     plt = _plt()
     t, P, m, p = thermal_pairs(model, run, window)
@@ -44,7 +53,7 @@ def plot_curves(model, run, path, title, window=None, max_sweeps=12):
     return path
 
 
-def plot_residuals(models, run, path, title, window=None):
+def plot_residuals(models: Mapping[str, Any], run: Run, path: str, title: str, window: tuple[float | None, float | None] | None = None) -> str:
     """Residual (measured − predicted) over time of several models on one run: {label: model}."""
     plt = _plt()
     fig, ax = plt.subplots(figsize=(8, 4.5))
@@ -64,7 +73,7 @@ def plot_residuals(models, run, path, title, window=None):
     return path
 
 
-def plot_scree(pcr, path, title):
+def plot_scree(pcr: Any, path: str, title: str) -> str:
     """Eigenvalues and cumulative explained variance of a fitted PCR, kept components marked."""
     plt = _plt()
     k = np.arange(1, pcr.eigenvalues_.size + 1)
@@ -84,7 +93,7 @@ def plot_scree(pcr, path, title):
     return path
 
 
-def plot_summary(rows, path, title):
+def plot_summary(rows: Sequence[Mapping[str, Any]], path: str, title: str) -> str:
     """Bars of mean held-out RMSE, clean and disturbed, per method. rows: dicts from compare."""
     plt = _plt()
     rows = [r for r in rows if r.get("mean_test_rmse_um") is not None]

@@ -14,13 +14,20 @@ g_m smooth ridge functions. Our choices (the paper does not fix them):
 * ``n_terms`` terms (default 2) are added forward; then ``backfit_passes`` (1) passes
   refit every term (direction and function) on the residual of the others.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+from numpy.typing import ArrayLike
+
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.checks import check_predict_x, check_xy, finite_or_none
 
 
-def natural_spline_basis(v, knots):
+def natural_spline_basis(v: ArrayLike, knots: ArrayLike) -> np.ndarray:
     """Natural cubic spline basis (n, K) of values v for K knots: 1, v, and K−2 truncated-power terms."""
     v = np.asarray(v, dtype=float)
     k = np.asarray(knots, dtype=float)
@@ -81,13 +88,13 @@ class PPR:
 
     method = "ppr"
 
-    def __init__(self, *, n_terms=2, knots=5, backfit_passes=1, fit_intercept=True):
+    def __init__(self, *, n_terms: int = 2, knots: int = 5, backfit_passes: int = 1, fit_intercept: bool = True) -> None:
         self.n_terms = n_terms
         self.knots = knots
         self.backfit_passes = backfit_passes
         self.fit_intercept = fit_intercept  # ȳ is always fitted
 
-    def fit(self, X, y, names=None, groups=None):
+    def fit(self, X: np.ndarray, y: np.ndarray, names: Sequence[str] | None = None, groups: np.ndarray | None = None) -> PPR:
         """``groups`` (cross-validation groups) is part of every estimator's fit signature; PPR does not read it."""
         for key, lo in (("n_terms", 1), ("knots", 3), ("backfit_passes", 0)):
             v = getattr(self, key)
@@ -120,12 +127,36 @@ class PPR:
         self.rsquared_ = 1.0 - float(e @ e) / sst if sst > 0 else float("nan")
         return self
 
-    def predict(self, X):
+    def predict(self, X: np.ndarray) -> np.ndarray:
         X = check_predict_x(self, X, "terms_", lambda: self.x_mean_.size)
         Z = (X - self.x_mean_) / self.x_scale_
         return self.y_mean_ + sum(t(Z) for t in self.terms_)
 
-    def statistics(self):
+    def ridges(self) -> dict[str, Any]:
+        """The fitted model as plain lists (the ``ppr`` model document's ``thermal.ridges``): the standardisation,
+        ȳ, and each term's unit direction, spline knots and spline coefficients (natural_spline_basis)."""
+        return {
+            "input_offset": [float(v) for v in self.x_mean_],
+            "input_scale": [float(v) for v in self.x_scale_],
+            "output_offset": float(self.y_mean_),
+            "terms": [{"direction": [float(v) for v in t.a], "knots": [float(v) for v in t.knots],
+                       "coefficients": [float(v) for v in t.beta]} for t in self.terms_],
+        }
+
+    @classmethod
+    def from_ridges(cls, ridges: dict[str, Any]) -> PPR:
+        """A PPR predicting with a ``ridges()`` dict (no training data; host/learning/empirical/kinds.py
+        PPRModel.from_document checks the dict first)."""
+        terms = ridges["terms"]
+        self = cls(n_terms=len(terms), knots=len(terms[0]["knots"]))
+        self.x_mean_ = np.asarray(ridges["input_offset"], dtype=float)
+        self.x_scale_ = np.asarray(ridges["input_scale"], dtype=float)
+        self.y_mean_ = float(ridges["output_offset"])
+        self.terms_ = [_Ridge(np.asarray(t["direction"], dtype=float), np.asarray(t["knots"], dtype=float),
+                              np.asarray(t["coefficients"], dtype=float)) for t in terms]
+        return self
+
+    def statistics(self) -> dict[str, Any]:
         return {
             "n_samples": int(self.n_samples_),
             "r2": finite_or_none(self.rsquared_),

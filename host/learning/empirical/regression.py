@@ -10,6 +10,12 @@ Bad input raises :class:`host.learning.empirical.EmpiricalDataError` naming the 
 NaN, fewer samples than parameters, a constant sensor, perfectly collinear
 sensors (MLR and stepwise; PCR handles collinearity by design), constant target.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 from scipy import stats as _st
 
@@ -39,7 +45,7 @@ def _collinear_groups(A, names, has_intercept):
     return dep
 
 
-def ols_statistics(A, y, beta, has_intercept):
+def ols_statistics(A: np.ndarray, y: np.ndarray, beta: np.ndarray, has_intercept: bool) -> dict[str, Any]:
     """Textbook OLS statistics of y ≈ A @ beta (A includes the ones column when has_intercept).
 
     Returns a dict: bse (standard errors of beta), t, p (two-sided), rss, df_resid,
@@ -126,10 +132,10 @@ class MLR(_Linear):
 
     method = "mlr"
 
-    def __init__(self, *, fit_intercept=True):
+    def __init__(self, *, fit_intercept: bool = True) -> None:
         self.fit_intercept = fit_intercept
 
-    def fit(self, X, y, names=None, groups=None):
+    def fit(self, X: np.ndarray, y: np.ndarray, names: Sequence[str] | None = None, groups: np.ndarray | None = None) -> MLR:
         """``groups`` (cross-validation groups) is part of every estimator's fit signature; this one does not read it."""
         X, y, names = check_xy(X, y, names, X_params(X, self.fit_intercept), "MLR")
         A = np.column_stack([np.ones(len(y)), X]) if self.fit_intercept else X
@@ -211,7 +217,7 @@ class MLR(_Linear):
         return "\n".join(lines + self.warnings())
 
 
-def X_params(X, fit_intercept):
+def X_params(X: np.ndarray, fit_intercept: bool) -> int:
     X = np.asarray(X)
     return (X.shape[1] if X.ndim == 2 else 1) + int(fit_intercept)
 
@@ -238,12 +244,12 @@ class PCR(_Linear):
 
     method = "pcr"
 
-    def __init__(self, *, variance_threshold=0.85, n_components=None, fit_intercept=True):
+    def __init__(self, *, variance_threshold: float = 0.85, n_components: int | None = None, fit_intercept: bool = True) -> None:
         self.variance_threshold = variance_threshold
         self.n_components = n_components
         self.fit_intercept = fit_intercept
 
-    def fit(self, X, y, names=None, groups=None):
+    def fit(self, X: np.ndarray, y: np.ndarray, names: Sequence[str] | None = None, groups: np.ndarray | None = None) -> PCR:
         """``groups`` (cross-validation groups) is part of every estimator's fit signature; this one does not read it."""
         if not (0.0 < float(self.variance_threshold) <= 1.0):
             raise EmpiricalDataError("PCR: variance_threshold must be in (0, 1], got %r" % self.variance_threshold)
@@ -311,7 +317,7 @@ class PCR(_Linear):
         self._st = st
         return self
 
-    def scree(self):
+    def scree(self) -> list[dict[str, Any]]:
         """Scree data: one dict per component (eigenvalue, explained and cumulative ratio, kept)."""
         return [
             {"component": i + 1, "eigenvalue": float(self.eigenvalues_[i]), "explained": float(self.explained_variance_ratio_[i]),
@@ -319,7 +325,7 @@ class PCR(_Linear):
             for i in range(self.eigenvalues_.size)
         ]
 
-    def statistics(self):
+    def statistics(self) -> dict[str, Any]:
         return self._stats_dict(self._st, {
             "n_components": int(self.n_components_),
             "variance_threshold": float(self.variance_threshold),
@@ -349,7 +355,7 @@ class Stepwise(_Linear):
 
     method = "stepwise"
 
-    def __init__(self, *, f_enter=100.0, f_remove=50.0, fit_intercept=True, max_steps=None):
+    def __init__(self, *, f_enter: float = 100.0, f_remove: float = 50.0, fit_intercept: bool = True, max_steps: int | None = None) -> None:
         self.f_enter = f_enter
         self.f_remove = f_remove
         self.fit_intercept = fit_intercept
@@ -380,7 +386,7 @@ class Stepwise(_Linear):
         r = x - A @ c
         return float(r @ r) / max(float(ref @ ref), 1e-300)
 
-    def fit(self, X, y, names=None, groups=None):
+    def fit(self, X: np.ndarray, y: np.ndarray, names: Sequence[str] | None = None, groups: np.ndarray | None = None) -> Stepwise:
         """``groups`` (cross-validation groups) is part of every estimator's fit signature; this one does not read it."""
         if self.f_enter < self.f_remove:
             raise EmpiricalDataError("stepwise: F_enter (%g) must be >= F_remove (%g), otherwise a sensor can enter and leave forever" % (self.f_enter, self.f_remove))
@@ -440,7 +446,7 @@ class Stepwise(_Linear):
         self.names_ = names
         return self._refit_on(X, y, sel)
 
-    def statistics(self):
+    def statistics(self) -> dict[str, Any]:
         d = self.mlr_.statistics()
         d.update({"selected": list(self.selected_names_), "f_enter": float(self.f_enter), "f_remove": float(self.f_remove), "history": self.history_})
         return d
@@ -465,12 +471,12 @@ class BestSubsetCV(_Linear):
 
     method = "cv-subset"
 
-    def __init__(self, *, max_sensors=5, fit_intercept=True, max_combinations=200000):
+    def __init__(self, *, max_sensors: int = 5, fit_intercept: bool = True, max_combinations: int = 200000) -> None:
         self.max_sensors = max_sensors
         self.fit_intercept = fit_intercept
         self.max_combinations = max_combinations
 
-    def fit(self, X, y, names=None, groups=None):
+    def fit(self, X: np.ndarray, y: np.ndarray, names: Sequence[str] | None = None, groups: np.ndarray | None = None) -> BestSubsetCV:
         import itertools
         from math import comb
 
@@ -543,7 +549,7 @@ class BestSubsetCV(_Linear):
         self.n_groups_ = int(labels.size)
         return self._refit_on(X, y, sel)
 
-    def statistics(self):
+    def statistics(self) -> dict[str, Any]:
         d = self.mlr_.statistics()
         d.update({"selected": list(self.selected_names_), "max_sensors": int(self.max_sensors), "search": self.search_,
                   "cv_groups": self.n_groups_, "cv_rmse_by_size": self.cv_rmse_})

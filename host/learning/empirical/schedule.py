@@ -8,12 +8,22 @@ the first cycle. A cycle is *constant-speed* when it has one running speed, and
 (train on the first constant-speed cycles, hold out the rest) and the
 cross-validation blocks of single-run fits.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+from numpy.typing import ArrayLike
+
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
 
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
-def segments(run):
+
+def segments(run: Run) -> list[tuple[float, float, float]]:
     """[(t_start_s, t_end_s, rpm)] of constant speed, in time order."""
     sp = run.spindle
     if sp is None or sp.time_s.size < 2:
@@ -26,7 +36,7 @@ def segments(run):
     return [(float(t[a]), float(t[b]) if b < t.size else float(t[-1]), float(r[a])) for a, b in zip(starts, ends)]
 
 
-def cycles(run):
+def cycles(run: Run) -> list[dict[str, Any]]:
     """[{"t_start_s", "t_end_s", "speeds_rpm", "constant"}] from each start out of standstill."""
     segs = segments(run)
     starts = [i for i, s in enumerate(segs) if s[2] > 0 and (i == 0 or segs[i - 1][2] == 0)]
@@ -45,6 +55,6 @@ def cycles(run):
     return out
 
 
-def block_labels(times, edges):
+def block_labels(times: ArrayLike, edges: Sequence[float]) -> np.ndarray:
     """Index of the block each time falls in, blocks separated by ``edges`` (ascending)."""
     return np.searchsorted(np.asarray(edges, dtype=float), np.asarray(times, dtype=float), side="right")

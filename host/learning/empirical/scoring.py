@@ -21,6 +21,12 @@ same rows against the whole prediction (``model.predict``: geometric polynomial
 + thermal part for ``poly_slope``; for ``linear_direct`` there is no geometric
 part and both are the same numbers).
 """
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+from numpy.typing import ArrayLike
+
 import copy
 
 import numpy as np
@@ -28,8 +34,11 @@ import numpy as np
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.targets import in_window, sweep_slopes
 
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
-def metrics(measured, predicted):
+
+def metrics(measured: ArrayLike, predicted: ArrayLike) -> dict[str, Any]:
     """RMSE, max/min residual, RMS(measured), accuracy % and n of measured − predicted."""
     m = np.asarray(measured, dtype=float)
     p = np.asarray(predicted, dtype=float)
@@ -48,7 +57,7 @@ def metrics(measured, predicted):
     }
 
 
-def thermal_pairs(model, run, window=None):
+def thermal_pairs(model: Any, run: Run, window: tuple[float | None, float | None] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(time_s, position_mm, measured thermal error, predicted thermal error) over the evaluated rows."""
     rows, measured, pred = _thermal_rows(model, run, window)
     return run.errors.time_s[rows], run.errors.position_mm[rows], measured, pred
@@ -90,7 +99,7 @@ def _thermal_rows(model, run, window=None):
     return rows, measured, pred
 
 
-def score_model(model, run, window=None):
+def score_model(model: Any, run: Run, window: tuple[float | None, float | None] | None = None) -> dict[str, Any]:
     """Metrics of ``model`` on ``run`` (optionally only rows with lo <= time_s < hi).
 
     The thermal metrics at the top level; ``comprehensive``: the same metrics on the
@@ -102,7 +111,7 @@ def score_model(model, run, window=None):
     return out
 
 
-def disturb_run(run, noise_C=0.0, offset_C=0.0, seed=0):
+def disturb_run(run: Run, noise_C: float = 0.0, offset_C: float = 0.0, seed: int = 0) -> Run:
     """A copy of ``run`` whose temperatures carry sensor disturbances.
 
     ``noise_C``: independent Gaussian noise of that standard deviation on every

@@ -20,12 +20,22 @@ by default as *rises* over the run's first temperature sample (the cold start),
 which is how the published slope and spindle models are formulated and what
 makes a model portable between runs started at different ambient temperatures.
 """
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING, Any
+from numpy.typing import ArrayLike
+
 from dataclasses import dataclass
 
 import numpy as np
 
 from host.data.runs import common_error_reference
 from host.learning.empirical import EmpiricalDataError
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 TARGETS = ("slope", "direct")
 
@@ -60,13 +70,13 @@ class SweepSlopes:
     rows: list  # row indices of errors.csv per sweep
 
     @property
-    def target(self):
+    def target(self) -> np.ndarray:
         """Thermal slope targets k_i − k_0 (µm/mm), k_0 per direction."""
         k0 = np.array([self.k0_um_per_mm[int(d)] for d in self.direction])
         return self.slope_um_per_mm - k0
 
 
-def sweep_slopes(run, channel=None):
+def sweep_slopes(run: Run, channel: str | None = None) -> SweepSlopes:
     """First-order fit of every sweep of ``run`` -> :class:`SweepSlopes`, in time order.
 
     Raises EmpiricalDataError when a sweep has fewer than two distinct positions
@@ -105,7 +115,7 @@ def sweep_slopes(run, channel=None):
     return SweepSlopes(run.name, times, slopes, inters, dirs, k0, rows)
 
 
-def direct_targets(run, channel=None):
+def direct_targets(run: Run, channel: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Times and measured errors (µm) of one channel at a fixed point -> (time_s, error_um).
 
     The channel's rows must all be at one position (a direct model has no
@@ -129,7 +139,7 @@ def direct_targets(run, channel=None):
     return t.astype(float), y.astype(float)
 
 
-def temperature_features(run, sensors, times, rise=True):
+def temperature_features(run: Run, sensors: Sequence[str], times: ArrayLike, rise: bool = True) -> np.ndarray:
     """Temperatures of ``sensors`` linearly interpolated at ``times`` -> (n, p).
 
     ``rise=True`` subtracts each sensor's first sample of the run (the cold
@@ -162,13 +172,13 @@ def temperature_features(run, sensors, times, rise=True):
     return X
 
 
-def start_temperatures(run, sensors):
+def start_temperatures(run: Run, sensors: Sequence[str]) -> np.ndarray:
     """Each sensor's first sample of the run (the reference of the rises), °C."""
     temps = run.temperatures
     return np.array([temps.column(s)[0] for s in sensors], dtype=float)
 
 
-def targets(run, target="slope", channel=None):
+def targets(run: Run, target: str = "slope", channel: str | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(time_s, y) of one run for ``target`` in TARGETS."""
     if target == "slope":
         s = sweep_slopes(run, channel)
@@ -178,7 +188,7 @@ def targets(run, target="slope", channel=None):
     raise ValueError("target must be one of %s (got %r)" % (", ".join(TARGETS), target))
 
 
-def common_sensors(runs):
+def common_sensors(runs: Sequence[Run]) -> list[str]:
     """Sensors present in every run, in the first run's column order."""
     names = list(runs[0].temperatures.names)
     for r in runs[1:]:
@@ -202,32 +212,32 @@ class RunArrays:
 
     __slots__ = ("X", "y", "names", "time_s", "run", "start", "log")
 
-    def __init__(self, X, y, names, time_s, run, start=None, log=None):
+    def __init__(self, X: np.ndarray, y: np.ndarray, names: list[str], time_s: np.ndarray, run: str, start: np.ndarray | None = None, log: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         self.X, self.y, self.names, self.time_s, self.run, self.start, self.log = X, y, names, time_s, run, start, log
 
-    def log_columns(self, idx):
+    def log_columns(self, idx: Any) -> tuple[np.ndarray, np.ndarray] | None:
         """``log`` restricted to the columns ``idx`` (None stays None)."""
         return None if self.log is None else (self.log[0], self.log[1][:, idx])
 
     @property
-    def values(self):
+    def values(self) -> np.ndarray:
         """The measured temperatures (rises plus the start temperatures)."""
         return self.X if self.start is None else self.X + self.start
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[Any]:
         return iter((self.X, self.y, self.names))
 
-    def __len__(self):
+    def __len__(self) -> int:
         return 3
 
-    def __getitem__(self, i):
+    def __getitem__(self, i: int) -> Any:
         return (self.X, self.y, self.names)[i]
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "RunArrays(run=%r, n=%d, sensors=%d)" % (self.run, self.y.size, len(self.names))
 
 
-def in_window(t, window):
+def in_window(t: np.ndarray, window: tuple[float | None, float | None]) -> np.ndarray:
     """Mask of the times with lo <= t < hi for ``window`` = (lo, hi); either end may be None (unbounded)."""
     lo, hi = window
     keep = np.ones(np.shape(t), bool)
@@ -238,7 +248,7 @@ def in_window(t, window):
     return keep
 
 
-def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True, window=None, exclude=None):
+def training_arrays(runs: Sequence[Run], target: str = "slope", channel: str | None = None, sensors: Sequence[str] | None = None, rise: bool = True, window: tuple[float | None, float | None] | None = None, exclude: tuple[float, float] | None = None) -> list[RunArrays]:
     """Per run, the (X, y, names) a regression or selector is fitted on.
 
     ``sensors=None`` uses the sensors common to all runs. ``window=(lo, hi)``
@@ -278,7 +288,7 @@ def training_arrays(runs, target="slope", channel=None, sensors=None, rise=True,
     return out
 
 
-def temperature_log(run, sensors, window=None, exclude=None, rise=True):
+def temperature_log(run: Run, sensors: Sequence[str], window: tuple[float | None, float | None] | None = None, exclude: tuple[float, float] | None = None, rise: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
     """(time_s, (m, p)) every sample of temperatures.csv of ``sensors`` inside ``window`` and outside ``exclude``
     (rises over the run's first sample, or values); None when fewer than 3 samples remain."""
     temps = run.temperatures
@@ -294,7 +304,7 @@ def temperature_log(run, sensors, window=None, exclude=None, rise=True):
     return t[keep], np.asarray(V, dtype=float)
 
 
-def stack(arrays):
+def stack(arrays: Sequence[RunArrays]) -> tuple[np.ndarray, np.ndarray]:
     """Concatenate several RunArrays (same sensors) -> (X, y)."""
     arrays = list(arrays)
     names = arrays[0].names

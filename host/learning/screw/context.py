@@ -4,15 +4,23 @@ and step, the error rows and their interpolation weights, sensor rises.
 Built once per run and reused for every parameter set the identification tries,
 so a model evaluation is one simulation plus a few array products.
 """
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from host.learning.screw import heat
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 # Largest time-steps x segments grid of one run (a float array of it is 160 MB; several are held at once).
 MAX_GRID_CELLS = 20_000_000
 
 
-def check_screw_run(run, geometry=None, require_nut=True):
+def check_screw_run(run: Run, geometry: heat.ScrewGeometry | None = None, require_nut: bool = True) -> heat.ScrewGeometry:
     """ValueError naming what makes ``run`` unusable for the screw model.
 
     require_nut: identification needs a sensor with role 'nut' (diagnostic and
@@ -53,7 +61,7 @@ class RunContext:
     run.errors), n_rows, positions_mm, direction (or None), measured_um,
     overlap_mm (n_rows, M), base_sensor, ambient_sensor, nut_sensor."""
 
-    def __init__(self, run, geometry, dt_s, rows=None, edges_mm=None, t_end=None):
+    def __init__(self, run: Run, geometry: heat.ScrewGeometry, dt_s: float, rows: np.ndarray | None = None, edges_mm: np.ndarray | None = None, t_end: float | None = None) -> None:
         self.run = run
         self.run_name = run.path or run.name
         self.geometry = geometry
@@ -95,7 +103,7 @@ class RunContext:
         self.ambient_sensor = next((s for s in roles["ambient"] if s in names), None)
         self.nut_sensor = next((s for s in roles["nut"] if s in names), None)
 
-    def sensor_at_rows(self, name):
+    def sensor_at_rows(self, name: str) -> np.ndarray:
         tt = self.run.temperatures
         late = self.row_time_s[(self.row_time_s < tt.time_s[0]) | (self.row_time_s > tt.time_s[-1])]
         if late.size:
@@ -104,16 +112,16 @@ class RunContext:
                              % (self.run_name, late[0], tt.time_s[0], tt.time_s[-1], name))
         return np.interp(self.row_time_s, tt.time_s, tt.column(name))
 
-    def sensor_rise_at_rows(self, name):
+    def sensor_rise_at_rows(self, name: str) -> np.ndarray:
         """Sensor temperature at the error rows minus its first reading."""
         return self.sensor_at_rows(name) - self.run.temperatures.column(name)[0]
 
-    def at_rows(self, grid_values):
+    def at_rows(self, grid_values: np.ndarray) -> np.ndarray:
         """(n_steps+1, M) values on the grid -> (n_rows, M) linearly interpolated at the rows' times."""
         w = self.row_w[:, None]
         return grid_values[self.row_k] * (1.0 - w) + grid_values[self.row_k + 1] * w
 
-    def nut_rise_measured(self):
+    def nut_rise_measured(self) -> np.ndarray | None:
         """Nut sensor rise over the air (ambient, else base sensor) relative to the start, on the grid."""
         tt = self.run.temperatures
         nut = np.interp(self.t_grid, tt.time_s, tt.column(self.nut_sensor))
@@ -124,7 +132,7 @@ class RunContext:
             rise = rise - (ref - ref[0])
         return rise
 
-    def nut_rise_predicted(self, rises):
+    def nut_rise_predicted(self, rises: np.ndarray) -> np.ndarray:
         """Screw temperature under the nut: travel-weighted mean over the segments the nut
         covered in the last moving step (held while idle)."""
         tot = self.travel_mm.sum(axis=1)

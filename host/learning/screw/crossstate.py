@@ -11,6 +11,12 @@ programme) and on the fitting run's own cool-down, which neither model saw.
 writes DIR/validation.md (RMSE and max |residual| per state and model),
 DIR/validation.json and DIR/validation.png.
 """
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
 import argparse
 import json
 import os
@@ -21,12 +27,15 @@ import numpy as np
 from host.data.runs import load_run
 from host.learning.screw.screwmodel import ScrewModel
 
+if TYPE_CHECKING:
+    from host.data.runs import Run
+
 
 def _heating_end(run):
     return float(run.motion.t_end_s.max())
 
 
-def fit_models(fit_run, mlr_sensor_sets=None):
+def fit_models(fit_run: Run, mlr_sensor_sets: Mapping[str, Sequence[str]] | None = None) -> dict[str, Any]:
     """{label: fitted model} on the heating phase of ``fit_run``."""
     t_end = _heating_end(fit_run)
     # E_e on: the bundled runs hold the frame's drift with the base (the twin's ambient_expansion), which E_e stands for
@@ -48,7 +57,7 @@ def fit_models(fit_run, mlr_sensor_sets=None):
     return models
 
 
-def states(fit_run, runs):
+def states(fit_run: Run, runs: Sequence[Run]) -> list[tuple[str, Run, np.ndarray, bool]]:
     """(state label, run, row indices, seen-in-training) for every evaluated state."""
     t = fit_run.errors.time_s
     t_end = _heating_end(fit_run)
@@ -59,7 +68,7 @@ def states(fit_run, runs):
     return [s for s in out if s[2].size]
 
 
-def state_errors(models, fit_run, runs):
+def state_errors(models: Mapping[str, Any], fit_run: Run, runs: Sequence[Run]) -> list[dict[str, Any]]:
     rows = []
     for label, run, idx, seen in states(fit_run, runs):
         for name, model in models.items():
@@ -70,7 +79,7 @@ def state_errors(models, fit_run, runs):
     return rows
 
 
-def summary(rows):
+def summary(rows: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
     """Mean RMSE over the unseen states per model."""
     out = {}
     for m in sorted({r["model"] for r in rows}):
@@ -79,7 +88,7 @@ def summary(rows):
     return out
 
 
-def markdown(rows):
+def markdown(rows: Sequence[Mapping[str, Any]]) -> str:
     models = list(dict.fromkeys(r["model"] for r in rows))
     lines = ["| state | " + " | ".join("%s RMSE / max [µm]" % m for m in models) + " |",
              "|---|" + "---|" * len(models)]
@@ -92,7 +101,7 @@ def markdown(rows):
     return "\n".join(lines)
 
 
-def plot(rows, models, fit_run, runs, path):
+def plot(rows: Sequence[Mapping[str, Any]], models: Mapping[str, Any], fit_run: Run, runs: Sequence[Run], path: str) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -125,7 +134,7 @@ def plot(rows, models, fit_run, runs, path):
     plt.close(fig)
 
 
-def main(argv=None):
+def main(argv: Sequence[str] | None = None) -> int:
     ap = argparse.ArgumentParser(prog="python -m host.learning.screw.crossstate", description=__doc__.split("\n\n")[0])
     ap.add_argument("fit_run")
     ap.add_argument("runs", nargs="+")

@@ -25,9 +25,19 @@ An effect is an object with
 Register a new effect class in ``EFFECTS`` (or pass instances to ScrewModel(effects=...)).
 The five effects below are the catalog the discrepancy workflow (issue 5) tests.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 from dataclasses import dataclass
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from host.learning.screw.context import RunContext
+    from host.learning.screw.screwmodel import ScrewModel
 
 
 class NoReducedForm(ValueError):
@@ -54,17 +64,17 @@ class ParamSpec:
 class Effect:
     name = "effect"
 
-    def parameters(self):
+    def parameters(self) -> list[ParamSpec]:
         return []
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         return {}
 
     @classmethod
-    def from_document(cls, d):
+    def from_document(cls, d: dict[str, Any]) -> Effect:
         return cls(**d)
 
-    def __repr__(self):
+    def __repr__(self) -> str:
         return "%s(%s)" % (type(self).__name__, self.to_document())
 
 
@@ -74,15 +84,15 @@ class BearingHeat(Effect):
 
     name = "bearing_heat"
 
-    def parameters(self):
+    def parameters(self) -> list[ParamSpec]:
         return [ParamSpec("W_per_m_min", 0.1, 0.0, 50.0, "W/(m/min)", positive=False)]
 
-    def heat_W(self, ctx, p):
+    def heat_W(self, ctx: RunContext, p: dict[str, float]) -> np.ndarray:
         out = np.zeros((ctx.n_steps, ctx.M))
         out[:, 0] = p["W_per_m_min"] * ctx.step_speed_m_min
         return out
 
-    def reduce(self, model, p, red, C):
+    def reduce(self, model: ScrewModel, p: dict[str, float], red: dict[str, Any], C: np.ndarray) -> None:
         # energy k·U·0.06 J per step into the fixed-end segment: a temperature increment linear in the step's travel
         heat = red.setdefault("travel_heat_K_per_mm", [0.0] * len(C))
         heat[0] += p["W_per_m_min"] * J_PER_W_PER_M_MIN_PER_MM / float(C[0])
@@ -93,20 +103,20 @@ class SpeedDependentHeat(Effect):
 
     name = "speed_dependent_heat"
 
-    def __init__(self, v_ref_m_min=8.0):
+    def __init__(self, v_ref_m_min: float = 8.0) -> None:
         self.v_ref_m_min = float(v_ref_m_min)
 
-    def parameters(self):
+    def parameters(self) -> list[ParamSpec]:
         return [ParamSpec("k", 0.0, -0.9, 5.0, "1", positive=False)]
 
-    def heat_scale(self, ctx, p):
+    def heat_scale(self, ctx: RunContext, p: dict[str, float]) -> np.ndarray:
         v = ctx.step_speed_m_min
         return np.where(v > 0, 1.0 + p["k"] * (v / self.v_ref_m_min - 1.0), 1.0)
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         return {"v_ref_m_min": self.v_ref_m_min}
 
-    def reduce(self, model, p, red, C):
+    def reduce(self, model: ScrewModel, p: dict[str, float], red: dict[str, Any], C: np.ndarray) -> None:
         raise NoReducedForm("the friction heat per mm of travel depends on the step's speed (q·(1 + k(v/v_ref - 1))): "
                             "the firmware's recurrence has one heat per mm of travel (B) and no travel x speed product")
 
@@ -116,42 +126,42 @@ class MovingConvection(Effect):
 
     name = "moving_convection"
 
-    def __init__(self, v_ref_m_min=8.0):
+    def __init__(self, v_ref_m_min: float = 8.0) -> None:
         self.v_ref_m_min = float(v_ref_m_min)
 
-    def parameters(self):
+    def parameters(self) -> list[ParamSpec]:
         return [ParamSpec("k", 0.1, 0.0, 20.0, "1", positive=False)]
 
-    def convection_mult(self, ctx, p):
+    def convection_mult(self, ctx: RunContext, p: dict[str, float]) -> np.ndarray:
         return 1.0 + p["k"] * ctx.step_speed_m_min / self.v_ref_m_min
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         return {"v_ref_m_min": self.v_ref_m_min}
 
-    def reduce(self, model, p, red, C):
+    def reduce(self, model: ScrewModel, p: dict[str, float], red: dict[str, Any], C: np.ndarray) -> None:
         raise NoReducedForm("the convection coefficient depends on the step's speed (h·(1 + k·v/v_ref)): the firmware's "
                             "propagator A is fixed and it has no state x speed product")
 
 
-class ReversalError(Effect):
+class ReversalEffect(Effect):
     """Backlash-like offset: +b/2 on +1 sweeps, −b/2 on −1 sweeps (bidirectional data)."""
 
     name = "reversal_error"
 
-    def parameters(self):
+    def parameters(self) -> list[ParamSpec]:
         return [ParamSpec("b_um", 0.0, -100.0, 100.0, "um", positive=False)]
 
-    def check(self, contexts):
+    def check(self, contexts: Sequence[RunContext]) -> None:
         if not any(c.direction is not None and np.any(c.direction > 0) and np.any(c.direction < 0) for c in contexts):
             raise ValueError("reversal_error needs bidirectional sweeps (errors.csv 'direction' column with +1 and -1); "
                              "none of %s has them" % ", ".join(c.run_name for c in contexts))
 
-    def error_um(self, ctx, p):
+    def error_um(self, ctx: RunContext, p: dict[str, float]) -> np.ndarray:
         if ctx.direction is None:
             return np.zeros(ctx.n_rows)
         return 0.5 * p["b_um"] * ctx.direction
 
-    def reduce(self, model, p, red, C):
+    def reduce(self, model: ScrewModel, p: dict[str, float], red: dict[str, Any], C: np.ndarray) -> None:
         # the board knows the direction of the last position change (position reports); +b/2 moving in +, -b/2 in -
         red["reversal_um"] = red.get("reversal_um", 0.0) + 0.5 * p["b_um"]
 
@@ -165,20 +175,20 @@ class AmbientExpansion(Effect):
 
     name = "ambient_expansion"
 
-    def __init__(self, sensor=None):
+    def __init__(self, sensor: str | None = None) -> None:
         self.sensor = sensor
 
-    def parameters(self):
+    def parameters(self) -> list[ParamSpec]:
         return [ParamSpec("um_per_m_K", 0.0, -50.0, 50.0, "um/(m K)", positive=False)]
 
-    def error_um(self, ctx, p):
+    def error_um(self, ctx: RunContext, p: dict[str, float]) -> np.ndarray:
         name = self.sensor or ctx.base_sensor or ctx.ambient_sensor
         if name is None:
             raise ValueError("ambient_expansion: run %s has no sensor with role 'base' or 'ambient'" % ctx.run_name)
         rise = ctx.sensor_rise_at_rows(name)
         return 1e-3 * p["um_per_m_K"] * rise * ctx.positions_mm
 
-    def reduce(self, model, p, red, C):
+    def reduce(self, model: ScrewModel, p: dict[str, float], red: dict[str, Any], C: np.ndarray) -> None:
         # k·(T_s - T_s,start)·P is the table's base term: its coefficient grows by k (um/(m K) -> um/(mm K)); the
         # reference is each run's start, which the board latches at its cold start
         name = self.sensor or model.effect_sensor_(self)
@@ -192,14 +202,14 @@ class AmbientExpansion(Effect):
             red["base_ref_C"] = model.start_C_(name)
         red["ee_um_per_mm_per_K"] = red.get("ee_um_per_mm_per_K", 0.0) + 1e-3 * p["um_per_m_K"]
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         return {"sensor": self.sensor}
 
 
-EFFECTS = {cls.name: cls for cls in (BearingHeat, SpeedDependentHeat, MovingConvection, ReversalError, AmbientExpansion)}
+EFFECTS = {cls.name: cls for cls in (BearingHeat, SpeedDependentHeat, MovingConvection, ReversalEffect, AmbientExpansion)}
 
 
-def make_effect(name, **settings):
+def make_effect(name: str, **settings: Any) -> Effect:
     if name not in EFFECTS:
         raise ValueError("unknown screw-model effect %r (known: %s)" % (name, ", ".join(EFFECTS)))
     return EFFECTS[name](**settings)

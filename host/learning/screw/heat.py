@@ -57,10 +57,20 @@ E_m = 0 at the fixed end).
 
 Units: mm for lengths in the API, SI inside; α in 1/K; errors in µm.
 """
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import TYPE_CHECKING, Any
+from numpy.typing import ArrayLike
+
 from dataclasses import dataclass, replace
 
 import numpy as np
 from scipy.linalg import eigh_tridiagonal
+
+if TYPE_CHECKING:
+    from host.data.runs import Motion
 
 MIN_RANGE_MM = 1e-6  # an interval whose range is shorter than this is a dwell: no travel, no friction heat
 STEEL = {"density_kg_m3": 7850.0, "c_J_kgK": 460.0, "lambda_W_mK": 46.0, "alpha_per_K": 11.5e-6}
@@ -86,7 +96,7 @@ class ScrewGeometry:
     segments: int = 40
     bore_mm: float = 0.0
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         if not self.length_mm > 0:
             raise ValueError("screw length_mm must be positive (found %r)" % (self.length_mm,))
         if not self.diameter_mm > 0:
@@ -97,18 +107,18 @@ class ScrewGeometry:
             raise ValueError("segments must be a positive integer (found %r)" % (self.segments,))
 
     @property
-    def edges_mm(self):
+    def edges_mm(self) -> np.ndarray:
         return np.linspace(0.0, self.length_mm, int(self.segments) + 1)
 
     @property
-    def section_m2(self):
+    def section_m2(self) -> float:
         return np.pi / 4.0 * ((self.diameter_mm * 1e-3) ** 2 - (self.bore_mm * 1e-3) ** 2)
 
-    def with_segments(self, m):
+    def with_segments(self, m: int) -> ScrewGeometry:
         return replace(self, segments=int(m))
 
     @classmethod
-    def from_meta(cls, meta, segments=40):
+    def from_meta(cls, meta: Mapping[str, Any], segments: int = 40) -> ScrewGeometry:
         """From a run's meta.json ``screw`` block (length_mm, diameter_mm, fixed_end_mm, bore_mm)."""
         s = meta.get("screw") if isinstance(meta, dict) else None
         if not isinstance(s, dict):
@@ -132,12 +142,12 @@ class ScrewParams:
     h_W_m2K: float = 15.0
     alpha_per_K: float = STEEL["alpha_per_K"]
 
-    def Q_per_pass_J(self, segment_mm):
+    def Q_per_pass_J(self, segment_mm: float) -> float:
         """Heat of one nut pass over a segment of ``segment_mm``."""
         return self.q_J_per_mm * segment_mm
 
     @classmethod
-    def from_meta(cls, meta, **overrides):
+    def from_meta(cls, meta: Mapping[str, Any], **overrides: Any) -> ScrewParams:
         """Material defaults (steel) overridden by optional meta.json ``screw`` keys
         density_kg_m3, c_J_kgK, lambda_W_mK, h_W_m2K, alpha_per_K (or alpha_um_per_m_K)."""
         s = (meta or {}).get("screw") or {}
@@ -154,7 +164,7 @@ class ScrewParams:
 # ------------------------------------------------------------------ geometry helpers
 
 
-def segment_properties(edges_mm, diameter_mm, params, bore_mm=0.0):
+def segment_properties(edges_mm: ArrayLike, diameter_mm: float, params: ScrewParams, bore_mm: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(C [J/K] per segment, G [W/K] per interface (M-1), H [W/K] = h·S per segment)."""
     edges = np.asarray(edges_mm, dtype=float) * 1e-3
     L = np.diff(edges)
@@ -167,14 +177,14 @@ def segment_properties(edges_mm, diameter_mm, params, bore_mm=0.0):
     return C, G, H
 
 
-def overlap_mm(edges_mm, x_mm):
+def overlap_mm(edges_mm: ArrayLike, x_mm: ArrayLike) -> np.ndarray:
     """Length of each segment inside [0, x]: shape x.shape + (M,)."""
     edges = np.asarray(edges_mm, dtype=float)
     x = np.asarray(x_mm, dtype=float)[..., None]
     return np.clip(x - edges[:-1], 0.0, np.diff(edges))
 
 
-def interp_rows(t, t_grid, values):
+def interp_rows(t: ArrayLike, t_grid: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Linear interpolation of every column of ``values`` (len(t_grid), ...) at times t
     (clamped to the grid's ends): (len(t), ...)."""
     t = np.asarray(t, dtype=float)
@@ -186,7 +196,7 @@ def interp_rows(t, t_grid, values):
     return values[k] * (1.0 - w) + values[k + 1] * w
 
 
-def thermal_error_um(edges_mm, rises, positions_mm, fixed_end_mm, alpha):
+def thermal_error_um(edges_mm: ArrayLike, rises: np.ndarray, positions_mm: ArrayLike, fixed_end_mm: float, alpha: float) -> np.ndarray:
     """E_m in µm: α·Σ_i T_i·overlap_i(P).
 
     rises: (..., M) segment rises [K]; positions_mm broadcastable to rises.shape[:-1]
@@ -223,7 +233,7 @@ def _cumulative_travel(s, start, end, lo, hi):
     return legs[:, None] * full_cov[None, :] + _leg_overlap(p0, direction, r, lo, hi)
 
 
-def nut_travel_per_segment(motion, edges_mm, fixed_end_mm, t_grid, spread=False):
+def nut_travel_per_segment(motion: Motion, edges_mm: ArrayLike, fixed_end_mm: float, t_grid: np.ndarray, spread: bool = False) -> np.ndarray:
     """Travel of the nut inside each segment during each step [mm]: (n_steps, M).
 
     motion: host.data.runs.Motion (or any object with t_start_s, t_end_s, from_mm, to_mm,
@@ -260,7 +270,7 @@ def nut_travel_per_segment(motion, edges_mm, fixed_end_mm, t_grid, spread=False)
     return np.diff(cum, axis=0)
 
 
-def friction_heat_J(travel_mm, params):
+def friction_heat_J(travel_mm: ArrayLike, params: ScrewParams) -> np.ndarray:
     """Friction heat delivered into each segment during each step [J]: q·u."""
     return params.q_J_per_mm * np.asarray(travel_mm, dtype=float)
 
@@ -268,7 +278,7 @@ def friction_heat_J(travel_mm, params):
 # ------------------------------------------------------------------ integration
 
 
-def hold_weights(s, dt):
+def hold_weights(s: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Modal integrals over a step of length dt for decay rates s [1/s] (array).
 
     Returns (phi, gamma0, gamma1): phi = ∫_0^dt e^{-s(dt-τ)} dτ (zero-order hold of a
@@ -294,7 +304,7 @@ class Propagator:
     ``air_step(dt, g)`` -> (c0, c1): the air's contribution c0·a[k] + c1·a[k+1] (air
     linear within the step)."""
 
-    def __init__(self, C, G, H):
+    def __init__(self, C: ArrayLike, G: ArrayLike, H: ArrayLike) -> None:
         self.C = np.asarray(C, dtype=float)
         self.G = np.asarray(G, dtype=float)
         self.H = np.asarray(H, dtype=float)
@@ -302,7 +312,7 @@ class Propagator:
         self._s = np.sqrt(self.C)
         self._cache = {}
 
-    def symmetric(self, g=1.0):
+    def symmetric(self, g: float = 1.0) -> np.ndarray:
         M = self.C.size
         L = np.zeros((M, M))
         if M > 1:
@@ -312,7 +322,7 @@ class Propagator:
         L[np.diag_indices(M)] += np.asarray(g, dtype=float) * self.H
         return self._rs[:, None] * L * self._rs[None, :]
 
-    def modes(self, g=1.0):
+    def modes(self, g: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
         """Decay rates s [1/s] (ascending) and orthonormal modes U of the symmetric system.
 
         The system is tridiagonal, so LAPACK's tridiagonal solver is used (O(M²),
@@ -333,7 +343,7 @@ class Propagator:
             self._cache[key] = (np.clip(s, 0.0, None), U)
         return self._cache[key]
 
-    def step(self, dt, g=1.0):
+    def step(self, dt: float, g: float = 1.0) -> Any:
         gkey = float(g) if np.ndim(g) == 0 else tuple(np.round(np.asarray(g, dtype=float), 12))
         key = (round(float(dt), 9), gkey)
         if key not in self._cache:
@@ -346,7 +356,7 @@ class Propagator:
             self._cache[key] = (A, Bp)
         return self._cache[key]
 
-    def air_step(self, dt, g=1.0):
+    def air_step(self, dt: float, g: float = 1.0) -> Any:
         gkey = float(g) if np.ndim(g) == 0 else tuple(np.round(np.asarray(g, dtype=float), 12))
         key = ("air", round(float(dt), 9), gkey)
         if key not in self._cache:
@@ -357,7 +367,7 @@ class Propagator:
         return self._cache[key]
 
 
-def rows_matmul(X, A, rows=None):
+def rows_matmul(X: np.ndarray, A: np.ndarray, rows: int | None = None) -> np.ndarray:
     """X @ A for a tall X, computed in row blocks (default: about 2·10⁵ multiply-adds each).
 
     Each block product stays under OpenBLAS's threading threshold, so no BLAS
@@ -375,7 +385,7 @@ def rows_matmul(X, A, rows=None):
     return (Xp.reshape(nb, rows, k) @ A).reshape(nb * rows, A.shape[1])[:n]
 
 
-def modal_scan(e, W, z0, block=64):
+def modal_scan(e: np.ndarray, W: np.ndarray, z0: np.ndarray, block: int = 64) -> np.ndarray:
     """z[k+1] = e∘z[k] + W[k] for k < n, returned as (n, M) = z[1..n].
 
     Blocked scan: inside a block of B steps the response is a product with the
@@ -409,8 +419,7 @@ def modal_scan(e, W, z0, block=64):
     return Z.reshape(nb * B, M)[:n]
 
 
-def simulate_segments(geometry, params, t_grid, heat_J=None, convection_mult=None, source_W=None, T0=None, edges_mm=None,
-                      air_K=None):
+def simulate_segments(geometry: ScrewGeometry, params: ScrewParams, t_grid: np.ndarray, heat_J: np.ndarray | None = None, convection_mult: np.ndarray | None = None, source_W: np.ndarray | None = None, T0: np.ndarray | None = None, edges_mm: np.ndarray | None = None, air_K: np.ndarray | None = None) -> np.ndarray:
     """Integrate the segment temperatures over ``t_grid``; returns (n_steps+1, M) in K
     over the reference temperature.
 
@@ -501,7 +510,7 @@ def simulate_segments(geometry, params, t_grid, heat_J=None, convection_mult=Non
     return out
 
 
-def fin_steady_state(x_mm, power_W, length_mm, diameter_mm, lambda_W_mK, h_W_m2K):
+def fin_steady_state(x_mm: ArrayLike, power_W: float, length_mm: float, diameter_mm: float, lambda_W_mK: float, h_W_m2K: float) -> np.ndarray:
     """1-D fin with heat ``power_W`` entering at x = 0, adiabatic tip at length_mm:
     T(x) = P·cosh(m(L-x)) / (λ·A·m·sinh(mL)), m = sqrt(h·π·d/(λ·A))."""
     d = diameter_mm * 1e-3

@@ -4,10 +4,20 @@ flat-direction (non-identifiability) diagnosis.
 Positive parameters are searched in log space (relative steps, and the reported
 standard error is then a relative one); the others linearly.
 """
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+from numpy.typing import ArrayLike
+
 import warnings
 
 import numpy as np
 from scipy.optimize import least_squares
+
+if TYPE_CHECKING:
+    from host.learning.screw.effects import ParamSpec
 
 
 class IdentifiabilityWarning(UserWarning):
@@ -22,7 +32,7 @@ def _from_x(x, specs):
     return np.array([np.exp(v) if s.positive else v for v, s in zip(x, specs)], dtype=float)
 
 
-def fit_parameters(residual, specs, start=None, max_nfev=200, flat_ratio=1e-4, poor_rel_std=0.5, n_linear=0, ftol=1e-12):
+def fit_parameters(residual: Callable[[np.ndarray], np.ndarray], specs: Sequence[ParamSpec], start: ArrayLike | None = None, max_nfev: int = 200, flat_ratio: float = 1e-4, poor_rel_std: float = 0.5, n_linear: int = 0, ftol: float = 1e-12) -> dict[str, Any]:
     """Minimise ||residual(values)||² over the parameters described by ``specs``.
 
     residual: values (array, in spec order) -> residual vector; n_linear: linear

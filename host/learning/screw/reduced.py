@@ -36,13 +36,24 @@ T_j[k] ≤ U·Σ_m (max_i (A^m)_{ji}·B_i + (A^m·b_U)_j) for every input histor
 b_U = travel_heat_K_per_mm ≥ 0), summed until the tail is below 1e-9 of the total
 (geometric tail bound added).
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+from numpy.typing import ArrayLike
+
 import numpy as np
 
 from host.learning.screw import heat
 from host.learning.screw.effects import NoReducedForm
 
+if TYPE_CHECKING:
+    from host.data.runs import Motion, Run
+    from host.learning.screw.screwmodel import ScrewModel
 
-def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
+
+def build_reduced(model: ScrewModel, segments: int = 12, dt_s: float = 10.0, feed_max_mm_min: float = 12000.0) -> dict[str, Any]:
     """``thermal.reduced`` block of the document for a fitted ScrewModel."""
     if not 1 <= int(segments) <= 64:
         raise ValueError("reduced segments must be 1..64 (got %r)" % (segments,))
@@ -102,7 +113,7 @@ def build_reduced(model, segments=12, dt_s=10.0, feed_max_mm_min=12000.0):
     return out
 
 
-def state_bound(A, B, travel_max_mm, travel_heat=None):
+def state_bound(A: ArrayLike, B: ArrayLike, travel_max_mm: float, travel_heat: ArrayLike | None = None) -> float:
     """Certified max of every state for any travel history with Σu ≤ travel_max per step;
     ``travel_heat`` (M,) ≥ 0: the increment per mm of the step's total travel (effects)."""
     A = np.asarray(A, dtype=float)
@@ -130,14 +141,14 @@ def _arr(reduced):
             np.asarray(reduced["edges_mm"], dtype=float))
 
 
-def air_weights(reduced):
+def air_weights(reduced: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """(c0, c1) of the recurrence; zeros for a document without the air term."""
     M = int(reduced["segments"])
     return (np.asarray(reduced.get("air_K0") or np.zeros(M), dtype=float),
             np.asarray(reduced.get("air_K1") or np.zeros(M), dtype=float))
 
 
-def simulate_reduced(reduced, motion, t0, n_steps, spread=False, air_K=None):
+def simulate_reduced(reduced: dict[str, Any], motion: Motion, t0: float, n_steps: int, spread: bool = False, air_K: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """States (n_steps+1, M) of the float recurrence from a cold start at t0
     (in equilibrium with the air: T = a[0]).
 
@@ -164,7 +175,7 @@ def simulate_reduced(reduced, motion, t0, n_steps, spread=False, air_K=None):
     return t, T
 
 
-def reduced_error_um(reduced, T, positions_mm, base_rise_K=None):
+def reduced_error_um(reduced: dict[str, Any], T: np.ndarray, positions_mm: ArrayLike, base_rise_K: ArrayLike | None = None) -> np.ndarray:
     """E(P) of the reduced model without the geometric part: α·Σ T_i·overlap_i(P) (+ α·ΔT_b·P).
 
     T: (..., M); positions broadcastable to T.shape[:-1]."""
@@ -176,7 +187,7 @@ def reduced_error_um(reduced, T, positions_mm, base_rise_K=None):
     return E
 
 
-def reduced_predict(model, run, spread=False):
+def reduced_predict(model: ScrewModel, run: Run, spread: bool = False) -> np.ndarray:
     """The reduced form's error at every row of ``run.errors`` (µm), as the board evaluates it: the latest state
     (a step at t0 + k·dt), α·Σ T_i·overlap_i(P) + ee·(T_b − T_b,ref)·P − α·(T_R − T_R,ref)·P under a sensor error
     reference R + the reversal term by the row's direction
@@ -212,7 +223,7 @@ def reduced_predict(model, run, spread=False):
     return E + model.geometric_um(P)
 
 
-def reduction_error(model, run, positions=21, spread=False):
+def reduction_error(model: ScrewModel, run: Run, positions: int = 21, spread: bool = False) -> dict[str, Any]:
     """Difference between the full model and its reduced form on one run.
 
     E_m (``rms_um``, ``max_um``): both evaluated at every reduced step time on ``positions`` equally spaced
@@ -242,7 +253,7 @@ def reduction_error(model, run, positions=21, spread=False):
             "rows_rms_um": float(np.sqrt(np.mean(rows ** 2))), "rows_max_um": float(np.max(np.abs(rows)))}
 
 
-def reduction_certificate(model, runs):
+def reduction_certificate(model: ScrewModel, runs: Sequence[Run]) -> dict[str, Any]:
     """{run: reduction_error} with position reports, and the same fed from the feed/range state under "feed_range"."""
     out = {}
     for r in runs:

@@ -15,11 +15,20 @@ evaluates it as one more temperature-linear coefficient (−α on R).
 This module is the one place that term and E_e's default per reference are written; the screw model
 (screwmodel.py) and the discrepancy workflow's base model use it.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING
+from numpy.typing import ArrayLike
+
 import numpy as np
 
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 
-def ambient_default(error_reference):
+def ambient_default(error_reference: str) -> bool:
     """Whether E_e (α·(T_base − T_base,ref)·P) is in the default structure under ``error_reference``.
 
     Off under both. Under "start" E_m holds the screw at its own absolute temperature, which follows the air:
@@ -31,7 +40,7 @@ def ambient_default(error_reference):
     return False
 
 
-def check_reference_sensor(runs, sensor):
+def check_reference_sensor(runs: Sequence[Run], sensor: str) -> None:
     """ValueError naming the runs whose temperatures.csv lacks the reference sensor."""
     missing = [r.path or r.name for r in runs if sensor not in r.temperatures.names]
     if missing:
@@ -39,13 +48,13 @@ def check_reference_sensor(runs, sensor):
                          % (sensor, ", ".join(missing)))
 
 
-def reference_K(run, sensor, times_s, ref_C=None):
+def reference_K(run: Run, sensor: str, times_s: ArrayLike, ref_C: float | None = None) -> np.ndarray:
     """T_R(t) − T_R,ref at ``times_s`` (K): over the run's first reading (``ref_C`` None) or ``ref_C``."""
     tt = run.temperatures
     col = tt.column(sensor)
     return np.interp(np.asarray(times_s, dtype=float), tt.time_s, col) - (float(col[0]) if ref_C is None else ref_C)
 
 
-def reference_um(alpha_per_K, rise_K, positions_mm):
+def reference_um(alpha_per_K: float, rise_K: ArrayLike, positions_mm: ArrayLike) -> np.ndarray:
     """The term a sensor-referenced error lacks: α (T_R − T_R,ref) P in µm (subtract it from E_m)."""
     return 1e3 * alpha_per_K * np.asarray(rise_K) * np.asarray(positions_mm)

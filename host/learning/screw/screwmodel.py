@@ -7,6 +7,13 @@ one error per row of ``run.errors``.  ``to_document``/``from_document`` give the
 ``screw`` kind of docs/model-format.md, with the reduced firmware recurrence in
 ``thermal.reduced`` (host/learning/screw/reduced.py).  docs/screw-model.md has the equations.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+from numpy.typing import ArrayLike
+
 import warnings
 
 import numpy as np
@@ -18,6 +25,9 @@ from models_export.document import FORMAT
 from host.learning.screw.context import RunContext, check_screw_run
 from host.learning.screw.effects import EFFECTS, Effect, ParamSpec
 from host.learning.screw.identify import IdentifiabilityWarning, fit_parameters
+
+if TYPE_CHECKING:
+    from host.data.runs import Run
 
 BASE_PARAMS = ("q_J_per_mm", "h_W_m2K", "lambda_W_mK", "c_J_kgK", "alpha_per_K")
 ALIASES = {"q": "q_J_per_mm", "h": "h_W_m2K", "lambda": "lambda_W_mK", "c": "c_J_kgK", "alpha": "alpha_per_K"}
@@ -189,7 +199,7 @@ class ScrewModel:
         air = np.interp(ctx.t_grid, tt.time_s, col)
         return air - (float(tt.column(name)[0]) if self.base_ref == "run_start" else self.air_ref_C_)
 
-    def simulate_context(self, ctx, allvals=None):
+    def simulate_context(self, ctx: RunContext, allvals: dict[str, float] | None = None) -> np.ndarray:
         """Segment rises (n_steps+1, M) on the context's grid."""
         allvals = self.values_ if allvals is None else allvals
         base, eff = self._split(allvals)
@@ -209,7 +219,7 @@ class ScrewModel:
         return heat.simulate_segments(ctx.geometry, base, ctx.t_grid, heat_J, convection_mult=conv, edges_mm=ctx.edges_mm,
                                       air_K=self.air_K(ctx))
 
-    def thermal_context(self, ctx, allvals=None, rises=None):
+    def thermal_context(self, ctx: RunContext, allvals: dict[str, float] | None = None, rises: np.ndarray | None = None) -> np.ndarray:
         """E_m + E_e + effect outputs at the context's rows (µm), without the geometric part."""
         allvals = self.values_ if allvals is None else allvals
         base, eff = self._split(allvals)
@@ -258,7 +268,7 @@ class ScrewModel:
             return float(run.temperatures.column(self.base_sensor_)[0])
         return self.base_ref_C_
 
-    def geometric_um(self, positions_mm):
+    def geometric_um(self, positions_mm: ArrayLike) -> np.ndarray:
         P = np.asarray(positions_mm, dtype=float)
         return np.polynomial.polynomial.polyval(P, self.geometric_) if len(self.geometric_) else np.zeros_like(P)
 
@@ -350,7 +360,7 @@ class ScrewModel:
                 base.append("alpha_per_K")
         return base + ["%s.%s" % (e.name, s.name) for e in self.effects for s in e.parameters()]
 
-    def fit(self, runs, row_masks=None, start=None, reduce=True):
+    def fit(self, runs: Sequence[Run], row_masks: Sequence[np.ndarray | None] | None = None, start: dict[str, float] | None = None, reduce: bool = True) -> ScrewModel:
         """Identify the parameters from one or more runs (host.data.runs.Run).
 
         row_masks: per run a boolean array over its errors.csv rows to fit on (None: all; the discrepancy
@@ -570,7 +580,7 @@ class ScrewModel:
 
     # ------------------------------------------------------------ prediction
 
-    def predict(self, run):
+    def predict(self, run: Run) -> np.ndarray:
         """Predicted error (µm) at every row of ``run.errors``: the run's own motion and
         base temperature are simulated from a cold (ambient) screw at the run's start."""
         if not hasattr(self, "geometry_"):
@@ -586,7 +596,7 @@ class ScrewModel:
                              "(base sensor %s) is NaN/inf" % (ctx.run_name, bad[0], run.errors.time_s[bad[0]], self.base_sensor_))
         return out
 
-    def predict_grid(self, run, positions_mm, times_s=None):
+    def predict_grid(self, run: Run, positions_mm: ArrayLike, times_s: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Thermal + geometric error on a time × position grid (default times: the model grid)."""
         check_screw_run(run, self.geometry_, require_nut=False)
         ctx = self._context(run)
@@ -605,7 +615,7 @@ class ScrewModel:
 
     # ------------------------------------------------------------ document
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         g = self.geometry_
         thermal = {
             "parameters": {k: float(v) for k, v in self.values_.items()},
@@ -645,7 +655,7 @@ class ScrewModel:
             "training": self.training_,
         }
 
-    def input_sensors_(self):
+    def input_sensors_(self) -> list[str]:
         """The temperatures prediction reads: the base sensor (E_e), the air sensor, a sensor only an effect reads
         (ambient_expansion without E_e: the reduced form's base term), then the error reference's sensor."""
         out = [self.base_sensor_] if self.base_sensor_ else []
@@ -662,17 +672,17 @@ class ScrewModel:
             return None, None
         return name, red.get("base_ref_C")
 
-    def effect_sensor_(self, effect):
+    def effect_sensor_(self, effect: Effect) -> str | None:
         """The sensor an effect reading the machine's surroundings reads on the training runs (base, else ambient)."""
         base, ambient = getattr(self, "first_roles_", (self.base_sensor_, self.air_sensor_))
         return base or ambient
 
-    def start_C_(self, name):
+    def start_C_(self, name: str) -> float:
         """The first training run's first reading of ``name`` (degC)."""
         return self.run_start_C_[name]
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> ScrewModel:
         from host.learning.documents import ModelFormatError
 
         th = doc.get("thermal") or {}
@@ -739,7 +749,7 @@ class ScrewModel:
         return m
 
 
-def choose_geometric_degree(P, resid, max_degree, n_thermal):
+def choose_geometric_degree(P: np.ndarray, resid: np.ndarray, max_degree: int, n_thermal: int) -> tuple[int, dict[str, Any]]:
     """Degree 0..max_degree of the cold polynomial for the residual after the thermal part.
 
     Uses host.learning.empirical.geometric (leave-one-out CV over position-averaged points); when it

@@ -5,6 +5,12 @@ runs (data/demo/) are not there, and to check identification against known
 parameters.  The generated error is exactly the model's equation (plus optional
 white noise), so it tests the identification, not the physics.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
 import numpy as np
 
 from host.data.runs import Errors, Motion, Run, Temperatures
@@ -22,16 +28,14 @@ META = {
 TRUE = heat.ScrewParams(q_J_per_mm=0.08, h_W_m2K=18.0, lambda_W_mK=40.0)
 
 
-def protocol(feed_mm_min, lo_mm, hi_mm, heat_s=4 * 3600.0, cool_s=2 * 3600.0, sweep_every_s=900.0):
+def protocol(feed_mm_min: float, lo_mm: float, hi_mm: float, heat_s: float = 4 * 3600.0, cool_s: float = 2 * 3600.0, sweep_every_s: float = 900.0) -> tuple[np.ndarray, np.ndarray]:
     """(motion rows, sweep times): reciprocate lo..hi at feed for heat_s, then rest for cool_s."""
     motion = np.array([[0.0, heat_s, lo_mm, hi_mm, feed_mm_min]]) if heat_s > 0 else np.zeros((0, 5))
     sweeps = np.arange(0.0, heat_s + cool_s + 1e-9, sweep_every_s)
     return motion, sweeps
 
 
-def make_run(feed_mm_min=8000.0, lo_mm=210.0, hi_mm=490.0, params=TRUE, heat_s=4 * 3600.0, cool_s=2 * 3600.0,
-             sweep_every_s=900.0, positions_mm=None, noise_um=0.0, base_drift_K=0.8, geometric=(0.0, 2e-3, -4e-6),
-             segments=80, dt_s=5.0, seed=0, name=None, meta=None):
+def make_run(feed_mm_min: float = 8000.0, lo_mm: float = 210.0, hi_mm: float = 490.0, params: heat.ScrewParams = TRUE, heat_s: float = 4 * 3600.0, cool_s: float = 2 * 3600.0, sweep_every_s: float = 900.0, positions_mm: Sequence[float] | None = None, noise_um: float = 0.0, base_drift_K: float = 0.8, geometric: Sequence[float] = (0.0, 2e-3, -4e-6), segments: int = 80, dt_s: float = 5.0, seed: int = 0, name: str | None = None, meta: dict[str, Any] | None = None) -> Run:
     """One run: motion, temperatures (nut, base, air), errors = geometric + E_m + E_e (+ noise); the screw
     exchanges heat with the drifting air T_air."""
     meta = dict(META if meta is None else meta)

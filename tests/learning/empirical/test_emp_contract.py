@@ -119,6 +119,7 @@ def _models():
         "dynamic": (fit_model([cycles], method="dynamic", target="direct", channel="ch1", taus_s=(0, 1800)), cycles),
         "screw": (screw, screw_run),
         "mr_poly": (fit_model([slope], method="mr-poly", nut="T1", base="T2", degree=2), slope),
+        "ppr": (fit_model([slope], method="ppr", target="slope", n_terms=1, knots=4), slope),
     }
 
 
@@ -132,7 +133,7 @@ def _model(kind):
 
 
 def test_every_kind_is_covered():
-    assert set(KIND_CLASSES) == set(DOCUMENT_KINDS) == {"poly_slope", "linear_direct", "ann", "dynamic", "screw", "mr_poly"}
+    assert set(KIND_CLASSES) == set(DOCUMENT_KINDS) == {"poly_slope", "linear_direct", "ann", "dynamic", "screw", "mr_poly", "ppr"}
 
 
 @pytest.mark.parametrize("kind", sorted(KIND_CLASSES))

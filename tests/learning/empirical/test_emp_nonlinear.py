@@ -166,3 +166,38 @@ def test_lockstep_folds_equal_networks_trained_one_by_one():
         zo = (X[k] - mu[k]) / sd[k]
         errs.append(ym[k] + ys[k] * (np.tanh(W @ zo + b) @ v + c) - y[k])
     assert mse == pytest.approx(np.mean(np.square(errs)), rel=1e-9)
+
+
+def test_ppr_model_document_predict_and_export_refusal(make_direct, tmp_path, capsys):
+    """tcomp fit --model ppr writes a ``ppr`` document; predict reads it back to the fitted model's values; export
+    refuses it naming why (a ridge function is no table kind); a document whose ridges are malformed is refused
+    naming the field."""
+    from host.data.runs import load_runs, write_run
+
+    run = make_direct(n_sensors=3)
+    folder = write_run(run, str(tmp_path / "run"))
+    out = str(tmp_path / "ppr.json")
+    assert main(["fit", "--model", "ppr", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "n_terms=2",
+                 "--option", "knots=4"]) == 0
+    doc = json.loads(open(out).read())
+    assert doc["kind"] == "ppr" and doc["thermal"]["target"] == "direct" and len(doc["thermal"]["ridges"]["terms"]) == 2
+    # the same fit in memory on the written run (PPR is deterministic) predicts what the saved document predicts
+    written = load_runs([folder])[0]
+    expected = fit_model([written], "ppr", target="direct", channel="ch1", n_terms=2, knots=4).predict(written)
+    ch1 = written.errors.channel == "ch1"  # the model's channel; the other rows are not predicted (NaN)
+    assert np.isfinite(expected[ch1]).all() and np.isnan(expected[~ch1]).all()
+    np.testing.assert_allclose(load_model(out).predict(written), expected, rtol=0, atol=1e-9)
+    pred = str(tmp_path / "pred.csv")
+    assert main(["predict", out, folder, "--out", pred]) == 0
+    rows = np.genfromtxt(pred, delimiter=",", names=True, dtype=None, encoding="utf-8")
+    np.testing.assert_allclose(rows["predicted_um"], expected, rtol=0, atol=5.1e-5)  # printed to 0.1 nm in the CSV
+    capsys.readouterr()
+    assert main(["export", out, "--out", str(tmp_path / "t.bin")]) == 2
+    err = capsys.readouterr().err
+    assert "a ppr model cannot be exported" in err and "ridge functions" in err
+    assert not (tmp_path / "t.bin").exists()
+    for field, value in (("knots", [1.0, 1.0, 2.0, 3.0]), ("coefficients", [0.5]), ("direction", [1.0])):
+        bad = json.loads(open(out).read())
+        bad["thermal"]["ridges"]["terms"][1][field] = value
+        with pytest.raises(ModelFormatError, match=r"terms\[1\]\.%s" % field):
+            load_model(bad)

@@ -10,7 +10,7 @@ from host.cli import main as tcomp
 from host.learning.documents import load_model, read_document
 from host.data.runs import write_run
 from host.learning.screw import synth
-from host.learning.screw.effects import BearingHeat, Effect, ParamSpec, ReversalError
+from host.learning.screw.effects import BearingHeat, Effect, ParamSpec, ReversalEffect
 from host.learning.screw.screwmodel import ScrewModel
 from host.learning.screw.reduced import build_reduced, reduction_error, state_bound
 from host.learning.screw.crossstate import fit_models, state_errors, summary
@@ -161,7 +161,7 @@ def test_reversal_effect_output_hook():
     n = len(run.errors)
     run.errors.direction = np.where(np.arange(n) % 2 == 0, 1, -1).astype(np.int8)
     run.errors.error_um = run.errors.error_um + 0.5 * 3.0 * run.errors.direction
-    m = ScrewModel(ambient=True, free="q", geometric_degree=2, effects=[ReversalError()]).fit([run])
+    m = ScrewModel(ambient=True, free="q", geometric_degree=2, effects=[ReversalEffect()]).fit([run])
     assert m.values_["reversal_error.b_um"] == pytest.approx(3.0, abs=0.05)
 
 
@@ -191,7 +191,7 @@ def test_effects_plug_in_parameters_and_hooks(synth_run):
 def test_effect_checks_and_ambient_expansion_equals_the_base_term():
     run = synth.make_run(heat_s=3600.0, cool_s=1800.0, sweep_every_s=600.0)
     with pytest.raises(ValueError, match="reversal_error needs bidirectional sweeps"):
-        ScrewModel(ambient=True, free="q", effects=[ReversalError()]).fit([run])
+        ScrewModel(ambient=True, free="q", effects=[ReversalEffect()]).fit([run])
     from host.learning.screw.effects import AmbientExpansion
 
     m = ScrewModel(free="q,h,lambda", geometric_degree=2, ambient=False, effects=[AmbientExpansion()]).fit([run])
@@ -246,3 +246,15 @@ def test_air_falls_back_to_the_base_sensor_then_to_a_constant_air_and_says_so():
         assert (m.air_sensor_, m.air_source_, doc["thermal"]["air_source"]) == (sensor, source, source), roles
         notes = " ".join(m.statistics_["warnings"])
         assert (warning in notes) if warning else "role 'ambient'" not in notes, notes
+
+
+def test_effect_classes_are_not_named_as_exceptions():
+    """An effect is a term of the model, not an error raised: no effect class reads as an exception (issue 20's
+    'ReversalEffect'), while the names users type (--option effects=, the document, the CLI) stay as they were."""
+    import inspect
+    from host.learning.screw import effects
+
+    named_error = [name for name, cls in inspect.getmembers(effects, inspect.isclass)
+                   if issubclass(cls, Effect) and name.endswith("Error")]
+    assert named_error == []
+    assert effects.EFFECTS["reversal_error"] is ReversalEffect

@@ -49,12 +49,21 @@ Errors in the data (NaN, a constant sensor, fewer samples than parameters, too
 few runs, unknown method or parameter) raise :class:`SelectionError` with a
 message naming the sensor, run or parameter.
 """
-from host.learning.empirical.selectors.common import Selection, SelectionError  # noqa: F401
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
+from host.learning.empirical.selectors.common import Selection, SelectionError
 
 from host.learning.empirical.methods import SELECTORS as METHODS  # the registry's
 
+if TYPE_CHECKING:
+    from host.learning.empirical.selectors.maxtree import MaxTree
 
-def select(method, data, *, target="slope", channel=None, sensors=None, **params):
+
+def select(method: str, data: Any, *, target: str = "slope", channel: str | None = None, sensors: Sequence[str] | None = None, **params: Any) -> Selection:
     """Run one selection method on runs or arrays; returns a :class:`Selection`."""
     from host.learning.empirical.selectors.common import as_arrays
 
@@ -71,7 +80,7 @@ def select(method, data, *, target="slope", channel=None, sensors=None, **params
     return fn(arrays, context=context, **params)
 
 
-def maximal_tree(corr, names, target_corr=None, absolute=True):
+def maximal_tree(corr: Any, names: Sequence[str], target_corr: Any = None, absolute: bool = True) -> MaxTree:
     """Maximal-tree fuzzy clustering of a precomputed correlation matrix.
 
     Returns :class:`host.learning.empirical.selectors.maxtree.MaxTree` with ``edges``

@@ -1,5 +1,11 @@
 """What every selector shares: the result type, the error type, input checking."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -19,19 +25,19 @@ class Selection:
     reason: dict
     _plotter: object = field(default=None, repr=False, compare=False)
 
-    def plot(self, path):
+    def plot(self, path: str) -> str:
         """Write a PNG explaining the choice to ``path``; returns ``path``."""
         if self._plotter is None:
             raise SelectionError("this %s selection carries no plot data" % self.method)
         self._plotter(path)
         return path
 
-    def to_json(self):
+    def to_json(self) -> dict[str, Any]:
         """Strict-JSON dict: numpy scalars become Python numbers, inf/NaN become None."""
         return plain({"method": self.method, "sensors": list(self.sensors), "reason": self.reason})
 
 
-def plain(obj):
+def plain(obj: Any) -> Any:
     if isinstance(obj, dict):
         return {str(k): plain(v) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
@@ -51,8 +57,9 @@ def _is_run(obj):
     return hasattr(obj, "temperatures") and hasattr(obj, "errors")
 
 
-def as_arrays(data, target="slope", channel=None, sensors=None):
+def as_arrays(data: Any, target: str = "slope", channel: str | None = None, sensors: Any = None) -> tuple[list[Any], list[str]]:
     """Normalise runs or ``(X, y, names)`` tuples to a checked list of tuples plus run labels."""
+    # list[Any]: (X, y, names) tuples, or targets.RunArrays (which unpack as one and carry the temperature log)
     if _is_run(data) or (hasattr(data, "X") and hasattr(data, "y")):
         data = [data]  # one Run or one targets.RunArrays
     elif isinstance(data, tuple) and len(data) == 3 and not _is_run(data[0]) and np.ndim(data[0]) == 2:
@@ -113,7 +120,7 @@ def _keep_start(checked, original, start=None, log=_SAME):
                      None if start is None else np.asarray(start, dtype=float), log)
 
 
-def check_arrays(arr, label="data"):
+def check_arrays(arr: Any, label: str = "data") -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Return ``(X, y, names)`` as float arrays and a list, or raise naming the problem."""
     try:
         X, y, names = arr
@@ -153,14 +160,14 @@ def check_arrays(arr, label="data"):
     return X, y, names
 
 
-def pooled(arrays):
+def pooled(arrays: list[tuple[np.ndarray, np.ndarray, list[str]]]) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """All runs stacked: the sample correlations and the stepwise fit use every sample."""
     X = np.vstack([a[0] for a in arrays])
     y = np.concatenate([a[1] for a in arrays])
     return X, y, list(arrays[0][2])
 
 
-def check_params(method, params, allowed):
+def check_params(method: str, params: Mapping[str, Any], allowed: Mapping[str, Any]) -> dict[str, Any]:
     unknown = sorted(set(params) - set(allowed))
     if unknown:
         raise SelectionError("%s: unknown parameter(s) %s (known: %s)" % (method, ", ".join(unknown), ", ".join(sorted(allowed))))
@@ -169,8 +176,9 @@ def check_params(method, params, allowed):
     return out
 
 
-def number(method, name, value, lo=None, hi=None, integer=False, allow_none=False):
+def number(method: str, name: str, value: Any, lo: float | None = None, hi: float | None = None, integer: bool = False, allow_none: bool = False) -> Any:
     """A numeric parameter checked against its range (CLI --option values arrive as JSON)."""
+    # -> Any: an int when ``integer``, else a float, None only when ``allow_none``: each caller knows which it asked for
     if value is None and allow_none:
         return None
     ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
@@ -186,7 +194,7 @@ def number(method, name, value, lo=None, hi=None, integer=False, allow_none=Fals
     return int(value) if integer else float(value)
 
 
-def data_label(context, n_samples):
+def data_label(context: Mapping[str, Any] | None, n_samples: int) -> str:
     ctx = context or {}
     runs = ctx.get("runs") or []
     what = ctx.get("target") or "target"

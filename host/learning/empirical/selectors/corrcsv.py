@@ -8,6 +8,11 @@ must then match the header order.
 TCORR.csv: one ``sensor,r`` row per sensor. A header line is optional: the first
 line is taken as a header when its second cell is not a number (e.g. ``sensor,r``).
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
 import csv
 
 import numpy as np
@@ -49,7 +54,7 @@ def _is_number(cell):
         return False
 
 
-def read_corr_csv(path):
+def read_corr_csv(path: str) -> tuple[np.ndarray, list[str]]:
     """-> (matrix (p, p), names)."""
     rows = _rows(path)
     header, body = rows[0], rows[1:]
@@ -83,7 +88,7 @@ def read_corr_csv(path):
     return M, names
 
 
-def read_target_corr_csv(path, names):
+def read_target_corr_csv(path: str, names: Sequence[str]) -> dict[str, float]:
     """-> {name: r} for exactly the sensors in ``names``."""
     rows = _rows(path)
     start = 0

@@ -7,6 +7,11 @@ carried into the next generation, so the best cost never gets worse). Costs are
 cached per genome: with 20 x 20 evaluations and short genomes many children
 repeat their parents.
 """
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -22,7 +27,7 @@ class GAResult:
     cache: dict = field(repr=False, default_factory=dict)
 
 
-def binary_ga(cost, n_bits, population=20, crossover=0.8, mutation=0.005, generations=20, seed=0):
+def binary_ga(cost: Callable[[tuple[int, ...]], float], n_bits: int, population: int = 20, crossover: float = 0.8, mutation: float = 0.005, generations: int = 20, seed: int = 0) -> GAResult:
     """Minimise ``cost(genome_tuple_of_0_1) -> float`` over ``n_bits``-bit strings."""
     if population < 2 or population % 2:
         raise ValueError("population must be an even number >= 2, got %r" % population)
@@ -73,7 +78,7 @@ def binary_ga(cost, n_bits, population=20, crossover=0.8, mutation=0.005, genera
     return GAResult(tuple(int(v) for v in best), best_cost, history, len(cache), calls, cache)
 
 
-def decode_uint(bits):
+def decode_uint(bits: Sequence[int]) -> int:
     v = 0
     for b in bits:
         v = (v << 1) | int(b)

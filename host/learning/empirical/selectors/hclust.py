@@ -10,6 +10,10 @@ of its members; its distances to the other clusters are recomputed from that
 mean with the same normalisation constants, so D_e keeps one scale through the
 whole agglomeration.
 """
+
+from __future__ import annotations
+
+
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,7 +28,7 @@ class Moments:
     O(n p^2) pass over the data, then every agglomeration is O(p^3) whatever n.
     """
 
-    def __init__(self, X):
+    def __init__(self, X: np.ndarray) -> None:
         X = np.asarray(X, dtype=float)
         self.p = X.shape[1]
         # raw moments about a common origin (the grand mean) keep M well scaled
@@ -51,7 +55,7 @@ class Agglomeration:
     merges: list  # [(members_a, members_b, distance)] in merge order, members as index tuples
     p: int
 
-    def partition(self, k):
+    def partition(self, k: int) -> list[list[int]]:
         """k clusters (lists of column indices, sorted; clusters by first member)."""
         if not 1 <= k <= self.p:
             raise ValueError("number of clusters must be in 1..%d, got %d" % (self.p, k))
@@ -64,7 +68,7 @@ class Agglomeration:
                 label[i] = ga
         return sorted((sorted(g) for g in groups.values()), key=lambda g: g[0])
 
-    def linkage(self):
+    def linkage(self) -> np.ndarray:
         """scipy-style linkage matrix (heights = merge distances, not necessarily monotone)."""
         ids = {(i,): i for i in range(self.p)}
         rows = []
@@ -78,7 +82,7 @@ class Agglomeration:
 NORMALISATIONS = ("max", "minmax")
 
 
-def agglomerate(X, alpha, moments=None, normalisation="max"):
+def agglomerate(X: np.ndarray, alpha: float, moments: Moments | None = None, normalisation: str = "max") -> Agglomeration:
     """Cluster the columns of X (n, p) on the combined distance with weight ``alpha`` on D_e.
 
     ``moments``: a precomputed :class:`Moments` of X (reused across alphas by the GA).

@@ -23,6 +23,12 @@ Every one-per-cluster combination of a partition is fitted in one batch
 combinations exceeds ``max_combinations``, the largest clusters are trimmed to
 their members most correlated with the target until it fits; the reason records it.
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import TYPE_CHECKING, Any
+
 import math
 import zlib
 
@@ -32,6 +38,9 @@ from host.learning.empirical.selectors.common import Selection, SelectionError, 
 from host.learning.empirical.selectors.ga import binary_ga, decode_uint
 from host.learning.empirical.selectors.hclust import Moments, agglomerate
 from host.learning.empirical.selectors.linalg import SubsetFitter, SubsetScorer
+
+if TYPE_CHECKING:
+    from host.learning.empirical.selectors.hclust import Agglomeration
 
 ALPHA_BITS = 8
 
@@ -57,7 +66,7 @@ SERIES = ("log", "targets")
 DISTANCE_ON = ("values", "rises")
 
 
-def combinations(clusters, score, max_combinations):
+def combinations(clusters: Sequence[Sequence[int]], score: np.ndarray, max_combinations: int) -> tuple[np.ndarray, list[list[int]] | None]:
     """All one-per-cluster index combinations (m, k), trimming clusters if there are too many.
 
     ``score`` ranks members for trimming (|r| with the target, larger kept).
@@ -80,7 +89,7 @@ def combinations(clusters, score, max_combinations):
 class RobustnessProblem:
     """Everything the GA cost needs, with caches of agglomerations and partitions."""
 
-    def __init__(self, train, tests, disturbance_C, disturbance, seed, max_combinations, cluster_X=None, normalisation="max", intercept=False):
+    def __init__(self, train: Any, tests: Any, disturbance_C: float, disturbance: str, seed: int, max_combinations: int, cluster_X: np.ndarray | None = None, normalisation: str = "max", intercept: bool = False) -> None:
         Xtr, ytr, names = train
         self.names = names
         self.X = Xtr if cluster_X is None else cluster_X  # what the distances are computed on
@@ -108,12 +117,12 @@ class RobustnessProblem:
         self._part = {}
         self.evaluations = 0  # subset models fitted and scored
 
-    def agglomeration(self, alpha):
+    def agglomeration(self, alpha: float) -> Agglomeration:
         if alpha not in self._agg:
             self._agg[alpha] = agglomerate(self.X, alpha, self.moments, self.normalisation)
         return self._agg[alpha]
 
-    def score_partition(self, clusters):
+    def score_partition(self, clusters: Sequence[Sequence[int]]) -> dict[str, Any]:
         key = tuple(tuple(c) for c in clusters)
         if key in self._part:
             return self._part[key]
@@ -136,7 +145,7 @@ class RobustnessProblem:
         return res
 
 
-def select_hclust_ga(arrays, context=None, **params):
+def select_hclust_ga(arrays: Any, context: dict[str, Any] | None = None, **params: Any) -> Selection:
     prm = check_params("hclust-ga", params, DEFAULTS)
     runs = (context or {}).get("runs") or ["run %d" % (i + 1) for i in range(len(arrays))]
     if len(arrays) < 2:

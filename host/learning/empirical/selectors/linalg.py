@@ -8,10 +8,15 @@ Centring (and scaling to unit variance) first keeps those systems as well
 conditioned as the data allow: temperatures of 20-40 °C with an intercept column
 would otherwise square a condition number in the thousands.
 """
+
+from __future__ import annotations
+
+from typing import Any
+
 import numpy as np
 
 
-def ols_stats(X, y):
+def ols_stats(X: np.ndarray, y: np.ndarray) -> dict[str, Any]:
     """OLS of ``y`` on ``X`` with an intercept: coefficients, R², adjusted R², F and its p-value.
 
     Returns a dict of plain floats and lists (JSON-able). With as many parameters
@@ -60,7 +65,7 @@ class SubsetFitter:
     centred and scaled, and the intercepts returned are zero.
     """
 
-    def __init__(self, X, y, intercept=True):
+    def __init__(self, X: np.ndarray, y: np.ndarray, intercept: bool = True) -> None:
         X = np.asarray(X, dtype=float)
         y = np.asarray(y, dtype=float)
         self.intercept = bool(intercept)
@@ -74,7 +79,7 @@ class SubsetFitter:
         self.cross_ = Z.T @ yc  # (p,)
         self.n_samples_ = X.shape[0]
 
-    def fit(self, combos):
+    def fit(self, combos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """``combos`` (m, k) int -> (intercepts (m,), coefficients (m, k)) in raw units."""
         combos = np.asarray(combos, dtype=np.intp)
         m, k = combos.shape
@@ -100,7 +105,7 @@ class SubsetScorer:
     long test run costs no more per model than a short one.
     """
 
-    def __init__(self, X, y):
+    def __init__(self, X: np.ndarray, y: np.ndarray) -> None:
         X = np.asarray(X, dtype=float)
         y = np.asarray(y, dtype=float)
         self.n = X.shape[0]
@@ -112,7 +117,7 @@ class SubsetScorer:
         self.cross = Xc.T @ yc
         self.yy = float(yc @ yc)
 
-    def rmse(self, intercept, coef, combos):
+    def rmse(self, intercept: np.ndarray, coef: np.ndarray, combos: np.ndarray) -> np.ndarray:
         combos = np.asarray(combos, dtype=np.intp)
         G = self.gram[combos[:, :, None], combos[:, None, :]]
         quad = np.einsum("mk,mkl,ml->m", coef, G, coef)
@@ -122,6 +127,6 @@ class SubsetScorer:
         return np.sqrt(np.maximum(sse, 0.0) / self.n)
 
 
-def subset_rmse(intercept, coef, combos, X, y):
+def subset_rmse(intercept: np.ndarray, coef: np.ndarray, combos: np.ndarray, X: np.ndarray, y: np.ndarray) -> np.ndarray:
     """RMSE of every subset model on (X, y) -> (m,)."""
     return SubsetScorer(X, y).rmse(intercept, coef, combos)

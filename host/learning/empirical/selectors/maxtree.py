@@ -14,6 +14,12 @@ their similarity is above λ); edges of weight 1 are never cut. (Before issue 23
 (lambda_low, lambda_high], the edge kept at equality; the interval ends are the
 same numbers.)
 """
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from typing import Any
+
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -31,7 +37,7 @@ class Partition:
     clusters: list  # [[names]] members in sensor order, clusters by first member
     representatives: list  # one name per cluster, same order as clusters
 
-    def to_json(self):
+    def to_json(self) -> dict[str, Any]:
         return {
             "lambda_low": self.lambda_low,
             "lambda_high": self.lambda_high,
@@ -48,11 +54,11 @@ class MaxTree:
     partitions: list  # [Partition] ordered by λ
     representative_rule: str
 
-    def partition_at(self, lam):
+    def partition_at(self, lam: float) -> list[list[str]]:
         """Clusters (lists of names) from cutting the tree edges not heavier than ``lam`` (weight-1 edges are kept)."""
         return _components(self.names, [(self.names.index(a), self.names.index(b)) for a, b, w in self.edges if w > lam or w >= 1.0])
 
-    def to_json(self):
+    def to_json(self) -> dict[str, Any]:
         return {
             "sensors": list(self.names),
             "edges": [[a, b, float(w)] for a, b, w in self.edges],
@@ -61,7 +67,7 @@ class MaxTree:
             "interval_convention": "lambda in [lambda_low, lambda_high) (Li 2021 Table 3); the last interval is [lambda_low, 1]",
         }
 
-    def linkage(self):
+    def linkage(self) -> np.ndarray:
         """scipy linkage matrix of the tree (height 1 - weight): merges heaviest edge first."""
         p = len(self.names)
         idx = {n: i for i, n in enumerate(self.names)}
@@ -84,7 +90,7 @@ class MaxTree:
             cid[ra] = p + len(rows) - 1
         return np.asarray(rows, dtype=float).reshape(-1, 4)
 
-    def plot(self, path, title=None, mark_lambda=None, ax=None):
+    def plot(self, path: str, title: str | None = None, mark_lambda: float | None = None, ax: Any = None) -> str:
         import matplotlib
 
         matplotlib.use("Agg")
@@ -133,7 +139,7 @@ def _components(names, pairs):
     return [[names[i] for i in g] for g in sorted(groups.values(), key=lambda g: g[0])]
 
 
-def check_corr(corr, names, source="correlation matrix"):
+def check_corr(corr: Any, names: Sequence[str], source: str = "correlation matrix") -> np.ndarray:
     """Validate a square correlation matrix; returns it as float array."""
     names = [str(n) for n in names]
     C = np.asarray(corr, dtype=float)
@@ -162,7 +168,7 @@ def check_corr(corr, names, source="correlation matrix"):
     return np.clip((C + C.T) / 2.0, -1.0, 1.0)
 
 
-def prim_maximum_tree(S):
+def prim_maximum_tree(S: np.ndarray) -> list[tuple[int, int, float]]:
     """Maximum spanning tree of similarity ``S`` by Prim from vertex 0 -> [(i, j, w)] in addition order.
 
     Ties go to the lowest vertex index so the tree is reproducible.
@@ -184,7 +190,7 @@ def prim_maximum_tree(S):
     return edges
 
 
-def maximal_tree(corr, names, target_corr=None, absolute=True):
+def maximal_tree(corr: Any, names: Sequence[str], target_corr: Any = None, absolute: bool = True) -> MaxTree:
     """Maximal-tree fuzzy clustering of a correlation matrix (see module docstring).
 
     ``target_corr``: per-sensor correlation with the target (sequence in ``names``
@@ -251,7 +257,7 @@ CRITERIA = ("paper", "r2-change", "tolerance")
 SPSS_MIN_TOLERANCE = 1e-4
 
 
-def tolerances(X):
+def tolerances(X: np.ndarray) -> list[float]:
     """Each column's tolerance 1 − R² of its regression (with intercept) on the other columns (SPSS's TOLERANCE).
 
     One column: 1. A column that is an exact combination of the others: 0."""
@@ -270,7 +276,7 @@ def tolerances(X):
     return out
 
 
-def r2_change_test(r2_small, k_small, r2_large, k_large, n):
+def r2_change_test(r2_small: float, k_small: int, r2_large: float, k_large: int, n: int) -> tuple[float, float]:
     """F test of the R² gain from k_small to k_large regressors (with intercept) -> (F, p).
 
     F = ((R²_L − R²_S)/(k_L − k_S)) / ((1 − R²_L)/(n − k_L − 1)), F(k_L − k_S, n − k_L − 1)
@@ -308,7 +314,7 @@ def _choose_r2_change(ok, alpha, n):
     return cur, steps
 
 
-def choose_partition(rows, n, criterion="paper", alpha=0.05, r2_tolerance=0.01, min_tolerance=SPSS_MIN_TOLERANCE):
+def choose_partition(rows: Sequence[dict[str, Any]], n: int, criterion: str = "paper", alpha: float = 0.05, r2_tolerance: float = 0.01, min_tolerance: float = SPSS_MIN_TOLERANCE) -> tuple[dict[str, Any] | None, dict[str, Any]]:
     """The chosen row among evaluated representative sets -> (row, reason dict).
 
     ``rows``: one dict per representative set with ``partition`` (an id), ``representatives`` (names), ``r2``,
@@ -353,7 +359,7 @@ def choose_partition(rows, n, criterion="paper", alpha=0.05, r2_tolerance=0.01, 
     return chosen, reason
 
 
-def select_maxtree(arrays, context=None, **params):
+def select_maxtree(arrays: Any, context: dict[str, Any] | None = None, **params: Any) -> Selection:
     """Choose the partition whose representatives regress best on the target (:func:`choose_partition`).
 
     ``criterion="paper"`` (default, Li 2021 §3.2/§4.2): the largest R² among the representative sets whose

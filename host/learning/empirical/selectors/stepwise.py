@@ -4,13 +4,18 @@ The regression itself is :class:`host.learning.empirical.regression.Stepwise` (o
 implementation for the model and the selector); this module runs it on the
 pooled runs and reports the entry/removal history as the reason.
 """
+
+from __future__ import annotations
+
+from typing import Any
+
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.selectors.common import Selection, SelectionError, check_params, data_label, number, pooled
 
 DEFAULTS = {"f_enter": 100.0, "f_remove": 50.0}
 
 
-def select_stepwise(arrays, context=None, **params):
+def select_stepwise(arrays: Any, context: dict[str, Any] | None = None, **params: Any) -> Selection:
     from host.learning.empirical.regression import Stepwise
 
     prm = check_params("stepwise", params, DEFAULTS)
