@@ -33,6 +33,7 @@ _NO_POSITION = const(0x800000)
 _NO_TABLE = const(0x200000)
 _UPLOADING = const(0x2000000)
 _REF_PENDING = const(0x8000000)
+_SETTLING = const(0x20000000)
 
 _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is dropped
 _POLL_MS = const(5)  # serial polling period while waiting for the next cycle
@@ -114,6 +115,9 @@ class App:
         self.spindle = 0  # last reported spindle speed (rpm) and feed (mm/min): the dynamic table's inputs
         self.feed = 0
         self.dyn = False  # the table in use is a dynamic one
+        self.unobserved = False  # a dynamic table's lag states wait for the first all-good cycle (observer, or rest)
+        self.settle_s = 0  # seconds since the observer's estimate (saturating at the table's settle_s) and the ms
+        self.settle_ms = 0  # toward the next second
         # elapsed-time counters (ms, saturating) rather than timestamps: ticks wrap
         self.rx_ms = 0  # since the last valid controller traffic
         self.fault_active = False
@@ -197,6 +201,11 @@ class App:
         ev.update()
         if self.dyn:
             ev.rest()
+        # a dynamic table's lag states are set at the first cycle every sensor it needs reads good: estimated from the
+        # inputs (its observer), or at rest without one; then the filters step at dt_ms from that cycle
+        self.unobserved = self.dyn
+        self.settle_s = 0
+        self.settle_ms = 0
         self.table = table
         self.slot = slot
         self.ev = ev
@@ -456,6 +465,17 @@ class App:
             ev.update()
             if self.unsettled and not needed:
                 self._settle(ev)
+            if self.unobserved and not needed:
+                ev.observe()  # allocation-free (tests/firmware/test_fw_heaplock.py)
+                self.unobserved = False
+                self.step_ms = 0
+                self.settle_s = 0
+                self.settle_ms = 0
+            elif self.dyn and self.settle_s < t.settle_s:
+                v = self.settle_ms + dt  # dt <= _CAP: small ints throughout
+                k = v // 1000
+                self.settle_ms = v - k * 1000
+                self.settle_s = t.settle_s if k >= t.settle_s - self.settle_s else self.settle_s + k
             if self.screw or self.dyn:
                 dtm = t.dt_ms
                 self.step_ms += dt
@@ -480,6 +500,8 @@ class App:
                 s |= _CLAMPED
             if ev.extrap:
                 s |= _EXTRAPOLATING
+            if self.dyn and t.obs and (self.unobserved or self.settle_s < t.settle_s):
+                s |= _SETTLING
         lim = self.limiter
         s |= lim.update(raw_ref, raw_slope, raw_total, raw_prev, usable, dt)
         self.usable = usable
