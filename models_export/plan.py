@@ -260,7 +260,7 @@ class Planner:
             V = max(iv_abs(out[j]), iv_abs(e0))
             if V > iv_abs(out[j]):
                 out[j] = (-V, V)
-            self.obs_cert.append({"term": t["name"], "guard_bits": g, "start_error_units": float(iv_abs(e0)),
+            self.obs_cert.append({"term": t["name"], "filter": j, "guard_bits": g, "start_error_units": float(iv_abs(e0)),
                                   "start_error_signal_units": float(iv_abs(e0) / p2(fy) * t["per"]),
                                   "estimate_units_over_envelope": [float(est[0]), float(est[1])], "state_box_units": [Ylo, Yhi],
                                   "estimate_clamped_in_envelope": bool(est[0] < Ylo or est[1] > Yhi)})
