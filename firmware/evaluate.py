@@ -442,7 +442,8 @@ class Evaluator:
 
     def observe(self):
         """The observer (issue 21, docs/firmware.md): every lag state estimated from the present inputs,
-        Y[j] = (rG[j] + sum_m Go[j*nf + m] x Uc[m] / 2**(shO - gO[j])) >> gO[j], clamped to its box (the
+        Y[j] = (rG[j] + sum_m Go[j*nf + m] x Uc[m] / 2**(shO - gO[j])) >> gO[j] (gO < 0: a coarser row, clamped to the
+        box at its scale, then shifted up), clamped to its box (the
         exact state of a filter lies in it, so the clamp only removes error); the present inputs become the
         last step's, as in rest(). A table without an observer (obs 0) gets rest(): the cold start."""
         t = self.table
@@ -473,7 +474,16 @@ class Evaluator:
                         acc += self._mul(_ACC_OMUL, c, Uc[m], LO, nO, shO[k + m] - g)
                         if chk:
                             self._note(_ACC_OSUM, acc)
-                v = acc >> g
+                if g >= 0:
+                    v = acc >> g
+                else:  # a row coarser than the state (an estimate that can reach far beyond its box): clamp, then scale
+                    lo = Ylo[j] >> -g
+                    hi = Yhi[j] >> -g
+                    if acc < lo:
+                        acc = lo
+                    elif acc > hi:
+                        acc = hi
+                    v = acc << -g
                 if chk:
                     self._note(_ACC_Y, v)
                 if v < Ylo[j]:

@@ -302,7 +302,7 @@ def _check(t):
                 raise TableError(REASON_FIELD, "filter %d reads source %d" % (j, t.src[j]))
             if t.Ylo[j] > 0 or t.Yhi[j] < 0 or t.fy[j] < 0 or t.fy[j] > 28 or t.A[j] < 0:
                 raise TableError(REASON_FIELD, "filter %d state box %d..%d" % (j, t.Ylo[j], t.Yhi[j]))
-            if not 0 <= t.gO[j] <= 28 or (not t.obs and (t.gO[j] or t.rG[j])):
+            if not -28 <= t.gO[j] <= 28 or (not t.obs and (t.gO[j] or t.rG[j])):
                 raise TableError(REASON_FIELD, "observer row %d: guard bits %d, bias %d" % (j, t.gO[j], t.rG[j]))
             for m in range(t.nf):
                 k = j * t.nf + m

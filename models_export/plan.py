@@ -223,7 +223,11 @@ class Planner:
             if t["a"] == 0:
                 continue
             bound = sum(abs(G[j][k]) * max(-terms[k]["u"][0], terms[k]["u"][1]) for k in range(nf))
-            g = max(0, min(24, frac_bits(bound + 1, ACC)))
+            # the row's scale 2**g: guard bits (g > 0), or coarser than the state (g < 0) for an estimate that can reach far
+            # beyond the state's box over the envelope (gains on temperatures into a spindle state, say)
+            g = frac_bits(bound + 1, ACC, cap=24)
+            if g < -28:
+                raise ExportError("%s: the observer's estimate (up to %.3g state units) is too large for the table" % (t["name"], float(bound)))
             err = ZERO
             qs = []
             for k in range(nf):
@@ -238,7 +242,11 @@ class Planner:
                 _, nfl = rec.mul(ACC_OMUL, (q, q), u, LO, nO, sh, t["name"] + " observer")
                 err = iv_add(err, iv_scale((F(u[0]), F(u[1])), qv - G[j][k] * p2(g)), iv_scale(uin[k], G[j][k] * p2(g)),
                              floor_err(nfl))
-            r, e0 = _round_out(err, g)
+            if g >= 0:
+                r, e0 = _round_out(err, g)
+            else:  # acc clamped to the box at scale 2**g (within 1 of the exact box), then shifted up: no rounding
+                r = center(err)
+                e0 = iv_scale(iv_add(err, _c(r), (F(-1), F(1))), p2(-g))
             acc = (r, r)
             for k, (q, sh) in enumerate(qs):
                 if q:
@@ -252,7 +260,10 @@ class Planner:
             self.obs_e0[j] = iv_abs(e0)
             fy = t["fy"]
             Ylo, Yhi = t["u"][0] << fy, t["u"][1] << fy
-            rec.note(ACC_Y, acc[0] >> g, acc[1] >> g, t["name"] + " observer")
+            if g >= 0:
+                rec.note(ACC_Y, acc[0] >> g, acc[1] >> g, t["name"] + " observer")
+            else:
+                rec.note(ACC_Y, max(acc[0], Ylo >> -g) << -g, min(acc[1], Yhi >> -g) << -g, t["name"] + " observer")
             # where the exact estimate can leave the state box (over the certified envelope) the board starts at the box
             est = iv_add(*[iv_scale((F(terms[k]["u"][0]), F(terms[k]["u"][1])), G[j][k]) for k in range(nf)])
             # the error e (input errors ein and arithmetic) obeys |e'| <= (1 - a)|e| + a|ein| + rho with v >= rho / a,

@@ -22,7 +22,8 @@ tables and C headers differ from the format-4 digests only in the version byte (
 old table digests; checked when recorded); the three dynamic tables without an observer differ in the version and the
 observer's words (obs 0, settle_s 0, LO, nO, Go/shO (nf x nf zeros), gO/rG (zeros)): with those removed, the
 version set back to 4 and length, word count and CRC recomputed they give the format-4 digests (checked when
-recorded). golden/dynamic_observer.json (hil_tests/fixtures/samples.py with_observer) pins a table with an observer.
+recorded). golden/dynamic_observer.json (hil_tests/fixtures/samples.py with_observer) and the FL_THERMAL fit with its
+observer (hil_tests/fixtures/dynamic_observer_fl_thermal_ch1.json) pin tables with an observer.
 """
 import hashlib
 import json
@@ -44,7 +45,11 @@ GOLDEN = {
     "golden/screw.json": ("474dce39882309399facec6361362eeff91520b63d6fad3340cec73d161cedfd",
                           "0c45768c6ee3281e38de71554a4688ff327733209ce6344b544a7c860bf53f0c"),
     "golden/dynamic_direct.json": ("1d22f530bfc7637590d60be39071f3dbfcd7e72e6437a3f2836af14750551aa7", None),
-    "golden/dynamic_observer.json": ("cc7fa9aabaa86dde379c75ed45b09b08c23304b77396da40e3f82a9dc57a4d6d", None),
+    "golden/dynamic_observer.json": ("d115a4566634e907181df84f827dc9759e23ecaa8c8d959baea2579c634254d4", None),
+    # `tcomp fit data/fl_thermal --model dynamic --direct --channel ch1` (defaults: with the observer); rows coarser than
+    # the state (negative guard bits) for its spindle states
+    "../../hil_tests/fixtures/dynamic_observer_fl_thermal_ch1.json":
+        ("65301eed06ef8218ac213e90af47c0deb75c34dee0a10f8e7df439357d96b1c9", None),
     "golden/dynamic_slope.json": ("815523c83a6bc503eecf3b6969a854ba5492f767d3be5523b84333bb3e1daf48", None),
     "../../hil_tests/fixtures/dynamic_fl_thermal_ch1.json":
         ("af76d3f7e70dcc7f823dbc910f67c7d4edb21354e0c8b2d5921e04affa4e2f4d", None),

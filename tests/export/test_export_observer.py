@@ -179,3 +179,40 @@ def test_export_refuses_a_bad_observer_naming_the_field(edit, message):
     with pytest.raises(ExportError) as e:
         export_model(restamp(doc))
     assert message in str(e.value)
+
+
+def test_fl_thermal_fit_starts_like_the_host_on_every_sample():
+    """`tcomp fit` defaults on FL_THERMAL ch1 (hil_tests/fixtures/dynamic_observer_fl_thermal_ch1.json): its spindle
+    states' rows are coarser than the state (negative guard bits). At every 10th sample of the run, a board started
+    there estimates the host's states within the certified start error: on this run the host's estimates (with their
+    spindle states projected to >= 0, host/learning/empirical/observer.py) never leave the table's state boxes."""
+    import json
+    import os
+
+    from host.data.runs import load_run
+    here = os.path.dirname(os.path.abspath(__file__))
+    root = os.path.dirname(os.path.dirname(here))
+    with open(os.path.join(root, "hil_tests", "fixtures", "dynamic_observer_fl_thermal_ch1.json")) as fh:
+        doc = json.load(fh)
+    ex = export_model(doc)
+    t = parse_table(ex.table)
+    assert min(t.gO) < 0
+    th = doc["thermal"]
+    terms = [(x["signal"], x["tau_s"]) for x in th["terms"]]
+    host = Observer.from_document(th["observer"], terms)
+    cert = {s["filter"]: s["start_error_signal_units"] for s in ex.report["dynamic"]["observer"]["states"]}
+    run = load_run(os.path.join(root, "data", "fl_thermal"))
+    ts = run.temperatures.time_s
+    rpm_at = np.interp(ts, run.spindle.time_s, run.spindle.rpm)
+    cols = [run.temperatures.column(s) for s in t.sensors]
+    for k in range(0, len(ts), 10):
+        temps = [int(round(c[k] * 1000)) for c in cols]
+        rpm = int(round(rpm_at[k]))
+        ev = Evaluator(t, check=True)
+        ev.temps[:] = temps
+        ev.set_spindle(rpm)
+        ev.update()
+        ev.observe()
+        for j, y in host.initial_states(_host_inputs(doc, t, temps, rpm, 0)).items():
+            per = _per(terms[j][0], t) / 2.0 ** t.fy[j]
+            assert abs(ev.Y[j] * per - y) <= cert[j] * (1 + 1e-9) + 1e-12, (k, j, ev.Y[j] * per, y)
