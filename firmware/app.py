@@ -115,6 +115,7 @@ class App:
         self.spindle = 0  # last reported spindle speed (rpm) and feed (mm/min): the dynamic table's inputs
         self.feed = 0
         self.dyn = False  # the table in use is a dynamic one
+        self.obs_link = False  # its observer reads the spindle speed or feed: it waits for the first position report
         self.unobserved = False  # a dynamic table's lag states wait for the first all-good cycle (observer, or rest)
         self.settle_s = 0  # seconds since the observer's estimate (saturating at the table's settle_s) and the ms
         self.settle_ms = 0  # toward the next second
@@ -204,6 +205,13 @@ class App:
         # a dynamic table's lag states are set at the first cycle every sensor it needs reads good: estimated from the
         # inputs (its observer), or at rest without one; then the filters step at dt_ms from that cycle
         self.unobserved = self.dyn
+        # an observer that reads the spindle speed or the feed waits for the controller's first position report too
+        # (P carries the speed): estimated before it, those states would start from 0 rpm whatever the spindle does
+        self.obs_link = False
+        if self.dyn and table.obs:
+            for k in table.src:
+                if -3 <= k <= -1:
+                    self.obs_link = True
         self.settle_s = 0
         self.settle_ms = 0
         self.table = table
@@ -465,7 +473,7 @@ class App:
             ev.update()
             if self.unsettled and not needed:
                 self._settle(ev)
-            if self.unobserved and not needed:
+            if self.unobserved and not needed and (self.have_pos or not self.obs_link):
                 ev.observe()  # allocation-free (tests/firmware/test_fw_heaplock.py)
                 self.unobserved = False
                 self.step_ms = 0
