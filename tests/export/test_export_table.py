@@ -56,7 +56,7 @@ def test_round_trip(exports, kind):
     ex = exports[kind]
     t = parse_table(ex.table, expected_sensors=len(ex.fields["sensors"]))
     f = ex.fields
-    assert t.kind == kind and t.version == 4 and t.unit_code == 1 and t.error_ref == 0
+    assert t.kind == kind and t.version == 5 and t.unit_code == 1 and t.error_ref == 0
     assert t.axis == f["axis"] and t.sensors == f["sensors"] and t.provenance == f["provenance"]
     assert (t.env_lo, t.env_hi, t.ref) == (f["env_lo"], f["env_hi"], f["ref"])
     assert (t.train_lo, t.train_hi) == (f["train_lo"], f["train_hi"])
