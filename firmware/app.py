@@ -115,7 +115,8 @@ class App:
         self.spindle = 0  # last reported spindle speed (rpm) and feed (mm/min): the dynamic table's inputs
         self.feed = 0
         self.dyn = False  # the table in use is a dynamic one
-        self.obs_link = False  # its observer reads the spindle speed or feed: it waits for the first position report
+        self.obs_link = False  # its observer reads the spindle speed or feed: it waits for the controller (use_table)
+        self.heard_spin = False  # the controller has reported the spindle speed since boot
         self.unobserved = False  # a dynamic table's lag states wait for the first all-good cycle (observer, or rest)
         self.settle_s = 0  # seconds since the observer's estimate (saturating at the table's settle_s) and the ms
         self.settle_ms = 0  # toward the next second
@@ -205,13 +206,16 @@ class App:
         # a dynamic table's lag states are set at the first cycle every sensor it needs reads good: estimated from the
         # inputs (its observer), or at rest without one; then the filters step at dt_ms from that cycle
         self.unobserved = self.dyn
-        # an observer that reads the spindle speed or the feed waits for the controller's first position report too
-        # (P carries the speed): estimated before it, those states would start from 0 rpm whatever the spindle does
-        self.obs_link = False
+        # an observer that reads the spindle speed waits for the controller's first report of it (P,<pos>,<rpm>, or
+        # Modbus holding registers 18-19), one that reads the feed for its first position report: estimated before,
+        # those states would start from 0 rpm whatever the spindle does (docs/firmware.md, "Observer")
+        self.obs_link = 0  # 0: the sensors suffice; 1: wait for a position report; 2: for the spindle speed
         if self.dyn and table.obs:
             for k in table.src:
-                if -3 <= k <= -1:
-                    self.obs_link = True
+                if k == -3 and not self.obs_link:
+                    self.obs_link = 1
+                elif -2 <= k <= -1:
+                    self.obs_link = 2
         self.settle_s = 0
         self.settle_ms = 0
         self.table = table
@@ -367,6 +371,7 @@ class App:
     def report_spindle(self, rpm):
         """Spindle speed from the controller (rpm, either sign): an input of dynamic tables, like the position."""
         self.spindle = rpm
+        self.heard_spin = True
         if self.ev is not None and self.dyn:
             self.ev.set_spindle(rpm)
 
@@ -473,7 +478,8 @@ class App:
             ev.update()
             if self.unsettled and not needed:
                 self._settle(ev)
-            if self.unobserved and not needed and (self.have_pos or not self.obs_link):
+            link = self.obs_link
+            if self.unobserved and not needed and (link == 0 or (link == 1 and self.have_pos) or (link == 2 and self.heard_spin)):
                 ev.observe()  # allocation-free (tests/firmware/test_fw_heaplock.py)
                 self.unobserved = False
                 self.step_ms = 0

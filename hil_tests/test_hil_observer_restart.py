@@ -69,7 +69,9 @@ def _estimate_bound_um(doc, dT):
 
 
 @pytest.mark.parametrize("reset_h", [4.0, 12.0] if SLOW else [4.0])
-def test_board_reset_on_a_warm_machine_follows_the_hosts_observer(make_rig, reset_h):
+def test_board_reset_on_a_warm_machine_follows_the_hosts_observer(make_rig, interpreter, reset_h):
+    if interpreter == "cpython" and not SLOW:
+        pytest.skip("the 32-bit port is the board here; CPython adds 20 s and nothing the port does not show (TCOMP_SLOW=1 runs it)")
     from host.data.runs import load_run, time_slice
     from host.learning.documents import load_model
     with open(FIXTURE) as fh:

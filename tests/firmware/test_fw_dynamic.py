@@ -132,18 +132,21 @@ def test_accept_refuses_a_dynamic_table_beyond_its_certificate(tmp_path):
 def test_observer_estimates_at_the_first_all_good_cycle_and_settling_lasts_settle_s(tmp_path):
     """A table with an observer (issue 21; fixed references, settle_s 20 s) that reads the spindle speed: its lag
     states stay unset until the first cycle in which every sensor it needs reads good and the controller has sent
-    its first position report (P carries the speed), are then estimated from the inputs (a warm machine: not the
+    the spindle speed (P,<pos>,<rpm>; a P without it does not do), are then estimated from the inputs (a warm machine: not the
     rest state 0), and SETTLING is raised from boot until 20 s after the estimate."""
     from firmware.evaluate import Evaluator
     from firmware.wire import SETTLING
     app, board = rig_app(tmp_path, kind="dynamic_observer", serial_mode="stream", extra={"frame_ms": 0},
                          table_kw={"settle_s": 20.0})
     t = app.table
-    assert t.obs == 1 and t.settle_s == 20 and t.ref_mode == 0 and app.unobserved and app.obs_link
+    assert t.obs == 1 and t.settle_s == 20 and t.ref_mode == 0 and app.unobserved and app.obs_link == 2
     lag = [j for j in range(t.nf) if t.A[j]]
     run_cycles(app, board, 40)  # the sensors read good, no position report yet: nothing estimated (the filters run
     assert all(app.channels.good[i] for i in app.map) and app.unobserved  # from rest meanwhile, as without an observer)
     assert app.status & SETTLING
+    _send(app, board, cmd(b"TC,P,0"))  # the position alone: the speed is still unknown
+    run_cycles(app, board, 3)
+    assert app.unobserved
     _send(app, board, cmd(b"TC,P,0,6000"))
     run_cycles(app, board, 1)
     assert not app.unobserved and app.ev.spin == 6000
