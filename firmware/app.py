@@ -33,6 +33,7 @@ _NO_POSITION = const(0x800000)
 _NO_TABLE = const(0x200000)
 _UPLOADING = const(0x2000000)
 _REF_PENDING = const(0x8000000)
+_SETTLING = const(0x20000000)
 
 _MAX_CATCHUP = const(50)  # screw steps per cycle after a stall; beyond, time is dropped
 _POLL_MS = const(5)  # serial polling period while waiting for the next cycle
@@ -114,6 +115,11 @@ class App:
         self.spindle = 0  # last reported spindle speed (rpm) and feed (mm/min): the dynamic table's inputs
         self.feed = 0
         self.dyn = False  # the table in use is a dynamic one
+        self.obs_link = False  # its observer reads the spindle speed or feed: it waits for the controller (use_table)
+        self.heard_spin = False  # the controller has reported the spindle speed since boot
+        self.unobserved = False  # a dynamic table's lag states wait for the first all-good cycle (observer, or rest)
+        self.settle_s = 0  # seconds since the observer's estimate (saturating at the table's settle_s) and the ms
+        self.settle_ms = 0  # toward the next second
         # elapsed-time counters (ms, saturating) rather than timestamps: ticks wrap
         self.rx_ms = 0  # since the last valid controller traffic
         self.fault_active = False
@@ -197,6 +203,21 @@ class App:
         ev.update()
         if self.dyn:
             ev.rest()
+        # a dynamic table's lag states are set at the first cycle every sensor it needs reads good: estimated from the
+        # inputs (its observer), or at rest without one; then the filters step at dt_ms from that cycle
+        self.unobserved = self.dyn
+        # an observer that reads the spindle speed waits for the controller's first report of it (P,<pos>,<rpm>, or
+        # Modbus holding registers 18-19), one that reads the feed for its first position report: estimated before,
+        # those states would start from 0 rpm whatever the spindle does (docs/firmware.md, "Observer")
+        self.obs_link = 0  # 0: the sensors suffice; 1: wait for a position report; 2: for the spindle speed
+        if self.dyn and table.obs:
+            for k in table.src:
+                if k == -3 and not self.obs_link:
+                    self.obs_link = 1
+                elif -2 <= k <= -1:
+                    self.obs_link = 2
+        self.settle_s = 0
+        self.settle_ms = 0
         self.table = table
         self.slot = slot
         self.ev = ev
@@ -350,6 +371,7 @@ class App:
     def report_spindle(self, rpm):
         """Spindle speed from the controller (rpm, either sign): an input of dynamic tables, like the position."""
         self.spindle = rpm
+        self.heard_spin = True
         if self.ev is not None and self.dyn:
             self.ev.set_spindle(rpm)
 
@@ -456,6 +478,18 @@ class App:
             ev.update()
             if self.unsettled and not needed:
                 self._settle(ev)
+            link = self.obs_link
+            if self.unobserved and not needed and (link == 0 or (link == 1 and self.have_pos) or (link == 2 and self.heard_spin)):
+                ev.observe()  # allocation-free (tests/firmware/test_fw_heaplock.py)
+                self.unobserved = False
+                self.step_ms = 0
+                self.settle_s = 0
+                self.settle_ms = 0
+            elif self.dyn and self.settle_s < t.settle_s:
+                v = self.settle_ms + dt  # dt <= _CAP: small ints throughout
+                k = v // 1000
+                self.settle_ms = v - k * 1000
+                self.settle_s = t.settle_s if k >= t.settle_s - self.settle_s else self.settle_s + k
             if self.screw or self.dyn:
                 dtm = t.dt_ms
                 self.step_ms += dt
@@ -480,6 +514,8 @@ class App:
                 s |= _CLAMPED
             if ev.extrap:
                 s |= _EXTRAPOLATING
+            if self.dyn and t.obs and (self.unobserved or self.settle_s < t.settle_s):
+                s |= _SETTLING
         lim = self.limiter
         s |= lim.update(raw_ref, raw_slope, raw_total, raw_prev, usable, dt)
         self.usable = usable

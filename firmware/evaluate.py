@@ -78,7 +78,9 @@ _ACC_DMUL = const(40)  # dynamic: the filter increment
 _ACC_Y = const(42)  # dynamic: filter states
 _ACC_YMUL = const(43)  # dynamic: coefficient x filter state
 _ACC_PMUL = const(45)  # dynamic: a power of a temperature rise (S004's Eq. 12, mr_poly), one factor at a time
-_N_ACCS = const(47)
+_ACC_OMUL = const(47)  # dynamic: observer gain x filter input (issue 21)
+_ACC_OSUM = const(49)  # dynamic: an observer row's sum (guard bits finer than the state)
+_N_ACCS = const(50)
 
 _FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
 _FEED_LIMB = const(10)
@@ -436,6 +438,60 @@ class Evaluator:
             if t.A[j]:
                 self.Y[j] = 0
             self.U0[j] = self.Uc[j]
+        self.S = self._dsum(self.Slin)
+
+    def observe(self):
+        """The observer (issue 21, docs/firmware.md): every lag state estimated from the present inputs,
+        Y[j] = (rG[j] + sum_m Go[j*nf + m] x Uc[m] / 2**(shO - gO[j])) >> gO[j] (gO < 0: a coarser row, clamped to the
+        box at its scale, then shifted up), clamped to its box (the
+        exact state of a filter lies in it, so the clamp only removes error); the present inputs become the
+        last step's, as in rest(). A table without an observer (obs 0) gets rest(): the cold start."""
+        t = self.table
+        if not t.obs:
+            self.rest()
+            return
+        chk = self.check
+        nf = t.nf
+        A = t.A
+        Go = t.Go
+        shO = t.shO
+        gO = t.gO
+        rG = t.rG
+        Ylo = t.Ylo
+        Yhi = t.Yhi
+        LO = t.LO
+        nO = t.nO
+        Y = self.Y
+        Uc = self.Uc
+        for j in range(nf):
+            if A[j]:
+                g = gO[j]
+                acc = rG[j]
+                k = j * nf
+                for m in range(nf):
+                    c = Go[k + m]
+                    if c:
+                        acc += self._mul(_ACC_OMUL, c, Uc[m], LO, nO, shO[k + m] - g)
+                        if chk:
+                            self._note(_ACC_OSUM, acc)
+                if g >= 0:
+                    v = acc >> g
+                else:  # a row coarser than the state (an estimate that can reach far beyond its box): clamp, then scale
+                    lo = Ylo[j] >> -g
+                    hi = Yhi[j] >> -g
+                    if acc < lo:
+                        acc = lo
+                    elif acc > hi:
+                        acc = hi
+                    v = acc << -g
+                if chk:
+                    self._note(_ACC_Y, v)
+                if v < Ylo[j]:
+                    v = Ylo[j]
+                elif v > Yhi[j]:
+                    v = Yhi[j]
+                Y[j] = v
+            self.U0[j] = Uc[j]
         self.S = self._dsum(self.Slin)
 
     def extreme(self, sign):

@@ -19,7 +19,7 @@ from micropython import const
 
 MAGIC = b"TCTB"
 NAME_FORBIDDEN = b",*$"  # besides non-printable bytes: the $TC frames' separators (names are sent in the hello)
-_VERSION = const(4)  # 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
+_VERSION = const(5)  # 5: the dynamic table's observer (obs settle_s LO nO Go shO gO rG, issue 21); 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
 _AXIS_SIZE = const(8)
@@ -223,7 +223,7 @@ _RANGE_CODES = "fLn4scdMtFThaAPN"
 _LO = (0, 1, 1, 1, -_SH, -_SCALE, 0, 1, 1, 0, 0, 0, -1, -(1 << 30) + 1, 0, 1)
 _HI = (30, 29, 6, 4, _SH, _SCALE, _MAX_DEGREE, _MAX_SEGMENTS, 3600000, 1 << 20, (1 << 30) - 1, _SH, _MAX_SENSORS - 1, 0, 1,
        _MAX_FILTERS)
-_COUNT_CODES = "DdEQmj"  # degree + 1, degree, M + 1, M * M, M, nf
+_COUNT_CODES = "DdEQmjO"  # degree + 1, degree, M + 1, M * M, M, nf, nf * nf
 PER_SENSOR = "b shb:s fb:c"  # a sensor's slope coefficient, its shift and its fraction bits
 # the per-sensor block between the names and the payload: int32 each, milli-degC (_SENSOR_SIZE bytes)
 SENSOR_FIELDS = "env_lo env_hi ref train_lo train_hi"
@@ -235,9 +235,12 @@ _CERT = "cert_out:T cert_ref:T cert_slope:T"
 _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:f C=Q umax:T Lu:L nu:4 "
           "B=m shB=m rS=m G2=m shG2=m H shH:s fh:c Lx:L nx:n shX:s KC Lc:L nc:n shC:s "
           "air:a Tlo:A W0=m shW0=m W1=m shW1=m Ka shKa:s Bu=m shBu=m Rv |")
-# dynamic: first-order lags of temperature rises, spindle speed (and its square) and feed (docs/table-format.md)
+# dynamic: first-order lags of temperature rises, spindle speed (and its square) and feed (docs/table-format.md);
+# then the observer (issue 21): obs (1: the lag states are estimated from the inputs at the first all-good cycle),
+# settle_s (SETTLING until then), the gains Go[j*nf + m] (filter j's state from filter m's input), their shifts shO,
+# each row's guard bits gO and rounding bias rG
 _DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F Lp:L np:4 shp2:s shp:s LX:L nX:4 LY:L nY:4 nf:N "
-            "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j |")
+            "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j obs:P settle_s:T LO:L nO:4 Go=O shO=O gO=j rG=j |")
 
 
 def model_sections(kind, t):
@@ -257,7 +260,8 @@ def list_length(code, t):
     """Entries of a list field whose count code (_COUNT_CODES) is ``code``, from the fields ``t`` has so far."""
     g = getattr(t, "degree", 0)
     m = getattr(t, "M", 0)
-    return (g + 1, g, m + 1, m * m, m, getattr(t, "nf", 0))[_COUNT_CODES.index(code)]
+    nf = getattr(t, "nf", 0)
+    return (g + 1, g, m + 1, m * m, m, nf, nf * nf)[_COUNT_CODES.index(code)]
 
 
 def _take(buf, w, name, r=-1):
@@ -298,6 +302,12 @@ def _check(t):
                 raise TableError(REASON_FIELD, "filter %d reads source %d" % (j, t.src[j]))
             if t.Ylo[j] > 0 or t.Yhi[j] < 0 or t.fy[j] < 0 or t.fy[j] > 28 or t.A[j] < 0:
                 raise TableError(REASON_FIELD, "filter %d state box %d..%d" % (j, t.Ylo[j], t.Yhi[j]))
+            if not -28 <= t.gO[j] <= 28 or (not t.obs and (t.gO[j] or t.rG[j])):
+                raise TableError(REASON_FIELD, "observer row %d: guard bits %d, bias %d" % (j, t.gO[j], t.rG[j]))
+            for m in range(t.nf):
+                k = j * t.nf + m
+                if not -_SH <= t.shO[k] <= _SH or (t.Go[k] and (not t.obs or not t.A[j])):  # gains only into lag states
+                    raise TableError(REASON_FIELD, "observer gain %d,%d" % (j, m))
         return
     if hasattr(t, "Ka"):
         if t.air >= t.n_sensors:

@@ -117,12 +117,10 @@ class Model:
         self.direct = self.kind == "linear_direct" or (self.kind == "dynamic" and thermal.get("target") == "direct")
         if self.kind == "dynamic" and thermal.get("target") not in ("direct", "slope"):
             raise ExportError("thermal.target must be 'direct' or 'slope', found %r" % (thermal.get("target"),))
-        if self.kind == "dynamic" and thermal.get("observer") is not None:
-            # The firmware starts a fixed-reference table's filters in equilibrium with its first reading, not at the
-            # observer's estimate: the board would compute another model than tcomp predict. Refused until the table
-            # carries the observer (issue 21).
-            raise ExportError("thermal.observer: the firmware does not evaluate the dynamic model's observer yet, so the board would "
-                              "not compute what tcomp predict does; fit with --option observer=false to export this model")
+        if self.kind == "dynamic" and thermal.get("observer") is not None and thermal.get("reference", "fixed") != "fixed":
+            # the observer's gains read rises over the fixed reference_C; a latched reference would move them
+            raise ExportError("thermal.observer needs thermal.reference 'fixed' (the gains read T - reference_C), found %r"
+                              % (thermal.get("reference"),))
         if thermal.get("reference", "fixed") not in ("fixed", "run_start"):
             raise ExportError("thermal.reference must be 'fixed' or 'run_start', found %r" % (thermal.get("reference"),))
         # "run_start": the firmware may latch the references at a cold start (Evaluator.latch_references),
@@ -384,11 +382,50 @@ class Model:
             import numpy as np
             a = F(float(1.0 - np.exp(-(self.dt_ms / 1000.0) / float(tau)))) if tau > 0 else F(0)
             name = "thermal.terms[%d] (%s, tau %g s)" % (j, sig, float(tau))
-            self.dyn.append(dict(src=src, u=u, fy=fy, a=a, name=name, tau=tau, ein=ein))
+            self.dyn.append(dict(src=src, u=u, fy=fy, a=a, name=name, tau=tau, ein=ein, per=per, signal=sig))
             self.b.append(coef * unit * per / p2(fy))  # output scale per state unit
             self.d_lo.append(u[0] << fy)
             self.d_hi.append(u[1] << fy)
             self.b_names.append(name)
+        self._observer(thermal.get("observer"))
+
+    def _observer(self, obs):
+        """The observer's gains in table units (issue 21; host/learning/empirical/observer.py): ``obs_gain[j][m]``, the
+        exact coefficient of filter m's integer input in lag state j's integer estimate (state units 2**-fy[j]); a signal's
+        gain goes to the first filter reading it. ``None``: no observer (the filters start at rest)."""
+        self.observer, self.obs_gain, self.settle_s = None, None, 0
+        if obs is None:
+            return
+        where = "thermal.observer"
+        obs = _obj(obs, where)
+        if obs.get("method") != "static_state_estimate":
+            raise ExportError("%s.method must be 'static_state_estimate', found %r" % (where, obs.get("method")))
+        settle = _num(obs.get("settle_s"), where + ".settle_s")
+        if not 0 <= settle <= (1 << 30) - 1:
+            raise ExportError("%s.settle_s must be 0..%d s, found %r" % (where, (1 << 30) - 1, settle))
+        self.settle_s = math.ceil(F(settle))
+        first = {}
+        for m, t in enumerate(self.dyn):
+            first.setdefault(t["signal"], m)
+        lagged = [j for j, t in enumerate(self.dyn) if t["tau"] > 0]
+        states = obs.get("states")
+        if not isinstance(states, list) or [s.get("term") if isinstance(s, dict) else None for s in states] != lagged:
+            raise ExportError("%s.states must list one object per lag term (thermal.terms with tau_s > 0), in term order: "
+                              "terms %s" % (where, lagged))
+        nf = len(self.dyn)
+        self.obs_gain = [[F(0)] * nf for _ in range(nf)]
+        for k, st in enumerate(states):
+            j = st["term"]
+            gains = _obj(st.get("gains"), "%s.states[%d].gains" % (where, k))
+            for name, g in gains.items():
+                if name not in first:
+                    raise ExportError("%s.states[%d].gains: signal %r is not read by any term (the terms read %s)"
+                                      % (where, k, name, ", ".join(first)))
+                m = first[name]
+                g = F(_num(g, "%s.states[%d].gains.%s" % (where, k, name)))
+                # y_j = sum g x_m in the signals' units; x_m = per_m x Uc[m], Y[j] = y_j / per_j x 2**fy[j]
+                self.obs_gain[j][m] += g * self.dyn[m]["per"] * p2(self.dyn[j]["fy"]) / self.dyn[j]["per"]
+        self.observer = obs
 
     def _sensor_index(self, name, where):
         if name not in self.sensors:

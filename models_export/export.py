@@ -193,6 +193,14 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
             "dt_ms": f["dt_ms"], "positional": bool(f["positional"]), "filters": planner.dyn_cert,
             "horizon": "unbounded (steady state) from the cold start (latch): |e| <= v with v >= (1 - a) v + rho verified exactly",
         }
+        if planner.obs_cert is not None:
+            # the observer's integer start against the host's estimate (exact arithmetic on the document's float gains):
+            # each state's start error is inside its filter's state error bound, which the offset error above includes
+            report["dynamic"]["observer"] = {
+                "method": model.observer["method"], "settle_s": f["settle_s"], "states": planner.obs_cert,
+                "start_error_um": _up(planner.obs_start_um) + 1e-9 if planner.obs_start_um is not None else None,
+                "horizon": "from the estimate: |e| <= max(v + |ein|, |start error|), kept by every step",
+            }
     accs = {k: v for k, v in rec.accs.items() if k >= 0}
     return Export(f, table, report, accs, errs)
 

@@ -21,7 +21,7 @@ import numpy as np
 # the names firmware/evaluate.py publishes on CPython only (its globals() loop): invisible to pyright
 from firmware.evaluate import (
     ACC_AMUL, ACC_BMUL, ACC_CMUL, ACC_CUM, ACC_CUMMUL, ACC_D, ACC_DE, ACC_DMUL, ACC_DX, ACC_FEEDMUL, ACC_GEO,
-    ACC_GEOMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW, ACC_ROWMUL, ACC_S, ACC_SEGMUL,
+    ACC_GEOMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_OMUL, ACC_OSUM, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW, ACC_ROWMUL, ACC_S, ACC_SEGMUL,
     ACC_SLOPE, ACC_SMUL, ACC_STATE, ACC_SUM, ACC_THMUL, ACC_TRAVEL, ACC_XL, ACC_Y, ACC_YMUL, FEED_LIMB, FEED_W_BITS,
 )
 from models_export.certify import (
@@ -67,6 +67,9 @@ class Planner:
         self.rec = Recorder()
         self.f = {}
         self.terms = []  # dicts: name, scale, key (recorder key), err_ou (contribution in output units, 0.01 um)
+        self.obs_cert = None  # dynamic tables with an observer: per lag state, its certified start (dyn_observer)
+        self.obs_e0 = {}  # filter index -> |start error| (state units)
+        self.obs_start_um = None  # the observer's start error carried to the offset (um)
 
     def term(self, name: str, scale: int, err_ou: Num, key: str | None = None) -> None:
         """Record one term's error contribution to the offset; ``err_ou`` is in output units (0.01 um), never in
@@ -141,13 +144,20 @@ class Planner:
                  LX=LX, nX=nX, LY=LY, nY=nY, nf=len(terms), src=[], A=[], shA=[], gA=[], rA=[], fy=[], Ylo=[], Yhi=[])
         out = []
         self.dyn_cert = []
+        uin = []  # per filter: its integer input minus the exact one (input units), for the observer
         for t in terms:
             fy, a = t["fy"], t["a"]
             Ylo, Yhi = t["u"][0] << fy, t["u"][1] << fy
             rec.note(ACC_Y, Ylo, Yhi, t["name"])
             ein = ZERO
+            if t["src"] >= 0:  # the rise d = T - round(reference): the exact one is T - reference_C (the observer's)
+                fr = m.ref_frac[t["src"]]
+                uin.append((fr, fr))
+            elif t["src"] > -2:
+                uin.append(ZERO)
             if t["src"] == -2:  # rpm**2 floored limb by limb: the input is low by less than kq units
                 ein = (F(-kq) * p2(fy), F(0))
+                uin.append((F(-kq), F(0)))
                 if q_iv[1] > t["u"][1]:
                     raise ExportError("%s: the squared speed exceeds its box" % t["name"])
             elif t["src"] <= -4:  # a power of a rise, floored factor by factor (models_export.exact.power_chain)
@@ -156,6 +166,9 @@ class Planner:
                 if u[0] < t["u"][0] or u[1] > t["u"][1]:
                     raise ExportError("%s: the power exceeds its box" % t["name"])
                 ein = (err[0] * p2(fy), err[1] * p2(fy))
+                uin.append(err)
+            elif t["src"] == -3:
+                uin.append(ZERO)
             f["src"].append(t["src"])
             f["fy"].append(fy)
             f["Ylo"].append(Ylo)
@@ -191,6 +204,88 @@ class Planner:
             out.append(iv_add((-v[0], v[0]), ein))
             self.dyn_cert.append({"term": t["name"], "a": float(a), "a_quantised": float(aq), "per_step_residual_units": float(rho),
                                   "state_error_units": float(v[0]), "state_frac_bits": fy})
+        return self.dyn_observer(out, uin)
+
+    def dyn_observer(self, out, uin):
+        """Quantise and certify the observer (Evaluator.observe); returns the state error intervals ``out`` widened to
+        cover the observer's start.
+
+        Row j: acc = rG[j] + sum_m mul(Go, Uc[m], LO, nO, shO - gO[j]) at gO[j] guard bits, then >> gO[j] and clamped
+        to the state box. Its error against the exact estimate sum_m c_jm u*_m (u* the exact inputs, ``uin`` their
+        difference from the integer ones) is quantisation, input error and floors, centred by rG and rounded once:
+        an interval E0_j. The exact start is that estimate clamped to the box (a projection: |error| does not grow,
+        and from a start inside the box the exact state stays in it). The filter's error then obeys
+        |e[k+1]| <= (1 - a)|e[k]| + rho from |e[0]| <= |E0_j|, so V = max(v, |E0_j|) (v >= (1 - a) v + rho, hence
+        V >= (1 - a) V + rho) bounds it at every step after the estimate."""
+        m, f, rec = self.m, self.f, self.rec
+        terms = m.dyn
+        nf = len(terms)
+        R = max([max(-t["u"][0], t["u"][1]) for t in terms] + [1])
+        nO = 2
+        LO = max(1, -(-R.bit_length() // nO))
+        f.update(obs=0, settle_s=0, LO=LO, nO=nO, Go=[0] * (nf * nf), shO=[0] * (nf * nf), gO=[0] * nf, rG=[0] * nf)
+        self.obs_cert = None
+        G = getattr(m, "obs_gain", None)
+        if G is None:
+            return out
+        f.update(obs=1, settle_s=m.settle_s)
+        self.obs_cert = []
+        for j, t in enumerate(terms):
+            if t["a"] == 0:
+                continue
+            bound = sum(abs(G[j][k]) * max(-terms[k]["u"][0], terms[k]["u"][1]) for k in range(nf))
+            # the row's scale 2**g: guard bits (g > 0), or coarser than the state (g < 0) for an estimate that can reach far
+            # beyond the state's box over the envelope (gains on temperatures into a spindle state, say)
+            g = frac_bits(bound + 1, ACC, cap=24)
+            if g < -28:
+                raise ExportError("%s: the observer's estimate (up to %.3g state units) is too large for the table" % (t["name"], float(bound)))
+            err = ZERO
+            qs = []
+            for k in range(nf):
+                u = terms[k]["u"]
+                q, sh = fit_coef(G[j][k], limb_max(u, LO, nO), g) if G[j][k] else (0, 0)
+                qs.append((q, sh))
+                if q == 0:
+                    err = iv_add(err, iv_scale((F(u[0]), F(u[1])), -G[j][k] * p2(g)), iv_scale(uin[k], -G[j][k] * p2(g)))
+                    continue
+                qv = F(q) / p2(sh)
+                # integer q x Uc / 2**sh (floored) against c 2**g u*: (qv - c 2**g) Uc + c 2**g (Uc - u*) + floors
+                _, nfl = rec.mul(ACC_OMUL, (q, q), u, LO, nO, sh, t["name"] + " observer")
+                err = iv_add(err, iv_scale((F(u[0]), F(u[1])), qv - G[j][k] * p2(g)), iv_scale(uin[k], G[j][k] * p2(g)),
+                             floor_err(nfl))
+            if g >= 0:
+                r, e0 = _round_out(err, g)
+            else:  # acc clamped to the box at scale 2**g (within 1 of the exact box), then shifted up: no rounding
+                r = center(err)
+                e0 = iv_scale(iv_add(err, _c(r), (F(-1), F(1))), p2(-g))
+            acc = (r, r)
+            for k, (q, sh) in enumerate(qs):
+                if q:
+                    res, _ = rec.mul(ACC_OMUL, (q, q), terms[k]["u"], LO, nO, sh, t["name"] + " observer")
+                    acc = iv_add(acc, res)
+                    rec.note(ACC_OSUM, acc[0], acc[1], t["name"] + " observer")
+                    f["Go"][j * nf + k] = q
+                    f["shO"][j * nf + k] = sh + g
+            f["gO"][j] = g
+            f["rG"][j] = r
+            self.obs_e0[j] = iv_abs(e0)
+            fy = t["fy"]
+            Ylo, Yhi = t["u"][0] << fy, t["u"][1] << fy
+            if g >= 0:
+                rec.note(ACC_Y, acc[0] >> g, acc[1] >> g, t["name"] + " observer")
+            else:
+                rec.note(ACC_Y, max(acc[0], Ylo >> -g) << -g, min(acc[1], Yhi >> -g) << -g, t["name"] + " observer")
+            # where the exact estimate can leave the state box (over the certified envelope) the board starts at the box
+            est = iv_add(*[iv_scale((F(terms[k]["u"][0]), F(terms[k]["u"][1])), G[j][k]) for k in range(nf)])
+            # the error e (input errors ein and arithmetic) obeys |e'| <= (1 - a)|e| + a|ein| + rho with v >= rho / a,
+            # so V = max(v + |ein|, |E0|) is kept by every step
+            V = max(iv_abs(out[j]), iv_abs(e0))
+            if V > iv_abs(out[j]):
+                out[j] = (-V, V)
+            self.obs_cert.append({"term": t["name"], "filter": j, "guard_bits": g, "start_error_units": float(iv_abs(e0)),
+                                  "start_error_signal_units": float(iv_abs(e0) / p2(fy) * t["per"]),
+                                  "estimate_units_over_envelope": [float(est[0]), float(est[1])], "state_box_units": [Ylo, Yhi],
+                                  "estimate_clamped_in_envelope": bool(est[0] < Ylo or est[1] > Yhi)})
         return out
 
     def dyn_coefficients(self, fS: int, y_err: list[Interval], out_factor: Num, parts: list[Any]) -> None:
@@ -209,6 +304,8 @@ class Planner:
             quant = iv_scale((F(Yiv[0]), F(Yiv[1])), qv - B * p2(fS))
             err = iv_add(quant, iv_scale(y_err[j], qv), floor_err(k))
             parts.append((res, t["name"], fS + sh, iv_abs(quant), err))
+            if j in self.obs_e0:
+                self.obs_start_um = (self.obs_start_um or 0) + abs(qv) * self.obs_e0[j] * out_factor / OU_PER_UM
             self.term(t["name"], fS + sh, (iv_abs(quant) + iv_abs(iv_scale(y_err[j], qv))) * out_factor)
 
     # ------------------------------------------------------------ kinds

@@ -352,3 +352,17 @@ def test_linuxcnc_cli_has_the_spindle_option():
     p = argparse.ArgumentParser()
     linuxcnc.add_arguments(p)
     assert p.parse_args(["--port", "x", "--spindle"]).spindle and not p.parse_args(["--port", "x"]).spindle
+
+
+def test_settling_is_not_a_fault_and_reaches_the_board_status_pin():
+    """SETTLING (a dynamic table's observer estimated its states less than settle_s ago, issue 21) informs: the bridge
+    keeps applying the board's offset and passes the bit on in board-status; `tcomp monitor` names it."""
+    from firmware.wire import SETTLING
+    from host.board.link import STATUS_BITS
+    run = Run()
+    run.step(80)
+    run.link.status = SETTLING
+    rows = run.step(60)
+    assert rows[-1][1] == pytest.approx(25.0) and rows[-1][2] == 0
+    assert run.bridge.step(run.t, run.inp).board_status & SETTLING
+    assert STATUS_BITS[SETTLING] == "SETTLING"

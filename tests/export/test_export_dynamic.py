@@ -165,10 +165,6 @@ def test_latch_restarts_the_filters_from_rest():
     (lambda d: d["thermal"]["terms"].append({"signal": "T:nope", "tau_s": 0.0, "coefficient": 1.0}), "T:nope"),
     (lambda d: d["thermal"]["terms"].append({"signal": "torque", "tau_s": 0.0, "coefficient": 1.0}), "torque"),
     (lambda d: d["thermal"].update(target="sideways"), "thermal.target"),
-    # issue 21: the firmware does not start the filters at the observer's estimate yet, so such a table would
-    # compute another model than tcomp predict
-    (lambda d: d["thermal"].update(reference="fixed", observer={"method": "static_state_estimate", "tolerance": 1.0, "settle_s": 0.0, "scale": 1.0,
-                                                                "states": []}), "thermal.observer"),
 ])
 def test_export_refuses_naming_the_field(edit, message):
     doc = dynamic_doc(random.Random(1), "direct", n_sensors=2, signals=["T:T0", "spindle_krpm"])

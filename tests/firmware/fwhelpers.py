@@ -36,13 +36,16 @@ def make_table(**kw):
     from models_export.tableformat import pack
     if kw.get("kind") == "dynamic":
         return dynamic_table(kw["sensors"])
+    if kw.get("kind") == "dynamic_observer":
+        return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0))
     if kw.get("kind") == "screw":
         return screw_table(kw["sensors"])
     return pack(table_fields(**kw))
 
 
-def dynamic_table(sensors, dt_s=1.0, seed=3):
-    """An exported, certified dynamic table over ``sensors`` reading every kind of signal; 1 s filter step."""
+def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None):
+    """An exported, certified dynamic table over ``sensors`` reading every kind of signal; 1 s filter step.
+    ``observer``: None, or the settle_s of an observer (issue 21; the table then has the fixed reference)."""
     import random
     from hil_tests.fixtures.samples import dynamic_doc
     from models_export import export_model
@@ -51,7 +54,9 @@ def dynamic_table(sensors, dt_s=1.0, seed=3):
     for t, tau in zip(doc["thermal"]["terms"], (0.0, 900.0, 3600.0, 600.0, 1800.0, 300.0)):
         t["tau_s"] = tau
     doc["envelope"]["spindle_rpm"] = [0, 12000]
-    from hil_tests.fixtures.samples import restamp
+    from hil_tests.fixtures.samples import restamp, with_observer
+    if observer is not None:
+        doc = with_observer(doc, random.Random(seed), settle_s=observer)
     return export_model(restamp(doc)).table
 
 
@@ -307,6 +312,7 @@ else:
         rtu(bytes([1, 4, 0, 0, 0, 15])), rtu(bytes([1, 4, 0, 16, 0, 35]))]
     if DYN:
         msgs += [rtu(bytes([1, 16, 0, 18, 0, 2, 4, 0, 0, 0x10 + k, 0])) for k in range(5)]
+OBS = N // 2  # a dynamic table with an observer estimates its states again there (as after a table switch), under the lock
 sent = 0
 err = None
 free1 = 0  # every global exists before the lock: a new one could grow the module dict
@@ -315,6 +321,8 @@ free0 = gc.mem_free()
 micropython.heap_lock()
 try:
     for k in range(N):
+        if DYN and k == OBS:
+            app.unobserved = True
         board.serial.feed(msgs[k % len(msgs)])
         app.cycle()
         board.clock.t += 100

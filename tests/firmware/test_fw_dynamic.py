@@ -127,3 +127,46 @@ def test_accept_refuses_a_dynamic_table_beyond_its_certificate(tmp_path):
         app._accept(parse_table(bytes(b)))
     assert e.value.reason == "certificate"
     app._accept(parse_table(good))
+
+
+def test_observer_estimates_at_the_first_all_good_cycle_and_settling_lasts_settle_s(tmp_path):
+    """A table with an observer (issue 21; fixed references, settle_s 20 s) that reads the spindle speed: its lag
+    states stay unset until the first cycle in which every sensor it needs reads good and the controller has sent
+    the spindle speed (P,<pos>,<rpm>; a P without it does not do), are then estimated from the inputs (a warm machine: not the
+    rest state 0), and SETTLING is raised from boot until 20 s after the estimate."""
+    from firmware.evaluate import Evaluator
+    from firmware.wire import SETTLING
+    app, board = rig_app(tmp_path, kind="dynamic_observer", serial_mode="stream", extra={"frame_ms": 0},
+                         table_kw={"settle_s": 20.0})
+    t = app.table
+    assert t.obs == 1 and t.settle_s == 20 and t.ref_mode == 0 and app.unobserved and app.obs_link == 2
+    lag = [j for j in range(t.nf) if t.A[j]]
+    run_cycles(app, board, 40)  # the sensors read good, no position report yet: nothing estimated (the filters run
+    assert all(app.channels.good[i] for i in app.map) and app.unobserved  # from rest meanwhile, as without an observer)
+    assert app.status & SETTLING
+    _send(app, board, cmd(b"TC,P,0"))  # the position alone: the speed is still unknown
+    run_cycles(app, board, 3)
+    assert app.unobserved
+    _send(app, board, cmd(b"TC,P,0,6000"))
+    run_cycles(app, board, 1)
+    assert not app.unobserved and app.ev.spin == 6000
+    est = list(app.ev.Y)
+    # the estimate is the table's: a fresh evaluator on the same inputs gives the same states
+    ev = Evaluator(t)
+    ev.temps[:] = app.ev.temps
+    ev.set_spindle(6000)
+    ev.set_feed_rate(app.feed)
+    ev.update()
+    ev.observe()
+    assert ev.Y == est and any(est[j] for j in lag)
+    assert app.step_ms == 100  # the step phase restarts at the estimate's cycle, as at a latch (firmware App._latch)
+    run_cycles(app, board, 198)  # 19.9 s after the estimate
+    assert app.status & SETTLING
+    run_cycles(app, board, 2)
+    assert not app.status & SETTLING
+
+
+def test_table_without_observer_never_settles(tmp_path):
+    from firmware.wire import SETTLING
+    app, board = _dyn_app(tmp_path)
+    assert not app.table.obs and not app.status & SETTLING

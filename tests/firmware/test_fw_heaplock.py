@@ -23,6 +23,7 @@ import os
 import pytest
 
 from fwhelpers import compile_mpy, run_micropython, make_table, HEAPLOCK_SCRIPT
+from firmware.wire import SETTLING
 
 def heap(mode, kind="poly_slope"):
     """The test heap for the chosen interpreter's word size (hil_tests/rig/interpreters.py HEAPS); a dynamic
@@ -40,10 +41,11 @@ def mpy_dir():
 @pytest.mark.parametrize("kind", ["poly_slope", "dynamic", "screw"])
 @pytest.mark.parametrize("mode", ["stream", "modbus"])
 def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode, kind):
-    """The dynamic table (1 s filter step: a step every 10 cycles) with spindle speed and feed reports; the screw
+    """The dynamic table (1 s filter step: a step every 10 cycles, an observer that estimates the lag states at the
+    first all-good cycle and again halfway through the locked cycles) with spindle speed and feed reports; the screw
     table (format 4: bearing heat per mm of travel, the reversal term) with position reports going up and back."""
     names = ["T%d" % i for i in range(1, 12)]
-    (tmp_path / "table_a.bin").write_bytes(make_table(kind=kind, sensors=names))
+    (tmp_path / "table_a.bin").write_bytes(make_table(kind="dynamic_observer" if kind == "dynamic" else kind, sensors=names))
     n = 2000 if os.environ.get("TCOMP_SLOW") else 300
     out = run_micropython("MODE = %r\nN = %d\nDYN = %r\n" % (mode, n, kind == "dynamic") + HEAPLOCK_SCRIPT, str(tmp_path),
                           mpy_dir, heap(mode, kind))
@@ -53,6 +55,8 @@ def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode, kind):
     assert int(status, 16) & 0xFFFF == 0  # all 11 sensors good throughout
     assert int(pos) > 0  # position reports were parsed under the lock
     assert int(dfree) == 0  # nothing allocated
+    if kind == "dynamic":
+        assert int(status, 16) & SETTLING  # the estimate halfway through: settle_s (30 s) not yet passed
     # the app's own data (table, evaluator, channels, drivers, buffers), bounded so that growth is
     # noticed: on 32 bits the firmware's target (< 16 kB), on 64 bits objects are twice the size
     from hil_tests.rig import interpreters

@@ -208,7 +208,9 @@ def _hil(args, out):
         with Rig(cfg, data, interpreter=args.interpreter, temps=temps, noise_uohm=args.noise_uohm) as rig:
             rig.reader.on_frame = show
             answers = play(rig, run_, sensors, warmup_ms=int(args.warmup_s * 1000), motion=screw or dyn,
-                           faults=_actions(faults), spindle=dyn, latch=dyn and rig.signer is not None,
+                           faults=_actions(faults), spindle=dyn,
+                           # a run-start table latches at the run's start; a fixed-reference one (an observer's) refuses L
+                           latch=dyn and table.ref_mode == 1 and rig.signer is not None,
                            query_delay_ms=200 if dyn else 0)
             n = len(rig.frames)
             bad = len(rig.reader.decoder.bad)

@@ -53,6 +53,7 @@ import numpy as np
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.dynamic import FEED, SPINDLE, signals
 
+NONNEGATIVE = SPINDLE + (FEED,)  # signals whose lag states cannot be negative
 SETTLE_TOLERANCE_UM = 1.0  # the issue's restart goal: within 1 um of an uninterrupted board
 
 
@@ -78,8 +79,16 @@ class Observer:
         return start_error_bound(model, self.states, elapsed_s, self.scale)
 
     def initial_states(self, u):
-        """{term index: ŷ_j} from the filter inputs {signal: value} read at power-on."""
-        return {s["term"]: sum(g * u[name] for name, g in s["gains"].items()) for s in self.states}
+        """{term index: ŷ_j} from the filter inputs {signal: value} read at power-on.
+
+        A lag of the spindle speed, its square or the feed (inputs >= 0) is >= 0: a negative estimate is projected to
+        0, as the board projects every estimate onto its state's box (firmware Evaluator.observe; the true state is
+        in it, so the projection only removes error and the bound E_j still holds)."""
+        out = {}
+        for s in self.states:
+            v = sum(g * u[name] for name, g in s["gains"].items())
+            out[s["term"]] = 0.0 if s.get("signal") in NONNEGATIVE and v < 0 else v
+        return out
 
     def to_document(self):
         return {"method": "static_state_estimate", "tolerance": self.tolerance, "settle_s": self.settle_s, "scale": self.scale,
@@ -117,6 +126,7 @@ class Observer:
             if not isinstance(g, dict) or any(k not in signals_of(terms) for k in g) or not all(num(v) for v in g.values()):
                 raise ModelFormatError("%s.states[%d].gains must map the model's signals (%s) to finite numbers, found %r"
                                        % (where, i, ", ".join(signals_of(terms)), g))
+        states = [dict(s, signal=terms[s["term"]][0]) for s in states]
         return cls(states, obs["settle_s"], obs["tolerance"], obs["scale"])
 
 
@@ -229,7 +239,7 @@ def fit_observer(model, runs, spans=None, exclude=None, tolerance=SETTLE_TOLERAN
     for k, j in enumerate(lagged):
         coef = np.linalg.lstsq(A, Y[:, k], rcond=None)[0]
         res = Y[:, k] - A @ coef
-        states.append({"term": j, "gains": dict(zip(names, (float(v) for v in coef))),
+        states.append({"term": j, "signal": model.terms[j][0], "gains": dict(zip(names, (float(v) for v in coef))),
                        "bound": float(np.abs(res).max()), "rms": float(np.sqrt(np.mean(res**2)))})
     return Observer(states, settle_time(model, states, tolerance, scale), tolerance, scale)
 
