@@ -605,10 +605,12 @@ class Evaluator:
         Tn = self.Tn
         u = self.u
         umax = t.umax
+        U0 = 0
         if self.feed:
             w = self.w
             F = self.F
             for i in range(m):
+                U0 += u[i]
                 v = u[i] + self._mul(_ACC_FEEDMUL, w[i], F, _FEED_LIMB, 3, _FEED_W_BITS)
                 if chk:
                     self._note(_ACC_TRAVEL, v)
@@ -616,7 +618,7 @@ class Evaluator:
                     v = umax
                     self.flags |= _CLAMP_TRAVEL
                 u[i] = v
-        U = 0  # the step's total travel, for the effects' heat per mm of travel (Bu; bearing_heat)
+        U = 0  # the step's total travel, for the effects' heat per mm of travel (Bu; bearing_heat) and speed terms
         for i in range(m):
             U += u[i]
             if chk:
@@ -624,6 +626,12 @@ class Evaluator:
             if U > umax:
                 U = umax
                 self.flags |= _CLAMP_TRAVEL
+        if self.feed:
+            # the spread's fractions sum to 1: the total is the feed's travel itself (plus what position reports left in
+            # u this step), without the shares' floors
+            U = U0 + self.F
+            if U > umax:
+                U = umax
         fg = t.fg
         g = 0
         if fg:  # speed_dependent_heat (format 5): the friction heat of the step times g(U) = g0 + Gv*U (2**-fg)

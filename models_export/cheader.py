@@ -219,9 +219,12 @@ static void tcomp_step(tcomp_eval_t *e)
     uint32_t fl = 0;
     int32_t U = 0, g = 0, a0 = 0;
     int i, j, k;
+    int32_t U0 = 0;
     if (e->feed) {
         for (i = 0; i < TCOMP_M; i++) {
-            int32_t v = e->u[i] + tcomp_mul(e->w[i], e->F, 10, 3, TCOMP_FEED_W_BITS);
+            int32_t v;
+            U0 += e->u[i];
+            v = e->u[i] + tcomp_mul(e->w[i], e->F, 10, 3, TCOMP_FEED_W_BITS);
             if (v > TCOMP_UMAX) { v = TCOMP_UMAX; e->flags |= TCOMP_CLAMP_TRAVEL; }
             e->u[i] = v;
         }
@@ -230,6 +233,7 @@ static void tcomp_step(tcomp_eval_t *e)
         U += e->u[i];
         if (U > TCOMP_UMAX) { U = TCOMP_UMAX; e->flags |= TCOMP_CLAMP_TRAVEL; }
     }
+    if (e->feed) { U = U0 + e->F; if (U > TCOMP_UMAX) U = TCOMP_UMAX; } /* the spread's fractions sum to 1 */
     if (TCOMP_FG) g = TCOMP_G0 + tcomp_mul(TCOMP_GV, U, TCOMP_LU, TCOMP_NU, TCOMP_SHGV);
     if (TCOMP_FE && TCOMP_AIR >= 0) {
         a0 = tcomp_mul(TCOMP_KA, e->da0, TCOMP_LT, TCOMP_NT, TCOMP_SHKA);

@@ -540,7 +540,10 @@ class Planner:
             fc -= 1
         umax = s["umax"]
         g0, gv, D = s["g0"], s["gv"], s["D"]
-        dU = iv_scale((-(F(umax) / p2(FEED_W_BITS) + 4), F(0)), M)  # the feed/range mode's rounding of U (um)
+        # the step's total travel U: exact with position reports (a sum of integers); in the feed/range mode the firmware
+        # takes U = F, the feed's travel per step floored to 1 um (the spread's fractions sum to 1), not the sum of the
+        # segments' floored shares
+        dU = (F(-1), F(0))
         gmax = F(1) if g0 is None else g0 + max(gv, F(0)) * umax
         # the effective travel u·g(U) (speed_dependent_heat) as the limb-wise interval products bound it: a limb split
         # of [0, umax] sums to at most 2·umax, and g's own product the same
@@ -703,10 +706,10 @@ class Planner:
                 errW = iv_add(errW, iv_mul(_c(F(q) / p2(sw) - c / 1000 * p2(ft + gs)), (F(d_air[0]), F(d_air[1]))), floor_err(k))
             err = iv_add(err, errW)
             parts.append((iv_abs(errC) / p2(gs), (iv_abs(errB) + iv_abs(errW)) / p2(gs)))
+            err = iv_add(err, errD)  # (centred with the rest: the term is 0 when idle, and so symmetric in y)
             bias, _ = _round_out(err, gs)
             if s["Bu"][i]:
                 err = iv_add(err, errBu)
-            err = iv_add(err, errD)
             bias, err_state = _round_out(err, gs, bias)  # v = T + (acc + rS) >> gs
             rS.append(bias)
             acc = (acc[0] + bias, acc[1] + bias)

@@ -16,6 +16,14 @@ tables differ from the format-3 digests only in the version byte (set back to 3,
 give the old digests: checked when recorded); the dynamic tables gained the power inputs' four header words
 (Lp np shp2 shp) and the screw table the effect terms (Bu shBu per segment, Rv); the C headers follow the new
 version and the screw's new coefficients.
+
+Recorded again, on purpose, for table format 5 (issue 19, branch effects19: the reduced forms of
+speed_dependent_heat and moving_convection): every table differs from its format-4 digest only in the version
+byte, and the screw table also in eleven new screw fields (fg g0 Gv shGv Lgu ngu, D and shD per segment, fe Ly ny,
+all "absent" values for this document) before the certificate. Checked when recorded: with the version byte set
+back to 4, the new screw words cut out, the length, word count and CRC recomputed, every table gives its format-4
+digest (the previous GOLDEN, in git history); the C headers follow the new version, the new screw coefficients and the two new terms of tcomp_step.
+(The observer branch also bumps the table to format 5 in the dynamic section: the lead re-records at merge.)
 """
 import hashlib
 import json
@@ -30,16 +38,24 @@ REPO = HERE.parents[1]
 
 # document -> (sha256 of the table, sha256 of the C header or None: dynamic tables have no C evaluator)
 GOLDEN = {
-    "golden/poly_slope_run_start.json": ("1220bc0e4ebae26186188f23f5a82daf5755ef1550bc108935d856410beddf3c",
-                                         "400b6f1ad6548732464ca935ebd82c63cd47163a779251be504a8f376c9d9fcf"),
-    "golden/linear_direct.json": ("f4657172432ff1a812450bef9c17556b5801bf77425bcb3af18ea136f51d4104",
-                                  "6683bb321bc38083006844124463e14d4ea10951f544dd1a531fd419044d2987"),
-    "golden/screw.json": ("1020388c83a0485975b5bdd18919314374bad41a1cea172680a0da43881fbe50",
-                          "fd0479f1cf14783d16e1adb2c078639e9bd9bcad9dce6ecbd514dea625e1193b"),
-    "golden/dynamic_direct.json": ("b41cda0fbd622fe95a0300f58df206eb317d8fe573dff47669bdbc2dffc62c4f", None),
-    "golden/dynamic_slope.json": ("af294fcd34390f056b2e9458554085e87c33969ccbbe17300f2df8d7f1dc0c6f", None),
+    "golden/poly_slope_run_start.json":
+        ("af8d3eeded6211ac3cd43c497c90811f3745ec199e280f082880bbea84037d89",
+         "f4c51c06e7f6893c06b8de228dd2e9068bd7baba558a86c142c28c43ce8d5478"),
+    "golden/linear_direct.json":
+        ("a516603b283da0c993d112136b66e230a4f614212d43cd4f18f26262e34d8082",
+         "ee70a4cdb96906f9814f9b5c0e8e812df7d75a5f3ef8792ea9866d7b1f9d2078"),
+    "golden/screw.json":
+        ("0b1bf56398d253983d213a8a2bd9543ddd28b12c0e0d70284b7810bfda8250a5",
+         "7fcb8330bb7680e33e8b03c08af406688dd3102f3a822c56841b7ad549a12868"),
+    "golden/dynamic_direct.json":
+        ("232a67c4f4f3798856abb26206882335d3ba0ccd51ad5f922e1530cfb208e85d",
+         None),
+    "golden/dynamic_slope.json":
+        ("9c39b237fa3a049a2cc649c915ff402cce616904aa1abe33daaddb200c8cb062",
+         None),
     "../../hil_tests/fixtures/dynamic_fl_thermal_ch1.json":
-        ("13dbf8f2062014f6d52de0769df9dd07cb39ef1ad1ef3d545dcb44398819ff7d", None),
+        ("3dba5d4e0444a87311276e556f4f95541ad97d36dc6607c325d80a4f11ddaad0",
+         None),
 }
 
 
