@@ -25,6 +25,7 @@ from models_export.certify import (
 from models_export.exact import power_chain
 
 ZERO = (F(0), F(0))
+EPS_BITS = 24  # moving_convection: the step's extra convection weight D_i*U is held below 2**EPS_BITS
 
 
 def _c(x):
@@ -580,20 +581,24 @@ class Planner:
             rec.note(ACC_GMUL + 1, g_iv[0], g_iv[1], "thermal.reduced.heat_scale_per_mm")
             # g's error (2**-fg units): the quantisation of g0 and of Gv (times U >= 0) and Gv*U's floors
             err_g = iv_add(_c(F(g0q) - g0 * p2(fg)), iv_mul(_c(F(Gvq) / p2(shGv) - gv * p2(fg)), (F(0), F(umax))), floor_err(kg))
+            # the limb-wise interval loses the limbs' correlation: g is the exact factor on [0, umax] plus its error
+            g_exact = (min(g0, g0 + gv * umax) * p2(fg), max(g0, g0 + gv * umax) * p2(fg))
+            g_iv = _meet(g_iv, int_iv(g_exact, err_g))
             gabs = max(abs(g_iv[0]), abs(g_iv[1]), 1)
             Lgu = narrow_width(gabs)
             ngu = top_limbs_needed(U_iv, Lgu, gabs)
             if ngu is None:
                 raise ExportError("thermal.reduced.heat_scale_per_mm: the effective travel cannot be formed in small-int limbs")
             ue_iv, kgu = rec.mul(ACC_UGMUL, g_iv, U_iv, Lgu, ngu, fg, "speed heat: travel x g")
-            if ue_iv[0] < -8 or ue_iv[1] > ueff:
+            if max(-ue_iv[0], ue_iv[1]) > ueff:
                 raise ExportError("thermal.reduced.heat_scale_per_mm: the effective travel %r leaves its range" % (ue_iv,))
             # effective travel error (um): u * err_g / 2**fg and the floors
             # the feed/range mode's travel rounding moves U (so g) too
             err_ue = iv_add(iv_mul((F(0), F(umax)), iv_scale(err_g, 1 / p2(fg))), floor_err(kgu),
                             _hull(ZERO, iv_mul((F(0), F(umax)), iv_scale(dU, gv))))
         ue_range = (F(0), F(umax) * gmax)
-        # moving_convection: eps_i = D_i*U at 2**-fe (below 2**20), then eps_i x (T_i - a0) with y in Ly-bit limbs
+        # moving_convection: eps_i = D_i*U at 2**-fe (below 2**24: its floors times the state-minus-air range are the
+        # term's main error), then eps_i x (T_i - a0) with y in Ly-bit limbs (5 bits: 6 limbs of a 2**29 range)
         # y = T_i - a0: the exact state is its heat response (in [0, state_max_K]) plus a convex combination of the air's
         # readings, which lie within the air envelope's span of a0; the integer state is within the certified state error
         # of it (checked below against the 1 K margin)
@@ -601,9 +606,9 @@ class Planner:
         heat_K = F(float(m.red["state_max_K"]))
         y_iv = (math.floor(-(span + 1) * p2(ft)), math.ceil((heat_K + span + 1) * p2(ft)))
         if emax:
-            fe = max(1, min(30, frac_bits(emax, 1 << 20)))
-            Ly = narrow_width(1 << 20)
-            ny = top_limbs_needed(y_iv, Ly, 1 << 20)
+            fe = max(1, min(30, frac_bits(emax, 1 << EPS_BITS)))
+            Ly = narrow_width(1 << EPS_BITS)
+            ny = top_limbs_needed(y_iv, Ly, 1 << EPS_BITS)
             if ny is None:
                 raise ExportError("thermal.reduced.convection_per_mm: state x weight does not fit small-int limbs")
         else:
@@ -681,8 +686,8 @@ class Planner:
                 Dq.append(q)
                 shD.append(sd)
                 e_iv, k1 = rec.mul(ACC_EMUL, (q, q), U_iv, Lu, nu, sd, "thermal.reduced.convection_per_mm[%d]" % i)
-                if e_iv[1] > (1 << 20) or e_iv[0] < 0:
-                    raise ExportError("thermal.reduced.convection_per_mm[%d]: the weight leaves its 20 bits" % i)
+                if e_iv[1] > (1 << EPS_BITS) or e_iv[0] < 0:
+                    raise ExportError("thermal.reduced.convection_per_mm[%d]: the weight leaves its %d bits" % (i, EPS_BITS))
                 err_e = iv_add(iv_mul(_c(F(q) / p2(sd) - s["D"][i] * p2(fe)), (F(0), F(umax))), floor_err(k1),
                                _hull(ZERO, iv_scale(dU, s["D"][i] * p2(fe))))
                 rec.note(ACC_CONVY, y_iv[0], y_iv[1], "thermal.reduced.convection_per_mm[%d]" % i)
