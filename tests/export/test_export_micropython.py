@@ -135,8 +135,12 @@ print('steady', out[0], out[1], out[2], out[3])
 
 
 def screw_speed_doc(rng):
-    """A screw document with the reduced forms of speed_dependent_heat and moving_convection (format 5), 10 s steps."""
-    return screw_doc(rng, dt_s=10.0, feed_max_mm_min=12000.0, speed_effects=True)
+    """A screw document with the reduced forms of speed_dependent_heat and moving_convection (format 5), 10 s steps;
+    the table carries both terms."""
+    doc = screw_doc(rng, dt_s=10.0, feed_max_mm_min=12000.0, speed_effects=True)
+    t = parse_table(export_model(doc).table)
+    assert t.fg and t.Gv and min(t.D) > 0
+    return doc
 
 
 def mr_poly_doc_degree4(rng):

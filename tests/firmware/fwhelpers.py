@@ -77,7 +77,11 @@ def screw_table(sensors, seed=5):
     doc["envelope"]["temperature_C"] = env
     doc["envelope"]["position_mm"] = [0.0, 700.0]
     doc["sensors"] = names
-    return export_model(restamp(doc)).table
+    table = export_model(restamp(doc)).table
+    from firmware.table import parse_table
+    t = parse_table(table)
+    assert t.fg and t.Gv and min(t.D) > 0  # the table carries the speed terms the cycle must evaluate
+    return table
 
 
 def need_micropython():
