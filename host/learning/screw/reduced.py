@@ -23,7 +23,9 @@ recurrence ``T[k+1] = A·T[k] + B ∘ u[k] + c0·a[k] + c1·a[k+1]``:
   step's total travel U = Σ u_i (bearing_heat: k·0.06/C_0 into the fixed-end segment);
   ``ee_um_per_mm_per_K``, the base term's coefficient (α for E_e, plus
   ambient_expansion's k); ``reversal_um``, +r moving in +, −r moving in − (the
-  direction of the last position change).  An effect whose form the firmware cannot
+  direction of the last position change); ``heat_scale0``, ``heat_scale_per_mm`` (speed_dependent_heat): the
+  friction heat B_i·u_i times g(U) = heat_scale0 + heat_scale_per_mm·U; ``convection_per_mm`` (M,)
+  (moving_convection): the step's extra loss −D_i·U·(T_i − a), explicit (state and air at the step's start).  An effect whose form the firmware cannot
   evaluate is listed in ``omitted_effects`` with the reason in ``omitted_reasons``;
   the reduction error below then shows what leaving it out costs, and the exporter
   refuses above its limit.
