@@ -16,11 +16,11 @@ import warnings
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-from host.learning.screw.effects import make_effect  # noqa: E402
-from host.learning.screw.reduced import reduction_certificate  # noqa: E402
-from host.learning.screw.screwmodel import ScrewModel  # noqa: E402
-from host.twin import EFFECTS as TWIN_EFFECTS  # noqa: E402
-from host.twin import simulate_run  # noqa: E402
+from host.learning.screw.effects import make_effect
+from host.learning.screw.reduced import reduction_certificate
+from host.learning.screw.screwmodel import ScrewModel
+from host.twin import EFFECTS as TWIN_EFFECTS
+from host.twin import simulate_run
 
 RUNS = ("v6500_r210_490", "v15000_r210_490", "mixed")
 SPEED_FIELDS = ("heat_scale0", "heat_scale_per_mm", "convection_per_mm")
