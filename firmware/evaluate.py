@@ -78,9 +78,14 @@ _ACC_DMUL = const(40)  # dynamic: the filter increment
 _ACC_Y = const(42)  # dynamic: filter states
 _ACC_YMUL = const(43)  # dynamic: coefficient x filter state
 _ACC_PMUL = const(45)  # dynamic: a power of a temperature rise (S004's Eq. 12, mr_poly), one factor at a time
-_ACC_OMUL = const(47)  # dynamic: observer gain x filter input (issue 21)
-_ACC_OSUM = const(49)  # dynamic: an observer row's sum (guard bits finer than the state)
-_N_ACCS = const(50)
+_ACC_GMUL = const(47)  # screw: the speed heat factor g(U) (speed_dependent_heat)
+_ACC_UGMUL = const(49)  # screw: a segment's effective travel u_i x g
+_ACC_EMUL = const(51)  # screw: a segment's extra convection weight D_i x U (moving_convection)
+_ACC_CONVY = const(53)  # screw: a segment's state minus the air (state units)
+_ACC_LMUL = const(54)  # screw: the extra convection loss, weight x (state - air)
+_ACC_OMUL = const(56)  # dynamic: observer gain x filter input (issue 21)
+_ACC_OSUM = const(58)  # dynamic: an observer row's sum (guard bits finer than the state)
+_N_ACCS = const(59)
 
 _FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
 _FEED_LIMB = const(10)
@@ -645,7 +650,8 @@ class Evaluator:
 
     def step(self):
         """One time step (every ``table.dt_ms``): the dynamic table's filters, or the screw's segment recurrence
-        T <- T + C*T + B*u + Bu*U + W0*a0 + W1*a1 (then u = 0), U = sum u (the step's total travel)."""
+        T <- T + C*T + B*g(U)*u + Bu*U - D*U*(T - a0) + W0*a0 + W1*a1 (then u = 0), U = sum u (the step's total
+        travel), g(U) = g0 + Gv*U (speed_dependent_heat; 1 without it), D (moving_convection; 0 without it)."""
         if self.kind == _KIND_DYNAMIC:
             return self._dstep()
         t = self.table
@@ -655,10 +661,12 @@ class Evaluator:
         Tn = self.Tn
         u = self.u
         umax = t.umax
+        U0 = 0
         if self.feed:
             w = self.w
             F = self.F
             for i in range(m):
+                U0 += u[i]
                 v = u[i] + self._mul(_ACC_FEEDMUL, w[i], F, _FEED_LIMB, 3, _FEED_W_BITS)
                 if chk:
                     self._note(_ACC_TRAVEL, v)
@@ -666,7 +674,7 @@ class Evaluator:
                     v = umax
                     self.flags |= _CLAMP_TRAVEL
                 u[i] = v
-        U = 0  # the step's total travel, for the effects' heat per mm of travel (Bu; bearing_heat)
+        U = 0  # the step's total travel, for the effects' heat per mm of travel (Bu; bearing_heat) and speed terms
         for i in range(m):
             U += u[i]
             if chk:
@@ -674,6 +682,27 @@ class Evaluator:
             if U > umax:
                 U = umax
                 self.flags |= _CLAMP_TRAVEL
+        if self.feed:
+            # the spread's fractions sum to 1: the total is the feed's travel itself (plus what position reports left in
+            # u this step), without the shares' floors
+            U = U0 + self.F
+            if U > umax:
+                U = umax
+        fg = t.fg
+        g = 0
+        if fg:  # speed_dependent_heat (format 5): the friction heat of the step times g(U) = g0 + Gv*U (2**-fg)
+            g = t.g0 + self._mul(_ACC_GMUL, t.Gv, U, t.Lu, t.nu, t.shGv)
+            if chk:
+                self._note(_ACC_GMUL + 1, g)
+        a0 = 0  # moving_convection (format 5): the air at the step's start in state units (as settle() sets it)
+        if t.fe and t.air >= 0:
+            a0 = self._mul(_ACC_AMUL, t.Ka, self.da0, t.Lt, t.nt, t.shKa)
+            if a0 < t.Tlo:
+                a0 = t.Tlo
+            elif a0 > t.Tmax:
+                a0 = t.Tmax
+        D = t.D
+        shD = t.shD
         ns = t.ns
         Ls = t.Ls
         mask = (1 << Ls) - 1
@@ -715,7 +744,17 @@ class Evaluator:
                 if chk:
                     self._note(_ACC_ROW, acc)
                 sh -= Ls
-            acc += self._mul(_ACC_BMUL, B[i], u[i], t.Lu, t.nu, shB[i]) + rS[i]
+            ui = u[i]
+            if fg:
+                ui = self._mul(_ACC_UGMUL, g, ui, t.Lgu, t.ngu, fg)
+            acc += self._mul(_ACC_BMUL, B[i], ui, t.Lu, t.nu, shB[i]) + rS[i]
+            if D[i]:
+                # the extra loss D_i*U*(T_i - a) of the step, explicit: the weight (2**-fe) then its product
+                e = self._mul(_ACC_EMUL, D[i], U, t.Lu, t.nu, shD[i])
+                y = T[i] - a0
+                if chk:
+                    self._note(_ACC_CONVY, y)
+                acc -= self._mul(_ACC_LMUL, e, y, t.Ly, t.ny, t.fe - gs)
             if Bu[i]:
                 acc += self._mul(_ACC_BMUL, Bu[i], U, t.Lu, t.nu, shBu[i])
             if chk:

@@ -19,7 +19,7 @@ from micropython import const
 
 MAGIC = b"TCTB"
 NAME_FORBIDDEN = b",*$"  # besides non-printable bytes: the $TC frames' separators (names are sent in the hello)
-_VERSION = const(5)  # 5: the dynamic table's observer (obs settle_s LO nO Go shO gO rG, issue 21); 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
+_VERSION = const(5)  # 5: screw effect terms for speed_dependent_heat (fg g0 Gv shGv Lgu ngu) and moving_convection (D shD fe Ly ny) (issue 19), the dynamic table's observer (obs settle_s LO nO Go shO gO rG, issue 21); 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
 _AXIS_SIZE = const(8)
@@ -234,7 +234,7 @@ _POSITION = "Lw:L nw:n shw:s KS shK:s fK:f rK rT degree:d Lg:L ng:n G=D fG=D shg
 _CERT = "cert_out:T cert_ref:T cert_slope:T"
 _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:f C=Q umax:T Lu:L nu:4 "
           "B=m shB=m rS=m G2=m shG2=m H shH:s fh:c Lx:L nx:n shX:s KC Lc:L nc:n shC:s "
-          "air:a Tlo:A W0=m shW0=m W1=m shW1=m Ka shKa:s Bu=m shBu=m Rv |")
+          "air:a Tlo:A W0=m shW0=m W1=m shW1=m Ka shKa:s Bu=m shBu=m Rv fg:f g0 Gv shGv:s Lgu:L ngu:n D=m shD=m fe:f Ly:L ny:n |")
 # dynamic: first-order lags of temperature rises, spindle speed (and its square) and feed (docs/table-format.md);
 # then the observer (issue 21): obs (1: the lag states are estimated from the inputs at the first all-good cycle),
 # settle_s (SETTLING until then), the gains Go[j*nf + m] (filter j's state from filter m's input), their shifts shO,

@@ -218,16 +218,20 @@ static void tcomp_set_feed(tcomp_eval_t *e, int32_t feed, int32_t lo_um, int32_t
     e->dir = 0; /* the feed/range state has no direction */
 }
 
-/* one step of T <- T + C*T + B*u + Bu*U + W0*a0 + W1*a1 (U: the step's total travel), every TCOMP_DT_MS ms */
+/* one step of T <- T + C*T + B*g(U)*u + Bu*U - D*U*(T - a0) + W0*a0 + W1*a1 (U: the step's total travel,
+   g(U) = g0 + Gv*U: speed_dependent_heat, D: moving_convection), every TCOMP_DT_MS ms */
 static void tcomp_step(tcomp_eval_t *e)
 {
     const int32_t mask = (int32_t)((1L << TCOMP_LS) - 1);
     uint32_t fl = 0;
-    int32_t U = 0;
+    int32_t U = 0, g = 0, a0 = 0;
     int i, j, k;
+    int32_t U0 = 0;
     if (e->feed) {
         for (i = 0; i < TCOMP_M; i++) {
-            int32_t v = e->u[i] + tcomp_mul(e->w[i], e->F, 10, 3, TCOMP_FEED_W_BITS);
+            int32_t v;
+            U0 += e->u[i];
+            v = e->u[i] + tcomp_mul(e->w[i], e->F, 10, 3, TCOMP_FEED_W_BITS);
             if (v > TCOMP_UMAX) { v = TCOMP_UMAX; e->flags |= TCOMP_CLAMP_TRAVEL; }
             e->u[i] = v;
         }
@@ -235,6 +239,13 @@ static void tcomp_step(tcomp_eval_t *e)
     for (i = 0; i < TCOMP_M; i++) {
         U += e->u[i];
         if (U > TCOMP_UMAX) { U = TCOMP_UMAX; e->flags |= TCOMP_CLAMP_TRAVEL; }
+    }
+    if (e->feed) { U = U0 + e->F; if (U > TCOMP_UMAX) U = TCOMP_UMAX; } /* the spread's fractions sum to 1 */
+    if (TCOMP_FG) g = TCOMP_G0 + tcomp_mul(TCOMP_GV, U, TCOMP_LU, TCOMP_NU, TCOMP_SHGV);
+    if (TCOMP_FE && TCOMP_AIR >= 0) {
+        a0 = tcomp_mul(TCOMP_KA, e->da0, TCOMP_LT, TCOMP_NT, TCOMP_SHKA);
+        if (a0 < TCOMP_TLO) a0 = TCOMP_TLO;
+        else if (a0 > TCOMP_TMAX) a0 = TCOMP_TMAX;
     }
     for (j = 0; j < TCOMP_M; j++) {
         int32_t x = e->T[j];
@@ -250,7 +261,15 @@ static void tcomp_step(tcomp_eval_t *e)
             acc += tcomp_shift(r, sh);
             sh -= TCOMP_LS;
         }
-        acc += tcomp_mul(tcomp_B[i], e->u[i], TCOMP_LU, TCOMP_NU, tcomp_shB[i]) + tcomp_rS[i];
+        {
+            int32_t ui = e->u[i];
+            if (TCOMP_FG) ui = tcomp_mul(g, ui, TCOMP_LGU, TCOMP_NGU, TCOMP_FG);
+            acc += tcomp_mul(tcomp_B[i], ui, TCOMP_LU, TCOMP_NU, tcomp_shB[i]) + tcomp_rS[i];
+        }
+        if (tcomp_D[i]) {
+            int32_t eps = tcomp_mul(tcomp_D[i], U, TCOMP_LU, TCOMP_NU, tcomp_shD[i]);
+            acc -= tcomp_mul(eps, e->T[i] - a0, TCOMP_LY, TCOMP_NY, TCOMP_FE - TCOMP_GS);
+        }
         if (tcomp_Bu[i]) acc += tcomp_mul(tcomp_Bu[i], U, TCOMP_LU, TCOMP_NU, tcomp_shBu[i]);
         if (TCOMP_AIR >= 0) {
             acc += tcomp_mul(tcomp_W0[i], e->da0, TCOMP_LT, TCOMP_NT, tcomp_shW0[i]);

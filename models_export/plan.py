@@ -20,9 +20,10 @@ import numpy as np
 
 # the names firmware/evaluate.py publishes on CPython only (its globals() loop): invisible to pyright
 from firmware.evaluate import (
-    ACC_AMUL, ACC_BMUL, ACC_CMUL, ACC_CUM, ACC_CUMMUL, ACC_D, ACC_DE, ACC_DMUL, ACC_DX, ACC_FEEDMUL, ACC_GEO,
-    ACC_GEOMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_OMUL, ACC_OSUM, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW, ACC_ROWMUL, ACC_S, ACC_SEGMUL,
-    ACC_SLOPE, ACC_SMUL, ACC_STATE, ACC_SUM, ACC_THMUL, ACC_TRAVEL, ACC_XL, ACC_Y, ACC_YMUL, FEED_LIMB, FEED_W_BITS,
+    ACC_AMUL, ACC_BMUL, ACC_CMUL, ACC_CONVY, ACC_CUM, ACC_CUMMUL, ACC_D, ACC_DE, ACC_DMUL, ACC_DX, ACC_EMUL, ACC_FEEDMUL,
+    ACC_GEO, ACC_GEOMUL, ACC_GMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_LMUL, ACC_OMUL, ACC_OSUM, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW,
+    ACC_ROWMUL, ACC_S, ACC_SEGMUL, ACC_SLOPE, ACC_SMUL, ACC_STATE, ACC_SUM, ACC_THMUL, ACC_TRAVEL, ACC_UGMUL, ACC_XL, ACC_Y,
+    ACC_YMUL, FEED_LIMB, FEED_W_BITS,
 )
 from models_export.certify import (
     ACC, OU_PER_UM, PROD, SLOPE_PER_OU_PER_UM, ExportError, Recorder, center, fit_coef, floor_err, frac_bits,
@@ -35,6 +36,7 @@ if TYPE_CHECKING:
     from models_export.exact import Model
 
 ZERO = (F(0), F(0))
+EPS_BITS = 24  # moving_convection: the step's extra convection weight D_i*U is held below 2**EPS_BITS
 
 
 def _c(x):
@@ -514,8 +516,9 @@ class Planner:
         Tlo_K = F(d_air[0], 1000)
         Thi_K = F(Tmax) + F(d_air[1], 1000)
         Bu, rev = self._screw_effects(red, M)
+        g0, gv, D = self._screw_speed_effects(red, A, M, umax)
         self.s = dict(M=M, A=A, B=B, edges=edges, edges_um=edges_um, fixed=fixed, fe=fe, Tmax=Thi_K, Tlo=Tlo_K, umax=umax,
-                      air=air, c0=c0, c1=c1, d_air=d_air, Bu=Bu, rev=rev)
+                      air=air, c0=c0, c1=c1, d_air=d_air, Bu=Bu, rev=rev, g0=g0, gv=gv, D=D)
         f.update(M=M, dt_ms=dt_ms, fixed_end=fe, fmax=fmax, edges=edges_um, umax=umax, air=air)
         alpha = m.alpha
         return abs(alpha) * max(Thi_K, -Tlo_K) * F(edges[-1]) * OU_PER_UM * 2  # x2: margin for state errors
@@ -535,6 +538,37 @@ class Planner:
         if not isinstance(rev, (int, float)) or not math.isfinite(rev) or abs(rev) > 1000:
             raise ExportError("thermal.reduced.reversal_um must be a finite number of um below 1000 (got %r)" % (rev,))
         return Bu, F(float(rev))
+
+    def _screw_speed_effects(self, red, A, M, umax):
+        """The speed effects' reduced forms (format 5): the friction heat's factor g(U) = g0 + gv·U (gv per um; None
+        without speed_dependent_heat) and the extra convection weight D_i per um of the step's travel (moving_convection;
+        zeros without it). Refuses a factor that turns negative on [0, umax] (no state bound) and D_i·umax > A_ii (the
+        explicit step would be no convex combination: neither the state nor its error would stay bounded)."""
+        g0, gv = red.get("heat_scale0"), red.get("heat_scale_per_mm")
+        if g0 is None and gv is None:
+            g0 = gv = None
+        else:
+            for v, name in ((g0, "heat_scale0"), (gv, "heat_scale_per_mm")):
+                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > 1000:
+                    raise ExportError("thermal.reduced.%s must be a finite number (got %r)" % (name, v))
+            g0, gv = F(float(g0)), F(float(gv)) / 1000
+            if g0 < 0 or g0 + gv * umax < 0:
+                raise ExportError("thermal.reduced.heat_scale0/heat_scale_per_mm: the friction heat factor is negative on "
+                                  "the travel range 0..%d um per step (speed_dependent_heat): no certified state bound" % umax)
+        dd = red.get("convection_per_mm")
+        if dd is None:
+            D = [F(0)] * M
+        else:
+            if not isinstance(dd, list) or len(dd) != M or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v >= 0 for v in dd):
+                raise ExportError("thermal.reduced.convection_per_mm must be %d finite non-negative numbers" % M)
+            D = [F(float(v)) / 1000 for v in dd]
+            for i in range(M):
+                if D[i] * umax > F(float(A[i, i])):
+                    raise ExportError("thermal.reduced.convection_per_mm[%d]: the extra loss per step at the top feed, %.4g, "
+                                      "exceeds A[%d][%d] = %.4g (moving_convection): the explicit step is not stable"
+                                      % (i, float(D[i] * umax), i, i, float(A[i, i])))
+        return g0, gv, D
 
     def _screw_air(self, red, A, M):
         """(channel index or -1, c0, c1 as Fractions, air range (milli-K) over its reference)."""
@@ -614,17 +648,80 @@ class Planner:
                 break
             fc -= 1
         umax = s["umax"]
+        g0, gv, D = s["g0"], s["gv"], s["D"]
+        # the step's total travel U: exact with position reports (a sum of integers); in the feed/range mode the firmware
+        # takes U = F, the feed's travel per step floored to 1 um (the spread's fractions sum to 1), not the sum of the
+        # segments' floored shares
+        dU = (F(-1), F(0))
+        gmax = F(1) if g0 is None else g0 + max(gv, F(0)) * umax
+        # the effective travel u·g(U) (speed_dependent_heat) as the limb-wise interval products bound it: a limb split
+        # of [0, umax] sums to at most 2·umax, and g's own product the same
+        ueff = umax if g0 is None else math.ceil(2 * umax * (g0 + 2 * max(gv, F(0)) * umax)) + 64
         nu = 2
-        Lu = max(1, -(-umax.bit_length() // nu))
+        Lu = max(1, -(-ueff.bit_length() // nu))
         U_iv = (0, umax)
-        lmu = limb_max(U_iv, Lu, nu)
-        # guard bits: the row sum |C T| + B u + W a (state units) times 2**gs stays below ACC
-        Bmax = max(F(float(b)) + bu for b, bu in zip(s["B"], s["Bu"])) / 1000 * p2(ft) * umax
+        lmu = limb_max((0, ueff), Lu, nu)
+        # guard bits: the row sum |C T| + B u + W a + D U (T - a) (state units) times 2**gs stays below ACC
+        Bmax = max(F(float(b)) * gmax + bu for b, bu in zip(s["B"], s["Bu"])) / 1000 * p2(ft) * umax
         d_air = s["d_air"]
         Dabs = max(-d_air[0], d_air[1])
         Wmax = max(c0 + c1 for c0, c1 in zip(s["c0"], s["c1"])) / 1000 * p2(ft) * Dabs
-        gs = max(0, min(20, frac_bits(rowsum * TA + Bmax + Wmax + 1, ACC)))
+        emax = max(D) * umax  # the largest extra convection weight of a step (<= A_ii, checked)
+        gs = max(0, min(20, frac_bits(rowsum * TA + Bmax + Wmax + emax * (Tq - Tlq) + 1, ACC)))
         lmd = limb_max(d_air, f["Lt"], f["nt"])
+        # the start state (Evaluator.settle) and the air in state units the convection term reads: Ka * a ~ a * 2**ft / 1000
+        if s["air"] >= 0:
+            Ka, shKa = fit_coef(p2(ft) / 1000, lmd, 0)
+            a0_iv, k = rec.mul(ACC_AMUL, (Ka, Ka), d_air, f["Lt"], f["nt"], shKa, "air start state")
+            e0 = iv_abs(iv_add(iv_mul(_c(F(Ka) / p2(shKa) - p2(ft) / 1000), (F(d_air[0]), F(d_air[1]))), floor_err(k)))
+        else:
+            Ka, shKa, e0 = 0, 0, F(0)
+        # speed_dependent_heat: g = g0 + Gv*U at 2**-fg (below 2**20, so g x travel limbs of 9 bits stay small ints)
+        if g0 is None:
+            fg, g0q, Gvq, shGv, Lgu, ngu = 0, 0, 0, 0, 1, 1
+            err_g = ZERO
+        else:
+            fg = max(1, min(30, frac_bits(gmax + 1, 1 << 20)))
+            g0q = rnd(g0 * p2(fg))
+            Gvq, shGv = fit_coef(gv, limb_max(U_iv, Lu, nu), fg)
+            gres, kg = rec.mul(ACC_GMUL, (Gvq, Gvq), U_iv, Lu, nu, shGv, "thermal.reduced.heat_scale_per_mm")
+            g_iv = (g0q + gres[0], g0q + gres[1])
+            rec.note(ACC_GMUL + 1, g_iv[0], g_iv[1], "thermal.reduced.heat_scale_per_mm")
+            # g's error (2**-fg units): the quantisation of g0 and of Gv (times U >= 0) and Gv*U's floors
+            err_g = iv_add(_c(F(g0q) - g0 * p2(fg)), iv_mul(_c(F(Gvq) / p2(shGv) - gv * p2(fg)), (F(0), F(umax))), floor_err(kg))
+            # the limb-wise interval loses the limbs' correlation: g is the exact factor on [0, umax] plus its error
+            g_exact = (min(g0, g0 + gv * umax) * p2(fg), max(g0, g0 + gv * umax) * p2(fg))
+            g_iv = _meet(g_iv, int_iv(g_exact, err_g))
+            gabs = max(abs(g_iv[0]), abs(g_iv[1]), 1)
+            Lgu = narrow_width(gabs)
+            ngu = top_limbs_needed(U_iv, Lgu, gabs)
+            if ngu is None:
+                raise ExportError("thermal.reduced.heat_scale_per_mm: the effective travel cannot be formed in small-int limbs")
+            ue_iv, kgu = rec.mul(ACC_UGMUL, g_iv, U_iv, Lgu, ngu, fg, "speed heat: travel x g")
+            if max(-ue_iv[0], ue_iv[1]) > ueff:
+                raise ExportError("thermal.reduced.heat_scale_per_mm: the effective travel %r leaves its range" % (ue_iv,))
+            # effective travel error (um): u * err_g / 2**fg and the floors
+            # the feed/range mode's travel rounding moves U (so g) too
+            err_ue = iv_add(iv_mul((F(0), F(umax)), iv_scale(err_g, 1 / p2(fg))), floor_err(kgu),
+                            _hull(ZERO, iv_mul((F(0), F(umax)), iv_scale(dU, gv))))
+        ue_range = (F(0), F(umax) * gmax)
+        # moving_convection: eps_i = D_i*U at 2**-fe (below 2**24: its floors times the state-minus-air range are the
+        # term's main error), then eps_i x (T_i - a0) with y in Ly-bit limbs (5 bits: 6 limbs of a 2**29 range)
+        # y = T_i - a0: the exact state is its heat response (in [0, state_max_K]) plus a convex combination of the air's
+        # readings, which lie within the air envelope's span of a0; the integer state is within the certified state error
+        # of it (checked below against the 1 K margin)
+        span = F(m.env_hi[s["air"]] - m.env_lo[s["air"]], 1000) if s["air"] >= 0 else F(0)
+        heat_K = F(float(m.red["state_max_K"]))
+        y_iv = (math.floor(-(span + 1) * p2(ft)), math.ceil((heat_K + span + 1) * p2(ft)))
+        if emax:
+            fe = max(1, min(30, frac_bits(emax, 1 << EPS_BITS)))
+            Ly = narrow_width(1 << EPS_BITS)
+            ny = top_limbs_needed(y_iv, Ly, 1 << EPS_BITS)
+            if ny is None:
+                raise ExportError("thermal.reduced.convection_per_mm: state x weight does not fit small-int limbs")
+        else:
+            fe, Ly, ny = 0, 1, 1
+        Dq, shD = [], []
         W0q, shW0, W1q, shW1 = [], [], [], []
         Bq, shB, rS = [], [], []
         Buq, shBu = [], []
@@ -660,10 +757,16 @@ class Planner:
             q, sb = fit_coef(F(float(s["B"][i])) / 1000, lmu, ft + gs)
             Bq.append(q)
             shB.append(sb)
-            res, k = rec.mul(ACC_BMUL, (q, q), U_iv, Lu, nu, sb, "thermal.reduced.B_K_per_mm[%d]" % i)
             bq = F(q) / p2(sb)
             db = bq - F(float(s["B"][i])) / 1000 * p2(ft + gs)
-            errB = iv_add(iv_mul(_c(db), (F(0), F(umax))), _hull(ZERO, iv_scale(feed_du, bq)))
+            if g0 is None:
+                res, k = rec.mul(ACC_BMUL, (q, q), U_iv, Lu, nu, sb, "thermal.reduced.B_K_per_mm[%d]" % i)
+                errB = iv_add(iv_mul(_c(db), (F(0), F(umax))), _hull(ZERO, iv_scale(feed_du, bq)))
+            else:
+                # on the effective travel u*g: B's quantisation over its range, the travel's error times B, and the
+                # feed/range mode's travel rounding times g
+                res, k = rec.mul(ACC_BMUL, (q, q), (min(0, ue_iv[0]), ue_iv[1]), Lu, nu, sb, "thermal.reduced.B_K_per_mm[%d]" % i)
+                errB = iv_add(iv_mul(_c(db), ue_range), iv_scale(err_ue, bq), _hull(ZERO, iv_scale(feed_du, bq * gmax)))
             err = iv_add(err, errB, floor_err(k))
             acc = iv_add(acc, res)
             # the effects' heat per mm of the step's total travel U = sum u (clamped to umax, as u is); in the
@@ -682,6 +785,29 @@ class Planner:
                 q, sb = 0, 0
             Buq.append(q)
             shBu.append(sb)
+            errD = ZERO
+            if s["D"][i]:
+                # - eps_i * (T_i - a0): eps's quantisation and floors times y, the floors of the product (they lower the
+                # loss), and eps times the air's start-state error; the state's own error enters the recursion through
+                # A - diag(eps), |A - diag(eps)| <= |A| as eps <= A_ii (checked), so the supersolution below covers it
+                q, sd = fit_coef(s["D"][i], lmu, fe)
+                Dq.append(q)
+                shD.append(sd)
+                e_iv, k1 = rec.mul(ACC_EMUL, (q, q), U_iv, Lu, nu, sd, "thermal.reduced.convection_per_mm[%d]" % i)
+                if e_iv[1] > (1 << EPS_BITS) or e_iv[0] < 0:
+                    raise ExportError("thermal.reduced.convection_per_mm[%d]: the weight leaves its %d bits" % (i, EPS_BITS))
+                err_e = iv_add(iv_mul(_c(F(q) / p2(sd) - s["D"][i] * p2(fe)), (F(0), F(umax))), floor_err(k1),
+                               _hull(ZERO, iv_scale(dU, s["D"][i] * p2(fe))))
+                rec.note(ACC_CONVY, y_iv[0], y_iv[1], "thermal.reduced.convection_per_mm[%d]" % i)
+                loss, k2 = rec.mul(ACC_LMUL, e_iv, y_iv, Ly, ny, fe - gs, "thermal.reduced.convection_per_mm[%d]" % i)
+                acc = iv_add(acc, (-loss[1], -loss[0]))
+                err_l = iv_add(iv_scale(iv_mul(err_e, (F(y_iv[0]), F(y_iv[1]))), p2(gs - fe)), floor_err(k2))
+                eps_max = s["D"][i] * umax
+                errD = iv_add((-err_l[1], -err_l[0]), iv_scale((-e0, e0), eps_max * p2(gs)))
+                errB = iv_add(errB, errD)
+            else:
+                Dq.append(0)
+                shD.append(0)
             # air at the step's start and end (milli-K over the reference), weights c/1000 K per mK
             errW = ZERO
             for c, qs, shs in ((s["c0"][i], W0q, shW0), (s["c1"][i], W1q, shW1)):
@@ -693,6 +819,7 @@ class Planner:
                 errW = iv_add(errW, iv_mul(_c(F(q) / p2(sw) - c / 1000 * p2(ft + gs)), (F(d_air[0]), F(d_air[1]))), floor_err(k))
             err = iv_add(err, errW)
             parts.append((iv_abs(errC) / p2(gs), (iv_abs(errB) + iv_abs(errW)) / p2(gs)))
+            err = iv_add(err, errD)  # (centred with the rest: the term is 0 when idle, and so symmetric in y)
             bias, _ = _round_out(err, gs)
             if s["Bu"][i]:
                 err = iv_add(err, errBu)
@@ -706,13 +833,6 @@ class Planner:
         maxlen = max(b - a for a, b in zip(s["edges_um"], s["edges_um"][1:]))
         rec.note(ACC_TRAVEL, 0, umax + max(maxlen, umax), "travel")
         rec.mul(ACC_FEEDMUL, (0, 1 << FEED_W_BITS), (0, umax), FEED_LIMB, 3, FEED_W_BITS, "travel")
-        # the start state (Evaluator.settle): Ka * a ~ a * 2**ft / 1000, clamped to the state box
-        if s["air"] >= 0:
-            Ka, shKa = fit_coef(p2(ft) / 1000, lmd, 0)
-            res, k = rec.mul(ACC_AMUL, (Ka, Ka), d_air, f["Lt"], f["nt"], shKa, "air start state")
-            e0 = iv_abs(iv_add(iv_mul(_c(F(Ka) / p2(shKa) - p2(ft) / 1000), (F(d_air[0]), F(d_air[1]))), floor_err(k)))
-        else:
-            Ka, shKa, e0 = 0, 0, F(0)
         rec.note(ACC_STATE, Tlq, Tq, "air start state")
         # state error: v >= |A| v + rho, verified exactly; a start error e0 adds e0 to every component
         # (|A| has row sums <= 1, so v + e0 is again a supersolution and bounds the error from the start)
@@ -725,10 +845,14 @@ class Planner:
             if any(sum(row) > 1 for row in AF):
                 raise ExportError("thermal.reduced.A: a row sum above 1, the start state's error cannot be bounded")
             v = [x + e0 for x in v]
+        if emax and max(v) + e0 >= p2(ft):
+            raise ExportError("thermal.reduced.convection_per_mm: the state error bound %.3g K exceeds the 1 K margin of the "
+                              "state minus the air" % float((max(v) + e0) / p2(ft)))
         self.state_cert = {"rho_state_units": [float(r) for r in rho], "v_state_units": [float(x) for x in v], "ft": ft,
                            "start_error_state_units": float(e0)}
         f.update(ft=ft, Tmax=Tq, Tlo=Tlq, Ls=Ls, ns=ns, fc=fc, gs=gs, C=[c for row in Cq for c in row], Lu=Lu, nu=nu, B=Bq,
-                 shB=shB, rS=rS, W0=W0q, shW0=shW0, W1=W1q, shW1=shW1, Ka=Ka, shKa=shKa, Bu=Buq, shBu=shBu)
+                 shB=shB, rS=rS, W0=W0q, shW0=shW0, W1=W1q, shW1=shW1, Ka=Ka, shKa=shKa, Bu=Buq, shBu=shBu,
+                 fg=fg, g0=g0q, Gv=Gvq, shGv=shGv, Lgu=Lgu, ngu=ngu, D=Dq, shD=shD, fe=fe, Ly=Ly, ny=ny)
         # informational split of the certified state error by source: output weight of a unit residual in row i
         W = np.linalg.inv(np.eye(M) - np.abs(np.asarray(A, dtype=float)))
         wout = [float(abs(m.alpha) * (F(s["edges"][j + 1]) - F(s["edges"][j])) * OU_PER_UM) / 2.0 ** ft for j in range(M)]

@@ -199,8 +199,22 @@ def _feed_travel(t, feed, lo, hi):
 @settings(max_examples=12 if not SLOW else 120, phases=[Phase.explicit, Phase.reuse, Phase.generate], **SETTINGS)
 @given(seed=st.integers(0, 2 ** 31), data=st.data())
 def test_screw_reduced_within_certificate(seed, data):
+    _screw_within_certificate(seed, data, speed_effects=False)
+
+
+@pytest.mark.slow
+@settings(max_examples=12 if not SLOW else 120, phases=[Phase.explicit, Phase.reuse, Phase.generate], **SETTINGS)
+@given(seed=st.integers(0, 2 ** 31), data=st.data())
+def test_screw_speed_effects_within_certificate(seed, data):
+    """Format 5: the friction heat's factor g(U) (speed_dependent_heat) and the extra convection loss D·U·(T − a)
+    (moving_convection) against the float recurrence written from docs/table-format.md (hil_tests/fixtures/reference.py),
+    every accumulator inside its certified interval."""
+    _screw_within_certificate(seed, data, speed_effects=True)
+
+
+def _screw_within_certificate(seed, data, speed_effects):
     rng = random.Random(seed)
-    doc = screw_doc(rng)
+    doc = screw_doc(rng, speed_effects=speed_effects)
     try:
         ex = export_model(doc)
     except ExportError as exc:
@@ -252,7 +266,11 @@ def test_screw_reduced_within_certificate(seed, data):
         ref.update(temps)
         _check(ex, ev, ref, temps, data.draw(st.integers(t.pos_lo - 5000, t.pos_hi + 5000)) if k % 10 == 0 else rng.randint(t.pos_lo, t.pos_hi))
         assert not ev.flags & CLAMP_STATE  # the certified state bound is never hit by admissible motion
-    assert _accs_inside(ex, ev) > 20
+    seen = _accs_inside(ex, ev)
+    assert seen > 20
+    if speed_effects:
+        from firmware.evaluate import ACC_CONVY, ACC_GMUL, ACC_LMUL
+        assert all(ev.lo[a] <= ev.hi[a] for a in (ACC_GMUL, ACC_CONVY, ACC_LMUL))  # the new terms really ran
 
 
 @pytest.mark.slow

@@ -65,6 +65,8 @@ def test_bit_identical_to_cpython(tmp_path, mp, runner, word):
         cases.append((export_model(linear_direct_doc(random.Random(seed))).table, None))
         cases.append((export_model(screw_doc(random.Random(seed))).table, None))
         cases.append((export_model(dynamic_doc(random.Random(seed), "direct" if seed != 1 else "slope")).table, None))
+        # format 5: the friction heat's speed factor and the extra convection while moving (issue 19)
+        cases.append((export_model(screw_speed_doc(random.Random(seed))).table, None))
     cases = [(tb, _vectors(_FakeEx(tb), rng, n)) for tb, _ in cases]
     path = tmp_path / "cases.jsonl"
     path.write_text("".join(json.dumps({"table": tb.hex(), "ops": ops}) + "\n" for tb, ops in cases))
@@ -77,7 +79,7 @@ def test_bit_identical_to_cpython(tmp_path, mp, runner, word):
         assert mp == cp
         total += len(cp)
         assert len(set(tuple(r) for r in cp)) > len(cp) // 4  # the vectors exercise many distinct outputs
-    assert total == 12 * n
+    assert total == 15 * n
 
 
 class _FakeEx:
@@ -132,12 +134,22 @@ print('steady', out[0], out[1], out[2], out[3])
 """
 
 
+def screw_speed_doc(rng):
+    """A screw document with the reduced forms of speed_dependent_heat and moving_convection (format 5), 10 s steps;
+    the table carries both terms."""
+    doc = screw_doc(rng, dt_s=10.0, feed_max_mm_min=12000.0, speed_effects=True)
+    t = parse_table(export_model(doc).table)
+    assert t.fg and t.Gv and min(t.D) > 0
+    return doc
+
+
 def mr_poly_doc_degree4(rng):
     """S004's Eq. 12 with every power (the firmware's power inputs run in the cycle)."""
     return mr_poly_doc(rng, degree=4)
 
 
-@pytest.mark.parametrize("make", [poly_slope_doc, linear_direct_doc, screw_doc, dynamic_doc, mr_poly_doc_degree4], ids=lambda f: f.__name__)
+@pytest.mark.parametrize("make", [poly_slope_doc, linear_direct_doc, screw_doc, screw_speed_doc, dynamic_doc, mr_poly_doc_degree4],
+                         ids=lambda f: f.__name__)
 def test_steady_state_allocates_nothing(tmp_path, mp, make):
     ex = export_model(make(random.Random(4)))
     t = parse_table(ex.table)

@@ -21,8 +21,12 @@ from host.twin import simulate_run
 from models_export import ExportError, export_model
 
 RUN = "mixed"  # several feeds, bidirectional sweeps
-CARRIED = ["bearing_heat", "ambient_expansion", "reversal_error", "ambient_expansion+bearing_heat"]
-NOT_CARRIED = ["speed_dependent_heat", "moving_convection"]
+CARRIED = ["bearing_heat", "ambient_expansion", "reversal_error", "ambient_expansion+bearing_heat", "speed_dependent_heat",
+           "moving_convection", "moving_convection+speed_dependent_heat"]
+# parameter values whose reduced form the firmware cannot carry (the effect's reduce refuses): a friction heat factor
+# 1 + k(v/v_ref - 1) negative at rest (k > 1), and an extra convection loss per step above the state's own weight A_ii
+UNREDUCIBLE = {"speed_dependent_heat": ({"speed_dependent_heat.k": 1.4}, None),
+               "moving_convection": ({"moving_convection.k": 20.0}, 1.0e6)}
 _CACHE = {}
 
 
@@ -91,7 +95,7 @@ def _without_effects(model, run):
         model.params_, model.effect_params_ = model._split(saved)
 
 
-@pytest.mark.parametrize("names", ["bearing_heat", "ambient_expansion"])
+@pytest.mark.parametrize("names", ["bearing_heat", "ambient_expansion", "speed_dependent_heat", "moving_convection"])
 def test_a_table_without_the_effect_term_leaves_the_bound(names):
     """The negative control: the effect's reduced form removed from the same document, the board misses."""
     run, model, doc = fitted(names)
@@ -99,6 +103,10 @@ def test_a_table_without_the_effect_term_leaves_the_bound(names):
     red = d["thermal"]["reduced"]
     if names == "bearing_heat":
         red["travel_heat_K_per_mm"] = [0.0] * red["segments"]
+    elif names == "speed_dependent_heat":
+        del red["heat_scale0"], red["heat_scale_per_mm"]
+    elif names == "moving_convection":
+        del red["convection_per_mm"]
     else:
         red["ee_um_per_mm_per_K"] = 0.0
     d.pop("provenance", None)
@@ -107,21 +115,65 @@ def test_a_table_without_the_effect_term_leaves_the_bound(names):
     assert np.max(err - bound_um(ex, doc, run, run.errors.position_mm)) > 5.0
 
 
-@pytest.mark.parametrize("name", NOT_CARRIED)
+def unreducible(name):
+    """(run, model, document) of the fitted model with the effect's parameter moved where its reduced form is refused
+    (UNREDUCIBLE), the reduced block and its reduction certificate rebuilt as the fit builds them."""
+    from host.learning.screw.reduced import build_reduced, reduction_certificate
+    run, model, _ = fitted(name)
+    values, feed_max = UNREDUCIBLE[name]
+    saved = (dict(model.values_), model.reduced_)
+    try:
+        model.values_.update(values)
+        model.params_, model.effect_params_ = model._split(model.values_)
+        model.reduced_ = build_reduced(model, model.reduced_segments, model.reduced_dt_s,
+                                       feed_max_mm_min=feed_max or model.reduced_["feed_max_mm_min"])
+        model.reduced_["reduction_error_um"] = reduction_certificate(model, [run])
+        doc = json.loads(json.dumps(model.to_document()))
+        host = model.predict(run)
+    finally:
+        model.values_, model.reduced_ = saved
+        model.params_, model.effect_params_ = model._split(model.values_)
+    return run, host, doc
+
+
+@pytest.mark.parametrize("name", sorted(UNREDUCIBLE))
 def test_an_effect_without_a_reduced_form_is_refused_by_name(name):
-    run, model, doc = fitted(name)
+    run, host, doc = unreducible(name)
     red = doc["thermal"]["reduced"]
     assert red["omitted_effects"] == [name] and name in red["omitted_reasons"]
     with pytest.raises(ExportError) as exc:
         export_model(doc)
     msg = str(exc.value)
     assert name in msg and "um RMS" in msg and "--reduction-limit" in msg and run.name in msg
+    if name == "moving_convection":
+        # the top feed at which the explicit convection step stops being a convex combination (D_i·umax > A_ii) is
+        # beyond the travel per step a table holds: that refusal comes first
+        with pytest.raises(ExportError, match="travel per step too large"):
+            export_model(doc, reduction_limit_um=1000.0)
+        return
     # the refusal is right: with the limit raised the board leaves the host model by micrometres
     ex = export_model(doc, reduction_limit_um=1000.0)
     assert ex.report["reduction"]["omitted_effects"] == [name]
-    err = np.abs(board_offsets(ex.table, run) - model.predict(run))
+    err = np.abs(board_offsets(ex.table, run) - host)
     assert np.max(err) > 2.0 and np.max(err) <= ex.report["max_error_um"] + \
         red["reduction_error_um"][run.name]["feed_range"]["rows_max_um"] + 0.1
+
+
+@pytest.mark.parametrize("field, value, message", [
+    ("convection_per_mm", 1.0, "convection_per_mm\\[0\\]: the extra loss per step at the top feed"),
+    ("heat_scale0", -0.2, "friction heat factor is negative"),
+])
+def test_the_exporter_refuses_a_speed_term_it_cannot_certify(field, value, message):
+    """A document whose convection weight exceeds A_ii at the top feed, or whose friction heat factor is negative,
+    has no certified state bound: refused naming the field."""
+    name = "moving_convection" if field == "convection_per_mm" else "speed_dependent_heat"
+    _, _, doc = fitted(name)
+    d = json.loads(json.dumps(doc))
+    red = d["thermal"]["reduced"]
+    red[field] = [value] * red["segments"] if field == "convection_per_mm" else value
+    d.pop("provenance", None)
+    with pytest.raises(ExportError, match=message):
+        export_model(d)
 
 
 def test_reduction_error_is_required_of_a_fitted_document_and_not_of_a_reduced_one():
@@ -139,16 +191,16 @@ def test_reduction_error_is_required_of_a_fitted_document_and_not_of_a_reduced_o
 
 def test_cli_reduction_limit(tmp_path, capsys):
     from host.cli import main
-    _, _, doc = fitted("moving_convection")
+    _, _, doc = unreducible("speed_dependent_heat")
     from host.learning.documents import save_model
     path = tmp_path / "model.json"
     save_model(doc, str(path))
     out = str(tmp_path / "t.bin")
     assert main(["export", str(path), "--out", out]) == 2
-    assert "moving_convection" in capsys.readouterr().err
+    assert "speed_dependent_heat" in capsys.readouterr().err
     assert main(["export", str(path), "--out", out, "--reduction-limit", "-1"]) == 2
     assert "--reduction-limit" in capsys.readouterr().err
     assert main(["export", str(path), "--out", out, "--reduction-limit", "1000", "--json", str(tmp_path / "r.json")]) == 0
     rep = json.loads((tmp_path / "r.json").read_text())
-    assert rep["reduction"]["limit_um"] == 1000.0 and rep["reduction"]["omitted_effects"] == ["moving_convection"]
-    assert "left out: moving_convection" in capsys.readouterr().out
+    assert rep["reduction"]["limit_um"] == 1000.0 and rep["reduction"]["omitted_effects"] == ["speed_dependent_heat"]
+    assert "left out: speed_dependent_heat" in capsys.readouterr().out

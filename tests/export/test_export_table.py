@@ -113,8 +113,8 @@ def test_specific_reasons(exports):
     assert reason(bytes(v2)) == REASON_VERSION
     assert reason(refresh_crc(v2)) == REASON_VERSION
     # tables of format 1 (before the screw's air channel), 2 (before the training range) and 3 (before the screw's
-    # effect terms, the power inputs of dynamic tables and the error reference) and 4 (before the dynamic table's observer)
-    # are refused with a message that says to re-export
+    # effect terms, the power inputs of dynamic tables and the error reference) and 4 (before the speed effects' screw
+    # terms, issue 19, and the dynamic table's observer, issue 21) are refused with a message that says to re-export
     for old in (1, 2, 3, 4):
         v1 = bytearray(buf)
         v1[4] = old

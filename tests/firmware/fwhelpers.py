@@ -60,14 +60,16 @@ def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None):
     return export_model(restamp(doc)).table
 
 
-def screw_table(sensors, seed=3):
+def screw_table(sensors, seed=5):
     """An exported screw table over ``sensors`` (base sensors[0], air sensors[1], the rest read and unused) with
-    the effect terms of format 4 (bearing heat per mm of travel, a reversal term); 1 s steps."""
+    the effect terms of formats 4 and 5 (bearing heat per mm of travel, a reversal term, the friction heat's speed factor,
+    the extra convection while moving); 1 s steps."""
     import random
     from hil_tests.fixtures.samples import restamp, screw_doc
     from models_export import export_model
-    doc = screw_doc(random.Random(seed), segments=8, dt_s=1.0, length_mm=800.0, feed_max_mm_min=12000.0)
-    assert doc["thermal"]["reduced"]["reversal_um"] and doc["thermal"]["reduced"]["travel_heat_K_per_mm"][0] > 0
+    doc = screw_doc(random.Random(seed), segments=8, dt_s=1.0, length_mm=800.0, feed_max_mm_min=12000.0, speed_effects=True)
+    red = doc["thermal"]["reduced"]
+    assert red["reversal_um"] and red["travel_heat_K_per_mm"][0] > 0 and red["heat_scale_per_mm"] and min(red["convection_per_mm"]) > 0
     names = list(sensors)
     ren = {"T_base": names[0], "T_air": names[1]}
     red = doc["thermal"]["reduced"]
@@ -80,7 +82,11 @@ def screw_table(sensors, seed=3):
     doc["envelope"]["temperature_C"] = env
     doc["envelope"]["position_mm"] = [0.0, 700.0]
     doc["sensors"] = names
-    return export_model(restamp(doc)).table
+    table = export_model(restamp(doc)).table
+    from firmware.table import parse_table
+    t = parse_table(table)
+    assert t.fg and t.Gv and min(t.D) > 0  # the table carries the speed terms the cycle must evaluate
+    return table
 
 
 def need_micropython():

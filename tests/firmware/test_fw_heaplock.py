@@ -43,7 +43,8 @@ def mpy_dir():
 def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode, kind):
     """The dynamic table (1 s filter step: a step every 10 cycles, an observer that estimates the lag states at the
     first all-good cycle and again halfway through the locked cycles) with spindle speed and feed reports; the screw
-    table (format 4: bearing heat per mm of travel, the reversal term) with position reports going up and back."""
+    table (formats 4 and 5: bearing heat per mm of travel, the reversal term, the friction heat's speed factor and the
+    extra convection while moving) with position reports going up and back."""
     names = ["T%d" % i for i in range(1, 12)]
     (tmp_path / "table_a.bin").write_bytes(make_table(kind="dynamic_observer" if kind == "dynamic" else kind, sensors=names))
     n = 2000 if os.environ.get("TCOMP_SLOW") else 300

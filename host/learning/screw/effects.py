@@ -117,8 +117,20 @@ class SpeedDependentHeat(Effect):
         return {"v_ref_m_min": self.v_ref_m_min}
 
     def reduce(self, model: ScrewModel, p: dict[str, float], red: dict[str, Any], C: np.ndarray) -> None:
-        raise NoReducedForm("the friction heat per mm of travel depends on the step's speed (q·(1 + k(v/v_ref - 1))): "
-                            "the firmware's recurrence has one heat per mm of travel (B) and no travel x speed product")
+        # q·u_i·(1 + k(v/v_ref − 1)) with v = U·0.06/dt (U: the step's total travel, mm): the friction heat B_i·u_i
+        # times a factor linear in U, the same for every segment (firmware: the step's effective travel u_i·g(U))
+        k = p["k"]
+        dt = float(red["dt_s"])
+        per_mm = k * J_PER_W_PER_M_MIN_PER_MM / (self.v_ref_m_min * dt)
+        g0 = 1.0 - k
+        umax = float(red["feed_max_mm_min"]) / 60.0 * dt
+        if g0 < 0 or g0 + per_mm * umax < 0:
+            # a negative friction heat (the full model has it too) has no certified state bound in the firmware
+            raise NoReducedForm("the friction heat factor 1 + k(v/v_ref - 1) = %.3g at rest and %.3g at the top feed "
+                                "(k = %.3g) is negative: the firmware's state bound needs heat >= 0"
+                                % (g0, g0 + per_mm * umax, k))
+        red["heat_scale0"] = g0
+        red["heat_scale_per_mm"] = per_mm
 
 
 class MovingConvection(Effect):
@@ -139,8 +151,22 @@ class MovingConvection(Effect):
         return {"v_ref_m_min": self.v_ref_m_min}
 
     def reduce(self, model: ScrewModel, p: dict[str, float], red: dict[str, Any], C: np.ndarray) -> None:
-        raise NoReducedForm("the convection coefficient depends on the step's speed (h·(1 + k·v/v_ref)): the firmware's "
-                            "propagator A is fixed and it has no state x speed product")
+        # the extra loss over a step, k·(v/v_ref)·h·S_i/C_i·dt·(T_i − a) with v = U·0.06/dt, is D_i·U·(T_i − a):
+        # D_i = k·0.06·h·S_i/(v_ref·C_i) per mm of the step's travel (dt cancels), explicit in the step (the state
+        # and the air at its start)
+        from host.learning.screw import heat
+        _, _, H = heat.segment_properties(red["edges_mm"], model.geometry_.diameter_mm, model.params_, model.geometry_.bore_mm)
+        D = p["k"] * J_PER_W_PER_M_MIN_PER_MM * H / (self.v_ref_m_min * np.asarray(C, dtype=float))
+        umax = float(red["feed_max_mm_min"]) / 60.0 * float(red["dt_s"])
+        A = np.asarray(red["A"], dtype=float)
+        bad = [i for i in range(len(C)) if not 0.0 <= D[i] * umax <= A[i][i]]
+        if bad:
+            # the weight moved from T_i to the air must not exceed A_ii: else the step is no convex combination and
+            # the state (and its error) lose their certified bounds
+            i = bad[0]
+            raise NoReducedForm("the extra loss per step D·U = %.3g at the top feed exceeds the state's own weight A_ii = %.3g "
+                                "in segment %d (k = %.3g): the explicit step is unstable" % (D[i] * umax, A[i][i], i, p["k"]))
+        red["convection_per_mm"] = [float(d) for d in D]
 
 
 class ReversalEffect(Effect):

@@ -23,7 +23,9 @@ recurrence ``T[k+1] = A·T[k] + B ∘ u[k] + c0·a[k] + c1·a[k+1]``:
   step's total travel U = Σ u_i (bearing_heat: k·0.06/C_0 into the fixed-end segment);
   ``ee_um_per_mm_per_K``, the base term's coefficient (α for E_e, plus
   ambient_expansion's k); ``reversal_um``, +r moving in +, −r moving in − (the
-  direction of the last position change).  An effect whose form the firmware cannot
+  direction of the last position change); ``heat_scale0``, ``heat_scale_per_mm`` (speed_dependent_heat): the
+  friction heat B_i·u_i times g(U) = heat_scale0 + heat_scale_per_mm·U; ``convection_per_mm`` (M,)
+  (moving_convection): the step's extra loss −D_i·U·(T_i − a), explicit (state and air at the step's start).  An effect whose form the firmware cannot
   evaluate is listed in ``omitted_effects`` with the reason in ``omitted_reasons``;
   the reduction error below then shows what leaving it out costs, and the exporter
   refuses above its limit.
@@ -101,7 +103,12 @@ def build_reduced(model: ScrewModel, segments: int = 12, dt_s: float = 10.0, fee
         bad = [e.name for e in model.effects if e.name not in omitted and e.name == "bearing_heat"]
         raise NoReducedForm("%s: negative heat per mm of travel %r K/mm: no certified state bound"
                             % (", ".join(bad) or "travel_heat_K_per_mm", min(heat_u)))
-    out["state_max_K"] = state_bound(A, B, feed_max_mm_min / 60.0 * dt_s, heat_u)
+    umax = feed_max_mm_min / 60.0 * dt_s
+    # speed_dependent_heat scales the friction heat by g(U) = heat_scale0 + heat_scale_per_mm·U >= 0 (checked by its
+    # reduce): the bound takes g's largest value on [0, umax]; moving_convection only moves weight from the state to
+    # the air (D_i·U <= A_ii), so the bound of the heat response without it holds
+    g = out.get("heat_scale0", 1.0) + max(0.0, out.get("heat_scale_per_mm", 0.0)) * umax
+    out["state_max_K"] = state_bound(A, B * g, umax, heat_u)
     if getattr(model, "air_lag_s_", 0.0) > 0:
         # the recurrence's air weights c0, c1 are convex (>= 0): the de-lag's derivative would make them negative and
         # lose the state envelope the exporter certifies; the reduction error below shows what the raw air costs
@@ -160,17 +167,27 @@ def simulate_reduced(reduced: dict[str, Any], motion: Motion, t0: float, n_steps
     dt = reduced["dt_s"]
     t = t0 + dt * np.arange(n_steps + 1)
     u = heat.nut_travel_per_segment(motion, edges, reduced["fixed_end_mm"], t, spread=spread)
-    drive = u * B[None, :]
+    U = u.sum(axis=1)  # the step's total travel (mm)
+    # speed_dependent_heat: the friction heat times g(U) = heat_scale0 + heat_scale_per_mm·U
+    g = reduced.get("heat_scale0", 1.0) + reduced.get("heat_scale_per_mm", 0.0) * U
+    drive = u * g[:, None] * B[None, :]
     if reduced.get("travel_heat_K_per_mm") is not None:
-        drive = drive + u.sum(axis=1)[:, None] * np.asarray(reduced["travel_heat_K_per_mm"], dtype=float)[None, :]
+        drive = drive + U[:, None] * np.asarray(reduced["travel_heat_K_per_mm"], dtype=float)[None, :]
     T = np.zeros((n_steps + 1, B.size))
+    a = np.zeros(n_steps + 1)
     if air_K is not None:
         a = np.asarray(air_K, dtype=float)
         drive = drive + a[:-1, None] * c0[None, :] + a[1:, None] * c1[None, :]
         T[0] = a[0]
+    # moving_convection: the extra loss D_i·U·(T_i − a) of the step, explicit (the state and the air at its start)
+    D = reduced.get("convection_per_mm")
+    D = None if D is None else np.asarray(D, dtype=float)
     x = T[0].copy()
     for k in range(n_steps):
-        x = A @ x + drive[k]
+        xn = A @ x + drive[k]
+        if D is not None:
+            xn -= D * U[k] * (x - a[k])
+        x = xn
         T[k + 1] = x
     return t, T
 
