@@ -72,7 +72,7 @@ def _estimate_bound_um(doc, dT):
 def test_board_reset_on_a_warm_machine_follows_the_hosts_observer(make_rig, interpreter, reset_h):
     if interpreter == "cpython" and not SLOW:
         pytest.skip("the 32-bit port is the board here; CPython adds 20 s and nothing the port does not show (TCOMP_SLOW=1 runs it)")
-    from host.data.runs import load_run, time_slice
+    from host.data.runs import load_run, slice_run
     from host.learning.documents import load_model
     with open(FIXTURE) as fh:
         doc = json.load(fh)
@@ -83,9 +83,9 @@ def test_board_reset_on_a_warm_machine_follows_the_hosts_observer(make_rig, inte
     sensors = list(doc["sensors"])
     R = reset_h * 3600.0
     full = load_run(RUN)
-    run = _shift(time_slice(full, R - BEFORE_S, R + AFTER_S), R - BEFORE_S, ch)
-    before = time_slice(run, 0.0, BEFORE_S)
-    after = time_slice(run, BEFORE_S)
+    run = _shift(slice_run(full, R - BEFORE_S, R + AFTER_S), R - BEFORE_S, ch)
+    before = slice_run(run, 0.0, BEFORE_S)
+    after = slice_run(run, BEFORE_S)
     ex = export(doc)
     assert ex.report["dynamic"]["observer"]["settle_s"] == SETTLE_S
     from hil_tests.rig import interpreters
@@ -102,7 +102,7 @@ def test_board_reset_on_a_warm_machine_follows_the_hosts_observer(make_rig, inte
 
     model = load_model(doc)
     restarted = np.asarray(model.predict(after))  # a board switched on at R: its observer
-    uninterrupted = np.asarray(model.predict(after, history=[_shift(time_slice(full, 0.0, R), R - BEFORE_S, ch)]))
+    uninterrupted = np.asarray(model.predict(after, history=[_shift(slice_run(full, 0.0, R), R - BEFORE_S, ch)]))
     bench = os.path.join(os.path.dirname(HERE), "tools")
     import sys
     sys.path.insert(0, bench)
