@@ -22,5 +22,6 @@ VERBS = {
     "record": ("host.cli.verbs.record", "record a thermal test: poll the board's temperatures into a run folder, valid at every instant"),
     "select": ("host.cli.verbs.select", "choose temperature sensors (maximal-tree fuzzy clustering, stepwise partial F, hierarchical clustering + GA)"),
     "simulate": ("host.cli.verbs.simulate", "simulate thermal tests of a feed axis with the digital twin and write run folders"),
+    "upload": ("host.cli.verbs.upload", "send a new coefficient table to a running board over its link, signed with its key; verified by the board's hello"),
     "validate": ("host.cli.verbs.validate", "check run folders against the tcomp-run/1 format and print every problem (exit 1 if any)"),
 }
