@@ -168,9 +168,9 @@ def _upload(args):
             _abort(link, args.timeout)
             raise UserError("%s: %s; the board keeps its old table (%s)" % (
                 args.port, refusal_cause(exc.frame, exc.cause, args.key), old))
-        except LinkError as exc:
-            raise UserError("%s; the upload is incomplete, so the board keeps its old table (%s): it discards the "
-                            "upload 60 s after its last chunk" % (exc, old))
+        except (LinkError, OSError) as exc:  # no answer, or the port failed (pyserial's errors are OSErrors)
+            raise UserError("%s: the link failed mid-upload (%s); the upload is incomplete, so the board keeps its "
+                            "old table (%s) and discards the upload 60 s after its last chunk" % (args.port, exc, old))
         except KeyboardInterrupt:
             _abort(link, 2.0)
             raise UserError("interrupted: the upload is incomplete, so the board keeps its old table (%s)" % old)
