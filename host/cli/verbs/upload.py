@@ -155,7 +155,8 @@ def _upload(args):
             print("%s: the board already runs table %s (slot %s); nothing sent" % (args.port, crc, before.slot))
             summary.update(after=before.as_dict(), lines=0, uploaded=False)
             return 0, summary
-        old = "table %s in slot %s" % (before.table_crc, before.slot) if before.table_crc not in (None, "", "00000000") \
+        # a board without a table says "-" for its slot and CRC (docs/protocol.md, frame H)
+        old = "table %s in slot %s" % (before.table_crc, before.slot) if before.table_crc not in (None, "", "-") \
             else "no table"
         print("%s: board %s (%s); uploading %s table %s, %d bytes" % (
             args.port, before.firmware, old, table.kind, crc, len(data)))
