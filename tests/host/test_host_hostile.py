@@ -160,6 +160,8 @@ def valid(tmp_path_factory):
     files["map.json"] = json.dumps({"time": "time_s", "temperatures": ["T1", "T2"], "errors": ["T3"]}).encode()
     files["corr.csv"] = b"T1,T2,T3\n1,0.9,0.5\n0.9,1,0.4\n0.5,0.4,1\n"
     files["tcorr.csv"] = b"sensor,r\nT1,0.9\nT2,0.5\nT3,0.1\n"
+    files["board.csv"] = b"time_s,position_mm,offset_um\n" + b"".join(
+        b"%g,%g,0\n" % (t, p) for t, p in zip(np.repeat(np.arange(0.0, 7200.0, 600.0), 6), np.tile(np.linspace(0, 500, 6), 12)))
     files["port"] = b""  # a port given as a plain file: it is read, so it is an input
     files["mpremote"] = b"#!/bin/sh\nexit 0\n"
     return files
@@ -192,6 +194,8 @@ FLAGS = {
     # (refused) or a live link (refused; a dangling one is replaced); --key is read, or created when missing
     "board": {"in": {"--run": "folder", "--table": "file", "--config": "file", "--key": "file"}, "out": {},
               "other": "--port --room-c --interpreter --noise-uohm --speed"},
+    "check": {"in": {"--model": "file", "--run": "folder", "--board-log": "file"}, "out": {"--json": "file"},
+              "other": "--board-t0-ms --max-dt-s --position-tol-mm --limit-um --allow-edited"},
     "compare": {"in": {"runs": "folder"}, "out": {"--json": "file", "--plots": "folder"},
                 "other": "--channel --direct --sensors --methods --train --split-h --noise-C --offset-C --repeats "
                          "--reference --option --no-intercept"},
@@ -200,7 +204,7 @@ FLAGS = {
     "export": {"in": {"model": "file"}, "out": {"--out": "file", "--report": "file", "--json": "file", "--c-header": "file"},
                "other": "--ref-position-mm --allow-edited --envelope --envelope-margin --reduction-limit"},
     "fit": {"in": {"runs": "folder"}, "out": {"--out": "file", "--json": "file"},
-            "other": "--model --sensors --channel --direct --no-intercept --option"},
+            "other": "--model --sensors --channel --direct --no-intercept --t-min --t-max --option"},
     # --key is created when missing (after the flash), else read: an output that is never written over anything
     "flash": {"in": {"--table": "file", "--config": "file", "--board": "file", "--port": "file", "--mpremote": "file"},
               "out": {"--key": "file"}, "other": "--table-dir --no-firmware --reset --dry-run"},
@@ -215,14 +219,18 @@ FLAGS = {
                  "other": "--mode --baud --address --name --units --slew-um-per-s --period-ms --stale-ms --recover-ms "
                           "--cold-start --spindle"},
     "monitor": {"in": {"--port": "file", "--key": "file"}, "out": {"--csv": "log", "--json": "file"},
-                "other": "--baud --count --duration --hello --latch --temperatures"},
+                "other": "--baud --count --duration --hello --latch --temperatures --query --query-every"},
     "record": {"in": {"--port": "file", "--config": "file"}, "out": {"--out": "folder"},
                "other": "--baud --sensor --period --duration --link-timeout --notes --linuxcnc --hal-position "
                         "--hal-velocity --hal-spindle --hal-name --units"},
     "predict": {"in": {"model": "file", "run": "folder"}, "out": {"--out": "file", "--json": "file"}, "other": "--allow-edited"},
+    "report": {"in": {"runs": "folder", "--model": "file"}, "out": {"--out": "folder"}, "other": "--allow-edited"},
     "select": {"in": {"runs": "folder", "--corr": "file", "--target-corr": "file"}, "out": {"--json": "file", "--plot": "file"},
                "other": "--method --channel --target --sensors --split --option"},
     "simulate": {"in": {}, "out": {"--out": "folder", "--json": "file"}, "other": "--protocol --effects --seed --noise-um --set --error-reference"},
+    # tcomp upload reads the table and the key and talks to the port; its one output is --json
+    "upload": {"in": {"--port": "file", "--table": "file", "--key": "file"}, "out": {"--json": "file"},
+               "other": "--baud --timeout"},
     "validate": {"in": {"runs": "folder"}, "out": {"--json": "file"}, "other": ""},
 }
 
@@ -230,10 +238,12 @@ FLAGS = {
 INPUT_FILES = {"runs": "run", "run": "run", "--run": "run", "model": "m.json", "--table": "t.bin", "--config": "cfg.json",
                "--board": "board.py", "--port": "port", "--mpremote": "mpremote", "source": "log.csv",
                "--mapping": "map.json", "--corr": "corr.csv", "--target-corr": "tcorr.csv", "--key": "k.key",
-               "--model": "m.json"}
+               "--model": "m.json", "--board-log": "board.csv"}
 OUTPUT_NAMES = {"--json": "o.json", "--plots": "plots", "--report": "report", "--out": "out", "--c-header": "t.h",
                 "--key": "new.key", "--csv": "log2.csv", "--plot": "p.png"}
 BASE = {
+    "check": ["check", "--model", "{--model}", "--run", "{--run}", "--board-log", "{--board-log}", "--limit-um", "100",
+              "--json", "{@--json}"],
     "compare": ["compare", "{runs}", "--split-h", "1", "--methods", "mlr", "--json", "{@--json}", "--plots", "{@--plots}"],
     "discrepancy": ["discrepancy", "{runs}", "--json", "{@--json}", "--report", "{@--report}"],
     "export": ["export", "{model}", "--out", "{@--out}", "--report", "{@--report}", "--json", "{@--json}", "--c-header", "{@--c-header}"],
@@ -243,10 +253,12 @@ BASE = {
     "hil": ["hil", "--run", "{--run}", "--table", "{--table}", "--config", "{--config}", "--model", "{--model}",
             "--json", "{@--json}"],
     "import": ["import", "{source}", "--mapping", "{--mapping}", "--out", "{@--out}", "--json", "{@--json}"],
+    "upload": ["upload", "--port", "{--port}", "--table", "{--table}", "--key", "{--key}", "--json", "{@--json}"],
     "monitor": ["monitor", "--port", "{--port}", "--key", "{--key}", "--duration", "0.2", "--csv", "{@--csv}", "--json", "{@--json}"],
     "record": ["record", "--port", "{--port}", "--config", "{--config}", "--sensor", "T1=nut", "--duration", "0.2",
                "--out", "{@--out}"],
     "predict": ["predict", "{model}", "{run}", "--out", "{@--out}", "--json", "{@--json}"],
+    "report": ["report", "{runs}", "--model", "{--model}", "--out", "{@--out}"],
     "select": ["select", "--method", "maxtree", "{runs}", "--corr", "{--corr}", "--target-corr", "{--target-corr}",
                "--json", "{@--json}", "--plot", "{@--plot}"],
     "simulate": ["simulate", "--protocol", "idle", "--out", "{@--out}", "--json", "{@--json}"],

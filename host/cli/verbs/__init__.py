@@ -9,6 +9,7 @@ module here plus one row below.
 # verb -> (module, one-line summary); listed alphabetically, as `tcomp --help` shows them
 VERBS = {
     "board": ("host.cli.verbs.board", "start a simulated board (the firmware on simulated chips) on a pty, driven by a run's temperatures or a steady room, for monitor, record, linuxcnc"),
+    "check": ("host.cli.verbs.check", "production check: a check run's errors uncompensated against compensated (the board's logged offsets or the model), pass/fail against a limit"),
     "compare": ("host.cli.verbs.compare", "fit MLR, PCR, stepwise, the sensor selectors, ANN, PPR and the dynamic model on one run, predict the others, with a robustness check"),
     "discrepancy": ("host.cli.verbs.discrepancy", "find where the screw model and the measurements disagree, name the missing physical effect(s), refit (held-out evidence)"),
     "export": ("host.cli.verbs.export", "quantise a model into the firmware's integer coefficient table, with a certificate of integer safety and accuracy"),
@@ -20,6 +21,7 @@ VERBS = {
     "monitor": ("host.cli.verbs.monitor", "decode the $TC stream of a board (a real port or a pty) into a table, optionally logged as CSV"),
     "predict": ("host.cli.verbs.predict", "predict the error at every row of a run's errors.csv with any saved model"),
     "record": ("host.cli.verbs.record", "record a thermal test: poll the board's temperatures into a run folder, valid at every instant"),
+    "report": ("host.cli.verbs.report", "ISO 230-3-style thermal drift report of runs (HTML with plots, JSON figures), before/after compensation with a model"),
     "select": ("host.cli.verbs.select", "choose temperature sensors (maximal-tree fuzzy clustering, stepwise partial F, hierarchical clustering + GA)"),
     "simulate": ("host.cli.verbs.simulate", "simulate thermal tests of a feed axis with the digital twin and write run folders"),
     "upload": ("host.cli.verbs.upload", "send a new coefficient table to a running board over its link, signed with its key; verified by the board's hello"),

@@ -120,7 +120,7 @@ def _compare(args, methods, out):
     except EmpiricalDataError as exc:
         raise UserError(str(exc))
     print(table(results))
-    notes = findings(results)
+    notes = findings(results) + [_scoring_note(args.reference, target)]
     for line in notes:
         print(line)
     doc = {"target": target, "channel": args.channel, "reference": args.reference, "runs": [r.path for r in runs], "methods": methods,
@@ -137,6 +137,17 @@ def _compare(args, methods, out):
     if results and len(failed) == len(results):
         raise UserError("every method failed (first: %s: %s); details in %s" % (failed[0]["method"], failed[0]["error"], args.json))
     return 0
+
+
+def _scoring_note(reference, target):
+    """Why a model's compare figure is not the RMSE tcomp predict prints for it (host/cli/verbs/predict.py
+    _compare_view says the same from the other side)."""
+    what = ("the thermal part, on the rows after each test run's cold sweep, against the measured error minus that "
+            "sweep (tests.*.comprehensive: the whole error of the same rows)" if target == "slope" else "the model's channel")
+    ref = ("--reference run_start: rises from each run's own first sample, while tcomp fit saves reference 'fixed' (the "
+           "training runs' mean start, as the board uses) and tcomp predict applies it; --reference fixed scores models "
+           "as fit saves them" if reference == "run_start" else "--reference fixed: models as tcomp fit saves them")
+    return "note: RMSE here is of %s; tcomp predict's is of the whole error of every row. %s." % (what, ref)
 
 
 def _check_robustness(args):

@@ -15,6 +15,7 @@ from scipy import stats as _st
 
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.checks import check_predict_x, check_xy, finite_or_none
+from host.learning.empirical.diagnostics import CANCEL_RULE, autocorrelation, cancelling_pairs
 
 _COLLINEAR_TOL = 1e-10  # 1 − R² of a sensor on the others below this = perfectly collinear
 
@@ -161,17 +162,39 @@ class MLR(_Linear):
         self.df_model_ = st["df_model"]
         self.rmse_ = st["rmse"]
         self._st = st
+        # what the p-values and coefficients hide (host/learning/empirical/diagnostics.py)
+        fitted = A @ beta
+        self.autocorrelation_ = autocorrelation(y - fitted, st["t"][o:], A.shape[1], groups)
+        self.cancelling_ = cancelling_pairs(X, self.coef_, names, fitted)
         return self
 
     def statistics(self):
+        p_eff = self.autocorrelation_["p_effective"]
         coefs = {
-            n: {"coef": finite_or_none(c), "std_error": finite_or_none(s), "t": finite_or_none(t), "p": finite_or_none(p)}
-            for n, c, s, t, p in zip(self.names_, self.coef_, self.bse_, self.tvalues_, self.pvalues_)
+            n: {"coef": finite_or_none(c), "std_error": finite_or_none(s), "t": finite_or_none(t), "p": finite_or_none(p),
+                "p_effective": pe}
+            for n, c, s, t, p, pe in zip(self.names_, self.coef_, self.bse_, self.tvalues_, self.pvalues_, p_eff)
         }
-        extra: dict = {"coefficients": coefs}
+        extra: dict = {"coefficients": coefs, "autocorrelation": {k: v for k, v in self.autocorrelation_.items() if k != "p_effective"},
+                       "cancelling": {"pairs": self.cancelling_, "rule": CANCEL_RULE}}
         if self.fit_intercept:
             extra["intercept"] = {"coef": finite_or_none(self.intercept_), "std_error": finite_or_none(self.intercept_bse_), "t": finite_or_none(self.intercept_t_), "p": finite_or_none(self.intercept_p_)}
         return self._stats_dict(self._st, extra)
+
+    def warnings(self):
+        """Lines saying what the textbook statistics oversell (empty when nothing is flagged)."""
+        out = []
+        a = self.autocorrelation_
+        if a["autocorrelated"]:
+            out.append("WARNING: residuals are autocorrelated (Durbin-Watson %.3f, lag-1 %.3f): the %d samples count as "
+                       "about %.0f independent ones; p-values assuming independence are too small (p_effective recomputes "
+                       "them)" % (a["durbin_watson"], a["lag1_autocorrelation"], self.n_samples_, a["n_effective"]))
+        for c in self.cancelling_:
+            out.append("WARNING: coefficients of %s and %s (%+.4g, %+.4g) cancel: their terms vary %.3g and %.3g but their "
+                       "sum only %.3g; a drift of either sensor moves the prediction by its large coefficient"
+                       % (c["sensors"][0], c["sensors"][1], c["coefficients"][0], c["coefficients"][1], c["term_std"][0],
+                          c["term_std"][1], c["sum_std"]))
+        return out
 
     def summary(self):
         """Plain-text coefficient table (what a statistics package prints)."""
@@ -185,7 +208,7 @@ class MLR(_Linear):
             "n=%d  R2=%.4f  adj R2=%.4f  F=%.4g (p=%.3g, df %d/%d)  residual std error=%.4g"
             % (self.n_samples_, self.rsquared_, self.rsquared_adj_, self.fvalue_, self.f_pvalue_, self.df_model_, self.df_resid_, self.resid_std_err_)
         )
-        return "\n".join(lines)
+        return "\n".join(lines + self.warnings())
 
 
 def X_params(X, fit_intercept):

@@ -64,6 +64,11 @@ from scipy.linalg import eigh_tridiagonal
 
 MIN_RANGE_MM = 1e-6  # an interval whose range is shorter than this is a dwell: no travel, no friction heat
 STEEL = {"density_kg_m3": 7850.0, "c_J_kgK": 460.0, "lambda_W_mK": 46.0, "alpha_per_K": 11.5e-6}
+# The values a ball screw's steel can have (room temperature, the steels screws are made of: carbon steels such as
+# C45/Cf53 ~50, low-alloy 42CrMo4 ~42, bearing steel 100Cr6 ~40-46, martensitic stainless X46Cr13 ~25-30 W/(m K);
+# their expansion 10.5-12.5e-6 /K, specific heat 440-490 J/(kg K)), with a margin. An identified value outside is
+# not the screw's material: the parameter is absorbing another effect (docs/screw-model.md, "Plausibility").
+STEEL_RANGES = {"lambda_W_mK": (20.0, 60.0), "alpha_per_K": (10.0e-6, 13.0e-6), "c_J_kgK": (420.0, 500.0)}
 
 
 @dataclass(frozen=True)

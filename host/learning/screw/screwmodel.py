@@ -40,6 +40,24 @@ def _resolve(name):
 # Margin (K) added on both sides of the training range of the base sensor in the exported envelope.
 BASE_ENVELOPE_MARGIN_K = 5.0
 
+def implausible_parameters(identified):
+    """[{parameter, value, accepted, steel, warning}] of the identified parameters outside what a screw's steel can
+    have (heat.STEEL_RANGES); fixed parameters are the user's statement and are not judged."""
+    out = []
+    for name, value in identified.items():
+        if name not in heat.STEEL_RANGES:
+            continue
+        lo, hi = heat.STEEL_RANGES[name]
+        if lo <= value <= hi:
+            continue
+        unit = {"lambda_W_mK": "W/(m K)", "alpha_per_K": "/K", "c_J_kgK": "J/(kg K)"}[name]
+        out.append({"parameter": name, "value": value, "accepted": [lo, hi], "steel": heat.STEEL[name],
+                    "warning": "identified %s = %.4g %s is not a steel's (screw steels: %.4g..%.4g %s, nominal %.4g): the "
+                               "parameter absorbs another effect or the data do not identify it; do not read it as the "
+                               "screw's material" % (name, value, unit, lo, hi, unit, heat.STEEL[name])})
+    return out
+
+
 class ScrewModel:
     """Segment heat-transfer model of a ball screw, identified from runs.
 
@@ -443,6 +461,8 @@ class ScrewModel:
                  "geometric_degree_scores": degree_scores, "nfev": res["nfev"] if res else 0}
         for s, v, sd, rel in zip(specs, values, res["std"] if res else [], res["rel_std"] if res else []):
             stats["parameters"][s.name] = {"value": float(v), "std": float(sd), "rel_std": float(rel), "unit": s.unit}
+        stats["implausible"] = implausible_parameters({s.name: float(v) for s, v in zip(specs, values)})
+        stats["warnings"] += [i["warning"] for i in stats["implausible"]]
         for n, v in fixed.items():
             stats["parameters"][n] = {"value": float(v), "std": 0.0, "rel_std": 0.0, "fixed": True,
                                      "unit": next(s.unit for s in specs_all if s.name == n)}

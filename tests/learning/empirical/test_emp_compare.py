@@ -233,7 +233,9 @@ def test_predict_reports_max_and_min_residual(three_runs, tmp_path):
     assert main(["predict", str(tmp_path / "m.json"), folder, "--out", str(tmp_path / "p.csv"), "--json", str(tmp_path / "p.json")]) == 0
     with open(tmp_path / "p.json") as fh:
         rep = json.load(fh)
-    pred = np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1)[:, -1]
+    with open(tmp_path / "p.csv") as fh:
+        column = fh.readline().strip().split(",").index("predicted_um")  # measured_um, residual_um follow it
+    pred = np.loadtxt(tmp_path / "p.csv", delimiter=",", skiprows=1)[:, column]
     measured = np.loadtxt(os.path.join(folder, "errors.csv"), delimiter=",", skiprows=1)[:, 2]
     r = measured - pred
     assert rep["max_residual_um"] == pytest.approx(r.max(), abs=2e-4) and rep["min_residual_um"] == pytest.approx(r.min(), abs=2e-4)

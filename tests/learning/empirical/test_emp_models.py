@@ -172,7 +172,7 @@ def test_fit_and_predict_cli(tmp_path, capsys, make_slope):
     assert doc["method"] == "pcr" and doc["statistics"]["variance_threshold"] == 0.9
     assert main(["predict", out, other, "--out", str(tmp_path / "p.csv")]) == 0
     rows = open(tmp_path / "p.csv").read().splitlines()
-    assert rows[0] == "time_s,position_mm,predicted_um" and len(rows) == len(load_run(other).errors) + 1
+    assert rows[0] == "time_s,position_mm,predicted_um,measured_um,residual_um" and len(rows) == len(load_run(other).errors) + 1
     assert main(["fit", "--model", "mlr", folder, "--out", out, "--option", "f_enter=3"]) == 2
     assert "applies to --model stepwise" in capsys.readouterr().err
     assert main(["fit", "--model", "mlr", folder, "--out", out, "--sensors", "T1,T9"]) == 2

@@ -1,0 +1,54 @@
+"""Load a model document and predict a run with it: the one path `tcomp predict`, `tcomp check` and
+`tcomp report` take (the same provenance check, the same errors), so a model scores the same in each."""
+import sys
+
+
+def load_checked_model(path, allow_edited=False, verb="tcomp"):
+    """(model, provenance word) of the document at ``path``; UserError when it is not a model or was edited
+    after it was saved (unless ``allow_edited``, which warns on stderr)."""
+    from host.errors import UserError
+    from host.learning.documents import ModelFormatError, load_model, read_document
+    from models_export.document import edited_reason, provenance
+
+    try:
+        doc = read_document(path)
+        try:
+            model = load_model(doc)
+        except ModelFormatError as exc:
+            raise ModelFormatError("%s: %s" % (path, exc))
+    except ModelFormatError as exc:
+        raise UserError(str(exc))
+    actual, declared = provenance(doc)
+    edited = declared is not None and declared != actual
+    if edited and not allow_edited:
+        # the check tcomp export makes, after the fields' own checks (which name the field), with its words
+        raise UserError("%s: %s" % (path, edited_reason(declared, actual)))
+    if edited:
+        print("%s: warning: %s was edited after it was saved (provenance.sha256 does not match); "
+              "predicting with it as asked (--allow-edited)" % (verb, path), file=sys.stderr)
+    return model, "edited" if edited else "verified" if declared is not None else "none"
+
+
+def load_run_or_fail(path):
+    from host.data.runs import RunFormatError, load_run
+    from host.errors import UserError
+
+    try:
+        return load_run(path)
+    except RunFormatError as exc:
+        raise UserError(str(exc))
+
+
+def predict_rows(model, model_path, run_, run_path):
+    """The model's prediction at every errors.csv row of ``run_`` (NaN on rows of other channels)."""
+    import numpy as np
+
+    from host.errors import UserError
+
+    try:
+        pred = np.asarray(model.predict(run_), dtype=float)
+    except ValueError as exc:  # the run lacks what the model needs (a sensor, motion, a channel)
+        raise UserError("%s cannot be predicted with %s: %s" % (run_path, model_path, exc))
+    if pred.shape != (len(run_.errors),):
+        raise UserError("model returned %s predictions for %d rows of %s" % (pred.shape, len(run_.errors), run_path))
+    return pred
