@@ -100,7 +100,7 @@ def export_rows(run, origin, point_s, window=None):
         for k, (i, t) in enumerate(zip(idx, times)):
             d = 1 if e.direction is None else int(e.direction[i])
             cells = ["%d" % n, "%d" % (k + 1), "%.3f" % e.position_mm[i], "Forward" if d > 0 else "Reverse",
-                     (origin + timedelta(seconds=t)).isoformat(timespec="milliseconds"), "%.3f" % e.error_um[i]]
+                     (origin + timedelta(seconds=t)).isoformat(timespec="milliseconds"), "%.4f" % e.error_um[i]]
             for names in (air, material):
                 cells.append("%.2f" % run.temperatures.at([t], names)[0, 0] if names else "")
             cells += ["%.2f" % NOMINAL_PRESSURE_MBAR, "%d" % NOMINAL_HUMIDITY_PCT]

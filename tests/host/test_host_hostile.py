@@ -195,7 +195,7 @@ FLAGS = {
     "board": {"in": {"--run": "folder", "--table": "file", "--config": "file", "--key": "file"}, "out": {},
               "other": "--port --room-c --interpreter --noise-uohm --speed"},
     "check": {"in": {"--model": "file", "--run": "folder", "--board-log": "file"}, "out": {"--json": "file"},
-              "other": "--board-t0-ms --max-dt-s --position-tol-mm --limit-um --allow-edited"},
+              "other": "--board-t0-ms --max-dt-s --position-tol-mm --limit-um --allow-edited --t-min --t-max"},
     "compare": {"in": {"runs": "folder"}, "out": {"--json": "file", "--plots": "folder"},
                 "other": "--channel --direct --sensors --methods --train --split-h --noise-C --offset-C --repeats "
                          "--reference --option --no-intercept"},
