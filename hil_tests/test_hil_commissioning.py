@@ -13,6 +13,7 @@ import json
 import os
 import re
 import shlex
+import signal
 import subprocess
 import sys
 import time
@@ -40,13 +41,25 @@ def _env():
     return env
 
 
+# a step that fails ends the script (set -e): the boards it started in the background are stopped then (Ctrl-C),
+# as the reader's would be, so that a failing step fails the test at once instead of leaving a board running
+STOP_BOARDS_ON_EXIT = "trap 'for p in $(jobs -p); do kill -INT $p 2>/dev/null; done; wait' EXIT\n"
+
+
 def run_script(folder, script, timeout=600):
-    """bash -e of ``script`` in ``folder``; (exit code, output, wall seconds)."""
+    """bash -e of ``script`` in ``folder``; (exit code, output, wall seconds). On a timeout every process of the
+    script (its own session) is killed."""
     t = time.monotonic()
-    p = subprocess.run(["bash", "-c", "set -euo pipefail\n" + script], cwd=str(folder), env=_env(),
-                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, timeout=timeout,
-                       start_new_session=True)
-    return p.returncode, p.stdout, time.monotonic() - t
+    p = subprocess.Popen(["bash", "-c", "set -euo pipefail\n" + STOP_BOARDS_ON_EXIT + script], cwd=str(folder),
+                         env=_env(), stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                         start_new_session=True)
+    try:
+        out, _ = p.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(p.pid, signal.SIGKILL)
+        out, _ = p.communicate()
+        raise AssertionError("docs/commissioning.md's script did not end within %d s:\n%s" % (timeout, out[-3000:]))
+    return p.returncode, out, time.monotonic() - t
 
 
 @pytest.fixture(scope="module")
