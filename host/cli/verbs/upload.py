@@ -23,7 +23,7 @@ def add_arguments(p):
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     p.add_argument("--timeout", type=float, default=DEFAULT_TIMEOUT_S,
                    help="seconds to wait for the board's answer to each line (default %g)" % DEFAULT_TIMEOUT_S)
-    p.add_argument("--json", help="write {port, table_crc, kind, bytes, lines, before: hello, after: hello} as JSON")
+    p.add_argument("--json", help="write {port, table, table_crc, kind, bytes, lines, uploaded, before: hello, after: hello} as JSON")
 
 
 class UploadRefused(Exception):
