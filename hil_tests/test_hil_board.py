@@ -234,3 +234,35 @@ def test_board_in_modbus_mode_answers_a_modbus_master_in_real_time(tmp_path, dem
     finally:
         _stop(p)
     assert p.returncode == 0
+
+
+def test_monitor_query_logs_the_offsets_at_the_given_positions(tmp_path, demo_run, capsys):
+    """tcomp monitor --query: a board whose controller reports no position answers Q at each listed position; the
+    CSV log holds those Q frames (what tcomp check aligns with a laser's target positions)."""
+    import csv
+
+    from hil_tests.rig import interpreters
+    from host.cli import main as tcomp
+    interpreters.get().require()
+    (tmp_path / "t.bin").write_bytes(export(poly_slope_for_run(demo_run, ["T1", "T2", "T4"], seed=43)).table)
+    link = str(tmp_path / "ttyQ")
+    assert tcomp(["monitor", "--port", link, "--query", "0,abc"]) == 2
+    assert "--query 0,abc: 'abc' is not a position in mm" in capsys.readouterr().err
+    p, first = _start(["--port", link, "--run", os.path.join(ROOT, "data", "demo", "mixed"), "--table",
+                       str(tmp_path / "t.bin"), "--speed", "20"])
+    try:
+        assert first.startswith("board: "), first
+        rc = tcomp(["monitor", "--port", link, "--csv", str(tmp_path / "log.csv"), "--query", "0,350.5,700",
+                    "--query-every", "0.5", "--duration", "2.5"])
+        assert rc == 0
+    finally:
+        _stop(p)
+    with open(tmp_path / "log.csv", newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if r["kind"] == "Q"]
+    assert len(rows) >= 9, rows  # 3 positions, every 0.5 s for 2.5 s
+    assert {r["pos_um"] for r in rows} == {"0", "350500", "700000"}
+    by_time = {}
+    for r in rows:
+        by_time.setdefault(r["t_ms"], {})[r["pos_um"]] = float(r["total_um"])
+    # the table's offset depends on the position: the answers are the board's, at the position asked
+    assert any(len(set(v.values())) > 1 for v in by_time.values()), by_time

@@ -142,3 +142,31 @@ def test_check_reads_the_answers_of_tcomp_hil(model, tmp_path, capsys):
     json.dump({"answers": answers}, open(log, "w"))
     err = _fails(capsys, ["check", "--model", model, "--run", CHECK, "--board-log", log, "--limit-um", "1"])
     assert "answers[7].offset_um is None" in err
+
+
+def test_check_window_checks_only_its_rows_and_counts_the_others(model, tmp_path, capsys):
+    """--t-min/--t-max: a log that begins after the run's first sweeps; without the window the first row is an
+    error, with it the figures are those of the rows inside [S, S') and the rows left out are counted."""
+    t, _, e = _errors()
+    times = np.unique(t)
+    s, s2 = float(times[2]), float(times[-2])
+    inside = (t >= s) & (t < s2)
+    residual = np.where(inside, 0.25, 50.0)  # outside the window the log's offsets are far off
+    log = _monitor_log(str(tmp_path / "log.csv"), 5000, residual)
+    argv = ["check", "--model", model, "--run", CHECK, "--board-log", log, "--board-t0-ms", "5000", "--limit-um", "1"]
+    assert main(argv) == 1  # the whole run: the rows outside fail it
+    capsys.readouterr()
+    out = str(tmp_path / "c.json")
+    assert main(argv + ["--t-min", repr(s), "--t-max", repr(s2), "--json", out]) == 0
+    text = capsys.readouterr().out
+    doc = json.load(open(out))
+    c = doc["channels"]["error"]
+    assert c["rows"] == int(inside.sum()) and doc["rows_outside_window"] == int((~inside).sum())
+    assert "%d rows of the model's channel outside it not checked" % (~inside).sum() in text, text
+    assert c["uncompensated"]["rmse_um"] == pytest.approx(np.sqrt(np.mean(e[inside] ** 2)), rel=1e-9)
+    assert c["compensated"]["max_abs_residual_um"] == pytest.approx(
+        np.abs(e[inside] - np.round(e[inside] - 0.25, 1)).max(), rel=1e-9)
+    assert main(argv + ["--t-min", "1e9"]) == 2
+    assert "no errors.csv row of the model's channel in the window 1e+09..- s" in capsys.readouterr().err
+    assert main(argv + ["--t-min", "10", "--t-max", "5"]) == 2
+    assert "the window is empty" in capsys.readouterr().err

@@ -195,7 +195,7 @@ FLAGS = {
     "board": {"in": {"--run": "folder", "--table": "file", "--config": "file", "--key": "file"}, "out": {},
               "other": "--port --room-c --interpreter --noise-uohm --speed"},
     "check": {"in": {"--model": "file", "--run": "folder", "--board-log": "file"}, "out": {"--json": "file"},
-              "other": "--board-t0-ms --max-dt-s --position-tol-mm --limit-um --allow-edited"},
+              "other": "--board-t0-ms --max-dt-s --position-tol-mm --limit-um --allow-edited --t-min --t-max"},
     "compare": {"in": {"runs": "folder"}, "out": {"--json": "file", "--plots": "folder"},
                 "other": "--channel --direct --sensors --methods --train --split-h --noise-C --offset-C --repeats "
                          "--reference --option --no-intercept"},
@@ -219,7 +219,7 @@ FLAGS = {
                  "other": "--mode --baud --address --name --units --slew-um-per-s --period-ms --stale-ms --recover-ms "
                           "--cold-start --spindle"},
     "monitor": {"in": {"--port": "file", "--key": "file"}, "out": {"--csv": "log", "--json": "file"},
-                "other": "--baud --count --duration --hello --latch --temperatures"},
+                "other": "--baud --count --duration --hello --latch --temperatures --query --query-every"},
     "record": {"in": {"--port": "file", "--config": "file"}, "out": {"--out": "folder"},
                "other": "--baud --sensor --period --duration --link-timeout --notes --linuxcnc --hal-position "
                         "--hal-velocity --hal-spindle --hal-name --units"},
@@ -228,13 +228,17 @@ FLAGS = {
     "select": {"in": {"runs": "folder", "--corr": "file", "--target-corr": "file"}, "out": {"--json": "file", "--plot": "file"},
                "other": "--method --channel --target --sensors --split --option"},
     "simulate": {"in": {}, "out": {"--out": "folder", "--json": "file"}, "other": "--protocol --effects --seed --noise-um --set --error-reference"},
+    # tcomp upload reads the table and the key and talks to the port; its one output is --json
+    "upload": {"in": {"--port": "file", "--table": "file", "--key": "file"}, "out": {"--json": "file"},
+               "other": "--baud --timeout"},
     "validate": {"in": {"runs": "folder"}, "out": {"--json": "file"}, "other": ""},
 }
 
 # where each input lives in the world, and a valid call naming every input ({FLAG}) and output ({@FLAG})
 INPUT_FILES = {"runs": "run", "run": "run", "--history": "run", "--run": "run", "model": "m.json", "--table": "t.bin", "--config": "cfg.json",
                "--board": "board.py", "--port": "port", "--mpremote": "mpremote", "source": "log.csv",
-               "--mapping": "map.json", "--model": "m.json", "--board-log": "board.csv", "--corr": "corr.csv", "--target-corr": "tcorr.csv", "--key": "k.key"}
+               "--mapping": "map.json", "--corr": "corr.csv", "--target-corr": "tcorr.csv", "--key": "k.key",
+               "--model": "m.json", "--board-log": "board.csv"}
 OUTPUT_NAMES = {"--json": "o.json", "--plots": "plots", "--report": "report", "--out": "out", "--c-header": "t.h",
                 "--key": "new.key", "--csv": "log2.csv", "--plot": "p.png"}
 BASE = {
@@ -249,6 +253,7 @@ BASE = {
     "hil": ["hil", "--run", "{--run}", "--table", "{--table}", "--config", "{--config}", "--model", "{--model}",
             "--json", "{@--json}"],
     "import": ["import", "{source}", "--mapping", "{--mapping}", "--out", "{@--out}", "--json", "{@--json}"],
+    "upload": ["upload", "--port", "{--port}", "--table", "{--table}", "--key", "{--key}", "--json", "{@--json}"],
     "monitor": ["monitor", "--port", "{--port}", "--key", "{--key}", "--duration", "0.2", "--csv", "{@--csv}", "--json", "{@--json}"],
     "record": ["record", "--port", "{--port}", "--config", "{--config}", "--sensor", "T1=nut", "--duration", "0.2",
                "--out", "{@--out}"],

@@ -24,5 +24,6 @@ VERBS = {
     "report": ("host.cli.verbs.report", "ISO 230-3-style thermal drift report of runs (HTML with plots, JSON figures), before/after compensation with a model"),
     "select": ("host.cli.verbs.select", "choose temperature sensors (maximal-tree fuzzy clustering, stepwise partial F, hierarchical clustering + GA)"),
     "simulate": ("host.cli.verbs.simulate", "simulate thermal tests of a feed axis with the digital twin and write run folders"),
+    "upload": ("host.cli.verbs.upload", "send a new coefficient table to a running board over its link, signed with its key; verified by the board's hello"),
     "validate": ("host.cli.verbs.validate", "check run folders against the tcomp-run/1 format and print every problem (exit 1 if any)"),
 }

@@ -1,4 +1,5 @@
 """tcomp check --model MODEL --run CHECK_RUN [--board-log LOG.csv --board-t0-ms MS] --limit-um L [--json OUT]
+            [--t-min S] [--t-max S]
 
 A production check (docs/check.md): the errors measured on a check run, uncompensated (as measured) against
 compensated (measured − the board's offsets from its log, or − the host model's prediction when there is no
@@ -25,6 +26,11 @@ def add_arguments(p):
                    help="... and its position within this of the row's (default %g mm)" % DEFAULT_POSITION_TOL_MM)
     p.add_argument("--limit-um", dest="limit_um", type=float, required=True,
                    help="the stated limit: pass when every compensated |measured - offset| is at most this (µm)")
+    p.add_argument("--t-min", dest="t_min", type=float, metavar="S",
+                   help="check only the errors.csv rows with time_s >= S (as tcomp fit --t-min): e.g. the sweeps "
+                        "measured after the board's log began; the rows left out are counted in the output")
+    p.add_argument("--t-max", dest="t_max", type=float, metavar="S",
+                   help="check only the errors.csv rows with time_s < S")
     p.add_argument("--json", help="write the figures and the verdict as JSON")
     p.add_argument("--allow-edited", dest="allow_edited", action="store_true",
                    help="check with a model whose provenance.sha256 does not match its content, as tcomp predict does")
@@ -41,6 +47,11 @@ def run(args):
     for flag, v in (("--max-dt-s", args.max_dt_s), ("--position-tol-mm", args.position_tol_mm)):
         if not (math.isfinite(v) and v >= 0):
             raise UserError("%s %s: must be a finite number >= 0" % (flag, v))
+    for flag, v in (("--t-min", args.t_min), ("--t-max", args.t_max)):
+        if v is not None and not math.isfinite(v):
+            raise UserError("%s %s: must be a finite number of seconds (run time)" % (flag, v))
+    if args.t_min is not None and args.t_max is not None and not args.t_min < args.t_max:
+        raise UserError("--t-min %g, --t-max %g: the window is empty (--t-min must be < --t-max)" % (args.t_min, args.t_max))
     if args.board_t0_ms is not None and not args.board_log:
         raise UserError("--board-t0-ms is the board log's time 0: give --board-log too")
     with Outputs([args.model, args.run, args.board_log]) as out:
@@ -72,6 +83,17 @@ def _check(args, out):
     rows_of = channel_rows(e, predicted)
     if not rows_of:
         raise UserError("%s: no errors.csv row the model %s predicts" % (args.run, args.model))
+    window = np.ones(len(e), dtype=bool)  # --t-min/--t-max: [S, S') of the run's time, as tcomp fit's window
+    if args.t_min is not None:
+        window &= e.time_s >= args.t_min
+    if args.t_max is not None:
+        window &= e.time_s < args.t_max
+    outside = int(sum(int((~window[r]).sum()) for r in rows_of.values()))
+    rows_of = {c: r[window[r]] for c, r in rows_of.items() if window[r].any()}
+    if not rows_of:
+        raise UserError("%s: no errors.csv row of the model's channel in the window %s..%s s (time_s from %g to %g)"
+                        % (args.run, "-" if args.t_min is None else "%g" % args.t_min,
+                           "-" if args.t_max is None else "%g" % args.t_max, e.time_s.min(), e.time_s.max()))
     used = np.sort(np.concatenate(list(rows_of.values())))
     if args.board_log:
         try:
@@ -102,6 +124,10 @@ def _check(args, out):
     not_checked = [c for c in e.channels() if c not in channels] if e.channel is not None else []
     passed = all(c["pass"] for c in channels.values())
     print("tcomp check: %s against %s; limit %g µm on max |measured - offset|" % (args.run, source, args.limit_um))
+    if args.t_min is not None or args.t_max is not None:
+        print("  window: rows with %s; %d rows of the model's channel outside it not checked" % (
+            " and ".join(t for t in ("time_s >= %g" % args.t_min if args.t_min is not None else "",
+                                    "time_s < %g" % args.t_max if args.t_max is not None else "") if t), outside))
     for name, c in channels.items():
         b, a = c["uncompensated"], c["compensated"]
         print("  %s: %d rows; uncompensated RMSE %.3f µm, max |e| %.3f µm; compensated RMSE %.3f µm, max |r| %.3f µm: %s"
@@ -118,6 +144,7 @@ def _check(args, out):
             json.dump({"model": args.model, "run": args.run, "provenance": provenance,
                        "compensation": "board_log" if args.board_log else "host_model",
                        "board_log": args.board_log, "board_t0_ms": args.board_t0_ms,
+                       "t_min_s": args.t_min, "t_max_s": args.t_max, "rows_outside_window": outside,
                        "max_dt_s": args.max_dt_s, "position_tol_mm": args.position_tol_mm,
                        "limit_um": args.limit_um, "criterion": "max_abs_compensated_residual_um <= limit_um per channel",
                        "channels": channels, "not_checked": not_checked, "pass": passed}, fh, indent=2)

@@ -1,4 +1,5 @@
-"""tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch] [--temperatures S]"""
+"""tcomp monitor --port PORT [--csv LOG] [--count N] [--duration S] [--latch] [--temperatures S]
+              [--query MM[,MM...] [--query-every S]]"""
 
 from __future__ import annotations
 
@@ -36,6 +37,13 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="ask for the temperatures (S) every SECONDS: T frames are shown and logged with the others "
                         "(t_ms, then the channels' degC in the fields column). To record a thermal test into a run "
                         "folder use tcomp record")
+    p.add_argument("--query", metavar="MM[,MM...]",
+                   help="ask for the offsets at these axis positions (mm; Q commands, docs/protocol.md) every "
+                        "--query-every seconds: Q frames are shown and logged with the others. For a board whose "
+                        "controller reports no positions (a tcomp board, a bench), so that a log holds the offsets "
+                        "at a laser's target positions (tcomp check)")
+    p.add_argument("--query-every", type=float, default=1.0, metavar="SECONDS",
+                   help="with --query: seconds between two rounds of queries (default 1, at least 0.05)")
     p.add_argument("--json", help="write {frames, malformed, rows: [decoded frames], bad: [reasons]} as JSON at the end")
 
 
@@ -61,6 +69,25 @@ def offset_problem(f: Frame) -> str | None:
             return "%s frame seq %d: %s %r is not a finite %s" % (f.kind, f.seq, name, value[:40],
                                                                  "integer" if pattern is _INTEGER else "decimal number")
     return None
+
+
+def query_positions(text: str | None) -> list[int] | None:
+    """``--query`` "0,50,100.5" (mm) -> [0, 50000, 100500] (the integer µm of the Q command); None without it;
+    UserError naming the cell that is not a finite number."""
+    from host.errors import UserError
+    if text is None:
+        return None
+    out = []
+    for cell in text.split(","):
+        try:
+            mm = float(cell)
+        except ValueError:
+            mm = math.nan
+        if not math.isfinite(mm) or abs(mm) > 1e6:
+            raise UserError("--query %s: %r is not a position in mm (comma-separated numbers, e.g. 0,50,100)"
+                            % (text, cell.strip()))
+        out.append(int(round(mm * 1000.0)))
+    return out
 
 
 def row(f: Frame) -> dict[str, Any]:
@@ -96,6 +123,9 @@ def run(args: argparse.Namespace) -> int:
     for flag, value in (("--baud", args.baud), ("--count", args.count), ("--duration", args.duration)):
         if not value >= (1 if flag == "--baud" else 0):
             raise UserError("%s %s: must be %s" % (flag, value, "a positive rate in bit/s" if flag == "--baud" else ">= 0 (0: no limit)"))
+    args.query_um = query_positions(args.query)
+    if not (math.isfinite(args.query_every) and args.query_every >= 0.05):
+        raise UserError("--query-every %s: must be a number of seconds >= 0.05" % args.query_every)
     if not math.isfinite(args.duration):  # inf would never stop; 0 is the way to say "no limit"
         raise UserError("--duration %s: must be a finite number of seconds (0: no limit, Ctrl-C stops)" % args.duration)
     # The key is an input too: --csv KEY or --json KEY would overwrite the board's key.
@@ -136,6 +166,7 @@ def _monitor(args, outputs):
     bad = 0
     start = time.monotonic()
     next_s = start  # when temperatures (S) are asked for next, with --temperatures
+    next_q = start  # when the offsets at the --query positions (Q) are asked for next
     print("%6s %1s %8s %10s %10s %9s %9s %9s  %s" % ("seq", "", "status", "t_ms", "pos_um", "total_um",
                                                       "ref_um", "slope", "flags / fields"))
     latch = None  # the board's answer to L: "ok" or "refused"
@@ -158,6 +189,10 @@ def _monitor(args, outputs):
             if args.temperatures and time.monotonic() >= next_s:
                 link.send("S")
                 next_s += args.temperatures
+            if args.query_um and time.monotonic() >= next_q:
+                for pos_um in args.query_um:
+                    link.send("Q", pos_um)
+                next_q += args.query_every
             try:
                 new = link.receive()
             except serial.SerialException as exc:
