@@ -133,7 +133,7 @@ class ScrewModel:
                  geometric_degree: int | str = "auto", effects: Sequence[Effect] = (), channel: str | None = None,
                  ambient: bool | str = "auto", nut_weight: float = 0.0, reduced_segments: int = 12, reduced_dt_s: float = 10.0,
                  feed_max_mm_min: float | None = None, max_nfev: int = 200, base_sensor: str | None = None,
-                 base_ref: str = "run_start", fit_window: tuple[float, float] | None = None, air: str = "auto",
+                 base_ref: str = "run_start", fit_window: tuple[float | None, float | None] | None = None, air: str = "auto",
                  ftol: float = 1e-12, air_lag_s: float = 0.0) -> None:
         self.segments = segments
         self.dt_s = dt_s
