@@ -15,11 +15,20 @@ rig passes one that lets simulated time move, a real port passes none and waits 
     frame = link.request("S", kinds="TE")           # the T frame (temperatures) answering S
     ms = link.clock.extend(frame.t_ms)              # a board time that keeps counting across the wrap
 """
+from __future__ import annotations
+
+from collections.abc import Callable
 import threading
 import time
+from typing import TYPE_CHECKING, Any, cast
 
 from firmware.wire import PROTOCOL_VERSION
-from host.board.link import StreamDecoder, command_line
+from host.board.link import Frame, StreamDecoder, command_line
+
+if TYPE_CHECKING:  # pyserial is imported where a port is opened: the bridge and the rig import this module first
+    import serial
+
+    from host.board.linkauth import LinkSigner
 
 # MicroPython's ticks_ms() wraps here (docs/protocol.md, Units): the board's t_ms counts 0 .. WRAP_MS - 1
 WRAP_MS = 1 << 30
@@ -42,13 +51,13 @@ class BoardClock:
     Between two frames the board's clock may move forward by less than half the wrap (6.2 days): a step
     that reads as more than that backwards is refused (ClockError), never taken as 12 days of silence."""
 
-    def __init__(self, wrap_ms=WRAP_MS):
+    def __init__(self, wrap_ms: int = WRAP_MS) -> None:
         self.wrap_ms = wrap_ms
-        self.last_raw = None
+        self.last_raw: int | None = None
         self.ms = 0  # board milliseconds since the first frame, across every wrap
         self.wraps = 0
 
-    def extend(self, t_ms):
+    def extend(self, t_ms: int | str) -> int:
         """``t_ms`` of a frame -> board milliseconds since the first frame this clock saw."""
         t = int(t_ms)
         if not 0 <= t < self.wrap_ms:
@@ -71,26 +80,37 @@ class Hello:
     """A board's hello frame (H) by name: protocol, firmware, slot, table_crc, provenance, kind, axis, channels
     (an int), refs, counter, nonce, error_reference (None for a firmware before it)."""
 
-    def __init__(self, frame):
+    # the frame's text fields (HELLO_NAMES, set by name below), None when the frame ends before them
+    protocol: str | None
+    firmware: str | None
+    slot: str | None
+    table_crc: str | None
+    provenance: str | None
+    kind: str | None
+    axis: str | None
+    channels: int | None
+    refs: str | None
+
+    def __init__(self, frame: Frame) -> None:
         from firmware.wire import HELLO_COUNTER, HELLO_ERROR_REFERENCE, HELLO_NONCE
         f = frame.fields
         self.frame = frame
         for i, name in enumerate(HELLO_NAMES):
             setattr(self, name, f[i] if i < len(f) else None)
         try:
-            self.channels = int(self.channels)
+            self.channels = int(cast(str, self.channels))  # the loop above set the frame's text (or None)
         except (TypeError, ValueError):
             self.channels = None
         self.counter = f[HELLO_COUNTER] if len(f) > HELLO_COUNTER else None
         self.nonce = f[HELLO_NONCE] if len(f) > HELLO_NONCE else None
         self.error_reference = f[HELLO_ERROR_REFERENCE] if len(f) > HELLO_ERROR_REFERENCE else None
 
-    def as_dict(self):
+    def as_dict(self) -> dict[str, Any]:
         """What a record of the board keeps (never the nonce: it is a session's, not the board's)."""
         return {name: getattr(self, name) for name in HELLO_NAMES + ("error_reference",)}
 
 
-def check_protocol(frame, port):
+def check_protocol(frame: Frame, port: str) -> None:
     """LinkError when hello ``frame`` is of another protocol version than this tcomp's."""
     if frame.fields[:1] != [str(PROTOCOL_VERSION)]:
         raise LinkError("%s: the board's hello frame says protocol version %s; this tcomp speaks %d (docs/protocol.md)"
@@ -101,18 +121,19 @@ class BoardLink:
     """One board on one port. ``frames``: every frame decoded since the last ``take_frames`` (a list shared with a
     reader thread, guarded by ``lock``); ``decoder.bad``: malformed lines; ``last_hello``: the newest H frame."""
 
-    def __init__(self, ser, port="", signer=None):
+    def __init__(self, ser: serial.Serial, port: str = "", signer: LinkSigner | None = None) -> None:
         self.ser = ser
         self.port = port
         self.signer = signer
         self.decoder = StreamDecoder()
-        self.frames = []
+        self.frames: list[Frame] = []
         self.lock = threading.Condition()
-        self.last_hello = None
+        self.last_hello: Frame | None = None
         self.clock = BoardClock()
 
     @classmethod
-    def open(cls, port, baud=115200, signer=None, timeout=0.05, **kw):
+    def open(cls, port: str, baud: int = 115200, signer: LinkSigner | None = None, timeout: float = 0.05,
+             **kw: Any) -> BoardLink:
         """Open ``port`` (a device path, a pty, or a pySerial URL: socket://, loop://, spy://); LinkError naming it."""
         import serial
         try:
@@ -122,35 +143,40 @@ class BoardLink:
         return cls(ser, port, signer)
 
     # --- out -------------------------------------------------------------------------------
-    def write(self, data, flush=True):
+    def write(self, data: bytes, flush: bool = True) -> None:
         """``flush=False`` for a caller on a deadline (the LinuxCNC bridge): the port's write timeout bounds it."""
         self.ser.write(data)
         if flush:
             self.ser.flush()
 
-    def send(self, *fields):
+    def send(self, *fields: bytes | str | int) -> None:
         self.write(command_line(*fields))
+
+    def _signer(self) -> LinkSigner:
+        # only a link opened with a key signs (the verbs check --key first); None.<method> was the error before
+        assert self.signer is not None, "this link has no key to sign with"
+        return self.signer
 
     def _observe_counter(self):
         # the board's last counter and session nonce are in its newest hello (boot, V, table switch)
         if self.last_hello is not None:
-            self.signer.observe_hello(self.last_hello.fields)
+            self._signer().observe_hello(self.last_hello.fields)
 
-    def signed_line(self, *fields, extra=b""):
+    def signed_line(self, *fields: bytes | str | int, extra: bytes = b"") -> bytes:
         """A command that changes the output, signed with the board's key (``signer``) for the newest hello's
         session; linkauth's CounterError when the hello's counter or nonce cannot be used."""
         self._observe_counter()
-        return self.signer.stream_line(*fields, extra=extra)
+        return self._signer().stream_line(*fields, extra=extra)
 
-    def upload_lines(self, table):
+    def upload_lines(self, table: bytes) -> list[bytes]:
         self._observe_counter()
-        return self.signer.upload_lines(table)
+        return self._signer().upload_lines(table)
 
-    def send_signed(self, *fields, extra=b""):
+    def send_signed(self, *fields: bytes | str | int, extra: bytes = b"") -> None:
         self.write(self.signed_line(*fields, extra=extra))
 
     # --- in --------------------------------------------------------------------------------
-    def feed(self, data, arrival=0.0):
+    def feed(self, data: bytes, arrival: float = 0.0) -> list[Frame]:
         """Decode ``data``; the new frames are appended to ``frames`` and returned."""
         with self.lock:
             new = self.decoder.feed(data, arrival)
@@ -161,7 +187,7 @@ class BoardLink:
             self.lock.notify_all()
         return new
 
-    def receive(self):
+    def receive(self) -> list[Frame]:
         """Read what the port has (waiting up to the port's timeout for the first byte), decode it; the new frames.
         The port's errors (unplugged, closed) come through as pyserial's SerialException (an OSError)."""
         data = self.ser.read(self.ser.in_waiting or 1)
@@ -171,13 +197,14 @@ class BoardLink:
             data = self.ser.read(self.ser.in_waiting) if self.ser.in_waiting else b""
         return out
 
-    def take_frames(self):
+    def take_frames(self) -> list[Frame]:
         with self.lock:
             out = list(self.frames)
             self.frames.clear()
         return out
 
-    def wait(self, pred, timeout, since=0, step=None, what="a matching frame"):
+    def wait(self, pred: Callable[[Frame], bool], timeout: float, since: int = 0, step: Callable[[], object] | None = None,
+             what: str = "a matching frame") -> Frame:
         """The first frame from index ``since`` of ``frames`` that satisfies ``pred``, within ``timeout`` real
         seconds; between looks ``step()`` (simulated time moves) or, without one, the port is read."""
         end = time.monotonic() + timeout
@@ -193,20 +220,21 @@ class BoardLink:
             else:
                 self.receive()
 
-    def request(self, *fields, kinds="QAEHT", timeout=10.0, step=None):
+    def request(self, *fields: bytes | str | int, kinds: str = "QAEHT", timeout: float = 10.0,
+                step: Callable[[], object] | None = None) -> Frame:
         """Send a command and return the first frame of one of ``kinds`` that follows it."""
         with self.lock:
             n0 = len(self.frames)
         self.send(*fields)
         return self.wait(lambda f: f.kind in kinds, timeout, n0, step, "reply to %s" % ",".join(map(str, fields)))
 
-    def read_hello(self, timeout=5.0, step=None):
+    def read_hello(self, timeout: float = 5.0, step: Callable[[], object] | None = None) -> Hello:
         """Ask for the hello (V); its Hello, after checking the protocol version (LinkError otherwise)."""
         f = self.request("V", kinds="H", timeout=timeout, step=step)
         check_protocol(f, self.port)
         return Hello(f)
 
-    def close(self):
+    def close(self) -> None:
         try:
             self.ser.close()
         except (OSError, ValueError):

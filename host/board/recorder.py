@@ -20,8 +20,12 @@ Samples with a faulty channel (``!XX`` in the T frame) cannot be a row of temper
 docs/data-format.md): they go to ``board_faults.csv`` (time_s, channel, fault bits), written the same way,
 and are counted in the summary; nothing is dropped unsaid.
 """
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
 import json
 import os
+from typing import Any
 
 from host.data.runformat import ERROR_COLUMNS, ERRORS, FORMAT, META, ROLES, TEMPERATURES
 
@@ -43,7 +47,7 @@ def _fsync_dir(folder):
         os.close(fd)
 
 
-def write_atomic(path, text):
+def write_atomic(path: str, text: str) -> None:
     """``text`` into ``path`` whole or not at all (temporary file beside it, fsync, rename, fsync of the folder)."""
     tmp = os.path.join(os.path.dirname(path), ".%s.tmp-%d" % (os.path.basename(path), os.getpid()))
     try:
@@ -65,15 +69,16 @@ class AppendFile:
     file, which would not validate), then opened for appending: ``append(lines)`` is one write() and an fsync;
     a short write is cut back to the last whole line and raises RecordStop naming the file."""
 
-    def __init__(self, path, header, first_lines):
+    def __init__(self, path: str, header: Sequence[str], first_lines: Sequence[str]) -> None:
         self.path = path
         self.rows = 0
         write_atomic(path, "".join(line + "\n" for line in [",".join(header)] + list(first_lines)))
-        self.fd = os.open(path, os.O_WRONLY | os.O_APPEND)
+        self.fd: int | None = os.open(path, os.O_WRONLY | os.O_APPEND)
         self.size = os.fstat(self.fd).st_size
         self.rows = len(first_lines)
 
-    def append(self, lines):
+    def append(self, lines: Sequence[str]) -> None:
+        assert self.fd is not None, "%s: appended to after close" % self.path  # a bug of the caller, not of the disk
         data = "".join(line + "\n" for line in lines).encode("ascii")
         try:
             n = os.write(self.fd, data)
@@ -91,13 +96,13 @@ class AppendFile:
         self.size += len(data)
         self.rows += len(lines)
 
-    def close(self):
+    def close(self) -> None:
         if self.fd is not None:
             os.close(self.fd)
             self.fd = None
 
 
-def parse_sensor(text):
+def parse_sensor(text: str) -> tuple[str, dict[str, str]]:
     """``NAME=ROLE[:LOCATION]`` -> (name, {role, location}); ValueError naming what is wrong."""
     name, eq, rest = text.partition("=")
     role, _, location = rest.partition(":")
@@ -108,7 +113,7 @@ def parse_sensor(text):
     return name, {"role": role, "location": location or "not given"}
 
 
-def sensor_names(channels, sensors, config_names=None):
+def sensor_names(channels: int, sensors: dict[str, dict[str, str]], config_names: Sequence[str] | None = None) -> list[str]:
     """The run's sensor names in the board's channel order: the board config's names when given, else the
     ``--sensor`` names in their order; ValueError when the count or the names do not match the board's."""
     if config_names is not None:
@@ -136,7 +141,8 @@ class RunWriter:
     are written into a hidden folder beside ``folder``, which is then renamed to ``folder`` (an empty one is
     replaced). Every later row is appended."""
 
-    def __init__(self, folder, names, meta, time_s, values, faults=()):
+    def __init__(self, folder: str, names: Iterable[str], meta: dict[str, Any], time_s: float, values: Sequence[str],
+                 faults: Sequence[tuple[str, str, str]] = ()) -> None:
         folder = os.path.normpath(folder)
         if os.path.lexists(folder) and (not os.path.isdir(folder) or os.listdir(folder)):
             raise RecordStop("%s: exists and is not an empty folder; a recording is written into a new folder, never "
@@ -146,10 +152,10 @@ class RunWriter:
         stage = os.path.join(parent, ".%s.recording-%d" % (os.path.basename(folder), os.getpid()))
         self.folder = folder
         self.names = list(names)
-        self.faults = None
+        self.faults: AppendFile | None = None
         self.faulty_samples = len({t for t, _, _ in faults})
-        self.temperatures = None
-        self.extra = {}  # motion.csv, spindle.csv: AppendFile once they have a row
+        self.temperatures: AppendFile | None = None  # an AppendFile once __init__ returns
+        self.extra: dict[str, AppendFile] = {}  # motion.csv, spindle.csv: AppendFile once they have a row
         doc = {"format": FORMAT, "errors_pending": True}
         doc.update(meta)
         os.mkdir(stage)
@@ -176,11 +182,12 @@ class RunWriter:
     def _row(time_s, values):
         return ",".join(["%.3f" % time_s] + list(values))
 
-    def sample(self, time_s, values):
+    def sample(self, time_s: float, values: Sequence[str]) -> bool:
         """One sample: ``values`` as the board sent them (``°C.mmm`` or ``!XX``), in channel order. True when it
         became a row of temperatures.csv, False when a faulty channel sent it to board_faults.csv."""
         bad = faulty_channels(self.names, time_s, values)
         if not bad:
+            assert self.temperatures is not None  # __init__ made it or raised
             self.temperatures.append([self._row(time_s, values)])
             return True
         lines = ["%s,%s,%s" % f for f in bad]
@@ -191,7 +198,7 @@ class RunWriter:
         self.faulty_samples += 1
         return False
 
-    def create(self, name, header, lines):
+    def create(self, name: str, header: Sequence[str], lines: Sequence[str]) -> AppendFile:
         """A further file of the run (motion.csv, spindle.csv, board_faults.csv), created whole with its first rows."""
         try:
             f = AppendFile(os.path.join(self.folder, name), header, lines)
@@ -200,7 +207,7 @@ class RunWriter:
         _fsync_dir(self.folder)
         return f
 
-    def append(self, name, header, lines):
+    def append(self, name: str, header: Sequence[str], lines: Sequence[str]) -> None:
         """Rows of motion.csv or spindle.csv (created with its first rows)."""
         if not lines:
             return
@@ -209,12 +216,12 @@ class RunWriter:
         else:
             self.extra[name].append(lines)
 
-    def close(self):
+    def close(self) -> None:
         for f in [self.temperatures, self.faults] + list(self.extra.values()):
             if f is not None:
                 f.close()
 
 
-def faulty_channels(names, time_s, values):
+def faulty_channels(names: Sequence[str], time_s: float, values: Sequence[str]) -> list[tuple[str, str, str]]:
     """[(time text, channel, fault bits)] of the channels a T frame reports faulty (``!XX``)."""
     return [("%.3f" % time_s, n, v[1:]) for n, v in zip(names, values) if v.startswith("!")]

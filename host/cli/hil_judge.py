@@ -7,13 +7,23 @@ model, board − host (what the integer table on the board adds to the model's o
 RMSE, largest |residual|, largest and smallest residual.
 """
 
+from __future__ import annotations
+
+from collections.abc import Sequence
 import dataclasses
 import math
+from typing import TYPE_CHECKING, Any
 
 from host.errors import UserError
 
+if TYPE_CHECKING:  # for the hints only: numpy stays imported where it is used, as before
+    import numpy as np
 
-def first_seconds(run, seconds, where):
+    from host.board.link import Frame
+    from host.data.runs import Run
+
+
+def first_seconds(run: Run, seconds: float, where: str) -> Run:
     """``run`` cut to its first ``seconds`` (from its first temperature sample): temperatures, errors rows,
     moves (a move running at the cut ends there) and spindle samples up to the cut."""
     import numpy as np
@@ -46,7 +56,7 @@ def first_seconds(run, seconds, where):
     return dataclasses.replace(run, temperatures=temps, errors=errors, motion=motion, spindle=spindle)
 
 
-def read_model(path):
+def read_model(path: str) -> tuple[dict[str, Any], Any]:
     """The host model of ``--model`` (as `tcomp predict` reads it; an edited document is refused)."""
     from host.learning.documents import ModelFormatError, load_model, read_document
     from models_export.document import edited_reason, provenance
@@ -61,7 +71,8 @@ def read_model(path):
     return doc, model
 
 
-def host_predict(model, run, model_path, run_path, table_sensors):
+def host_predict(model: tuple[dict[str, Any], Any], run: Run, model_path: str, run_path: str,
+                 table_sensors: Sequence[str]) -> np.ndarray:
     """The host model's prediction at every errors.csv row (NaN on another channel's rows)."""
     import numpy as np
     doc, m = model
@@ -80,18 +91,18 @@ def host_predict(model, run, model_path, run_path, table_sensors):
     return pred
 
 
-def error_ref_code(reference, sensors):
+def error_ref_code(reference: str, sensors: Sequence[str]) -> int | None:
     """The table's code (firmware/table.py ``error_ref``) of a run's error reference; None when none fits."""
     if reference == "start":
         return 0
     return 1 + list(sensors).index(reference) if reference in sensors else None
 
 
-def error_ref_name(code, sensors):
+def error_ref_name(code: int, sensors: Sequence[str]) -> str:
     return "start" if code == 0 else sensors[code - 1] if 0 < code <= len(sensors) else "code %d" % code
 
 
-def output_name(run, model):
+def output_name(run: Run, model: tuple[dict[str, Any], Any] | None) -> str:
     """The name of the output channel the table computes: the model's errors channel, else the run's only
     channel, else the run's axis (meta.json), else "error"."""
     if model is not None and model[0].get("channel"):
@@ -119,7 +130,8 @@ def _stats(residuals):
             "max_um": float(r.max()), "min_um": float(r.min())}
 
 
-def judge(run, answers, host_um, model=None):
+def judge(run: Run, answers: Sequence[dict[str, Any]], host_um: np.ndarray | None,
+          model: tuple[dict[str, Any], Any] | None = None) -> dict[str, Any]:
     """{"output": the channel the board computes, "residuals": what each is, "channels": {name: {rows,
     held_or_fallback, against_measurement, against_host_model, host_model_against_measurement}}}
     (docs/hil.md, "Judging")."""
@@ -146,7 +158,8 @@ def judge(run, answers, host_um, model=None):
             "channels": out}
 
 
-def answer_rows(run, answers, host_um, model=None):
+def answer_rows(run: Run, answers: Sequence[dict[str, Any]], host_um: np.ndarray | None,
+                model: tuple[dict[str, Any], Any] | None = None) -> list[dict[str, Any]]:
     """The JSON's answers: time, position, the board's offset and status, as before; and the row's channel,
     its measured error and residual, and the host model's prediction when there is one."""
     e = run.errors
@@ -163,7 +176,7 @@ def answer_rows(run, answers, host_um, model=None):
     return out
 
 
-def report_lines(verdict):
+def report_lines(verdict: dict[str, Any]) -> list[str]:
     """The printout: one line per channel and comparison."""
     lines = []
     for name, c in verdict["channels"].items():
@@ -181,7 +194,7 @@ def report_lines(verdict):
     return lines
 
 
-def label(frame, channel_names, output):
+def label(frame: Frame, channel_names: Sequence[str], output: str) -> str:
     """One frame as a labelled line: the output channel's name on offsets, the board's channel names on
     temperatures and on the faulty-sensor bits of the status word."""
     from host.board.link import SENSOR_MASK, STATUS_BITS

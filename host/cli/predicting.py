@@ -1,9 +1,17 @@
 """Load a model document and predict a run with it: the one path `tcomp predict`, `tcomp check` and
 `tcomp report` take (the same provenance check, the same errors), so a model scores the same in each."""
+from __future__ import annotations
+
 import sys
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # numpy and the run format are imported where they are used
+    import numpy as np
+
+    from host.data.runs import Run
 
 
-def load_checked_model(path, allow_edited=False, verb="tcomp"):
+def load_checked_model(path: str, allow_edited: bool = False, verb: str = "tcomp") -> tuple[Any, str]:
     """(model, provenance word) of the document at ``path``; UserError when it is not a model or was edited
     after it was saved (unless ``allow_edited``, which warns on stderr)."""
     from host.errors import UserError
@@ -29,7 +37,7 @@ def load_checked_model(path, allow_edited=False, verb="tcomp"):
     return model, "edited" if edited else "verified" if declared is not None else "none"
 
 
-def load_run_or_fail(path):
+def load_run_or_fail(path: str) -> Run:
     from host.data.runs import RunFormatError, load_run
     from host.errors import UserError
 
@@ -39,7 +47,8 @@ def load_run_or_fail(path):
         raise UserError(str(exc))
 
 
-def predict_rows(model, model_path, run_, run_path, history=None, history_path=None):
+def predict_rows(model: Any, model_path: str, run_: Run, run_path: str, history: Run | None = None,
+                 history_path: str | None = None) -> np.ndarray:
     """The model's prediction at every errors.csv row of ``run_`` (NaN on rows of other channels); with ``history``
     (a run logged before ``run_``, dynamic models only) the model's states run through it first."""
     import numpy as np

@@ -14,8 +14,10 @@ Two layouts are read (docs/check.md):
 Nothing is guessed: a missing column, a cell that is not a number or a time that goes backwards is a
 ``BoardLogError`` naming the file and line.
 """
-import math
+from __future__ import annotations
+
 from dataclasses import dataclass
+import math
 
 import numpy as np
 
@@ -38,7 +40,7 @@ class BoardLog:
     offset_um: np.ndarray  # the board's offset (the predicted error with its sign, docs/protocol.md)
     layout: str  # "monitor" or "aligned"
 
-    def __len__(self):
+    def __len__(self) -> int:
         return self.time_s.size
 
 
@@ -76,7 +78,7 @@ def _read_hil_json(path, fh):
     return BoardLog(np.asarray(cols["time_s"]), np.asarray(cols["position_mm"]), np.asarray(cols["offset_um"]), "hil")
 
 
-def read_board_log(path, board_t0_ms=None):
+def read_board_log(path: str, board_t0_ms: float | None = None) -> BoardLog:
     """The offsets of a board log on the run's clock (see the module doc); BoardLogError names what is wrong."""
     if path.lower().endswith(".json"):
         if board_t0_ms is not None:
@@ -132,6 +134,7 @@ def read_board_log(path, board_t0_ms=None):
                                         "sessions?); check one session at a time" % (path, line, tick, last_tick - tick,
                                                                                      last_line, last_tick))
             last_tick, last_line = tick, line
+            assert board_t0_ms is not None  # a monitor log without it was refused above
             t.append((tick + wraps * T_MS_WRAP - board_t0_ms) / 1000.0)
             p.append(_number(path, line, "pos_um", cells[col["pos_um"]]) / 1000.0)
             o.append(_number(path, line, "total_um", cells[col["total_um"]]))
@@ -149,7 +152,8 @@ def read_board_log(path, board_t0_ms=None):
     return BoardLog(np.asarray(t), np.asarray(p), np.asarray(o), layout)
 
 
-def offsets_at(log, time_s, position_mm, max_dt_s, position_tol_mm, where):
+def offsets_at(log: BoardLog, time_s: np.ndarray, position_mm: np.ndarray, max_dt_s: float, position_tol_mm: float,
+               where: str) -> np.ndarray:
     """The board's offset for each (time, position) measured: the log entry nearest in time among those at the
     position (within ``position_tol_mm``) and within ``max_dt_s``. BoardLogError names the first row without one."""
     out = np.empty(len(time_s))

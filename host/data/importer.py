@@ -19,7 +19,7 @@ Units are declared per column, never guessed: a column whose name says another u
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 import json
 import math
 import os
@@ -565,7 +565,7 @@ def _read(source, m, numeric, text=()):
     return table
 
 
-def import_csv(source, mapping, mapping_where="mapping"):
+def import_csv(source: str, mapping: Any, mapping_where: str = "mapping") -> Run:
     """Read a wide-layout ``source`` (CSV path) with ``mapping``; return a Run (not yet written)."""
     if isinstance(mapping, dict) and mapping.get("layout") == "long":
         raise LogImportError("%s: a long layout holds error sweeps, not the run's temperatures: import the temperatures first (tcomp "
@@ -588,7 +588,9 @@ def import_csv(source, mapping, mapping_where="mapping"):
     units = {c: m["temperatures"][c]["unit"] for c in tcols}
     _check_ranges([(cells, c, tvals[:, j], lo, hi, "degC%s, the range of a Pt100 (IEC 60751)"
                     % ("" if units[c] == "degC" else " once converted from %s" % units[c])) for j, c in enumerate(tcols)]
-                  + [(cells, c, evals[:, j], -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
+                  # evals is None only without ecols, when this list is empty
+                  + [(cells, c, evals[:, j], -ERROR_LIMIT_UM,  # pyright: ignore[reportOptionalSubscript]
+                       ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
                      for j, c in enumerate(ecols)])
     temps = Temperatures(time_s, [m["temperatures"][c]["name"] for c in tcols], tvals)
     n = time_s.size
@@ -598,10 +600,11 @@ def import_csv(source, mapping, mapping_where="mapping"):
         err_pos = np.tile([m["errors"][c]["position_mm"] for c in ecols], n)
         # The channel column is kept even for one channel: it records which probe it was.
         channel = np.tile(np.array([m["errors"][c]["channel"] for c in ecols], dtype=object), n)
+        assert evals is not None  # made with ecols
         errors = Errors(err_time, err_pos, evals.reshape(-1), None, channel)
     spindle = Spindle(time_s, cells.column(m["spindle"])) if m["spindle"] else None
     # Only what the user declared: no axis, no sensor location unless the mapping (or a flag) gives it.
-    meta = {"format": FORMAT}
+    meta: dict[str, Any] = {"format": FORMAT}
     if "axis" in m["meta"]:
         meta["axis"] = m["meta"].pop("axis")
     meta["sensors"] = {s["name"]: dict({"role": s["role"]}, **({"location": s["location"]} if s["location"] is not None else {}))
@@ -632,7 +635,8 @@ def import_csv(source, mapping, mapping_where="mapping"):
                              "nor one of the imported sensors (%s) the errors were corrected to"
                              % (mapping_where, json.dumps(ref), ", ".join(meta["sensors"])))
     name = os.path.splitext(os.path.basename(source))[0]
-    run = Run(meta, temps, errors, None, spindle, name=name)
+    # errors None: a run awaiting its sweeps, which write_run writes as errors.csv's header (a loaded Run always has Errors)
+    run = Run(meta, temps, cast(Errors, errors), None, spindle, name=name)
     run.dialect = table.dialect  # what the file was read as, for the command's summary (meta.json keeps it when not plain CSV)
     return run
 
@@ -643,11 +647,12 @@ class Sweeps:
     ``lines`` each row's source line, ``start_time`` the first sample's UTC date-time (date-time files only),
     ``record`` what meta.json keeps of the import, ``meta`` the mapping's meta."""
 
-    def __init__(self, errors, point_time_s, lines, start_time, record, meta):
+    def __init__(self, errors: Errors, point_time_s: np.ndarray, lines: np.ndarray, start_time: str | None, record: dict[str, Any],
+                 meta: dict[str, Any]) -> None:
         self.errors, self.point_time_s, self.lines = errors, point_time_s, lines
         self.start_time, self.record, self.meta = start_time, record, meta
 
-    def groups(self):
+    def groups(self) -> list[np.ndarray]:
         return self.errors.sweeps()
 
 
@@ -688,7 +693,7 @@ def _sweep_starts(cells, m, position, direction):
     return starts
 
 
-def import_errors(source, mapping, mapping_where="mapping"):
+def import_errors(source: str, mapping: Any, mapping_where: str = "mapping") -> Sweeps:
     """Read an instrument's error file (long layout: one row per point; or wide: probe columns) into Sweeps."""
     layout = mapping.get("layout", "wide") if isinstance(mapping, dict) else "wide"
     if layout == "wide":

@@ -18,12 +18,19 @@ approach direction. Within a group, each target position's deviations over time 
 
 The same functions give the figures of residuals (measured − predicted): "after compensation".
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+
+if TYPE_CHECKING:  # for the hints only: this module imports nothing of tcomp at run time
+    from host.data.runs import Errors, Run
 
 POSITION_DECIMALS = 3  # targets closer than 1 µm are one target (laser software writes them rounded)
 
 
-def groups(errors):
+def groups(errors: Errors) -> list[tuple[str, np.ndarray]]:
     """[(label, row indices)] per (channel, direction) of errors.csv, in first-seen order."""
     keys = []
     labels = []
@@ -42,7 +49,7 @@ def groups(errors):
     return [(k, np.asarray(out[k])) for k in labels]
 
 
-def drift_table(time_s, position_mm, value_um):
+def drift_table(time_s: np.ndarray, position_mm: np.ndarray, value_um: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(times, positions, matrix[time, position]) of one group's values (NaN where a position was not measured)."""
     pos = np.round(np.asarray(position_mm, dtype=float), POSITION_DECIMALS)
     times = np.unique(time_s)
@@ -54,7 +61,7 @@ def drift_table(time_s, position_mm, value_um):
     return times, targets, m
 
 
-def drift_figures(time_s, position_mm, value_um):
+def drift_figures(time_s: np.ndarray, position_mm: np.ndarray, value_um: np.ndarray) -> dict[str, Any]:
     """The figures of the module doc for one group of rows (values: deviations, or residuals)."""
     times, targets, m = drift_table(time_s, position_mm, value_um)
     per_position = []
@@ -84,7 +91,7 @@ def drift_figures(time_s, position_mm, value_um):
     return out
 
 
-def etve_applicable(run):
+def etve_applicable(run: Run) -> tuple[bool, str]:
     """(bool, why): Clause 5's ETVE needs the machine standing still while only the environment changes."""
     moving = run.motion is not None and len(run.motion) > 0
     spinning = run.spindle is not None and np.any(np.asarray(run.spindle.rpm) != 0)

@@ -9,9 +9,13 @@ Nothing is guessed silently: a detected delimiter or decimal separator is report
 written into meta.json by the importer and printed by ``tcomp import``), and a file that reads two ways is
 refused, saying why. Every problem names the file, line (1 = header) and column.
 """
+from __future__ import annotations
+
+from collections.abc import Iterable, Sequence
+from datetime import datetime, timedelta, timezone, tzinfo
 import math
 import re
-from datetime import datetime, timedelta, timezone
+from typing import Any
 
 from host.data.runs import CsvSyntaxError, parse_number, read_records
 
@@ -32,7 +36,8 @@ class Table:
 
     ``dialect``: {"delimiter": ..., "decimal": ..., "detected": [what was detected rather than declared]}."""
 
-    def __init__(self, source, header, records, delimiter, decimal, detected, header_line=1):
+    def __init__(self, source: str, header: list[str], records: list[tuple[int, list[str]]], delimiter: str, decimal: str,
+                 detected: Iterable[str], header_line: int = 1) -> None:
         self.source = source
         self.header = header
         self.header_line = header_line  # the file's line holding the header (lines before it: the export's preamble)
@@ -42,7 +47,7 @@ class Table:
         self.detected = detected
 
     @property
-    def dialect(self):
+    def dialect(self) -> dict[str, Any]:
         return {"delimiter": self.delimiter, "decimal": self.decimal, "detected": list(self.detected)}
 
 
@@ -110,7 +115,8 @@ def _detect_decimal(source, header, records, delimiter, numeric_columns):
     return "," if comma else "."
 
 
-def read_table(source, delimiter=AUTO, decimal=AUTO, numeric_columns=(), header_line=1):
+def read_table(source: str, delimiter: str = AUTO, decimal: str = AUTO, numeric_columns: Iterable[str] = (),
+               header_line: int = 1) -> Table:
     """Read ``source`` (a path) into a Table; ``numeric_columns``: the mapped columns a decimal separator is detected on;
     ``header_line``: the line holding the column names (the lines before it, an export's preamble, are not read)."""
     try:
@@ -144,7 +150,7 @@ def read_table(source, delimiter=AUTO, decimal=AUTO, numeric_columns=(), header_
     return Table(source, header, records[1:], delimiter, decimal, detected, header_line)
 
 
-def parse_cell(cell, decimal):
+def parse_cell(cell: str, decimal: str) -> float:
     """float of a number cell written with ``decimal`` as its separator; ValueError with the reason otherwise."""
     if decimal == ",":
         if "." in cell:
@@ -158,7 +164,7 @@ def parse_cell(cell, decimal):
         raise
 
 
-def number(cell, decimal, where):
+def number(cell: str, decimal: str, where: str) -> float | None:
     """A finite number, or None for an empty cell (a gap); LogFileError naming ``where`` otherwise."""
     cell = cell.strip()
     if not cell:
@@ -177,7 +183,7 @@ def number(cell, decimal, where):
 _OFFSET = re.compile(r"(?:UTC)?([+-])([0-9]{2}):?([0-9]{2})")
 
 
-def fixed_or_named_zone(name, where):
+def fixed_or_named_zone(name: Any, where: str) -> tzinfo:
     """A tzinfo for a declared time zone: "UTC", a fixed offset "+01:00", or an IANA name ("Europe/Berlin")."""
     if not isinstance(name, str) or not name:
         raise LogFileError("%s: \"timezone\" must be a string such as \"UTC\", \"+01:00\" or \"Europe/Berlin\", found %r" % (where, name))
@@ -205,7 +211,7 @@ def _in_zone(naive, zone, where):
     return a
 
 
-def parse_timestamp(cell, time_format, where):
+def parse_timestamp(cell: str, time_format: str, where: str) -> datetime:
     """A datetime (aware or naive, as the cell says) of an ISO 8601 or strptime-formatted cell."""
     cell = cell.strip()
     try:
@@ -219,7 +225,8 @@ def parse_timestamp(cell, time_format, where):
                                                                    if time_format == ISO8601 else "the format %r" % time_format))
 
 
-def seconds_since_first(stamps, wheres, zone_name, zone_where):
+def seconds_since_first(stamps: Sequence[datetime], wheres: Sequence[str], zone_name: str | None,
+                        zone_where: str) -> tuple[list[float], str]:
     """Seconds of each datetime since the first, and the first as ISO 8601 UTC.
 
     Either every timestamp carries its offset (then no "timezone" may be declared: the cells say it), or
@@ -245,7 +252,7 @@ def seconds_since_first(stamps, wheres, zone_name, zone_where):
     return [(u - first).total_seconds() for u in utc], first.isoformat().replace("+00:00", "Z")
 
 
-def parse_utc(text, where):
+def parse_utc(text: Any, where: str) -> datetime:
     """A datetime in UTC from an ISO 8601 string that carries its offset (meta.json "start_time")."""
     try:
         t = datetime.fromisoformat(text[:-1] + "+00:00" if isinstance(text, str) and text[-1:] in "zZ" else text)
@@ -260,14 +267,14 @@ _DELIMITER_NAMES = {"comma": ",", "semicolon": ";", "tab": "\t", "\\t": "\t", ",
 _DECIMAL_NAMES = {"point": ".", "comma": ",", ".": ".", ",": ",", AUTO: AUTO}
 
 
-def delimiter_of(value, where):
+def delimiter_of(value: Any, where: str) -> str:
     """The delimiter a mapping or flag declares: ',' ';' tab (or their names), or "auto"."""
     if value not in _DELIMITER_NAMES:
         raise LogFileError("%s: delimiter %r: expected \"auto\", \",\" (comma), \";\" (semicolon) or \"tab\"" % (where, value))
     return _DELIMITER_NAMES[value]
 
 
-def decimal_of(value, where):
+def decimal_of(value: Any, where: str) -> str:
     """The decimal separator a mapping or flag declares: '.' or ',' (or point/comma), or "auto"."""
     if value not in _DECIMAL_NAMES:
         raise LogFileError("%s: decimal %r: expected \"auto\", \".\" (point) or \",\" (comma)" % (where, value))

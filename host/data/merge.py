@@ -12,9 +12,12 @@ Every sweep must lie inside the run's temperature record (a model reads the temp
 time; outside it they would be extrapolated); those that do not are refused by line and time.
 The run is re-validated with its new errors.csv and meta.json before anything is written.
 """
+from __future__ import annotations
+
 import os
 import shutil
 import tempfile
+from typing import Any
 
 import numpy as np
 
@@ -24,7 +27,7 @@ from host.data.logfile import LogFileError
 from host.data.runs import ERRORS, META, MOTION, SPINDLE, START, TEMPERATURES, Errors, RunFormatError, load_run, write_errors, write_meta
 
 
-def run_start_time(meta):
+def run_start_time(meta: dict[str, Any]) -> tuple[Any, str]:
     """(the wall clock of the run's time 0, the meta.json key holding it) or (None, "start_time").
 
     ``start_time``: written by tcomp import of a date-time log and by tcomp record (docs/recording.md)."""
@@ -96,7 +99,9 @@ def _merge_errors(old, new, run_errors_path):
     time_s = np.concatenate([old.time_s, new.time_s])
     order = np.argsort(time_s, kind="stable")
     pick = lambda a: None if a is None else a[order]  # noqa: E731
-    return Errors(time_s[order], pick(cat(old.position_mm, new.position_mm)), pick(cat(old.error_um, new.error_um)),
+    # position and error are never None (cat/pick pass a None through, for direction and channel)
+    return Errors(time_s[order], np.concatenate([old.position_mm, new.position_mm])[order],
+                  np.concatenate([old.error_um, new.error_um])[order],
                   pick(cat(old.direction, new.direction)), pick(cat(old.channel, new.channel)))
 
 
@@ -115,7 +120,8 @@ def _merge_meta(run, sweeps, record, source, mapping_where):
     return meta
 
 
-def merge_into(run_folder, source, mapping, stage, mapping_where="mapping", clock_offset_s=None):
+def merge_into(run_folder: str, source: str, mapping: Any, stage: str, mapping_where: str = "mapping",
+               clock_offset_s: float | None = None) -> tuple[dict[str, Any], Errors]:
     """Merge the sweeps of ``source`` into the run ``run_folder``; write its new errors.csv and meta.json into the
     folder ``stage`` (the caller renames them into place). Returns (summary dict, merged Errors)."""
     try:

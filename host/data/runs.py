@@ -8,7 +8,7 @@ column; nothing is silently dropped.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any
 from numpy.typing import ArrayLike
 import csv
@@ -119,6 +119,9 @@ class Run:
     spindle: Spindle | None = None
     path: str | None = None
     name: str = field(default="run")
+    # what an imported log was read as (logfile.Table.dialect), set by import_csv for the command's summary; not a run
+    # file's content, so neither in the constructor nor in the comparison or the repr
+    dialect: dict[str, Any] | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def sensors(self) -> dict[str, dict[str, Any]]:
@@ -172,7 +175,7 @@ class CsvSyntaxError(ValueError):
     """A CSV file that cannot be split into cells unambiguously; the message names file and line."""
 
 
-def read_records(fh, path, delimiter=",", first_line=1):
+def read_records(fh: Iterable[str], path: str, delimiter: str = ",", first_line: int = 1) -> list[tuple[int, list[str]]]:
     """[(line number, cells)] of an open CSV file, one record per physical line (cells split at ``delimiter``;
     ``first_line``: the file's line number of ``fh``'s first line, when lines before it were skipped).
 
@@ -363,7 +366,7 @@ def _is_utc_date_time(text):
         return False
 
 
-def error_reference(meta):
+def error_reference(meta: dict[str, Any]) -> str:
     """The declared error reference of a run's meta: ``"start"`` when absent (load_run has validated it)."""
     return meta.get("error_reference", START)
 
@@ -404,7 +407,7 @@ def check_model_reference(run: Run, model_reference: str | None) -> None:
                          "referred to %s (docs/data-format.md)" % (run.path or run.name, json.dumps(ref), json.dumps(model_reference)))
 
 
-def slice_run(run, t_start_s, t_end_s=None):
+def slice_run(run: Run, t_start_s: float, t_end_s: float | None = None) -> Run:
     """The part of ``run`` with t_start_s <= time < t_end_s as a run of its own: what a board switched on at
     ``t_start_s`` would have seen (forward-chaining validation, a restart on a warm machine).
 
@@ -444,7 +447,7 @@ def slice_run(run, t_start_s, t_end_s=None):
     return Run(dict(run.meta), temps, errors, motion, spindle, path=None, name=name)
 
 
-def load_meta(folder):
+def load_meta(folder: str) -> dict[str, Any]:
     path = os.path.join(folder, META)
     problems = _Problems()
     try:
@@ -604,7 +607,7 @@ def _g(decimals):
     return f
 
 
-def write_meta(meta, path):
+def write_meta(meta: dict[str, Any], path: str) -> None:
     """meta.json of a run (``format`` set when missing)."""
     meta = dict(meta)
     meta.setdefault("format", FORMAT)
@@ -613,7 +616,7 @@ def write_meta(meta, path):
         fh.write("\n")
 
 
-def write_errors(e, path, decimals=4):
+def write_errors(e: Errors | None, path: str, decimals: int = 4) -> None:
     """errors.csv of a run: time to the millisecond, positions and errors to ``decimals``.
 
     ``e`` None writes the header only: a run of temperatures awaiting its sweeps (meta.json ``errors_pending``,
@@ -621,7 +624,9 @@ def write_errors(e, path, decimals=4):
     if e is None:
         _write_csv(path, list(ERROR_COLUMNS), [], [])
         return
-    header, cols, fmts = list(ERROR_COLUMNS), [e.time_s, e.position_mm, e.error_um], [_g(3), _g(decimals), _g(decimals)]
+    header: list[str] = list(ERROR_COLUMNS)
+    cols: list[np.ndarray] = [e.time_s, e.position_mm, e.error_um]
+    fmts: list[Callable[[Any], str]] = [_g(3), _g(decimals), _g(decimals)]
     if e.direction is not None:
         header.append("direction")
         cols.append(e.direction)
@@ -633,7 +638,7 @@ def write_errors(e, path, decimals=4):
     _write_csv(path, header, cols, fmts)
 
 
-def write_run(run, folder, decimals=4):
+def write_run(run: Run, folder: str, decimals: int = 4) -> str:
     """Write ``run`` as a tcomp-run/1 folder (created if needed). Returns the folder.
 
     Raises NotADirectoryError naming ``folder`` when it exists as a file (os.makedirs would only say "File exists").

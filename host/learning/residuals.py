@@ -5,12 +5,20 @@ residual = measured − predicted (Li 2021's MAXR/MINR are its max and min). Row
 (rows of another channel than the model's) are not the model's rows and are left out; which rows were used
 is counted in ``rows``.
 """
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+from numpy.typing import ArrayLike
+
+if TYPE_CHECKING:  # for the hints only
+    from host.data.runs import Errors
 
 NO_CHANNEL = "error"  # the key of a run without an errors.csv channel column
 
 
-def figures(measured, predicted):
+def figures(measured: ArrayLike, predicted: ArrayLike) -> dict[str, Any]:
     """{rows, rmse_um, max_residual_um, min_residual_um, max_abs_residual_um, r2} of the finite pairs."""
     measured = np.asarray(measured, dtype=float)
     predicted = np.asarray(predicted, dtype=float)
@@ -26,7 +34,7 @@ def figures(measured, predicted):
             "min_residual_um": float(r.min()), "max_abs_residual_um": float(np.abs(r).max()), "r2": r2}
 
 
-def channel_rows(errors, predicted):
+def channel_rows(errors: Errors, predicted: ArrayLike) -> dict[str, np.ndarray]:
     """{channel name: row indices} of the rows with a finite prediction, in first-seen order."""
     ok = np.isfinite(np.asarray(predicted, dtype=float))
     if errors.channel is None:
@@ -39,7 +47,7 @@ def channel_rows(errors, predicted):
     return out
 
 
-def per_channel(errors, predicted):
+def per_channel(errors: Errors, predicted: ArrayLike) -> dict[str, dict[str, Any]]:
     """{channel: figures(...)} over the rows ``channel_rows`` gives."""
     return {c: figures(errors.error_um[rows], np.asarray(predicted, dtype=float)[rows])
             for c, rows in channel_rows(errors, predicted).items()}

@@ -144,6 +144,7 @@ class StreamLink:
             if self.latch_wanted:
                 self.latch_wanted = False
                 if line is not None:
+                    assert self.link is not None  # _frame reads the frames the open link has just received
                     self.link.write(line, flush=False)
                     self.latch_pending = True
         elif f.kind == "E" and self.latch_pending and f.fields[:1] in (["%d" % E_STATE], ["%d" % E_AUTH], ["%d" % E_BUSY]):

@@ -7,6 +7,10 @@ temperatures, as motion.csv intervals and spindle.csv samples (docs/recording.md
 unit-tested without LinuxCNC; the whole chain runs in a real LinuxCNC in hil_tests/test_hil_linuxcnc.py.
 """
 
+from __future__ import annotations
+
+from collections.abc import Iterable
+
 from host.board.linuxcnc.bridge import UM_PER_UNIT
 
 # LinuxCNC pins of a machine's X axis, spindle 0 (checked in LinuxCNC 2.9's motmod: docs/linuxcnc.md)
@@ -19,7 +23,7 @@ IDLE_MM_PER_S = 0.01  # below this the axis counts as standing (a thermal test's
 class HalReader:
     """Reads ``pins`` from HAL each ``read()``; ValueError naming a pin HAL does not have."""
 
-    def __init__(self, pins, name="tcomp-record"):
+    def __init__(self, pins: Iterable[str], name: str = "tcomp-record") -> None:
         from host.board.linuxcnc.halcomp import import_hal
         hal = import_hal()
         self.hal = hal
@@ -37,10 +41,10 @@ class HalReader:
                 self.close()
                 raise ValueError("HAL has no pin, parameter or signal %r (%s)" % (p, exc))
 
-    def read(self):
+    def read(self) -> list[float]:
         return [float(self.hal.get_value(p)) for p in self.pins]
 
-    def close(self):
+    def close(self) -> None:
         try:
             self.comp.exit()
         except Exception:  # already gone with its HAL session
@@ -54,13 +58,13 @@ class MotionSegmenter:
     it, or where the velocity changes sign (a reversal starts the next move there). Its feed is the mean of the
     sampled |velocity|: the times are as fine as the sampling period."""
 
-    def __init__(self, units="mm", idle_mm_per_s=IDLE_MM_PER_S):
+    def __init__(self, units: str = "mm", idle_mm_per_s: float = IDLE_MM_PER_S) -> None:
         self.mm_per_unit = UM_PER_UNIT[units] / 1000.0
         self.idle = idle_mm_per_s
-        self.move = None  # [t_start, from_mm, sign, sum of |v|, samples]
-        self.last = None  # (t, pos_mm) of the previous sample
+        self.move: list[float] | None = None  # [t_start, from_mm, sign, sum of |v|, samples]
+        self.last: tuple[float, float] | None = None  # (t, pos_mm) of the previous sample
 
-    def sample(self, t, position, velocity):
+    def sample(self, t: float, position: float, velocity: float) -> list[tuple[float, float, float, float, float]]:
         """One sample (machine units, units/s); the intervals it closed, as tuples."""
         pos = position * self.mm_per_unit
         v = velocity * self.mm_per_unit
@@ -79,13 +83,14 @@ class MotionSegmenter:
         return out
 
     def _close(self, t, pos):
+        assert self.move is not None  # called with a move open (sample, finish check it)
         t0, p0, _, vsum, n = self.move
         self.move = None
         if t <= t0 or not n:
             return []
         return [(t0, t, p0, pos, 60.0 * vsum / n)]
 
-    def finish(self):
+    def finish(self) -> list[tuple[float, float, float, float, float]]:
         """The move still open at the end of the recording, closed at the last sample."""
         if self.move is None or self.last is None:
             return []

@@ -10,6 +10,10 @@ or a steady room. Runs until Ctrl-C (or SIGTERM) and then stops the board and re
 The rig is reached through the entry point group ``tcomp.rig`` (as ``tcomp hil`` does,
 host/cli/verbs/hil.py ``load_rig``): host never imports hil_tests (tests/test_layers.py).
 """
+from __future__ import annotations
+
+import argparse
+
 
 import json
 import math
@@ -22,7 +26,7 @@ TICK_S = 0.05  # wall time between two grants of simulated time
 LAG_WARN_S = 5.0  # simulated time this far behind the wall clock is reported (once)
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", metavar="LINK",
                    help="also make LINK a symlink to the board's pty (the pty's own path is printed either way); "
                         "an existing file is refused, a dangling symlink replaced")
@@ -153,7 +157,7 @@ def _key(path):
         raise UserError("--key %s" % exc)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.cli.verbs.hil import load_rig
     from host.errors import UserError
 

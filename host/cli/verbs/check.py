@@ -6,12 +6,16 @@ compensated (measured − the board's offsets from its log, or − the host mode
 log), RMSE and max per channel, pass when every compensated |residual| of the model's channel(s) is within
 the limit. Exit 0 pass, 1 fail.
 """
+from __future__ import annotations
+
+import argparse
+
 
 DEFAULT_MAX_DT_S = 60.0  # a laser sweep stamps its rows with one time; the board logs every cycle (100 ms)
 DEFAULT_POSITION_TOL_MM = 0.05  # the board's position (µm, from the controller) against the laser's target
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--model", required=True, help="the model document the board's table was exported from")
     p.add_argument("--run", required=True, help="the check run folder (measured errors and temperatures)")
     p.add_argument("--board-log", dest="board_log", metavar="LOG.csv",
@@ -36,7 +40,7 @@ def add_arguments(p):
                    help="check with a model whose provenance.sha256 does not match its content, as tcomp predict does")
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     import math
 
     from host.errors import UserError

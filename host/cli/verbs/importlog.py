@@ -3,7 +3,10 @@ tcomp import --errors FILE.csv --into RUN --mapping MAP.json [--clock-offset S]"
 
 from __future__ import annotations
 
-def add_arguments(p):
+import argparse
+
+
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("source", nargs="?", help="CSV log with a header row (with --out)")
     p.add_argument("--out", help="run folder to write")
     p.add_argument("--errors", metavar="FILE.csv", help="an instrument's error file (a laser's sweeps) to merge into --into RUN by time")
@@ -155,7 +158,7 @@ def _mapping(args):
     return mapping, where
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.errors import UserError
 
     if args.errors or args.into:

@@ -6,6 +6,9 @@ its 2^30 ms wrap) from the first sample; meta.json holds the wall-clock time of 
 the recording (exit 0); a silent or lost link, a restarted board or a full disk end it with a message (exit 1).
 Either way the folder holds every sample written before.
 """
+from __future__ import annotations
+
+import argparse
 import math
 import re
 import signal
@@ -18,7 +21,7 @@ DEFAULT_PERIOD_S = 1.0
 _DECIMAL = re.compile(r"-?[0-9]{1,6}(\.[0-9]{1,6})?\Z")  # what the firmware prints for a good channel: degC.mmm
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", required=True, help="serial port or pySerial URL of the board (e.g. /dev/ttyACM0, a pty)")
     p.add_argument("--baud", type=int, default=115200, help="baud rate (default 115200)")
     p.add_argument("--out", required=True, help="the run folder to create (new, or an empty folder)")
@@ -81,7 +84,7 @@ def _config_names(path):
     return [c.name for c in cfg.channels]
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.board.recorder import parse_sensor
     from host.errors import UserError, check_output_dir
     _check(args)
@@ -225,6 +228,7 @@ def _record(args, sensors, config_names):
                 else:
                     writer.sample(time_s, values)
                 if hal is not None:
+                    assert host_t0 is not None  # set with t0_ms by the first answer, before any sample
                     _sample_hal(writer, hal, motion, time.monotonic() - host_t0)
             except RecordStop as exc:
                 if writer is None:
@@ -236,6 +240,7 @@ def _record(args, sensors, config_names):
     finally:
         link.close()
         if writer is not None and hal is not None:
+            assert motion is not None  # made with hal
             try:
                 writer.append(MOTION, MOTION_COLUMNS, [_motion_row(r) for r in motion.finish()])
             except RecordStop as exc:
@@ -249,6 +254,7 @@ def _record(args, sensors, config_names):
         print("record: no sample with every channel good (%d with a faulty channel); %s not written"
               % (faulty, args.out), file=sys.stderr)
     else:
+        assert writer.temperatures is not None  # RunWriter made it or raised
         # the rows the file holds: a Ctrl-C between a sample's write and a counter's increment cannot make them disagree
         print("%d samples in %s%s%s" % (writer.temperatures.rows, args.out,
                                          ", %d with a faulty channel in %s" % (faulty, "board_faults.csv") if faulty else "",

@@ -4,6 +4,10 @@ DIR gets report.html, report.json (every figure) and the PNG plots the HTML show
 (host/outputs.py). The figures are host/data/iso230.py's; residuals against a model are host/learning/residuals.py's,
 the same as `tcomp predict` and `tcomp check` print.
 """
+from __future__ import annotations
+
+import argparse
+
 
 CLAUSES = {
     "followed": [
@@ -27,7 +31,7 @@ CLAUSES = {
 }
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("runs", nargs="+", metavar="RUN", help="run folders (a thermal drift test each)")
     p.add_argument("--out", required=True, metavar="DIR", help="folder for report.html, report.json and the plots")
     p.add_argument("--model", help="model document: adds the figures after compensation (residual = measured - predicted)")
@@ -35,7 +39,7 @@ def add_arguments(p):
                    help="use a model whose provenance.sha256 does not match its content, as tcomp predict does")
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     from host.outputs import Outputs
 
     with Outputs(list(args.runs) + ([args.model] if args.model else [])) as out:

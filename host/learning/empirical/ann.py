@@ -144,6 +144,7 @@ class ANN:
         self.validation_r2_ = {}
         for h in sizes:
             params, rmse, epochs, best_epoch = self._train(Z[tr], t[tr], Z[val], t[val], h)
+            assert rmse is not None  # early stopping (no epochs given) measures it
             self.validation_rmse_[h] = rmse * self.y_scale_
             self.validation_r2_[h] = 1.0 - val.sum() * self.validation_rmse_[h] ** 2 / sst_v if sst_v > 0 else float("nan")
             self.epochs_[h] = epochs

@@ -14,9 +14,14 @@ fitted target does (std(b_i·x_i) > std(ŷ) and std(b_j·x_j) > std(ŷ)) while t
 of the smaller term (std(b_i·x_i + b_j·x_j) < ``CANCEL_FRACTION``·min): the two terms mostly cancel, and a
 drift or offset of either sensor moves the prediction by the large coefficient, not by the small net effect.
 """
+from __future__ import annotations
+
+from collections.abc import Sequence
 import itertools
+from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import stats as _st
 
 DW_FLAG = 1.5
@@ -33,7 +38,8 @@ def _pairs(groups, n):
     return idx[same] - 1, idx[same]
 
 
-def autocorrelation(resid, t_values, n_params, groups=None):
+def autocorrelation(resid: ArrayLike, t_values: Sequence[float] | np.ndarray, n_params: int,
+                    groups: ArrayLike | None = None) -> dict[str, Any]:
     """{durbin_watson, lag1_autocorrelation, n_effective, autocorrelated, p_effective (per t value), rule}."""
     r = np.asarray(resid, dtype=float)
     n = r.size
@@ -57,7 +63,7 @@ def autocorrelation(resid, t_values, n_params, groups=None):
                     % (DW_FLAG, n_params)}
 
 
-def cancelling_pairs(X, coef, names, fitted):
+def cancelling_pairs(X: ArrayLike, coef: ArrayLike, names: Sequence[str], fitted: np.ndarray) -> list[dict[str, Any]]:
     """[{sensors, coefficients, term_std, sum_std, fitted_std}] of the pairs the module doc's rule flags."""
     X = np.asarray(X, dtype=float)
     coef = np.asarray(coef, dtype=float)

@@ -36,12 +36,22 @@ coefficients from cancelling each other out of the training range.
 Scoring uses per-group Gram matrices of the candidate columns, so one CV
 evaluation costs O(k³ · groups) whatever the number of samples.
 """
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host.data.runs import START, check_model_reference
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.checks import check_predict_x, finite_or_none
 from models_export.document import FORMAT
+
+if TYPE_CHECKING:  # for the hints only (observer.py imports this module)
+    from host.data.runs import Run
+    from host.learning.empirical.observer import Observer
 
 # 0 (the signal itself), 15 min .. 16 h: from a sensor's own lag to two 8 h heating/cooling cycles of a machine structure
 TAUS_S = (0.0, 900.0, 1800.0, 3600.0, 7200.0, 14400.0, 28800.0, 57600.0)
@@ -60,7 +70,7 @@ MIN_BLOCKS = 3  # forward chaining: at least two scored blocks, so no single per
 TAU_MAX_FRACTION = 0.25
 
 
-def lag_filter(time_s, u, tau_s):
+def lag_filter(time_s: ArrayLike, u: ArrayLike, tau_s: float) -> np.ndarray:
     """First-order lag of u (n,) or (n, m) sampled at time_s, from rest, zero-order-hold exact."""
     u = np.asarray(u, dtype=float)
     if tau_s <= 0:
@@ -92,7 +102,7 @@ SPINDLE = ("spindle_krpm", "spindle_krpm2")
 FEED = "feed_m_min"
 
 
-def signals(run, sensors):
+def signals(run: Run, sensors: Iterable[str]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Time base (the temperature log) and the raw signals {name: (n,)} the model can filter.
 
     Temperature rises over the run's first sample are named ``T:<sensor>``; the
@@ -123,7 +133,7 @@ def signals(run, sensors):
     return t, out
 
 
-def features(run, terms, times):
+def features(run: Run, terms: Sequence[tuple[str, float]], times: ArrayLike) -> np.ndarray:
     """Columns of the model terms [(signal, tau_s)] at ``times`` (interpolated from the temperature time base)."""
     names = sorted({sig[2:] for sig, _ in terms if sig.startswith("T:")})
     t, sig = signals(run, names)
@@ -147,7 +157,8 @@ def features(run, terms, times):
     return np.column_stack(cols) if cols else np.zeros((times.size, 0))
 
 
-def candidate_matrix(runs, times_per_run, sensors, taus_s, use_spindle=True, use_feed=True):
+def candidate_matrix(runs: Iterable[Run], times_per_run: Iterable[np.ndarray], sensors: Sequence[str], taus_s: Iterable[float],
+                     use_spindle: bool = True, use_feed: bool = True) -> tuple[np.ndarray, list[tuple[str, float]] | None]:
     """Every candidate column (signal × τ) stacked over the runs -> (F (n, m), [(signal, tau)])."""
     blocks, terms = [], None
     for run, times in zip(runs, times_per_run):
@@ -194,20 +205,40 @@ class DynamicRegression:
     """
 
     method = "dynamic"
+    # learned by fit (the winning ridge value's _fit_one result, set by name, and what fit computes after it)
+    intercept_: float
+    coef_: np.ndarray
+    selected_: list[int]
+    fold_rmse_: list[float]
+    scale_: np.ndarray
+    fold_labels_: list[Any]
+    terms_: list[tuple[str, float]]
+    cv_rmse: float
+    cv_rmse_: float
+    history_: list[dict[str, Any]]
+    n_samples_: int
+    n_groups_: int
+    ridge_: float
+    cv_score_: str
+    cv_by_ridge_: dict[float, float]
+    rmse_: float
+    rsquared_: float
 
-    def __init__(self, *, max_sensors=5, max_terms=8, min_gain=0.01, cv_score=None, swaps=True, ridge=RIDGE, selection="forward",
-                 fit_intercept=True):
+    def __init__(self, *, max_sensors: int = 5, max_terms: int = 8, min_gain: float = 0.01, cv_score: str | None = None,
+                 swaps: bool = True, ridge: float | Sequence[float] = RIDGE, selection: str = "forward",
+                 fit_intercept: bool = True) -> None:
         self.ridge = ridge
         self.cv_score = cv_score
         self.selection = selection
-        self.block_columns = None
+        self.block_columns: dict[Any, tuple[np.ndarray, np.ndarray]] | None = None
         self.swaps = swaps
         self.max_sensors = max_sensors
         self.max_terms = max_terms
         self.min_gain = min_gain
         self.fit_intercept = fit_intercept
 
-    def fit(self, X, y, names=None, groups=None):
+    def fit(self, X: np.ndarray, y: np.ndarray, names: Sequence[tuple[str, float]] | None = None,
+            groups: np.ndarray | None = None) -> DynamicRegression:
         """Structure and coefficients for every ridge value in ``ridge``; the lowest CV score wins.
         ``X``: the lag-filtered candidates (fitting.candidate_matrix), ``names``: their (signal, tau) terms,
         ``groups``: the cross-validation groups (both required)."""
@@ -371,14 +402,14 @@ class DynamicRegression:
                 "terms_": [(terms[j][0], float(terms[j][1])) for j in selected], "cv_rmse": current, "cv_rmse_": current,
                 "history_": history, "n_samples_": n_all, "n_groups_": int(labels.size), "ridge_": ridge}
 
-    def with_block_columns(self, columns):
+    def with_block_columns(self, columns: Mapping[Any, tuple[np.ndarray, np.ndarray]]) -> DynamicRegression:
         """Score forward block ``label`` on ``columns[label] = (F_k, y_k)``: the candidate columns as a board switched on at
         the block's start computes them (host/learning/empirical/forward.py), instead of the rows of ``X`` (filters
         running since the run start). Returns self."""
         self.block_columns = dict(columns)
         return self
 
-    def coefficients_on(self, rows):
+    def coefficients_on(self, rows: ArrayLike) -> tuple[float, np.ndarray]:
         """(intercept, coefficients) of the chosen terms refitted on the samples ``rows`` (a mask over the fitted samples)
         with the chosen penalty and the same column scaling: the fit of one forward-chaining fold."""
         rows = np.asarray(rows, dtype=bool)
@@ -391,12 +422,12 @@ class DynamicRegression:
         beta = np.linalg.solve(A.T @ A + P, A.T @ self._y[rows]) / self.scale_
         return (float(beta[0]) if o else 0.0), beta[o:]
 
-    def predict(self, F):
+    def predict(self, F: np.ndarray) -> np.ndarray:
         """``F``: the selected terms' signals, one column per ``terms_`` entry."""
         F = check_predict_x(self, F, "coef_", lambda: self.coef_.size)
         return self.intercept_ + F @ self.coef_
 
-    def statistics(self):
+    def statistics(self) -> dict[str, Any]:
         return {
             "n_samples": int(self.n_samples_), "r2": finite_or_none(self.rsquared_), "rmse": finite_or_none(self.rmse_), "cv_rmse": finite_or_none(self.cv_rmse_),
             "cv_groups": self.n_groups_, "cv_score": self.cv_score_, "selection": self.selection, "history": self.history_, "ridge": self.ridge_,
@@ -426,8 +457,11 @@ class DynamicModel:
     coefficients = None  # not a linear function of the temperatures
     intercept = 0.0
 
-    def __init__(self, terms, coefficients, intercept, target="direct", channel=None, geometric_coef=(0.0,), method="dynamic", axis=None,
-                 reference_C=None, envelope=None, statistics=None, training=None, dt_s=None, observer=None):
+    def __init__(self, terms: Iterable[tuple[str, float]], coefficients: ArrayLike, intercept: float, target: str = "direct",
+                 channel: str | None = None, geometric_coef: ArrayLike = (0.0,), method: str = "dynamic", axis: str | None = None,
+                 reference_C: Mapping[str, float] | None = None, envelope: dict[str, Any] | None = None,
+                 statistics: dict[str, Any] | None = None, training: dict[str, Any] | None = None, dt_s: float | None = None,
+                 observer: Observer | None = None) -> None:
         self.observer = observer  # observer.Observer or None (filters from rest at the run start)
         self.dt_s = dt_s  # the filters' step on the board (the training runs' sample interval); None: not recorded
         self.terms = [(str(n), float(tau)) for n, tau in terms]
@@ -445,10 +479,10 @@ class DynamicModel:
         self.training = training or {}
 
     @property
-    def reference(self):
+    def reference(self) -> str:
         return "run_start" if self.observer is None else "fixed"
 
-    def thermal_at(self, run, times, history=None):
+    def thermal_at(self, run: Run, times: ArrayLike, history: Sequence[Run] | None = None) -> np.ndarray:
         """Thermal output at ``times`` of ``run``; ``history``: earlier runs (oldest first) the states run through first."""
         if self.observer is None and not history:
             return self.intercept + features(run, self.terms, times) @ self.term_coefficients
@@ -465,7 +499,7 @@ class DynamicModel:
             raise EmpiricalDataError("%s: time %g s is outside the temperature log %g..%g s (no extrapolation)" % (run.name, bad, t_run[0], t_run[-1]))
         return self.intercept + np.column_stack([np.interp(times, t, cols[:, j]) for j in range(cols.shape[1])]) @ self.term_coefficients
 
-    def geometric(self, P):
+    def geometric(self, P: ArrayLike) -> np.ndarray:
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
 
     def _rows(self, run):
@@ -476,11 +510,11 @@ class DynamicModel:
         return _channel_rows(run, self.channel)
 
     @property
-    def error_reference(self):
+    def error_reference(self) -> str:
         """The convention of the training errors ("start" for documents written before it was recorded)."""
         return self.training.get("error_reference", START)
 
-    def predict(self, run, history=None):
+    def predict(self, run: Run, history: Run | Sequence[Run] | None = None) -> np.ndarray:
         """Predicted errors of ``run`` as a board switched on at its first sample computes them (with its
         observer, if the model has one); ``history``: a run or list of runs (oldest first, ending before
         ``run`` starts, one clock) the board ran through first, without a restart."""
@@ -497,7 +531,7 @@ class DynamicModel:
         out[rows] = self.geometric(e.position_mm[rows]) + th * e.position_mm[rows] if self.target == "slope" else th
         return out
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         return {
             "format": FORMAT, "kind": self.kind, "method": self.method, "axis": self.axis, "channel": self.channel,
             "sensors": list(self.sensors), "error_reference": self.error_reference, "reference_C": dict(self.reference_C),
@@ -511,7 +545,7 @@ class DynamicModel:
         }
 
     @classmethod
-    def from_document(cls, doc):
+    def from_document(cls, doc: dict[str, Any]) -> DynamicModel:
         import math
 
         from host.learning.documents import ModelFormatError

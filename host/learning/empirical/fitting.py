@@ -11,7 +11,7 @@ has its fixed measuring position.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -126,9 +126,12 @@ def cv_groups(runs: Sequence[Run], arrays: Sequence[RunArrays], cv_blocks: int |
     return g
 
 
-def fit_model(runs, method="mlr", target="slope", channel=None, sensors=None, fit_intercept=True, window=None,
-              reference="fixed", envelope_margin_K=ENVELOPE_MARGIN_K, geometric_max_degree=5, geometric_criterion="cv",
-              cv_blocks=None, exclude=None, geometric_degree=None, forward_chaining=True, **options):
+def fit_model(runs: Sequence[Run], method: str = "mlr", target: str = "slope", channel: str | None = None,
+              sensors: Sequence[str] | None = None, fit_intercept: bool = True,
+              window: tuple[float | None, float | None] | None = None, reference: str = "fixed",
+              envelope_margin_K: float = ENVELOPE_MARGIN_K, geometric_max_degree: int = 5, geometric_criterion: str = "cv",
+              cv_blocks: int | None = None, exclude: tuple[float, float] | None = None, geometric_degree: int | None = None,
+              forward_chaining: bool = True, **options: Any) -> Any:
     """Fit ``method`` (an ESTIMATORS name, or dynamic) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 
     ``options`` go to the estimator (e.g. variance_threshold=0.9, f_enter=50).

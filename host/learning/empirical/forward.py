@@ -24,11 +24,20 @@ machine. Forward chaining measures that:
   filters running since the run start (``continuous_rmse_um``), then the worst
   block and the pooled RMSE over every scored sample.
 """
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from host.data.runs import slice_run
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.schedule import block_labels, cycles
+
+if TYPE_CHECKING:  # for the hints only
+    from host.data.runs import Run
+    from host.learning.empirical.targets import RunArrays
 
 FORWARD_BLOCKS = 4  # equal time blocks of one run without a spindle log
 MIN_BLOCKS = 3  # two scored blocks at least (the same rule as dynamic.py's selection)
@@ -37,7 +46,8 @@ RULE = ("blocks in time order: the training runs (several runs), else the spindl
         "scored by the model fitted on blocks < k, predicting block k as its own run (a board switched on at its start)" % FORWARD_BLOCKS)
 
 
-def forward_blocks(runs, arrays, forward_blocks=None):
+def forward_blocks(runs: Iterable[Run], arrays: Iterable[RunArrays],
+                   forward_blocks: int | None = None) -> tuple[np.ndarray, list[dict[str, Any]]]:
     """Blocks of the stacked training samples -> (labels (n,) ascending in time, [block dict]).
 
     Each block: ``{"block": k, "run": i, "t_start_s", "t_end_s"}`` (its first and last target time).
@@ -77,13 +87,13 @@ def forward_blocks(runs, arrays, forward_blocks=None):
     return labels, blocks
 
 
-def folds(labels):
+def folds(labels: np.ndarray) -> list[tuple[int, np.ndarray, np.ndarray]]:
     """[(k, training mask, scored mask)] for every block k >= 1: training = blocks before k, scored = block k."""
     labels = np.asarray(labels)
     return [(int(k), labels < k, labels == k) for k in np.unique(labels)[1:]]
 
 
-def block_run(runs, block):
+def block_run(runs: Sequence[Run], block: dict[str, Any]) -> Run:
     """Block ``block`` of the training runs as its own run: from its first target time's temperature sample to its
     last target time (a whole run when the runs are the blocks)."""
     run = runs[block["run"]]
@@ -99,7 +109,7 @@ def block_run(runs, block):
         raise EmpiricalDataError(str(exc))
 
 
-def block_residuals(model, run, block):
+def block_residuals(model: Any, run: Run, block: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
     """(measured, predicted) of ``model.predict(run)`` over the rows of ``run`` inside ``block``'s time span."""
     pred = model.predict(run)
     rows = model._rows(run)
@@ -111,7 +121,8 @@ def block_residuals(model, run, block):
     return run.errors.error_um[rows], pred[rows]
 
 
-def forward_chaining(runs, blocks, refit, target="direct"):
+def forward_chaining(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], refit: Callable[[int], Any],
+                     target: str = "direct") -> dict[str, Any]:
     """Score ``refit(k)`` (a model fitted on blocks < k) on every block k >= 1 -> the ``forward_chaining`` statistics.
 
     The model predicts block k as its own run (:func:`block_run`) and, for comparison, with its filters running since
@@ -136,7 +147,9 @@ def forward_chaining(runs, blocks, refit, target="direct"):
             "worst_um": max(f["rmse_um"] for f in out), "pooled_um": float(np.sqrt(sq / n_all))}
 
 
-def linear_forward_chaining(model, runs, target="slope", channel=None, fit_intercept=True, window=None):
+def linear_forward_chaining(model: Any, runs: Iterable[Run], target: str = "slope", channel: str | None = None,
+                            fit_intercept: bool = True,
+                            window: tuple[float | None, float | None] | None = None) -> dict[str, Any]:
     """``forward_chaining`` statistics of a static linear model: MLR on the model's own sensors refitted on the blocks
     before each scored block (the document contract: temperatures over the fixed reference, so a board switched on at
     a block's start predicts as one that never stopped). Its sensor choice was made on all training data."""

@@ -48,12 +48,22 @@ i.e. the model loses exactly the memory that made it better than a static one.
 What the sensors cannot say about the past is not recoverable from them; the
 observer states how much is missing (E_j) and for how long it matters.
 """
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from typing import TYPE_CHECKING, Any
+
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.dynamic import FEED, SPINDLE, signals
 
 NONNEGATIVE = SPINDLE + (FEED,)  # signals whose lag states cannot be negative
+
+if TYPE_CHECKING:  # for the hints only
+    from host.data.runs import Run
+    from host.learning.empirical.dynamic import DynamicModel
+
 SETTLE_TOLERANCE_UM = 1.0  # the issue's restart goal: within 1 um of an uninterrupted board
 
 
@@ -68,36 +78,37 @@ class Observer:
     largest training position in mm for a slope model).
     """
 
-    def __init__(self, states, settle_s, tolerance=SETTLE_TOLERANCE_UM, scale=1.0):
+    def __init__(self, states: Iterable[Mapping[str, Any]], settle_s: float, tolerance: float = SETTLE_TOLERANCE_UM,
+                 scale: float = 1.0) -> None:
         self.states = [dict(s) for s in states]
         self.settle_s = float(settle_s)
         self.tolerance = float(tolerance)
         self.scale = float(scale)
 
-    def start_error_bound(self, model, elapsed_s=0.0):
+    def start_error_bound(self, model: DynamicModel, elapsed_s: float = 0.0) -> float:
         """B(elapsed_s) in µm (module doc)."""
         return start_error_bound(model, self.states, elapsed_s, self.scale)
 
-    def initial_states(self, u):
+    def initial_states(self, u: Mapping[str, float]) -> dict[int, float]:
         """{term index: ŷ_j} from the filter inputs {signal: value} read at power-on.
 
         A lag of the spindle speed, its square or the feed (inputs >= 0) is >= 0: a negative estimate is projected to
         0, as the board projects every estimate onto its state's box (firmware Evaluator.observe; the true state is
         in it, so the projection only removes error and the bound E_j still holds)."""
-        out = {}
+        out: dict[int, float] = {}
         for s in self.states:
             v = sum(g * u[name] for name, g in s["gains"].items())
             out[s["term"]] = 0.0 if s.get("signal") in NONNEGATIVE and v < 0 else v
         return out
 
-    def to_document(self):
+    def to_document(self) -> dict[str, Any]:
         return {"method": "static_state_estimate", "tolerance": self.tolerance, "settle_s": self.settle_s, "scale": self.scale,
                 "states": [{"term": int(s["term"]),
                             "gains": {k: float(v) for k, v in s["gains"].items()},
                             "bound": float(s["bound"]), "rms": float(s["rms"])} for s in self.states]}
 
     @classmethod
-    def from_document(cls, obs, terms):
+    def from_document(cls, obs: Any, terms: Sequence[tuple[str, float]]) -> Observer:
         import math
 
         from host.learning.documents import ModelFormatError
@@ -130,12 +141,12 @@ class Observer:
         return cls(states, obs["settle_s"], obs["tolerance"], obs["scale"])
 
 
-def signals_of(terms):
+def signals_of(terms: Iterable[tuple[str, float]]) -> list[str]:
     """The distinct signals of ``terms`` in first-use order: the observer's regressors."""
     return list(dict.fromkeys(n for n, _ in terms))
 
 
-def inputs(model, run):
+def inputs(model: DynamicModel, run: Run) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     """Time base and every filter input {signal: (n,)} with temperatures referenced to ``reference_C`` (fixed)."""
     t, sig = signals(run, model.sensors)
     for s in model.sensors:
@@ -188,7 +199,7 @@ def _filter_from(t, u, tau_s, y0):
     return y
 
 
-def board_terms(model, runs, observer=True):
+def board_terms(model: DynamicModel, runs: Sequence[Run], observer: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Term columns over the chained runs' time base as a board switched on at the first run's first sample computes them.
 
     ``observer``: start each lag state at the observer's estimate (True) or at the
@@ -204,7 +215,9 @@ def board_terms(model, runs, observer=True):
     return t, cols
 
 
-def fit_observer(model, runs, spans=None, exclude=None, tolerance=SETTLE_TOLERANCE_UM, scale=1.0):
+def fit_observer(model: DynamicModel, runs: Sequence[Run], spans: Sequence[tuple[float, float]] | None = None,
+                 exclude: tuple[float | None, float | None] | None = None, tolerance: float = SETTLE_TOLERANCE_UM,
+                 scale: float = 1.0) -> Observer:
     """Fit the static state estimate of ``model``'s lag states on its training runs -> Observer.
 
     The true states on each training run are the filters run through it from its
@@ -244,7 +257,7 @@ def fit_observer(model, runs, spans=None, exclude=None, tolerance=SETTLE_TOLERAN
     return Observer(states, settle_time(model, states, tolerance, scale), tolerance, scale)
 
 
-def start_error_bound(model, states, elapsed_s, scale=1.0):
+def start_error_bound(model: DynamicModel, states: Iterable[Mapping[str, Any]], elapsed_s: float, scale: float = 1.0) -> float:
     """B(t) in µm: the bound of the prediction's start error ``elapsed_s`` after the board started (module doc)."""
     out = 0.0
     for s in states:
@@ -253,7 +266,8 @@ def start_error_bound(model, states, elapsed_s, scale=1.0):
     return out * scale
 
 
-def settle_time(model, states, tolerance=SETTLE_TOLERANCE_UM, scale=1.0):
+def settle_time(model: DynamicModel, states: Sequence[Mapping[str, Any]], tolerance: float = SETTLE_TOLERANCE_UM,
+                scale: float = 1.0) -> float:
     """Smallest elapsed time (s, to 1 s) at which start_error_bound <= tolerance; B decreases monotonically."""
     if start_error_bound(model, states, 0.0, scale) <= tolerance:
         return 0.0

@@ -174,7 +174,7 @@ class MLR(_Linear):
         self.cancelling_ = cancelling_pairs(X, self.coef_, names, fitted)
         return self
 
-    def statistics(self):
+    def statistics(self) -> dict[str, Any]:
         p_eff = self.autocorrelation_["p_effective"]
         coefs = {
             n: {"coef": finite_or_none(c), "std_error": finite_or_none(s), "t": finite_or_none(t), "p": finite_or_none(p),
@@ -187,7 +187,7 @@ class MLR(_Linear):
             extra["intercept"] = {"coef": finite_or_none(self.intercept_), "std_error": finite_or_none(self.intercept_bse_), "t": finite_or_none(self.intercept_t_), "p": finite_or_none(self.intercept_p_)}
         return self._stats_dict(self._st, extra)
 
-    def warnings(self):
+    def warnings(self) -> list[str]:
         """Lines saying what the textbook statistics oversell (empty when nothing is flagged)."""
         out = []
         a = self.autocorrelation_
@@ -202,7 +202,7 @@ class MLR(_Linear):
                           c["term_std"][1], c["sum_std"]))
         return out
 
-    def summary(self):
+    def summary(self) -> str:
         """Plain-text coefficient table (what a statistics package prints)."""
         lines = ["%-12s %12s %12s %9s %10s" % ("term", "coef", "std err", "t", "P>|t|")]
         rows = list(zip(self.names_, self.coef_, self.bse_, self.tvalues_, self.pvalues_))

@@ -135,7 +135,7 @@ def plot(rows: Sequence[Mapping[str, Any]], models: Mapping[str, Any], fit_run: 
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m host.learning.screw.crossstate", description=__doc__.split("\n\n")[0])
+    ap = argparse.ArgumentParser(prog="python -m host.learning.screw.crossstate", description=(__doc__ or "").split("\n\n")[0])  # None only under python -OO
     ap.add_argument("fit_run")
     ap.add_argument("runs", nargs="+")
     ap.add_argument("--out", required=True)

@@ -49,7 +49,7 @@ AIR_LAG_SMOOTH_S = 300.0
 MAX_AIR_LAG_S = 3600.0
 
 
-def delagged(time_s, reading, lag_s, smooth_s=AIR_LAG_SMOOTH_S):
+def delagged(time_s: ArrayLike, reading: ArrayLike, lag_s: float, smooth_s: float = AIR_LAG_SMOOTH_S) -> np.ndarray:
     """The temperature a first-order sensor of time constant ``lag_s`` lags behind: T = reading + lag·d(reading)/dt,
     the derivative of the reading's moving average over ``smooth_s`` (uneven sampling: averaged by time)."""
     t = np.asarray(time_s, dtype=float)
@@ -79,7 +79,7 @@ def _resolve(name):
 # Margin (K) added on both sides of the training range of the base sensor in the exported envelope.
 BASE_ENVELOPE_MARGIN_K = 5.0
 
-def implausible_parameters(identified):
+def implausible_parameters(identified: dict[str, float]) -> list[dict[str, Any]]:
     """[{parameter, value, accepted, steel, warning}] of the identified parameters outside what a screw's steel can
     have (heat.STEEL_RANGES); fixed parameters are the user's statement and are not judged."""
     out = []
@@ -129,9 +129,12 @@ class ScrewModel:
     reference E_m is over that sensor's temperature (S004 Eq. 9, host/learning/screw/reference.py); runs of
     different references are refused."""
 
-    def __init__(self, segments=40, dt_s=10.0, free=None, geometric_degree="auto", effects=(), channel=None, ambient="auto",
-                 nut_weight=0.0, reduced_segments=12, reduced_dt_s=10.0, feed_max_mm_min=None, max_nfev=200, base_sensor=None,
-                 base_ref="run_start", fit_window=None, air="auto", ftol=1e-12, air_lag_s=0.0):
+    def __init__(self, segments: int = 40, dt_s: float = 10.0, free: str | Sequence[str] | None = None,
+                 geometric_degree: int | str = "auto", effects: Sequence[Effect] = (), channel: str | None = None,
+                 ambient: bool | str = "auto", nut_weight: float = 0.0, reduced_segments: int = 12, reduced_dt_s: float = 10.0,
+                 feed_max_mm_min: float | None = None, max_nfev: int = 200, base_sensor: str | None = None,
+                 base_ref: str = "run_start", fit_window: tuple[float | None, float | None] | None = None, air: str = "auto",
+                 ftol: float = 1e-12, air_lag_s: float = 0.0) -> None:
         self.segments = segments
         self.dt_s = dt_s
         self.free = free
@@ -179,7 +182,7 @@ class ScrewModel:
     def _context(self, run, rows=None):
         return RunContext(run, self.geometry_, self.dt_s, rows=rows)
 
-    def air_K(self, ctx, delag=True):
+    def air_K(self, ctx: RunContext, delag: bool = True) -> np.ndarray | None:
         """Air temperature over the model's reference on the context's grid (None: constant air).
 
         The reference is the air at the run's start (base_ref "run_start": the screw starts in

@@ -104,7 +104,7 @@ def agglomerate(X: np.ndarray, alpha: float, moments: Moments | None = None, nor
     span = hi - lo if hi > lo else 1.0
     D = alpha * (De - lo) / span + (1.0 - alpha) * (1.0 - R)
     np.fill_diagonal(D, np.inf)
-    members = [(i,) for i in range(p)]
+    members: list[tuple[int, ...]] = [(i,) for i in range(p)]  # each cluster's variables, grown by the merges
     W = np.eye(p)
     active = list(range(p))
     merges = []

@@ -330,7 +330,7 @@ def choose_partition(rows: Sequence[dict[str, Any]], n: int, criterion: str = "p
     """
     if criterion not in CRITERIA:
         raise SelectionError("maxtree: criterion must be one of %s, got %r" % (", ".join(CRITERIA), criterion))
-    reason = {"criterion_name": criterion}
+    reason: dict[str, Any] = {"criterion_name": criterion}
     if criterion == "paper":
         for r in rows:
             if "skipped" not in r and r.get("min_tolerance") is not None and r["min_tolerance"] < min_tolerance:
@@ -385,7 +385,7 @@ def select_maxtree(arrays: Any, context: dict[str, Any] | None = None, **params:
     # each run's start, all runs pooled); the target is only known at the sweeps, so its correlations stay there
     logs = [getattr(a, "log", None) for a in arrays]
     if prm["correlation_on"] == "log" and all(lg is not None for lg in logs):
-        L = np.vstack([lg[1] for lg in logs])
+        L = np.vstack([lg[1] for lg in logs])  # pyright: ignore[reportOptionalSubscript]  # all not None: checked above
         similarity_on = "temperature log: %d samples (rises over each run's start, runs pooled)" % L.shape[0]
     else:
         L = X
