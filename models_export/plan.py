@@ -208,7 +208,7 @@ class Planner:
                                   "state_error_units": float(v[0]), "state_frac_bits": fy})
         return self.dyn_observer(out, uin)
 
-    def dyn_observer(self, out, uin):
+    def dyn_observer(self, out: list[Interval], uin: list[Interval]) -> list[Interval]:
         """Quantise and certify the observer (Evaluator.observe); returns the state error intervals ``out`` widened to
         cover the observer's start.
 

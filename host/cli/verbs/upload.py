@@ -10,12 +10,17 @@ upload (Ctrl-C, a lost link) leaves it in force (the half-written slot is the on
 `tcomp flash` copies files with mpremote through a board's REPL; this verb needs no REPL: a board in production,
 a `tcomp board` simulated board, a board whose REPL is not free.
 """
+from __future__ import annotations
+
+import argparse
 import sys
+from collections.abc import Callable
+from typing import Any
 
 DEFAULT_TIMEOUT_S = 15.0  # per line; the commit checks the table's SHA-256 on the board (seconds on a Cortex-M0+)
 
 
-def add_arguments(p):
+def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--port", required=True, help="serial port of the running board (a device, a pty, a pySerial URL)")
     p.add_argument("--table", required=True, help="coefficient table to upload (tcomp export)")
     p.add_argument("--key", required=True, metavar="FILE",
@@ -29,13 +34,13 @@ def add_arguments(p):
 class UploadRefused(Exception):
     """The board answered a line with an E frame: ``cause`` says why in the user's words."""
 
-    def __init__(self, cause, frame):
+    def __init__(self, cause: str, frame: Any) -> None:
         super().__init__(cause)
         self.cause = cause
         self.frame = frame
 
 
-def refusal_cause(frame, step, key_path):
+def refusal_cause(frame: Any, step: str, key_path: str) -> str:
     """One sentence for the board's E frame answering upload step ``step`` (B, D, C)."""
     from firmware.wire import E_AUTH, E_BUSY, E_STATE, E_TABLE
     code = frame.fields[0] if frame.fields else "?"
@@ -70,7 +75,8 @@ def _answer(link, since, timeout, what):
     return link.wait(lambda f: f.kind in ("A", "E"), timeout, since, what=what)
 
 
-def send_upload(link, table, timeout, progress=None):
+def send_upload(link: Any, table: bytes, timeout: float,
+                progress: Callable[[int, int], None] | None = None) -> tuple[Any, int]:
     """Every line of the upload, each after the board acknowledged the previous one; the A,U,C frame.
     UploadRefused (with the board's E frame) when a line is refused; LinkError when the board does not answer."""
     lines = link.upload_lines(table)
@@ -92,7 +98,7 @@ def send_upload(link, table, timeout, progress=None):
     return a, len(lines)
 
 
-def run(args):
+def run(args: argparse.Namespace) -> int:
     import math
 
     from host.errors import UserError
