@@ -505,6 +505,20 @@ def _time_s(cells, m):
     return time_s, raw, start
 
 
+
+def _read_cells(source, m, numeric, mapping_where):
+    """The mapped cells of ``source`` with the declared gap policy applied, in time order -> (table, cells, gaps, time_s,
+    start): gaps as _apply_gaps counts them, start the date-time of the first sample (None for
+    numeric times)."""
+    table = _read(source, m, numeric)
+    cells = _Cells(table, m, numeric)
+    gaps = _apply_gaps(cells, m, mapping_where)
+    time_s, raw, start = _time_s(cells, m)
+    _check_time_order(cells, m, time_s, raw, strict=True)
+    if gaps is not None and gaps["policy"] == "interpolate":
+        _interpolate(cells, time_s)
+    return table, cells, gaps, time_s, start
+
 def _check_time_order(cells, m, time_s, raw, strict):
     back = np.flatnonzero(np.diff(time_s) <= 0 if strict else np.diff(time_s) < 0)
     if back.size:
@@ -575,13 +589,7 @@ def import_csv(source: str, mapping: Any, mapping_where: str = "mapping") -> Run
     m["where"] = mapping_where
     tcols, ecols = list(m["temperatures"]), list(m["errors"])
     numeric = tcols + ecols + ([m["spindle"]] if m["spindle"] else [])
-    table = _read(source, m, numeric)
-    cells = _Cells(table, m, numeric)
-    gaps = _apply_gaps(cells, m, mapping_where)
-    time_s, raw, start = _time_s(cells, m)
-    _check_time_order(cells, m, time_s, raw, strict=True)
-    if gaps is not None and gaps["policy"] == "interpolate":
-        _interpolate(cells, time_s)
+    table, cells, gaps, time_s, start = _read_cells(source, m, numeric, mapping_where)
     lo, hi = TEMPERATURE_RANGE_C
     tvals = np.column_stack([_to_degc(cells.column(c), m["temperatures"][c]["unit"]) for c in tcols])
     evals = np.column_stack([cells.column(c) * m["errors"][c]["scale"] for c in ecols]) if ecols else None
@@ -752,13 +760,7 @@ def _wide_errors(source, mapping, mapping_where):
         raise LogImportError("%s: --errors merges error sweeps; 'spindle' belongs to the run's own log" % mapping_where)
     m["where"] = mapping_where
     ecols = list(m["errors"])
-    table = _read(source, m, ecols)
-    cells = _Cells(table, m, ecols)
-    gaps = _apply_gaps(cells, m, mapping_where)
-    time_s, raw, start = _time_s(cells, m)
-    _check_time_order(cells, m, time_s, raw, strict=True)
-    if gaps is not None and gaps["policy"] == "interpolate":
-        _interpolate(cells, time_s)
+    table, cells, gaps, time_s, start = _read_cells(source, m, ecols, mapping_where)
     evals = np.column_stack([cells.column(c) * m["errors"][c]["scale"] for c in ecols])
     _check_ranges([(cells, c, evals[:, j], -ERROR_LIMIT_UM, ERROR_LIMIT_UM, "um once scaled: no feed axis grows that much")
                    for j, c in enumerate(ecols)])

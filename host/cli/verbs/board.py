@@ -51,20 +51,6 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="simulated seconds per wall second (default 1: a board in real time; at most 100)")
 
 
-def _read_table(path):
-    from firmware.table import TableError, parse_table
-    from host.errors import UserError
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError as exc:
-        raise UserError("--table %s: %s" % (path, exc.strerror or exc))
-    try:
-        return data, parse_table(data)
-    except TableError as exc:
-        raise UserError("--table %s: not a valid table: %s" % (path, exc))
-
-
 def _read_config(path, rig_config, table):
     """The board config: --config validated as the board's boot check does, else the rig's wiring of the
     table's sensors. The table's sensors must all have a channel."""
@@ -171,7 +157,9 @@ def run(args: argparse.Namespace) -> int:
     problem = rig.board_problem(args.interpreter)
     if problem:
         raise UserError("tcomp board --interpreter %s: %s" % (args.interpreter, problem))
-    data, table = _read_table(args.table) if args.table else (None, None)
+    from host.cli.tablefile import read_table
+
+    data, table = read_table(args.table) if args.table else (None, None)
     cfg = _read_config(args.config, rig.rig_config, table)
     channels = [c["name"] for c in cfg["channels"]]
     lo_mC, hi_mC = cfg.get("plausible_mC", (-20000, 80000))

@@ -120,26 +120,14 @@ def run(args: argparse.Namespace) -> int:
     return rc
 
 
-def _read_table(path):
-    from firmware.table import TableError, parse_table
-    from host.errors import UserError
-    try:
-        with open(path, "rb") as f:
-            data = f.read()
-    except OSError as exc:
-        raise UserError("--table %s: %s" % (path, exc.strerror or exc))
-    try:
-        return data, parse_table(data)
-    except TableError as exc:
-        raise UserError("--table %s: not a valid coefficient table: %s" % (path, exc))
-
-
 def _upload(args):
     from host.board.client import BoardLink, LinkError
     from host.board.linkauth import CounterError, signer_for_option
     from host.errors import UserError
 
-    data, table = _read_table(args.table)
+    from host.cli.tablefile import read_table
+
+    data, table = read_table(args.table)
     crc = "%08X" % table.crc
     signer = signer_for_option(args.key)
     try:

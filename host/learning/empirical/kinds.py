@@ -144,6 +144,12 @@ class _Base:
             "training": self.training,
         }
 
+    def _geometric_doc(self) -> dict[str, Any] | None:
+        """The document's ``geometric`` part: the polynomial of a slope model, none for a direct one."""
+        if self.target == "direct":
+            return None
+        return {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]}
+
     @staticmethod
     def _target(thermal, kind):
         """``thermal.target`` of a ``kind`` document whose thermal part is 'slope' or 'direct'; else ModelFormatError."""
@@ -308,8 +314,7 @@ class NetworkModel(_Base):
         if not hasattr(self.estimator_, "network"):
             raise ModelFormatError("a %s model has no document form (only ann networks are saved)" % self.method)
         doc = self._common_doc()
-        doc["geometric"] = (None if self.target == "direct"
-                            else {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]})
+        doc["geometric"] = self._geometric_doc()
         doc["thermal"] = {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": self.reference,
                           "network": self.estimator_.network()}
         return doc
@@ -359,8 +364,7 @@ class PPRModel(NetworkModel):
 
     def to_document(self) -> dict[str, Any]:
         doc = self._common_doc()
-        doc["geometric"] = (None if self.target == "direct"
-                            else {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]})
+        doc["geometric"] = self._geometric_doc()
         doc["thermal"] = {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": self.reference,
                           "ridges": self.estimator_.ridges()}
         return doc

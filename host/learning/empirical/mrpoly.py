@@ -123,8 +123,7 @@ class MRPolyModel(_Base):
 
     def to_document(self) -> dict[str, Any]:
         doc = self._common_doc()
-        doc["geometric"] = (None if self.target == "direct"
-                            else {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]})
+        doc["geometric"] = self._geometric_doc()
         doc["thermal"] = {
             "target": self.target,
             "unit": "um_per_mm" if self.target == "slope" else "um",
