@@ -124,6 +124,8 @@ class RunContext:
     def nut_rise_measured(self) -> np.ndarray | None:
         """Nut sensor rise over the air (ambient, else base sensor) relative to the start, on the grid."""
         tt = self.run.temperatures
+        # callers ask only for runs with a nut sensor (check_screw_run(require_nut=...), screwmodel's nut_sensor test)
+        assert self.nut_sensor is not None
         nut = np.interp(self.t_grid, tt.time_s, tt.column(self.nut_sensor))
         ref_name = self.ambient_sensor or self.base_sensor
         rise = nut - nut[0]
