@@ -453,6 +453,11 @@ class DynamicModel:
     at the run's first sample, on a warm machine or not.
     """
 
+    # set by host.learning.empirical.fitting (the fitted estimator and its data), absent on loaded documents
+    estimator_: Any
+    arrays_: Any
+    geometric_: Any
+
     kind = "dynamic"
     coefficients = None  # not a linear function of the temperatures
     intercept = 0.0
