@@ -78,7 +78,7 @@ def p2(k: int) -> Fraction:
     return F(2) ** k
 
 
-def rnd(x: Num) -> int:
+def rnd(x: float | Fraction) -> int:
     """Round a Fraction to the nearest int (half away from zero)."""
     x = F(x)
     return int(math.floor(x + F(1, 2))) if x >= 0 else -int(math.floor(-x + F(1, 2)))
@@ -106,18 +106,18 @@ def int_iv(real_iv: Interval, err_iv: Interval) -> tuple[int, int]:
     return (math.floor(real_iv[0] + err_iv[0]), math.ceil(real_iv[1] + err_iv[1]))
 
 
-def limbs(x: Interval, L: int, n: int) -> list[tuple[int, int]]:
+def limbs(x: tuple[int, int], L: int, n: int) -> list[tuple[int, int]]:
     """Intervals of the limbs of x (an int interval) split as the firmware's _mul does."""
     out = [(0, (1 << L) - 1)] * (n - 1)
     out.append((x[0] >> (L * (n - 1)), x[1] >> (L * (n - 1))))
     return out
 
 
-def limb_max(x: Interval, L: int, n: int) -> int:
+def limb_max(x: tuple[int, int], L: int, n: int) -> int:
     return max(max(abs(a), abs(b)) for a, b in limbs(x, L, n))
 
 
-def top_limbs_needed(x: Interval, L: int, narrow: Num) -> int | None:
+def top_limbs_needed(x: tuple[int, int], L: int, narrow: Num) -> int | None:
     """Smallest limb count n such that narrow * |top limb| <= PROD."""
     for n in range(1, 7):
         top = max(abs(x[0] >> (L * (n - 1))), abs(x[1] >> (L * (n - 1))))
@@ -171,7 +171,7 @@ class Recorder:
                               "small-int limit 2^30; the model cannot be made integer-safe over its envelope"
                               % (term, m, math.log2(m)))
 
-    def mul(self, acc_id: int, c: Interval, x: Interval, L: int, n: int, sh: int, term: str) -> tuple[tuple[int, int], int]:
+    def mul(self, acc_id: int, c: tuple[int, int], x: tuple[int, int], L: int, n: int, sh: int, term: str) -> tuple[tuple[int, int], int]:
         """Mirror of Evaluator._mul: returns (result interval, number of flooring shifts)."""
         rlo = rhi = 0
         s = sh

@@ -14,7 +14,9 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING
 
-from firmware.table import COMMON, KINDS, POSITION, SCREW, SENSOR_FIELDS
+# The ignore: firmware/table.py defines COMMON, POSITION, SCREW as _NAME and publishes them under NAME through
+# globals() on CPython only, which pyright cannot follow.
+from firmware.table import COMMON, KINDS, POSITION, SCREW, SENSOR_FIELDS  # pyright: ignore[reportAttributeAccessIssue]
 from models_export.tableformat import spec_names
 
 if TYPE_CHECKING:

@@ -15,8 +15,11 @@ import struct
 import types
 
 from firmware.crc32 import crc32
-from firmware.table import (AXIS_SIZE, CERT, HEADER_SIZE, KINDS, MAGIC, NAME_FORBIDDEN, NAME_SIZE, PER_SENSOR, SENSOR_FIELDS,
-                            SENSOR_SIZE, UNIT_CODE, VERSION, list_length, model_sections)
+# The ignores: firmware/table.py defines these as _NAME consts (free on MicroPython) and publishes them under
+# NAME through globals() on CPython only, which pyright cannot follow.
+from firmware.table import (AXIS_SIZE, CERT, HEADER_SIZE, KINDS, MAGIC,  # pyright: ignore[reportAttributeAccessIssue]
+                            NAME_FORBIDDEN, NAME_SIZE, PER_SENSOR, SENSOR_FIELDS,  # pyright: ignore[reportAttributeAccessIssue]
+                            SENSOR_SIZE, UNIT_CODE, VERSION, list_length, model_sections)  # pyright: ignore[reportAttributeAccessIssue]
 
 KIND_CODES = {name: code for code, name in KINDS.items()}  # the firmware's table owns the codes
 

@@ -39,7 +39,7 @@ evaluation costs O(k³ · groups) whatever the number of samples.
 from __future__ import annotations
 
 from collections.abc import Iterable, Mapping, Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -250,7 +250,8 @@ class DynamicRegression:
         self.cv_score_ = DEFAULT_SCORE[self.selection] if self.cv_score is None else self.cv_score
         if self.cv_score_ not in ("worst", "pooled"):
             raise EmpiricalDataError("dynamic: cv_score must be 'worst' or 'pooled', got %r" % (self.cv_score,))
-        grid = [self.ridge] if np.isscalar(self.ridge) else list(self.ridge)
+        # np.isscalar does not narrow for pyright; an entry that is not a number is rejected just below
+        grid = cast("list[float]", [self.ridge] if np.isscalar(self.ridge) else list(self.ridge))  # pyright: ignore[reportArgumentType]
         if not grid or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 for v in grid):
             raise EmpiricalDataError("dynamic: ridge must be a number >= 0 or a list of them, got %r" % (self.ridge,))
         best, tried = None, {}
@@ -259,6 +260,7 @@ class DynamicRegression:
             tried[float(lam)] = fitted["cv_rmse"]
             if best is None or fitted["cv_rmse"] < best["cv_rmse"]:
                 best = fitted
+        assert best is not None  # grid is not empty (checked above), so the loop set it
         for k, v in best.items():
             setattr(self, k, v)
         self.cv_by_ridge_ = tried
@@ -300,8 +302,9 @@ class DynamicRegression:
         A = A / scale
         G = [(A[groups == g].T @ A[groups == g], A[groups == g].T @ y[groups == g], float(y[groups == g] @ y[groups == g]), int((groups == g).sum()))
              for g in labels]
-        Gall = sum(g[0] for g in G)
-        call = sum(g[1] for g in G)
+        # sums of arrays (one per group) are arrays; pyright types sum() from its int start
+        Gall = cast(np.ndarray, sum(g[0] for g in G))
+        call = cast(np.ndarray, sum(g[1] for g in G))
         n_all = len(y)
         # folds: (training Gram, training moment, training samples, held-out (Gram, moment, y'y, samples))
         folds = []
@@ -453,6 +456,11 @@ class DynamicModel:
     at the run's first sample, on a warm machine or not.
     """
 
+    # set by host.learning.empirical.fitting (the fitted estimator and its data), absent on loaded documents
+    estimator_: Any
+    arrays_: Any
+    geometric_: Any
+
     kind = "dynamic"
     coefficients = None  # not a linear function of the temperatures
     intercept = 0.0
@@ -519,7 +527,7 @@ class DynamicModel:
         observer, if the model has one); ``history``: a run or list of runs (oldest first, ending before
         ``run`` starts, one clock) the board ran through first, without a restart."""
         if history is not None and not isinstance(history, (list, tuple)):
-            history = [history]
+            history = [cast("Run", history)]  # not a list or tuple: one run, as the hint says
         try:
             check_model_reference(run, self.error_reference)
         except ValueError as exc:

@@ -221,6 +221,7 @@ def fit_model(runs: Sequence[Run], method: str = "mlr", target: str = "slope", c
         if method in NONLINEAR:
             model = NONLINEAR[method](used, est, ref, "slope", geometric_coef=geo.coef_, **kw)
         else:
+            assert coefs is not None  # a linear method's, set above (None only for NONLINEAR and mr-poly, handled before)
             model = PolySlopeModel(used, coefs, est.intercept_, ref, geometric_coef=geo.coef_, **kw)
         model.geometric_ = geo
     model.estimator_ = est
@@ -294,6 +295,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
                                     lag_bound["training_span_s"], lag_bound["fraction"]))
     names = arrays[0].names
     F, terms = candidate_matrix(runs, [a.time_s for a in arrays], names, taus, use_spindle, use_feed)
+    assert terms is not None  # None only without runs; arrays[0] above has read the first
     selection = opts.get("selection", "forward")
     labels, blocks, fc_error = None, None, None
     try:
@@ -319,6 +321,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     if selection == "forward" and forward_state == "switched_on" and len(runs) == 1:
         # score each block on the columns a board switched on at its start computes (several runs: each run already is)
         held = {}
+        assert blocks is not None  # selection "forward" raised above when forward_blocks failed
         for b in blocks[1:]:
             rows = labels == b["block"]
             Fk, _ = candidate_matrix([forward.block_run(runs, b)], [np.concatenate([a.time_s for a in arrays])[rows]], names, taus,
@@ -362,6 +365,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     if report_forward and blocks is None:
         stats["forward_chaining"] = {"error": fc_error}
     elif report_forward:
+        assert blocks is not None  # the branch above took None
         def refit(k):
             b0, coef = est.coefficients_on(labels < k)
             m = DynamicModel(est.terms_, coef, b0, target, channel, model.geometric_coef, "dynamic", model.axis,

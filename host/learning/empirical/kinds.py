@@ -21,7 +21,7 @@ rows of other channels than the model's are NaN.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from numpy.typing import ArrayLike
 
 import math
@@ -48,6 +48,10 @@ class _Base:
     estimator_: Any = None
     arrays_: Any = None
     geometric_: Any = None
+    # declared for the shared code here, set by the subclasses: thermal(R) as the docstring says; geometric_coef by
+    # the slope models (the only ones whose _geometric_doc reads it)
+    thermal: Callable[..., np.ndarray]  # ...: a method of the subclass (self, R), or a plain function of R
+    geometric_coef: np.ndarray
 
     def __init__(self, sensors, coefficients, intercept, reference_C, reference="fixed", channel=None, method="mlr", axis=None,
                  envelope=None, statistics=None, training=None):
@@ -227,6 +231,7 @@ class LinearDirectModel(_Base):
     thermal = predict_rises
 
     def to_document(self) -> dict[str, Any]:
+        assert self.coefficients is not None  # a linear model always has them (None only for the ann's NetworkModel)
         doc = self._common_doc()
         doc["geometric"] = None
         doc["thermal"] = {
@@ -263,6 +268,7 @@ class PolySlopeModel(_Base):
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
 
     def to_document(self) -> dict[str, Any]:
+        assert self.coefficients is not None  # a linear model always has them (None only for the ann's NetworkModel)
         doc = self._common_doc()
         doc["geometric"] = {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]}
         doc["thermal"] = {

@@ -18,7 +18,7 @@ g_m smooth ridge functions. Our choices (the paper does not fix them):
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, cast
 from numpy.typing import ArrayLike
 
 import numpy as np
@@ -130,7 +130,8 @@ class PPR:
     def predict(self, X: np.ndarray) -> np.ndarray:
         X = check_predict_x(self, X, "terms_", lambda: self.x_mean_.size)
         Z = (X - self.x_mean_) / self.x_scale_
-        return self.y_mean_ + sum(t(Z) for t in self.terms_)
+        # each ridge term returns an array, so the sum is one; pyright types sum() from its int start
+        return cast(np.ndarray, self.y_mean_ + sum(t(Z) for t in self.terms_))
 
     def ridges(self) -> dict[str, Any]:
         """The fitted model as plain lists (the ``ppr`` model document's ``thermal.ridges``): the standardisation,

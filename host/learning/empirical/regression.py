@@ -87,6 +87,9 @@ class _Linear:
     coef_: np.ndarray
     intercept_: float
     n_samples_: int
+    # set by the subclasses: their parameter, and (the subset selectors, the only users of _refit_on) the chosen names
+    fit_intercept: bool
+    selected_names_: list[str]
 
     def predict(self, X):
         X = check_predict_x(self, X, "coef_", lambda: self.coef_.size)
@@ -184,6 +187,8 @@ class MLR(_Linear):
         extra: dict = {"coefficients": coefs, "autocorrelation": {k: v for k, v in self.autocorrelation_.items() if k != "p_effective"},
                        "cancelling": {"pairs": self.cancelling_, "rule": CANCEL_RULE}}
         if self.fit_intercept:
+            # fit() sets them to floats when fit_intercept (None only without an intercept)
+            assert self.intercept_bse_ is not None and self.intercept_t_ is not None and self.intercept_p_ is not None
             extra["intercept"] = {"coef": finite_or_none(self.intercept_), "std_error": finite_or_none(self.intercept_bse_), "t": finite_or_none(self.intercept_t_), "p": finite_or_none(self.intercept_p_)}
         return self._stats_dict(self._st, extra)
 

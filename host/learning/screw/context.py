@@ -121,9 +121,11 @@ class RunContext:
         w = self.row_w[:, None]
         return grid_values[self.row_k] * (1.0 - w) + grid_values[self.row_k + 1] * w
 
-    def nut_rise_measured(self) -> np.ndarray | None:
+    def nut_rise_measured(self) -> np.ndarray:
         """Nut sensor rise over the air (ambient, else base sensor) relative to the start, on the grid."""
         tt = self.run.temperatures
+        # callers ask only for runs with a nut sensor (check_screw_run(require_nut=...), screwmodel's nut_sensor test)
+        assert self.nut_sensor is not None
         nut = np.interp(self.t_grid, tt.time_s, tt.column(self.nut_sensor))
         ref_name = self.ambient_sensor or self.base_sensor
         rise = nut - nut[0]

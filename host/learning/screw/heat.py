@@ -233,10 +233,10 @@ def _cumulative_travel(s, start, end, lo, hi):
     return legs[:, None] * full_cov[None, :] + _leg_overlap(p0, direction, r, lo, hi)
 
 
-def nut_travel_per_segment(motion: Motion, edges_mm: ArrayLike, fixed_end_mm: float, t_grid: np.ndarray, spread: bool = False) -> np.ndarray:
+def nut_travel_per_segment(motion: Motion | None, edges_mm: ArrayLike, fixed_end_mm: float, t_grid: np.ndarray, spread: bool = False) -> np.ndarray:
     """Travel of the nut inside each segment during each step [mm]: (n_steps, M).
 
-    motion: host.data.runs.Motion (or any object with t_start_s, t_end_s, from_mm, to_mm,
+    motion: host.data.runs.Motion, or None for a run without motion (no travel) (or any object with t_start_s, t_end_s, from_mm, to_mm,
     feed_mm_min arrays): during each interval the nut reciprocates from from_mm to
     to_mm and back at feed_mm_min, starting at from_mm.  t_grid: (n_steps+1,)
     ascending times.  Exact by default (the loop runs over motion intervals,
