@@ -63,12 +63,14 @@ def _effects(text):
 # --option KEY=VALUE settings of ScrewModel, with their converters (host/options.py)
 # Bounds: segments and dt_s size the model's arrays (host/learning/screw/context.py checks their product too);
 # reduced_segments and reduced_dt_s are what a table can hold (firmware/table.py: 1..32 segments, 1 ms..1 h);
-# a feed is positive, a weight is not negative.
+# a feed is positive, a weight is not negative. The largest feed is at least MIN_FEED_MM_MIN: no machine tool's top
+# feed is below 1 mm/min, and a subnormal one (2.2e-308, which `> 0` let through) is a typo, not a machine.
+MIN_FEED_MM_MIN = 1.0
 OPTIONS = {
     "segments": number(int, 2, MAX_SEGMENTS), "dt_s": number(float, MIN_DT_S, MAX_DT_S), "free": str,
     "geometric_degree": _geometric_degree, "effects": _effects, "nut_weight": number(float, 0.0, 1e6),
     "reduced_segments": number(int, 1, 32), "reduced_dt_s": number(float, 0.001, 3600.0),
-    "feed_max_mm_min": number(float, maximum=MAX_FEED_MM_MIN, above=0.0),
+    "feed_max_mm_min": number(float, MIN_FEED_MM_MIN, MAX_FEED_MM_MIN),
     "ambient": _ambient, "air": str,  # air: auto, a sensor name, or off
     "air_lag_s": number(float, 0.0, MAX_AIR_LAG_S),
     "max_nfev": number(int, 1, 100000), "base_ref": str, "fit_window": _fit_window,
