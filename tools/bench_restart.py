@@ -8,8 +8,25 @@
    several points of the twin's 24 h day; the deviation of the restarted board's offset from the uninterrupted board
    (at the largest training position for a slope model): largest in the first 30 min and overall, at 30 min, and the
    settle time (from when on it stays within 1 um), observer on vs off; and the observer's SETTLING time (settle_s).
+3. `--windows 0,5,10,20,30` (experiment, docs/empirical.md "Observer: two follow-ups measured"): the same resets
+   with a second state estimate after a window of W minutes. During the window the board runs from the observer's
+   instantaneous estimate (as now); at t0+W each lag state is re-estimated by least squares, without a constant,
+   from what the board has then (`--window-regressors`, letters): u the filter inputs at t0+W, d their change
+   u(t0+W) - u(t0), y the board's own lag states at t0+W (run from the instantaneous estimate), h a helper filter
+   (tau = W/2) of each input started at u(t0), minus u(t0+W). Fitted on the training samples at every start time t0,
+   as the observer is. A state takes the window estimate only if its largest training residual E_j^W is below the
+   instantaneous one decayed over the window, E_j e^(-W/tau_j). Per W: settle_s (the start-error bound's 1-um time:
+   the instantaneous bound before W, the window's after), E_j, resets within 1 um at 30 min, and per reset the
+   largest deviation in the first 30 min / at 30 min / settle time / the offset's step at t0+W.
+4. `--spindle-history 30,60,120,inf` (experiment, same section): what the speed's recent history, as the controller
+   saw it, says about the state at a reset. S0: the spindle/feed lag states set to their uninterrupted values (a
+   controller that ran the board's speed filters itself), the temperature states from the observer's instantaneous
+   estimate. S(H): every lag state re-estimated by least squares, without a constant, from the inputs and the
+   spindle/feed filters run from rest over the last H minutes before the reset (H = inf: their exact values),
+   fitted on the training samples at every start time.
 
-Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin]
+Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin] [--no-split]
+       [--windows 0,5,10,20,30 [--window-regressors ud,udy,udh,udhy]] [--spindle-history 30,60,120,inf]
 """
 import argparse
 import os
@@ -21,6 +38,7 @@ import numpy as np
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 from host.data.runs import load_run, slice_run
+from host.learning.empirical import observer as obs
 from host.learning.empirical.fitting import fit_model
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
@@ -29,6 +47,7 @@ FL_RESETS_H = (4.0, 12.0, 20.0, 28.0, 36.0, 44.0)
 TWIN_RESETS_H = (2.0, 6.0, 10.0, 14.0, 18.0)
 TOL_UM = 1.0
 WINDOW_S = 1800.0
+REGRESSORS = "udyh"
 
 
 def without_observer(model):
@@ -45,6 +64,13 @@ def rmse(model, run, ch, **kw):
     return float(np.sqrt(np.mean(r**2)))
 
 
+def deviation_figures(el, dev):
+    """(largest in the first 30 min, at 30 min, settle time: from when on within TOL_UM) of a deviation series."""
+    over = np.flatnonzero(dev > TOL_UM)
+    settle = 0.0 if not over.size else (el[over[-1] + 1] if over[-1] + 1 < el.size else np.inf)
+    return dev[el <= WINDOW_S].max(), float(np.interp(WINDOW_S, el, dev)) if el[-1] >= WINDOW_S else np.nan, dev.max(), settle
+
+
 def restart_figures(model, run, reset_s, scale):
     """Deviation (um) of a board reset at reset_s from the uninterrupted one, observer on and off."""
     t = run.temperatures.time_s
@@ -54,11 +80,7 @@ def restart_figures(model, run, reset_s, scale):
     out = {}
     for name, m in (("on", model), ("off", without_observer(model))):
         dev = np.abs(m.thermal_at(warm, times) * scale - full)
-        el = times - times[0]
-        over = np.flatnonzero(dev > TOL_UM)
-        settle = 0.0 if not over.size else (el[over[-1] + 1] if over[-1] + 1 < el.size else np.inf)
-        first = el <= WINDOW_S
-        out[name] = (dev[first].max(), float(np.interp(WINDOW_S, el, dev)) if el[-1] >= WINDOW_S else np.nan, dev.max(), settle)
+        out[name] = deviation_figures(times - times[0], dev)
     return out
 
 
@@ -75,29 +97,255 @@ def print_restarts(label, model, run, resets_h, scale):
         print("%6.1f | %s | %s" % (h, *("%7.2f / %6.2f / %7.2f / %-17s" % (a, b, c, fmt_settle(d)) for a, b, c, d in (f["on"], f["off"]))))
 
 
+# --- experiment 3: a second estimate after a window of W s ---------------------------------------------------------
+
+def _lagged(model):
+    return [j for j, (_, tau) in enumerate(model.terms) if tau > 0]
+
+
+def _true_states(model, t, sig):
+    """The lag states as the training defines them: the filters run through the run from its first sample."""
+    return np.column_stack([obs._filter_from(t, sig[model.terms[j][0]], model.terms[j][1], sig[model.terms[j][0]][0])
+                            for j in _lagged(model)])
+
+
+def _instant(model, sig):
+    """The observer's instantaneous estimate of every lag state at every sample (n, lag states)."""
+    U = np.column_stack([sig[n] for n in obs.signals_of(model.terms)])
+    cols = []
+    for s in model.observer.states:
+        v = U @ np.array([s["gains"].get(n, 0.0) for n in obs.signals_of(model.terms)])
+        cols.append(np.maximum(v, 0.0) if s["signal"] in obs.NONNEGATIVE else v)
+    return np.column_stack(cols)
+
+
+def _window_regressors(model, t, sig, W, regressors, keep):
+    """Rows k whose window starts at a sample k0 with t[k] - t[k0] = W (both kept): regressors X, true states Y."""
+    names = obs.signals_of(model.terms)
+    Y = _true_states(model, t, sig)
+    k0 = np.searchsorted(t, t - W - 1e-6)
+    dt = float(np.median(np.diff(t)))
+    ok = np.abs((t - t[k0]) - W) < dt / 2
+    k, k0 = np.flatnonzero(ok), k0[ok]
+    both = keep[k] & keep[k0]
+    k, k0 = k[both], k0[both]
+    U = np.column_stack([sig[n] for n in names])
+    cols = []
+    if "u" in regressors:
+        cols.append(U[k])
+    if "d" in regressors:
+        cols.append(U[k] - U[k0])
+    if "y" in regressors:
+        # the board's states at k, run from the instantaneous estimate at k0: the true ones minus the decayed start error
+        taus = np.array([model.terms[j][1] for j in _lagged(model)])
+        cols.append(Y[k] - np.exp(-(t[k] - t[k0])[:, None] / taus[None, :]) * (Y[k0] - _instant(model, sig)[k0]))
+    if "h" in regressors:
+        # helper filter (tau W/2) started at u(k0): the one run from the first sample minus its decayed difference from u(k0)
+        H = np.column_stack([obs._filter_from(t, sig[n], W / 2, sig[n][0]) for n in names])
+        cols.append(H[k] - np.exp(-(t[k] - t[k0]) / (W / 2))[:, None] * (H[k0] - U[k0]) - U[k])
+    return np.column_stack(cols), Y[k]
+
+
+def _window_regressors_at(model, tt, s, cols, kw, W, regressors):
+    """The same regressors on a restarted board at its sample kw (tt, s from the reset; cols its term columns)."""
+    names = obs.signals_of(model.terms)
+    U, U0 = np.array([s[n][kw] for n in names]), np.array([s[n][0] for n in names])
+    x = []
+    if "u" in regressors:
+        x.append(U)
+    if "d" in regressors:
+        x.append(U - U0)
+    if "y" in regressors:
+        x.append(cols[kw, _lagged(model)])
+    if "h" in regressors:
+        x.append(np.array([obs._filter_from(tt[:kw + 1], s[n][:kw + 1], W / 2, s[n][0])[-1] for n in names]) - U)
+    return np.concatenate(x)
+
+
+def fit_window(model, train, W, regressors):
+    """Gains (regressors x lag states), E^W per state, and which states take the window estimate."""
+    X, Y = [], []
+    for run, (lo, hi) in train:
+        t, sig = obs.inputs(model, run)
+        Xr, Yr = _window_regressors(model, t, sig, W, regressors, (t >= lo) & (t <= hi))
+        X.append(Xr)
+        Y.append(Yr)
+    X, Y = np.vstack(X), np.vstack(Y)
+    gains = np.linalg.lstsq(X, Y, rcond=None)[0]  # no constant: a machine at rest (every regressor 0) stays at zero
+    e_w = np.abs(Y - X @ gains).max(axis=0)
+    e_0 = np.array([s["bound"] for s in model.observer.states])
+    taus = np.array([model.terms[j][1] for j in _lagged(model)])
+    return gains, e_w, e_w < e_0 * np.exp(-W / taus)
+
+
+def bound_settle(model, bounds_before, bounds_after, W, scale):
+    """Smallest time (s, 10 s grid) from which the start-error bound stays <= TOL_UM: B uses the instantaneous bounds
+    before W and the window's after (each decaying from its own start)."""
+    taus = np.array([model.terms[j][1] for j in _lagged(model)])
+    b = np.abs(model.term_coefficients[_lagged(model)]) * scale
+    grid = np.arange(0.0, 400 * 3600.0, 10.0)
+    B = np.where(grid[:, None] < W, bounds_before[None, :] * np.exp(-grid[:, None] / taus),
+                 bounds_after[None, :] * np.exp(-np.maximum(grid[:, None] - W, 0) / taus)) @ b
+    over = np.flatnonzero(B > TOL_UM)
+    return 0.0 if not over.size else (grid[over[-1] + 1] if over[-1] + 1 < grid.size else np.inf)
+
+
+def restarted_columns(model, run, reset_s, start=None):
+    """Time base, inputs and term columns of a board reset at reset_s with the observer's start (or ``start`` {term: y})."""
+    t, sig = obs.inputs(model, run)
+    r0 = int(np.searchsorted(t, reset_s))
+    tt, s = t[r0:], {n: v[r0:] for n, v in sig.items()}
+    est = model.observer.initial_states({n: s[n][0] for n in obs.signals_of(model.terms)})
+    est.update(start or {})
+    cols = np.column_stack([obs._filter_from(tt, s[n], tau, est.get(j, s[n][0])) for j, (n, tau) in enumerate(model.terms)])
+    return r0, tt, s, cols
+
+
+def window_restart(model, run, full, reset_s, W, gains, use, regressors, scale):
+    """(max30, at30, settle, |offset step at t0+W|) of a board reset at reset_s with the window estimate."""
+    r0, tt, s, cols = restarted_columns(model, run, reset_s)
+    step = 0.0
+    if W > 0:
+        kw = int(np.searchsorted(tt, tt[0] + W - 1e-6))
+        before = (model.intercept + cols[kw] @ model.term_coefficients) * scale
+        yw = _window_regressors_at(model, tt, s, cols, kw, W, regressors) @ gains
+        for q, j in enumerate(_lagged(model)):
+            if use[q]:
+                n, tau = model.terms[j]
+                y0 = max(yw[q], 0.0) if n in obs.NONNEGATIVE else yw[q]
+                cols[kw:, j] = obs._filter_from(tt[kw:], s[n][kw:], tau, y0)
+        step = abs((model.intercept + cols[kw] @ model.term_coefficients) * scale - before)
+    dev = np.abs((model.intercept + cols @ model.term_coefficients) * scale - full[r0:])
+    max30, at30, _, settle = deviation_figures(tt - tt[0], dev)
+    return max30, at30, settle, step
+
+
+def print_windows(label, model, train, run, resets_h, scale, windows_min, regressor_sets):
+    t, _ = obs.inputs(model, run)
+    full = model.thermal_at(run, t) * scale
+    e_0 = np.array([s["bound"] for s in model.observer.states])
+    print("\n%s, window estimate: per W, settle_s (bound), E_j per lag state, resets within %g um at 30 min; per reset H "
+          "(h): max30 / at30 / settle (min) / offset step at t0+W (um)" % (label, TOL_UM))
+    print("  lag states: %s" % ", ".join("%s %g s" % model.terms[j] for j in _lagged(model)))
+    for regressors in regressor_sets:
+        for w_min in windows_min:
+            W = 60.0 * w_min
+            if W == 0:
+                gains, e_w, use = None, e_0, np.zeros(e_0.size, dtype=bool)
+            else:
+                gains, e_w, use = fit_window(model, train, W, regressors)
+            figs = [window_restart(model, run, full, h * 3600.0, W, gains, use, regressors, scale) for h in resets_h]
+            settle = bound_settle(model, e_0, np.where(use, e_w, e_0 * np.exp(-W / np.array([model.terms[j][1] for j in _lagged(model)]))), W, scale)
+            print("  %-5s W %2g min  settle_s %6s  E %-34s ok30 %d/%d | %s" % (
+                regressors if W else "-", w_min, fmt_settle(settle).replace(" min", ""),
+                " ".join("%.2f%s" % (e, "*" if u else "") for e, u in zip(np.where(use, e_w, e_0), use)),
+                sum(f[1] <= TOL_UM for f in figs), len(figs),
+                "  ".join("%g:%.1f/%.2f/%s/%.1f" % (h, a, b, "%.0f" % (c / 60) if np.isfinite(c) else "inf", d)
+                          for h, (a, b, c, d) in zip(resets_h, figs))))
+        windows_min = [w for w in windows_min if w != 0]  # W = 0 is the same for every regressor set: printed once
+
+
+# --- experiment 4: the spindle lag states from the controller's history ---------------------------------------------
+
+def _partial(t, Y, taus, H):
+    """Each column of Y (lag states run from the first sample) as a filter started at rest H s before each sample
+    (at the run's first sample where the run is shorter): Y(k) - e^(-H/tau) Y(k_H), exact for the recurrence; H = inf: Y."""
+    if not np.isfinite(H):
+        return Y
+    kh = np.searchsorted(t, t - H - 1e-6)
+    return Y - np.exp(-(t - t[kh])[:, None] / taus[None, :]) * Y[kh]
+
+
+def print_spindle_history(label, model, train, run, resets_h, scale, histories_min):
+    """S0: the spindle/feed lag states exact (their uninterrupted values), the others the observer's; S(H): every lag
+    state re-estimated, without a constant, from the inputs and the spindle/feed lag states run from rest over the
+    last H minutes before the reset (the controller's history of the speed), fitted on the training samples."""
+    lagged = _lagged(model)
+    spin = [q for q, j in enumerate(lagged) if model.terms[j][0] in obs.NONNEGATIVE]
+    if not spin:
+        print("\n%s: no spindle or feed lag state (the spindle history cannot help)" % label)
+        return
+    names = obs.signals_of(model.terms)
+    taus = np.array([model.terms[j][1] for j in lagged])
+    e_0 = np.array([s["bound"] for s in model.observer.states])
+    t, sig = obs.inputs(model, run)
+    full = model.thermal_at(run, t) * scale
+    _, uninterrupted = obs.board_terms(model, [run])
+    print("\n%s, spindle lag states from the controller's history at the reset: S0 exact, the others the observer's; "
+          "S(H min) every state from the inputs and the spindle lag states over the last H min: settle_s (bound), E_j, "
+          "resets within %g um at 30 min; per reset H (h): max30 / at30 / settle (min)" % (label, TOL_UM))
+    for H in [None] + [60.0 * h for h in histories_min]:
+        if H is None:
+            e = e_0.copy()
+            e[spin] = 0.0
+        else:
+            X, Y = [], []
+            for r, (lo, hi) in train:
+                tr, sr = obs.inputs(model, r)
+                keep = (tr >= lo) & (tr <= hi)
+                Yr = _true_states(model, tr, sr)
+                P = _partial(tr, Yr, taus, H)
+                X.append(np.column_stack([np.column_stack([sr[n] for n in names]), P[:, spin]])[keep])
+                Y.append(Yr[keep])
+            X, Y = np.vstack(X), np.vstack(Y)
+            gains = np.linalg.lstsq(X, Y, rcond=None)[0]  # no constant (as the observer)
+            e = np.abs(Y - X @ gains).max(axis=0)
+            U = uninterrupted[:, lagged]
+            P_run = _partial(t, U, taus, H)
+        figs = []
+        for h in resets_h:
+            r0 = int(np.searchsorted(t, h * 3600.0))
+            if H is None:
+                start = {lagged[q]: uninterrupted[r0, lagged[q]] for q in spin}
+            else:
+                est = np.concatenate([[sig[n][r0] for n in names], P_run[r0, spin]]) @ gains
+                start = {j: (max(v, 0.0) if q in spin else v) for q, (j, v) in enumerate(zip(lagged, est))}
+            r0, tt, _, cols = restarted_columns(model, run, h * 3600.0, start)
+            dev = np.abs((model.intercept + cols @ model.term_coefficients) * scale - full[r0:])
+            figs.append(deviation_figures(tt - tt[0], dev))
+        print("  %-9s settle_s %6s  E %-34s ok30 %d/%d | %s" % (
+            "S0" if H is None else "S(%g)" % (H / 60), fmt_settle(bound_settle(model, e, e, 0.0, scale)).replace(" min", ""),
+            " ".join("%.2f" % v for v in e), sum(f[1] <= TOL_UM for f in figs), len(figs),
+            "  ".join("%g:%.1f/%.2f/%s" % (h, a, b, "%.0f" % (d / 60) if np.isfinite(d) else "inf") for h, (a, b, _, d) in zip(resets_h, figs))))
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--channels", default="ch1,ch2,ch3,ch4,ch5")
     ap.add_argument("--no-twin", action="store_true")
+    ap.add_argument("--split-h", type=float, default=SPLIT_H, help="FL_THERMAL's training/held-out split (h; default the 5th cycle's start)")
+    ap.add_argument("--no-split", action="store_true", help="skip sections 1-2 (the split ratios and observer on/off resets)")
+    ap.add_argument("--windows", default=None, help="experiment 3: window lengths in minutes, e.g. 0,5,10,20,30")
+    ap.add_argument("--window-regressors", default="ud,udy,udh,udhy", help="experiment 3: regressor sets (letters %s)" % REGRESSORS)
+    ap.add_argument("--spindle-history", default=None, help="experiment 4: history lengths in minutes, e.g. 30,60,120,inf")
     args = ap.parse_args()
+    windows = [float(v) for v in args.windows.split(",")] if args.windows else []
+    regressor_sets = args.window_regressors.split(",")
+    histories = [float(v) for v in args.spindle_history.split(",")] if args.spindle_history else None
+    for r in regressor_sets:
+        if not r or set(r) - set(REGRESSORS):
+            ap.error("--window-regressors: each set is letters of %s, found %r" % (REGRESSORS, r))
     t0 = time.perf_counter()
     run = load_run(os.path.join(ROOT, "data", "fl_thermal"))
-    split = SPLIT_H * 3600.0
+    split = args.split_h * 3600.0
     held = slice_run(run, split)
     before = slice_run(run, 0.0, split)
     models = {}
-    print("FL_THERMAL, fit t < %.2f h (tcomp fit defaults), held out t >= %.2f h: RMSE um (ratio to MLR-16)" % (SPLIT_H, SPLIT_H))
-    print("%4s %8s | %-22s | %-22s | %-22s | %s" % ("ch", "MLR-16", "switched on, observer", "switched on, no observer",
-                                                  "filters from 0 h", "sensors"))
+    if not args.no_split:
+        print("FL_THERMAL, fit t < %.2f h (tcomp fit defaults), held out t >= %.2f h: RMSE um (ratio to MLR-16)" % (args.split_h, args.split_h))
+        print("%4s %8s | %-22s | %-22s | %-22s | %s" % ("ch", "MLR-16", "switched on, observer", "switched on, no observer",
+                                                      "filters from 0 h", "sensors"))
     for ch in args.channels.split(","):
         dyn = fit_model([run], "dynamic", target="direct", channel=ch, window=(None, split))
-        mlr = fit_model([run], "mlr", target="direct", channel=ch, window=(None, split))
         models[ch] = dyn
-        m = rmse(mlr, held, ch)
-        cells = [rmse(dyn, held, ch), rmse(without_observer(dyn), held, ch), rmse(dyn, held, ch, history=before)]
-        print("%4s %8.2f | %s | %s" % (ch, m, " | ".join("%8.2f (%5.2f)%7s" % (c, c / m, "") for c in cells), ",".join(dyn.sensors)))
+        if not args.no_split:
+            mlr = fit_model([run], "mlr", target="direct", channel=ch, window=(None, split))
+            m = rmse(mlr, held, ch)
+            cells = [rmse(dyn, held, ch), rmse(without_observer(dyn), held, ch), rmse(dyn, held, ch, history=before)]
+            print("%4s %8.2f | %s | %s" % (ch, m, " | ".join("%8.2f (%5.2f)%7s" % (c, c / m, "") for c in cells), ",".join(dyn.sensors)))
+    cases = []  # (label, model, training runs with spans, test run, resets, scale)
     for ch, dyn in models.items():
-        print_restarts("FL_THERMAL %s (model fitted on t < %.2f h)" % (ch, SPLIT_H), dyn, run, FL_RESETS_H, 1.0)
+        cases.append(("FL_THERMAL %s (model fitted on t < %.2f h)" % (ch, args.split_h), dyn, [(run, (0.0, split))], run, FL_RESETS_H, 1.0))
     if not args.no_twin:
         from host.twin import simulate_run
 
@@ -107,7 +355,14 @@ def main():
         scale = float(max(np.nanmax(np.abs(r.errors.position_mm)) for r in train))
         print("\ntwin: slope model fitted on 4 cold-start 5 h runs (v8000_r210_490, mixed, random, v15000_r210_490), sensors %s;"
               " tested on day24h (seed 7); deviation at %.0f mm" % (",".join(dyn.sensors), scale))
-        print_restarts("twin day24h", dyn, day, TWIN_RESETS_H, scale)
+        cases.append(("twin day24h", dyn, [(r, (-np.inf, np.inf)) for r in train], day, TWIN_RESETS_H, scale))
+    for label, model, train, test, resets, scale in cases:
+        if not args.no_split:
+            print_restarts(label, model, test, resets, scale)
+        if windows:
+            print_windows(label, model, train, test, resets, scale, windows, regressor_sets)
+        if histories is not None:
+            print_spindle_history(label, model, train, test, resets, scale, histories)
     print("\n(%.0f s)" % (time.perf_counter() - t0))
 
 
