@@ -171,6 +171,9 @@ def fit_window(model, train, W, regressors):
         X.append(Xr)
         Y.append(Yr)
     X, Y = np.vstack(X), np.vstack(Y)
+    if X.shape[0] <= X.shape[1]:
+        raise SystemExit("window %g s: %d training rows for %d regressors (is W a multiple of the sample interval, and "
+                         "shorter than the training runs?)" % (W, X.shape[0], X.shape[1]))
     gains = np.linalg.lstsq(X, Y, rcond=None)[0]  # no constant: a machine at rest (every regressor 0) stays at zero
     e_w = np.abs(Y - X @ gains).max(axis=0)
     e_0 = np.array([s["bound"] for s in model.observer.states])
@@ -319,9 +322,18 @@ def main():
     ap.add_argument("--window-regressors", default="ud,udy,udh,udhy", help="experiment 3: regressor sets (letters %s)" % REGRESSORS)
     ap.add_argument("--spindle-history", default=None, help="experiment 4: history lengths in minutes, e.g. 30,60,120,inf")
     args = ap.parse_args()
-    windows = [float(v) for v in args.windows.split(",")] if args.windows else []
+    def minutes(text, flag, positive):
+        try:
+            vals = [float(v) for v in text.split(",")]
+        except ValueError:
+            ap.error("%s: comma-separated minutes, found %r" % (flag, text))
+        if any(np.isnan(v) or v < 0 or (positive and v == 0) or (flag == "--windows" and not np.isfinite(v)) for v in vals):
+            ap.error("%s: each length must be %s minutes, found %r" % (flag, "> 0" if positive else "finite >= 0", text))
+        return vals
+
+    windows = minutes(args.windows, "--windows", False) if args.windows else []
     regressor_sets = args.window_regressors.split(",")
-    histories = [float(v) for v in args.spindle_history.split(",")] if args.spindle_history else None
+    histories = minutes(args.spindle_history, "--spindle-history", True) if args.spindle_history else None
     for r in regressor_sets:
         if not r or set(r) - set(REGRESSORS):
             ap.error("--window-regressors: each set is letters of %s, found %r" % (REGRESSORS, r))
