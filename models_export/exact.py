@@ -14,7 +14,7 @@ import math
 from fractions import Fraction as F
 
 from models_export.certify import (
-    ACC, LIMITS_UM, OU_PER_UM, ExportError, Recorder, frac_bits, iv_add, iv_mul, narrow_width, p2, rnd, top_limbs_needed,
+    ACC, OU_PER_UM, ExportError, Recorder, frac_bits, iv_add, iv_mul, narrow_width, p2, rnd, top_limbs_needed,
 )
 from models_export.document import FORMAT
 
@@ -27,6 +27,11 @@ NOT_EXPORTABLE = {
            "evaluates (a table holds fixed coefficients of poly_slope, linear_direct, screw or dynamic form); predict "
            "reads it, and for the board fit a method that exports (mlr, pcr, stepwise, cv-subset, dynamic, mr-poly, screw)",
 }
+
+# the document kinds a table evaluates -> that table's kind (certify.LIMITS_UM): mr_poly is written as a dynamic table
+# (mr_poly_as_dynamic); a table kind such as screw_reduced is not a document's
+TABLE_KINDS = {"poly_slope": "poly_slope", "linear_direct": "linear_direct", "screw": "screw_reduced", "dynamic": "dynamic",
+               "mr_poly": "dynamic"}
 
 # dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
 START = "start"  # the raw-error reference of docs/data-format.md (the exporter sees documents, not runs)
@@ -58,16 +63,16 @@ def mr_poly_as_dynamic(doc: dict[str, Any]) -> dict[str, Any]:
     nut, base = th.get("nut_sensor"), th.get("base_sensor")
     if list(doc.get("sensors") or []) != [nut, base]:
         raise ExportError("mr_poly: sensors must be [thermal.nut_sensor, thermal.base_sensor], found %r" % (doc.get("sensors"),))
+    # sensors equal to [nut, base] can still be no names (e.g. [null, null] with both fields null)
+    nut = _sensor_name(nut, "mr_poly: thermal.nut_sensor")
+    base = _sensor_name(base, "mr_poly: thermal.base_sensor")
     a = th.get("nut_coefficients")
     if not isinstance(a, list) or not 1 <= len(a) <= 4:
         raise ExportError("thermal.nut_coefficients must list 1..4 numbers (a_1..a_m), found %r" % (a,))
-    # The two ignores: nut and base are the sensors' names (sensors == [nut, base] above); a document whose sensors
-    # are not strings (e.g. [null, null]) is not caught before here and fails with a TypeError (known, not fixed
-    # by the type-check round, which changes no behaviour)
-    terms = [{"signal": ("T:" if j == 0 else "T%d:" % (j + 1)) + nut, "tau_s": 0,  # pyright: ignore[reportOperatorIssue]
+    terms = [{"signal": ("T:" if j == 0 else "T%d:" % (j + 1)) + nut, "tau_s": 0,
               "coefficient": _num(c, "thermal.nut_coefficients[%d]" % j)}
              for j, c in enumerate(a)]
-    terms.append({"signal": "T:" + base, "tau_s": 0,  # pyright: ignore[reportOperatorIssue]
+    terms.append({"signal": "T:" + base, "tau_s": 0,
                   "coefficient": _num(th.get("base_coefficient"), "thermal.base_coefficient")})
     out = dict(doc)
     out["kind"] = "dynamic"
@@ -102,14 +107,14 @@ class Model:
             raise ExportError("format must be %r (a model document), found %r" % (FORMAT, doc.get("format")))
         kind = doc.get("kind")
         self.doc_kind = kind
+        if isinstance(kind, str) and kind in NOT_EXPORTABLE:
+            raise ExportError("a %s model cannot be exported: %s" % (kind, NOT_EXPORTABLE[kind]))
+        if not isinstance(kind, str) or kind not in TABLE_KINDS:
+            raise ExportError("model kind %r cannot be exported (known: %s)" % (kind, ", ".join(TABLE_KINDS)))
+        self.kind = TABLE_KINDS[kind]
         if kind == "mr_poly":
             doc = mr_poly_as_dynamic(doc)
             kind = "dynamic"
-        self.kind = "screw_reduced" if kind == "screw" else kind
-        if kind in NOT_EXPORTABLE:
-            raise ExportError("a %s model cannot be exported: %s" % (kind, NOT_EXPORTABLE[kind]))
-        if self.kind not in LIMITS_UM:
-            raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw, dynamic, mr_poly)" % (kind,))
         sensors = doc.get("sensors") or []
         if not isinstance(sensors, list) or not all(isinstance(s, str) for s in sensors):
             raise ExportError("sensors must be a list of sensor names, found %r" % (sensors,))
@@ -460,6 +465,12 @@ class Model:
         for k in range(len(self.g) - 2, j - 1, -1):
             h = iv_add(iv_mul(h, P), (self.g[k], self.g[k]))
         return h
+
+
+def _sensor_name(v: object, where: str) -> str:
+    if not isinstance(v, str):
+        raise ExportError("%s must be a sensor's name, found %r" % (where, v))
+    return v
 
 
 def _num(v, where):
