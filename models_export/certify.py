@@ -167,11 +167,10 @@ class Recorder:
     """Interval of every checked firmware accumulator (firmware/evaluate.py ACC_*), and the peak |integer| each named term produces."""
 
     def __init__(self) -> None:
-        self.accs = {}
-        self.peaks = {}
-        self.where = {}
+        self.accs: dict[int, IntInterval] = {}  # accumulator (ACC_*; -1 the constants) -> its interval
+        self.peaks: dict[str, int] = {}  # term -> the largest |integer| it produces
 
-    def note(self, acc_id: int, lo: Num, hi: Num, term: str) -> None:
+    def note(self, acc_id: int, lo: int, hi: int, term: str) -> None:
         cur = self.accs.get(acc_id)
         self.accs[acc_id] = (lo, hi) if cur is None else (min(cur[0], lo), max(cur[1], hi))
         m = max(abs(lo), abs(hi))
