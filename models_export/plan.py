@@ -9,6 +9,7 @@ contributions and ``rec`` (a certify.Recorder) the accumulator intervals and hea
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from fractions import Fraction
 from typing import Any, TypedDict, overload
 from models_export.certify import IntInterval, Interval, Num
@@ -1037,7 +1038,7 @@ def _largest(m: Model, PM: int = 1, seg_bound: Num = 0) -> str:
     return max(cands, key=lambda c: c[0])[1]
 
 
-def _supersolution(A: np.ndarray, rho: list[Num]) -> list[Fraction] | None:
+def _supersolution(A: np.ndarray, rho: Sequence[Num]) -> list[Fraction] | None:
     """v >= 0 with v >= |A| v + rho (exact check), or None."""
     Aa = np.abs(np.asarray(A, dtype=float))
     M = Aa.shape[0]
