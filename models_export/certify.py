@@ -31,7 +31,7 @@ no such v exists (|A| not contracting) it refuses to export.
 from __future__ import annotations
 
 from fractions import Fraction
-from typing import Union
+from typing import Union, overload
 import math
 from fractions import Fraction as F
 
@@ -51,6 +51,9 @@ DEFAULT_REDUCTION_LIMIT_UM = 0.5
 # an exact number of the analysis, and a closed interval of them (lo, hi)
 Num = Union[int, Fraction]
 Interval = tuple[Num, Num]
+# an interval of the firmware's integers (an accumulator, a limb, a coefficient): what the limb splits and the
+# shifts take; the sum and product of integer intervals are integer intervals (iv_add, iv_mul say so)
+IntInterval = tuple[int, int]
 
 
 class ExportError(ValueError):
@@ -84,11 +87,19 @@ def rnd(x: float | Fraction) -> int:
     return int(math.floor(x + F(1, 2))) if x >= 0 else -int(math.floor(-x + F(1, 2)))
 
 
+@overload
+def iv_mul(a: IntInterval, b: IntInterval) -> IntInterval: ...
+@overload
+def iv_mul(a: Interval, b: Interval) -> Interval: ...
 def iv_mul(a: Interval, b: Interval) -> Interval:
     c = (a[0] * b[0], a[0] * b[1], a[1] * b[0], a[1] * b[1])
     return (min(c), max(c))
 
 
+@overload
+def iv_add(*ivs: IntInterval) -> IntInterval: ...
+@overload
+def iv_add(*ivs: Interval) -> Interval: ...
 def iv_add(*ivs: Interval) -> Interval:
     return (sum(i[0] for i in ivs), sum(i[1] for i in ivs))
 
@@ -101,23 +112,23 @@ def iv_abs(a: Interval) -> Num:
     return max(abs(a[0]), abs(a[1]))
 
 
-def int_iv(real_iv: Interval, err_iv: Interval) -> tuple[int, int]:
+def int_iv(real_iv: Interval, err_iv: Interval) -> IntInterval:
     """Integer interval holding real + err."""
     return (math.floor(real_iv[0] + err_iv[0]), math.ceil(real_iv[1] + err_iv[1]))
 
 
-def limbs(x: tuple[int, int], L: int, n: int) -> list[tuple[int, int]]:
+def limbs(x: IntInterval, L: int, n: int) -> list[IntInterval]:
     """Intervals of the limbs of x (an int interval) split as the firmware's _mul does."""
     out = [(0, (1 << L) - 1)] * (n - 1)
     out.append((x[0] >> (L * (n - 1)), x[1] >> (L * (n - 1))))
     return out
 
 
-def limb_max(x: tuple[int, int], L: int, n: int) -> int:
+def limb_max(x: IntInterval, L: int, n: int) -> int:
     return max(max(abs(a), abs(b)) for a, b in limbs(x, L, n))
 
 
-def top_limbs_needed(x: tuple[int, int], L: int, narrow: Num) -> int | None:
+def top_limbs_needed(x: IntInterval, L: int, narrow: Num) -> int | None:
     """Smallest limb count n such that narrow * |top limb| <= PROD."""
     for n in range(1, 7):
         top = max(abs(x[0] >> (L * (n - 1))), abs(x[1] >> (L * (n - 1))))
@@ -156,11 +167,10 @@ class Recorder:
     """Interval of every checked firmware accumulator (firmware/evaluate.py ACC_*), and the peak |integer| each named term produces."""
 
     def __init__(self) -> None:
-        self.accs = {}
-        self.peaks = {}
-        self.where = {}
+        self.accs: dict[int, IntInterval] = {}  # accumulator (ACC_*; -1 the constants) -> its interval
+        self.peaks: dict[str, int] = {}  # term -> the largest |integer| it produces
 
-    def note(self, acc_id: int, lo: Num, hi: Num, term: str) -> None:
+    def note(self, acc_id: int, lo: int, hi: int, term: str) -> None:
         cur = self.accs.get(acc_id)
         self.accs[acc_id] = (lo, hi) if cur is None else (min(cur[0], lo), max(cur[1], hi))
         m = max(abs(lo), abs(hi))
@@ -171,7 +181,7 @@ class Recorder:
                               "small-int limit 2^30; the model cannot be made integer-safe over its envelope"
                               % (term, m, math.log2(m)))
 
-    def mul(self, acc_id: int, c: tuple[int, int], x: tuple[int, int], L: int, n: int, sh: int, term: str) -> tuple[tuple[int, int], int]:
+    def mul(self, acc_id: int, c: IntInterval, x: IntInterval, L: int, n: int, sh: int, term: str) -> tuple[IntInterval, int]:
         """Mirror of Evaluator._mul: returns (result interval, number of flooring shifts)."""
         rlo = rhi = 0
         s = sh

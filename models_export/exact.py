@@ -8,18 +8,19 @@ models_export.document's job.
 from __future__ import annotations
 
 from collections.abc import Mapping
-from typing import Any
+from fractions import Fraction
+from typing import Any, TypedDict
 from typing import TYPE_CHECKING
 import math
 from fractions import Fraction as F
 
 from models_export.certify import (
-    ACC, LIMITS_UM, OU_PER_UM, ExportError, Recorder, frac_bits, iv_add, iv_mul, narrow_width, p2, rnd, top_limbs_needed,
+    ACC, OU_PER_UM, ExportError, Recorder, frac_bits, iv_add, iv_mul, narrow_width, p2, rnd, top_limbs_needed,
 )
 from models_export.document import FORMAT
 
 if TYPE_CHECKING:
-    from models_export.certify import Interval, Num
+    from models_export.certify import IntInterval, Interval, Num
 
 # document kinds predict reads but no table kind of the firmware evaluates, and why (docs/model-format.md)
 NOT_EXPORTABLE = {
@@ -28,6 +29,11 @@ NOT_EXPORTABLE = {
            "reads it, and for the board fit a method that exports (mlr, pcr, stepwise, cv-subset, dynamic, mr-poly, screw)",
 }
 
+# the document kinds a table evaluates -> that table's kind (certify.LIMITS_UM): mr_poly is written as a dynamic table
+# (mr_poly_as_dynamic); a table kind such as screw_reduced is not a document's
+TABLE_KINDS = {"poly_slope": "poly_slope", "linear_direct": "linear_direct", "screw": "screw_reduced", "dynamic": "dynamic",
+               "mr_poly": "dynamic"}
+
 # dynamic: the signal a filter reads -> firmware source code (>= 0: a sensor's index)
 START = "start"  # the raw-error reference of docs/data-format.md (the exporter sees documents, not runs)
 DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
@@ -35,8 +41,8 @@ DYN_SOURCES = {"spindle_krpm": -1, "spindle_krpm2": -2, "feed_m_min": -3}
 POWER_PREFIXES = {"T2:": 2, "T3:": 3, "T4:": 4}
 
 
-def power_chain(rec: Recorder, x_iv: tuple[int, int], e: int, L: int, n: int, sh2: int, sh: int, name: str,
-                acc: int) -> tuple[tuple[int, int], Interval, list[tuple[int, int]]]:
+def power_chain(rec: Recorder, x_iv: IntInterval, e: int, L: int, n: int, sh2: int, sh: int, name: str,
+                acc: int) -> tuple[IntInterval, Interval, list[IntInterval]]:
     """Integer interval and error interval of the firmware's power x**e / 2**(sh2 + sh*(e - 2)) of an exact integer
     rise x, formed one floored factor at a time (Evaluator._inputs), recorded on ``rec`` as accumulator ``acc``;
     also the interval of every left factor (for the limb bound)."""
@@ -58,16 +64,16 @@ def mr_poly_as_dynamic(doc: dict[str, Any]) -> dict[str, Any]:
     nut, base = th.get("nut_sensor"), th.get("base_sensor")
     if list(doc.get("sensors") or []) != [nut, base]:
         raise ExportError("mr_poly: sensors must be [thermal.nut_sensor, thermal.base_sensor], found %r" % (doc.get("sensors"),))
+    # sensors equal to [nut, base] can still be no names (e.g. [null, null] with both fields null)
+    nut = _sensor_name(nut, "mr_poly: thermal.nut_sensor")
+    base = _sensor_name(base, "mr_poly: thermal.base_sensor")
     a = th.get("nut_coefficients")
     if not isinstance(a, list) or not 1 <= len(a) <= 4:
         raise ExportError("thermal.nut_coefficients must list 1..4 numbers (a_1..a_m), found %r" % (a,))
-    # The two ignores: nut and base are the sensors' names (sensors == [nut, base] above); a document whose sensors
-    # are not strings (e.g. [null, null]) is not caught before here and fails with a TypeError (known, not fixed
-    # by the type-check round, which changes no behaviour)
-    terms = [{"signal": ("T:" if j == 0 else "T%d:" % (j + 1)) + nut, "tau_s": 0,  # pyright: ignore[reportOperatorIssue]
+    terms = [{"signal": ("T:" if j == 0 else "T%d:" % (j + 1)) + nut, "tau_s": 0,
               "coefficient": _num(c, "thermal.nut_coefficients[%d]" % j)}
              for j, c in enumerate(a)]
-    terms.append({"signal": "T:" + base, "tau_s": 0,  # pyright: ignore[reportOperatorIssue]
+    terms.append({"signal": "T:" + base, "tau_s": 0,
                   "coefficient": _num(th.get("base_coefficient"), "thermal.base_coefficient")})
     out = dict(doc)
     out["kind"] = "dynamic"
@@ -83,7 +89,20 @@ DYN_SQUARE_BITS = 24  # the spindle speed squared is held as rpm**2 / 2**shq < 2
 DEFAULT_ENVELOPE_MARGIN_K = 15.0
 
 
-def _obj(value, where):
+class DynTerm(TypedDict):
+    """One filter of a dynamic table in table units (Model._dyn_terms)."""
+    src: int  # the signal's firmware source code (DYN_SOURCES; >= 0: a sensor's index; <= -4: a power of a rise)
+    u: IntInterval  # the input's integer range (it holds the rest state 0)
+    fy: int  # the state's fraction bits: state = input << fy
+    a: Fraction  # the discrete lag's weight 1 - exp(-dt/tau) (0: no lag)
+    name: str
+    tau: Fraction  # s
+    ein: Interval  # the integer input minus the exact one (input units; powers of rises only)
+    per: Fraction  # the signal's unit per input unit
+    signal: str
+
+
+def _obj(value: object, where: str) -> dict[str, Any]:
     """A document block that must be a JSON object; absent (None) reads as empty."""
     if value is None:
         return {}
@@ -102,14 +121,14 @@ class Model:
             raise ExportError("format must be %r (a model document), found %r" % (FORMAT, doc.get("format")))
         kind = doc.get("kind")
         self.doc_kind = kind
+        if isinstance(kind, str) and kind in NOT_EXPORTABLE:
+            raise ExportError("a %s model cannot be exported: %s" % (kind, NOT_EXPORTABLE[kind]))
+        if not isinstance(kind, str) or kind not in TABLE_KINDS:
+            raise ExportError("model kind %r cannot be exported (known: %s)" % (kind, ", ".join(TABLE_KINDS)))
+        self.kind = TABLE_KINDS[kind]
         if kind == "mr_poly":
             doc = mr_poly_as_dynamic(doc)
             kind = "dynamic"
-        self.kind = "screw_reduced" if kind == "screw" else kind
-        if kind in NOT_EXPORTABLE:
-            raise ExportError("a %s model cannot be exported: %s" % (kind, NOT_EXPORTABLE[kind]))
-        if self.kind not in LIMITS_UM:
-            raise ExportError("model kind %r cannot be exported (known: poly_slope, linear_direct, screw, dynamic, mr_poly)" % (kind,))
         sensors = doc.get("sensors") or []
         if not isinstance(sensors, list) or not all(isinstance(s, str) for s in sensors):
             raise ExportError("sensors must be a list of sensor names, found %r" % (sensors,))
@@ -134,8 +153,14 @@ class Model:
         if kind == "screw" and isinstance(thermal.get("reduced"), dict) and thermal["reduced"].get("base_ref") == "run_start":
             # The screw model's ambient term is referenced to each run's start: certify latched references too.
             self.ref_mode = 1
-        self.env_lo, self.env_hi, self.ref, self.ref_frac = [], [], [], []
-        self.train_lo, self.train_hi, self.env_source = [], [], []
+        # per sensor: the certified envelope and the reference (mK), the reference's fraction folded into the intercept
+        self.env_lo: list[int] = []
+        self.env_hi: list[int] = []
+        self.ref: list[int] = []
+        self.ref_frac: list[Num] = []
+        self.train_lo: list[int] = []  # the training range (mK)
+        self.train_hi: list[int] = []
+        self.env_source: list[str] = []  # "set" (the caller's envelope) or "default" (training range +- margin)
         envelope = dict(envelope or {})
         unknown = [s for s in envelope if s not in self.sensors]
         if unknown:
@@ -274,7 +299,7 @@ class Model:
         if len(self.g) - 1 > 6:
             raise ExportError("geometric degree %d: the table holds at most degree 6" % (len(self.g) - 1))
 
-    def _error_reference(self, doc):
+    def _error_reference(self, doc: dict[str, Any]) -> None:
         """``error_ref``: 0 when the model was fitted on raw errors ("start", also a document without the field),
         1 + i when on errors corrected to sensor i (table header byte 58, docs/table-format.md)."""
         ref = doc.get("error_reference", START)
@@ -287,7 +312,7 @@ class Model:
                               % (ref, ", ".join(self.sensors) or "none"))
         self.error_ref, self.error_reference = 1 + self.sensors.index(ref), ref
 
-    def _dyn_terms(self, doc, thermal, env, unit):
+    def _dyn_terms(self, doc: dict[str, Any], thermal: dict[str, Any], env: dict[str, Any], unit: Num) -> None:
         """The filters in table units; their coefficients and state boxes are appended to b, d_lo, d_hi, b_names
         (after the sensors, whose own coefficients are 0), so S's ranges include them."""
         dt = thermal.get("dt_s")
@@ -301,15 +326,14 @@ class Model:
         if not isinstance(terms, list) or not 1 <= len(terms) <= 8:
             raise ExportError("thermal.terms must list 1..8 terms, found %r" % (terms,))
 
-        def top(key, needed):
+        def top(key: str, needed: bool) -> int:
             if not needed:
                 return 0
             v = env.get(key)
-            lo, hi = _pair(v, "envelope.%s" % key) if v is not None else (None, None)
-            if v is None or lo != 0 or not hi >= 0:  # pyright: ignore[reportOptionalOperand]  # hi is None only when v is
+            lo, hi = _pair(v, "envelope.%s" % key) if v is not None else (None, 0.0)
+            if lo != 0 or not hi >= 0:  # lo None: the document has no envelope.<key>
                 raise ExportError("envelope.%s must be [0, max] for a model reading %s; re-fit the model with this tcomp"
                                   % (key, key.split("_")[0]))
-            assert hi is not None  # v is not None here, so _pair gave hi
             if hi > (1 << 20):
                 raise ExportError("envelope.%s: %r is beyond what the table holds (%d)" % (key, hi, 1 << 20))
             return math.ceil(F(hi))
@@ -346,7 +370,7 @@ class Model:
             self.p_bound, self.Lp, self.np = 1 << cb, L, n
             self.shp2 = max(0, 2 * db - (cb - 1))
             self.shp = db
-        self.dyn = []
+        self.dyn: list[DynTerm] = []
         for j, t in enumerate(terms):
             where = "thermal.terms[%d]" % j
             if not isinstance(t, dict):
@@ -370,7 +394,7 @@ class Model:
                     raise ExportError("%s: the power of %s outgrows its limbs" % (where, sig[3:]))
                 src = -4 - 3 * i - (e - 2)
                 per = p2(self.shp2 + self.shp * (e - 2)) / F(1000) ** e  # (mK**e / 2**(shp2 + shp*(e-2))) -> K**e
-            elif sig in DYN_SOURCES:
+            elif isinstance(sig, str) and sig in DYN_SOURCES:  # (a list or an object is no signal: unhashable)
                 src = DYN_SOURCES[sig]
                 if src == -1:
                     u, per = (0, self.smax), F(1, 1000)  # rpm -> krpm
@@ -388,18 +412,20 @@ class Model:
             import numpy as np
             a = F(float(1.0 - np.exp(-(self.dt_ms / 1000.0) / float(tau)))) if tau > 0 else F(0)
             name = "thermal.terms[%d] (%s, tau %g s)" % (j, sig, float(tau))
-            self.dyn.append(dict(src=src, u=u, fy=fy, a=a, name=name, tau=tau, ein=ein, per=per, signal=sig))
+            self.dyn.append(DynTerm(src=src, u=u, fy=fy, a=a, name=name, tau=tau, ein=ein, per=per, signal=sig))
             self.b.append(coef * unit * per / p2(fy))  # output scale per state unit
             self.d_lo.append(u[0] << fy)
             self.d_hi.append(u[1] << fy)
             self.b_names.append(name)
         self._observer(thermal.get("observer"))
 
-    def _observer(self, obs):
+    def _observer(self, obs: object) -> None:
         """The observer's gains in table units (issue 21; host/learning/empirical/observer.py): ``obs_gain[j][m]``, the
         exact coefficient of filter m's integer input in lag state j's integer estimate (state units 2**-fy[j]); a signal's
         gain goes to the first filter reading it. ``None``: no observer (the filters start at rest)."""
-        self.observer, self.obs_gain, self.settle_s = None, None, 0
+        self.observer: dict[str, Any] | None = None
+        self.obs_gain: list[list[Fraction]] | None = None
+        self.settle_s = 0
         if obs is None:
             return
         where = "thermal.observer"
@@ -433,7 +459,7 @@ class Model:
                 self.obs_gain[j][m] += g * self.dyn[m]["per"] * p2(self.dyn[j]["fy"]) / self.dyn[j]["per"]
         self.observer = obs
 
-    def _sensor_index(self, name, where):
+    def _sensor_index(self, name: str, where: str) -> int:
         if name not in self.sensors:
             raise ExportError("%s: sensor %r is not in sensors %r" % (where, name, self.sensors))
         return self.sensors.index(name)
@@ -462,19 +488,25 @@ class Model:
         return h
 
 
-def _num(v, where):
+def _sensor_name(v: object, where: str) -> str:
+    if not isinstance(v, str):
+        raise ExportError("%s must be a sensor's name, found %r" % (where, v))
+    return v
+
+
+def _num(v: object, where: str) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
         raise ExportError("%s: expected a finite number, got %r" % (where, v))
     return v
 
 
-def _get(d, key, where):
+def _get(d: object, key: str, where: str) -> Any:
     if not isinstance(d, dict) or key not in d:
         raise ExportError("%s has no entry for sensor %r" % (where, key))
     return d[key]
 
 
-def _pair(v, where):
+def _pair(v: object, where: str) -> tuple[float, float]:
     if not (isinstance(v, (list, tuple)) and len(v) == 2):
         raise ExportError("%s: expected [lo, hi], got %r" % (where, v))
     return _num(v[0], where + "[0]"), _num(v[1], where + "[1]")

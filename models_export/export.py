@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
+from fractions import Fraction
 from typing import Any
 import math
 
@@ -11,7 +12,10 @@ from models_export.certify import DEFAULT_REDUCTION_LIMIT_UM, LIMITS_UM, OU_PER_
 from models_export.document import edited_reason, provenance
 from models_export.exact import DEFAULT_ENVELOPE_MARGIN_K, Model
 from models_export.plan import Planner
-from models_export.tableformat import VERSION, pack
+from models_export.tableformat import pack
+# The ignore: firmware/table.py defines VERSION as a _NAME const (free on MicroPython) and publishes it under this
+# name on CPython only (its globals() loop), which pyright cannot see
+from firmware.table import VERSION  # pyright: ignore[reportAttributeAccessIssue]
 
 
 class Export:
@@ -32,7 +36,7 @@ class Export:
         return c_header(self, guard)
 
 
-def _provenance(doc):
+def _provenance(doc: dict[str, Any]) -> tuple[str, str | None]:
     """(sha256 of the document being exported, the recorded one or None). The table names the
     actual document; a recorded hash that differs means it was edited after it was saved."""
     return provenance(doc)
@@ -44,8 +48,10 @@ def reduction(doc: dict[str, Any], limit_um: float = DEFAULT_REDUCTION_LIMIT_UM)
     thermal.reduced.reduction_error_um (host/learning/screw/reduced.py reduction_certificate). Raises ExportError
     when it is missing or its worst RMS is above ``limit_um``, naming the run and the effects left out."""
     th = doc.get("thermal")
-    red = th.get("reduced") if isinstance(th, dict) else None
-    if doc.get("kind") != "screw" or not isinstance(red, dict):
+    if doc.get("kind") != "screw" or not isinstance(th, dict):
+        return None
+    red = th.get("reduced")
+    if not isinstance(red, dict):
         return None
     if "parameters" not in th:  # a document of the reduced recurrence alone: it is its own full model
         return {"status": "reduced form only (no full model in the document): nothing reduced", "limit_um": limit_um,
@@ -134,7 +140,8 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
         raise ExportError("certified worst-case error %.4g um is not below %.4g um for %s; largest contribution: term %s "
                           "(%.4g um)" % (max_err, limit, model.kind, worst["name"], worst["max_error_um"]))
     peak = max(max(abs(lo), abs(hi)) for lo, hi in rec.accs.values())
-    envelope = {
+    # the report's envelope (the certified one, in table units); the argument ``envelope`` is what the caller set
+    certified: dict[str, Any] = {
         "temperature_mC": {s: [lo, hi] for s, lo, hi in zip(model.sensors, model.env_lo, model.env_hi)},
         "reference_mC": dict(zip(model.sensors, model.ref)),
         # the certified envelope above is the operating range; the model was fitted over this one: between the two
@@ -146,9 +153,9 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
         "reference_mode": "latched (any reference inside the envelope)" if model.ref_mode else "fixed",
     }
     if not model.direct:
-        envelope["position_um"] = [model.pos_lo, model.pos_hi]
-        envelope["reference_position_um"] = model.pos_ref
-    report = {
+        certified["position_um"] = [model.pos_lo, model.pos_hi]
+        certified["reference_position_um"] = model.pos_ref
+    report: dict[str, Any] = {
         "model_kind": model.kind,
         "document_kind": model.doc_kind,  # mr_poly is written as a dynamic table (models_export.exact.mr_poly_as_dynamic)
         # what the offsets compensate: the machine relative to its cold start, or to a workpiece at this sensor's temperature
@@ -163,7 +170,7 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
         "slope_max_error_um_per_m": _up(max(map(abs, errs["slope"])) * 0.01) + 1e-9,
         "min_headroom_bits": round(30.0 - math.log2(peak), 3) if peak else 30.0,
         "terms": terms,
-        "envelope": envelope,
+        "envelope": certified,
         "provenance_sha256": prov.hex(),
         "provenance_verified": verified,
         "provenance_edited": edited,
@@ -173,9 +180,9 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
     if model.kind == "screw_reduced":
         sc = planner.state_cert
         s = planner.s
-        envelope["state_K"] = [0.0, float(s["Tmax"])]
-        envelope["travel_um_per_step"] = [0, f["umax"]]
-        envelope["feed_max_mm_min"] = f["fmax"]
+        certified["state_K"] = [0.0, float(s["Tmax"])]
+        certified["travel_um_per_step"] = [0, f["umax"]]
+        certified["feed_max_mm_min"] = f["fmax"]
         report["screw"] = {
             "segments": f["M"], "dt_ms": f["dt_ms"], "state_frac_bits": f["ft"], "state_limbs": f["ns"],
             "state_error_bound_K": max(sc["v_state_units"]) / (1 << f["ft"]),
@@ -184,16 +191,18 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
         }
         # what the board does against the host model: the integer arithmetic (certified) plus the reduction
         # (measured on the training runs)
+        assert red_cert is not None  # a screw document (exact.TABLE_KINDS) whose thermal.reduced Model read: reduction() read it too
         report["reduction"] = red_cert
         report["total_max_error_um"] = max_err + red_cert["max_um"]
     if model.kind == "dynamic":
-        envelope["spindle_rpm"] = [0, f["smax"]]
-        envelope["feed_mm_min"] = [0, f["fmax"]]
+        certified["spindle_rpm"] = [0, f["smax"]]
+        certified["feed_mm_min"] = [0, f["fmax"]]
         report["dynamic"] = {
             "dt_ms": f["dt_ms"], "positional": bool(f["positional"]), "filters": planner.dyn_cert,
             "horizon": "unbounded (steady state) from the cold start (latch): |e| <= v with v >= (1 - a) v + rho verified exactly",
         }
         if planner.obs_cert is not None:
+            assert model.observer is not None  # Planner.dyn_observer certifies an observer only for a model with one
             # the observer's integer start against the host's estimate (exact arithmetic on the document's float gains):
             # each state's start error is inside its filter's state error bound, which the offset error above includes
             report["dynamic"]["observer"] = {
@@ -205,7 +214,7 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
     return Export(f, table, report, accs, errs)
 
 
-def _up(x):
+def _up(x: float | Fraction) -> float:
     """float(x) rounded up (x a Fraction or float)."""
     v = float(x)
     return math.nextafter(v, math.inf) if v < x else v

@@ -9,21 +9,23 @@ contributions and ``rec`` (a certify.Recorder) the accumulator intervals and hea
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from fractions import Fraction
-from typing import Any
-from models_export.certify import Interval, Num
+from typing import Any, TypedDict, overload
+from models_export.certify import IntInterval, Interval, Num
 from typing import TYPE_CHECKING
 import math
 from fractions import Fraction as F
 
 import numpy as np
 
-# the names firmware/evaluate.py publishes on CPython only (its globals() loop): invisible to pyright
+# The ignores: firmware/evaluate.py defines these as _NAME consts (free on MicroPython) and publishes them under
+# NAME on CPython only (its globals() loop), which pyright cannot see
 from firmware.evaluate import (
-    ACC_AMUL, ACC_BMUL, ACC_CMUL, ACC_CONVY, ACC_CUM, ACC_CUMMUL, ACC_D, ACC_DE, ACC_DMUL, ACC_DX, ACC_EMUL, ACC_FEEDMUL,
-    ACC_GEO, ACC_GEOMUL, ACC_GMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_LMUL, ACC_OMUL, ACC_OSUM, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW,
-    ACC_ROWMUL, ACC_S, ACC_SEGMUL, ACC_SLOPE, ACC_SMUL, ACC_STATE, ACC_SUM, ACC_THMUL, ACC_TRAVEL, ACC_UGMUL, ACC_XL, ACC_Y,
-    ACC_YMUL, FEED_LIMB, FEED_W_BITS,
+    ACC_AMUL, ACC_BMUL, ACC_CMUL, ACC_CONVY, ACC_CUM, ACC_CUMMUL, ACC_D, ACC_DE, ACC_DMUL, ACC_DX, ACC_EMUL, ACC_FEEDMUL,  # pyright: ignore[reportAttributeAccessIssue]
+    ACC_GEO, ACC_GEOMUL, ACC_GMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_LMUL, ACC_OMUL, ACC_OSUM, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW,  # pyright: ignore[reportAttributeAccessIssue]
+    ACC_ROWMUL, ACC_S, ACC_SEGMUL, ACC_SLOPE, ACC_SMUL, ACC_STATE, ACC_SUM, ACC_THMUL, ACC_TRAVEL, ACC_UGMUL, ACC_XL, ACC_Y,  # pyright: ignore[reportAttributeAccessIssue]
+    ACC_YMUL, FEED_LIMB, FEED_W_BITS,  # pyright: ignore[reportAttributeAccessIssue]
 )
 from models_export.certify import (
     ACC, OU_PER_UM, PROD, SLOPE_PER_OU_PER_UM, ExportError, Recorder, center, fit_coef, floor_err, frac_bits,
@@ -35,25 +37,35 @@ from models_export.exact import power_chain
 if TYPE_CHECKING:
     from models_export.exact import Model
 
-ZERO = (F(0), F(0))
+ZERO: Interval = (F(0), F(0))
 EPS_BITS = 24  # moving_convection: the step's extra convection weight D_i*U is held below 2**EPS_BITS
 
 
-def _c(x):
+def _c(x: Num) -> Interval:
+    """The point interval of one exact number."""
     x = F(x)
     return (x, x)
 
 
-def _hull(*ivs):
+# the hull and the meet of integer intervals are integer intervals (the accumulators' bounds stay ints)
+@overload
+def _hull(*ivs: IntInterval) -> IntInterval: ...
+@overload
+def _hull(*ivs: Interval) -> Interval: ...
+def _hull(*ivs: Interval) -> Interval:
     return (min(i[0] for i in ivs), max(i[1] for i in ivs))
 
 
-def _meet(a, b):
+@overload
+def _meet(a: IntInterval, b: IntInterval) -> IntInterval: ...
+@overload
+def _meet(a: Interval, b: Interval) -> Interval: ...
+def _meet(a: Interval, b: Interval) -> Interval:
     lo, hi = max(a[0], b[0]), min(a[1], b[1])
     return (lo, hi) if lo <= hi else a
 
 
-def _round_out(err, f, r=None):
+def _round_out(err: Interval, f: int, r: int | None = None) -> tuple[int, Interval]:
     """Error interval of floor((acc + r) / 2**f) given acc's error interval ``err`` (acc units); returns (r, err_out).
     ``r`` None: the bias that centres the interval."""
     if r is None:
@@ -63,15 +75,55 @@ def _round_out(err, f, r=None):
     return r, (lo, hi)
 
 
+# one term of S (s_block, dyn_coefficients): (integer result interval, name, scale, |quantisation|, error interval)
+SPart = tuple[IntInterval, str, int, Num, Interval]
+
+
+class Term(TypedDict):
+    """One term's line of the certificate (Planner.term; export.py reports it)."""
+    name: str
+    scale: int  # the power of two of its integer coefficient
+    key: str  # the Recorder's name of the term (its headroom)
+    err_ou: Fraction  # its error contribution to the offset, output units (0.01 um)
+
+
+class ReducedScrew(TypedDict):
+    """thermal.reduced as Planner.screw_prepare read and checked it, in the units the screw planning uses."""
+    M: int  # segments
+    A: np.ndarray  # M x M state transition
+    B: np.ndarray  # M heat per mm of the segment's travel (K/mm)
+    edges: list[float]  # M + 1 segment edges (mm)
+    edges_um: list[int]  # ... rounded to whole um (the table's)
+    fixed: float  # fixed end (mm)
+    fe: int  # ... rounded to whole um
+    Tmax: Fraction  # the state's range (K): [Tlo, Tmax]
+    Tlo: Fraction
+    umax: int  # travel per step at the top feed (um)
+    air: int  # the air sensor's channel, -1 without one
+    c0: list[Fraction]  # air weights at the step's start and end
+    c1: list[Fraction]
+    d_air: IntInterval  # the air's range over its reference (mK)
+    Bu: list[Fraction]  # heat per mm of the step's total travel (K/mm)
+    rev: Fraction  # reversal term (um)
+    g0: Fraction | None  # speed_dependent_heat: g(U) = g0 + gv U; g0 None without it
+    gv: Fraction  # (per um; 0 without speed_dependent_heat, where nothing reads it)
+    D: list[Fraction]  # moving_convection: extra convection weight per um of the step's travel
+
+
 class Planner:
     def __init__(self, model: Model) -> None:
         self.m = model
         self.rec = Recorder()
-        self.f = {}
-        self.terms = []  # dicts: name, scale, key (recorder key), err_ou (contribution in output units, 0.01 um)
-        self.obs_cert = None  # dynamic tables with an observer: per lag state, its certified start (dyn_observer)
-        self.obs_e0 = {}  # filter index -> |start error| (state units)
-        self.obs_start_um = None  # the observer's start error carried to the offset (um)
+        self.f: dict[str, Any] = {}  # the table's fields by name (ints, lists of ints): tableformat.pack
+        self.terms: list[Term] = []
+        self.obs_cert: list[dict[str, Any]] | None = None  # dynamic tables with an observer: per lag state, its certified start (dyn_observer)
+        self.obs_e0: dict[int, Num] = {}  # filter index -> |start error| (state units)
+        self.obs_start_um: Num | None = None  # the observer's start error carried to the offset (um)
+        # set by the kind's planning (declared here for their types): the dynamic filters' and the screw state's
+        # certificates (report entries), and thermal.reduced as read (screw_prepare)
+        self.dyn_cert: list[dict[str, Any]]
+        self.state_cert: dict[str, Any]
+        self.s: ReducedScrew
 
     def term(self, name: str, scale: int, err_ou: Num, key: str | None = None) -> None:
         """Record one term's error contribution to the offset; ``err_ou`` is in output units (0.01 um), never in
@@ -79,7 +131,7 @@ class Planner:
         self.terms.append({"name": name, "scale": scale, "key": key or name, "err_ou": F(err_ou)})
 
     # ------------------------------------------------------------ S = S0 + sum b*d
-    def s_block(self, fS: int, out_factor: Num) -> tuple[Interval, Interval]:
+    def s_block(self, fS: int, out_factor: Num) -> tuple[IntInterval, Interval]:
         """Temperature-linear accumulator at scale 2**fS; out_factor converts its error to output units."""
         m, rec, f = self.m, self.rec, self.f
         n = len(m.sensors)
@@ -88,7 +140,7 @@ class Planner:
         Lt = max(1, min(29, -(-dmax.bit_length() // nt)))
         f.update(Lt=Lt, nt=nt, fS=fS, b=[], shb=[], fb=[])
         err = ZERO
-        parts = []
+        parts: list[SPart] = []
         if m.kind == "dynamic":
             y_err = self.dyn_filters()
             self.dyn_coefficients(fS, y_err, out_factor, parts)
@@ -290,7 +342,7 @@ class Planner:
                                   "estimate_clamped_in_envelope": bool(est[0] < Ylo or est[1] > Yhi)})
         return out
 
-    def dyn_coefficients(self, fS: int, y_err: list[Interval], out_factor: Num, parts: list[Any]) -> None:
+    def dyn_coefficients(self, fS: int, y_err: list[Interval], out_factor: Num, parts: list[SPart]) -> None:
         """bY[j] x Y[j] into S (scale 2**fS); parts gets (result, name, scale, |quantisation|, error interval)."""
         m, f, rec = self.m, self.f, self.rec
         n = len(m.sensors)
@@ -430,7 +482,7 @@ class Planner:
         f["cert_slope"] = _mag(((sl[0] + rK) >> fK, (sl[1] + rK) >> fK))
         return {"offset": err_out, "ref_offset": err_ref_out, "slope": err_sl_out}
 
-    def horner(self, fo: int, PM: int) -> tuple[Interval, Interval]:
+    def horner(self, fo: int, PM: int) -> tuple[IntInterval, Interval]:
         m, f, rec = self.m, self.f, self.rec
         d = len(m.g) - 1
         fr = [fo]
@@ -451,7 +503,8 @@ class Planner:
                 h = (G[d], G[d])
                 err = _c(F(G[d]) - m.g[d] * p2(fr[d]))
                 for j in range(d - 1, -1, -1):
-                    if top_limbs_needed(h, Lg, PM) is None or top_limbs_needed(h, Lg, PM) > ng:
+                    nh = top_limbs_needed(h, Lg, PM)
+                    if nh is None or nh > ng:
                         raise _Retry()
                     res, k = sub.mul(ACC_GEOMUL, (m.pos_lo, m.pos_hi), h, Lg, ng, shg[j], names[j + 1])
                     err = iv_add(iv_scale(iv_mul(P, err), 1 / p2(shg[j])), floor_err(k), _c(F(G[j]) - m.g[j] * p2(fr[j])))
@@ -517,13 +570,13 @@ class Planner:
         Thi_K = F(Tmax) + F(d_air[1], 1000)
         Bu, rev = self._screw_effects(red, M)
         g0, gv, D = self._screw_speed_effects(red, A, M, umax)
-        self.s = dict(M=M, A=A, B=B, edges=edges, edges_um=edges_um, fixed=fixed, fe=fe, Tmax=Thi_K, Tlo=Tlo_K, umax=umax,
-                      air=air, c0=c0, c1=c1, d_air=d_air, Bu=Bu, rev=rev, g0=g0, gv=gv, D=D)
+        self.s = ReducedScrew(M=M, A=A, B=B, edges=edges, edges_um=edges_um, fixed=fixed, fe=fe, Tmax=Thi_K, Tlo=Tlo_K, umax=umax,
+                              air=air, c0=c0, c1=c1, d_air=d_air, Bu=Bu, rev=rev, g0=g0, gv=gv, D=D)
         f.update(M=M, dt_ms=dt_ms, fixed_end=fe, fmax=fmax, edges=edges_um, umax=umax, air=air)
         alpha = m.alpha
         return abs(alpha) * max(Thi_K, -Tlo_K) * F(edges[-1]) * OU_PER_UM * 2  # x2: margin for state errors
 
-    def _screw_effects(self, red, M):
+    def _screw_effects(self, red: dict[str, Any], M: int) -> tuple[list[Fraction], Fraction]:
         """The effects' reduced forms (host/learning/screw/effects.py reduce): heat per mm of the step's total travel
         (K/mm, per segment, >= 0) and the reversal term (um); zeros for a document without them."""
         hu = red.get("travel_heat_K_per_mm")
@@ -539,19 +592,17 @@ class Planner:
             raise ExportError("thermal.reduced.reversal_um must be a finite number of um below 1000 (got %r)" % (rev,))
         return Bu, F(float(rev))
 
-    def _screw_speed_effects(self, red, A, M, umax):
-        """The speed effects' reduced forms (format 5): the friction heat's factor g(U) = g0 + gv·U (gv per um; None
-        without speed_dependent_heat) and the extra convection weight D_i per um of the step's travel (moving_convection;
+    def _screw_speed_effects(self, red: dict[str, Any], A: np.ndarray, M: int,
+                             umax: int) -> tuple[Fraction | None, Fraction, list[Fraction]]:
+        """The speed effects' reduced forms (format 5): the friction heat's factor g(U) = g0 + gv·U (gv per um; g0 None
+        and gv 0 without speed_dependent_heat) and the extra convection weight D_i per um of the step's travel (moving_convection;
         zeros without it). Refuses a factor that turns negative on [0, umax] (no state bound) and D_i·umax > A_ii (the
         explicit step would be no convex combination: neither the state nor its error would stay bounded)."""
-        g0, gv = red.get("heat_scale0"), red.get("heat_scale_per_mm")
-        if g0 is None and gv is None:
-            g0 = gv = None
+        g0_doc, gv_doc = red.get("heat_scale0"), red.get("heat_scale_per_mm")
+        if g0_doc is None and gv_doc is None:
+            g0, gv = None, F(0)
         else:
-            for v, name in ((g0, "heat_scale0"), (gv, "heat_scale_per_mm")):
-                if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > 1000:
-                    raise ExportError("thermal.reduced.%s must be a finite number (got %r)" % (name, v))
-            g0, gv = F(float(g0)), F(float(gv)) / 1000
+            g0, gv = _heat_scale(g0_doc, "heat_scale0"), _heat_scale(gv_doc, "heat_scale_per_mm") / 1000
             if g0 < 0 or g0 + gv * umax < 0:
                 raise ExportError("thermal.reduced.heat_scale0/heat_scale_per_mm: the friction heat factor is negative on "
                                   "the travel range 0..%d um per step (speed_dependent_heat): no certified state bound" % umax)
@@ -570,7 +621,7 @@ class Planner:
                                       % (i, float(D[i] * umax), i, i, float(A[i, i])))
         return g0, gv, D
 
-    def _screw_air(self, red, A, M):
+    def _screw_air(self, red: dict[str, Any], A: np.ndarray, M: int) -> tuple[int, list[Fraction], list[Fraction], IntInterval]:
         """(channel index or -1, c0, c1 as Fractions, air range (milli-K) over its reference)."""
         m = self.m
         name = red.get("air_sensor")
@@ -594,7 +645,7 @@ class Planner:
             raise ExportError("thermal.reduced.air_ref_C lies outside the air sensor's envelope %r" % (name,))
         return i, c0, c1, d_air
 
-    def screw_state(self, fo: int) -> tuple[Interval, Interval]:
+    def screw_state(self, fo: int) -> tuple[IntInterval, Interval]:
         """Recurrence, state error certificate, cum/segslope; returns (seg(p) interval, seg(p) error interval).
 
         Tries 2..5 state limbs (more limbs: finer C = A - I, more multiplications per step) and keeps
@@ -614,6 +665,7 @@ class Planner:
             if best is None or e < best[0] * F(99, 100):  # fewer limbs unless clearly better
                 best = (e, sub, out)
         if best is None:
+            assert last is not None  # every limb count was refused, each with its ExportError: last holds one
             raise last
         _, sub, out = best
         self.f.update(sub.f)
@@ -622,7 +674,7 @@ class Planner:
         self.state_cert = sub.state_cert
         return out
 
-    def _screw_state(self, fo, ns):
+    def _screw_state(self, fo: int, ns: int) -> tuple[IntInterval, Interval]:
         m, f, rec, s = self.m, self.f, self.rec, self.s
         M, A = s["M"], s["A"]
         Tmax, Tlo = s["Tmax"], s["Tlo"]
@@ -933,7 +985,7 @@ class Planner:
         f.update(G2=G2, shG2=shG2, H=H, shH=shH, fh=fh, Lx=Lx, nx=nx, shX=shX)
         return seg_iv, err_seg
 
-    def screw_chord(self, seg_iv: Interval, err_seg: Interval, fo: int, fK: int) -> tuple[Interval, Interval]:
+    def screw_chord(self, seg_iv: IntInterval, err_seg: Interval, fo: int, fK: int) -> tuple[IntInterval, Interval]:
         """slope += KC * (seg(pos_hi) - seg(pos_lo)): the chord of the segment elongation over the envelope."""
         m, f, rec = self.m, self.f, self.rec
         de = (seg_iv[0] - seg_iv[1], seg_iv[1] - seg_iv[0])
@@ -960,7 +1012,15 @@ class _Retry(Exception):
     pass
 
 
-def _merge(dst, src):
+def _heat_scale(v: object, name: str) -> Fraction:
+    """thermal.reduced.<name> (speed_dependent_heat's heat_scale0 or heat_scale_per_mm), a finite number of
+    magnitude <= 1000, exactly."""
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or abs(v) > 1000:
+        raise ExportError("thermal.reduced.%s must be a finite number (got %r)" % (name, v))
+    return F(float(v))
+
+
+def _merge(dst: Recorder, src: Recorder) -> None:
     for acc_id, (lo, hi) in src.accs.items():
         dst.note(acc_id, lo, hi, "_merge")
     for k, v in src.peaks.items():
@@ -968,7 +1028,7 @@ def _merge(dst, src):
     dst.peaks.pop("_merge", None)
 
 
-def _largest(m, PM=1, seg_bound=0):
+def _largest(m: Model, PM: int = 1, seg_bound: Num = 0) -> str:
     """Name of the term with the largest contribution to the output range (for refusals)."""
     cands = [(abs(m.b0) * PM, "thermal intercept")]
     cands += [(abs(b) * max(abs(lo), abs(hi)) * PM, n) for b, lo, hi, n in zip(m.b, m.d_lo, m.d_hi, m.b_names)]
@@ -978,7 +1038,7 @@ def _largest(m, PM=1, seg_bound=0):
     return max(cands, key=lambda c: c[0])[1]
 
 
-def _supersolution(A, rho):
+def _supersolution(A: np.ndarray, rho: Sequence[Num]) -> list[Fraction] | None:
     """v >= 0 with v >= |A| v + rho (exact check), or None."""
     Aa = np.abs(np.asarray(A, dtype=float))
     M = Aa.shape[0]
@@ -997,6 +1057,6 @@ def _supersolution(A, rho):
     return None
 
 
-def _mag(iv):
+def _mag(iv: IntInterval) -> int:
     """The table's certified output bound: the largest |value| of an integer interval."""
     return int(max(abs(iv[0]), abs(iv[1])))

@@ -165,6 +165,10 @@ def test_latch_restarts_the_filters_from_rest():
     (lambda d: d["thermal"]["terms"].append({"signal": "T:nope", "tau_s": 0.0, "coefficient": 1.0}), "T:nope"),
     (lambda d: d["thermal"]["terms"].append({"signal": "torque", "tau_s": 0.0, "coefficient": 1.0}), "torque"),
     (lambda d: d["thermal"].update(target="sideways"), "thermal.target"),
+    # a signal that is no string: unhashable, the source lookup raised a TypeError (tcomp export printed a traceback)
+    (lambda d: d["thermal"]["terms"].append({"signal": ["spindle_krpm"], "tau_s": 0.0, "coefficient": 1.0}),
+     "thermal.terms[2].signal must be 'T:<sensor>', 'T2:'..'T4:<sensor>' or one of spindle_krpm, spindle_krpm2, "
+     "feed_m_min, found ['spindle_krpm']"),
 ])
 def test_export_refuses_naming_the_field(edit, message):
     doc = dynamic_doc(random.Random(1), "direct", n_sensors=2, signals=["T:T0", "spindle_krpm"])
@@ -172,6 +176,21 @@ def test_export_refuses_naming_the_field(edit, message):
     with pytest.raises(ExportError) as e:
         export_model(restamp(doc))
     assert message in str(e.value)
+
+
+def test_tcomp_export_refuses_a_signal_that_is_no_string(tmp_path, capsys):
+    """The document check before the exporter does not look into thermal.terms: a list signal reached the exporter's
+    source lookup and tcomp export ended in a TypeError traceback; now a user error naming the term, no table."""
+    import json
+
+    from host.cli import main
+
+    doc = dynamic_doc(random.Random(1), "direct", n_sensors=2, signals=["T:T0", "spindle_krpm"])
+    doc["thermal"]["terms"][1]["signal"] = ["spindle_krpm"]
+    model = tmp_path / "model.json"
+    model.write_text(json.dumps(restamp(doc)))
+    assert main(["export", str(model), "--out", str(tmp_path / "t.bin")]) == 2
+    assert "thermal.terms[1].signal must be " in capsys.readouterr().err and not (tmp_path / "t.bin").exists()
 
 
 def test_loader_refuses_a_filter_reading_a_missing_sensor():

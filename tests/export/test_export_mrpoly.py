@@ -15,6 +15,7 @@ from host.learning.documents import load_model
 from host.data.runs import load_run
 from models_export import export_model
 from models_export.certify import ExportError
+from models_export.exact import mr_poly_as_dynamic
 
 
 def _host_um(doc, temps_mc, ref_mc, pos_um):
@@ -99,6 +100,23 @@ def test_export_refuses_a_broken_mr_poly_document():
     doc["thermal"]["nut_coefficients"] = [0.1] * 5
     with pytest.raises(ExportError, match="1..4 numbers"):
         export_model(doc)
+
+
+@pytest.mark.parametrize("names", [[None, None], [1, 2]])
+def test_mr_poly_whose_sensors_are_no_names_is_refused_naming_the_field(names):
+    """sensors equal to [nut_sensor, base_sensor] but not strings: mr_poly_as_dynamic (which Model calls before it checks
+    sensors) built "T:" + None and raised a TypeError; a direct call is the only way there (tcomp export's document
+    check refuses first)."""
+    doc = mr_poly_doc(random.Random(1))
+    doc["sensors"] = list(names)
+    doc["thermal"]["nut_sensor"], doc["thermal"]["base_sensor"] = names
+    with pytest.raises(ExportError, match=r"mr_poly: thermal\.nut_sensor must be a sensor's name, found %r" % (names[0],)):
+        mr_poly_as_dynamic(doc)
+    with pytest.raises(ExportError, match=r"thermal\.nut_sensor"):
+        export_model(doc)
+    doc["sensors"][0] = doc["thermal"]["nut_sensor"] = "T_nut"
+    with pytest.raises(ExportError, match=r"mr_poly: thermal\.base_sensor must be a sensor's name, found %r" % (names[1],)):
+        mr_poly_as_dynamic(doc)
 
 
 def test_micropython_bit_identical_and_allocation_free(tmp_path, mp, runner):

@@ -7,7 +7,7 @@ import pytest
 
 from firmware.table import parse_table
 from host.cli import main
-from models_export import ExportError, export_model
+from models_export import LIMITS_UM, ExportError, export_model
 from hil_tests.fixtures.samples import linear_direct_doc, poly_slope_doc, restamp, screw_doc
 
 
@@ -65,6 +65,11 @@ def test_accuracy_limit_refusal_names_largest_term():
     (lambda d: d["thermal"]["coefficients_um_per_mm_per_K"].update(T0=float("nan")), r"coefficients_um_per_mm_per_K\.T0: expected a finite number"),
     (lambda d: d["thermal"]["coefficients_um_per_mm_per_K"].pop("T0"), r"has no entry for sensor 'T0'"),
     (lambda d: d.update(kind="spline"), r"model kind 'spline'"),
+    # a kind that is no string (unhashable: the kind lookups raised a TypeError) or a table's kind, not a document's
+    # (screw_reduced was planned as a screw and the report then raised a TypeError on its missing reduction part)
+    (lambda d: d.update(kind=["poly_slope"]), r"model kind \['poly_slope'\] cannot be exported \(known: poly_slope, "
+                                             r"linear_direct, screw, dynamic, mr_poly\)"),
+    (lambda d: d.update(kind={"name": "screw"}), r"model kind \{'name': 'screw'\} cannot be exported"),
 ])
 def test_bad_documents_name_the_field(edit, match):
     doc = poly_slope_doc(random.Random(5), n_sensors=2)
@@ -78,6 +83,23 @@ def test_screw_without_reduced_block_is_refused():
     del doc["thermal"]["reduced"]
     with pytest.raises(ExportError, match="thermal.reduced"):
         export_model(doc)
+
+
+def test_a_table_kind_is_no_document_kind():
+    """kind screw_reduced (the firmware table's name of a screw model) is refused; it was planned as a screw and then
+    failed with a TypeError: its certificate's reduction part reads kind screw documents only."""
+    doc = screw_doc(random.Random(6), segments=8)
+    doc["kind"] = "screw_reduced"
+    with pytest.raises(ExportError, match=r"model kind 'screw_reduced' cannot be exported \(known: poly_slope, linear_direct, "
+                                          r"screw, dynamic, mr_poly\)"):
+        export_model(restamp(doc))
+
+
+def test_every_exportable_kind_has_a_table_accuracy_limit():
+    """export_model reads LIMITS_UM[model.kind] for every kind Model accepts (exact.TABLE_KINDS' values)."""
+    from models_export.exact import TABLE_KINDS
+
+    assert set(TABLE_KINDS.values()) == set(LIMITS_UM)
 
 
 def test_cli_writes_table_report_and_header(tmp_path, capsys):
