@@ -303,6 +303,8 @@ class App:
         # if the machine is where it was at the write (docs/firmware.md, "Warm restarts of the lag states").
         w = self.lag_rec
         self.lag_rec = None
+        if w is None:
+            return
         nf = t.nf
         n = t.n_sensors
         temps = ev.temps

@@ -65,7 +65,8 @@ class _Slots:
         self.tag = tag
 
     def _ok(self, words):
-        return True
+        # a subclass checks the values against its table's bounds
+        return len(words) == self.words
 
     def load(self):
         """The words of the newest valid record for this table and tag (a list of ints), or None."""
@@ -178,8 +179,8 @@ class HeatStore(_Slots):
         self.hi = table.Tmax
         _Slots.__init__(self, directory + "/heat.bin", b"TH", table.M, 0, table, tag, table.M)
 
-    def _ok(self, T):
-        for v in T:
+    def _ok(self, words):
+        for v in words:
             if v < self.lo or v > self.hi:
                 return False
         return True
@@ -206,7 +207,8 @@ class LagStore(_Slots):
         _Slots.__init__(self, directory + "/lags.bin", b"TL", table.nf, table.n_sensors, table, tag,
                         table.nf + table.n_sensors + 3)
 
-    def _ok(self, w):
+    def _ok(self, words):
+        w = words
         t = self.t
         for j in range(t.nf):
             if t.A[j] and (w[j] < t.Ylo[j] or w[j] > t.Yhi[j]):
