@@ -37,7 +37,7 @@ pytestmark = pytest.mark.rig
 R_S = 4 * 3600.0  # the cut
 BEFORE_S = 630.0  # the board runs this long before it: its periodic write comes 600 s after the estimate (at ~0 s)
 AFTER_S = 900.0  # played after each restart
-GAP_S = 2 * 3600.0  # the long cut: the machine has moved on
+GAP_S = 10 * 3600.0  # the long cut (a night): the machine has moved on
 SETTLE_S = 300.0  # the test copy's settle_s
 FRAME_UM = 0.05  # half the frames' 0.1 um resolution (a frame's rounding)
 
@@ -108,7 +108,7 @@ def test_power_cut_restores_the_lag_states_and_a_changed_machine_gets_the_observ
     start2 = BEFORE_S + AFTER_S  # on the played clock: it goes on from the end of the first restart's span
     run2 = _shift(slice_run(full, R_S + GAP_S, R_S + GAP_S + AFTER_S), R_S + GAP_S - start2, ch)
     moved = max(abs(float(run2.temperatures.column(s)[0]) - float(after.temperatures.column(s)[0])) for s in sensors)
-    assert moved > 0.25, moved  # the machine moved more than the restore's 0.25 K during the cut
+    assert moved > 1.0, moved  # the machine moved more than the restore's 1 K during the cut
     rig.kill()
     rig.spec["start_ms"] = rig.t_ms
     rig.spec["temps"] = {s: float(run2.temperatures.column(s)[0]) for s in sensors}

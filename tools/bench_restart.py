@@ -8,8 +8,15 @@
    several points of the twin's 24 h day; the deviation of the restarted board's offset from the uninterrupted board
    (at the largest training position for a slope model): largest in the first 30 min and overall, at 30 min, and the
    settle time (from when on it stays within 1 um), observer on vs off; and the observer's SETTLING time (settle_s).
+3. Warm restarts (``--warm``, docs/firmware.md "Warm restarts of the lag states"): the same resets as a short cut
+   (back within seconds), the lag states restored from lags.bin when the firmware's rule trusts them (every model
+   sensor within 0.25 K of its reading at the write, and the observer's estimate moved less than 1 um of offset),
+   the observer's start otherwise. The stored state is the last periodic write, AGE_S old: 0 s (a cut right after a
+   write, or an X reset, which writes first) and 600 s (a cut just before the next write, the oldest it can be).
+   Per reset: warm state (age 0) / warm state (age 600 s) / observer only / neither, each as the largest deviation
+   and the settle time; "obs" marks a warm restart that refused the record and started from the observer.
 
-Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin]
+Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin] [--warm]
 """
 import argparse
 import os
@@ -62,6 +69,64 @@ def restart_figures(model, run, reset_s, scale):
     return out
 
 
+WARM_DRIFT_K = 0.25  # firmware/app.py _LAG_DRIFT_MK
+WARM_AGREE_UM = 1.0  # firmware/app.py _LAG_AGREE (0.01 um)
+AGES_S = (0.0, 600.0)  # the stored state's age: right after a write; just before the next (firmware/warmstate.py _SAVE_MS)
+
+
+def _settle_of(el, dev):
+    over = np.flatnonzero(dev > TOL_UM)
+    return 0.0 if not over.size else (el[over[-1] + 1] if over[-1] + 1 < el.size else np.inf)
+
+
+def warm_figures(model, run, reset_s, scale, age_s):
+    """A short cut at reset_s with the lag states of reset_s - age_s stored: (trusted, max deviation, settle time) of
+    the board that applies the firmware's rule (restore if trusted, else the observer's start)."""
+    from host.learning.empirical.observer import _filter_from, board_terms, inputs
+
+    t, cols = board_terms(model, [run])  # the uninterrupted board (switched on at the run's start, observer)
+    _, sig = inputs(model, run)
+    coef = np.asarray(model.term_coefficients, dtype=float)
+    k = np.flatnonzero(t >= reset_s)
+    ts = t[k]
+    el = ts - ts[0]
+    full = (model.intercept + cols[k] @ coef) * scale
+    then = reset_s - age_s
+    temps_then = {s: float(np.interp(then, run.temperatures.time_s, run.temperatures.column(s))) for s in model.sensors}
+    temps_now = {s: float(run.temperatures.column(s)[k[0]]) for s in model.sensors}
+    trusted = max(abs(temps_now[s] - temps_then[s]) for s in model.sensors) <= WARM_DRIFT_K
+    if trusted and model.observer is not None:
+        u_then = {n: float(np.interp(then, t, v)) for n, v in sig.items()}
+        u_now = dict(u_then)  # the temperatures now, the spindle and feed of the write (as the firmware compares)
+        for s in model.sensors:
+            u_now["T:" + s] = temps_now[s] - model.reference_C[s]
+        e0, e1 = model.observer.initial_states(u_then), model.observer.initial_states(u_now)
+        moved = abs(sum(coef[j] * (e1[j] - e0[j]) for j in e0)) * scale
+        trusted = moved <= WARM_AGREE_UM
+    if trusted:
+        own = np.column_stack([_filter_from(ts, sig[name][k], tau, float(np.interp(then, t, cols[:, j])))
+                               for j, (name, tau) in enumerate(model.terms)])
+        warm = (model.intercept + own @ coef) * scale
+    else:
+        warm = model.thermal_at(slice_run(run, reset_s), ts) * scale
+    dev = np.abs(warm - full)
+    return trusted, float(dev.max()), _settle_of(el, dev)
+
+
+def print_warm(label, model, run, resets_h, scale):
+    print("\n%s, short cuts: largest deviation from the uninterrupted board (um) / settle time (within 1 um from then on)" % label)
+    print("%6s | %-26s | %-26s | %-26s | %-26s" % ("H", "warm state, age 0 s", "warm state, age 600 s", "observer only", "neither"))
+    for h in resets_h:
+        cells = []
+        for age in AGES_S:
+            ok, d, st = warm_figures(model, run, h * 3600.0, scale, age)
+            cells.append("%7.2f / %-12s %4s" % (d, fmt_settle(st), "" if ok else "obs"))
+        f = restart_figures(model, run, h * 3600.0, scale)
+        for name in ("on", "off"):
+            cells.append("%7.2f / %-17s" % (f[name][2], fmt_settle(f[name][3])))
+        print("%6.1f | %s" % (h, " | ".join(cells)))
+
+
 def fmt_settle(s):
     return "never (in record)" if not np.isfinite(s) else "%.0f min" % (s / 60)
 
@@ -79,6 +144,7 @@ def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--channels", default="ch1,ch2,ch3,ch4,ch5")
     ap.add_argument("--no-twin", action="store_true")
+    ap.add_argument("--warm", action="store_true", help="also the short cuts with the lag states restored (lags.bin)")
     args = ap.parse_args()
     t0 = time.perf_counter()
     run = load_run(os.path.join(ROOT, "data", "fl_thermal"))
@@ -98,6 +164,8 @@ def main():
         print("%4s %8.2f | %s | %s" % (ch, m, " | ".join("%8.2f (%5.2f)%7s" % (c, c / m, "") for c in cells), ",".join(dyn.sensors)))
     for ch, dyn in models.items():
         print_restarts("FL_THERMAL %s (model fitted on t < %.2f h)" % (ch, SPLIT_H), dyn, run, FL_RESETS_H, 1.0)
+        if args.warm:
+            print_warm("FL_THERMAL %s" % ch, dyn, run, FL_RESETS_H, 1.0)
     if not args.no_twin:
         from host.twin import simulate_run
 
@@ -108,6 +176,8 @@ def main():
         print("\ntwin: slope model fitted on 4 cold-start 5 h runs (v8000_r210_490, mixed, random, v15000_r210_490), sensors %s;"
               " tested on day24h (seed 7); deviation at %.0f mm" % (",".join(dyn.sensors), scale))
         print_restarts("twin day24h", dyn, day, TWIN_RESETS_H, scale)
+        if args.warm:
+            print_warm("twin day24h", dyn, day, TWIN_RESETS_H, scale)
     print("\n(%.0f s)" % (time.perf_counter() - t0))
 
 
