@@ -101,8 +101,7 @@ class _Slots:
         n = 2 * self.size
         try:
             f = open(self.path, "r+b")
-            f.seek(0, 2)
-            if f.tell() == n:
+            if f.seek(0, 2) == n:  # seek returns the new position; a port may have no tell() (QEMU's semihosting files)
                 self.f = f
                 return True
             f.close()

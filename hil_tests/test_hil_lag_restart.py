@@ -26,6 +26,7 @@ import numpy as np
 import pytest
 
 from firmware.wire import SETTLING
+from hil_tests.conftest import SLOW
 from hil_tests.fixtures.samples import restamp
 from hil_tests.rig.boards import export, rig_config
 from hil_tests.rig.play import play, rtd_bound_K
@@ -46,9 +47,11 @@ def _after_ramp(answers):
     return [a for a in answers if not a["fallback"] and not int(a["status"], 16) & RATE_LIMITED]
 
 
+# the 32-bit port, and the emulated Cortex-M3 board (150 s there: with TCOMP_SLOW=1)
+@pytest.mark.parametrize("interpreter", ["micropython", "qemu"])
 def test_power_cut_restores_the_lag_states_and_a_changed_machine_gets_the_observer(make_rig, interpreter):
-    if interpreter == "cpython":
-        pytest.skip("the 32-bit port is the board here")
+    if interpreter == "qemu" and not SLOW:
+        pytest.skip("150 s on the emulated board (TCOMP_SLOW=1 runs it); test_hil_observer_restart.py resets it there")
     from host.data.runs import load_run, slice_run
     from host.learning.documents import load_model
     with open(FIXTURE) as fh:
@@ -64,7 +67,7 @@ def test_power_cut_restores_the_lag_states_and_a_changed_machine_gets_the_observ
     after = slice_run(run, BEFORE_S)
     ex = export(doc)
     from hil_tests.rig import interpreters
-    heap = os.environ.get("TCOMP_HIL_HEAP") or interpreters.heap("rig_dynamic")
+    heap = None if interpreter == "qemu" else os.environ.get("TCOMP_HIL_HEAP") or interpreters.heap("rig_dynamic")
     cfg = rig_config(sensors)
     start_temps = {s: float(before.temperatures.column(s)[0]) for s in sensors}
 
@@ -125,8 +128,8 @@ def test_power_cut_restores_the_lag_states_and_a_changed_machine_gets_the_observ
         assert abs(a["offset_um"] - p) <= bound2, (a, p, bound2)
     el = [(a["time_s"] - start2, bool(int(a["status"], 16) & SETTLING)) for a in answers2]
     assert all(s for e, s in el if e < SETTLE_S - 5) and not any(s for e, s in el if e > SETTLE_S + 5), el
-    print("cut at %.0f h, back within the second: %d answers, worst |restarted - uninterrupted| %.3f um (bound %.3f um; "
+    print("%s: cut at %.0f h, back within the second: %d answers, worst |restarted - uninterrupted| %.3f um (bound %.3f um; "
           "the observer's start is %.3f um away); back %.0f h later (sensors moved %.2f K): worst |board - host's observer "
-          "start| %.3f um (bound %.3f um)" % (R_S / 3600, len(compared), worst, bound, gap_obs, GAP_S / 3600, moved, worst2, bound2))
+          "start| %.3f um (bound %.3f um)" % (interpreter, R_S / 3600, len(compared), worst, bound, gap_obs, GAP_S / 3600, moved, worst2, bound2))
     for name, c in rig.stats()["chips"].items():
         assert c["violations"] == 0, c["violation_text"]

@@ -15,6 +15,10 @@
    write, or an X reset, which writes first) and 600 s (a cut just before the next write, the oldest it can be).
    Per reset: warm state (age 0) / warm state (age 600 s) / observer only / neither, each as the largest deviation
    and the settle time; "obs" marks a warm restart that refused the record and started from the observer.
+   Then the rule's sweep: a record CUTS_S old (a cut of that length, or a shorter one after an older write) at a
+   reset every 2 h of FL_THERMAL, all channels pooled: for each pair of limits (sensor K, observer um), the share of
+   records trusted and the mean / largest deviation of the board that applies it, beside restore-always and
+   observer-only. The firmware's limits are the row marked "*".
 
 Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin] [--warm]
 """
@@ -69,8 +73,10 @@ def restart_figures(model, run, reset_s, scale):
     return out
 
 
-WARM_DRIFT_K = 0.25  # firmware/app.py _LAG_DRIFT_MK
-WARM_AGREE_UM = 1.0  # firmware/app.py _LAG_AGREE (0.01 um)
+WARM_DRIFT_K = 1.0  # firmware/app.py _LAG_DRIFT_MK
+WARM_AGREE_UM = 10.0  # firmware/app.py _LAG_AGREE (0.01 um)
+CUTS_S = (60.0, 600.0, 1800.0, 3600.0, 7200.0, 28800.0)  # the rule's sweep: how long the stored state is old at the restart
+RULES = ((0.25, 1.0), (1.0, 5.0), (WARM_DRIFT_K, WARM_AGREE_UM), (1.0, np.inf), (2.0, 10.0), (2.0, np.inf))
 AGES_S = (0.0, 600.0)  # the stored state's age: right after a write; just before the next (firmware/warmstate.py _SAVE_MS)
 
 
@@ -127,6 +133,61 @@ def print_warm(label, model, run, resets_h, scale):
         print("%6.1f | %s" % (h, " | ".join(cells)))
 
 
+def _cut_case(model, run, t, cols, sig, coef, reset_s, age_s):
+    """(largest sensor change K, observer's move um, deviation restored um, deviation observer um) of one cut."""
+    from host.learning.empirical.observer import _filter_from
+
+    k = np.flatnonzero(t >= reset_s)
+    ts = t[k]
+    then = reset_s - age_s
+    now = {s: float(run.temperatures.column(s)[k[0]]) for s in model.sensors}
+    old = {s: float(np.interp(then, run.temperatures.time_s, run.temperatures.column(s))) for s in model.sensors}
+    u_then = {n: float(np.interp(then, t, v)) for n, v in sig.items()}
+    u_now = dict(u_then)
+    for s in model.sensors:
+        u_now["T:" + s] = now[s] - model.reference_C[s]
+    e0, e1 = model.observer.initial_states(u_then), model.observer.initial_states(u_now)
+    moved = abs(sum(coef[j] * (e1[j] - e0[j]) for j in e0))
+    own = np.column_stack([_filter_from(ts, sig[n][k], tau, float(np.interp(then, t, cols[:, j])))
+                           for j, (n, tau) in enumerate(model.terms)])
+    dev_r = float(np.abs((own - cols[k]) @ coef).max())
+    dev_o = float(np.abs(model.thermal_at(slice_run(run, reset_s), ts) - (model.intercept + cols[k] @ coef)).max())
+    return max(abs(now[s] - old[s]) for s in model.sensors), moved, dev_r, dev_o
+
+
+def print_rule_sweep(models, run):
+    from host.learning.empirical.observer import board_terms, inputs
+
+    cases = {c: [] for c in CUTS_S}
+    for model in models:
+        t, cols = board_terms(model, [run])
+        _, sig = inputs(model, run)
+        coef = np.asarray(model.term_coefficients, dtype=float)
+        for c in CUTS_S:
+            for h in np.arange(2.0, 46.0, 2.0):
+                if h * 3600.0 - c >= 0:
+                    cases[c].append(_cut_case(model, run, t, cols, sig, coef, h * 3600.0, c))
+    print("\nthe restore rule on FL_THERMAL (%s pooled, a reset every 2 h): trusted %% / mean / largest deviation (um) "
+          "of the board applying it, by the stored state's age" % ",".join(m.channel for m in models))
+    print("%-24s | %s" % ("rule", " | ".join("%-22s" % ("%.0f s" % c) for c in CUTS_S)))
+    rows = [("restore always", None), ("observer only", None)] + [("%s %.2f K, %s um" % (
+        "*" if (dk, au) == (WARM_DRIFT_K, WARM_AGREE_UM) else " ", dk, "any" if not np.isfinite(au) else "%g" % au), (dk, au))
+        for dk, au in RULES]
+    for label, rule in rows:
+        cells = []
+        for c in CUTS_S:
+            a = np.array(cases[c])
+            if label == "restore always":
+                acc = np.ones(len(a), dtype=bool)
+            elif rule is None:
+                acc = np.zeros(len(a), dtype=bool)
+            else:
+                acc = (a[:, 0] <= rule[0]) & (a[:, 1] <= rule[1])
+            chosen = np.where(acc, a[:, 2], a[:, 3])
+            cells.append("%3.0f%% %6.2f %6.2f      " % (100 * acc.mean(), chosen.mean(), chosen.max()))
+        print("%-24s | %s" % (label, " | ".join(cells)))
+
+
 def fmt_settle(s):
     return "never (in record)" if not np.isfinite(s) else "%.0f min" % (s / 60)
 
@@ -166,6 +227,8 @@ def main():
         print_restarts("FL_THERMAL %s (model fitted on t < %.2f h)" % (ch, SPLIT_H), dyn, run, FL_RESETS_H, 1.0)
         if args.warm:
             print_warm("FL_THERMAL %s" % ch, dyn, run, FL_RESETS_H, 1.0)
+    if args.warm:
+        print_rule_sweep(list(models.values()), run)
     if not args.no_twin:
         from host.twin import simulate_run
 
