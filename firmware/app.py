@@ -274,7 +274,9 @@ class App:
             return
         from firmware.warmstate import HeatStore, ref_tag
         h = HeatStore(self.store.dir, table, ref_tag(ev.ref))
-        T = h.load() if restore else None
+        T = h.load()  # read even when not restored: the writes' sequence numbers go on above the file's
+        if not restore:
+            T = None
         if T is not None:
             ev.T[:] = T
             ev.settle_restored()
@@ -293,8 +295,9 @@ class App:
             return
         from firmware.warmstate import LagStore, ref_tag
         h = LagStore(self.store.dir, table, ref_tag(ev.ref))
+        w = h.load()  # read even when not restored: the writes' sequence numbers go on above the file's
         if restore:
-            self.lag_rec = h.load()
+            self.lag_rec = w
         if h.open():
             self.lags = h
 

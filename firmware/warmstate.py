@@ -69,32 +69,35 @@ class _Slots:
         return len(words) == self.words
 
     def load(self):
-        """The words of the newest valid record for this table and tag (a list of ints), or None."""
+        """The words of the newest valid record for this table and tag (a list of ints), or None. Either way the next
+        write's sequence number follows the highest of any intact record in the file (another table's or other
+        references' too), so that a stale record can never outrank the writes from now on."""
         try:
             with open(self.path, "rb") as f:
                 data = f.read(2 * self.size + 1)
         except OSError:
             return None
         best = None
+        top = 0
         n = self.size
         head = bytes(self.buf[0:4])  # bytes: MicroPython never finds bytes equal to a bytearray
         ident = bytes(self.buf[8:16])
         for off in (0, n):
             r = bytes(data[off:off + n])
-            if len(r) != n or r[0:4] != head or r[8:16] != ident:
-                continue
-            if crc16_ccitt(r, 0, n - 2) != r[n - 2] | r[n - 1] << 8:
+            if len(r) != n or r[0:4] != head or crc16_ccitt(r, 0, n - 2) != r[n - 2] | r[n - 1] << 8:
                 continue
             seq = struct.unpack_from("<I", r, 4)[0]
-            w = list(struct.unpack_from("<%di" % self.words, r, _HEAD))
-            if seq > _SEQ_MAX or not self._ok(w):
+            if seq > _SEQ_MAX:
                 continue
-            if best is None or seq > best[0]:
+            if seq > top:
+                top = seq
+            if r[8:16] != ident:
+                continue
+            w = list(struct.unpack_from("<%di" % self.words, r, _HEAD))
+            if self._ok(w) and (best is None or seq > best[0]):
                 best = (seq, w)
-        if best is None:
-            return None
-        self.seq = best[0]
-        return best[1]
+        self.seq = top
+        return None if best is None else best[1]
 
     def open(self):
         """Open the file for the cycle's writes (creating it, both slots empty, if its size is not this record's)."""

@@ -355,3 +355,33 @@ def test_writes_in_the_heap_locked_cycle_and_power_cuts_on_micropython(tmp_path,
         word, kk, dfree, verdict, which = line.split()[:5]
         assert word == "cut" and int(kk) == k and int(dfree) == 0 and int(verdict) == 1, line
         assert int(which) == (1 if k == n else 0), line  # the new record only when complete, else the old
+
+
+def test_a_new_latch_outranks_a_stale_record_of_the_same_references(tmp_path):
+    """A record written before refs.bin was lost, with references a new latch happens to repeat exactly (the same
+    temperatures): the latch's rest state must be the newer record, not the stale warm state (the writes' sequence
+    numbers go on above every intact record in the file)."""
+    import os
+    from firmware.app import LAGS_RESTORED
+    table = make_table(kind="dynamic", sensors=["T%d" % i for i in range(1, 12)])
+    app, board, _ = _boot(tmp_path, table)
+    run_cycles(app, board, 3, dt=1000)
+    t = app.table
+    for k in range(3):
+        board.chips[k].set_temperature(WARM[k] + 1.0)
+    run_cycles(app, board, 300, dt=1000)
+    for k in range(3):  # back where it started: the lag states still hold the warm-up
+        board.chips[k].set_temperature(WARM[k])
+    seq = app.lags.seq
+    while app.lags.seq == seq:  # the periodic write, 10 min after the latch
+        run_cycles(app, board, 1, dt=1000)
+    stale = _records(tmp_path / "lags.bin", t.nf, t.n_sensors)[-1]
+    # a warm state whose readings are the first boot's (within 0.1 K): the restore rule alone would take it
+    assert any(_lags(t, stale[3])) and max(abs(a - 1000 * w) for a, w in zip(stale[4], WARM)) < 100
+    os.remove(str(tmp_path / "refs.bin"))
+    app2, board2, _ = _boot(tmp_path)  # the same temperatures as the first boot: the latch repeats its references
+    _to_first_good_cycle(app2, board2)
+    assert app2.ref_state == 2 and app2.ev.ref == app.ev.ref
+    app3, board3, hello = _boot(tmp_path)
+    _to_first_good_cycle(app3, board3)
+    assert app3.lag_verdict == LAGS_RESTORED and not any(_lags(t, app3.ev.Y)), (_lags(t, app3.ev.Y), _lags(t, stale[3]))
