@@ -7,7 +7,9 @@ played span (the bit's logic does not depend on the value; the fitted 514 min st
 
 The rig boots the board 10 min before the reset hour R (its first estimate already on a warm machine), plays to R,
 cuts the power (SIGKILL) and restarts it on the same flash with the sensors at R's temperatures, then plays on for
-45 min. The run's times are moved so that the played span starts at 0 (the model reads time differences only).
+45 min. The stored lag states (lags.bin, written 10 min after the estimate) are removed before the restart: with them
+the board would restore its own state (test_hil_lag_restart.py); this test is about the observer's start. The same
+reset runs on the emulated board (QEMU), 2 min before and 4 min after the cut, settle_s 2 min in its copy. The run's times are moved so that the played span starts at 0 (the model reads time differences only).
 
 Checked per answer after the restart:
 * the board equals the host's prediction for a board switched on at R (`predict(run from R)`, its observer)
