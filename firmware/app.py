@@ -57,6 +57,17 @@ _UPLOAD_IDLE_MS = const(60000)  # an upload without a chunk for this long is aba
 # queued in the controller's or the UART's buffers arrive closer together than they were sent)
 _POS_JITTER_MS = const(200)
 _NEED_CAP = const(8000000)  # d // v beyond this: the time needed exceeds _CAP (the sums below stay small ints)
+# A dynamic table's stored lag states (lags.bin) are trusted at a restart only if the machine is where it was at the
+# write (docs/firmware.md, "Warm restarts of the lag states", where the two limits were measured on FL_THERMAL): every
+# sensor the table reads within _LAG_DRIFT_MK of its reading then, and (with an observer) the observer's estimate from
+# the temperatures now within _LAG_AGREE (0.01 um of output) of its estimate from those then.
+_LAG_DRIFT_MK = const(1000)
+_LAG_AGREE = const(1000)
+# lag_verdict: what became of lags.bin at this table's start (App._restore_lags; docs/firmware.md)
+LAGS_NONE = 0  # no record (none, damaged, another table's or references', or not a dynamic table)
+LAGS_RESTORED = 1
+LAGS_MOVED = 2  # a sensor moved more than _LAG_DRIFT_MK since the write
+LAGS_DISAGREE = 3  # the observer's estimate moved more than _LAG_AGREE since the write
 
 
 def _load_config(d):
@@ -142,6 +153,9 @@ class App:
         self.ref_state = 0
         self.heat = None  # firmware.warmstate.HeatStore of a screw table with latched references
         self.warm = False  # the screw state was restored from heat.bin (not settled at the first good cycle)
+        self.lags = None  # firmware.warmstate.LagStore of a dynamic table
+        self.lag_rec = None  # its stored record, until the first all-good cycle decides whether to trust it
+        self.lag_verdict = LAGS_NONE
         self.limiter = Limiter(cfg.slew_um_per_s, cfg.max_offset_um, 1000)
         self.store = TableStore(cfg.table_dir, self._accept)
         self.wear = _WEAR_CAP  # flash-write tokens (spend_flash)
@@ -241,6 +255,7 @@ class App:
         self.warm = False
         self.step_ms = 0
         self._open_heat(table, ev, st == _REFS_STORED)
+        self._open_lags(table, ev, st == _REFS_STORED or table.ref_mode != 1)
         self._span()
 
     def _settle(self, ev):
@@ -259,13 +274,86 @@ class App:
             return
         from firmware.warmstate import HeatStore, ref_tag
         h = HeatStore(self.store.dir, table, ref_tag(ev.ref))
-        T = h.load() if restore else None
+        T = h.load()  # read even when not restored: the writes' sequence numbers go on above the file's
+        if not restore:
+            T = None
         if T is not None:
             ev.T[:] = T
             ev.settle_restored()
             self.warm = True
         if h.open():
             self.heat = h
+
+    def _open_lags(self, table, ev, restore):
+        # a dynamic table's lag states: the stored record is read now and judged at the first all-good cycle
+        if self.lags is not None:
+            self.lags.close()
+            self.lags = None
+        self.lag_rec = None
+        self.lag_verdict = LAGS_NONE
+        if not self.dyn:
+            return
+        from firmware.warmstate import LagStore, ref_tag
+        h = LagStore(self.store.dir, table, ref_tag(ev.ref))
+        w = h.load()  # read even when not restored: the writes' sequence numbers go on above the file's
+        if restore:
+            self.lag_rec = w
+        if h.open():
+            self.lags = h
+
+    def _restore_lags(self, ev, t):
+        # once, at the first cycle every sensor reads good (allocates: not the steady state). The record is used only
+        # if the machine is where it was at the write (docs/firmware.md, "Warm restarts of the lag states").
+        w = self.lag_rec
+        self.lag_rec = None
+        if w is None:
+            return
+        nf = t.nf
+        n = t.n_sensors
+        temps = ev.temps
+        for i in range(n):
+            d = temps[i] - w[nf + i]
+            if d > _LAG_DRIFT_MK or d < -_LAG_DRIFT_MK:
+                self.lag_verdict = LAGS_MOVED
+                return
+        if t.obs:
+            # the observer's estimate from the readings at the write and from the temperatures now (the spindle speed
+            # and feed of the write in both: the speed now says nothing about the heat the spindle left), each
+            # applied to the model at the present inputs: how far the observer sees the machine moved, in output
+            now = list(temps)
+            before = list(ev.Y)
+            spin = ev.spin
+            fin = ev.fin
+            ev.set_spindle(w[nf + n])
+            ev.set_feed_rate(w[nf + n + 1])
+            est = []
+            for k in range(2):
+                for i in range(n):
+                    temps[i] = w[nf + i] if k == 0 else now[i]
+                ev.update()
+                ev.observe()
+                est.append(list(ev.Y))
+            ev.set_spindle(spin)
+            ev.set_feed_rate(fin)
+            ev.update()
+            fl = ev.flags
+            for p in (t.pos_lo, t.pos_hi):
+                ev.set_lags(est[0])
+                a = ev.offset_at(p)
+                ev.set_lags(est[1])
+                d = ev.offset_at(p) - a
+                if d > _LAG_AGREE or d < -_LAG_AGREE:
+                    self.lag_verdict = LAGS_DISAGREE
+                    ev.flags = fl
+                    ev.set_lags(before)  # as before the decision: the observer sets the states below
+                    return
+            ev.flags = fl
+        ev.set_lags(w)
+        self.lag_verdict = LAGS_RESTORED
+        self.unobserved = False
+        self.step_ms = 0
+        self.settle_s = w[nf + n + 2]  # SETTLING goes on where it was (docs/firmware.md)
+        self.settle_ms = 0
 
     def _span(self):
         t = self.table
@@ -283,6 +371,12 @@ class App:
             self.step_ms = 0  # the filters step at dt_ms from the cold start, as the host's from the run's first sample
         self.unlatched = False
         self.ref_state = _REFS_LATCHED if self.store.save_refs(t, ev.ref) else _REFS_UNSAVED
+        h = self.lags
+        if h is not None:  # a latch is a cold start: the filters at rest, stored under the new references
+            from firmware.warmstate import ref_tag
+            self.lag_rec = None
+            h.retag(ref_tag(ev.ref))
+            h.save(ev, self.settle_s)
         h = self.heat
         if h is not None:  # a latch is a cold start: the settled state, stored under the new references
             from firmware.warmstate import ref_tag
@@ -478,6 +572,8 @@ class App:
             ev.update()
             if self.unsettled and not needed:
                 self._settle(ev)
+            if self.lag_rec is not None and not needed:
+                self._restore_lags(ev, t)  # once per table start: a stored state, if it is trusted
             link = self.obs_link
             if self.unobserved and not needed and (link == 0 or (link == 1 and self.have_pos) or (link == 2 and self.heard_spin)):
                 ev.observe()  # allocation-free (tests/firmware/test_fw_heaplock.py)
@@ -503,6 +599,8 @@ class App:
                         break
                 if self.heat is not None and not self.unsettled:
                     self.heat.tick(dt, ev.T)  # allocation-free (firmware/warmstate.py)
+                if self.lags is not None and not self.unobserved:
+                    self.lags.tick(dt, ev, self.settle_s)  # allocation-free (firmware/warmstate.py)
             pos = self.pos if self.have_pos else ev.pos_ref
             # the model at last cycle's position too: the limiter tells motion from drift
             raw_prev = ev.offset_at(self.pos_used)
@@ -566,6 +664,9 @@ class App:
         ev = self.ev
         if h is not None and ev is not None and not self.unsettled and self.spend_flash():
             h.save(ev.T)  # the restart resumes from the state of this very moment
+        h = self.lags
+        if h is not None and ev is not None and not self.unobserved and self.spend_flash():
+            h.save(ev, self.settle_s)
         self.store.abort()
         r = self.board.reset
         if r is not None:

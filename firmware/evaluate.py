@@ -499,6 +499,17 @@ class Evaluator:
             self.U0[j] = Uc[j]
         self.S = self._dsum(self.Slin)
 
+    def set_lags(self, Y):
+        """Every lag state from ``Y`` (a stored or computed state, already checked against its box: a warm restart,
+        firmware/warmstate.py); the present inputs become the last step's, as in rest() and observe(). A term without
+        a lag keeps its input (update() sets it)."""
+        t = self.table
+        for j in range(t.nf):
+            if t.A[j]:
+                self.Y[j] = Y[j]
+            self.U0[j] = self.Uc[j]
+        self.S = self._dsum(self.Slin)
+
     def extreme(self, sign):
         """Every filter state at the end of its box that drives S up (sign > 0), down (< 0), or 0 (the firmware's
         cheap certificate check at table acceptance)."""

@@ -24,8 +24,19 @@
    estimate. S(H): every lag state re-estimated by least squares, without a constant, from the inputs and the
    spindle/feed filters run from rest over the last H minutes before the reset (H = inf: their exact values),
    fitted on the training samples at every start time.
+5. Warm restarts (``--warm``, docs/firmware.md "Warm restarts of the lag states"): the same resets as a short cut
+   (back within seconds), the lag states restored from lags.bin when the firmware's rule trusts them (every model
+   sensor within 1 K of its reading at the write, and the observer's estimate moved at most 10 um of offset),
+   the observer's start otherwise. The stored state is the last periodic write, AGE_S old: 0 s (a cut right after a
+   write, or an X reset, which writes first) and 600 s (a cut just before the next write, the oldest it can be).
+   Per reset: warm state (age 0) / warm state (age 600 s) / observer only / neither, each as the largest deviation
+   and the settle time; "obs" marks a warm restart that refused the record and started from the observer.
+   Then the rule's sweep: a record CUTS_S old (a cut of that length, or a shorter one after an older write) at a
+   reset every 2 h of FL_THERMAL, all channels pooled: for each pair of limits (sensor K, observer um), the share of
+   records trusted and the mean / largest deviation of the board that applies it, beside restore-always and
+   observer-only. The firmware's limits are the row marked "*".
 
-Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin] [--no-split]
+Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin] [--no-split] [--warm]
        [--windows 0,5,10,20,30 [--window-regressors ud,udy,udh,udhy]] [--spindle-history 30,60,120,inf]
 """
 import argparse
@@ -82,6 +93,121 @@ def restart_figures(model, run, reset_s, scale):
         dev = np.abs(m.thermal_at(warm, times) * scale - full)
         out[name] = deviation_figures(times - times[0], dev)
     return out
+
+
+WARM_DRIFT_K = 1.0  # firmware/app.py _LAG_DRIFT_MK
+WARM_AGREE_UM = 10.0  # firmware/app.py _LAG_AGREE (0.01 um)
+CUTS_S = (60.0, 600.0, 1800.0, 3600.0, 7200.0, 28800.0)  # the rule's sweep: how long the stored state is old at the restart
+RULES = ((0.25, 1.0), (1.0, 5.0), (WARM_DRIFT_K, WARM_AGREE_UM), (1.0, np.inf), (2.0, 10.0), (2.0, np.inf))
+AGES_S = (0.0, 600.0)  # the stored state's age: right after a write; just before the next (firmware/warmstate.py _SAVE_MS)
+
+
+def _settle_of(el, dev):
+    over = np.flatnonzero(dev > TOL_UM)
+    return 0.0 if not over.size else (el[over[-1] + 1] if over[-1] + 1 < el.size else np.inf)
+
+
+def warm_figures(model, run, reset_s, scale, age_s):
+    """A short cut at reset_s with the lag states of reset_s - age_s stored: (trusted, max deviation, settle time) of
+    the board that applies the firmware's rule (restore if trusted, else the observer's start)."""
+    from host.learning.empirical.observer import _filter_from, board_terms, inputs
+
+    t, cols = board_terms(model, [run])  # the uninterrupted board (switched on at the run's start, observer)
+    _, sig = inputs(model, run)
+    coef = np.asarray(model.term_coefficients, dtype=float)
+    k = np.flatnonzero(t >= reset_s)
+    ts = t[k]
+    el = ts - ts[0]
+    full = (model.intercept + cols[k] @ coef) * scale
+    then = reset_s - age_s
+    temps_then = {s: float(np.interp(then, run.temperatures.time_s, run.temperatures.column(s))) for s in model.sensors}
+    temps_now = {s: float(run.temperatures.column(s)[k[0]]) for s in model.sensors}
+    trusted = max(abs(temps_now[s] - temps_then[s]) for s in model.sensors) <= WARM_DRIFT_K
+    if trusted and model.observer is not None:
+        u_then = {n: float(np.interp(then, t, v)) for n, v in sig.items()}
+        u_now = dict(u_then)  # the temperatures now, the spindle and feed of the write (as the firmware compares)
+        for s in model.sensors:
+            u_now["T:" + s] = temps_now[s] - model.reference_C[s]
+        e0, e1 = model.observer.initial_states(u_then), model.observer.initial_states(u_now)
+        moved = abs(sum(coef[j] * (e1[j] - e0[j]) for j in e0)) * scale
+        trusted = moved <= WARM_AGREE_UM
+    if trusted:
+        own = np.column_stack([_filter_from(ts, sig[name][k], tau, float(np.interp(then, t, cols[:, j])))
+                               for j, (name, tau) in enumerate(model.terms)])
+        warm = (model.intercept + own @ coef) * scale
+    else:
+        warm = model.thermal_at(slice_run(run, reset_s), ts) * scale
+    dev = np.abs(warm - full)
+    return trusted, float(dev.max()), _settle_of(el, dev)
+
+
+def print_warm(label, model, run, resets_h, scale):
+    print("\n%s, short cuts: largest deviation from the uninterrupted board (um) / settle time (within 1 um from then on)" % label)
+    print("%6s | %-26s | %-26s | %-26s | %-26s" % ("H", "warm state, age 0 s", "warm state, age 600 s", "observer only", "neither"))
+    for h in resets_h:
+        cells = []
+        for age in AGES_S:
+            ok, d, st = warm_figures(model, run, h * 3600.0, scale, age)
+            cells.append("%7.2f / %-12s %4s" % (d, fmt_settle(st), "" if ok else "obs"))
+        f = restart_figures(model, run, h * 3600.0, scale)
+        for name in ("on", "off"):
+            cells.append("%7.2f / %-17s" % (f[name][2], fmt_settle(f[name][3])))
+        print("%6.1f | %s" % (h, " | ".join(cells)))
+
+
+def _cut_case(model, run, t, cols, sig, coef, reset_s, age_s):
+    """(largest sensor change K, observer's move um, deviation restored um, deviation observer um) of one cut."""
+    from host.learning.empirical.observer import _filter_from
+
+    k = np.flatnonzero(t >= reset_s)
+    ts = t[k]
+    then = reset_s - age_s
+    now = {s: float(run.temperatures.column(s)[k[0]]) for s in model.sensors}
+    old = {s: float(np.interp(then, run.temperatures.time_s, run.temperatures.column(s))) for s in model.sensors}
+    u_then = {n: float(np.interp(then, t, v)) for n, v in sig.items()}
+    u_now = dict(u_then)
+    for s in model.sensors:
+        u_now["T:" + s] = now[s] - model.reference_C[s]
+    e0, e1 = model.observer.initial_states(u_then), model.observer.initial_states(u_now)
+    moved = abs(sum(coef[j] * (e1[j] - e0[j]) for j in e0))
+    own = np.column_stack([_filter_from(ts, sig[n][k], tau, float(np.interp(then, t, cols[:, j])))
+                           for j, (n, tau) in enumerate(model.terms)])
+    dev_r = float(np.abs((own - cols[k]) @ coef).max())
+    dev_o = float(np.abs(model.thermal_at(slice_run(run, reset_s), ts) - (model.intercept + cols[k] @ coef)).max())
+    return max(abs(now[s] - old[s]) for s in model.sensors), moved, dev_r, dev_o
+
+
+def print_rule_sweep(models, run):
+    from host.learning.empirical.observer import board_terms, inputs
+
+    cases = {c: [] for c in CUTS_S}
+    for model in models:
+        t, cols = board_terms(model, [run])
+        _, sig = inputs(model, run)
+        coef = np.asarray(model.term_coefficients, dtype=float)
+        for c in CUTS_S:
+            for h in np.arange(2.0, 46.0, 2.0):
+                if h * 3600.0 - c >= 0:
+                    cases[c].append(_cut_case(model, run, t, cols, sig, coef, h * 3600.0, c))
+    print("\nthe restore rule on FL_THERMAL (%s pooled, a reset every 2 h): trusted %% / mean / largest deviation (um) "
+          "of the board applying it, by the stored state's age" % ",".join(m.channel for m in models))
+    print("%-24s | %s" % ("rule", " | ".join("%-22s" % ("%.0f s" % c) for c in CUTS_S)))
+    rows = [("restore always", None), ("observer only", None)] + [("%s %.2f K, %s um" % (
+        "*" if (dk, au) == (WARM_DRIFT_K, WARM_AGREE_UM) else " ", dk, "any" if not np.isfinite(au) else "%g" % au), (dk, au))
+        for dk, au in RULES]
+    for label, rule in rows:
+        cells = []
+        for c in CUTS_S:
+            a = np.array(cases[c])
+            if label == "restore always":
+                acc = np.ones(len(a), dtype=bool)
+            elif rule is None:
+                acc = np.zeros(len(a), dtype=bool)
+            else:
+                acc = (a[:, 0] <= rule[0]) & (a[:, 1] <= rule[1])
+            chosen = np.where(acc, a[:, 2], a[:, 3])
+            cells.append("%3.0f%% %6.2f %6.2f      " % (100 * acc.mean(), chosen.mean(), chosen.max()))
+        print("%-24s | %s" % (label, " | ".join(cells)))
 
 
 def fmt_settle(s):
@@ -321,6 +447,7 @@ def main():
     ap.add_argument("--windows", default=None, help="experiment 3: window lengths in minutes, e.g. 0,5,10,20,30")
     ap.add_argument("--window-regressors", default="ud,udy,udh,udhy", help="experiment 3: regressor sets (letters %s)" % REGRESSORS)
     ap.add_argument("--spindle-history", default=None, help="experiment 4: history lengths in minutes, e.g. 30,60,120,inf")
+    ap.add_argument("--warm", action="store_true", help="also the short cuts with the lag states restored (lags.bin)")
     args = ap.parse_args()
     def minutes(text, flag, positive):
         try:
@@ -375,6 +502,10 @@ def main():
             print_windows(label, model, train, test, resets, scale, windows, regressor_sets)
         if histories is not None:
             print_spindle_history(label, model, train, test, resets, scale, histories)
+        if args.warm:
+            print_warm(label, model, test, resets, scale)
+    if args.warm:
+        print_rule_sweep(list(models.values()), run)
     print("\n(%.0f s)" % (time.perf_counter() - t0))
 
 
