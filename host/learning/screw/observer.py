@@ -43,6 +43,7 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host.learning.screw import heat
 from host.learning.screw.reduced import simulate_reduced
@@ -61,8 +62,7 @@ class ScrewObserver:
     ``sensor``: the screw-side sensor (nut), ``air``: the sensor r is referenced to; ``reference_C``: their
     references under ``base_ref="fixed"`` (None under "run_start": the board's latched references)."""
 
-    def __init__(self, sensor: str, air: str, gains_K_per_K: Sequence[float], bound_K: Sequence[float],
-                 rms_K: Sequence[float], settle_s: float, start_error_um: float, cold_start_error_um: float,
+    def __init__(self, sensor: str, air: str, gains_K_per_K: ArrayLike, bound_K: ArrayLike, rms_K: ArrayLike, settle_s: float, start_error_um: float, cold_start_error_um: float,
                  cold_settle_s: float, reference_C: dict[str, float] | None = None,
                  tolerance_um: float = SETTLE_TOLERANCE_UM) -> None:
         self.sensor = sensor
@@ -154,8 +154,11 @@ def reduced_run(model: ScrewModel, run: Run, t_start: float | None = None, T0: n
     """The reduced recurrence over ``run`` from ``t_start`` (default: the run's first grid time) as a board started
     then computes it: (step times, air over the reference at them (zeros without an air sensor), states (n+1, M)).
     ``T0``: the start state (None: cold, in equilibrium with the air)."""
+    from host.learning.screw.context import check_screw_run
+
     red = model.reduced_
     assert red is not None  # callers pass fitted models with their reduced form
+    check_screw_run(run, model.geometry_, require_nut=False)  # a run without motion is refused here, by name
     ctx = model._context(run)
     dt = red["dt_s"]
     t0 = ctx.t_grid[0] if t_start is None else float(t_start)
@@ -165,6 +168,7 @@ def reduced_run(model: ScrewModel, run: Run, t_start: float | None = None, T0: n
     ts = t0 + dt * np.arange(n + 1)
     air = model.air_K(ctx, delag=False)  # the firmware's air input: the sensor's reading
     a = np.zeros(n + 1) if air is None else np.interp(ts, ctx.t_grid, air)
+    assert run.motion is not None  # check_screw_run above
     _, T = simulate_reduced(red, run.motion, t0, n, spread=spread, air_K=None if air is None else a, T0=T0)
     return ts, a, T
 

@@ -127,3 +127,25 @@ def test_no_nut_sensor_gives_no_observer_and_says_so(demo_runs):
     assert doc["thermal"]["observer_note"].startswith("no observer: no screw-side sensor (role 'nut'")
     assert doc["thermal"]["observer_note"] in format_report(m)
 
+
+
+def test_export_says_the_table_does_not_carry_the_observer(fitted, tmp_path, capsys):
+    """Table format 5 has no screw observer: the certificate says so, and `tcomp export` warns, naming the settle
+    times; it does not drop the document's observer silently."""
+    from host.cli import main
+    from models_export.export import export_model
+
+    doc = json.loads(json.dumps(fitted.to_document()))
+    status = export_model(doc).report["screw"]["observer"]
+    assert status["in_document"] and not status["carried"]
+    assert "starts the screw cold" in status["reason"] and status["settle_s"] == fitted.observer_.settle_s
+    path = tmp_path / "screw.json"
+    path.write_text(json.dumps(doc))
+    assert main(["export", str(path), "--out", str(tmp_path / "t.bin"), "--report", str(tmp_path / "r.json")]) == 0
+    err = capsys.readouterr().err
+    assert "WARNING: thermal.observer (screw state from T1 at power-on" in err and "is not in the table" in err
+    assert json.loads((tmp_path / "r.json").read_text())["screw"]["observer"]["carried"] is False
+    # a document without an observer: no warning, its note in the certificate
+    doc["thermal"]["observer"] = None
+    doc["thermal"]["observer_note"] = "no observer: test"
+    assert export_model(doc).report["screw"]["observer"] == {"in_document": False, "carried": False, "note": "no observer: test"}
