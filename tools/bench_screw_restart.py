@@ -6,7 +6,8 @@ v15000_r210_490, v8000_r0_700). Resets on runs it did not see, all from the inde
 mixed and v6500_r210_490 runs, and a twin 24 h day (protocol day24h, seed --seed). For each reset: the largest
 deviation of the restarted board's E_m from the uninterrupted board's over 21 positions of the stroke in the first
 30 min and at 30 min, and the settle time (from when on it stays within 1 um), observer on vs off (cold start: the
-state in equilibrium with the air, what the board does without a trusted heat.bin); and the document's bounds.
+state in equilibrium with the air, what the board does without a trusted heat.bin); the document's bounds; and
+what fitting the observer adds to ScrewModel.fit.
 
 Usage: OPENBLAS_NUM_THREADS=1 .venv/bin/python tools/bench_screw_restart.py [--seed 5]
 """
@@ -56,6 +57,12 @@ def main():
         return 1
     print("fit + observer %.1f s; document: start error bound %.2f um (cold %.2f), settle_s %.0f s (cold %.0f s)"
           % (time.time() - t0, obs.start_error_um, obs.cold_start_error_um, obs.settle_s, obs.cold_settle_s))
+    cost = []
+    for _ in range(3):  # the observer's share of ScrewModel.fit (fit_observer alone; best of 3)
+        t1 = time.perf_counter()
+        so.fit_observer(m, runs)
+        cost.append(time.perf_counter() - t1)
+    print("fit_observer on the %d training runs: %.3f s (best of 3)" % (len(runs), min(cost)))
     print("gains K/K per segment: " + " ".join("%.3f" % g for g in obs.gains))
     print("residual bound K:      " + " ".join("%.2f" % b for b in obs.bound))
     cases = [(load_run(os.path.join(ROOT, "data", "demo", n)), n, DEMO_RESETS_S) for n in ("mixed", "v6500_r210_490")]
