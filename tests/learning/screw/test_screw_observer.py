@@ -149,3 +149,19 @@ def test_export_says_the_table_does_not_carry_the_observer(fitted, tmp_path, cap
     doc["thermal"]["observer"] = None
     doc["thermal"]["observer_note"] = "no observer: test"
     assert export_model(doc).report["screw"]["observer"] == {"in_document": False, "carried": False, "note": "no observer: test"}
+
+
+def test_a_training_run_without_the_nut_column_gives_no_observer_not_a_failed_fit(demo_runs):
+    """The nut sensor is optional for the screw model: a run that lacks its column leaves the fit as it was and the
+    document says why there is no observer."""
+    from host.data.runs import Temperatures
+
+    a, b = copy.copy(demo_runs[TRAIN[0]]), copy.copy(demo_runs[TRAIN[1]])
+    tt = b.temperatures
+    keep = [i for i, n in enumerate(tt.names) if n != "T1"]
+    b.temperatures = Temperatures(tt.time_s, [tt.names[i] for i in keep], tt.values[:, keep])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", IdentifiabilityWarning)
+        m = ScrewModel().fit([a, b])
+    assert m.observer_ is None
+    assert m.observer_note_.startswith("no observer: training run ") and "no column for sensor T1" in m.observer_note_
