@@ -103,6 +103,10 @@ def format_report(model: ScrewModel) -> str:
         lines.append("  WARNING: %s %s has no reduced form (%s): tcomp export refuses the model if leaving it out "
                      "costs more than its reduction limit" % (what, name, why))
     lines.append("  reduced state bound %.2f K at feed %g mm/min" % (red["state_max_K"], red["feed_max_mm_min"]))
+    # the screw state at power-on without a trusted heat.bin (issue 21, host/learning/screw/observer.py)
+    note = getattr(model, "observer_note_", None)
+    if note:
+        lines.append("  " + note)
     for w in st["warnings"]:
         lines.append("  WARNING: " + w)
     return "\n".join(lines)

@@ -4,6 +4,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 from collections.abc import Iterable
 
 
@@ -57,6 +58,12 @@ def run(args: argparse.Namespace) -> int:
               "integer + reduction max %.3f um" % (rd["rms_um"], rd["max_um"], rd["limit_um"],
                                                    "; left out: " + ", ".join(rd["omitted_effects"]) if rd["omitted_effects"] else "",
                                                    r["total_max_error_um"]))
+    obs = (r.get("screw") or {}).get("observer") or {}
+    if obs.get("in_document") and not obs.get("carried"):
+        # the document's power-on state estimate (issue 21) is host-side only: say so, not drop it silently
+        print("WARNING: thermal.observer (screw state from %s at power-on, settles in %.0f min against %.0f min cold) "
+              "is not in the table: %s" % (obs["sensor"], obs["settle_s"] / 60, obs["cold_settle_s"] / 60, obs["reason"]),
+              file=sys.stderr)
     return 0
 
 

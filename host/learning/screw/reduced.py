@@ -155,9 +155,10 @@ def air_weights(reduced: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
             np.asarray(reduced.get("air_K1") or np.zeros(M), dtype=float))
 
 
-def simulate_reduced(reduced: dict[str, Any], motion: Motion, t0: float, n_steps: int, spread: bool = False, air_K: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def simulate_reduced(reduced: dict[str, Any], motion: Motion, t0: float, n_steps: int, spread: bool = False, air_K: np.ndarray | None = None,
+                     T0: ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
     """States (n_steps+1, M) of the float recurrence from a cold start at t0
-    (in equilibrium with the air: T = a[0]).
+    (in equilibrium with the air: T = a[0]), or from ``T0`` (M,) (a warm start: host/learning/screw/observer.py).
 
     spread: feed the travel as a feed/range state (spread over the range) instead of
     the exact reciprocation (position reports); air_K: (n_steps+1,) air temperature
@@ -179,6 +180,8 @@ def simulate_reduced(reduced: dict[str, Any], motion: Motion, t0: float, n_steps
         a = np.asarray(air_K, dtype=float)
         drive = drive + a[:-1, None] * c0[None, :] + a[1:, None] * c1[None, :]
         T[0] = a[0]
+    if T0 is not None:
+        T[0] = np.asarray(T0, dtype=float)
     # moving_convection: the extra loss D_i·U·(T_i − a) of the step, explicit (the state and the air at its start)
     D = reduced.get("convection_per_mm")
     D = None if D is None else np.asarray(D, dtype=float)

@@ -566,6 +566,7 @@ class ScrewModel:
             self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
         if not reduce:
             self.reduced_ = None
+            self.observer_, self.observer_note_ = None, "no observer: the model has no reduced form (fit with reduce=False)"
             return self
         from host.learning.screw.reduced import build_reduced
         self.reduced_ = build_reduced(self, self.reduced_segments, self.reduced_dt_s,
@@ -579,6 +580,9 @@ class ScrewModel:
             self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
         from host.learning.screw.reduced import reduction_certificate
         self.reduced_["reduction_error_um"] = reduction_certificate(self, [c.run for c in ctxs])
+        # the reduced state recovered from the nut sensor at power-on (issue 21), or why the sensors do not allow it
+        from host.learning.screw.observer import fit_observer
+        self.observer_, self.observer_note_ = fit_observer(self, [c.run for c in ctxs])
         return self
 
     # ------------------------------------------------------------ prediction
@@ -639,6 +643,8 @@ class ScrewModel:
             "error_reference": self.error_reference_,
             "error_reference_C": self.error_reference_C_,
             "reduced": self.reduced_,
+            "observer": None if getattr(self, "observer_", None) is None else self.observer_.to_document(),
+            "observer_note": getattr(self, "observer_note_", None),
         }
         return {
             "format": FORMAT,
@@ -740,6 +746,14 @@ class ScrewModel:
                 raise KeyError("thermal.error_reference_C")
             m.ambient_ = m.base_sensor_ is not None
             m.reduced_ = th.get("reduced")
+            # documents written before the screw observer (issue 21) have none: the board starts the screw cold
+            m.observer_note_ = th.get("observer_note")
+            m.observer_ = None
+            if th.get("observer") is not None:
+                from host.learning.screw.observer import ScrewObserver
+                if not isinstance(m.reduced_, dict):
+                    raise KeyError("thermal.reduced (thermal.observer estimates its state)")
+                m.observer_ = ScrewObserver.from_document(th["observer"], int(m.reduced_["segments"]))
             gm = doc.get("geometric") or {"degree": 0, "coefficients_um": []}
             m.geometric_ = [float(c) for c in gm["coefficients_um"]]
             m.geometric_degree_ = int(gm["degree"])
