@@ -123,6 +123,17 @@ class _Linear:
         return self
 
 
+
+def _set_fit_statistics(est: Any, st: dict[str, Any]) -> None:
+    """The whole-fit statistics MLR and PCR learn alike from ``ols_statistics``' result (trailing-underscore attributes)."""
+    est.rsquared_ = st["r2"]
+    est.rsquared_adj_ = st["r2_adj"]
+    est.fvalue_ = st["F"]
+    est.f_pvalue_ = st["F_p"]
+    est.resid_std_err_ = st["sigma"]
+    est.df_resid_ = st["df_resid"]
+    est.rmse_ = st["rmse"]
+
 class MLR(_Linear):
     """Ordinary least squares with full statistics.
 
@@ -162,14 +173,8 @@ class MLR(_Linear):
         self.intercept_t_ = float(st["t"][0]) if o else None
         self.intercept_p_ = float(st["p"][0]) if o else None
         self.cov_ = st["cov"]
-        self.rsquared_ = st["r2"]
-        self.rsquared_adj_ = st["r2_adj"]
-        self.fvalue_ = st["F"]
-        self.f_pvalue_ = st["F_p"]
-        self.resid_std_err_ = st["sigma"]
-        self.df_resid_ = st["df_resid"]
+        _set_fit_statistics(self, st)
         self.df_model_ = st["df_model"]
-        self.rmse_ = st["rmse"]
         self._st = st
         # what the p-values and coefficients hide (host/learning/empirical/diagnostics.py)
         fitted = A @ beta
@@ -312,13 +317,7 @@ class PCR(_Linear):
         self.mean_ = mean
         self.scale_ = scale
         self.corr_ = corr
-        self.rsquared_ = st["r2"]
-        self.rsquared_adj_ = st["r2_adj"]
-        self.fvalue_ = st["F"]
-        self.f_pvalue_ = st["F_p"]
-        self.resid_std_err_ = st["sigma"]
-        self.df_resid_ = st["df_resid"]
-        self.rmse_ = st["rmse"]
+        _set_fit_statistics(self, st)
         self._st = st
         return self
 
