@@ -87,6 +87,14 @@ class _Linear:
     coef_: np.ndarray
     intercept_: float
     n_samples_: int
+    # the whole-fit statistics (ols_statistics), learned by _set_fit_statistics (MLR, PCR) or copied by _refit_on
+    rsquared_: float
+    rsquared_adj_: float
+    fvalue_: float
+    f_pvalue_: float
+    resid_std_err_: float
+    df_resid_: int
+    rmse_: float
     # set by the subclasses: their parameter, and (the subset selectors, the only users of _refit_on) the chosen names
     fit_intercept: bool
     selected_names_: list[str]
@@ -118,13 +126,11 @@ class _Linear:
         self.coef_[sel] = self.mlr_.coef_
         self.intercept_ = self.mlr_.intercept_
         self.n_samples_ = X.shape[0]
-        for a in ("rsquared_", "rsquared_adj_", "fvalue_", "f_pvalue_", "resid_std_err_", "df_resid_", "rmse_"):
-            setattr(self, a, getattr(self.mlr_, a))
+        _set_fit_statistics(self, self.mlr_._st)  # the refit MLR's whole-fit statistics are the selector's
         return self
 
 
-
-def _set_fit_statistics(est: Any, st: dict[str, Any]) -> None:
+def _set_fit_statistics(est: _Linear, st: dict[str, Any]) -> None:
     """The whole-fit statistics MLR and PCR learn alike from ``ols_statistics``' result (trailing-underscore attributes)."""
     est.rsquared_ = st["r2"]
     est.rsquared_adj_ = st["r2_adj"]
@@ -133,6 +139,7 @@ def _set_fit_statistics(est: Any, st: dict[str, Any]) -> None:
     est.resid_std_err_ = st["sigma"]
     est.df_resid_ = st["df_resid"]
     est.rmse_ = st["rmse"]
+
 
 class MLR(_Linear):
     """Ordinary least squares with full statistics.
