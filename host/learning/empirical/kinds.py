@@ -291,7 +291,7 @@ class PolySlopeModel(_Base):
     def to_document(self) -> dict[str, Any]:
         assert self.coefficients is not None  # a linear model always has them (None only for the ann's NetworkModel)
         doc = self._common_doc()
-        doc["geometric"] = {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]}
+        doc["geometric"] = self._geometric_doc()
         doc["thermal"] = {
             "intercept_um_per_mm": self.intercept,
             "coefficients_um_per_mm_per_K": {s: float(c) for s, c in zip(self.sensors, self.coefficients)},
