@@ -12,7 +12,7 @@ sensor of the E_e term (and switches E_e on unless ambient is given); ``--channe
 from __future__ import annotations
 
 import argparse
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING
 import json
 import warnings
 
@@ -79,6 +79,8 @@ OPTIONS = {
 
 def format_report(model: ScrewModel) -> str:
     st = model.statistics_
+    if st is None:  # a model read from a document without statistics; fit always sets them
+        raise ValueError("screw model: no fit statistics to report")
     lines = ["screw model: %d segments, dt %g s, geometric degree %d" % (model.geometry_.segments, model.dt_s, model.geometric_degree_),
              "  air: %s (%s)" % (model.air_sensor_ or "constant", model.air_source_),
              "  errors referred to: %s; E_e %s" % ("the machine at each run's start (raw)" if model.error_reference_ == "start"
@@ -93,7 +95,7 @@ def format_report(model: ScrewModel) -> str:
         nut = "no nut sensor" if r["nut_rise_rmse_K"] is None else "nut rise RMSE %.2f K" % r["nut_rise_rmse_K"]
         lines.append("  run %s: %d rows, RMSE %.3f um, max |residual| %.3f um, %s"
                      % (r["run"], r["rows"], r["rmse_um"], r["max_abs_residual_um"], nut))
-    red = cast("dict[str, Any]", model.reduced_)  # fit(reduce=True), the CLI's call, always sets it
+    red = model.reduced_form()
     for run, e in red["reduction_error_um"].items():
         lines.append("  reduced (%d segments, dt %g s) vs full on %s: RMS %.3f um, max %.3f um (E_m); at the error rows "
                      "RMS %.3f um, max %.3f um" % (red["segments"], red["dt_s"], run, e["rms_um"], e["max_um"],
@@ -143,5 +145,5 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     print(format_report(model))
     if args.json:
         with out.open(args.json) as fh:
-            json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": cast("dict[str, Any]", model.reduced_)["reduction_error_um"]}, fh, indent=2)
+            json.dump({"model": args.out, "statistics": doc["statistics"], "reduced_error_um": model.reduced_form()["reduction_error_um"]}, fh, indent=2)
     return 0

@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING
 
 import time
 from dataclasses import dataclass, field
-from typing import Any, Optional
+from typing import Any
 
 import numpy as np
 
@@ -60,19 +60,23 @@ from host.learning.empirical.methods import PIPELINES
 
 if TYPE_CHECKING:
     from host.data.runs import Run
+    from host.learning.empirical.targets import RunArrays
+
+# (lo, hi) on target time, either end None: unbounded (targets.in_window)
+Window = tuple[float | None, float | None]
 ROBUSTNESS = {"noise_C": 0.2, "offset_C": 0.5, "seed": 0, "repeats": 5}
 
 
 @dataclass
 class Case:
     label: str
-    train: list  # runs
-    window: Optional[tuple] = None  # training window on target time
-    tests: list = field(default_factory=list)  # [(label, run, window)]
-    ga_data: Any = None  # data for the hclust-ga selector (runs or arrays)
-    ga_params: dict = field(default_factory=dict)
+    train: list[Run]
+    window: Window | None = None  # training window on target time
+    tests: list[tuple[str, Run, Window | None]] = field(default_factory=list)  # [(label, run, window)]
+    ga_data: list[Run] | list[RunArrays] | None = None  # data for the hclust-ga selector (runs or arrays)
+    ga_params: dict[str, Any] = field(default_factory=dict)
     ga_note: str = ""
-    summary_tests: Optional[list] = None  # labels averaged into the mean metrics (None: all tests)
+    summary_tests: list[str] | None = None  # labels averaged into the mean metrics (None: all tests)
 
 
 def cases_runs(runs: Sequence[Run], train: Sequence[int | tuple[int, ...]] = (0,)) -> list[Case]:
@@ -91,7 +95,7 @@ def cases_runs(runs: Sequence[Run], train: Sequence[int | tuple[int, ...]] = (0,
             raise EmpiricalDataError("compare: training run index repeated in the pooled group %s" % "+".join(map(str, group)))
         if len(group) >= len(runs):
             raise EmpiricalDataError("compare: pooling runs %s leaves no run to predict" % "+".join(map(str, group)))
-        tests = [(r.name, r, None) for j, r in enumerate(runs) if j not in group]
+        tests: list[tuple[str, Run, Window | None]] = [(r.name, r, None) for j, r in enumerate(runs) if j not in group]
         note = "hclust-ga fitness predicts the other runs given (published protocol): its selection has seen the test runs"
         if len(group) > 1:
             note += "; with pooled training runs its fitness fits on the first of them (%s)" % runs[group[0]].name
@@ -100,12 +104,12 @@ def cases_runs(runs: Sequence[Run], train: Sequence[int | tuple[int, ...]] = (0,
     return out
 
 
-def case_split(run: Run, split_s: float, target: str = "direct", channel: str | None = None, sensors: Sequence[str] | None = None, test_windows: Sequence[tuple[float | None, float | None]] | None = None) -> Case:
-    """Fit on run times < split_s, test on >= split_s (and on each extra window in ``test_windows``)."""
+def case_split(run: Run, split_s: float, target: str = "direct", channel: str | None = None, sensors: Sequence[str] | None = None, test_windows: Sequence[tuple[str, Window]] | None = None) -> Case:
+    """Fit on run times < split_s, test on >= split_s (and on each extra ``(label, window)`` of ``test_windows``)."""
     from host.learning.empirical.schedule import cycles
     from host.learning.empirical.targets import training_arrays
 
-    tests = [("held-out (t >= %.2f h)" % (split_s / 3600), run, (split_s, None))]
+    tests: list[tuple[str, Run, Window | None]] = [("held-out (t >= %.2f h)" % (split_s / 3600), run, (split_s, None))]
     for label, w in (test_windows or []):
         tests.append((label, run, w))
     ga_data, note = None, ""
@@ -208,7 +212,7 @@ def run_case(case: Case, methods: Sequence[str] = METHODS, target: str = "slope"
     results = []
     for method in methods:
         t0 = time.perf_counter()
-        res = {"case": case.label, "method": method}
+        res: dict[str, Any] = {"case": case.label, "method": method}
         try:
             model, info = _fit(method, case, target, channel, sensors, fit_intercept, options, selector_params, reference)
         except EmpiricalDataError as exc:

@@ -44,10 +44,10 @@ from typing import TYPE_CHECKING, Any, cast
 import numpy as np
 from numpy.typing import ArrayLike
 
-from host.data.runs import START, check_model_reference
+from host.data.runs import check_model_reference
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.checks import check_predict_x, finite_or_none
-from models_export.document import FORMAT
+from host.learning.empirical.kinds import DocumentFields, _geometric_from_document, document_target
 
 if TYPE_CHECKING:  # for the hints only (observer.py imports this module)
     from host.data.runs import Run
@@ -443,7 +443,7 @@ class DynamicRegression:
         }
 
 
-class DynamicModel:
+class DynamicModel(DocumentFields):
     """Model document kind ``dynamic`` (docs/model-format.md): δ = b0 + Σ b_j·L_τj[u_j], direct or slope.
 
     Without an observer (documents written before issue 21, or fitted with
@@ -517,11 +517,6 @@ class DynamicModel:
             return np.arange(len(run.errors))
         return _channel_rows(run, self.channel)
 
-    @property
-    def error_reference(self) -> str:
-        """The convention of the training errors ("start" for documents written before it was recorded)."""
-        return self.training.get("error_reference", START)
-
     def predict(self, run: Run, history: Run | Sequence[Run] | None = None) -> np.ndarray:
         """Predicted errors of ``run`` as a board switched on at its first sample computes them (with its
         observer, if the model has one); ``history``: a run or list of runs (oldest first, ending before
@@ -541,15 +536,13 @@ class DynamicModel:
 
     def to_document(self) -> dict[str, Any]:
         return {
-            "format": FORMAT, "kind": self.kind, "method": self.method, "axis": self.axis, "channel": self.channel,
-            "sensors": list(self.sensors), "error_reference": self.error_reference, "reference_C": dict(self.reference_C),
-            "geometric": None if self.target == "direct" else {"degree": int(self.geometric_coef.size - 1),
-                                                               "coefficients_um": [float(c) for c in self.geometric_coef]},
+            **self._identity_doc(),
+            "geometric": self._geometric_doc(),
             "thermal": {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": self.reference,
                         "intercept": self.intercept, **({"dt_s": self.dt_s} if self.dt_s is not None else {}),
                         **({"observer": self.observer.to_document()} if self.observer is not None else {}),
                         "terms": [{"signal": n, "tau_s": tau, "coefficient": float(c)} for (n, tau), c in zip(self.terms, self.term_coefficients)]},
-            "envelope": self.envelope, "statistics": self.statistics, "training": self.training,
+            **self._record_doc(),
         }
 
     @classmethod
@@ -564,8 +557,7 @@ class DynamicModel:
         th = doc.get("thermal")
         if not isinstance(th, dict):
             raise ModelFormatError("dynamic model document lacks the object 'thermal'")
-        if th.get("target") not in ("direct", "slope"):
-            raise ModelFormatError("dynamic model document: thermal.target must be 'direct' or 'slope', found %r" % (th.get("target"),))
+        document_target(th, "dynamic")
         if th.get("reference", "run_start") != ("run_start" if th.get("observer") is None else "fixed"):
             raise ModelFormatError("dynamic model document: thermal.reference must be 'run_start' (the filters start at rest) without "
                                    "thermal.observer, 'fixed' (T - reference_C) with it; found %r" % (th.get("reference"),))
@@ -591,8 +583,6 @@ class DynamicModel:
             coefs.append(t["coefficient"])
         geo = (0.0,)
         if th["target"] == "slope":
-            from host.learning.empirical.kinds import _geometric_from_document
-
             geo = _geometric_from_document(doc, "dynamic")
         if doc.get("channel") is not None and not isinstance(doc.get("channel"), str):
             raise ModelFormatError("dynamic model document: field 'channel' must be a channel name (string) or null")

@@ -130,7 +130,7 @@ def fit_model(runs: Sequence[Run], method: str = "mlr", target: str = "slope", c
               sensors: Sequence[str] | None = None, fit_intercept: bool = True,
               window: tuple[float | None, float | None] | None = None, reference: str = "fixed",
               envelope_margin_K: float = ENVELOPE_MARGIN_K, geometric_max_degree: int = 5, geometric_criterion: str = "cv",
-              cv_blocks: int | None = None, exclude: tuple[float, float] | None = None, geometric_degree: int | None = None,
+              cv_blocks: int | None = None, exclude: tuple[float | None, float | None] | None = None, geometric_degree: int | None = None,
               forward_chaining: bool = True, **options: Any) -> Any:
     """Fit ``method`` (an ESTIMATORS name, or dynamic) on ``runs`` -> model object with ``estimator_`` and ``arrays_``.
 

@@ -38,7 +38,59 @@ from models_export.document import FORMAT
 REFERENCES = ("run_start", "fixed")
 
 
-class _Base:
+def document_target(thermal: dict[str, Any], kind: str) -> str:
+    """``thermal.target`` of a ``kind`` document whose thermal part is 'slope' or 'direct'; else ModelFormatError."""
+    target = thermal.get("target")
+    if target not in ("slope", "direct"):
+        raise ModelFormatError("%s model document: thermal.target must be 'slope' or 'direct', found %r" % (kind, target))
+    return target
+
+
+class DocumentFields:
+    """The document fields every empirical kind writes alike (_Base's models here, dynamic.py's DynamicModel): the
+    model's identity (format .. reference_C), the fit's record (envelope, statistics, training), a slope model's
+    geometric part; the attributes below are what they read."""
+
+    kind: str | None
+    method: str
+    axis: str | None
+    channel: str | None
+    sensors: list[str]
+    reference_C: dict[str, float]
+    envelope: dict[str, Any]
+    statistics: dict[str, Any]
+    training: dict[str, Any]
+    target: str | None
+    geometric_coef: np.ndarray
+
+    @property
+    def error_reference(self) -> str:
+        """The convention of the training errors ("start" for documents written before it was recorded)."""
+        return self.training.get("error_reference", START)
+
+    def _identity_doc(self) -> dict[str, Any]:
+        return {
+            "format": FORMAT,
+            "kind": self.kind,
+            "method": self.method,
+            "axis": self.axis,
+            "channel": self.channel,
+            "sensors": list(self.sensors),
+            "error_reference": self.error_reference,
+            "reference_C": dict(self.reference_C),
+        }
+
+    def _record_doc(self) -> dict[str, Any]:
+        return {"envelope": self.envelope, "statistics": self.statistics, "training": self.training}
+
+    def _geometric_doc(self) -> dict[str, Any] | None:
+        """The document's ``geometric`` part: the polynomial of a slope model, none for a direct one."""
+        if self.target == "direct":
+            return None
+        return {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]}
+
+
+class _Base(DocumentFields):
     """Shared inputs and document fields. Subclasses give ``target`` ("slope": the thermal part
     is a slope in µm/mm multiplied by P; "direct": an error in µm) and ``thermal(R)`` of rises R."""
 
@@ -105,11 +157,6 @@ class _Base:
     def geometric(self, P):
         return np.zeros(np.shape(P))
 
-    @property
-    def error_reference(self):
-        """The convention of the training errors ("start" for documents written before it was recorded)."""
-        return self.training.get("error_reference", START)
-
     def predict(self, run):
         try:
             check_model_reference(run, self.error_reference)
@@ -134,33 +181,7 @@ class _Base:
         return _channel_rows(run, self.channel)
 
     def _common_doc(self):
-        return {
-            "format": FORMAT,
-            "kind": self.kind,
-            "method": self.method,
-            "axis": self.axis,
-            "channel": self.channel,
-            "sensors": list(self.sensors),
-            "error_reference": self.error_reference,
-            "reference_C": dict(self.reference_C),
-            "envelope": self.envelope,
-            "statistics": self.statistics,
-            "training": self.training,
-        }
-
-    def _geometric_doc(self) -> dict[str, Any] | None:
-        """The document's ``geometric`` part: the polynomial of a slope model, none for a direct one."""
-        if self.target == "direct":
-            return None
-        return {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]}
-
-    @staticmethod
-    def _target(thermal, kind):
-        """``thermal.target`` of a ``kind`` document whose thermal part is 'slope' or 'direct'; else ModelFormatError."""
-        target = thermal.get("target")
-        if target not in ("slope", "direct"):
-            raise ModelFormatError("%s model document: thermal.target must be 'slope' or 'direct', found %r" % (kind, target))
-        return target
+        return {**self._identity_doc(), **self._record_doc()}
 
     @staticmethod
     def _common_args(doc):
@@ -270,7 +291,7 @@ class PolySlopeModel(_Base):
     def to_document(self) -> dict[str, Any]:
         assert self.coefficients is not None  # a linear model always has them (None only for the ann's NetworkModel)
         doc = self._common_doc()
-        doc["geometric"] = {"degree": int(self.geometric_coef.size - 1), "coefficients_um": [float(c) for c in self.geometric_coef]}
+        doc["geometric"] = self._geometric_doc()
         doc["thermal"] = {
             "intercept_um_per_mm": self.intercept,
             "coefficients_um_per_mm_per_K": {s: float(c) for s, c in zip(self.sensors, self.coefficients)},
@@ -316,24 +337,34 @@ class NetworkModel(_Base):
     def geometric(self, P: ArrayLike) -> np.ndarray:
         return np.polynomial.polynomial.polyval(np.asarray(P, dtype=float), self.geometric_coef)
 
-    def to_document(self) -> dict[str, Any]:
-        if not hasattr(self.estimator_, "network"):
-            raise ModelFormatError("a %s model has no document form (only ann networks are saved)" % self.method)
+    def _estimator_doc(self, key: str, block: dict[str, Any]) -> dict[str, Any]:
+        """The document of a network-like model: ``thermal.<key>`` holds what its estimator predicts with."""
         doc = self._common_doc()
         doc["geometric"] = self._geometric_doc()
         doc["thermal"] = {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": self.reference,
-                          "network": self.estimator_.network()}
+                          key: block}
         return doc
+
+    @classmethod
+    def _estimator_args(cls, doc: dict[str, Any], key: str) -> tuple[list[str], dict[str, float], str, dict[str, Any], dict[str, Any]]:
+        """(sensors, reference_C, target, the object thermal.<key>, the common keywords) of a ``cls.kind`` document."""
+        thermal, sensors, ref, kw = cls._common_args(doc)
+        target = document_target(thermal, str(cls.kind))
+        block = thermal.get(key)
+        if not isinstance(block, dict):
+            raise ModelFormatError("%s model document lacks the object thermal.%s" % (cls.kind, key))
+        return sensors, ref, target, block, kw
+
+    def to_document(self) -> dict[str, Any]:
+        if not hasattr(self.estimator_, "network"):
+            raise ModelFormatError("a %s model has no document form (only ann networks are saved)" % self.method)
+        return self._estimator_doc("network", self.estimator_.network())
 
     @classmethod
     def from_document(cls, doc: dict[str, Any]) -> NetworkModel:
         from host.learning.empirical.ann import ANN
 
-        thermal, sensors, ref, kw = cls._common_args(doc)
-        target = cls._target(thermal, "ann")
-        net = thermal.get("network")
-        if not isinstance(net, dict):
-            raise ModelFormatError("ann model document lacks the object thermal.network")
+        sensors, ref, target, net, kw = cls._estimator_args(doc, "network")
         if net.get("activation") != "tanh":
             raise ModelFormatError("ann model document: thermal.network.activation must be 'tanh', found %r" % (net.get("activation"),))
         p = len(sensors)
@@ -369,21 +400,13 @@ class PPRModel(NetworkModel):
     kind = "ppr"
 
     def to_document(self) -> dict[str, Any]:
-        doc = self._common_doc()
-        doc["geometric"] = self._geometric_doc()
-        doc["thermal"] = {"target": self.target, "unit": "um_per_mm" if self.target == "slope" else "um", "reference": self.reference,
-                          "ridges": self.estimator_.ridges()}
-        return doc
+        return self._estimator_doc("ridges", self.estimator_.ridges())
 
     @classmethod
     def from_document(cls, doc: dict[str, Any]) -> PPRModel:
         from host.learning.empirical.ppr import PPR
 
-        thermal, sensors, ref, kw = cls._common_args(doc)
-        target = cls._target(thermal, "ppr")
-        ridges = thermal.get("ridges")
-        if not isinstance(ridges, dict):
-            raise ModelFormatError("ppr model document lacks the object thermal.ridges")
+        sensors, ref, target, ridges, kw = cls._estimator_args(doc, "ridges")
         p = len(sensors)
 
         def numbers(v, size, where):

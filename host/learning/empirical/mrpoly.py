@@ -21,7 +21,7 @@ from numpy.typing import ArrayLike
 import numpy as np
 
 from host.learning.empirical import EmpiricalDataError
-from host.learning.empirical.kinds import _Base, _geometric_from_document, _is_number
+from host.learning.empirical.kinds import _Base, _geometric_from_document, _is_number, document_target
 from host.learning.empirical.checks import check_predict_x, check_xy, finite_or_none as _f
 from host.learning.documents import ModelFormatError
 
@@ -140,7 +140,7 @@ class MRPolyModel(_Base):
     @classmethod
     def from_document(cls, doc: dict[str, Any]) -> MRPolyModel:
         thermal, sensors, ref, kw = cls._common_args(doc)
-        target = cls._target(thermal, "mr_poly")
+        target = document_target(thermal, "mr_poly")
         if len(sensors) != 2 or thermal.get("nut_sensor") != sensors[0] or thermal.get("base_sensor") != sensors[1]:
             raise ModelFormatError("mr_poly model document: sensors must be [thermal.nut_sensor, thermal.base_sensor], found %r with %r, %r"
                                    % (sensors, thermal.get("nut_sensor"), thermal.get("base_sensor")))

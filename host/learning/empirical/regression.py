@@ -87,6 +87,14 @@ class _Linear:
     coef_: np.ndarray
     intercept_: float
     n_samples_: int
+    # the whole-fit statistics (ols_statistics), learned by _set_fit_statistics (MLR, PCR) or copied by _refit_on
+    rsquared_: float
+    rsquared_adj_: float
+    fvalue_: float
+    f_pvalue_: float
+    resid_std_err_: float
+    df_resid_: int
+    rmse_: float
     # set by the subclasses: their parameter, and (the subset selectors, the only users of _refit_on) the chosen names
     fit_intercept: bool
     selected_names_: list[str]
@@ -118,9 +126,19 @@ class _Linear:
         self.coef_[sel] = self.mlr_.coef_
         self.intercept_ = self.mlr_.intercept_
         self.n_samples_ = X.shape[0]
-        for a in ("rsquared_", "rsquared_adj_", "fvalue_", "f_pvalue_", "resid_std_err_", "df_resid_", "rmse_"):
-            setattr(self, a, getattr(self.mlr_, a))
+        _set_fit_statistics(self, self.mlr_._st)  # the refit MLR's whole-fit statistics are the selector's
         return self
+
+
+def _set_fit_statistics(est: _Linear, st: dict[str, Any]) -> None:
+    """The whole-fit statistics MLR and PCR learn alike from ``ols_statistics``' result (trailing-underscore attributes)."""
+    est.rsquared_ = st["r2"]
+    est.rsquared_adj_ = st["r2_adj"]
+    est.fvalue_ = st["F"]
+    est.f_pvalue_ = st["F_p"]
+    est.resid_std_err_ = st["sigma"]
+    est.df_resid_ = st["df_resid"]
+    est.rmse_ = st["rmse"]
 
 
 class MLR(_Linear):
@@ -162,14 +180,8 @@ class MLR(_Linear):
         self.intercept_t_ = float(st["t"][0]) if o else None
         self.intercept_p_ = float(st["p"][0]) if o else None
         self.cov_ = st["cov"]
-        self.rsquared_ = st["r2"]
-        self.rsquared_adj_ = st["r2_adj"]
-        self.fvalue_ = st["F"]
-        self.f_pvalue_ = st["F_p"]
-        self.resid_std_err_ = st["sigma"]
-        self.df_resid_ = st["df_resid"]
+        _set_fit_statistics(self, st)
         self.df_model_ = st["df_model"]
-        self.rmse_ = st["rmse"]
         self._st = st
         # what the p-values and coefficients hide (host/learning/empirical/diagnostics.py)
         fitted = A @ beta
@@ -312,13 +324,7 @@ class PCR(_Linear):
         self.mean_ = mean
         self.scale_ = scale
         self.corr_ = corr
-        self.rsquared_ = st["r2"]
-        self.rsquared_adj_ = st["r2_adj"]
-        self.fvalue_ = st["F"]
-        self.f_pvalue_ = st["F_p"]
-        self.resid_std_err_ = st["sigma"]
-        self.df_resid_ = st["df_resid"]
-        self.rmse_ = st["rmse"]
+        _set_fit_statistics(self, st)
         self._st = st
         return self
 

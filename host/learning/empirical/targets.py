@@ -248,7 +248,7 @@ def in_window(t: np.ndarray, window: tuple[float | None, float | None]) -> np.nd
     return keep
 
 
-def training_arrays(runs: Sequence[Run], target: str = "slope", channel: str | None = None, sensors: Sequence[str] | None = None, rise: bool = True, window: tuple[float | None, float | None] | None = None, exclude: tuple[float, float] | None = None) -> list[RunArrays]:
+def training_arrays(runs: Sequence[Run], target: str = "slope", channel: str | None = None, sensors: Sequence[str] | None = None, rise: bool = True, window: tuple[float | None, float | None] | None = None, exclude: tuple[float | None, float | None] | None = None) -> list[RunArrays]:
     """Per run, the (X, y, names) a regression or selector is fitted on.
 
     ``sensors=None`` uses the sensors common to all runs. ``window=(lo, hi)``
@@ -288,7 +288,7 @@ def training_arrays(runs: Sequence[Run], target: str = "slope", channel: str | N
     return out
 
 
-def temperature_log(run: Run, sensors: Sequence[str], window: tuple[float | None, float | None] | None = None, exclude: tuple[float, float] | None = None, rise: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
+def temperature_log(run: Run, sensors: Sequence[str], window: tuple[float | None, float | None] | None = None, exclude: tuple[float | None, float | None] | None = None, rise: bool = True) -> tuple[np.ndarray, np.ndarray] | None:
     """(time_s, (m, p)) every sample of temperatures.csv of ``sensors`` inside ``window`` and outside ``exclude``
     (rises over the run's first sample, or values); None when fewer than 3 samples remain."""
     temps = run.temperatures

@@ -14,10 +14,18 @@ import numpy as np
 from host.learning.screw import heat
 
 if TYPE_CHECKING:
-    from host.data.runs import Run
+    from host.data.runs import Motion, Run
 
 # Largest time-steps x segments grid of one run (a float array of it is 160 MB; several are held at once).
 MAX_GRID_CELLS = 20_000_000
+
+
+def run_motion(run: Run) -> Motion:
+    """``run.motion``; ValueError naming the run when it has none or an empty one."""
+    if run.motion is None or len(run.motion) == 0:
+        raise ValueError("%s: the run has no motion (motion.csv missing or empty); the screw model is driven by the nut's "
+                         "travel" % (run.path or run.name))
+    return run.motion
 
 
 def check_screw_run(run: Run, geometry: heat.ScrewGeometry | None = None, require_nut: bool = True) -> heat.ScrewGeometry:
@@ -26,9 +34,8 @@ def check_screw_run(run: Run, geometry: heat.ScrewGeometry | None = None, requir
     require_nut: identification needs a sensor with role 'nut' (diagnostic and
     optional residual); prediction does not read it."""
     name = run.path or run.name
-    if run.motion is None or len(run.motion) == 0:
-        raise ValueError("%s: the run has no motion (motion.csv missing or empty); the screw model is driven by the nut's travel" % name)
-    if not np.any(np.abs(run.motion.to_mm - run.motion.from_mm) > heat.MIN_RANGE_MM):
+    motion = run_motion(run)
+    if not np.any(np.abs(motion.to_mm - motion.from_mm) > heat.MIN_RANGE_MM):
         raise ValueError("%s: motion.csv has no travel (every interval has from_mm == to_mm)" % name)
     if require_nut and not run.sensors_with_role("nut"):
         raise ValueError("%s: meta.json has no sensor with role 'nut' (sensors: %s); the screw model needs the nut temperature"
@@ -43,7 +50,7 @@ def check_screw_run(run: Run, geometry: heat.ScrewGeometry | None = None, requir
             raise ValueError("%s: meta.json 'screw' block is unusable: %s" % (name, exc))
     lo_x = geometry.fixed_end_mm
     hi_x = geometry.fixed_end_mm + geometry.length_mm
-    used = np.concatenate([run.motion.from_mm, run.motion.to_mm, run.errors.position_mm])
+    used = np.concatenate([motion.from_mm, motion.to_mm, run.errors.position_mm])
     stroke = run.stroke_mm
     top = max(float(used.max()), float(stroke) if stroke else -np.inf)
     if top > hi_x + 1e-9 or float(used.min()) < lo_x - 1e-9:

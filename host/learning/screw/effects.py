@@ -14,13 +14,15 @@ An effect is an object with
     ``convection_mult(ctx, p)``   -> (n_steps,) or (n_steps, M) factor on h·S;
     ``error_um(ctx, p)``          -> (n_rows,) extra error at the run's error rows;
 - optional ``check(contexts)``: raise ValueError when the runs cannot show the
-  effect at all (e.g. reversal error without bidirectional sweeps);
+  effect at all (e.g. reversal error without bidirectional sweeps); the protocols HeatHook,
+  HeatScaleHook, ConvectionHook, ErrorHook and CheckHook below are the hooks' types;
 - ``to_document()`` -> dict and a ``from_document(d)`` classmethod for settings
   that are not parameters (reference speeds, sensor names);
 - ``reduce(model, p, red, C)``: the effect's reduced (firmware) form: it adds its
   terms to ``red``, the ``thermal.reduced`` block being built (C: the reduced
   segments' heat capacities, J/K), or raises :class:`NoReducedForm` saying why the
-  firmware's recurrence cannot carry it (docs/screw-model.md, "Reduced forms of the effects").
+  firmware's recurrence cannot carry it (docs/screw-model.md, "Reduced forms of the effects"); Effect's own
+  raises it, so an effect without a reduced form is listed in the block's ``omitted_effects``.
 
 Register a new effect class in ``EFFECTS`` (or pass instances to ScrewModel(effects=...)).
 The five effects below are the catalog the discrepancy workflow (issue 5) tests.
@@ -29,7 +31,7 @@ The five effects below are the catalog the discrepancy workflow (issue 5) tests.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol, runtime_checkable
 
 from dataclasses import dataclass
 
@@ -62,10 +64,14 @@ class ParamSpec:
 
 
 class Effect:
-    name = "effect"
+    name: str = "effect"
 
     def parameters(self) -> list[ParamSpec]:
         return []
+
+    def reduce(self, model: ScrewModel, p: dict[str, float], red: dict[str, Any], C: np.ndarray) -> None:
+        """An effect that defines no reduced form has none: the reduced block lists it in ``omitted_effects``."""
+        raise NoReducedForm("the effect defines no reduce(): the firmware's recurrence has no form of it")
 
     def to_document(self) -> dict[str, Any]:
         return {}
@@ -230,6 +236,33 @@ class AmbientExpansion(Effect):
 
     def to_document(self) -> dict[str, Any]:
         return {"sensor": self.sensor}
+
+
+# The optional hooks (the module docstring): ScrewModel asks isinstance(effect, HeatHook) etc., which is true when the
+# effect defines the method, as hasattr was
+@runtime_checkable
+class HeatHook(Protocol):
+    def heat_W(self, ctx: RunContext, p: dict[str, float]) -> np.ndarray: ...
+
+
+@runtime_checkable
+class HeatScaleHook(Protocol):
+    def heat_scale(self, ctx: RunContext, p: dict[str, float]) -> np.ndarray: ...
+
+
+@runtime_checkable
+class ConvectionHook(Protocol):
+    def convection_mult(self, ctx: RunContext, p: dict[str, float]) -> np.ndarray: ...
+
+
+@runtime_checkable
+class ErrorHook(Protocol):
+    def error_um(self, ctx: RunContext, p: dict[str, float]) -> np.ndarray: ...
+
+
+@runtime_checkable
+class CheckHook(Protocol):
+    def check(self, contexts: Sequence[RunContext]) -> None: ...
 
 
 EFFECTS = {cls.name: cls for cls in (BearingHeat, SpeedDependentHeat, MovingConvection, ReversalEffect, AmbientExpansion)}

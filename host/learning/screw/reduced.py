@@ -48,6 +48,7 @@ from numpy.typing import ArrayLike
 import numpy as np
 
 from host.learning.screw import heat
+from host.learning.screw.context import run_motion
 from host.learning.screw.effects import NoReducedForm
 
 if TYPE_CHECKING:
@@ -212,7 +213,7 @@ def reduced_predict(model: ScrewModel, run: Run, spread: bool = False) -> np.nda
     (a step at t0 + k·dt), α·Σ T_i·overlap_i(P) + ee·(T_b − T_b,ref)·P − α·(T_R − T_R,ref)·P under a sensor error
     reference R + the reversal term by the row's direction
     (none in the feed/range mode, which has no direction) + the geometric polynomial."""
-    red = model.reduced_
+    red = model.reduced_form()
     ctx = model._context(run)
     t0 = ctx.t_grid[0]
     dt = red["dt_s"]
@@ -220,7 +221,7 @@ def reduced_predict(model: ScrewModel, run: Run, spread: bool = False) -> np.nda
     air = model.air_K(ctx, delag=False)  # the firmware's air input: the sensor's reading
     if air is not None:
         air = np.interp(t0 + dt * np.arange(n + 1), ctx.t_grid, air)
-    _, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread, air_K=air)
+    _, Tr = simulate_reduced(red, run_motion(run), t0, n, spread=spread, air_K=air)
     e = run.errors
     k = np.clip(np.floor((e.time_s - t0) / dt + 1e-9).astype(int), 0, n)
     P = e.position_mm
@@ -252,7 +253,7 @@ def reduction_error(model: ScrewModel, run: Run, positions: int = 21, spread: bo
     model's prediction against :func:`reduced_predict` at the run's error rows (E_e, effect outputs, direction).
     ``spread`` feeds the reduced model from the feed/range state.
     Returns {"rms_um", "max_um", "points", "full_max_um", "rows_rms_um", "rows_max_um"}."""
-    red = model.reduced_
+    red = model.reduced_form()
     ctx_full = model._context(run)
     rises = model.simulate_context(ctx_full)
     t0 = ctx_full.t_grid[0]
@@ -260,7 +261,7 @@ def reduction_error(model: ScrewModel, run: Run, positions: int = 21, spread: bo
     air = model.air_K(ctx_full, delag=False)
     if air is not None:
         air = np.interp(t0 + red["dt_s"] * np.arange(n + 1), ctx_full.t_grid, air)
-    t, Tr = simulate_reduced(red, run.motion, t0, n, spread=spread, air_K=air)
+    t, Tr = simulate_reduced(red, run_motion(run), t0, n, spread=spread, air_K=air)
     lo, hi = model.envelope_["position_mm"] if model.envelope_ else (0.0, model.geometry_.length_mm)
     P = np.linspace(lo, hi, positions)
     Rf = heat.interp_rows(t, ctx_full.t_grid, rises)

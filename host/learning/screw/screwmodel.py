@@ -22,12 +22,13 @@ from host.data.runs import START as RAW, check_model_reference, common_error_ref
 from host.learning.screw import heat
 from host.learning.screw import reference as errref
 from models_export.document import FORMAT
-from host.learning.screw.context import RunContext, check_screw_run
-from host.learning.screw.effects import EFFECTS, Effect, ParamSpec
+from host.learning.screw.context import RunContext, check_screw_run, run_motion
+from host.learning.screw.effects import EFFECTS, CheckHook, ConvectionHook, Effect, ErrorHook, HeatHook, HeatScaleHook, ParamSpec
 from host.learning.screw.identify import IdentifiabilityWarning, fit_parameters
 
 if TYPE_CHECKING:
     from host.data.runs import Run
+    from host.learning.screw.observer import ScrewObserver
 
 BASE_PARAMS = ("q_J_per_mm", "h_W_m2K", "lambda_W_mK", "c_J_kgK", "alpha_per_K")
 ALIASES = {"q": "q_J_per_mm", "h": "h_W_m2K", "lambda": "lambda_W_mK", "c": "c_J_kgK", "alpha": "alpha_per_K"}
@@ -72,7 +73,7 @@ def delagged(time_s: ArrayLike, reading: ArrayLike, lag_s: float, smooth_s: floa
     return x + lag_s * np.gradient(avg, t)
 
 
-def _resolve(name):
+def _resolve(name: str) -> str:
     return ALIASES.get(name, name)
 
 
@@ -128,6 +129,37 @@ class ScrewModel:
     The runs' declared error reference (meta.json ``error_reference``) is read, not set: under a sensor
     reference E_m is over that sensor's temperature (S004 Eq. 9, host/learning/screw/reference.py); runs of
     different references are refused."""
+
+    # Learned by fit (a trailing underscore, scikit-learn style) or read back by from_document
+    geometry_: heat.ScrewGeometry
+    density_: float
+    values_: dict[str, float]  # every parameter by name, the effects' as "<effect>.<param>"
+    params_: heat.ScrewParams
+    effect_params_: dict[str, dict[str, float]]  # {effect: {param: value}}
+    free_: list[str]
+    ambient_: bool
+    base_sensor_: str | None  # E_e's sensor; None: no E_e term
+    base_ref_C_: float | None  # E_e's reference under base_ref "fixed" (None without E_e)
+    nut_sensor_: str | None
+    air_sensor_: str | None  # None: a constant air
+    air_ref_C_: float | None  # the air's reference under base_ref "fixed" (None without an air sensor)
+    air_source_: str
+    air_lag_s_: float
+    error_reference_: str  # "start" (raw errors) or the sensor the errors are referred to
+    error_reference_C_: float | None  # its reference under base_ref "fixed" (None for "start")
+    axis_: str | None
+    geometric_: list[float]
+    geometric_degree_: int
+    envelope_: dict[str, Any] | None  # None: a document without one
+    statistics_: dict[str, Any] | None
+    training_: dict[str, Any] | None
+    reduced_: dict[str, Any] | None  # thermal.reduced; None after fit(reduce=False) or from a document without it
+    observer_: ScrewObserver | None  # thermal.observer (issue 21); None: the sensors do not allow one (observer_note_ says why)
+    observer_note_: str | None
+    # fit only: what the effects' reduced forms read (effect_sensor_, start_C_) and the position scale of the fit
+    first_roles_: tuple[str | None, str | None]
+    run_start_C_: dict[str, float]
+    p_scale_: float
 
     def __init__(self, segments: int = 40, dt_s: float = 10.0, free: str | Sequence[str] | None = None,
                  geometric_degree: int | str = "auto", effects: Sequence[Effect] = (), channel: str | None = None,
@@ -200,7 +232,7 @@ class ScrewModel:
         if delag and lag > 0:
             col = delagged(tt.time_s, col, lag)
         air = np.interp(ctx.t_grid, tt.time_s, col)
-        return air - (float(tt.column(name)[0]) if self.base_ref == "run_start" else self.air_ref_C_)
+        return air - self._start_reference(ctx.run, name, self.air_ref_C_)
 
     def simulate_context(self, ctx: RunContext, allvals: dict[str, float] | None = None) -> np.ndarray:
         """Segment rises (n_steps+1, M) on the context's grid."""
@@ -211,12 +243,12 @@ class ScrewModel:
         extra = np.zeros((ctx.n_steps, ctx.M))
         for e in self.effects:
             p = eff[e.name]
-            if hasattr(e, "heat_scale"):
+            if isinstance(e, HeatScaleHook):
                 scale = scale * e.heat_scale(ctx, p)
-            if hasattr(e, "convection_mult"):
+            if isinstance(e, ConvectionHook):
                 g = np.asarray(e.convection_mult(ctx, p), dtype=float)
                 conv = g if conv is None else conv * g
-            if hasattr(e, "heat_W"):
+            if isinstance(e, HeatHook):
                 extra += e.heat_W(ctx, p) * ctx.dt[:, None]
         heat_J = heat.friction_heat_J(ctx.travel_mm, base) * scale[:, None] + extra
         return heat.simulate_segments(ctx.geometry, base, ctx.t_grid, heat_J, convection_mult=conv, edges_mm=ctx.edges_mm,
@@ -232,22 +264,31 @@ class ScrewModel:
         if self.base_sensor_ is not None:
             if self.base_sensor_ not in ctx.run.temperatures.names:
                 raise ValueError("%s: the model's base sensor %r is not in temperatures.csv" % (ctx.run_name, self.base_sensor_))
-            E = E + 1e3 * base.alpha_per_K * (ctx.sensor_at_rows(self.base_sensor_) - self._base_ref(ctx.run)) * ctx.positions_mm
+            E = E + 1e3 * base.alpha_per_K * (ctx.sensor_at_rows(self.base_sensor_)
+                                              - self._start_reference(ctx.run, self.base_sensor_, self.base_ref_C_)) * ctx.positions_mm
         if self.error_reference_ != RAW:
             if self.error_reference_ not in ctx.run.temperatures.names:
                 raise ValueError("%s: the model's error reference %r is not in temperatures.csv" % (ctx.run_name, self.error_reference_))
             rise = ctx.sensor_at_rows(self.error_reference_) - self._reference_start(ctx.run)
             E = E - errref.reference_um(base.alpha_per_K, rise, ctx.positions_mm)
         for e in self.effects:
-            if hasattr(e, "error_um"):
+            if isinstance(e, ErrorHook):
                 E = E + e.error_um(ctx, eff[e.name])
         return E
 
     def _reference_start(self, run):
         """T_R,ref of a sensor-referenced model: the same start rule as E_e's base_ref."""
+        return self._start_reference(run, self.error_reference_, self.error_reference_C_)
+
+    def _start_reference(self, run: Run, sensor: str, fixed_C: float | None) -> float:
+        """The reference temperature of a term reading ``sensor``: its first reading in ``run`` (base_ref "run_start")
+        or ``fixed_C`` (base_ref "fixed": fit sets it for every sensor the model reads, from_document refuses a
+        document without it)."""
         if self.base_ref == "run_start":
-            return float(run.temperatures.column(self.error_reference_)[0])
-        return self.error_reference_C_
+            return float(run.temperatures.column(sensor)[0])
+        if fixed_C is None:
+            raise ValueError("screw model: base_ref is 'fixed' but %s has no fixed reference temperature" % sensor)
+        return float(fixed_C)
 
     def _reference_K(self, run, times_s):
         """T_R − T_R,ref at ``times_s``."""
@@ -265,11 +306,6 @@ class ScrewModel:
 
     def _check_reference(self, run):
         check_model_reference(run, self.error_reference_)
-
-    def _base_ref(self, run):
-        if self.base_ref == "run_start":
-            return float(run.temperatures.column(self.base_sensor_)[0])
-        return self.base_ref_C_
 
     def geometric_um(self, positions_mm: ArrayLike) -> np.ndarray:
         P = np.asarray(positions_mm, dtype=float)
@@ -440,7 +476,7 @@ class ScrewModel:
         for c in ctxs:
             self._check_inputs(c)
         for e in self.effects:
-            if hasattr(e, "check"):
+            if isinstance(e, CheckHook):
                 e.check(ctxs)
         y = np.concatenate([c.measured_um for c in ctxs])
         if not np.all(np.isfinite(y)):
@@ -539,47 +575,48 @@ class ScrewModel:
                           "geometric_degree": self.geometric_degree, "nut_weight": self.nut_weight, "channel": self.channel,
                           "effects": [e.name for e in self.effects], "fit_window_s": self.fit_window, "air": self.air,
                           "ambient": self.ambient, "error_reference": self.error_reference_, "air_lag_s": self.air_lag_s_}
-        feeds = np.concatenate([r.motion.feed_mm_min for r in runs])
-        P_all = np.concatenate([P] + [np.r_[r.motion.from_mm, r.motion.to_mm] for r in runs])
+        motions = [run_motion(r) for r in runs]  # check_screw_run refused a run without
+        feeds = np.concatenate([m.feed_mm_min for m in motions])
+        P_all = np.concatenate([P] + [np.r_[m.from_mm, m.to_mm] for m in motions])
         strokes = [float(r.meta["stroke_mm"]) for r in runs if isinstance(r.meta.get("stroke_mm"), (int, float))]
         p_lo, p_hi = float(P_all.min()), float(P_all.max())
         if strokes:  # the firmware is asked for offsets anywhere on the stroke, not only where the laser measured
             p_lo, p_hi = min(p_lo, 0.0), max(p_hi, min(strokes))
-        self.envelope_: dict = {"position_mm": [p_lo, p_hi],
-                          "feed_mm_min": [float(feeds.min()), float(feeds.max())]}
+        envelope: dict[str, Any] = {"position_mm": [p_lo, p_hi], "feed_mm_min": [float(feeds.min()), float(feeds.max())]}
+        self.envelope_ = envelope
         if self.base_sensor_ is not None:
             tb = np.concatenate([r.temperatures.column(self.base_sensor_) for r in runs])
             # E_e is linear in the base temperature (alpha * dT * P), so a margin beyond the training range is
             # physics, not extrapolation of a regression: BASE_ENVELOPE_MARGIN_K covers a shop's daily swing.
-            self.envelope_["temperature_C"] = {self.base_sensor_: [float(tb.min()) - BASE_ENVELOPE_MARGIN_K,
-                                                                   float(tb.max()) + BASE_ENVELOPE_MARGIN_K]}
-            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+            envelope["temperature_C"] = {self.base_sensor_: [float(tb.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                             float(tb.max()) + BASE_ENVELOPE_MARGIN_K]}
+            envelope["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
         if self.air_sensor_ is not None and self.air_sensor_ != self.base_sensor_:
             ta = np.concatenate([r.temperatures.column(self.air_sensor_) for r in runs])
-            self.envelope_.setdefault("temperature_C", {})[self.air_sensor_] = [float(ta.min()) - BASE_ENVELOPE_MARGIN_K,
-                                                                                 float(ta.max()) + BASE_ENVELOPE_MARGIN_K]
-            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
-        if self.error_reference_ != RAW and self.error_reference_ not in self.envelope_.get("temperature_C", {}):
+            envelope.setdefault("temperature_C", {})[self.air_sensor_] = [float(ta.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                          float(ta.max()) + BASE_ENVELOPE_MARGIN_K]
+            envelope["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+        if self.error_reference_ != RAW and self.error_reference_ not in envelope.get("temperature_C", {}):
             tr = np.concatenate([r.temperatures.column(self.error_reference_) for r in runs])
-            self.envelope_.setdefault("temperature_C", {})[self.error_reference_] = [float(tr.min()) - BASE_ENVELOPE_MARGIN_K,
-                                                                                       float(tr.max()) + BASE_ENVELOPE_MARGIN_K]
-            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+            envelope.setdefault("temperature_C", {})[self.error_reference_] = [float(tr.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                               float(tr.max()) + BASE_ENVELOPE_MARGIN_K]
+            envelope["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
         if not reduce:
             self.reduced_ = None
             self.observer_, self.observer_note_ = None, "no observer: the model has no reduced form (fit with reduce=False)"
             return self
         from host.learning.screw.reduced import build_reduced
-        self.reduced_ = build_reduced(self, self.reduced_segments, self.reduced_dt_s,
-                                      feed_max_mm_min=self.feed_max_mm_min or 1.5 * float(feeds.max()))
-        self.envelope_["state_K"] = [0.0, self.reduced_["state_max_K"]]
-        ee = self.reduced_.get("base_sensor")
-        if ee is not None and ee not in self.envelope_.get("temperature_C", {}):  # an effect's sensor (ambient_expansion)
+        self.reduced_ = reduced = build_reduced(self, self.reduced_segments, self.reduced_dt_s,
+                                                feed_max_mm_min=self.feed_max_mm_min or 1.5 * float(feeds.max()))
+        envelope["state_K"] = [0.0, reduced["state_max_K"]]
+        ee = reduced.get("base_sensor")
+        if ee is not None and ee not in envelope.get("temperature_C", {}):  # an effect's sensor (ambient_expansion)
             te = np.concatenate([r.temperatures.column(ee) for r in runs])
-            self.envelope_.setdefault("temperature_C", {})[ee] = [float(te.min()) - BASE_ENVELOPE_MARGIN_K,
-                                                                  float(te.max()) + BASE_ENVELOPE_MARGIN_K]
-            self.envelope_["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
+            envelope.setdefault("temperature_C", {})[ee] = [float(te.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                            float(te.max()) + BASE_ENVELOPE_MARGIN_K]
+            envelope["temperature_margin_K"] = BASE_ENVELOPE_MARGIN_K
         from host.learning.screw.reduced import reduction_certificate
-        self.reduced_["reduction_error_um"] = reduction_certificate(self, [c.run for c in ctxs])
+        reduced["reduction_error_um"] = reduction_certificate(self, [c.run for c in ctxs])
         # the reduced state recovered from the nut sensor at power-on (issue 21), or why the sensors do not allow it
         from host.learning.screw.observer import fit_observer
         self.observer_, self.observer_note_ = fit_observer(self, [c.run for c in ctxs])
@@ -614,7 +651,8 @@ class ScrewModel:
         E = heat.thermal_error_um(ctx.edges_mm, R[:, None, :], P[None, :], self.geometry_.fixed_end_mm, self.params_.alpha_per_K)
         if self.base_sensor_ is not None:
             tb = np.interp(t, run.temperatures.time_s, run.temperatures.column(self.base_sensor_))
-            E = E + 1e3 * self.params_.alpha_per_K * (tb - self._base_ref(run))[:, None] * P[None, :]
+            ref = self._start_reference(run, self.base_sensor_, self.base_ref_C_)
+            E = E + 1e3 * self.params_.alpha_per_K * (tb - ref)[:, None] * P[None, :]
         if self.error_reference_ != RAW:
             self._check_reference(run)
             E = E - errref.reference_um(self.params_.alpha_per_K, self._reference_K(run, t)[:, None], P[None, :])
@@ -643,7 +681,7 @@ class ScrewModel:
             "error_reference": self.error_reference_,
             "error_reference_C": self.error_reference_C_,
             "reduced": self.reduced_,
-            "observer": None if getattr(self, "observer_", None) is None else self.observer_.to_document(),
+            "observer": None if (obs := getattr(self, "observer_", None)) is None else obs.to_document(),
             "observer_note": getattr(self, "observer_note_", None),
         }
         return {
@@ -680,6 +718,14 @@ class ScrewModel:
         if name is None or name == self.base_sensor_:
             return None, None
         return name, red.get("base_ref_C")
+
+    def reduced_form(self) -> dict[str, Any]:
+        """``reduced_``, the thermal.reduced block; ValueError when the model has none (fit(reduce=False), or a
+        document without it)."""
+        if self.reduced_ is None:
+            raise ValueError("screw model: no reduced (firmware) form: fit with reduce=True, or load a document with "
+                             "thermal.reduced")
+        return self.reduced_
 
     def effect_sensor_(self, effect: Effect) -> str | None:
         """The sensor an effect reading the machine's surroundings reads on the training runs (base, else ambient)."""
@@ -735,6 +781,8 @@ class ScrewModel:
             if not 0 <= m.air_lag_s_ <= MAX_AIR_LAG_S:
                 raise ValueError("thermal.air_lag_s must be 0..%g s" % MAX_AIR_LAG_S)
             m.air_lag_s = m.air_lag_s_
+            if m.base_sensor_ is not None and m.base_ref == "fixed" and not isinstance(m.base_ref_C_, (int, float)):
+                raise KeyError("thermal.base_ref_C")
             if m.air_sensor_ is not None and m.base_ref == "fixed" and not isinstance(m.air_ref_C_, (int, float)):
                 raise KeyError("thermal.air_ref_C")
             # documents written before the error reference was data: raw errors ("start")

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from host.cli import main as tcomp
-from host.learning.documents import load_model, read_document
+from host.learning.documents import ModelFormatError, load_model, read_document
 from host.data.runs import write_run
 from host.learning.screw import synth
 from host.learning.screw.effects import BearingHeat, Effect, ParamSpec, ReversalEffect
@@ -31,6 +31,17 @@ def test_document_round_trip_and_reduced_contract(synth_model, synth_run):
     assert red["alpha_um_per_mm_per_K"] == pytest.approx(1e3 * synth_model.params_.alpha_per_K)
     again = ScrewModel.from_document(doc)
     np.testing.assert_allclose(again.predict(synth_run), synth_model.predict(synth_run), atol=1e-9)
+
+
+def test_a_fixed_reference_document_without_its_base_reference_is_refused_at_load():
+    # base_ref "fixed" reads E_e's reference from thermal.base_ref_C: without it the model predicted None - a float
+    # (a TypeError at predict); it is refused by name when the document is read, as a missing air_ref_C is
+    run = synth.make_run(heat_s=3600.0, cool_s=600.0, sweep_every_s=600.0)
+    doc = ScrewModel(ambient=True, base_ref="fixed", free="q").fit([run], reduce=False).to_document()
+    assert doc["thermal"]["base_sensor"] is not None and doc["thermal"]["base_ref"] == "fixed"
+    del doc["thermal"]["base_ref_C"]
+    with pytest.raises(ModelFormatError, match="thermal.base_ref_C"):
+        ScrewModel.from_document(doc)
 
 
 def test_error_is_zero_at_the_fixed_end(synth_model, synth_run):
@@ -186,6 +197,15 @@ def test_effects_plug_in_parameters_and_hooks(synth_run):
     tail = m.simulate_context(ctx)[-1]
     base_tail = base.simulate_context(base._context(run))[-1]
     assert tail[-1] > base_tail[-1] + 1.0
+
+
+def test_an_effect_without_a_reduced_form_is_omitted_from_the_reduced_block_not_a_crash():
+    # Effect.reduce raises NoReducedForm: fit used to fail with AttributeError ('_ConstantHeat' has no 'reduce')
+    run = synth.make_run(heat_s=3600.0, cool_s=600.0, sweep_every_s=600.0)
+    m = ScrewModel(ambient=True, free="q", geometric_degree=2, effects=[_ConstantHeat()]).fit([run])
+    red = m.reduced_form()
+    assert red["omitted_effects"] == ["constant_tail_heat"]
+    assert "defines no reduce()" in red["omitted_reasons"]["constant_tail_heat"]
 
 
 def test_effect_checks_and_ambient_expansion_equals_the_base_term():

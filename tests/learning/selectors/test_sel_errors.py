@@ -113,6 +113,9 @@ def test_selection_without_plot_data():
         ("hclust-ga", {"generations": 0}, "generations must be an integer >= 1"),
         ("hclust-ga", {"mutation": 2}, "mutation must be a number >= 0 and <= 1"),
         ("hclust-ga", {"disturbance_C": float("nan")}, "disturbance_C must be"),
+        # an integer beyond the float range (json.loads of 400 digits): numpy's isfinite raised a TypeError
+        ("maxtree", {"max_sensors": 10 ** 400}, "max_sensors must be an integer >= 1, got 1000"),
+        ("stepwise", {"f_enter": 10 ** 400}, "f_enter must be a number >= 0, got 1000"),
     ],
 )
 def test_bad_parameters_are_named(method, params, message):

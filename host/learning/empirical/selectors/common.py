@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+import math
+from collections.abc import Callable, Mapping
 
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -23,7 +24,7 @@ class Selection:
     sensors: list
     method: str
     reason: dict
-    _plotter: object = field(default=None, repr=False, compare=False)
+    _plotter: Callable[[str], object] | None = field(default=None, repr=False, compare=False)
 
     def plot(self, path: str) -> str:
         """Write a PNG explaining the choice to ``path``; returns ``path``."""
@@ -98,26 +99,25 @@ def _subset(arr, sensors, label):
     if missing:
         raise SelectionError("%s has no sensor %s (has %s)" % (label, ", ".join(missing), ",".join(names)))
     idx = [names.index(s) for s in sensors]
-    start = getattr(arr, "start", None)
-    log = arr.log_columns(idx) if hasattr(arr, "log_columns") else None
-    return _keep_start((np.asarray(X, dtype=float)[:, idx], y, list(sensors)), arr, None if start is None else np.asarray(start)[idx], log)
+    return _keep_start((np.asarray(X, dtype=float)[:, idx], y, list(sensors)), arr, idx)
 
 
-_SAME = object()  # _keep_start: the original's log, its columns unchanged
-
-
-def _keep_start(checked, original, start=None, log=_SAME):
+def _keep_start(checked, original, columns=None):
     """``checked`` (X, y, names) keeps the start temperatures and the temperature log of a RunArrays
-    (rises -> measured values; the whole log for correlations and distances)."""
+    (rises -> measured values; the whole log for correlations and distances), of its sensors ``columns``
+    when given (_subset); a plain tuple, or a RunArrays with neither, stays a plain tuple."""
     from host.learning.empirical.targets import RunArrays
 
-    start = getattr(original, "start", None) if start is None else start
-    log = getattr(original, "log", None) if log is _SAME else log
+    if not isinstance(original, RunArrays):
+        return checked
+    start, log = original.start, original.log
+    if columns is not None:
+        start = None if start is None else np.asarray(start)[columns]
+        log = original.log_columns(columns)
     if start is None and log is None:
         return checked
     X, y, names = checked
-    return RunArrays(X, y, names, getattr(original, "time_s", None), getattr(original, "run", None),
-                     None if start is None else np.asarray(start, dtype=float), log)
+    return RunArrays(X, y, names, original.time_s, original.run, None if start is None else np.asarray(start, dtype=float), log)
 
 
 def check_arrays(arr: Any, label: str = "data") -> tuple[np.ndarray, np.ndarray, list[str]]:
@@ -176,22 +176,48 @@ def check_params(method: str, params: Mapping[str, Any], allowed: Mapping[str, A
     return out
 
 
-def number(method: str, name: str, value: Any, lo: float | None = None, hi: float | None = None, integer: bool = False, allow_none: bool = False) -> Any:
-    """A numeric parameter checked against its range (CLI --option values arrive as JSON)."""
-    # -> Any: an int when ``integer``, else a float, None only when ``allow_none``: each caller knows which it asked for
+# The overloads give each caller the type it asked for (an int when ``integer``, None only with ``allow_none``)
+@overload
+def number(method: str, name: str, value: Any, lo: float | None = None, hi: float | None = None, *,
+           integer: Literal[True], allow_none: Literal[False] = False) -> int: ...
+@overload
+def number(method: str, name: str, value: Any, lo: float | None = None, hi: float | None = None, *,
+           integer: Literal[True], allow_none: Literal[True]) -> int | None: ...
+@overload
+def number(method: str, name: str, value: Any, lo: float | None = None, hi: float | None = None, *,
+           integer: Literal[False] = False, allow_none: Literal[False] = False) -> float: ...
+@overload
+def number(method: str, name: str, value: Any, lo: float | None = None, hi: float | None = None, *,
+           integer: Literal[False] = False, allow_none: Literal[True]) -> float | None: ...
+def number(method: str, name: str, value: Any, lo: float | None = None, hi: float | None = None, *,
+           integer: bool = False, allow_none: bool = False) -> int | float | None:
+    """A numeric parameter checked against its range (CLI --option values arrive as JSON): an int when
+    ``integer``, else a float; None only when ``allow_none`` and ``value`` is None."""
     if value is None and allow_none:
         return None
-    ok = isinstance(value, (int, float)) and not isinstance(value, bool) and np.isfinite(value)
-    if ok and integer:
-        ok = float(value).is_integer()
-    if ok and lo is not None:
-        ok = value >= lo
-    if ok and hi is not None:
-        ok = value <= hi
-    if not ok:
+    checked = _finite_number(value)
+    ok = checked is not None
+    if checked is not None and integer:
+        ok = float(checked).is_integer()
+    if checked is not None and lo is not None:
+        ok = ok and checked >= lo
+    if checked is not None and hi is not None:
+        ok = ok and checked <= hi
+    if checked is None or not ok:
         rng = "%s%s" % ("" if lo is None else ">= %g" % lo, "" if hi is None else (" and " if lo is not None else "") + "<= %g" % hi)
         raise SelectionError("%s: %s must be %s%s, got %r" % (method, name, "an integer" if integer else "a number", " " + rng if rng else "", value))
-    return int(value) if integer else float(value)
+    return int(checked) if integer else float(checked)
+
+
+def _finite_number(value: object) -> int | float | None:
+    """``value`` when it is a finite int or float (a bool is not a number here), else None."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return None
+    try:
+        as_float = float(value)
+    except OverflowError:  # an int beyond the float range (JSON allows any digits): no parameter here means that
+        return None
+    return value if math.isfinite(as_float) else None
 
 
 def data_label(context: Mapping[str, Any] | None, n_samples: int) -> str:
