@@ -67,7 +67,7 @@ from numpy.typing import ArrayLike
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg.lapack import dstevd
+from scipy.linalg import get_lapack_funcs
 
 if TYPE_CHECKING:
     from host.data.runs import Motion
@@ -296,6 +296,9 @@ def hold_weights(s: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.n
     return phi, phi - g1, g1
 
 
+(_DSTEVD,) = get_lapack_funcs(("stevd",), (np.zeros(1),))  # float64 dstevd
+
+
 def _tridiagonal_eigh(d: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Eigenvalues (ascending) and eigenvectors of the symmetric tridiagonal matrix (diagonal d,
     off-diagonal e): LAPACK's dstevd, the driver scipy.linalg.eigh_tridiagonal chooses for all
@@ -305,7 +308,7 @@ def _tridiagonal_eigh(d: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndar
     e = np.ascontiguousarray(e, dtype=float)
     if not (np.isfinite(d).all() and np.isfinite(e).all()):
         raise ValueError("array must not contain infs or NaNs")
-    s, U, info = dstevd(d, e, compute_v=1)
+    s, U, info = _DSTEVD(d, e, compute_v=1)
     if info != 0:
         raise np.linalg.LinAlgError("dstevd (the segment modes) failed: info %d" % info)
     return s, U
