@@ -15,7 +15,6 @@ are missing).
 """
 import json
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -78,8 +77,9 @@ def main():
     # registered under that name only at run time (firmware/__init__.py), so pyright gets a one-module stub
     # folder holding just MicroPython's micropython.pyi (the rest of .stubs would shadow CPython's time etc.)
     cpython_stubs = os.path.join(STUBS, "cpython-side")
-    os.makedirs(cpython_stubs, exist_ok=True)
-    shutil.copy(os.path.join(STUBS, "micropython.pyi"), os.path.join(cpython_stubs, "micropython.pyi"))
+    from typecheck_host import micropython_stub  # this folder is on sys.path: the script's own
+    if not micropython_stub():
+        return 2
     cp = dict(common, include=host_side, extraPaths=[ROOT], venvPath=ROOT, venv=".venv", stubPath=cpython_stubs)
     rc = run(mp, "board files (firmware/manifest.py) vs MicroPython stubs")
     rc |= run(cp, "files left off the board (CPython)")

@@ -11,7 +11,6 @@ Exit status: 0 when both pass, 1 otherwise (2 if the MicroPython stubs are missi
 """
 import ast
 import os
-import shutil
 import subprocess
 import sys
 import tomllib
@@ -71,14 +70,26 @@ def python_files(path):
 
 def micropython_stub():
     """.stubs/cpython-side/micropython.pyi, MicroPython's own (make setup installs .stubs), for [tool.pyright]
-    stubPath: the firmware modules host imports say ``from micropython import const``; without the stub the
+    stubPath (tools/typecheck_firmware.py's CPython-side check uses it too): the firmware modules host imports say ``from micropython import const``; without the stub the
     constants they define would be Unknown to pyright. False (with the reason printed) when .stubs is missing."""
     stubs = os.path.join(ROOT, ".stubs")
     if not os.path.exists(os.path.join(stubs, "micropython.pyi")):
         print("MicroPython stubs missing in %s: run `make setup`" % stubs)
         return False
     os.makedirs(os.path.join(stubs, "cpython-side"), exist_ok=True)
-    shutil.copy(os.path.join(stubs, "micropython.pyi"), os.path.join(stubs, "cpython-side", "micropython.pyi"))
+    with open(os.path.join(stubs, "micropython.pyi"), "rb") as fh:
+        data = fh.read()
+    target = os.path.join(stubs, "cpython-side", "micropython.pyi")
+    if os.path.exists(target):
+        with open(target, "rb") as fh:
+            if fh.read() == data:
+                return True
+    # written beside and renamed: make typecheck runs this script and tools/typecheck_firmware.py at once,
+    # and either's pyright may be reading the stub while the other installs it
+    tmp = "%s.%d.tmp" % (target, os.getpid())
+    with open(tmp, "wb") as fh:
+        fh.write(data)
+    os.replace(tmp, target)
     return True
 
 

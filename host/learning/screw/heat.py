@@ -67,7 +67,7 @@ from numpy.typing import ArrayLike
 from dataclasses import dataclass, replace
 
 import numpy as np
-from scipy.linalg import eigh_tridiagonal
+from scipy.linalg import get_lapack_funcs
 
 if TYPE_CHECKING:
     from host.data.runs import Motion
@@ -296,6 +296,30 @@ def hold_weights(s: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray, np.n
     return phi, phi - g1, g1
 
 
+(_DSTEVD,) = get_lapack_funcs(("stevd",), (np.zeros(1),))  # float64 dstevd
+
+
+def _tridiagonal_eigh(d: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (ascending) and eigenvectors of the symmetric tridiagonal matrix (diagonal d,
+    off-diagonal e): LAPACK's dstevd, the driver scipy.linalg.eigh_tridiagonal chooses for all
+    eigenpairs, called directly (the same numbers; its argument checks cost more than the solve for
+    the 12-40 segments here, and a screw fit solves tens of thousands)."""
+    d = np.ascontiguousarray(d, dtype=float)
+    e = np.ascontiguousarray(e, dtype=float)
+    if not (np.isfinite(d).all() and np.isfinite(e).all()):
+        raise ValueError("array must not contain infs or NaNs")
+    s, U, info = _DSTEVD(d, e, compute_v=1)
+    if info != 0:
+        raise np.linalg.LinAlgError("dstevd (the segment modes) failed: info %d" % info)
+    return s, U
+
+
+def _gkey(g: Any) -> float | bytes:
+    """A convection multiplier (scalar, or one per segment) as a cache key: its exact value, so a cached
+    matrix is the one these very numbers give, whichever call computed it first (shared_propagator)."""
+    return float(g) if np.ndim(g) == 0 else np.ascontiguousarray(g, dtype=float).tobytes()
+
+
 class Propagator:
     """Exact step matrices of the segment system for given properties.
 
@@ -327,7 +351,7 @@ class Propagator:
 
         The system is tridiagonal, so LAPACK's tridiagonal solver is used (O(M²),
         single-threaded: a dense eigh is slower and fights over BLAS threads)."""
-        key = ("modes", float(g) if np.ndim(g) == 0 else tuple(np.round(np.asarray(g, dtype=float), 12)))
+        key = ("modes", _gkey(g))
         if key not in self._cache:
             M = self.C.size
             deg = np.zeros(M)
@@ -339,13 +363,12 @@ class Propagator:
                 s, U = d.copy(), np.ones((1, 1))
             else:
                 e = -self.G * self._rs[:-1] * self._rs[1:]
-                s, U = eigh_tridiagonal(d, e)
+                s, U = _tridiagonal_eigh(d, e)
             self._cache[key] = (np.clip(s, 0.0, None), U)
         return self._cache[key]
 
     def step(self, dt: float, g: float = 1.0) -> Any:
-        gkey = float(g) if np.ndim(g) == 0 else tuple(np.round(np.asarray(g, dtype=float), 12))
-        key = (round(float(dt), 9), gkey)
+        key = (round(float(dt), 9), _gkey(g))
         if key not in self._cache:
             s, U = self.modes(g)
             e = np.exp(-s * dt)
@@ -357,14 +380,39 @@ class Propagator:
         return self._cache[key]
 
     def air_step(self, dt: float, g: float = 1.0) -> Any:
-        gkey = float(g) if np.ndim(g) == 0 else tuple(np.round(np.asarray(g, dtype=float), 12))
-        key = ("air", round(float(dt), 9), gkey)
+        key = ("air", round(float(dt), 9), _gkey(g))
         if key not in self._cache:
             s, U = self.modes(g)
             _, g0, g1 = hold_weights(s, dt)
             v = (np.broadcast_to(np.asarray(g, dtype=float), self.H.shape) * self.H * self._rs) @ U  # g·h·S in the modal basis
             self._cache[key] = (self._rs * (U @ (g0 * v)), self._rs * (U @ (g1 * v)))
         return self._cache[key]
+
+
+# Propagators shared across simulate_segments calls: a screw fit simulates the same segment properties
+# (C, G, H) over and over (its Jacobian perturbs one parameter at a time, and most do not touch them;
+# every fold of a discrepancy analysis starts from the same values), each time building the same modes and
+# step matrices. Keyed by the exact bytes of C, G and H, so a hit is the very propagator a fresh build gives.
+# Bounded: the least recently used propagator goes past _SHARED_KEPT, and one whose cache outgrows
+# _ENTRIES_KEPT matrices (a continuous convection multiplier gives a new key per value) starts over.
+_SHARED: dict[tuple[bytes, bytes, bytes], Propagator] = {}
+_SHARED_KEPT = 16
+_ENTRIES_KEPT = 256
+
+
+def shared_propagator(C: np.ndarray, G: np.ndarray, H: np.ndarray) -> Propagator:
+    """The Propagator of (C, G, H), built once and kept for later calls with the same properties."""
+    C, G, H = (np.ascontiguousarray(a, dtype=float) for a in (C, G, H))
+    key = (C.tobytes(), G.tobytes(), H.tobytes())
+    prop = _SHARED.pop(key, None)
+    if prop is None:
+        prop = Propagator(C, G, H)
+        while len(_SHARED) >= _SHARED_KEPT:
+            _SHARED.pop(next(iter(_SHARED)), None)
+    elif len(prop._cache) > _ENTRIES_KEPT:
+        prop._cache.clear()
+    _SHARED[key] = prop  # (re)inserted last: the dict's order is the use order
+    return prop
 
 
 def rows_matmul(X: np.ndarray, A: np.ndarray, rows: int | None = None) -> np.ndarray:
@@ -461,7 +509,7 @@ def simulate_segments(geometry: ScrewGeometry, params: ScrewParams, t_grid: np.n
             raise ValueError("air_K must have shape (n_steps+1,) = (%d,), found %s" % (n + 1, air.shape))
         if not np.all(np.isfinite(air)):
             raise ValueError("air_K contains non-finite values")
-    prop = Propagator(C, G, H)
+    prop = shared_propagator(C, G, H)
     out = np.empty((n + 1, M))
     out[0] = (0.0 if air is None else air[0]) if T0 is None else np.asarray(T0, dtype=float)
     if n == 0:

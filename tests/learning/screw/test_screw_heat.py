@@ -199,3 +199,36 @@ def test_air_forcing_keeps_equilibrium_and_superposes_with_heat():
     assert np.max(np.abs(both - parts)) < 1e-10  # linear system: heat and air superpose
     with pytest.raises(ValueError, match="air_K must have shape"):
         heat.simulate_segments(geo, par, t, air_K=air[:-1])
+
+
+def test_shared_propagators_give_what_a_fresh_build_gives_whatever_came_before():
+    """simulate_segments keeps its propagators across calls for the same segment properties
+    (heat.shared_propagator): a cached matrix must be the one these very (dt, g) give, not one of a
+    multiplier that only rounds the same (g 1e-13 apart), and a warm call must equal a cold one."""
+    geo, params = heat.ScrewGeometry(length_mm=800, diameter_mm=32, segments=12), heat.ScrewParams()
+    C, G, H = heat.segment_properties(geo.edges_mm, geo.diameter_mm, params, geo.bore_mm)
+    g1 = 1.0 + 0.25 * np.arange(C.size) + 1e-13
+    g2 = g1 + 2e-13  # equal to g1 in 12 decimals
+    heat._SHARED.clear()
+    shared = heat.shared_propagator(C, G, H)
+    assert heat.shared_propagator(C.copy(), G.copy(), H.copy()) is shared  # the same properties: kept
+    first = shared.step(600.0, g1)
+    second = shared.step(600.0, g2)
+    fresh = heat.Propagator(C, G, H).step(600.0, g2)
+    assert not np.array_equal(first[0], fresh[0])  # the two multipliers do give different matrices
+    for a, b in zip(second, fresh):
+        np.testing.assert_array_equal(a, b)
+    fresh_air = heat.Propagator(C, G, H).air_step(600.0, g2)
+    for a, b in zip(shared.air_step(600.0, g2), fresh_air):
+        np.testing.assert_array_equal(a, b)
+    # a whole simulation with varying steps and multipliers, cold and then warm
+    t = np.r_[0.0, np.cumsum(np.tile([60.0, 90.0, 600.0], 20))]
+    rng = np.random.default_rng(5)
+    heat_J = rng.uniform(0, 50, (t.size - 1, C.size))
+    mult = np.tile([[1.0], [1.5], [2.0]], (20, C.size))
+    air = np.linspace(0.0, 2.0, t.size)
+    heat._SHARED.clear()
+    cold = heat.simulate_segments(geo, params, t, heat_J, convection_mult=mult, air_K=air)
+    warm = heat.simulate_segments(geo, params, t, heat_J, convection_mult=mult, air_K=air)
+    np.testing.assert_array_equal(cold, warm)
+    assert len(heat._SHARED) == 1
