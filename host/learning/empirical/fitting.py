@@ -312,22 +312,27 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         est = DynamicRegression(fit_intercept=fit_intercept, **opts)
     except TypeError as exc:
         raise EmpiricalDataError("dynamic: %s" % exc)
-    if forward_state == "switched_on" and use_observer:
-        # the switched-on columns start each candidate filter from rest at the block, as a board without observer does;
-        # the observer's start (fitted per fold and per candidate term) is not modelled in the selection yet
-        raise EmpiricalDataError("dynamic: forward_state=switched_on scores each block with filters started from rest, but this "
-                                 "model's board starts them at its observer's estimate; give observer=false with it, or "
-                                 "forward_state=continuous (the default)")
-    if selection == "forward" and forward_state == "switched_on" and len(runs) == 1:
-        # score each block on the columns a board switched on at its start computes (several runs: each run already is)
-        held = {}
-        assert blocks is not None  # selection "forward" raised above when forward_blocks failed
-        for b in blocks[1:]:
-            rows = labels == b["block"]
-            Fk, _ = candidate_matrix([forward.block_run(runs, b)], [np.concatenate([a.time_s for a in arrays])[rows]], names, taus,
-                                     use_spindle, use_feed)
-            held[b["block"]] = (Fk, y[rows])
-        est.with_block_columns(held)
+    # the training runs' mean start temperature of every candidate sensor: the fixed reference of the observer's inputs
+    # (the model's reference_C below is this, restricted to the sensors it uses)
+    reference_all = dict(zip(names, np.mean([start_temperatures(r, names) for r in runs], axis=0).tolist()))
+    # the observer's tolerance is in um of offset: a slope (um/mm) times the largest training position
+    obs_scale = 1.0 if target == "direct" else float(max(np.nanmax(np.abs(r.errors.position_mm)) for r in runs))
+    if selection == "forward" and forward_state == "switched_on":
+        assert blocks is not None and labels is not None  # selection "forward" raised above when forward_blocks failed
+        if use_observer:
+            # each block as a board switched on at its start computes it: filters from the estimate of the observer of the
+            # structure being scored, fitted on the blocks before it (forward.observer_block_columns)
+            est.with_block_columns(forward.observer_block_columns(runs, arrays, labels, blocks, terms, reference_all, target,
+                                                                  channel, exclude, obs_scale))
+        elif len(runs) == 1:
+            # without an observer: filters from rest on rises over the block's start (several runs: each run already is)
+            held = {}
+            for b in blocks[1:]:
+                rows = labels == b["block"]
+                Fk, _ = candidate_matrix([forward.block_run(runs, b)], [np.concatenate([a.time_s for a in arrays])[rows]], names, taus,
+                                         use_spindle, use_feed)
+                held[b["block"]] = (Fk, y[rows])
+            est.with_block_columns(held)
     est.fit(F, y, terms, groups=groups)
     stats = est.statistics()
     stats["lag_bound"] = lag_bound
@@ -351,8 +356,6 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     model = DynamicModel(est.terms_, est.coef_, est.intercept_, target, channel, geo.coef_ if geo is not None else (0.0,), "dynamic",
                          runs[0].meta.get("axis"), dict(zip(used, np.atleast_1d(start).tolist())), env, stats, training,
                          _sample_interval(runs))
-    # the observer's tolerance is in um of offset: a slope (um/mm) times the largest training position
-    obs_scale = 1.0 if target == "direct" else float(max(np.nanmax(np.abs(r.errors.position_mm)) for r in runs))
     if use_observer:
         # the lag states estimated from the sensors when a board starts (host/learning/empirical/observer.py),
         # fitted on the training samples only (window, exclude): never on what is held out
@@ -373,14 +376,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
             if use_observer:
                 # the board scored on block k starts with an observer fitted on the blocks before it, as the model's own
                 # was on all of them (reference_C: the training runs' start temperatures, as the model's)
-                from host.learning.empirical.observer import fit_observer
-
-                past = [b for b in blocks if b["block"] < k]
-                if len(runs) >= 2:
-                    m.observer = fit_observer(m, runs[:k], exclude=exclude, scale=obs_scale)
-                else:
-                    span = [(min(b["t_start_s"] for b in past), max(b["t_end_s"] for b in past))]
-                    m.observer = fit_observer(m, runs, spans=span, exclude=exclude, scale=obs_scale)
+                m.observer = forward.fit_fold_observer(m, runs, blocks, k, exclude, obs_scale)
             return m
 
         stats["forward_chaining"] = forward.forward_chaining(runs, blocks, refit, target)
