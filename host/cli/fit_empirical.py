@@ -7,6 +7,7 @@ from collections.abc import Iterable
 from typing import Any
 from typing import TYPE_CHECKING
 import json
+import sys
 
 from host import options
 from host.learning.empirical import EmpiricalDataError
@@ -158,6 +159,15 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     if fc and "rmse_um" in fc:
         print("  forward chaining (fit on the past, predict the next of %d blocks switched on at its start): RMSE %s um; worst %.4g, "
               "pooled %.4g" % (fc["blocks"], " ".join("%.4g" % v for v in fc["rmse_um"]), fc["worst_um"], fc["pooled_um"]))
+        base = fc.get("baseline_mlr_all")
+        if base:
+            print("  baseline on the same blocks, MLR on all %d candidate sensors: RMSE %s um; worst %.4g, pooled %.4g" % (
+                len(base["sensors"]), " ".join("%.4g" % v for v in base["rmse_um"]), base["worst_um"], base["pooled_um"]))
+            if not fc["beats_baseline"]:
+                # not silent: the user asked for a dynamic model and this one predicted the past blocks worse
+                print("tcomp fit: warning: the dynamic model predicts the next block worse than MLR on all %d candidate sensors "
+                      "(forward chaining, pooled %.4g um against %.4g um): fit --model mlr or compare them on held-out data "
+                      "before using it" % (len(base["sensors"]), fc["pooled_um"], base["pooled_um"]), file=sys.stderr)
     elif fc:
         print("  forward chaining not scored: %s" % fc["error"])
     if args.json:

@@ -265,6 +265,37 @@ class _StartEstimates:
                 model = DynamicModel(lagged, np.zeros(len(lagged)), 0.0, self.target, self.channel, reference_C=self.reference_C)
                 obs = fit_fold_observer(model, self.runs, self.blocks, self.k, self.exclude, self.scale)
                 for j, v in obs.initial_states({n: self.u0[n] for n in order}).items():
-                    vec[self.index[lagged[j]]] = v
+                    if lagged[j] in self.index:  # a lag of the structure's signals that is among the candidates
+                        vec[self.index[lagged[j]]] = v
             self.cache[key] = vec
         return vec[cols]
+
+
+BASELINE = "mlr_all"  # the fixed reference a dynamic model's forward-chaining score is reported beside
+
+
+def baseline_mlr_all(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], target: str, channel: str | None,
+                     sensors: Sequence[str], fit_intercept: bool = True,
+                     window: tuple[float | None, float | None] | None = None,
+                     exclude: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Forward-chaining score of a plain MLR on every candidate sensor (temperatures over the fixed reference, so
+    switched on at a block's start it predicts as one that never stopped) on the same ``blocks``: block k scored by
+    the MLR fitted on the blocks before it. A fixed reference, chosen by nothing, that a dynamic model's own score is
+    reported beside (``statistics.forward_chaining.baseline_mlr_all``)."""
+    from host.learning.empirical.fitting import fit_model
+
+    runs = list(runs)
+    start = {b["block"]: b["t_start_s"] for b in blocks}
+    lo = None if window is None else window[0]
+
+    def refit(k):
+        if len(runs) >= 2:
+            return fit_model(runs[:k], "mlr", target, channel, list(sensors), fit_intercept, window=window, exclude=exclude,
+                             forward_chaining=False)
+        return fit_model(runs, "mlr", target, channel, list(sensors), fit_intercept, window=(lo, start[k]), exclude=exclude,
+                         forward_chaining=False)
+
+    out = forward_chaining(runs, blocks, refit, target)
+    return {"method": "mlr", "sensors": list(sensors), "rmse_um": out["rmse_um"], "worst_um": out["worst_um"],
+            "pooled_um": out["pooled_um"],
+            "structure": "MLR on all %d candidate sensors (fixed reference), refitted on the blocks before each scored block" % len(sensors)}
