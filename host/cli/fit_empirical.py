@@ -55,6 +55,7 @@ OPTIONS = {
     "selection": str,  # dynamic: forward | loo (how sensors, lags and penalty are scored)
     "forward_blocks": number(int, 3),  # dynamic: forward chaining over N equal time blocks of one run
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
+    "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
@@ -133,6 +134,11 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
             print("  observer: lag states estimated from the inputs at a start; start-error bound %.3g um, within %.3g um after "
                   "%.0f min (SETTLING)%s" % (obs.start_error_bound(model), obs.tolerance, obs.settle_s / 60,
                                              "" if worst is None else "; largest share: lag(%s, tau %g s)" % model.terms[worst["term"]]))
+        fb = model.statistics.get("static_fallback")
+        if fb:
+            print("  static fallback: search over every term scored %.4g, over the static terms (tau 0) alone %s: the %s structure "
+                  "is the model" % (fb["dynamic_score_um"], "no structure" if fb["static_score_um"] is None else "%.4g" % fb["static_score_um"],
+                                    fb["chosen"]))
         lb = model.statistics.get("lag_bound", {})
         if lb.get("excluded_taus_s"):
             print("  lags %s s left out: longer than %g x the training span (%.0f s)" % (

@@ -285,6 +285,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     forward_state = opts.pop("forward_state", FORWARD_STATE)
     if forward_state not in FORWARD_STATES:
         raise EmpiricalDataError("dynamic: forward_state must be one of %s, got %r" % (", ".join(FORWARD_STATES), forward_state))
+    static_fallback = opts.pop("static_fallback", True)
+    if not isinstance(static_fallback, bool):
+        raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
     lag_bound = _lag_bound(arrays, opts.pop("tau_max_fraction", TAU_MAX_FRACTION))
     lag_bound["excluded_taus_s"] = [v for v in taus if v > lag_bound["max_tau_s"]]
     taus = tuple(v for v in taus if v <= lag_bound["max_tau_s"])
@@ -334,7 +337,27 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
                 held[b["block"]] = (Fk, y[rows])
             est.with_block_columns(held)
     est.fit(F, y, terms, groups=groups)
+    fallback = None
+    static = [j for j, (_, tau) in enumerate(terms) if tau == 0]
+    if static_fallback and selection == "forward" and static and len(static) < len(terms):
+        # the same search over the static terms (tau = 0) alone, scored the same way: the greedy search over every term can
+        # end in a dynamic structure that predicts the next block worse than a static one it never reached (docs/empirical.md)
+        plain = DynamicRegression(fit_intercept=fit_intercept, **opts)
+        if est.block_columns:
+            plain.with_block_columns({k: _columns_subset(v, static) for k, v in est.block_columns.items()})
+        try:
+            plain.fit(F[:, static], y, [terms[j] for j in static], groups=groups)
+        except EmpiricalDataError as exc:  # e.g. no static term lowers the score: the dynamic search stands
+            fallback = {"static_score_um": None, "static_error": str(exc)}
+        else:
+            fallback = {"static_score_um": float(plain.cv_rmse_)}
+        fallback.update(rule=STATIC_FALLBACK_RULE, dynamic_score_um=float(est.cv_rmse_),
+                        chosen="static" if fallback["static_score_um"] is not None and fallback["static_score_um"] < est.cv_rmse_ else "dynamic")
+        if fallback["chosen"] == "static":
+            est = plain
     stats = est.statistics()
+    if fallback is not None:
+        stats["static_fallback"] = fallback
     stats["lag_bound"] = lag_bound
     if selection == "forward":
         stats["forward_state"] = forward_state
@@ -387,6 +410,21 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
                                                                               window, exclude)
         fc["beats_baseline"] = bool(fc["pooled_um"] < base["pooled_um"])
     return model
+
+
+STATIC_FALLBACK_RULE = ("the structure chosen among every term is compared with the one the same search chooses among the static terms "
+                        "(tau = 0) alone, on the same forward-chaining score; the lower score is the model")
+
+
+def _columns_subset(columns, cols):
+    """A scored block's switched-on columns (dynamic.with_block_columns) restricted to the candidate columns ``cols``."""
+    from host.learning.empirical.dynamic import StartedColumns
+
+    if isinstance(columns, StartedColumns):
+        return StartedColumns(columns.rest[:, cols], columns.decay[:, cols], columns.y,
+                              lambda sub: columns.start([cols[i] for i in sub]))
+    Fk, yk = columns
+    return np.asarray(Fk)[:, cols], yk
 
 
 FORWARD_STATES = ("switched_on", "continuous")

@@ -227,7 +227,7 @@ def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], lab
         decay = np.zeros((tk.size, len(terms)))
         U = np.column_stack([sig[n] for n in names])
         for tau in sorted({tau for _, tau in terms}):
-            filtered = _lag_filter_fast(t, U, tau)  # from 0 at the block's first sample (tau 0: the input)
+            filtered = np.asarray(_lag_filter_fast(t, U, tau))  # from 0 at the block's first sample (tau 0: the input)
             d = np.interp(tk, t, np.exp(-(t - t[0]) / tau)) if tau > 0 else None
             for i, n in enumerate(names):
                 j = index.get((n, tau))

@@ -228,3 +228,21 @@ def test_slice_run_is_a_board_switched_on_at_the_cut(make_direct):
     assert late.spindle.rpm[0] == 2000.0 and late.spindle.time_s[0] == 8040.0
     with pytest.raises(ValueError, match="at least 2"):
         slice_run(run, 35990.0)
+
+
+def test_the_static_search_is_compared_on_the_same_score_and_the_lower_one_is_the_model(make_direct):
+    """statistics.static_fallback: the search over every term against the same search over the static (tau 0) terms,
+    both scored as boards switched on at each block; the model is the lower one (here the dynamic one: the truth has
+    lags), and the record says so; static_fallback=false leaves it out."""
+    run = _lagged_run(make_direct)
+    model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS)
+    fb = model.statistics["static_fallback"]
+    static = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0.0,))
+    assert fb["dynamic_score_um"] == pytest.approx(model.statistics["cv_rmse"])
+    assert fb["static_score_um"] == pytest.approx(static.statistics["cv_rmse"])  # the same search, tau 0 alone
+    assert fb["chosen"] == "dynamic" and fb["dynamic_score_um"] < fb["static_score_um"]
+    assert any(tau > 0 for _, tau in model.terms)
+    off = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, static_fallback=False)
+    assert "static_fallback" not in off.statistics and off.terms == model.terms
+    with pytest.raises(EmpiricalDataError, match="static_fallback must be true or false"):
+        fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, static_fallback="yes")
