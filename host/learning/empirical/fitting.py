@@ -337,7 +337,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
                 held[b["block"]] = (Fk, y[rows])
             est.with_block_columns(held)
     est.fit(F, y, terms, groups=groups)
-    fallback = None
+    fallback: dict[str, Any] | None = None
     static = [j for j, (_, tau) in enumerate(terms) if tau == 0]
     if static_fallback and selection == "forward" and static and len(static) < len(terms):
         # the same search over the static terms (tau = 0) alone, scored the same way: the greedy search over every term can
