@@ -1,7 +1,7 @@
 """Held-out figures of issue 21 on FL_THERMAL: the dynamic model fitted with `tcomp fit` defaults, predicting the future.
 
     .venv/bin/python tools/results_forward.py [--run data/fl_thermal] [--split-h 32.129 --split-h 24.129]
-        [--channels ch1,...] [--option KEY=VALUE ...] [--loco] [--json OUT]
+        [--channels ch1,...] [--option KEY=VALUE ...] [--variants continuous,static] [--loco] [--no-splits] [--json OUT]
 
 For each split and channel, every model is fitted on t < split with the defaults
 of `tcomp fit` (no setting tuned to the split; ``--option`` passes dynamic
@@ -19,6 +19,12 @@ temperatures) for:
     on the held-out part, as in the issue's table: an upper bound of what a
     user's choice gets), switched on at the split (a fixed temperature
     reference, so (a) and (b) are the same for it);
+
+``--variants continuous,static`` also fits the dynamic model with ``forward_state=continuous`` (the selection scored
+with filters running since the run start) and with ``taus_s=[0]`` (the static search the default's static fallback
+compares with), and prints their rows and every model's forward-chaining pooled score beside the baseline MLR on all
+sensors (``statistics.forward_chaining.baseline_mlr_all``). docs/results.md ("Issue 21, second half") was made with
+``--split-h 32.129166666666666 --split-h 24.129166666666666 --split-h 28.0 --variants continuous,static``;
 
 and, with ``--loco``, the leave-one-cycle-out ratios (every choice made inside
 each fold) of cv-subset and the dynamic model. Every number printed comes from

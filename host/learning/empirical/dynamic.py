@@ -18,7 +18,9 @@ Structure selection (which signals, which time constants) is a greedy forward
 search with sequential replacement, scored by forward-chaining validation
 (``selection="forward"``, the default since issue 21: the groups are time blocks
 in ascending order, block k scored by the fit on blocks < k, the pooled RMSE;
-host/learning/empirical/forward.py) or by leave-one-group-out cross-validation
+host/learning/empirical/forward.py; each scored block's columns are, by default, the ones a board switched on at
+the block's start computes with the observer of the structure being scored: :class:`StartedColumns`) or by
+leave-one-group-out cross-validation
 (``selection="loo"``: groups are the training runs or, for one run, its spindle
 cycles, host/learning/empirical/schedule.py; the *worst* held-out group's RMSE:
 a compensation model has to hold on every operating condition). At each step the
