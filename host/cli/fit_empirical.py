@@ -166,7 +166,9 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
         print("  forward chaining (fit on the past, predict the next of %d blocks switched on at its start): RMSE %s um; worst %.4g, "
               "pooled %.4g" % (fc["blocks"], " ".join("%.4g" % v for v in fc["rmse_um"]), fc["worst_um"], fc["pooled_um"]))
         base = fc.get("baseline_mlr_all")
-        if base:
+        if base and "error" in base:
+            print("  baseline (MLR on all %d candidate sensors) not scored: %s" % (len(base["sensors"]), base["error"]))
+        elif base:
             print("  baseline on the same blocks, MLR on all %d candidate sensors: RMSE %s um; worst %.4g, pooled %.4g" % (
                 len(base["sensors"]), " ".join("%.4g" % v for v in base["rmse_um"]), base["worst_um"], base["pooled_um"]))
             if not fc["beats_baseline"]:

@@ -406,9 +406,14 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         fc["structure"] = "terms and penalty as chosen on all training data; coefficients refitted on the blocks before each scored block"
         # beside it, the same blocks predicted by a plain MLR on every candidate sensor: a user sees whether the dynamic
         # structure beats it (tcomp fit warns when it does not)
-        base = fc["baseline_" + forward.BASELINE] = forward.baseline_mlr_all(runs, blocks, target, channel, names, fit_intercept,
-                                                                              window, exclude)
-        fc["beats_baseline"] = bool(fc["pooled_um"] < base["pooled_um"])
+        try:
+            base = forward.baseline_mlr_all(runs, blocks, target, channel, names, fit_intercept, window, exclude)
+        except EmpiricalDataError as exc:  # e.g. a first block with fewer samples than the MLR's parameters: said, not hidden
+            fc["baseline_" + forward.BASELINE] = {"method": "mlr", "sensors": list(names), "error": str(exc)}
+            fc["beats_baseline"] = None
+        else:
+            fc["baseline_" + forward.BASELINE] = base
+            fc["beats_baseline"] = bool(fc["pooled_um"] < base["pooled_um"])
     return model
 
 

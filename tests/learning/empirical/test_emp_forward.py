@@ -179,6 +179,16 @@ def test_switched_on_scoring_drops_a_lag_the_sensors_cannot_recover_and_predicts
     assert fc["beats_baseline"] == (fc["pooled_um"] < base["pooled_um"])
 
 
+def test_a_baseline_that_cannot_be_fitted_is_said_not_fatal(make_slope):
+    """A slope run of 12 sweeps cut into 4 blocks: the first block has 3 sweeps, fewer than MLR on all 4 sensors needs;
+    the dynamic fit stands and its statistics say why the baseline is missing (tcomp compare ran into this)."""
+    run = make_slope(name="r0", seed=0, noise_um=0.05)
+    model = fit_model([run], "dynamic", target="slope")
+    fc = model.statistics["forward_chaining"]
+    assert len(fc["rmse_um"]) == 3 and fc["beats_baseline"] is None
+    assert "3 samples for 5 parameters" in fc["baseline_mlr_all"]["error"]
+
+
 def test_forward_chaining_statistics_in_fit_and_compare_json(make_direct, tmp_path):
     folder = write_run(_lagged_run(make_direct), str(tmp_path / "run"))
     out = str(tmp_path / "dyn.json")
