@@ -171,7 +171,7 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
         elif base:
             print("  baseline on the same blocks, MLR on all %d candidate sensors: RMSE %s um; worst %.4g, pooled %.4g" % (
                 len(base["sensors"]), " ".join("%.4g" % v for v in base["rmse_um"]), base["worst_um"], base["pooled_um"]))
-            if not fc["beats_baseline"]:
+            if fc["pooled_um"] > base["pooled_um"] * (1 + 1e-9):  # worse, not a tie (a static structure can be the MLR)
                 # not silent: the user asked for a dynamic model and this one predicted the past blocks worse
                 print("tcomp fit: warning: the dynamic model predicts the next block worse than MLR on all %d candidate sensors "
                       "(forward chaining, pooled %.4g um against %.4g um): fit --model mlr or compare them on held-out data "

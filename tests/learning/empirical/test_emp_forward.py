@@ -256,3 +256,20 @@ def test_the_static_search_is_compared_on_the_same_score_and_the_lower_one_is_th
     assert "static_fallback" not in off.statistics and off.terms == model.terms
     with pytest.raises(EmpiricalDataError, match="static_fallback must be true or false"):
         fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, static_fallback="yes")
+
+
+def test_tcomp_fit_prints_the_baseline_and_warns_when_the_dynamic_model_loses_to_it(make_direct, tmp_path, capsys):
+    """ch1 = 0.4 − 3·rise(t1) + 1.5·rise(t2): one term (max_terms=1) cannot follow it, MLR on all sensors can; tcomp
+    fit says so on stderr. On a run whose error lags (no MLR can follow it), no warning."""
+    folder = write_run(make_direct(spindle=True, n_sensors=3, channels=("ch1",), noise_um=0.01), str(tmp_path / "run"))
+    base = ["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--option", "taus_s=0/1800"]
+    assert main(base + ["--out", str(tmp_path / "one.json"), "--option", "max_terms=1"]) == 0
+    out, err = capsys.readouterr()
+    assert "baseline on the same blocks, MLR on all 3 candidate sensors" in out
+    assert "warning: the dynamic model predicts the next block worse than MLR on all 3 candidate sensors" in err
+    assert json.loads(open(str(tmp_path / "one.json")).read())["statistics"]["forward_chaining"]["beats_baseline"] is False
+    lagged = write_run(_lagged_run(make_direct), str(tmp_path / "lagged"))
+    assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", lagged, "--option", "taus_s=0/1800/3600",
+                 "--out", str(tmp_path / "two.json")]) == 0
+    out, err = capsys.readouterr()
+    assert "baseline on the same blocks" in out and "warning" not in err
