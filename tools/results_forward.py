@@ -1,7 +1,7 @@
 """Held-out figures of issue 21 on FL_THERMAL: the dynamic model fitted with `tcomp fit` defaults, predicting the future.
 
     .venv/bin/python tools/results_forward.py [--run data/fl_thermal] [--split-h 32.129 --split-h 24.129]
-        [--channels ch1,...] [--option KEY=VALUE ...] [--loco] [--json OUT]
+        [--channels ch1,...] [--option KEY=VALUE ...] [--variants continuous,static] [--loco] [--no-splits] [--json OUT]
 
 For each split and channel, every model is fitted on t < split with the defaults
 of `tcomp fit` (no setting tuned to the split; ``--option`` passes dynamic
@@ -19,6 +19,12 @@ temperatures) for:
     on the held-out part, as in the issue's table: an upper bound of what a
     user's choice gets), switched on at the split (a fixed temperature
     reference, so (a) and (b) are the same for it);
+
+``--variants continuous,static`` also fits the dynamic model with ``forward_state=continuous`` (the selection scored
+with filters running since the run start) and with ``taus_s=[0]`` (the static search the default's static fallback
+compares with), and prints their rows and every model's forward-chaining pooled score beside the baseline MLR on all
+sensors (``statistics.forward_chaining.baseline_mlr_all``). docs/results.md ("Issue 21, second half") was made with
+``--split-h 32.129166666666666 --split-h 24.129166666666666 --split-h 28.0 --variants continuous,static``;
 
 and, with ``--loco``, the leave-one-cycle-out ratios (every choice made inside
 each fold) of cv-subset and the dynamic model. Every number printed comes from
@@ -48,23 +54,33 @@ def _rmse(pair):
     return float(np.sqrt(np.mean((m - p) ** 2)))
 
 
-def held_out(run, split_s, channel, dyn_options):
+# the dynamic variants measured beside the defaults: how the selection scores a block, and the static structure (τ = 0 only)
+VARIANTS = {"switched_on": {"forward_state": "switched_on"}, "continuous": {"forward_state": "continuous"}, "static": {"taus_s": [0]}}
+
+
+def held_out(run, split_s, channel, dyn_options, variants=()):
     """{figure: RMSE µm} of one channel on t >= split_s, and the fitted models' descriptions."""
     block = {"block": 1, "run": 0, "t_start_s": split_s, "t_end_s": float(run.errors.time_s.max())}
     cut = slice_run(run, split_s)
     out, info = {}, {}
     mlr = fit_model([run], "mlr", "direct", channel, window=(None, split_s), reference="fixed")
     out["mlr16"] = _rmse(block_residuals(mlr, run, block))
-    t0 = time.perf_counter()
-    dyn = fit_model([run], "dynamic", "direct", channel, window=(None, split_s), **dyn_options)
-    info["dynamic_fit_s"] = time.perf_counter() - t0
-    out["dynamic_switched_on"] = _rmse(block_residuals(dyn, cut, block))
-    out["dynamic_continuous"] = _rmse(block_residuals(dyn, run, block))
-    st = dyn.statistics
-    info["dynamic_terms"] = [[n, tau, float(c)] for (n, tau), c in zip(dyn.terms, dyn.term_coefficients)]
-    info["dynamic_sensors"] = list(dyn.sensors)
-    info["dynamic_ridge"] = st.get("ridge")
-    info["forward_chaining_pooled_um"] = st["forward_chaining"].get("pooled_um")
+    for name in ("",) + tuple(variants):
+        key = "dynamic" + ("_" + name if name else "")
+        t0 = time.perf_counter()
+        dyn = fit_model([run], "dynamic", "direct", channel, window=(None, split_s), **{**dyn_options, **VARIANTS.get(name, {})})
+        info[key + "_fit_s"] = time.perf_counter() - t0
+        out[key + "_switched_on"] = _rmse(block_residuals(dyn, cut, block))
+        out[key + "_continuous"] = _rmse(block_residuals(dyn, run, block))
+        st = dyn.statistics
+        info[key + "_terms"] = [[n, tau, float(c)] for (n, tau), c in zip(dyn.terms, dyn.term_coefficients)]
+        info[key + "_sensors"] = list(dyn.sensors)
+        info[key + "_ridge"] = st.get("ridge")
+        info[key + "_forward_state"] = st.get("forward_state")
+        fc = st["forward_chaining"]
+        info[key + "_forward_pooled_um"] = fc.get("pooled_um")
+        if "baseline_mlr_all" in fc:
+            info["baseline_mlr_all_forward_pooled_um"] = fc["baseline_mlr_all"]["pooled_um"]
     best = None
     for m in STATIC:
         try:
@@ -89,6 +105,8 @@ def main(argv=None):
     ap.add_argument("--split-h", type=float, action="append", help="split times in hours (default 32.129 and 24.129: cycle starts)")
     ap.add_argument("--channels", default="ch1,ch2,ch3,ch4,ch5")
     ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE", help="a dynamic setting (JSON value), e.g. selection=\"loo\"")
+    ap.add_argument("--variants", default="", help="also fit these dynamic variants (comma list of %s) and print them" % ", ".join(VARIANTS))
+    ap.add_argument("--no-splits", action="store_true", help="only the leave-one-cycle-out figures (with --loco)")
     ap.add_argument("--loco", action="store_true", help="also leave-one-cycle-out (5 channels x 6 folds: about 20 min more on the loaded 2-core machine)")
     ap.add_argument("--json", help="write every figure as JSON")
     args = ap.parse_args(argv)
@@ -101,29 +119,47 @@ def main(argv=None):
             opts[k] = v
     run = load_run(args.run)
     channels = args.channels.split(",")
-    splits = args.split_h or [32.129166666666666, 24.129166666666666]
+    splits = [] if args.no_splits else (args.split_h or [32.129166666666666, 24.129166666666666])
+    variants = [v for v in args.variants.split(",") if v]
+    unknown = [v for v in variants if v not in VARIANTS]
+    if unknown:
+        ap.error("unknown variant(s) %s (known: %s)" % (", ".join(unknown), ", ".join(VARIANTS)))
     report = {"run": args.run, "dynamic_options": opts, "splits": {}}
     for h in splits:
         split_s = round(h * 3600 / 15) * 15.0  # on the 15 s sample grid
         rows = {}
         for ch in channels:
-            rows[ch] = held_out(run, split_s, ch, opts)
+            rows[ch] = held_out(run, split_s, ch, opts, variants)
             print("split %.2f h %s done" % (h, ch), file=sys.stderr, flush=True)
         report["splits"]["%.2f" % h] = rows
         print("\nSplit at %.2f h (fit on t < %.2f h, score t >= %.2f h); dynamic settings: %s\n" % (h, h, h, opts or "tcomp fit defaults"))
         print("| figure | %s |" % " | ".join(channels))
         print("|---|%s" % ("---|" * len(channels)))
         print("| MLR-16 held-out RMSE µm | %s |" % " | ".join("%.2f" % rows[c][0]["mlr16"] for c in channels))
-        for key, label in (("dynamic_switched_on", "(a) dynamic, switched on at the split"), ("dynamic_continuous", "(b) dynamic, filters since 0 h"),
-                           ("static_le5", "(c) best static ≤ 5 sensors")):
+        figures = [("dynamic_switched_on", "(a) dynamic (tcomp fit defaults), switched on at the split"),
+                   ("dynamic_continuous", "(b) the same model, filters since 0 h")]
+        for v in variants:
+            figures += [("dynamic_%s_switched_on" % v, "dynamic %s, switched on at the split" % v),
+                         ("dynamic_%s_continuous" % v, "dynamic %s, filters since 0 h" % v)]
+        figures.append(("static_le5", "(c) best static ≤ 5 sensors"))
+        for key, label in figures:
             print("| %s, ratio to MLR-16 | %s |" % (label, " | ".join(
                 "%.2f (%.2f µm)" % (rows[c][0][key] / rows[c][0]["mlr16"], rows[c][0][key]) if key in rows[c][0] else "–" for c in channels)))
-        print("\n| channel | dynamic terms (signal, τ s, coefficient) | ridge | static ≤ 5 |")
-        print("|---|---|---|---|")
+        # the forward-chaining scores (training blocks only) the fit reports: what a user sees before any held-out data
+        print("| forward-chaining pooled µm: baseline MLR on all sensors | %s |" % " | ".join(
+            "%.2f" % rows[c][1]["baseline_mlr_all_forward_pooled_um"] if "baseline_mlr_all_forward_pooled_um" in rows[c][1] else "–"
+            for c in channels))
+        for key in ["dynamic"] + ["dynamic_" + v for v in variants]:
+            print("| forward-chaining pooled µm: %s | %s |" % (key, " | ".join("%.2f" % rows[c][1][key + "_forward_pooled_um"] for c in channels)))
+        print("\n| channel | model | terms (signal, τ s, coefficient) | ridge | fit s |")
+        print("|---|---|---|---|---|")
         for c in channels:
             i = rows[c][1]
-            print("| %s | %s | %s | %s |" % (c, ", ".join("%s %g s %.3g" % tuple(t) for t in i["dynamic_terms"]), i["dynamic_ridge"],
-                                             "%s: %s" % (i["static_le5"]["method"], ", ".join(i["static_le5"]["sensors"])) if "static_le5" in i else "–"))
+            for key in ["dynamic"] + ["dynamic_" + v for v in variants]:
+                print("| %s | %s | %s | %s | %.0f |" % (c, key, ", ".join("%s %g s %.3g" % tuple(t) for t in i[key + "_terms"]),
+                                                  i[key + "_ridge"], i[key + "_fit_s"]))
+            print("| %s | static ≤ 5 | %s | | |" % (c, "%s: %s" % (i["static_le5"]["method"], ", ".join(i["static_le5"]["sensors"]))
+                                                   if "static_le5" in i else "–"))
     if args.loco:
         loco = {}
         for ch in channels:

@@ -7,6 +7,7 @@ from collections.abc import Iterable
 from typing import Any
 from typing import TYPE_CHECKING
 import json
+import sys
 
 from host import options
 from host.learning.empirical import EmpiricalDataError
@@ -54,6 +55,7 @@ OPTIONS = {
     "selection": str,  # dynamic: forward | loo (how sensors, lags and penalty are scored)
     "forward_blocks": number(int, 3),  # dynamic: forward chaining over N equal time blocks of one run
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
+    "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
@@ -132,6 +134,11 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
             print("  observer: lag states estimated from the inputs at a start; start-error bound %.3g um, within %.3g um after "
                   "%.0f min (SETTLING)%s" % (obs.start_error_bound(model), obs.tolerance, obs.settle_s / 60,
                                              "" if worst is None else "; largest share: lag(%s, tau %g s)" % model.terms[worst["term"]]))
+        fb = model.statistics.get("static_fallback")
+        if fb:
+            print("  static fallback: search over every term scored %.4g, over the static terms (tau 0) alone %s: the %s structure "
+                  "is the model" % (fb["dynamic_score_um"], "no structure" if fb["static_score_um"] is None else "%.4g" % fb["static_score_um"],
+                                    fb["chosen"]))
         lb = model.statistics.get("lag_bound", {})
         if lb.get("excluded_taus_s"):
             print("  lags %s s left out: longer than %g x the training span (%.0f s)" % (
@@ -158,6 +165,17 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     if fc and "rmse_um" in fc:
         print("  forward chaining (fit on the past, predict the next of %d blocks switched on at its start): RMSE %s um; worst %.4g, "
               "pooled %.4g" % (fc["blocks"], " ".join("%.4g" % v for v in fc["rmse_um"]), fc["worst_um"], fc["pooled_um"]))
+        base = fc.get("baseline_mlr_all")
+        if base and "error" in base:
+            print("  baseline (MLR on all %d candidate sensors) not scored: %s" % (len(base["sensors"]), base["error"]))
+        elif base:
+            print("  baseline on the same blocks, MLR on all %d candidate sensors: RMSE %s um; worst %.4g, pooled %.4g" % (
+                len(base["sensors"]), " ".join("%.4g" % v for v in base["rmse_um"]), base["worst_um"], base["pooled_um"]))
+            if fc["pooled_um"] > base["pooled_um"] * (1 + 1e-9):  # worse, not a tie (a static structure can be the MLR)
+                # not silent: the user asked for a dynamic model and this one predicted the past blocks worse
+                print("tcomp fit: warning: the dynamic model predicts the next block worse than MLR on all %d candidate sensors "
+                      "(forward chaining, pooled %.4g um against %.4g um): fit --model mlr or compare them on held-out data "
+                      "before using it" % (len(base["sensors"]), fc["pooled_um"], base["pooled_um"]), file=sys.stderr)
     elif fc:
         print("  forward chaining not scored: %s" % fc["error"])
     if args.json:

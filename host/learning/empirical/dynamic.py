@@ -18,7 +18,9 @@ Structure selection (which signals, which time constants) is a greedy forward
 search with sequential replacement, scored by forward-chaining validation
 (``selection="forward"``, the default since issue 21: the groups are time blocks
 in ascending order, block k scored by the fit on blocks < k, the pooled RMSE;
-host/learning/empirical/forward.py) or by leave-one-group-out cross-validation
+host/learning/empirical/forward.py; each scored block's columns are, by default, the ones a board switched on at
+the block's start computes with the observer of the structure being scored: :class:`StartedColumns`) or by
+leave-one-group-out cross-validation
 (``selection="loo"``: groups are the training runs or, for one run, its spindle
 cycles, host/learning/empirical/schedule.py; the *worst* held-out group's RMSE:
 a compensation model has to hold on every operating condition). At each step the
@@ -185,6 +187,79 @@ def candidate_matrix(runs: Iterable[Run], times_per_run: Iterable[np.ndarray], s
     return np.vstack(blocks), terms
 
 
+class StartedColumns:
+    """One forward block's candidate columns as a board switched on at the block's start computes them, when the lag
+    states start at an estimate that depends on the structure (the observer is fitted for the structure's own inputs).
+
+    The lag filter is linear and its recurrence (zero-order hold) gives, for a filter started at y0 at the block's
+    first sample t0, exactly y(t) = y_rest(t) + y0 · exp(−(t − t0)/τ), with y_rest the filter of the same input from 0.
+    So column j = ``rest[:, j] + start_j · decay[:, j]``: ``rest`` (n, m) the candidates filtered from 0 at t0 (τ = 0:
+    the input itself), ``decay`` (n, m) exp(−(t − t0)/τ_j) (0 for τ = 0), ``y`` (n,) the block's targets, and
+    ``start(cols)`` the start estimates of the candidate columns ``cols`` for the structure made of them (0 where a
+    column has no state). Built by host/learning/empirical/forward.py (``observer_block_columns``).
+    """
+
+    def __init__(self, rest: np.ndarray, decay: np.ndarray, y: np.ndarray, start: Any) -> None:
+        self.rest = np.asarray(rest, dtype=float)
+        self.decay = np.asarray(decay, dtype=float)
+        self.y = np.asarray(y, dtype=float)
+        self.start = start
+
+    def columns(self, cols: Sequence[int]) -> np.ndarray:
+        """The columns ``cols`` of the structure made of them, as the board computes them."""
+        cols = list(cols)
+        return self.rest[:, cols] + self.decay[:, cols] * np.asarray(self.start(cols), dtype=float)
+
+
+class _FixedMoments:
+    """A scored block's moments when its columns do not depend on the structure: Gram, moment, y'y, n."""
+
+    def __init__(self, G: np.ndarray, c: np.ndarray, yy: float, n: int) -> None:
+        self.G, self.c, self.yy, self.n = G, c, yy, n
+
+    def __call__(self, idx, cols):
+        return self.G[np.ix_(idx, idx)], self.c[idx], self.yy, self.n
+
+
+class _StartedMoments:
+    """A scored block's moments for a structure whose columns start at structure-dependent estimates (StartedColumns):
+    from the moments of the rest and decay parts, Gram_ij = r_i·r_j + w_j r_i·d_j + w_i d_i·r_j + w_i w_j d_i·d_j."""
+
+    def __init__(self, block: StartedColumns, scale: np.ndarray, o: int) -> None:
+        n = block.y.size
+        R = np.column_stack([np.ones(n), block.rest]) if o else block.rest
+        D = np.column_stack([np.zeros(n), block.decay]) if o else block.decay
+        R, D = R / scale, D / scale
+        self.RR, self.RD, self.DD = R.T @ R, R.T @ D, D.T @ D
+        self.ry, self.dy = R.T @ block.y, D.T @ block.y
+        self.yy, self.n, self.o, self.block = float(block.y @ block.y), int(n), o, block
+
+    def __call__(self, idx, cols):
+        w = np.concatenate([np.zeros(self.o), np.asarray(self.block.start(list(cols)), dtype=float)])
+        ix = np.ix_(idx, idx)
+        RDw = self.RD[ix] * w[None, :]
+        G = self.RR[ix] + RDw + RDw.T + self.DD[ix] * np.outer(w, w)
+        return G, self.ry[idx] + w * self.dy[idx], self.yy, self.n
+
+
+def _fixed_moments(G, c, yy, n):
+    return _FixedMoments(G, c, yy, n)
+
+
+def _held_moments(spec, scale, o, label):
+    """Moments of a scored block given as switched-on columns: (F_k, y_k), or StartedColumns."""
+    if isinstance(spec, StartedColumns):
+        if not (np.isfinite(spec.rest).all() and np.isfinite(spec.decay).all() and np.isfinite(spec.y).all()):
+            raise EmpiricalDataError("dynamic: NaN/inf in the switched-on columns of block %s" % label)
+        return _StartedMoments(spec, scale, o)
+    Fk, yk = spec
+    Ak = np.column_stack([np.ones(len(yk)), Fk]) if o else np.asarray(Fk, dtype=float)
+    Ak = Ak / scale
+    if not np.isfinite(Ak).all():
+        raise EmpiricalDataError("dynamic: NaN/inf in the switched-on columns of block %s" % label)
+    return _FixedMoments(Ak.T @ Ak, Ak.T @ yk, float(yk @ yk), int(len(yk)))
+
+
 class DynamicRegression:
     """Greedy forward choice of lag-filtered terms by group cross-validation; scikit-learn style.
 
@@ -230,7 +305,7 @@ class DynamicRegression:
         self.ridge = ridge
         self.cv_score = cv_score
         self.selection = selection
-        self.block_columns: dict[Any, tuple[np.ndarray, np.ndarray]] | None = None
+        self.block_columns: dict[Any, tuple[np.ndarray, np.ndarray] | StartedColumns] | None = None
         self.swaps = swaps
         self.max_sensors = max_sensors
         self.max_terms = max_terms
@@ -311,17 +386,12 @@ class DynamicRegression:
         if forward:
             for k in range(1, labels.size):
                 if labels[k] in held_cols:  # the block as a board switched on at its start computes it
-                    Fk, yk = held_cols[labels[k]]
-                    Ak = np.column_stack([np.ones(len(yk)), Fk]) if o else np.asarray(Fk, dtype=float)
-                    Ak = Ak / scale
-                    if not np.isfinite(Ak).all():
-                        raise EmpiricalDataError("dynamic: NaN/inf in the switched-on columns of block %s" % labels[k])
-                    held = (Ak.T @ Ak, Ak.T @ yk, float(yk @ yk), int(len(yk)))
+                    held = _held_moments(held_cols[labels[k]], scale, o, labels[k])
                 else:
-                    held = G[k]
+                    held = _fixed_moments(*G[k])
                 folds.append((sum(g[0] for g in G[:k]), sum(g[1] for g in G[:k]), sum(g[3] for g in G[:k]), held))
         else:
-            folds = [(Gall - Gv, call - cv_, n_all - nv, (Gv, cv_, yy, nv)) for Gv, cv_, yy, nv in G]
+            folds = [(Gall - Gv, call - cv_, n_all - nv, _fixed_moments(Gv, cv_, yy, nv)) for Gv, cv_, yy, nv in G]
 
         def penalty(idx, n):
             # ridge on the scaled terms, never on the intercept
@@ -334,12 +404,13 @@ class DynamicRegression:
             """Held-out squared error of every fold, or None when a training Gram matrix is singular."""
             idx = ([0] if o else []) + [c + o for c in cols]
             sse = []
-            for Gt, ct, nt, (Gv, cv_, yy, nv) in folds:
+            for Gt, ct, nt, held in folds:
                 M = Gt[np.ix_(idx, idx)] + penalty(idx, nt)
                 if np.linalg.cond(M) > 1e12:
                     return None
                 beta = np.linalg.solve(M, ct[idx])
-                sse.append(max(yy - 2 * beta @ cv_[idx] + beta @ Gv[np.ix_(idx, idx)] @ beta, 0.0))
+                Gv, cv_, yy, _ = held(idx, cols)  # the scored block's moments on these columns (idx: with the intercept)
+                sse.append(max(yy - 2 * beta @ cv_ + beta @ Gv @ beta, 0.0))
             return sse
 
         def cv(cols):
@@ -347,8 +418,8 @@ class DynamicRegression:
             if sse is None:
                 return np.inf
             if self.cv_score_ == "worst":
-                return float(max(np.sqrt(s / f[3][3]) for s, f in zip(sse, folds)))
-            return float(np.sqrt(sum(sse) / sum(f[3][3] for f in folds)))
+                return float(max(np.sqrt(s / f[3].n) for s, f in zip(sse, folds)))
+            return float(np.sqrt(sum(sse) / sum(f[3].n for f in folds)))
 
         def sensor_of(j):
             return terms[j][0][2:] if terms[j][0].startswith("T:") else None
@@ -399,16 +470,17 @@ class DynamicRegression:
         idx = ([0] if o else []) + [c + o for c in selected]
         beta = np.linalg.solve(Gall[np.ix_(idx, idx)] + penalty(idx, n_all), call[idx]) / scale[idx]
         sse = fold_sse(selected) or [np.nan] * len(folds)
-        fold_rmse = [float(np.sqrt(s / f[3][3])) for s, f in zip(sse, folds)]
+        fold_rmse = [float(np.sqrt(s / f[3].n)) for s, f in zip(sse, folds)]
         return {"intercept_": float(beta[0]) if o else 0.0, "coef_": beta[o:], "selected_": selected, "fold_rmse_": fold_rmse,
                 "scale_": scale[idx], "fold_labels_": labels[1:].tolist() if forward else labels.tolist(),
                 "terms_": [(terms[j][0], float(terms[j][1])) for j in selected], "cv_rmse": current, "cv_rmse_": current,
                 "history_": history, "n_samples_": n_all, "n_groups_": int(labels.size), "ridge_": ridge}
 
-    def with_block_columns(self, columns: Mapping[Any, tuple[np.ndarray, np.ndarray]]) -> DynamicRegression:
-        """Score forward block ``label`` on ``columns[label] = (F_k, y_k)``: the candidate columns as a board switched on at
-        the block's start computes them (host/learning/empirical/forward.py), instead of the rows of ``X`` (filters
-        running since the run start). Returns self."""
+    def with_block_columns(self, columns: Mapping[Any, tuple[np.ndarray, np.ndarray] | StartedColumns]) -> DynamicRegression:
+        """Score forward block ``label`` on ``columns[label]``: the candidate columns as a board switched on at the
+        block's start computes them (host/learning/empirical/forward.py), instead of the rows of ``X`` (filters running
+        since the run start): ``(F_k, y_k)`` when they do not depend on the structure (filters from rest), a
+        :class:`StartedColumns` when the states start at the structure's observer estimate. Returns self."""
         self.block_columns = dict(columns)
         return self
 

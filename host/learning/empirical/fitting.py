@@ -285,6 +285,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     forward_state = opts.pop("forward_state", FORWARD_STATE)
     if forward_state not in FORWARD_STATES:
         raise EmpiricalDataError("dynamic: forward_state must be one of %s, got %r" % (", ".join(FORWARD_STATES), forward_state))
+    static_fallback = opts.pop("static_fallback", True)
+    if not isinstance(static_fallback, bool):
+        raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
     lag_bound = _lag_bound(arrays, opts.pop("tau_max_fraction", TAU_MAX_FRACTION))
     lag_bound["excluded_taus_s"] = [v for v in taus if v > lag_bound["max_tau_s"]]
     taus = tuple(v for v in taus if v <= lag_bound["max_tau_s"])
@@ -312,24 +315,49 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         est = DynamicRegression(fit_intercept=fit_intercept, **opts)
     except TypeError as exc:
         raise EmpiricalDataError("dynamic: %s" % exc)
-    if forward_state == "switched_on" and use_observer:
-        # the switched-on columns start each candidate filter from rest at the block, as a board without observer does;
-        # the observer's start (fitted per fold and per candidate term) is not modelled in the selection yet
-        raise EmpiricalDataError("dynamic: forward_state=switched_on scores each block with filters started from rest, but this "
-                                 "model's board starts them at its observer's estimate; give observer=false with it, or "
-                                 "forward_state=continuous (the default)")
-    if selection == "forward" and forward_state == "switched_on" and len(runs) == 1:
-        # score each block on the columns a board switched on at its start computes (several runs: each run already is)
-        held = {}
-        assert blocks is not None  # selection "forward" raised above when forward_blocks failed
-        for b in blocks[1:]:
-            rows = labels == b["block"]
-            Fk, _ = candidate_matrix([forward.block_run(runs, b)], [np.concatenate([a.time_s for a in arrays])[rows]], names, taus,
-                                     use_spindle, use_feed)
-            held[b["block"]] = (Fk, y[rows])
-        est.with_block_columns(held)
+    # the training runs' mean start temperature of every candidate sensor: the fixed reference of the observer's inputs
+    # (the model's reference_C below is this, restricted to the sensors it uses)
+    reference_all = dict(zip(names, np.mean([start_temperatures(r, names) for r in runs], axis=0).tolist()))
+    # the observer's tolerance is in um of offset: a slope (um/mm) times the largest training position
+    obs_scale = 1.0 if target == "direct" else float(max(np.nanmax(np.abs(r.errors.position_mm)) for r in runs))
+    if selection == "forward" and forward_state == "switched_on":
+        assert blocks is not None and labels is not None  # selection "forward" raised above when forward_blocks failed
+        if use_observer:
+            # each block as a board switched on at its start computes it: filters from the estimate of the observer of the
+            # structure being scored, fitted on the blocks before it (forward.observer_block_columns)
+            est.with_block_columns(forward.observer_block_columns(runs, arrays, labels, blocks, terms, reference_all, target,
+                                                                  channel, exclude, obs_scale))
+        elif len(runs) == 1:
+            # without an observer: filters from rest on rises over the block's start (several runs: each run already is)
+            held = {}
+            for b in blocks[1:]:
+                rows = labels == b["block"]
+                Fk, _ = candidate_matrix([forward.block_run(runs, b)], [np.concatenate([a.time_s for a in arrays])[rows]], names, taus,
+                                         use_spindle, use_feed)
+                held[b["block"]] = (Fk, y[rows])
+            est.with_block_columns(held)
     est.fit(F, y, terms, groups=groups)
+    fallback: dict[str, Any] | None = None
+    static = [j for j, (_, tau) in enumerate(terms) if tau == 0]
+    if static_fallback and selection == "forward" and static and len(static) < len(terms):
+        # the same search over the static terms (tau = 0) alone, scored the same way: the greedy search over every term can
+        # end in a dynamic structure that predicts the next block worse than a static one it never reached (docs/empirical.md)
+        plain = DynamicRegression(fit_intercept=fit_intercept, **opts)
+        if est.block_columns:
+            plain.with_block_columns({k: _columns_subset(v, static) for k, v in est.block_columns.items()})
+        try:
+            plain.fit(F[:, static], y, [terms[j] for j in static], groups=groups)
+        except EmpiricalDataError as exc:  # e.g. no static term lowers the score: the dynamic search stands
+            fallback = {"static_score_um": None, "static_error": str(exc)}
+        else:
+            fallback = {"static_score_um": float(plain.cv_rmse_)}
+        fallback.update(rule=STATIC_FALLBACK_RULE, dynamic_score_um=float(est.cv_rmse_),
+                        chosen="static" if fallback["static_score_um"] is not None and fallback["static_score_um"] < est.cv_rmse_ else "dynamic")
+        if fallback["chosen"] == "static":
+            est = plain
     stats = est.statistics()
+    if fallback is not None:
+        stats["static_fallback"] = fallback
     stats["lag_bound"] = lag_bound
     if selection == "forward":
         stats["forward_state"] = forward_state
@@ -351,8 +379,6 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     model = DynamicModel(est.terms_, est.coef_, est.intercept_, target, channel, geo.coef_ if geo is not None else (0.0,), "dynamic",
                          runs[0].meta.get("axis"), dict(zip(used, np.atleast_1d(start).tolist())), env, stats, training,
                          _sample_interval(runs))
-    # the observer's tolerance is in um of offset: a slope (um/mm) times the largest training position
-    obs_scale = 1.0 if target == "direct" else float(max(np.nanmax(np.abs(r.errors.position_mm)) for r in runs))
     if use_observer:
         # the lag states estimated from the sensors when a board starts (host/learning/empirical/observer.py),
         # fitted on the training samples only (window, exclude): never on what is held out
@@ -373,24 +399,41 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
             if use_observer:
                 # the board scored on block k starts with an observer fitted on the blocks before it, as the model's own
                 # was on all of them (reference_C: the training runs' start temperatures, as the model's)
-                from host.learning.empirical.observer import fit_observer
-
-                past = [b for b in blocks if b["block"] < k]
-                if len(runs) >= 2:
-                    m.observer = fit_observer(m, runs[:k], exclude=exclude, scale=obs_scale)
-                else:
-                    span = [(min(b["t_start_s"] for b in past), max(b["t_end_s"] for b in past))]
-                    m.observer = fit_observer(m, runs, spans=span, exclude=exclude, scale=obs_scale)
+                m.observer = forward.fit_fold_observer(m, runs, blocks, k, exclude, obs_scale)
             return m
 
-        stats["forward_chaining"] = forward.forward_chaining(runs, blocks, refit, target)
-        stats["forward_chaining"]["structure"] = ("terms and penalty as chosen on all training data; coefficients refitted on the "
-                                                  "blocks before each scored block")
+        fc = stats["forward_chaining"] = forward.forward_chaining(runs, blocks, refit, target)
+        fc["structure"] = "terms and penalty as chosen on all training data; coefficients refitted on the blocks before each scored block"
+        # beside it, the same blocks predicted by a plain MLR on every candidate sensor: a user sees whether the dynamic
+        # structure beats it (tcomp fit warns when it does not)
+        try:
+            base = forward.baseline_mlr_all(runs, blocks, target, channel, names, fit_intercept, window, exclude)
+        except EmpiricalDataError as exc:  # e.g. a first block with fewer samples than the MLR's parameters: said, not hidden
+            fc["baseline_" + forward.BASELINE] = {"method": "mlr", "sensors": list(names), "error": str(exc)}
+            fc["beats_baseline"] = None
+        else:
+            fc["baseline_" + forward.BASELINE] = base
+            fc["beats_baseline"] = bool(fc["pooled_um"] < base["pooled_um"])
     return model
 
 
+STATIC_FALLBACK_RULE = ("the structure chosen among every term is compared with the one the same search chooses among the static terms "
+                        "(tau = 0) alone, on the same forward-chaining score; the lower score is the model")
+
+
+def _columns_subset(columns, cols):
+    """A scored block's switched-on columns (dynamic.with_block_columns) restricted to the candidate columns ``cols``."""
+    from host.learning.empirical.dynamic import StartedColumns
+
+    if isinstance(columns, StartedColumns):
+        return StartedColumns(columns.rest[:, cols], columns.decay[:, cols], columns.y,
+                              lambda sub: columns.start([cols[i] for i in sub]))
+    Fk, yk = columns
+    return np.asarray(Fk)[:, cols], yk
+
+
 FORWARD_STATES = ("switched_on", "continuous")
-FORWARD_STATE = "continuous"  # how the selection scores a block (docs/empirical.md: why not yet switched_on)
+FORWARD_STATE = "switched_on"  # how the selection scores a block: as the board switched on at its start computes it (docs/empirical.md)
 
 
 def _lag_bound(arrays, fraction):

@@ -170,3 +170,132 @@ def linear_forward_chaining(model: Any, runs: Iterable[Run], target: str = "slop
     out = forward_chaining(runs, blocks, refit, target)
     out["structure"] = "the method's sensors as chosen on all training data; MLR on them refitted on the blocks before each scored block"
     return out
+
+
+def fit_fold_observer(model: Any, runs: Sequence[Run], blocks: Sequence[dict[str, Any]], k: int,
+                      exclude: tuple[float | None, float | None] | None = None, scale: float = 1.0) -> Any:
+    """The observer of ``model`` as the board scored on block ``k`` has it: fitted on the blocks before ``k`` only
+    (several runs: the runs before it; one run: the span of the blocks before it), never on block ``k`` or later.
+    The one place that says which samples a fold's observer sees: the reported score (fitting.py's refit) and the
+    switched-on selection (:func:`observer_block_columns`) both call it."""
+    from host.learning.empirical.observer import fit_observer
+
+    if len(runs) >= 2:
+        return fit_observer(model, list(runs[:k]), exclude=exclude, scale=scale)
+    past = [b for b in blocks if b["block"] < k]
+    span = [(min(b["t_start_s"] for b in past), max(b["t_end_s"] for b in past))]
+    return fit_observer(model, runs, spans=span, exclude=exclude, scale=scale)
+
+
+def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], labels: np.ndarray, blocks: Sequence[dict[str, Any]],
+                           terms: Sequence[tuple[str, float]], reference_C: dict[str, float], target: str = "direct",
+                           channel: str | None = None, exclude: tuple[float | None, float | None] | None = None,
+                           scale: float = 1.0) -> dict[int, Any]:
+    """{block k >= 1: StartedColumns}: every candidate term's column on block k as a board switched on at the block's
+    start with its observer computes it, for whichever structure the selection tries.
+
+    The inputs are the board's (temperatures over the fixed ``reference_C``, host/learning/empirical/observer.py
+    ``inputs``) on the block as its own run (:func:`block_run`); each lag column is its filter from rest plus the
+    start estimate decaying (dynamic.StartedColumns). The start estimate of a structure's term is what the observer
+    of *that structure* gives: fitted for the structure's own signals (its regressors on the board), on the blocks
+    before k only (:func:`fit_fold_observer`), read at the block's first sample (``Observer.initial_states``). An
+    observer's estimate of one state does not depend on the other states, so one observer fitted with every lag of
+    the structure's signals gives the starts of every structure with those signals: one fit per (block, signal set).
+    """
+    from host.learning.empirical.dynamic import DynamicModel, StartedColumns, _lag_filter_fast
+    from host.learning.empirical.observer import inputs, signals_of
+
+    terms = [(str(n), float(tau)) for n, tau in terms]
+    names = signals_of(terms)
+    lag_taus = sorted({tau for _, tau in terms if tau > 0})
+    index = {term: j for j, term in enumerate(terms)}
+    times = np.concatenate([a.time_s for a in arrays])
+    y = np.concatenate([a.y for a in arrays])
+    everything = DynamicModel([(n, 0.0) for n in names], np.zeros(len(names)), 0.0, target, channel, reference_C=reference_C)
+    out = {}
+    for b in blocks:
+        k = b["block"]
+        if k == 0:
+            continue
+        rows = labels == k
+        tk = times[rows]
+        t, sig = inputs(everything, block_run(runs, b))
+        missing = [n for n in names if n not in sig]
+        if missing:
+            raise EmpiricalDataError("block %d: the signal(s) %s are missing from the block's logs" % (k, ", ".join(missing)))
+        rest = np.empty((tk.size, len(terms)))
+        decay = np.zeros((tk.size, len(terms)))
+        U = np.column_stack([sig[n] for n in names])
+        for tau in sorted({tau for _, tau in terms}):
+            filtered = np.asarray(_lag_filter_fast(t, U, tau))  # from 0 at the block's first sample (tau 0: the input)
+            d = np.interp(tk, t, np.exp(-(t - t[0]) / tau)) if tau > 0 else None
+            for i, n in enumerate(names):
+                j = index.get((n, tau))
+                if j is not None:
+                    rest[:, j] = np.interp(tk, t, filtered[:, i])
+                    if d is not None:
+                        decay[:, j] = d
+        u0 = {n: float(sig[n][0]) for n in names}
+        out[k] = StartedColumns(rest, decay, y[rows], _StartEstimates(runs, blocks, k, terms, index, lag_taus, u0, reference_C,
+                                                                      target, channel, exclude, scale))
+    return out
+
+
+class _StartEstimates:
+    """start(cols) of StartedColumns for one block: the observer of the structure's signal set, fitted on the blocks
+    before it, read at the block's first sample; cached per signal set."""
+
+    def __init__(self, runs, blocks, k, terms, index, lag_taus, u0, reference_C, target, channel, exclude, scale):
+        self.runs, self.blocks, self.k, self.terms, self.index = runs, blocks, k, terms, index
+        self.lag_taus, self.u0, self.reference_C = lag_taus, u0, reference_C
+        self.target, self.channel, self.exclude, self.scale = target, channel, exclude, scale
+        self.cache: dict[frozenset, np.ndarray] = {}
+
+    def __call__(self, cols):
+        from host.learning.empirical.dynamic import DynamicModel
+
+        cols = list(cols)
+        order = list(dict.fromkeys(self.terms[c][0] for c in cols))  # the structure's signals, first-use order
+        key = frozenset(order)
+        vec = self.cache.get(key)
+        if vec is None:
+            vec = np.zeros(len(self.terms))
+            lagged = [(n, tau) for n in order for tau in self.lag_taus]
+            if lagged:
+                model = DynamicModel(lagged, np.zeros(len(lagged)), 0.0, self.target, self.channel, reference_C=self.reference_C)
+                obs = fit_fold_observer(model, self.runs, self.blocks, self.k, self.exclude, self.scale)
+                for j, v in obs.initial_states({n: self.u0[n] for n in order}).items():
+                    if lagged[j] in self.index:  # a lag of the structure's signals that is among the candidates
+                        vec[self.index[lagged[j]]] = v
+            self.cache[key] = vec
+        return vec[cols]
+
+
+BASELINE = "mlr_all"  # the fixed reference a dynamic model's forward-chaining score is reported beside
+
+
+def baseline_mlr_all(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], target: str, channel: str | None,
+                     sensors: Sequence[str], fit_intercept: bool = True,
+                     window: tuple[float | None, float | None] | None = None,
+                     exclude: tuple[float, float] | None = None) -> dict[str, Any]:
+    """Forward-chaining score of a plain MLR on every candidate sensor (temperatures over the fixed reference, so
+    switched on at a block's start it predicts as one that never stopped) on the same ``blocks``: block k scored by
+    the MLR fitted on the blocks before it. A fixed reference, chosen by nothing, that a dynamic model's own score is
+    reported beside (``statistics.forward_chaining.baseline_mlr_all``)."""
+    from host.learning.empirical.fitting import fit_model
+
+    runs = list(runs)
+    start = {b["block"]: b["t_start_s"] for b in blocks}
+    lo = None if window is None else window[0]
+
+    def refit(k):
+        if len(runs) >= 2:
+            return fit_model(runs[:k], "mlr", target, channel, list(sensors), fit_intercept, window=window, exclude=exclude,
+                             forward_chaining=False)
+        return fit_model(runs, "mlr", target, channel, list(sensors), fit_intercept, window=(lo, start[k]), exclude=exclude,
+                         forward_chaining=False)
+
+    out = forward_chaining(runs, blocks, refit, target)
+    return {"method": "mlr", "sensors": list(sensors), "rmse_um": out["rmse_um"], "worst_um": out["worst_um"],
+            "pooled_um": out["pooled_um"],
+            "structure": "MLR on all %d candidate sensors (fixed reference), refitted on the blocks before each scored block" % len(sensors)}

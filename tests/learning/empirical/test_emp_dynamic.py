@@ -48,7 +48,12 @@ def test_structure_and_time_constants_are_recovered(make_direct):
     assert terms[("spindle_krpm", 1800.0)] == pytest.approx(2, rel=0.05)
     st = model.statistics
     assert st["cv_groups"] == 5 and st["rmse"] < 0.05 and st["history"][0]["action"] == "start"
-    assert model.sensors == ["t1"]
+    # scored as a board switched on at each block (the default), a further sensor may join as an input of the observer
+    # only (it helps estimate the lag states at the start; its own gain stays ~0): the truth is still the model
+    assert model.sensors[0] == "t1"
+    assert all(abs(c) < 0.02 for term, c in terms.items() if term not in (("T:t1", 3600.0), ("spindle_krpm", 1800.0)))
+    continuous = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200), forward_state="continuous")
+    assert continuous.sensors == ["t1"] and len(continuous.terms) == 2
     # a static MLR on all sensors cannot represent the lags
     static = fit_model([run], "mlr", target="direct", channel="ch1")
     assert static.statistics["rmse"] > 5 * st["rmse"]
@@ -87,7 +92,9 @@ def test_document_round_trip_command_line_and_bad_documents(make_direct, tmp_pat
     assert doc["kind"] == "dynamic" and doc["thermal"]["reference"] == "fixed" and doc["thermal"]["observer"]["states"]
     assert set(doc["sensors"]) <= {"t1", "t2"} and doc["training"]["candidate_sensors"] == ["t1", "t2"]
     assert main(["predict", out, folder, "--out", str(tmp_path / "p.csv"), "--json", str(tmp_path / "p.json")]) == 0
-    assert json.loads(open(str(tmp_path / "p.json")).read())["rmse_um"] < 0.1
+    # predict from the document reproduces the fit on its training run (a cold start: the observer's start is the rest)
+    # (the structure is chosen for boards switched on at each cycle, so it need not be the truth: test_emp_forward.py)
+    assert json.loads(open(str(tmp_path / "p.json")).read())["rmse_um"] == pytest.approx(doc["statistics"]["rmse"], rel=1e-3)
     # without an observer: rises over the run's start, filters from rest
     plain = str(tmp_path / "plain.json")
     assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", "--sensors", "t1,t2", folder, "--out", plain,
