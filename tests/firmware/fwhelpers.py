@@ -217,6 +217,23 @@ def compile_mpy(fakes=False):
     return build(os.path.join(HERE, "manifest.py") if fakes else BOARD_MANIFEST).root
 
 
+# MicroPython source: a file whose next write reaches the flash only as far as `view` (a power cut in the middle of a
+# record); the warm-state tests (heat.bin, lags.bin) put it in front of their scripts
+POWER_CUT_FILE = r"""
+class Cut:
+    # the power fails after the first k bytes of the record reached the flash
+    def __init__(self, f, view):
+        self.f = f
+        self.view = view
+    def seek(self, o, w=0):
+        return self.f.seek(o, w)
+    def write(self, b):
+        return self.f.write(self.view)
+    def flush(self):
+        self.f.flush()
+"""
+
+
 def run_micropython(script, cwd, path, heap="128K", timeout=120):
     """Run ``script`` (text) on the chosen MicroPython; returns stdout, fails on error.
 

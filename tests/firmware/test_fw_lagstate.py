@@ -13,7 +13,7 @@ import struct
 
 import pytest
 
-from fwhelpers import (HELLO_REFS_AT, cmd, compile_mpy, frames, make_table, provision, run_cycles, run_micropython,
+from fwhelpers import (POWER_CUT_FILE, HELLO_REFS_AT, cmd, compile_mpy, frames, make_table, provision, run_cycles, run_micropython,
                        scmd)
 
 SETTLE_S = 3000.0
@@ -301,17 +301,6 @@ try:
 finally:
     micropython.heap_unlock()
 print("locked", free - gc.mem_free(), h.seq - seq0)
-class Cut:
-    # the power fails after the first k bytes of the record reached the flash
-    def __init__(self, f, view):
-        self.f = f
-        self.view = view
-    def seek(self, o, w=0):
-        return self.f.seek(o, w)
-    def write(self, b):
-        return self.f.write(self.view)
-    def flush(self):
-        self.f.flush()
 for k in CUTS:
     h = app.lags
     real = h.f
@@ -348,7 +337,7 @@ def test_writes_in_the_heap_locked_cycle_and_power_cuts_on_micropython(tmp_path,
     t = parse_table(observer_table)
     n = 18 + 4 * (t.nf + t.n_sensors + 3)
     cuts = sorted(random.Random(17).sample(range(1, n), 5)) + [n]
-    out = run_micropython("CUTS = %r\n" % cuts + MP_SCRIPT, str(tmp_path), mpy, "256K").split("\n")
+    out = run_micropython("CUTS = %r\n" % cuts + POWER_CUT_FILE + MP_SCRIPT, str(tmp_path), mpy, "256K").split("\n")
     word, dfree, writes = out[0].split()
     assert word == "locked" and int(dfree) == 0 and int(writes) == 2
     for k, line in zip(cuts, out[1:]):

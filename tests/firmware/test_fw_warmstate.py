@@ -10,7 +10,7 @@ import struct
 
 import pytest
 
-from fwhelpers import HELLO_REFS_AT, compile_mpy, frames, provision, run_cycles, run_micropython, scmd
+from fwhelpers import POWER_CUT_FILE, HELLO_REFS_AT, compile_mpy, frames, provision, run_cycles, run_micropython, scmd
 
 SAVE_MS = 600000
 TEMPS = (22.0, 23.0)  # T1 base sensor, T2 the air
@@ -185,17 +185,6 @@ try:
 finally:
     micropython.heap_unlock()
 print("locked", free - gc.mem_free(), h.seq - seq0)
-class Cut:
-    # the power fails after the first k bytes of the record reached the flash
-    def __init__(self, f, view):
-        self.f = f
-        self.view = view
-    def seek(self, o, w=0):
-        return self.f.seek(o, w)
-    def write(self, b):
-        return self.f.write(self.view)
-    def flush(self):
-        self.f.flush()
 for k in CUTS:
     h = app.heat
     real = h.f
@@ -229,7 +218,7 @@ def test_state_writes_in_the_heap_locked_cycle_and_power_cuts_on_micropython(tmp
     (tmp_path / "table_a.bin").write_bytes(screw_table)
     n = 18 + 4 * 8
     cuts = sorted(random.Random(13).sample(range(1, n), 5)) + [n]
-    out = run_micropython("CUTS = %r\n" % cuts + MP_SCRIPT, str(tmp_path), mpy, "256K").split("\n")
+    out = run_micropython("CUTS = %r\n" % cuts + POWER_CUT_FILE + MP_SCRIPT, str(tmp_path), mpy, "256K").split("\n")
     word, dfree, writes = out[0].split()
     assert word == "locked" and int(dfree) == 0 and int(writes) == 2
     for k, line in zip(cuts, out[1:]):
