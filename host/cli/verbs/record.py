@@ -104,10 +104,15 @@ def run(args: argparse.Namespace) -> int:
     check_output_dir(args.out)
     config_names = _config_names(args.config) if args.config else None
     previous = signal.signal(signal.SIGTERM, _on_sigterm)
+    # SIGINT ends a recording too, even when the recorder inherited it ignored: a shell script's background job
+    # (`tcomp record ... &`, then `kill -INT`) starts with SIGINT ignored, and Python then never raises
+    # KeyboardInterrupt, so the run could only be killed, not ended
+    previous_int = signal.signal(signal.SIGINT, signal.default_int_handler)
     try:
         return _record(args, sensors, config_names)
     finally:
         signal.signal(signal.SIGTERM, previous)
+        signal.signal(signal.SIGINT, previous_int)
 
 
 def _motion_row(r):
