@@ -1,8 +1,15 @@
-"""Synthetic runs with known truth for the empirical-model tests."""
+"""Synthetic runs with known truth for the empirical-model tests; puts this folder on sys.path for exactlag.py."""
+import os
+import sys
+
 import numpy as np
 import pytest
 
 from host.data.runs import Errors, Run, Spindle, Temperatures
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+if HERE not in sys.path:
+    sys.path.insert(0, HERE)
 
 
 def make_slope_run(name="run", seed=0, n_sweeps=12, n_sensors=4, coef=(0.004, -0.002), geo=(1.0, 0.01, -2e-5),
