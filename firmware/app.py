@@ -153,6 +153,10 @@ class App:
         self.ref_state = 0
         self.heat = None  # firmware.warmstate.HeatStore of a screw table with latched references
         self.warm = False  # the screw state was restored from heat.bin (not settled at the first good cycle)
+        # a screw table's observer (table.obs) starts the segments at the first all-good cycle, and SETTLING counts
+        # settle_s from there; cleared by a restored state, a latch (a cold start) or a faulty nut sensor then
+        self.sobs = False
+        self.nut = -1  # a screw observer table's index of its nut sensor: read by the start only, never needed by the model
         self.lags = None  # firmware.warmstate.LagStore of a dynamic table
         self.lag_rec = None  # its stored record, until the first all-good cycle decides whether to trust it
         self.lag_verdict = LAGS_NONE
@@ -255,15 +259,22 @@ class App:
         self.warm = False
         self.step_ms = 0
         self._open_heat(table, ev, st == _REFS_STORED)
+        self.sobs = self.screw and table.obs and not self.warm
+        self.nut = table.sn if self.screw and table.obs else -1
         self._open_lags(table, ev, st == _REFS_STORED or table.ref_mode != 1)
         self._span()
 
-    def _settle(self, ev):
+    def _settle(self, ev, nut_bad):
         # the first cycle in which every sensor the table needs reads good
         self.unsettled = False
         if self.warm:
             ev.da0 = ev.da  # the restored state keeps its heat; the air steps on from now
-        else:
+        elif self.sobs and not nut_bad:
+            ev.estimate()  # the observer (allocation-free, tests/firmware/test_fw_heaplock.py)
+            self.settle_s = 0
+            self.settle_ms = 0
+        else:  # no observer, or its nut sensor reads no good value: the cold start, no SETTLING (docs/firmware.md)
+            self.sobs = False
             ev.settle()
 
     def _open_heat(self, table, ev, restore):
@@ -370,6 +381,7 @@ class App:
         if self.dyn:
             self.step_ms = 0  # the filters step at dt_ms from the cold start, as the host's from the run's first sample
         self.unlatched = False
+        self.sobs = False  # a latch is a cold start by definition: the screw in equilibrium with the air, no estimate
         self.ref_state = _REFS_LATCHED if self.store.save_refs(t, ev.ref) else _REFS_UNSAVED
         h = self.lags
         if h is not None:  # a latch is a cold start: the filters at rest, stored under the new references
@@ -544,12 +556,15 @@ class App:
         else:
             needed = 0
             never = False
+            nut_bad = False
             temps = ev.temps
             m = self.map
             for j in range(len(m)):
                 i = m[j]
                 if ch.good[i]:
                     temps[j] = ch.temp[i]
+                elif j == self.nut and not self.unlatched:  # read by the start only (a cold start without it); a latch needs it
+                    nut_bad = True
                 else:
                     needed = 1
                     if not ch.have_good[i]:
@@ -571,7 +586,7 @@ class App:
                     self._latch(ev, t)
             ev.update()
             if self.unsettled and not needed:
-                self._settle(ev)
+                self._settle(ev, nut_bad)
             if self.lag_rec is not None and not needed:
                 self._restore_lags(ev, t)  # once per table start: a stored state, if it is trusted
             link = self.obs_link
@@ -581,7 +596,7 @@ class App:
                 self.step_ms = 0
                 self.settle_s = 0
                 self.settle_ms = 0
-            elif self.dyn and self.settle_s < t.settle_s:
+            elif (self.dyn or (self.sobs and not self.unsettled)) and self.settle_s < t.settle_s:
                 v = self.settle_ms + dt  # dt <= _CAP: small ints throughout
                 k = v // 1000
                 self.settle_ms = v - k * 1000
@@ -612,7 +627,8 @@ class App:
                 s |= _CLAMPED
             if ev.extrap:
                 s |= _EXTRAPOLATING
-            if self.dyn and t.obs and (self.unobserved or self.settle_s < t.settle_s):
+            if (self.dyn and t.obs and (self.unobserved or self.settle_s < t.settle_s)) or (
+                    self.sobs and self.settle_s < t.settle_s):
                 s |= _SETTLING
         lim = self.limiter
         s |= lim.update(raw_ref, raw_slope, raw_total, raw_prev, usable, dt)

@@ -85,7 +85,9 @@ _ACC_CONVY = const(53)  # screw: a segment's state minus the air (state units)
 _ACC_LMUL = const(54)  # screw: the extra convection loss, weight x (state - air)
 _ACC_OMUL = const(56)  # dynamic: observer gain x filter input (issue 21)
 _ACC_OSUM = const(58)  # dynamic: an observer row's sum (guard bits finer than the state)
-_N_ACCS = const(59)
+_ACC_NMUL = const(59)  # screw observer (issue 21): gain x the nut sensor's rise
+_ACC_NSUM = const(61)  # screw observer: a segment's estimate before its clamp
+_N_ACCS = const(62)
 
 _FEED_W_BITS = const(19)  # feed/range weights: fraction of the range per segment, 2**-19
 _FEED_LIMB = const(10)
@@ -807,6 +809,47 @@ class Evaluator:
             self.T[i] = v
         self.da0 = self.da
         self._refresh()
+
+    def estimate(self):
+        """The screw's segment states from its sensors (the observer, table.obs; issue 21, docs/firmware.md): the air's
+        state as settle() sets it plus, per segment, Gn[i] x r + rN[i], r the nut sensor sn's rise over sensor sr
+        (milli-K, clamped to +-Rn), then clamped to the state bounds. A table without an observer gets settle(): the
+        cold start. Runs once per start, allocation-free."""
+        self.settle()
+        t = self.table
+        if not t.obs:
+            return
+        chk = self.check
+        r = self._rise(t.sn) - self._rise(t.sr)
+        if r > t.Rn:
+            r = t.Rn
+        elif r < -t.Rn:
+            r = -t.Rn
+        T = self.T
+        a = T[0]
+        Gn = t.Gn
+        shGn = t.shGn
+        rN = t.rN
+        for i in range(t.M):
+            v = a + self._mul(_ACC_NMUL, Gn[i], r, t.Lr, t.nr, shGn[i]) + rN[i]
+            if chk:
+                self._note(_ACC_NSUM, v)
+            if v < t.Tlo:
+                v = t.Tlo
+            elif v > t.Tmax:
+                v = t.Tmax
+            T[i] = v
+        self._refresh()
+
+    def _rise(self, i):
+        """Sensor i's reading clamped to its envelope, over its reference (milli-K), as update() reads it."""
+        t = self.table
+        v = self.temps[i]
+        if v < t.env_lo[i]:
+            v = t.env_lo[i]
+        elif v > t.env_hi[i]:
+            v = t.env_hi[i]
+        return v - self.ref[i]
 
     def settle_restored(self):
         """The state ``T`` was written from a stored one (a warm restart): refresh what depends on it."""

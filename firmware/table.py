@@ -19,7 +19,7 @@ from micropython import const
 
 MAGIC = b"TCTB"
 NAME_FORBIDDEN = b",*$"  # besides non-printable bytes: the $TC frames' separators (names are sent in the hello)
-_VERSION = const(5)  # 5: screw effect terms for speed_dependent_heat (fg g0 Gv shGv Lgu ngu) and moving_convection (D shD fe Ly ny) (issue 19), the dynamic table's observer (obs settle_s LO nO Go shO gO rG, issue 21); 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
+_VERSION = const(6)  # 6: the screw table's observer (obs settle_s sn sr Rn Lr nr Gn shGn rN after the screw block, issue 21; a version 5 table still loads, without it); 5: screw effect terms for speed_dependent_heat (fg g0 Gv shGv Lgu ngu) and moving_convection (D shD fe Ly ny) (issue 19), the dynamic table's observer (obs settle_s LO nO Go shO gO rG, issue 21); 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
 _AXIS_SIZE = const(8)
@@ -115,7 +115,7 @@ def parse_table(buf, expected_sensors=None):
     if bytes(buf[0:4]) != MAGIC:
         raise TableError(REASON_MAGIC)
     version = buf[4]
-    if version != _VERSION:
+    if version != _VERSION and version != _VERSION - 1:  # format 5 differs only by the screw observer's words
         raise TableError(REASON_VERSION, "table format version %d is no longer supported; re-export the model "
                          "with this tcomp (format %d)" % (version, _VERSION) if version < _VERSION else "%d" % version)
     kind = buf[5]
@@ -239,6 +239,10 @@ _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:
 # then the observer (issue 21): obs (1: the lag states are estimated from the inputs at the first all-good cycle),
 # settle_s (SETTLING until then), the gains Go[j*nf + m] (filter j's state from filter m's input), their shifts shO,
 # each row's guard bits gO and rounding bias rG
+# the screw's observer (format 6, issue 21): obs (1: the segment states are estimated from the nut sensor sn's rise over
+# sensor sr when no stored state is restored), settle_s (SETTLING until then), the rise's clamp Rn (milli-K) and limbs,
+# per segment the gain Gn, its shift shGn and the constant rN (state units)
+_SCREW_OBS = "obs:P settle_s:T sn:a sr:a Rn:T Lr:L nr:4 Gn=m shGn=m rN=m |"
 _DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F Lp:L np:4 shp2:s shp:s LX:L nX:4 LY:L nY:4 nf:N "
             "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j obs:P settle_s:T LO:L nO:4 Go=O shO=O gO=j rG=j |")
 
@@ -254,6 +258,11 @@ def model_sections(kind, t):
         yield _POSITION
     if kind == _KIND_SCREW_REDUCED:
         yield _SCREW
+        if getattr(t, "version", _VERSION) == _VERSION:
+            yield _SCREW_OBS
+        else:  # format 5: no observer, the cold start
+            t.obs = 0
+            t.settle_s = 0
 
 
 def list_length(code, t):
@@ -308,6 +317,11 @@ def _check(t):
                 k = j * t.nf + m
                 if not -_SH <= t.shO[k] <= _SH or (t.Go[k] and (not t.obs or not t.A[j])):  # gains only into lag states
                     raise TableError(REASON_FIELD, "observer gain %d,%d" % (j, m))
+        return
+    if hasattr(t, "rN"):
+        if t.sn >= t.n_sensors or t.sr >= t.n_sensors or (t.obs and (t.sn < 0 or t.sr < 0 or t.sn == t.sr)) or (
+                not t.obs and (t.sn >= 0 or t.sr >= 0 or t.Rn)):
+            raise TableError(REASON_FIELD, "screw observer sensors %d, %d" % (t.sn, t.sr))
         return
     if hasattr(t, "Ka"):
         if t.air >= t.n_sensors:

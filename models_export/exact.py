@@ -137,6 +137,8 @@ class Model:
         tenv = _obj(env.get("temperature_C"), "envelope.temperature_C")
         refs = _obj(doc.get("reference_C"), "reference_C")
         thermal = _obj(doc.get("thermal"), "thermal")
+        if kind == "screw":
+            refs = self._screw_observer_sensors(thermal, tenv, refs)
         # direct: the offset does not depend on the position (linear_direct, dynamic with target "direct")
         self.direct = self.kind == "linear_direct" or (self.kind == "dynamic" and thermal.get("target") == "direct")
         if self.kind == "dynamic" and thermal.get("target") not in ("direct", "slope"):
@@ -458,6 +460,57 @@ class Model:
                 # y_j = sum g x_m in the signals' units; x_m = per_m x Uc[m], Y[j] = y_j / per_j x 2**fy[j]
                 self.obs_gain[j][m] += g * self.dyn[m]["per"] * p2(self.dyn[j]["fy"]) / self.dyn[j]["per"]
         self.observer = obs
+
+    def _screw_observer_sensors(self, thermal: dict[str, Any], tenv: dict[str, Any], refs: dict[str, Any]) -> dict[str, Any]:
+        """A screw document's observer (thermal.observer, host/learning/screw/observer.py; issue 21) read for the table:
+        ``screw_obs`` (None: not carried, ``screw_obs_note`` says why) with the nut sensor appended to the table's sensors
+        (its reference is the observer's under base_ref "fixed", latched at a cold start under "run_start"). Returns the
+        references with the nut sensor's."""
+        self.screw_obs: dict[str, Any] | None = None
+        self.screw_obs_note: str | None = None
+        obs = thermal.get("observer")
+        if obs is None:
+            return refs
+        where = "thermal.observer"
+        obs = _obj(obs, where)
+        if obs.get("method") != "static_state_estimate":
+            raise ExportError("%s.method must be 'static_state_estimate', found %r" % (where, obs.get("method")))
+        nut = _sensor_name(obs.get("sensor"), where + ".sensor")
+        air = _sensor_name(obs.get("air_sensor"), where + ".air_sensor")
+        red = thermal.get("reduced")
+        M = red.get("segments") if isinstance(red, dict) else None
+        gains = obs.get("gains_K_per_K")
+        if not isinstance(gains, list) or len(gains) != M:
+            raise ExportError("%s.gains_K_per_K must list %r numbers (one per reduced segment), found %r" % (where, M, gains))
+        gains = [F(_num(g, "%s.gains_K_per_K[%d]" % (where, i))) for i, g in enumerate(gains)]
+        settle = _num(obs.get("settle_s"), where + ".settle_s")
+        if not 0 <= settle <= (1 << 30) - 1:
+            raise ExportError("%s.settle_s must be 0..%d s, found %r" % (where, (1 << 30) - 1, settle))
+        if air not in self.sensors:
+            raise ExportError("%s.air_sensor %r is not in sensors %r" % (where, air, self.sensors))
+        if nut == air or nut in self.sensors:
+            raise ExportError("%s.sensor %r must be a sensor the model itself does not read (sensors %r)" % (where, nut, self.sensors))
+        if nut not in tenv:
+            self.screw_obs_note = ("the document records no envelope.temperature_C for the observer's nut sensor %s (fitted "
+                                   "before tcomp carried the observer into the table): re-fit the model" % nut)
+            return refs
+        run_start = isinstance(red, dict) and red.get("base_ref") == "run_start"
+        ref_C = obs.get("reference_C")
+        exact: dict[str, Fraction] | None = None
+        if run_start:
+            if ref_C is not None:
+                raise ExportError("%s.reference_C must be null under thermal.reduced.base_ref 'run_start' (the board "
+                                  "latches the references), found %r" % (where, ref_C))
+            lo, hi = _pair(tenv[nut], "envelope.temperature_C.%s" % nut)
+            nut_ref = (lo + hi) / 2  # a placeholder: the board latches every reference at a cold start (ref_mode 1)
+        else:
+            ref_C = _obj(ref_C, where + ".reference_C")
+            exact = {n: F(_num(ref_C.get(n), "%s.reference_C.%s" % (where, n))) * 1000 for n in (nut, air)}
+            nut_ref = ref_C[nut]
+        self.sensors.append(nut)
+        self.screw_obs = {"sensor": nut, "air_sensor": air, "gains": gains, "settle_s": math.ceil(F(settle)),
+                          "reference_mC": exact, "document": obs}
+        return dict(refs, **{nut: nut_ref})
 
     def _sensor_index(self, name: str, where: str) -> int:
         if name not in self.sensors:

@@ -189,7 +189,7 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
             "per_step_residual_K": max(sc["rho_state_units"]) / (1 << f["ft"]),
             "horizon": "unbounded (steady state): |e| <= v with v >= |A| v + rho verified exactly",
         }
-        report["screw"]["observer"] = screw_observer_status(doc)
+        report["screw"]["observer"] = screw_observer_status(doc, model, planner.sobs_cert)
         # what the board does against the host model: the integer arithmetic (certified) plus the reduction
         # (measured on the training runs)
         assert red_cert is not None  # a screw document (exact.TABLE_KINDS) whose thermal.reduced Model read: reduction() read it too
@@ -216,23 +216,34 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
 
 
 SCREW_OBSERVER_NOT_CARRIED = (
-    "table format %d has no screw observer: without a trusted heat.bin (none, torn, another table, or a machine that "
-    "cooled or heated while the board was off) the board starts the screw cold, in equilibrium with the air, and its "
-    "offsets are off until the screw's heat relaxes (docs/screw-model.md, \"Restart observer\")")
+    "%s; without a trusted heat.bin (none, torn, another table, or a machine that cooled or heated while the board was "
+    "off) the board starts the screw cold, in equilibrium with the air, and its offsets are off until the screw's heat "
+    "relaxes (docs/screw-model.md, \"Restart observer\")")
 
 
-def screw_observer_status(doc: dict[str, Any] | None) -> dict[str, Any]:
-    """What the table does with the screw document's thermal.observer (issue 21; host/learning/screw/observer.py): the
-    firmware cannot carry it yet, so the report says so beside the host's figures, and ``tcomp export`` prints it as a
-    warning. A document without an observer gets its recorded note (why the sensors did not allow one)."""
+def screw_observer_status(doc: dict[str, Any] | None, model: Model | None = None,
+                          cert: dict[str, Any] | None = None) -> dict[str, Any]:
+    """What the table does with the screw document's thermal.observer (issue 21; host/learning/screw/observer.py). Carried
+    (table format 6): the nut sensor is a table sensor and ``certificate`` is the integer start's (Planner.screw_observer:
+    its largest deviation from the host's estimate, per segment and in um of offset). Not carried (a document that does
+    not record the nut sensor's envelope): the reason, which ``tcomp export`` prints as a warning. A document without an
+    observer gets its recorded note (why the sensors did not allow one)."""
     th = doc.get("thermal") if isinstance(doc, dict) else None
     obs = th.get("observer") if isinstance(th, dict) else None
     if not isinstance(obs, dict):
         note = th.get("observer_note") if isinstance(th, dict) else None
         return {"in_document": False, "carried": False, "note": note if isinstance(note, str) else "no observer in the document"}
-    out = {"in_document": True, "carried": False, "reason": SCREW_OBSERVER_NOT_CARRIED % VERSION}
+    out: dict[str, Any] = {"in_document": True, "carried": cert is not None}
+    if cert is None:
+        note = getattr(model, "screw_obs_note", None) or "the table does not carry it"
+        out["reason"] = SCREW_OBSERVER_NOT_CARRIED % note
     for key in ("sensor", "air_sensor", "start_error_um", "settle_s", "cold_start_error_um", "cold_settle_s"):
         out[key] = obs.get(key)
+    if cert is not None:
+        # the host's figures above (start_error_um: its estimate's bound on the training runs) and the board's integer
+        # start against the host's estimate (exact arithmetic; inside the state error bound the offset error includes)
+        out["certificate"] = cert
+        out["table_settle_s"] = cert["settle_s"]
     return out
 
 

@@ -23,7 +23,7 @@ import numpy as np
 # NAME on CPython only (its globals() loop), which pyright cannot see
 from firmware.evaluate import (
     ACC_AMUL, ACC_BMUL, ACC_CMUL, ACC_CONVY, ACC_CUM, ACC_CUMMUL, ACC_D, ACC_DE, ACC_DMUL, ACC_DX, ACC_EMUL, ACC_FEEDMUL,  # pyright: ignore[reportAttributeAccessIssue]
-    ACC_GEO, ACC_GEOMUL, ACC_GMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_LMUL, ACC_OMUL, ACC_OSUM, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW,  # pyright: ignore[reportAttributeAccessIssue]
+    ACC_GEO, ACC_GEOMUL, ACC_GMUL, ACC_HMUL, ACC_KMUL, ACC_LIMB, ACC_LMUL, ACC_NMUL, ACC_NSUM, ACC_OMUL, ACC_OSUM, ACC_OUT, ACC_P, ACC_PMUL, ACC_QMUL, ACC_ROW,  # pyright: ignore[reportAttributeAccessIssue]
     ACC_ROWMUL, ACC_S, ACC_SEGMUL, ACC_SLOPE, ACC_SMUL, ACC_STATE, ACC_SUM, ACC_THMUL, ACC_TRAVEL, ACC_UGMUL, ACC_XL, ACC_Y,  # pyright: ignore[reportAttributeAccessIssue]
     ACC_YMUL, FEED_LIMB, FEED_W_BITS,  # pyright: ignore[reportAttributeAccessIssue]
 )
@@ -119,6 +119,7 @@ class Planner:
         self.obs_cert: list[dict[str, Any]] | None = None  # dynamic tables with an observer: per lag state, its certified start (dyn_observer)
         self.obs_e0: dict[int, Num] = {}  # filter index -> |start error| (state units)
         self.obs_start_um: Num | None = None  # the observer's start error carried to the offset (um)
+        self.sobs_cert: dict[str, Any] | None = None  # screw tables with an observer: its certified start (screw_observer)
         # set by the kind's planning (declared here for their types): the dynamic filters' and the screw state's
         # certificates (report entries), and thermal.reduced as read (screw_prepare)
         self.dyn_cert: list[dict[str, Any]]
@@ -672,6 +673,7 @@ class Planner:
         _merge(self.rec, sub.rec)
         self.terms += sub.terms
         self.state_cert = sub.state_cert
+        self.sobs_cert = sub.sobs_cert
         return out
 
     def _screw_state(self, fo: int, ns: int) -> tuple[IntInterval, Interval]:
@@ -728,6 +730,8 @@ class Planner:
             e0 = iv_abs(iv_add(iv_mul(_c(F(Ka) / p2(shKa) - p2(ft) / 1000), (F(d_air[0]), F(d_air[1]))), floor_err(k)))
         else:
             Ka, shKa, e0 = 0, 0, F(0)
+            a0_iv = (0, 0)
+        e_start = max(e0, self.screw_observer(ft, Tlq, Tq, Ka, shKa, a0_iv, e0))
         # speed_dependent_heat: g = g0 + Gv*U at 2**-fg (below 2**20, so g x travel limbs of 9 bits stay small ints)
         if g0 is None:
             fg, g0q, Gvq, shGv, Lgu, ngu = 0, 0, 0, 0, 1, 1
@@ -892,16 +896,16 @@ class Planner:
         if v is None:
             raise ExportError("thermal.reduced.A: the recurrence is not contracting (|A| has spectral radius >= 1); "
                               "the integer state error cannot be bounded")
-        if e0:
+        if e_start:
             AF = [[F(float(abs(a))) for a in row] for row in np.asarray(A, dtype=float)]
             if any(sum(row) > 1 for row in AF):
                 raise ExportError("thermal.reduced.A: a row sum above 1, the start state's error cannot be bounded")
-            v = [x + e0 for x in v]
+            v = [x + e_start for x in v]
         if emax and max(v) + e0 >= p2(ft):
             raise ExportError("thermal.reduced.convection_per_mm: the state error bound %.3g K exceeds the 1 K margin of the "
                               "state minus the air" % float((max(v) + e0) / p2(ft)))
         self.state_cert = {"rho_state_units": [float(r) for r in rho], "v_state_units": [float(x) for x in v], "ft": ft,
-                           "start_error_state_units": float(e0)}
+                           "start_error_state_units": float(e_start)}
         f.update(ft=ft, Tmax=Tq, Tlo=Tlq, Ls=Ls, ns=ns, fc=fc, gs=gs, C=[c for row in Cq for c in row], Lu=Lu, nu=nu, B=Bq,
                  shB=shB, rS=rS, W0=W0q, shW0=shW0, W1=W1q, shW1=shW1, Ka=Ka, shKa=shKa, Bu=Buq, shBu=shBu,
                  fg=fg, g0=g0q, Gv=Gvq, shGv=shGv, Lgu=Lgu, ngu=ngu, D=Dq, shD=shD, fe=fe, Ly=Ly, ny=ny)
@@ -984,6 +988,76 @@ class Planner:
         self.term("edges/fixed end rounded to 1 um", 0, geo_um * OU_PER_UM)
         f.update(G2=G2, shG2=shG2, H=H, shH=shH, fh=fh, Lx=Lx, nx=nx, shX=shX)
         return seg_iv, err_seg
+
+    def screw_observer(self, ft: int, Tlq: int, Tq: int, Ka: int, shKa: int, a0_iv: IntInterval, e_air: Num) -> Num:
+        """Quantise and certify the screw observer (Evaluator.estimate; issue 21); returns the largest |start error|
+        (state units) of a segment against the host's estimate T_i = a + G_i r (host/learning/screw/observer.py), 0
+        without an observer.
+
+        Segment i: v = a + mul(Gn[i], r, Lr, nr, shGn[i]) + rN[i], clamped to [Tlo, Tmax]; a is settle()'s air state
+        (error ``e_air``, plus the air reference's rounding under fixed references), r the nut's integer rise over sensor
+        sr, clamped to +-Rn. Against the host's a + G_i (r + c) (c: the integer references minus the observer's exact
+        ones, 0 when latched) the error is a's, G's quantisation times r, the floors and rN - G c (rN centres the
+        floors). Rn = 2 TA / max G: the estimate stays inside 3 TA < 2**30 and where the clamp acts the host's estimate
+        is beyond the state bounds anyway. The clamp to [Tlo, Tmax] only removes error when the host's estimate lies
+        inside them (a projection); the report says whether it can leave them over the envelope."""
+        m, f, rec, s = self.m, self.f, self.rec, self.s
+        M = s["M"]
+        obs = getattr(m, "screw_obs", None)
+        f.update(obs=0, settle_s=0, sn=-1, sr=-1, Rn=0, Lr=1, nr=1, Gn=[0] * M, shGn=[0] * M, rN=[0] * M)
+        self.sobs_cert = None
+        if obs is None:
+            return F(0)
+        i_n, i_r = m.sensors.index(obs["sensor"]), m.sensors.index(obs["air_sensor"])
+        r_iv = (m.d_lo[i_n] - m.d_hi[i_r], m.d_hi[i_n] - m.d_lo[i_r])
+        TA = max(Tq, -Tlq)
+        Gs = [g * p2(ft) / 1000 for g in obs["gains"]]  # state units per milli-K
+        gmax = max(abs(g) for g in Gs)
+        R = max(-r_iv[0], r_iv[1])
+        if gmax:
+            R = min(R, math.floor(2 * TA / gmax))
+        rc = (max(r_iv[0], -R), min(r_iv[1], R))
+        nr = 2
+        Lr = max(1, -(-max(R, 1).bit_length() // nr))
+        exact = obs["reference_mC"]
+        c = F(0)
+        if exact is not None:
+            c = (m.ref[i_n] - exact[obs["sensor"]]) - (m.ref[i_r] - exact[obs["air_sensor"]])
+        # the air's state against the host's a: settle()'s arithmetic and, under fixed references, the table's integer
+        # air reference against thermal.reduced.air_ref_C
+        err_a = (-F(e_air), F(e_air))
+        if s["air"] >= 0 and not m.ref_mode:
+            da = F(m.ref[s["air"]]) - F(float(m.red["air_ref_C"])) * 1000
+            err_a = iv_add(err_a, _c(-da * p2(ft) / 1000))
+        a_iv = (max(a0_iv[0], Tlq), min(a0_iv[1], Tq)) if s["air"] >= 0 else (0, 0)
+        Gn, shGn, rN, segs = [], [], [], []
+        worst = F(0)
+        um = F(0)
+        clamped = False
+        edges = s["edges"]
+        for i in range(M):
+            name = "thermal.observer.gains_K_per_K[%d]" % i
+            q, sh = fit_coef(Gs[i], limb_max(rc, Lr, nr), 0) if Gs[i] else (0, 0)
+            res, k = rec.mul(ACC_NMUL, (q, q), rc, Lr, nr, sh, name) if q else ((0, 0), 0)
+            bias = rnd(Gs[i] * c + F(k, 2))
+            err = iv_add(err_a, iv_mul(_c(F(q) / p2(sh) - Gs[i]), (F(rc[0]), F(rc[1]))), floor_err(k), _c(bias - Gs[i] * c))
+            tot = iv_add(a_iv, res, (bias, bias))
+            rec.note(ACC_NSUM, tot[0], tot[1], name)
+            est = iv_add((F(a0_iv[0]), F(a0_iv[1])), iv_mul(_c(Gs[i]), (F(r_iv[0]), F(r_iv[1]))))
+            clamped = clamped or est[0] < Tlq or est[1] > Tq
+            Gn.append(q)
+            shGn.append(sh)
+            rN.append(bias)
+            e = iv_abs(err)
+            worst = max(worst, e)
+            # the offset: segment i's state error over its length, alpha x length x error (largest at the far end)
+            um += abs(m.alpha) * (F(edges[i + 1]) - F(edges[i])) * e / p2(ft)
+            segs.append({"gain_K_per_K": float(obs["gains"][i]), "start_error_K": float(e / p2(ft))})
+        f.update(obs=1, settle_s=obs["settle_s"], sn=i_n, sr=i_r, Rn=R, Lr=Lr, nr=nr, Gn=Gn, shGn=shGn, rN=rN)
+        self.sobs_cert = {"sensor": obs["sensor"], "air_sensor": obs["air_sensor"], "settle_s": obs["settle_s"],
+                          "rise_clamp_mK": R, "segments": segs, "start_error_K": float(worst / p2(ft)),
+                          "start_error_um": float(um), "estimate_clamped_in_envelope": bool(clamped)}
+        return worst
 
     def screw_chord(self, seg_iv: IntInterval, err_seg: Interval, fo: int, fK: int) -> tuple[IntInterval, Interval]:
         """slope += KC * (seg(pos_hi) - seg(pos_lo)): the chord of the segment elongation over the envelope."""

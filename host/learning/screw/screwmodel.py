@@ -620,6 +620,13 @@ class ScrewModel:
         # the reduced state recovered from the nut sensor at power-on (issue 21), or why the sensors do not allow it
         from host.learning.screw.observer import fit_observer
         self.observer_, self.observer_note_ = fit_observer(self, [c.run for c in ctxs])
+        obs = self.observer_
+        if obs is not None and obs.sensor not in envelope.get("temperature_C", {}):
+            # the observer's nut sensor is a table input (its start, issue 21): its certified envelope is its training
+            # range widened like the other sensors' (models_export.exact reads it)
+            tn = np.concatenate([c.run.temperatures.column(obs.sensor) for c in ctxs])
+            envelope.setdefault("temperature_C", {})[obs.sensor] = [float(tn.min()) - BASE_ENVELOPE_MARGIN_K,
+                                                                    float(tn.max()) + BASE_ENVELOPE_MARGIN_K]
         return self
 
     # ------------------------------------------------------------ prediction
