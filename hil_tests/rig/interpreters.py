@@ -75,8 +75,9 @@ HEAPS = {
     "fw_heaplock_screw_modbus": {32: "106K", 64: "164K"},
     "fw_heaplock_dynamic_stream": {32: "106K", 64: "150K"},
     "fw_heaplock_dynamic_modbus": {32: "98K", 64: "144K"},
-    # tests/firmware/test_fw_micropython.py: boot, authorised upload, faults (smallest 100 kB on 32 bits)
-    "fw_scenario": {32: "112K", 64: "156K"},
+    # tests/firmware/test_fw_micropython.py: boot, authorised upload, faults (smallest 113 kB on 32 bits with table format
+    # 6, the screw observer; 112 kB before it, at 1 kB steps: the old 112 kB entry had no margin left)
+    "fw_scenario": {32: "124K", 64: "168K"},
     # the HIL rig's DUT: firmware + simulated chips + control channel, run from .mpy. On 32 bits every
     # MicroPython scenario passed at 112, 120 and 128 kB, but the 90-min soak once ran out at 116 kB
     # (a fragmented heap: not monotonic), so 20 % over 120 kB; 160 kB worked on 64 bits

@@ -40,6 +40,8 @@ def make_table(**kw):
         return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0))
     if kw.get("kind") == "screw":
         return screw_table(kw["sensors"])
+    if kw.get("kind") == "screw_observer":
+        return screw_table(kw["sensors"], observer=kw.get("settle_s", 3600.0))
     return pack(table_fields(**kw))
 
 
@@ -60,10 +62,11 @@ def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None):
     return export_model(restamp(doc)).table
 
 
-def screw_table(sensors, seed=5):
+def screw_table(sensors, seed=5, observer=None):
     """An exported screw table over ``sensors`` (base sensors[0], air sensors[1], the rest read and unused) with
     the effect terms of formats 4 and 5 (bearing heat per mm of travel, a reversal term, the friction heat's speed factor,
-    the extra convection while moving); 1 s steps."""
+    the extra convection while moving); 1 s steps. ``observer``: None, or the settle_s of a screw observer (format 6,
+    issue 21) whose nut sensor is sensors[2] (then the table's last sensor)."""
     import random
     from hil_tests.fixtures.samples import restamp, screw_doc
     from models_export import export_model
@@ -82,10 +85,16 @@ def screw_table(sensors, seed=5):
     doc["envelope"]["temperature_C"] = env
     doc["envelope"]["position_mm"] = [0.0, 700.0]
     doc["sensors"] = names
+    if observer is not None:
+        from hil_tests.fixtures.samples import with_screw_observer
+        doc["sensors"] = [n for n in names if n != names[2]]
+        del doc["reference_C"][names[2]]
+        with_screw_observer(doc, names[2], random.Random(seed), settle_s=observer, envelope_C=env[names[2]])
     table = export_model(restamp(doc)).table
     from firmware.table import parse_table
     t = parse_table(table)
     assert t.fg and t.Gv and min(t.D) > 0  # the table carries the speed terms the cycle must evaluate
+    assert t.obs == (observer is not None)
     return table
 
 
@@ -336,6 +345,10 @@ else:
     if DYN:
         msgs += [rtu(bytes([1, 16, 0, 18, 0, 2, 4, 0, 0, 0x10 + k, 0])) for k in range(5)]
 OBS = N // 2  # a dynamic table with an observer estimates its states again there (as after a table switch), under the lock
+try:
+    SOBS  # the prefix may say the table is a screw table with an observer: it starts the segments again at OBS
+except NameError:
+    SOBS = False
 sent = 0
 err = None
 free1 = 0  # every global exists before the lock: a new one could grow the module dict
@@ -346,6 +359,8 @@ try:
     for k in range(N):
         if DYN and k == OBS:
             app.unobserved = True
+        if SOBS and k == OBS:
+            app.unsettled = app.sobs = True
         board.serial.feed(msgs[k % len(msgs)])
         app.cycle()
         board.clock.t += 100

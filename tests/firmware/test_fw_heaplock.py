@@ -45,12 +45,14 @@ def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode, kind):
     """The dynamic table (1 s filter step: a step every 10 cycles, an observer that estimates the lag states at the
     first all-good cycle and again halfway through the locked cycles) with spindle speed and feed reports; the screw
     table (formats 4 and 5: bearing heat per mm of travel, the reversal term, the friction heat's speed factor and the
-    extra convection while moving) with position reports going up and back."""
+    extra convection while moving; format 6: the observer, which starts the segments from the nut sensor at the first
+    all-good cycle and again halfway through the locked cycles) with position reports going up and back."""
     names = ["T%d" % i for i in range(1, 12)]
-    (tmp_path / "table_a.bin").write_bytes(make_table(kind="dynamic_observer" if kind == "dynamic" else kind, sensors=names))
+    table = {"dynamic": "dynamic_observer", "screw": "screw_observer"}.get(kind, kind)
+    (tmp_path / "table_a.bin").write_bytes(make_table(kind=table, sensors=names))
     n = 2000 if os.environ.get("TCOMP_SLOW") else 300
-    out = run_micropython("MODE = %r\nN = %d\nDYN = %r\n" % (mode, n, kind == "dynamic") + HEAPLOCK_SCRIPT, str(tmp_path),
-                          mpy_dir, heap(mode, kind))
+    out = run_micropython("MODE = %r\nN = %d\nDYN = %r\nSOBS = %r\n" % (mode, n, kind == "dynamic", kind == "screw")
+                          + HEAPLOCK_SCRIPT, str(tmp_path), mpy_dir, heap(mode, kind))
     ok, cycles, sent, status, pos, dfree, data, peak = out.split()
     assert ok == "OK" and int(cycles) == 100 + n
     assert int(sent) > 0  # frames / replies really went out under the lock
@@ -59,6 +61,8 @@ def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode, kind):
     assert int(dfree) == 0  # nothing allocated
     if kind == "dynamic":
         assert int(status, 16) & SETTLING  # the estimate halfway through: settle_s (30 s) not yet passed
+    if kind == "screw":
+        assert int(status, 16) & SETTLING  # the screw observer's start halfway through: settle_s (1 h) not yet passed
     # the app's own data (table, evaluator, channels, drivers, buffers), bounded so that growth is
     # noticed: on 32 bits the firmware's target (< 16 kB), on 64 bits objects are twice the size
     from hil_tests.rig import interpreters
