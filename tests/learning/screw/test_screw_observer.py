@@ -129,26 +129,122 @@ def test_no_nut_sensor_gives_no_observer_and_says_so(demo_runs):
 
 
 
-def test_export_says_the_table_does_not_carry_the_observer(fitted, tmp_path, capsys):
-    """Table format 5 has no screw observer: the certificate says so, and `tcomp export` warns, naming the settle
-    times; it does not drop the document's observer silently."""
+def test_export_carries_the_observer_into_the_table(fitted, tmp_path, capsys):
+    """Table format 6 carries the screw observer (issue 21): the nut sensor is a table input, the gains and settle_s
+    are in the table, the certificate has the integer start's figure, and `tcomp export` does not warn."""
+    import math
+
+    from firmware.table import parse_table
     from host.cli import main
     from models_export.export import export_model
 
     doc = json.loads(json.dumps(fitted.to_document()))
-    status = export_model(doc).report["screw"]["observer"]
-    assert status["in_document"] and not status["carried"]
-    assert "starts the screw cold" in status["reason"] and status["settle_s"] == fitted.observer_.settle_s
+    ex = export_model(doc)
+    status = ex.report["screw"]["observer"]
+    assert status["in_document"] and status["carried"] and "reason" not in status
+    assert status["settle_s"] == fitted.observer_.settle_s and status["table_settle_s"] == math.ceil(fitted.observer_.settle_s)
+    cert = status["certificate"]
+    assert 0 < cert["start_error_K"] < 1e-3 and 0 < cert["start_error_um"] < 0.01
+    t = parse_table(ex.table)
+    assert t.version == 6 and t.obs == 1 and t.settle_s == math.ceil(fitted.observer_.settle_s)
+    assert t.sensors[t.sn] == "T1" and t.sensors[t.sr] == "T3" and "T1" not in doc["sensors"]
+    assert all(g > 0 for g in t.Gn)  # every segment warms with the nut (the fit's gains are all positive)
     path = tmp_path / "screw.json"
     path.write_text(json.dumps(doc))
     assert main(["export", str(path), "--out", str(tmp_path / "t.bin"), "--report", str(tmp_path / "r.json")]) == 0
+    assert "thermal.observer" not in capsys.readouterr().err
+    assert json.loads((tmp_path / "r.json").read_text())["screw"]["observer"]["carried"] is True
+
+
+def test_the_boards_integer_start_equals_the_hosts_estimate_within_the_certificate(fitted):
+    """firmware/evaluate.py's Evaluator.estimate (CPython, checking mode) on generated states: every temperature inside
+    the certified envelope, the references latched anywhere in it (base_ref run_start), against the host's
+    ScrewObserver.estimate in floats. Where the host's estimate lies inside the state bounds the board is within the
+    certified start error; every intermediate stays inside the exporter's intervals."""
+    import random
+
+    from firmware.evaluate import ACC_NMUL, ACC_NSUM, Evaluator
+    from firmware.table import parse_table
+    from models_export.export import export_model
+
+    doc = json.loads(json.dumps(fitted.to_document()))
+    ex = export_model(doc)
+    cert = ex.report["screw"]["observer"]["certificate"]
+    t = parse_table(ex.table)
+    assert t.ref_mode == 1 and t.air == t.sr  # the demo model's air sensor T3 is the observer's reference sensor
+    obs = fitted.observer_
+    ev = Evaluator(t, check=True)
+    rng = random.Random(21)
+    worst, inside = 0.0, 0
+    for k in range(400):
+        for i in range(t.n_sensors):
+            ev.temps[i] = rng.randint(t.env_lo[i], t.env_hi[i])
+        ev.latch_references()
+        for i in range(t.n_sensors):  # near the references half the time: the usual warm restart
+            lo, hi = (t.env_lo[i], t.env_hi[i]) if k % 2 else (max(t.env_lo[i], ev.ref[i] - 3000), min(t.env_hi[i], ev.ref[i] + 15000))
+            ev.temps[i] = rng.randint(lo, hi)
+        ev.update()
+        ev.estimate()
+        d = [(ev.temps[i] - ev.ref[i]) / 1000.0 for i in range(t.n_sensors)]
+        host = obs.estimate(d[t.air], d[t.sn] - d[t.sr]) * (1 << t.ft)
+        for i in range(t.M):
+            if t.Tlo <= host[i] <= t.Tmax:
+                inside += 1
+                worst = max(worst, abs(ev.T[i] - host[i]) / (1 << t.ft))
+    assert inside > 1000 and 0 < worst <= cert["start_error_K"]
+    for acc in (ACC_NMUL, ACC_NMUL + 1, ACC_NSUM):
+        assert ex.accs[acc][0] <= ev.lo[acc] <= ev.hi[acc] <= ex.accs[acc][1], acc
+
+
+def test_a_format_5_table_still_loads_and_starts_cold(fitted):
+    """A table written before format 6 (the same words without the screw observer's) loads, without an observer."""
+    import struct
+    import zlib
+
+    from firmware.evaluate import Evaluator
+    from firmware.table import parse_table
+    from models_export.export import export_model
+
+    doc = json.loads(json.dumps(fitted.to_document()))
+    doc["thermal"]["observer"] = None
+    b = bytearray(export_model(doc).table)
+    t6 = parse_table(bytes(b))
+    nw = 7 + 3 * t6.M  # obs settle_s sn sr Rn Lr nr, Gn shGn rN per segment, before the 3 certificate words
+    end = len(b) - 4 - 12
+    del b[end - 4 * nw:end]
+    b[4] = 5
+    struct.pack_into("<I", b, 8, len(b))
+    struct.pack_into("<I", b, 52, struct.unpack_from("<I", b, 52)[0] - nw)
+    struct.pack_into("<I", b, len(b) - 4, zlib.crc32(bytes(b[:-4])))
+    t5 = parse_table(bytes(b))
+    assert t5.version == 5 and t5.obs == 0 and t5.C == t6.C and t5.cert_out == t6.cert_out
+    ev = Evaluator(t5)
+    ev.estimate()  # no observer: the cold start
+    assert ev.T == [ev.T[0]] * t5.M
+
+
+def test_a_document_without_the_nut_envelope_keeps_the_observer_out_and_says_so(fitted, tmp_path, capsys):
+    """A document fitted before the table carried the observer has no envelope for its nut sensor: the export leaves
+    the observer out and says why (a warning naming the settle times); nothing is guessed. A document without an
+    observer has its note in the certificate and no warning."""
+    from host.cli import main
+    from models_export.export import export_model
+
+    doc = json.loads(json.dumps(fitted.to_document()))
+    del doc["envelope"]["temperature_C"]["T1"]
+    status = export_model(doc).report["screw"]["observer"]
+    assert status["in_document"] and not status["carried"] and "certificate" not in status
+    assert "re-fit the model" in status["reason"] and "starts the screw cold" in status["reason"]
+    path = tmp_path / "screw.json"
+    path.write_text(json.dumps(doc))
+    assert main(["export", str(path), "--out", str(tmp_path / "t.bin"), "--report", str(tmp_path / "r.json"),
+                 "--allow-edited"]) == 0
     err = capsys.readouterr().err
     assert "WARNING: thermal.observer (screw state from T1 at power-on" in err and "is not in the table" in err
-    assert json.loads((tmp_path / "r.json").read_text())["screw"]["observer"]["carried"] is False
-    # a document without an observer: no warning, its note in the certificate
     doc["thermal"]["observer"] = None
     doc["thermal"]["observer_note"] = "no observer: test"
-    assert export_model(doc).report["screw"]["observer"] == {"in_document": False, "carried": False, "note": "no observer: test"}
+    assert export_model(doc, allow_edited=True).report["screw"]["observer"] == {
+        "in_document": False, "carried": False, "note": "no observer: test"}
 
 
 def test_a_training_run_without_the_nut_column_gives_no_observer_not_a_failed_fit(demo_runs):
