@@ -39,7 +39,7 @@ document says why (``thermal.observer_note``); ``tcomp fit`` prints it.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -270,10 +270,12 @@ def fit_observer(model: ScrewModel, runs: Sequence[Run], tolerance_um: float = S
                  % (sensor, air, start, cold_start, tolerance_um, obs.settle_s / 60, obs.cold_settle_s / 60))
 
 
-def restart(model: ScrewModel, run: Run, t_restart: float, observer: ScrewObserver | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def restart(model: ScrewModel, run: Run, t_restart: float, observer: ScrewObserver | None,
+            start_K: Callable[[float], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """A board reset at ``t_restart`` on ``run`` against the uninterrupted board, both on the reduced recurrence:
     (step times from the restart, restarted states, uninterrupted states), states (n+1, M). ``observer`` None: the
-    restarted board starts cold (in equilibrium with the air), as without an observer."""
+    restarted board starts cold (in equilibrium with the air), as without an observer. ``start_K``: the start state
+    as a function of the restart's step time instead (e.g. the board's integer start, tools/bench_screw_restart.py)."""
     red = model.reduced_
     assert red is not None
     ts_full, _, T_full = reduced_run(model, run)
@@ -282,8 +284,8 @@ def restart(model: ScrewModel, run: Run, t_restart: float, observer: ScrewObserv
     if not 0 <= k0 < ts_full.size - 1:
         raise ValueError("%s: restart at %g s is outside the run's reduced steps" % (run.path or run.name, t_restart))
     t0 = ts_full[k0]
-    T0 = None
-    if observer is not None:
+    T0 = None if start_K is None else np.asarray(start_K(float(t0)), dtype=float)
+    if observer is not None and start_K is None:
         ctx = model._context(run)
         air = model.air_K(ctx, delag=False)
         a0 = 0.0 if air is None else float(np.interp(t0, ctx.t_grid, air))
@@ -295,14 +297,14 @@ def restart(model: ScrewModel, run: Run, t_restart: float, observer: ScrewObserv
 
 
 def restart_deviation_um(model: ScrewModel, run: Run, t_restart: float, observer: ScrewObserver | None,
-                         positions: int = 21) -> tuple[np.ndarray, np.ndarray]:
+                         positions: int = 21, start_K: Callable[[float], np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(elapsed s since the restart, largest |E_m(restarted) − E_m(uninterrupted)| over ``positions`` points of the
     position envelope at each step), µm."""
     from host.learning.screw.reduced import reduced_error_um
 
     red = model.reduced_
     assert red is not None
-    ts, T, Tu = restart(model, run, t_restart, observer)
+    ts, T, Tu = restart(model, run, t_restart, observer, start_K)
     lo, hi = model.envelope_["position_mm"] if model.envelope_ else (0.0, model.geometry_.length_mm)
     P = np.linspace(lo, hi, positions)
     d = reduced_error_um(red, T[:, None, :], P[None, :]) - reduced_error_um(red, Tu[:, None, :], P[None, :])
