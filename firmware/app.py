@@ -259,7 +259,7 @@ class App:
         self.warm = False
         self.step_ms = 0
         self._open_heat(table, ev, st == _REFS_STORED)
-        self.sobs = self.screw and table.obs and not self.warm
+        self.sobs = self.screw and table.obs and not self.warm and not self.unlatched  # unlatched: the latch, a cold start
         self.nut = table.sn if self.screw and table.obs else -1
         self._open_lags(table, ev, st == _REFS_STORED or table.ref_mode != 1)
         self._span()

@@ -28,7 +28,7 @@ UPLOADING = const(0x2000000)  # a table upload is open
 RECOVERING = const(0x4000000)  # ramping back from fallback to the model's output
 REF_PENDING = const(0x8000000)  # a run-start table waits for an all-good cycle to latch its reference temperatures
 EXTRAPOLATING = const(0x10000000)  # a temperature is outside the model's training range (inside the certified envelope it is evaluated, not clamped): informational, not a fault
-SETTLING = const(0x20000000)  # a dynamic table's lag states were estimated from the sensors (observer, issue 21) less than its settle_s ago, or not yet: informational, the estimate's start error may still exceed its tolerance
+SETTLING = const(0x20000000)  # a dynamic table's lag states, or a screw table's segment states (format 6), were estimated from the sensors (observer, issue 21) less than its settle_s ago, or not yet: informational, the estimate's start error may still exceed its tolerance
 
 # first field of the hello frame; `tcomp monitor` refuses any other. 2: authorised commands are bound to the
 # board's session nonce (the hello's last field), U,D chunks carry a tag bound to their U,B (issue 24)
