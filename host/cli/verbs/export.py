@@ -60,7 +60,8 @@ def run(args: argparse.Namespace) -> int:
                                                    r["total_max_error_um"]))
     obs = (r.get("screw") or {}).get("observer") or {}
     if obs.get("in_document") and not obs.get("carried"):
-        # the document's power-on state estimate (issue 21) is host-side only: say so, not drop it silently
+        # the document's power-on state estimate (issue 21) left out of the table (a document without its nut sensor's
+        # envelope, fitted before format 6 carried it): say so, not drop it silently
         print("WARNING: thermal.observer (screw state from %s at power-on, settles in %.0f min against %.0f min cold) "
               "is not in the table: %s" % (obs["sensor"], obs["settle_s"] / 60, obs["cold_settle_s"] / 60, obs["reason"]),
               file=sys.stderr)
