@@ -36,6 +36,11 @@
    records trusted and the mean / largest deviation of the board that applies it, beside restore-always and
    observer-only. The firmware's limits are the row marked "*".
 
+``--option KEY=VALUE`` (JSON value) passes a dynamic setting to every model fitted (FL_THERMAL and twin), e.g.
+``--option settle_max_s=1800`` (the settle-bounded structure choice, docs/empirical.md "Settle bound"); each case
+prints its terms and, with that option, statistics.settle_bound. The last lines sum sections 1-2 up per case, observer
+on: resets within 1 um at 30 min, the largest deviation in the first 30 min, the median settle time, SETTLING.
+
 Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin] [--no-split] [--warm] [--option KEY=VALUE ...]
        [--windows 0,5,10,20,30 [--window-regressors ud,udy,udh,udhy]] [--spindle-history 30,60,120,inf]
 """

@@ -26,6 +26,9 @@ compares with), and prints their rows and every model's forward-chaining pooled 
 sensors (``statistics.forward_chaining.baseline_mlr_all``). docs/results.md ("Issue 21, second half") was made with
 ``--split-h 32.129166666666666 --split-h 24.129166666666666 --split-h 28.0 --variants continuous,static``;
 
+the settle-bounded choice (docs/empirical.md "Settle bound") was measured with the same splits and
+``--option settle_max_s=1800`` against the same command without it (docs/results.md, "Settle bound");
+
 and, with ``--loco``, the leave-one-cycle-out ratios (every choice made inside
 each fold) of cv-subset and the dynamic model. Every number printed comes from
 this run of the script.
