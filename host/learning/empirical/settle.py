@@ -28,6 +28,7 @@ from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from host.learning.empirical import EmpiricalDataError
 
@@ -79,7 +80,7 @@ class SettleBound:
             out = self._bounds[key] = {lagged[s["term"]]: float(s["bound"]) for s in obs.states}
         return out
 
-    def settle_s(self, terms: Sequence[tuple[str, float]], coefficients: Sequence[float]) -> float:
+    def settle_s(self, terms: Sequence[tuple[str, float]], coefficients: ArrayLike) -> float:
         """settle_s of the structure ``terms`` with ``coefficients``: observer.settle_time on this training's E_j."""
         from host.learning.empirical.dynamic import DynamicModel
         from host.learning.empirical.observer import settle_time, signals_of
@@ -101,7 +102,8 @@ class SettleBound:
 class Screen:
     """A search's score with inadmissible structures scored inf; counts what it refused (``record``)."""
 
-    def __init__(self, bound: SettleBound, score, coefficients, terms) -> None:
+    def __init__(self, bound: SettleBound, score: Callable[[list[int]], float], coefficients: Callable[[list[int]], np.ndarray],
+                 terms: Sequence[tuple[str, float]]) -> None:
         self.bound, self.score, self.coefficients, self.terms = bound, score, coefficients, list(terms)
         self.settle: dict[tuple[int, ...], float] = {}
         self.refused: dict[tuple[int, ...], float] = {}  # structure -> its validation score
