@@ -80,6 +80,9 @@ def held_out(run, split_s, channel, dyn_options, variants=()):
         info[key + "_sensors"] = list(dyn.sensors)
         info[key + "_ridge"] = st.get("ridge")
         info[key + "_forward_state"] = st.get("forward_state")
+        info[key + "_settle_s"] = dyn.observer.settle_s if dyn.observer is not None else None
+        if "settle_bound" in st:  # --option settle_max_s=...: what the bound refused
+            info[key + "_settle_bound"] = {k: v for k, v in st["settle_bound"].items() if k not in ("rule", "observer")}
         fc = st["forward_chaining"]
         info[key + "_forward_pooled_um"] = fc.get("pooled_um")
         if "baseline_mlr_all" in fc:
@@ -161,6 +164,12 @@ def main(argv=None):
             for key in ["dynamic"] + ["dynamic_" + v for v in variants]:
                 print("| %s | %s | %s | %s | %.0f |" % (c, key, ", ".join("%s %g s %.3g" % tuple(t) for t in i[key + "_terms"]),
                                                   i[key + "_ridge"], i[key + "_fit_s"]))
+            for key in ["dynamic"] + ["dynamic_" + v for v in variants]:
+                if i.get(key + "_settle_s") is not None:
+                    sb = i.get(key + "_settle_bound")
+                    print("| %s | %s observer | settle_s %.0f min%s | | |" % (c, key, i[key + "_settle_s"] / 60, "" if sb is None else
+                          "; settle bound %.0f min: %d of %d structures with lags refused, chosen %s" % (
+                              sb["settle_max_s"] / 60, sb["structures_refused"], sb["structures_checked"], sb["chosen"])))
             print("| %s | static ≤ 5 | %s | | |" % (c, "%s: %s" % (i["static_le5"]["method"], ", ".join(i["static_le5"]["sensors"]))
                                                    if "static_le5" in i else "–"))
     if args.loco:
