@@ -57,6 +57,15 @@ def number(kind: Callable[[str], float], minimum: float | None = None, maximum: 
     return convert
 
 
+def number_or_none(kind: Callable[[str], float], minimum: float | None = None) -> Converter:
+    """Converter to ``number(kind, minimum)``, or None for the word none (any case): a setting that can be off."""
+    one = number(kind, minimum)
+
+    def convert(text):
+        return None if text.strip().lower() == "none" else one(text)
+    return convert
+
+
 def numbers(kind: Callable[[str], float], minimum: float | None = None) -> Converter:
     """Converter to a list of ``number(kind, minimum)`` values separated by '/' (e.g. 0/1800/7200)."""
     one = number(kind, minimum)

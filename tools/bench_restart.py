@@ -36,10 +36,16 @@
    records trusted and the mean / largest deviation of the board that applies it, beside restore-always and
    observer-only. The firmware's limits are the row marked "*".
 
-Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin] [--no-split] [--warm]
+``--option KEY=VALUE`` (JSON value) passes a dynamic setting to every model fitted (FL_THERMAL and twin), e.g.
+``--option settle_max_s=1800`` (the settle-bounded structure choice, docs/empirical.md "Settle bound"); each case
+prints its terms and, with that option, statistics.settle_bound. The last lines sum sections 1-2 up per case, observer
+on: resets within 1 um at 30 min, the largest deviation in the first 30 min, the median settle time, SETTLING.
+
+Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin] [--no-split] [--warm] [--option KEY=VALUE ...]
        [--windows 0,5,10,20,30 [--window-regressors ud,udy,udh,udhy]] [--spindle-history 30,60,120,inf]
 """
 import argparse
+import json
 import os
 import sys
 import time
@@ -215,12 +221,21 @@ def fmt_settle(s):
 
 
 def print_restarts(label, model, run, resets_h, scale):
+    """Print the resets' figures -> [(max30, at30, settle s)] with the observer on, one per reset."""
     print("\n%s: board reset at hour H vs the uninterrupted board (um of offset); SETTLING time of the observer %.0f min"
           % (label, model.observer.settle_s / 60))
+    print("terms (signal, tau s, coefficient): %s" % ", ".join("%s %g s %.3g" % (n, tau, c) for (n, tau), c in
+                                                              zip(model.terms, model.term_coefficients)))
+    bound = model.statistics.get("settle_bound")
+    if bound is not None:
+        print("settle bound: %s" % {k: v for k, v in bound.items() if k != "rule"})
     print("%6s | %-44s | %-44s" % ("H", "observer on: max30 / at30 / max / settle", "observer off: max30 / at30 / max / settle"))
+    out = []
     for h in resets_h:
         f = restart_figures(model, run, h * 3600.0, scale)
         print("%6.1f | %s | %s" % (h, *("%7.2f / %6.2f / %7.2f / %-17s" % (a, b, c, fmt_settle(d)) for a, b, c, d in (f["on"], f["off"]))))
+        out.append((f["on"][0], f["on"][1], f["on"][3]))
+    return out
 
 
 # --- experiment 3: a second estimate after a window of W s ---------------------------------------------------------
@@ -448,7 +463,16 @@ def main():
     ap.add_argument("--window-regressors", default="ud,udy,udh,udhy", help="experiment 3: regressor sets (letters %s)" % REGRESSORS)
     ap.add_argument("--spindle-history", default=None, help="experiment 4: history lengths in minutes, e.g. 30,60,120,inf")
     ap.add_argument("--warm", action="store_true", help="also the short cuts with the lag states restored (lags.bin)")
+    ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                    help="a dynamic setting (JSON value) for every model fitted, e.g. settle_max_s=1800")
     args = ap.parse_args()
+    opts = {}
+    for item in args.option:
+        k, _, v = item.partition("=")
+        try:
+            opts[k] = json.loads(v)
+        except json.JSONDecodeError:
+            opts[k] = v
     def minutes(text, flag, positive):
         try:
             vals = [float(v) for v in text.split(",")]
@@ -475,7 +499,7 @@ def main():
         print("%4s %8s | %-22s | %-22s | %-22s | %s" % ("ch", "MLR-16", "switched on, observer", "switched on, no observer",
                                                       "filters from 0 h", "sensors"))
     for ch in args.channels.split(","):
-        dyn = fit_model([run], "dynamic", target="direct", channel=ch, window=(None, split))
+        dyn = fit_model([run], "dynamic", target="direct", channel=ch, window=(None, split), **opts)
         models[ch] = dyn
         if not args.no_split:
             mlr = fit_model([run], "mlr", target="direct", channel=ch, window=(None, split))
@@ -490,14 +514,15 @@ def main():
 
         train = [simulate_run(p, seed=s) for s, p in enumerate(("v8000_r210_490", "mixed", "random", "v15000_r210_490"))]
         day = simulate_run("day24h", seed=7)
-        dyn = fit_model(train, "dynamic", target="slope")
+        dyn = fit_model(train, "dynamic", target="slope", **opts)
         scale = float(max(np.nanmax(np.abs(r.errors.position_mm)) for r in train))
         print("\ntwin: slope model fitted on 4 cold-start 5 h runs (v8000_r210_490, mixed, random, v15000_r210_490), sensors %s;"
               " tested on day24h (seed 7); deviation at %.0f mm" % (",".join(dyn.sensors), scale))
         cases.append(("twin day24h", dyn, [(r, (-np.inf, np.inf)) for r in train], day, TWIN_RESETS_H, scale))
+    summary = []  # (label, settle_s, [(max30, at30, settle)])
     for label, model, train, test, resets, scale in cases:
         if not args.no_split:
-            print_restarts(label, model, test, resets, scale)
+            summary.append((label, model.observer.settle_s, print_restarts(label, model, test, resets, scale)))
         if windows:
             print_windows(label, model, train, test, resets, scale, windows, regressor_sets)
         if histories is not None:
@@ -506,6 +531,14 @@ def main():
             print_warm(label, model, test, resets, scale)
     if args.warm:
         print_rule_sweep(list(models.values()), run)
+    if summary:
+        print("\nobserver on, dynamic settings %s: resets within %g um at 30 min / largest deviation in the first 30 min (um) / "
+              "median settle (min) / SETTLING (min)" % (opts or "tcomp fit defaults", TOL_UM))
+        for label, settle_s, figs in summary:
+            print("%-50s %d of %d / %6.2f / %6.0f / %6.0f" % (label, sum(f[1] <= TOL_UM for f in figs), len(figs), max(f[0] for f in figs),
+                                                      np.median([f[2] for f in figs]) / 60, settle_s / 60))
+        fl = [f for label, _, figs in summary if label.startswith("FL_THERMAL") for f in figs]
+        print("FL_THERMAL: %d of %d resets within %g um at 30 min" % (sum(f[1] <= TOL_UM for f in fl), len(fl), TOL_UM))
     print("\n(%.0f s)" % (time.perf_counter() - t0))
 
 

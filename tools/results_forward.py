@@ -26,6 +26,9 @@ compares with), and prints their rows and every model's forward-chaining pooled 
 sensors (``statistics.forward_chaining.baseline_mlr_all``). docs/results.md ("Issue 21, second half") was made with
 ``--split-h 32.129166666666666 --split-h 24.129166666666666 --split-h 28.0 --variants continuous,static``;
 
+the settle-bounded choice (docs/empirical.md "Settle bound") was measured with the same splits and
+``--option settle_max_s=1800`` against the same command without it (docs/results.md, "Settle bound");
+
 and, with ``--loco``, the leave-one-cycle-out ratios (every choice made inside
 each fold) of cv-subset and the dynamic model. Every number printed comes from
 this run of the script.
@@ -77,6 +80,9 @@ def held_out(run, split_s, channel, dyn_options, variants=()):
         info[key + "_sensors"] = list(dyn.sensors)
         info[key + "_ridge"] = st.get("ridge")
         info[key + "_forward_state"] = st.get("forward_state")
+        info[key + "_settle_s"] = dyn.observer.settle_s if dyn.observer is not None else None
+        if "settle_bound" in st:  # --option settle_max_s=...: what the bound refused
+            info[key + "_settle_bound"] = {k: v for k, v in st["settle_bound"].items() if k not in ("rule", "observer")}
         fc = st["forward_chaining"]
         info[key + "_forward_pooled_um"] = fc.get("pooled_um")
         if "baseline_mlr_all" in fc:
@@ -158,6 +164,12 @@ def main(argv=None):
             for key in ["dynamic"] + ["dynamic_" + v for v in variants]:
                 print("| %s | %s | %s | %s | %.0f |" % (c, key, ", ".join("%s %g s %.3g" % tuple(t) for t in i[key + "_terms"]),
                                                   i[key + "_ridge"], i[key + "_fit_s"]))
+            for key in ["dynamic"] + ["dynamic_" + v for v in variants]:
+                if i.get(key + "_settle_s") is not None:
+                    sb = i.get(key + "_settle_bound")
+                    print("| %s | %s observer | settle_s %.0f min%s | | |" % (c, key, i[key + "_settle_s"] / 60, "" if sb is None else
+                          "; settle bound %.0f min: %d of %d structures with lags refused, chosen %s" % (
+                              sb["settle_max_s"] / 60, sb["structures_refused"], sb["structures_checked"], sb["chosen"])))
             print("| %s | static ≤ 5 | %s | | |" % (c, "%s: %s" % (i["static_le5"]["method"], ", ".join(i["static_le5"]["sensors"]))
                                                    if "static_le5" in i else "–"))
     if args.loco:

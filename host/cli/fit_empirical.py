@@ -11,7 +11,7 @@ import sys
 
 from host import options
 from host.learning.empirical import EmpiricalDataError
-from host.options import boolean, number, numbers
+from host.options import boolean, number, number_or_none, numbers
 
 if TYPE_CHECKING:
     from host.outputs import Outputs
@@ -57,6 +57,7 @@ OPTIONS = {
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
     "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
+    "settle_max_s": number_or_none(float, 0.0),  # dynamic: only structures whose observer settles within this (s; none/0: off)
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
     "base": str,  # mr-poly: base sensor (default: role "base")
@@ -134,6 +135,13 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
             print("  observer: lag states estimated from the inputs at a start; start-error bound %.3g um, within %.3g um after "
                   "%.0f min (SETTLING)%s" % (obs.start_error_bound(model), obs.tolerance, obs.settle_s / 60,
                                              "" if worst is None else "; largest share: lag(%s, tau %g s)" % model.terms[worst["term"]]))
+        sb = model.statistics.get("settle_bound")
+        if sb:
+            print("  settle bound: only structures with settle_s <= %.0f min admitted; %d of %d structures with lags checked were "
+                  "refused%s; the model's settle_s %.0f min" % (
+                      sb["settle_max_s"] / 60, sb["structures_refused"], sb["structures_checked"],
+                      "" if sb["best_refused_score_um"] is None else " (best refused score %.4g)" % sb["best_refused_score_um"],
+                      (sb["settle_s"] or 0.0) / 60))
         fb = model.statistics.get("static_fallback")
         if fb:
             print("  static fallback: search over every term scored %.4g, over the static terms (tau 0) alone %s: the %s structure "

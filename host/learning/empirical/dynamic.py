@@ -54,6 +54,7 @@ from host.learning.empirical.kinds import DocumentFields, _geometric_from_docume
 if TYPE_CHECKING:  # for the hints only (observer.py imports this module)
     from host.data.runs import Run
     from host.learning.empirical.observer import Observer
+    from host.learning.empirical.settle import SettleBound
 
 # 0 (the signal itself), 15 min .. 16 h: from a sensor's own lag to two 8 h heating/cooling cycles of a machine structure
 TAUS_S = (0.0, 900.0, 1800.0, 3600.0, 7200.0, 14400.0, 28800.0, 57600.0)
@@ -294,6 +295,7 @@ class DynamicRegression:
     n_samples_: int
     n_groups_: int
     ridge_: float
+    settle_bound_: dict[str, Any] | None
     cv_score_: str
     cv_by_ridge_: dict[float, float]
     rmse_: float
@@ -306,6 +308,7 @@ class DynamicRegression:
         self.cv_score = cv_score
         self.selection = selection
         self.block_columns: dict[Any, tuple[np.ndarray, np.ndarray] | StartedColumns] | None = None
+        self.settle_bound: SettleBound | None = None  # with_settle_bound: only structures that settle in time
         self.swaps = swaps
         self.max_sensors = max_sensors
         self.max_terms = max_terms
@@ -441,6 +444,15 @@ class DynamicRegression:
                             best = (s, rest[:pos] + [j] + rest[pos:])
             return best
 
+        screen = None
+        if self.settle_bound is not None:
+            # only structures whose observer settles within settle_max_s (host/learning/empirical/settle.py), judged
+            # with the coefficients they would carry: the fit on every training sample with this penalty
+            def all_data_coefficients(cols):
+                idx = ([0] if o else []) + [c + o for c in cols]
+                return (np.linalg.solve(Gall[np.ix_(idx, idx)] + penalty(idx, n_all), call[idx]) / scale[idx])[o:]
+
+            screen = cv = self.settle_bound.screen(cv, all_data_coefficients, terms)
         selected, history = [], []
         current = cv([]) if o else np.inf
         history.append({"step": 0, "action": "start", "term": None, "cv_rmse": current})
@@ -474,7 +486,8 @@ class DynamicRegression:
         return {"intercept_": float(beta[0]) if o else 0.0, "coef_": beta[o:], "selected_": selected, "fold_rmse_": fold_rmse,
                 "scale_": scale[idx], "fold_labels_": labels[1:].tolist() if forward else labels.tolist(),
                 "terms_": [(terms[j][0], float(terms[j][1])) for j in selected], "cv_rmse": current, "cv_rmse_": current,
-                "history_": history, "n_samples_": n_all, "n_groups_": int(labels.size), "ridge_": ridge}
+                "history_": history, "n_samples_": n_all, "n_groups_": int(labels.size), "ridge_": ridge,
+                "settle_bound_": None if screen is None else screen.record()}
 
     def with_block_columns(self, columns: Mapping[Any, tuple[np.ndarray, np.ndarray] | StartedColumns]) -> DynamicRegression:
         """Score forward block ``label`` on ``columns[label]``: the candidate columns as a board switched on at the
@@ -482,6 +495,12 @@ class DynamicRegression:
         since the run start): ``(F_k, y_k)`` when they do not depend on the structure (filters from rest), a
         :class:`StartedColumns` when the states start at the structure's observer estimate. Returns self."""
         self.block_columns = dict(columns)
+        return self
+
+    def with_settle_bound(self, bound: SettleBound | None) -> DynamicRegression:
+        """Admit only structures whose observer settles within ``bound.settle_max_s`` (host/learning/empirical/settle.py;
+        None: every structure). The record of what it refused, for the winning penalty, is ``settle_bound_``. Returns self."""
+        self.settle_bound = bound
         return self
 
     def coefficients_on(self, rows: ArrayLike) -> tuple[float, np.ndarray]:

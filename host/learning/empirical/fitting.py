@@ -268,6 +268,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     (host/learning/empirical/dynamic.py, forward.py); lags bounded by the training span."""
     from host.learning.empirical import forward
     from host.learning.empirical.dynamic import TAU_MAX_FRACTION, TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
+    from host.learning.empirical.settle import SettleBound, settle_max_option
 
     opts = dict(options)
     taus = tuple(float(v) for v in opts.pop("taus_s", TAUS_S))
@@ -285,9 +286,12 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     forward_state = opts.pop("forward_state", FORWARD_STATE)
     if forward_state not in FORWARD_STATES:
         raise EmpiricalDataError("dynamic: forward_state must be one of %s, got %r" % (", ".join(FORWARD_STATES), forward_state))
+    settle_max_s = settle_max_option(opts.pop("settle_max_s", None))  # host/learning/empirical/settle.py
     static_fallback = opts.pop("static_fallback", True)
     if not isinstance(static_fallback, bool):
         raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
+    if settle_max_s is not None and not use_observer:
+        raise EmpiricalDataError("dynamic: settle_max_s bounds the observer's settle time; it needs observer=true")
     lag_bound = _lag_bound(arrays, opts.pop("tau_max_fraction", TAU_MAX_FRACTION))
     lag_bound["excluded_taus_s"] = [v for v in taus if v > lag_bound["max_tau_s"]]
     taus = tuple(v for v in taus if v <= lag_bound["max_tau_s"])
@@ -336,7 +340,12 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
                                          use_spindle, use_feed)
                 held[b["block"]] = (Fk, y[rows])
             est.with_block_columns(held)
+    if settle_max_s is not None:
+        # only structures whose observer (the one the document will carry) settles within settle_max_s
+        est.with_settle_bound(SettleBound(settle_max_s, runs, [(a.time_s.min(), a.time_s.max()) for a in arrays], exclude,
+                                          reference_all, target, channel, obs_scale, taus))
     est.fit(F, y, terms, groups=groups)
+    settle_record = est.settle_bound_
     fallback: dict[str, Any] | None = None
     static = [j for j, (_, tau) in enumerate(terms) if tau == 0]
     if static_fallback and selection == "forward" and static and len(static) < len(terms):
@@ -385,6 +394,11 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         from host.learning.empirical.observer import fit_observer
 
         model.observer = fit_observer(model, runs, spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=obs_scale)
+    if settle_record is not None:
+        # what the bound refused in the search over every term, and the settle_s of the model as written (the static
+        # fallback's, when it won: 0, it has no lag state)
+        stats["settle_bound"] = dict(settle_record, chosen=fallback["chosen"] if fallback else "dynamic",
+                                     settle_s=model.observer.settle_s if model.observer is not None else None)
     model.estimator_ = est
     model.arrays_ = arrays
     model.geometric_ = geo
