@@ -217,3 +217,22 @@ def test_a_document_of_another_format_is_refused_naming_the_format():
     for wrong in ("tcomp-model/2", None):
         with pytest.raises(ExportError, match="format must be %r" % FORMAT):
             export_model(restamp(dict(doc, format=wrong)))
+
+
+def test_c_header_says_it_leaves_out_the_screw_observer(tmp_path, capsys):
+    # format 6 carries the screw observer; the C header's evaluator starts the screw cold: the header and the
+    # command say so (a table that leaves out part of the model says it loudly); without an observer, nothing is said
+    from hil_tests.fixtures.samples import with_screw_observer
+    from hil_tests.rig.boards import _finish, screw_doc
+
+    from models_export.cheader import SCREW_OBSERVER_LEFT_OUT
+
+    plain = _finish(screw_doc(["T1", "T2"]))
+    observed = _finish(with_screw_observer(screw_doc(["T1", "T2"]), "T3", random.Random(3), settle_s=600.0))
+    for name, doc, said in (("plain", plain, False), ("observed", observed, True)):
+        model, hdr = tmp_path / (name + ".json"), tmp_path / (name + ".h")
+        model.write_text(json.dumps(doc))
+        assert main(["export", str(model), "--out", str(tmp_path / (name + ".bin")), "--c-header", str(hdr)]) == 0
+        err = capsys.readouterr().err
+        assert ("LEFT OUT: " + SCREW_OBSERVER_LEFT_OUT in hdr.read_text()) is said, name
+        assert ("WARNING: --c-header %s: %s" % (hdr, SCREW_OBSERVER_LEFT_OUT) in err) is said, name
