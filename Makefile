@@ -91,10 +91,30 @@ demo: setup
 
 # One BLAS thread per worker: pytest -n 2 on 2 cores plus BLAS threads oversubscribes the machine.
 # The firmware's MicroPython tests and the HIL scenarios run on the 32-bit port (TCOMP_MICROPYTHON).
+# pytest runs in the foreground (a background job inherits SIGINT ignored, which the recorder's tests see).
+# `make lint typecheck` runs beside it at nice 19, in its own process group: CPU-only, it takes the core time the tests
+# leave idle (a worker waiting on a paced board, LinuxCNC, a subprocess) and yields to them otherwise; its
+# output ($(CHECKS_LOG)) is printed after pytest's, in one piece. make test fails if either fails; Ctrl-C
+# stops both. Figures: docs/architecture.md, "Test time".
+# (the sub-make goes through CHECKS_MAKE, not $(MAKE) written in the recipe: a line naming MAKE runs even
+# under `make -n`, and this line also runs pytest)
+CHECKS_LOG := .build/checks.log
+CHECKS_MAKE = $(MAKE) --no-print-directory lint typecheck
+# its own process group (the trap stops all of it), nice 19, same session: with the kernel's autogroups (one per
+# session) a new session (setsid) would get a scheduling group of its own, where nice counts for nothing against pytest
+CHECKS_GROUP := import os, sys; os.setpgid(0, 0); os.nice(19); os.execvp(sys.argv[1], sys.argv[1:])
 test: setup
+	@mkdir -p $(dir $(CHECKS_LOG)); \
+	$(BIN)/python -c '$(CHECKS_GROUP)' $(CHECKS_MAKE) > $(CHECKS_LOG) 2>&1 & checks=$$!; \
+	trap 'kill -TERM -$$checks 2>/dev/null; exit 130' INT TERM; \
+	echo "make lint typecheck: beside pytest at nice 19 (its output after pytest's)"; \
 	TCOMP_MICROPYTHON=$(abspath $(MP32)) OPENBLAS_NUM_THREADS=1 OMP_NUM_THREADS=1 \
-	  $(BIN)/python -m pytest -q -n 2 --dist loadfile
-	$(MAKE) --no-print-directory lint typecheck
+	  $(BIN)/python -m pytest -q -n 2 --dist loadfile; tests=$$?; \
+	wait $$checks; checked=$$?; \
+	cat $(CHECKS_LOG); \
+	[ $$tests -eq 0 ] || echo "make test: pytest failed (exit $$tests)"; \
+	[ $$checked -eq 0 ] || echo "make test: make lint typecheck failed (exit $$checked)"; \
+	[ $$tests -eq 0 ] && [ $$checked -eq 0 ]
 
 # ruff's rules and why: pyproject.toml [tool.ruff]
 lint: setup
