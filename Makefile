@@ -95,7 +95,7 @@ demo: setup
 # `make lint typecheck` runs beside it at nice 19, in its own process group: CPU-only, it takes the core time the tests
 # leave idle (a worker waiting on a paced board, LinuxCNC, a subprocess) and yields to them otherwise; its
 # output ($(CHECKS_LOG)) is printed after pytest's, in one piece. make test fails if either fails; Ctrl-C
-# stops both. Figures: docs/architecture.md, "Test time".
+# stops both. Figures: docs/testing.md.
 # (the sub-make goes through CHECKS_MAKE, not $(MAKE) written in the recipe: a line naming MAKE runs even
 # under `make -n`, and this line also runs pytest)
 CHECKS_LOG := .build/checks.log
