@@ -161,3 +161,21 @@ def test_switched_on_the_averaged_score_is_the_boards_forward_chaining_score():
     assert avg.statistics["forward_state"] == "switched_on" and len(sa["members"]) == 2
     assert avg.statistics["forward_chaining"]["pooled_um"] == pytest.approx(sa["averaged_score_um"], rel=1e-9)
     assert sa["averaged_score_um"] < sa["single_score_um"]
+
+
+def test_tcomp_fit_takes_the_option_and_prints_the_members(tmp_path, capsys):
+    import json
+
+    from host.cli import main
+    from host.data.runs import write_run
+
+    folder = write_run(_two_source_machine(), str(tmp_path / "run"))
+    args = ["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--option", "taus_s=0/1800", "--option", "max_terms=1",
+            "--option", "use_spindle=false", "--option", "forward_state=continuous", "--out", str(tmp_path / "m.json")]
+    assert main(args + ["--option", "average_structures=2"]) == 0
+    out = capsys.readouterr().out
+    assert "structure average of 2 structures" in out and "weight 0.80: lag(T:t1, tau 1800 s)" in out
+    doc = json.loads((tmp_path / "m.json").read_text())
+    assert [t["signal"] for t in doc["thermal"]["terms"]] == ["T:t1", "T:t2"]
+    assert doc["statistics"]["structure_average"]["members"][1]["weight"] == pytest.approx(0.2)
+    assert main(args + ["--option", "average_structures=0"]) == 2
