@@ -20,6 +20,11 @@ temperatures) for:
     user's choice gets), switched on at the split (a fixed temperature
     reference, so (a) and (b) are the same for it);
 
+With ``--option average_structures=K`` (structure averaging, host/learning/empirical/averaging.py) two more rows,
+(a1) and (b1): the single best structure the average replaces, from the same search (so the fit without averaging,
+measured in the same run), and per channel the members and weights or why the single structure stays.
+docs/results.md ("Issue 21: structure averaging") was made with ``--option average_structures=3``.
+
 ``--variants continuous,static`` also fits the dynamic model with ``forward_state=continuous`` (the selection scored
 with filters running since the run start) and with ``taus_s=[0]`` (the static search the default's static fallback
 compares with), and prints their rows and every model's forward-chaining pooled score beside the baseline MLR on all

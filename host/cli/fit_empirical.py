@@ -57,6 +57,7 @@ OPTIONS = {
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
     "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "average_structures": number(int, 1),  # dynamic: average up to N structures, weights by forward chaining (1: the best one)
+    "average_members": str,  # dynamic: ridge | path (where the averaged structures come from)
     "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")

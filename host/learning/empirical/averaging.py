@@ -51,6 +51,10 @@ RULE = ("members: the best structure of each ridge value of the search over ever
         "predicted by the members refitted on the blocks before it, with the union's switched-on columns)" % (BOARD_TERMS, WEIGHT_STEP))
 
 
+PATH_RULE = ("members (average_members=path): the structures along the greedy path that ended in the chosen structure (after "
+             "each addition and exchange, at its ridge value), lowest forward-chaining score first; weights as with ridge members")
+
+
 def check_count(value: Any) -> int:
     """``average_structures``: an integer >= 1 (1: no averaging)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
@@ -76,6 +80,36 @@ def member_structures(searches: Sequence[tuple[Any, Sequence[int]]]) -> list[dic
             seen.add(frozenset(m["columns"]))
             out.append(m)
     return out
+
+
+def path_structures(anchor: Any, terms: Sequence[tuple[str, float]]) -> list[dict[str, Any]]:
+    """The structures along the greedy path that ended in ``anchor``'s structure (after each addition and each
+    exchange, at the anchor's ridge value), lowest score first, each once (``average_members="path"``). Without
+    exchanges each is a part of the anchor's structure, so averaging them shrinks the terms added last and the board
+    reads nothing more; a structure from before an exchange can add a term (the union's limits still apply)."""
+    index = {(n, float(tau)): j for j, (n, tau) in enumerate(terms)}
+    sel: list[int] = []
+    found = []
+    for h in anchor.history_:
+        if h["action"] == "add":
+            sel = sel + [index[(h["term"][0], float(h["term"][1]))]]
+        elif h["action"] == "swap":
+            sel = list(sel)
+            sel[sel.index(index[(h["replaces"][0], float(h["replaces"][1]))])] = index[(h["term"][0], float(h["term"][1]))]
+        else:
+            continue
+        if np.isfinite(h["cv_rmse"]):
+            found.append({"columns": list(sel), "ridge": float(anchor.ridge_), "score_um": float(h["cv_rmse"])})
+    found.sort(key=lambda m: m["score_um"])
+    seen, out = set(), []
+    for m in found:
+        if frozenset(m["columns"]) not in seen:
+            seen.add(frozenset(m["columns"]))
+            out.append(m)
+    return out
+
+
+MEMBERS = ("ridge", "path")  # where the members come from: each ridge value's best structure, or the chosen one's greedy path
 
 
 def _within(cols: Sequence[int], terms: Sequence[tuple[str, float]], max_sensors: int, max_terms: int) -> bool:
@@ -191,7 +225,7 @@ class AveragedRegression:
 
 def average(anchor: Any, F: np.ndarray, y: np.ndarray, terms: Sequence[tuple[str, float]], groups: np.ndarray,
             searches: Sequence[tuple[Any, Sequence[int]]], count: int,
-            block_columns: dict[Any, Any] | None = None) -> tuple[AveragedRegression | None, dict[str, Any]]:
+            block_columns: dict[Any, Any] | None = None, members_from: str = "ridge") -> tuple[AveragedRegression | None, dict[str, Any]]:
     """(the forward-weighted average of up to ``count`` structures of ``searches`` (see the module), or None when only
     one structure fits the limits or no weighting scores lower than the single structure; the record
     ``statistics.structure_average``: every candidate structure, the members and weights, or why the single one stays).
@@ -201,9 +235,11 @@ def average(anchor: Any, F: np.ndarray, y: np.ndarray, terms: Sequence[tuple[str
     ``block_columns``: the scored blocks' switched-on columns over every candidate (DynamicRegression.with_block_columns;
     None: the blocks' rows of F, filters running since the run start). Averaging is kept only when it scores lower
     than the anchor's own score."""
-    candidates = member_structures(searches)
+    if members_from not in MEMBERS:
+        raise EmpiricalDataError("dynamic: average_members must be one of %s, got %r" % (", ".join(MEMBERS), members_from))
+    candidates = member_structures(searches) if members_from == "ridge" else path_structures(anchor, terms)
     members = pick_members(candidates, count, terms, int(anchor.max_sensors), BOARD_TERMS)
-    record = {"rule": RULE, "members": None, "candidates": [
+    record = {"rule": RULE if members_from == "ridge" else PATH_RULE, "members": None, "candidates": [
         {"terms": [[terms[j][0], float(terms[j][1])] for j in m["columns"]], "ridge": m["ridge"], "score_um": m["score_um"],
          "within_limits_with_the_best": any(m is p for p in members)} for m in candidates]}
     if len(members) < 2:

@@ -289,6 +289,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     if not isinstance(static_fallback, bool):
         raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
     average_count = averaging.check_count(opts.pop("average_structures", averaging.AVERAGE_STRUCTURES))
+    average_members = opts.pop("average_members", "ridge")
     lag_bound = _lag_bound(arrays, opts.pop("tau_max_fraction", TAU_MAX_FRACTION))
     lag_bound["excluded_taus_s"] = [v for v in taus if v > lag_bound["max_tau_s"]]
     taus = tuple(v for v in taus if v <= lag_bound["max_tau_s"])
@@ -361,7 +362,8 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     single = est
     averaged, average_record = None, None
     if selection == "forward" and average_count > 1:
-        averaged, average_record = _average_structures(est, searched, plain, static, F, y, terms, groups, average_count)
+        averaged, average_record = _average_structures(est, searched, plain, static, F, y, terms, groups, average_count,
+                                                       average_members)
     if averaged is not None:
         est = averaged
     stats = est.statistics()
@@ -431,7 +433,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     return model
 
 
-def _average_structures(chosen, searched, plain, static, F, y, terms, groups, count):
+def _average_structures(chosen, searched, plain, static, F, y, terms, groups, count, members_from="ridge"):
     """(AveragedRegression or None, its record): structure averaging (host/learning/empirical/averaging.py) over the
     per-ridge structures of the search over every term and, when it ran, of the static search (``plain``)."""
     from host.learning.empirical import averaging
@@ -439,7 +441,7 @@ def _average_structures(chosen, searched, plain, static, F, y, terms, groups, co
     searches = [(searched, list(range(len(terms))))]
     if plain is not None:
         searches.append((plain, static))
-    return averaging.average(chosen, F, y, terms, groups, searches, count, searched.block_columns)
+    return averaging.average(chosen, F, y, terms, groups, searches, count, searched.block_columns, members_from)
 
 
 def _single_model(est, model, reference_all, runs, arrays, exclude, obs_scale, use_observer):

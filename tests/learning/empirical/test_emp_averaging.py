@@ -179,3 +179,31 @@ def test_tcomp_fit_takes_the_option_and_prints_the_members(tmp_path, capsys):
     assert [t["signal"] for t in doc["thermal"]["terms"]] == ["T:t1", "T:t2"]
     assert doc["statistics"]["structure_average"]["members"][1]["weight"] == pytest.approx(0.2)
     assert main(args + ["--option", "average_structures=0"]) == 2
+
+
+def test_path_members_are_the_greedy_steps_that_ended_in_the_chosen_structure():
+    """average_members=path: the structures after each step of the anchor's search, with the scores the search gave
+    them; the last step is the chosen structure; averaged, they shrink the terms added last (one model, its terms
+    those of the chosen structure)."""
+    from host.learning.empirical.averaging import path_structures
+
+    rng = np.random.default_rng(9)
+    X = rng.normal(size=(800, 3))
+    y = 2 * X[:, 0] + X[:, 1] + 0.3 * X[:, 2] + 0.5 * rng.normal(size=800)
+    groups = np.repeat(np.arange(4), 200)
+    terms = [("T:a", 0.0), ("T:b", 0.0), ("T:c", 0.0)]
+    est = DynamicRegression(min_gain=0.0, ridge=0.0).fit(X, y, terms, groups)
+    path = path_structures(est, terms)
+    added = [h for h in est.history_ if h["action"] == "add"]
+    assert len(path) == len(added) == 3 and est.history_[1]["term"] == ["T:a", 0.0]
+    assert sorted(len(m["columns"]) for m in path) == [1, 2, 3]
+    assert set(path[0]["columns"]) == set(est.selected_) and path[0]["score_um"] == pytest.approx(est.cv_rmse_)
+    assert sorted(m["score_um"] for m in path) == sorted(h["cv_rmse"] for h in added)
+    averaged, record = average(est, X, y, terms, groups, [(est, [0, 1, 2])], count=3, members_from="path")
+    assert record["candidates"][0]["terms"] == [list(terms[j]) for j in est.selected_]
+    # here 0.9 x (a, b, c) + 0.1 x (a, b): the union is the chosen structure's terms, c's coefficient shrunk
+    assert averaged is not None and averaged.weights.tolist() == [0.9, 0.1] and set(averaged.union) == set(est.selected_)
+    c = averaged.union.index(2)
+    assert 0 < averaged.coef_[c] < est.coef_[est.selected_.index(2)]
+    with pytest.raises(EmpiricalDataError, match="average_members must be one of ridge, path"):
+        average(est, X, y, terms, groups, [(est, [0, 1, 2])], count=3, members_from="steps")
