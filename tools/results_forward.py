@@ -20,6 +20,11 @@ temperatures) for:
     user's choice gets), switched on at the split (a fixed temperature
     reference, so (a) and (b) are the same for it);
 
+With ``--option average_structures=K`` (structure averaging, host/learning/empirical/averaging.py) two more rows,
+(a1) and (b1): the single best structure the average replaces, from the same search (so the fit without averaging,
+measured in the same run), and per channel the members and weights or why the single structure stays.
+docs/results.md ("Issue 21: structure averaging") was made with ``--option average_structures=3``.
+
 ``--variants continuous,static`` also fits the dynamic model with ``forward_state=continuous`` (the selection scored
 with filters running since the run start) and with ``taus_s=[0]`` (the static search the default's static fallback
 compares with), and prints their rows and every model's forward-chaining pooled score beside the baseline MLR on all
@@ -76,6 +81,15 @@ def held_out(run, split_s, channel, dyn_options, variants=()):
         out[key + "_switched_on"] = _rmse(block_residuals(dyn, cut, block))
         out[key + "_continuous"] = _rmse(block_residuals(dyn, run, block))
         st = dyn.statistics
+        if "structure_average" in st:
+            # the single best structure the average would replace (the model itself when averaging kept it): the same search,
+            # so this row is the fit without averaging, measured in the same run
+            single = getattr(dyn, "single_", dyn)
+            out[key + "_single_switched_on"] = _rmse(block_residuals(single, cut, block))
+            out[key + "_single_continuous"] = _rmse(block_residuals(single, run, block))
+            info[key + "_single_terms"] = [[n, tau, float(c)] for (n, tau), c in zip(single.terms, single.term_coefficients)]
+            sa = st["structure_average"]
+            info[key + "_average"] = sa
         info[key + "_terms"] = [[n, tau, float(c)] for (n, tau), c in zip(dyn.terms, dyn.term_coefficients)]
         info[key + "_sensors"] = list(dyn.sensors)
         info[key + "_ridge"] = st.get("ridge")
@@ -143,7 +157,9 @@ def main(argv=None):
         print("|---|%s" % ("---|" * len(channels)))
         print("| MLR-16 held-out RMSE µm | %s |" % " | ".join("%.2f" % rows[c][0]["mlr16"] for c in channels))
         figures = [("dynamic_switched_on", "(a) dynamic (tcomp fit defaults), switched on at the split"),
-                   ("dynamic_continuous", "(b) the same model, filters since 0 h")]
+                   ("dynamic_continuous", "(b) the same model, filters since 0 h"),
+                   ("dynamic_single_switched_on", "(a1) the single best structure (no averaging), switched on at the split"),
+                   ("dynamic_single_continuous", "(b1) the single best structure, filters since 0 h")]
         for v in variants:
             figures += [("dynamic_%s_switched_on" % v, "dynamic %s, switched on at the split" % v),
                          ("dynamic_%s_continuous" % v, "dynamic %s, filters since 0 h" % v)]
@@ -170,6 +186,15 @@ def main(argv=None):
                     print("| %s | %s observer | settle_s %.0f min%s | | |" % (c, key, i[key + "_settle_s"] / 60, "" if sb is None else
                           "; settle bound %.0f min: %d of %d structures with lags refused, chosen %s" % (
                               sb["settle_max_s"] / 60, sb["structures_refused"], sb["structures_checked"], sb["chosen"])))
+            if "dynamic_average" in i:
+                a = i["dynamic_average"]
+                print("| %s | structure average: %s | %s | forward score %s µm (single %s µm) | |" % (
+                    c, "averaged" if a["members"] else "single kept: %s; best weights %s" % (a.get("why_single"), a.get("best_weights")),
+                    "; ".join("w %.1f: %s (ridge %g, score %.3g)" % (m["weight"], ", ".join("%s %g s" % tuple(t) for t in m["terms"]),
+                                                                   m["ridge"], m["score_um"]) for m in a["members"] or []),
+                    "–" if a.get("best_score_um") is None else "%.3g" % a["best_score_um"],
+                    "–" if a.get("single_score_um") is None else "%.3g" % a["single_score_um"]))
+                print("| %s | single structure | %s | | |" % (c, ", ".join("%s %g s %.3g" % tuple(t) for t in i["dynamic_single_terms"])))
             print("| %s | static ≤ 5 | %s | | |" % (c, "%s: %s" % (i["static_le5"]["method"], ", ".join(i["static_le5"]["sensors"]))
                                                    if "static_le5" in i else "–"))
     if args.loco:

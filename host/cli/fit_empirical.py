@@ -56,6 +56,8 @@ OPTIONS = {
     "forward_blocks": number(int, 3),  # dynamic: forward chaining over N equal time blocks of one run
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
     "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
+    "average_structures": number(int, 1),  # dynamic: average up to N structures, weights by forward chaining (1: the best one)
+    "average_members": str,  # dynamic: ridge | path (where the averaged structures come from)
     "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
     "settle_max_s": number_or_none(float, 0.0),  # dynamic: only structures whose observer settles within this (s; none/0: off)
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
@@ -147,6 +149,15 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
             print("  static fallback: search over every term scored %.4g, over the static terms (tau 0) alone %s: the %s structure "
                   "is the model" % (fb["dynamic_score_um"], "no structure" if fb["static_score_um"] is None else "%.4g" % fb["static_score_um"],
                                     fb["chosen"]))
+        sa = model.statistics.get("structure_average")
+        if sa and sa.get("members"):
+            print("  structure average of %d structures (forward-chaining score %.4g against %.4g for the single best):" % (
+                len(sa["members"]), sa["averaged_score_um"], sa["single_score_um"]))
+            for m in sa["members"]:
+                print("    weight %.2f: %s (ridge %g, score %.4g)" % (m["weight"], ", ".join("lag(%s, tau %g s)" % tuple(t) for t in m["terms"]),
+                                                                   m["ridge"], m["score_um"]))
+        elif sa:
+            print("  structure average: the single best structure kept (%s)" % sa["why_single"])
         lb = model.statistics.get("lag_bound", {})
         if lb.get("excluded_taus_s"):
             print("  lags %s s left out: longer than %g x the training span (%.0f s)" % (

@@ -298,6 +298,7 @@ class DynamicRegression:
     settle_bound_: dict[str, Any] | None
     cv_score_: str
     cv_by_ridge_: dict[float, float]
+    fits_by_ridge_: dict[float, dict[str, Any]]
     rmse_: float
     rsquared_: float
 
@@ -333,9 +334,11 @@ class DynamicRegression:
         if not grid or any(isinstance(v, bool) or not isinstance(v, (int, float)) or not v >= 0 for v in grid):
             raise EmpiricalDataError("dynamic: ridge must be a number >= 0 or a list of them, got %r" % (self.ridge,))
         best, tried = None, {}
+        self.fits_by_ridge_ = {}  # every ridge value's best structure: the members structure averaging draws on (averaging.py)
         for lam in grid:
             fitted = self._fit_one(F, y, terms, groups, float(lam))
             tried[float(lam)] = fitted["cv_rmse"]
+            self.fits_by_ridge_[float(lam)] = fitted
             if best is None or fitted["cv_rmse"] < best["cv_rmse"]:
                 best = fitted
         assert best is not None  # grid is not empty (checked above), so the loop set it

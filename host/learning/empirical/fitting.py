@@ -266,7 +266,7 @@ def _sample_interval(runs):
 def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin, geometric, cv_blocks, options, exclude=None, report_forward=True):
     """``method="dynamic"``: lag-filtered signals chosen by forward chaining (default) or leave-one-group-out
     (host/learning/empirical/dynamic.py, forward.py); lags bounded by the training span."""
-    from host.learning.empirical import forward
+    from host.learning.empirical import averaging, forward
     from host.learning.empirical.dynamic import TAU_MAX_FRACTION, TAUS_S, DynamicModel, DynamicRegression, candidate_matrix
     from host.learning.empirical.settle import SettleBound, settle_max_option
 
@@ -292,6 +292,11 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
     if settle_max_s is not None and not use_observer:
         raise EmpiricalDataError("dynamic: settle_max_s bounds the observer's settle time; it needs observer=true")
+    average_count = averaging.check_count(opts.pop("average_structures", averaging.AVERAGE_STRUCTURES))
+    average_members = opts.pop("average_members", "ridge")
+    if settle_max_s is not None and average_count > 1:
+        # the average's union would carry an observer the bound never checked: not combined (neither measured with the other)
+        raise EmpiricalDataError("dynamic: settle_max_s and average_structures > 1 cannot be combined (the averaged union's observer is not bounded)")
     lag_bound = _lag_bound(arrays, opts.pop("tau_max_fraction", TAU_MAX_FRACTION))
     lag_bound["excluded_taus_s"] = [v for v in taus if v > lag_bound["max_tau_s"]]
     taus = tuple(v for v in taus if v <= lag_bound["max_tau_s"])
@@ -346,6 +351,8 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
                                           reference_all, target, channel, obs_scale, taus))
     est.fit(F, y, terms, groups=groups)
     settle_record = est.settle_bound_
+    searched = est  # the search over every term (the static fallback may replace est)
+    plain = None
     fallback: dict[str, Any] | None = None
     static = [j for j, (_, tau) in enumerate(terms) if tau == 0]
     if static_fallback and selection == "forward" and static and len(static) < len(terms):
@@ -364,7 +371,16 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
                         chosen="static" if fallback["static_score_um"] is not None and fallback["static_score_um"] < est.cv_rmse_ else "dynamic")
         if fallback["chosen"] == "static":
             est = plain
+    single = est
+    averaged, average_record = None, None
+    if selection == "forward" and average_count > 1:
+        averaged, average_record = _average_structures(est, searched, plain, static, F, y, terms, groups, average_count,
+                                                       average_members)
+    if averaged is not None:
+        est = averaged
     stats = est.statistics()
+    if average_record is not None:
+        stats["structure_average"] = average_record
     if fallback is not None:
         stats["static_fallback"] = fallback
     stats["lag_bound"] = lag_bound
@@ -402,6 +418,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     model.estimator_ = est
     model.arrays_ = arrays
     model.geometric_ = geo
+    if averaged is not None:
+        # the single structure the average replaced, as a model of its own (not in the document): for comparisons
+        model.single_ = _single_model(single, model, reference_all, runs, arrays, exclude, obs_scale, use_observer)
     if report_forward and blocks is None:
         stats["forward_chaining"] = {"error": fc_error}
     elif report_forward:
@@ -429,6 +448,32 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
             fc["baseline_" + forward.BASELINE] = base
             fc["beats_baseline"] = bool(fc["pooled_um"] < base["pooled_um"])
     return model
+
+
+def _average_structures(chosen, searched, plain, static, F, y, terms, groups, count, members_from="ridge"):
+    """(AveragedRegression or None, its record): structure averaging (host/learning/empirical/averaging.py) over the
+    per-ridge structures of the search over every term and, when it ran, of the static search (``plain``)."""
+    from host.learning.empirical import averaging
+
+    searches = [(searched, list(range(len(terms))))]
+    if plain is not None:
+        searches.append((plain, static))
+    return averaging.average(chosen, F, y, terms, groups, searches, count, searched.block_columns, members_from)
+
+
+def _single_model(est, model, reference_all, runs, arrays, exclude, obs_scale, use_observer):
+    """The DynamicModel of the single structure ``est`` that structure averaging replaced in ``model`` (same target,
+    geometry, reference rule and observer fit as the averaged model)."""
+    from host.learning.empirical.dynamic import DynamicModel
+
+    used = list(dict.fromkeys(n[2:] for n, _ in est.terms_ if n.startswith("T:")))
+    out = DynamicModel(est.terms_, est.coef_, est.intercept_, model.target, model.channel, model.geometric_coef, "dynamic", model.axis,
+                       {s: reference_all[s] for s in used}, training=model.training, dt_s=model.dt_s)
+    if use_observer:
+        from host.learning.empirical.observer import fit_observer
+
+        out.observer = fit_observer(out, runs, spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=obs_scale)
+    return out
 
 
 STATIC_FALLBACK_RULE = ("the structure chosen among every term is compared with the one the same search chooses among the static terms "

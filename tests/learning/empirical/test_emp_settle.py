@@ -87,6 +87,12 @@ def test_settle_max_needs_the_observer(run):
         fit_model([run], "dynamic", target="direct", channel="ch1", settle_max_s=BOUND_S, observer=False, **SETTINGS)
 
 
+def test_settle_max_is_not_combined_with_structure_averaging(run):
+    # the averaged union carries an observer the bound never checked: refused by name, not silently unbounded
+    with pytest.raises(EmpiricalDataError, match="settle_max_s and average_structures > 1 cannot be combined"):
+        fit_model([run], "dynamic", target="direct", channel="ch1", settle_max_s=BOUND_S, average_structures=2, **SETTINGS)
+
+
 def test_tcomp_fit_takes_the_option_and_prints_the_bound(run, tmp_path, capsys):
     path = str(tmp_path / "machine")
     write_run(run, path)
