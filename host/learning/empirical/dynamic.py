@@ -554,6 +554,7 @@ class DynamicModel(DocumentFields):
     estimator_: Any
     arrays_: Any
     geometric_: Any
+    single_: DynamicModel  # with average_structures > 1: the single best structure the average replaced (in memory only)
 
     kind = "dynamic"
     coefficients = None  # not a linear function of the temperatures
