@@ -45,7 +45,6 @@ Usage: .venv/bin/python tools/bench_restart.py [--channels ch1,ch4] [--no-twin] 
        [--windows 0,5,10,20,30 [--window-regressors ud,udy,udh,udhy]] [--spindle-history 30,60,120,inf]
 """
 import argparse
-import json
 import os
 import sys
 import time
@@ -57,6 +56,7 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from host.data.runs import load_run, slice_run
 from host.learning.empirical import observer as obs
 from host.learning.empirical.fitting import fit_model
+from host.options import parse_options
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SPLIT_H = 32.13  # start of FL_THERMAL's 5th spindle cycle (docs/results.md)
@@ -466,13 +466,7 @@ def main():
     ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="a dynamic setting (JSON value) for every model fitted, e.g. settle_max_s=1800")
     args = ap.parse_args()
-    opts = {}
-    for item in args.option:
-        k, _, v = item.partition("=")
-        try:
-            opts[k] = json.loads(v)
-        except json.JSONDecodeError:
-            opts[k] = v
+    opts = parse_options(args.option)  # JSON values or words, any key: fit_model's own settings (host/options.py)
     def minutes(text, flag, positive):
         try:
             vals = [float(v) for v in text.split(",")]

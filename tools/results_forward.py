@@ -53,6 +53,7 @@ from host.data.runs import load_run, slice_run  # noqa: E402
 from host.learning.empirical.compare import leave_one_cycle_out  # noqa: E402
 from host.learning.empirical.fitting import fit_model  # noqa: E402
 from host.learning.empirical.forward import block_residuals  # noqa: E402
+from host.options import parse_options  # noqa: E402
 
 STATIC = ("cv-subset", "stepwise")
 
@@ -130,13 +131,7 @@ def main(argv=None):
     ap.add_argument("--loco", action="store_true", help="also leave-one-cycle-out (5 channels x 6 folds: about 20 min more on the loaded 2-core machine)")
     ap.add_argument("--json", help="write every figure as JSON")
     args = ap.parse_args(argv)
-    opts = {}
-    for item in args.option:
-        k, _, v = item.partition("=")
-        try:
-            opts[k] = json.loads(v)
-        except json.JSONDecodeError:
-            opts[k] = v
+    opts = parse_options(args.option)  # JSON values or words, any key: fit_model's own settings (host/options.py)
     run = load_run(args.run)
     channels = args.channels.split(",")
     splits = [] if args.no_splits else (args.split_h or [32.129166666666666, 24.129166666666666])
