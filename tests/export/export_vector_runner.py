@@ -8,6 +8,7 @@ A case is a table (hex) and a list of operations:
   ["c"]                     clear_feed
   ["r", um]                 set_reference
   ["l"]                     latch_references (tables certified for latched references)
+  ["o"]                     estimate (a screw table's observer start; the cold start without one)
   ["n", rpm]                set_spindle (dynamic)
   ["g", mm_min]             set_feed_rate (dynamic)
   ["e", um]                 record [offset_at(um), ref_offset(), slope(), flags]
@@ -44,6 +45,8 @@ def run_case(table, ops, check=False):
             ev.set_reference(op[1])
         elif k == "l":
             ev.latch_references()
+        elif k == "o":
+            ev.estimate()
         elif k == "n":
             ev.set_spindle(op[1])
         elif k == "g":

@@ -224,7 +224,7 @@ def test_c_header_leaves_out_only_what_the_evaluator_never_reads():
     from models_export import cheader
     from models_export.tableformat import spec_names
 
-    spec = {n for s in (table.COMMON, table.POSITION, table.SCREW) for n, _ in spec_names(s)}
+    spec = {n for s in (table.COMMON, table.POSITION, table.SCREW, table.SCREW_OBS) for n, _ in spec_names(s)}
     emitted = {n for g in cheader.SCALARS.values() for n in g} | {n for g in cheader.ARRAYS.values() for n in g}
     assert spec - emitted == set(cheader.INFORMATIONAL)
     source = (Path(table.__file__).with_name("evaluate.py")).read_text()

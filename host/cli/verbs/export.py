@@ -65,11 +65,6 @@ def run(args: argparse.Namespace) -> int:
         print("WARNING: thermal.observer (screw state from %s at power-on, settles in %.0f min against %.0f min cold) "
               "is not in the table: %s" % (obs["sensor"], obs["settle_s"] / 60, obs["cold_settle_s"] / 60, obs["reason"]),
               file=sys.stderr)
-    if args.c_header:
-        from models_export.cheader import left_out
-
-        for note in left_out(ex):  # the table carries it, the C header's evaluator does not: say so, not drop it silently
-            print("WARNING: --c-header %s: %s" % (args.c_header, note), file=sys.stderr)
     return 0
 
 
