@@ -575,11 +575,18 @@ class DynamicModel(DocumentFields):
         self.geometric_coef = np.asarray(geometric_coef, dtype=float)
         self.method = method
         self.axis = axis
-        self.sensors = sorted({n[2:] for n, _ in self.terms if n.startswith("T:")}, key=lambda s: [n for n, _ in self.terms].index("T:" + s))
+        self.term_sensors = sorted({n[2:] for n, _ in self.terms if n.startswith("T:")}, key=lambda s: [n for n, _ in self.terms].index("T:" + s))
+        # sensors only the observer reads (option observer_sensors, host/learning/empirical/observer.py choose_observer_sensors)
+        self.observer_sensors: list[str] = []
         self.reference_C = dict(reference_C or {})
         self.envelope = envelope or {}
         self.statistics = statistics or {}
         self.training = training or {}
+
+    @property
+    def sensors(self) -> list[str]:
+        """Every sensor the board reads: the terms' (first-use order), then those only the observer reads."""
+        return self.term_sensors + [s for s in self.observer_sensors if s not in self.term_sensors]
 
     @property
     def reference(self) -> str:
@@ -691,9 +698,20 @@ class DynamicModel(DocumentFields):
             from host.learning.empirical.observer import Observer
 
             sensors = list(dict.fromkeys(n[2:] for n, _ in out if n.startswith("T:")))
-            missing = [s for s in sensors if not num((doc.get("reference_C") or {}).get(s))]
+            # a sensor of the document's "sensors" that no term reads is one only the observer reads (its gains' "T:<sensor>")
+            listed = doc.get("sensors")
+            if listed is not None and (not isinstance(listed, list) or not all(isinstance(v, str) and v for v in listed)):
+                raise ModelFormatError("dynamic model document: field 'sensors' must be a list of sensor names, found %r" % (listed,))
+            observer_only = [v for v in dict.fromkeys(listed or []) if v not in sensors]
+            missing = [s for s in sensors + observer_only if not num((doc.get("reference_C") or {}).get(s))]
             if missing:
                 raise ModelFormatError("dynamic model document: thermal.observer needs reference_C of sensor %s (a number, °C)" % missing[0])
-            observer = Observer.from_document(th["observer"], out)
-        return cls(out, coefs, th["intercept"], th["target"], doc.get("channel"), geo, doc.get("method", "dynamic"), doc.get("axis"),
-                   doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"), th.get("dt_s"), observer)
+            observer = Observer.from_document(th["observer"], out, observer_only)
+        elif doc.get("sensors") is not None and [v for v in doc["sensors"] if "T:%s" % v not in {n for n, _ in out}]:
+            raise ModelFormatError("dynamic model document: sensors %s are read by no term, and there is no thermal.observer to read them"
+                                   % ", ".join(str(v) for v in doc["sensors"] if "T:%s" % v not in {n for n, _ in out}))
+        model = cls(out, coefs, th["intercept"], th["target"], doc.get("channel"), geo, doc.get("method", "dynamic"), doc.get("axis"),
+                    doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"), th.get("dt_s"), observer)
+        if observer is not None:
+            model.observer_sensors = list(observer_only)
+        return model

@@ -292,6 +292,11 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
     if settle_max_s is not None and not use_observer:
         raise EmpiricalDataError("dynamic: settle_max_s bounds the observer's settle time; it needs observer=true")
+    from host.learning.empirical.observer import observer_sensors_option
+
+    observer_count = observer_sensors_option(opts.pop("observer_sensors", 0))  # sensors only the observer reads (observer.py)
+    if observer_count and not use_observer:
+        raise EmpiricalDataError("dynamic: observer_sensors adds sensors the observer reads; it needs observer=true")
     average_count = averaging.check_count(opts.pop("average_structures", averaging.AVERAGE_STRUCTURES))
     average_members = opts.pop("average_members", "ridge")
     if settle_max_s is not None and average_count > 1:
@@ -410,6 +415,19 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         from host.learning.empirical.observer import fit_observer
 
         model.observer = fit_observer(model, runs, spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=obs_scale)
+        if observer_count:
+            # sensors beyond the terms' whose present reading recovers the lag states better, chosen on the training
+            # samples only, the model's sensors staying within max_sensors (docs/empirical.md "Observer-only sensors")
+            from host.learning.empirical.observer import choose_observer_sensors
+
+            stats["observer_sensors"] = choose_observer_sensors(
+                model, runs, names, reference_all, observer_count, int(searched.max_sensors),
+                spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=obs_scale)
+            if model.observer_sensors:
+                model.envelope.setdefault("temperature_C", {}).update(
+                    _envelope(runs, arrays, model.observer_sensors, margin, target, channel)["temperature_C"])
+                model.envelope.setdefault("temperature_rise_K", {}).update(
+                    _envelope(runs, arrays, model.observer_sensors, margin, target, channel)["temperature_rise_K"])
     if settle_record is not None:
         # what the bound refused in the search over every term, and the settle_s of the model as written (the static
         # fallback's, when it won: 0, it has no lag state)
@@ -429,6 +447,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
             b0, coef = est.coefficients_on(labels < k)
             m = DynamicModel(est.terms_, coef, b0, target, channel, model.geometric_coef, "dynamic", model.axis,
                              reference_C=model.reference_C, training={"error_reference": common_error_reference(runs)})
+            m.observer_sensors = list(model.observer_sensors)  # the fold's observer reads what the model's reads
             if use_observer:
                 # the board scored on block k starts with an observer fitted on the blocks before it, as the model's own
                 # was on all of them (reference_C: the training runs' start temperatures, as the model's)

@@ -108,7 +108,8 @@ class Observer:
                             "bound": float(s["bound"]), "rms": float(s["rms"])} for s in self.states]}
 
     @classmethod
-    def from_document(cls, obs: Any, terms: Sequence[tuple[str, float]]) -> Observer:
+    def from_document(cls, obs: Any, terms: Sequence[tuple[str, float]], observer_only: Sequence[str] = ()) -> Observer:
+        """``observer_only``: the document's sensors that no term reads (the observer's own regressors "T:<sensor>")."""
         import math
 
         from host.learning.documents import ModelFormatError
@@ -129,21 +130,32 @@ class Observer:
         if not isinstance(states, list) or [s.get("term") if isinstance(s, dict) else None for s in states] != lagged:
             raise ModelFormatError("%s.states must list one object per lag term (thermal.terms with tau_s > 0), in term order: "
                                    "terms %s" % (where, lagged))
+        regressors = signals_of(terms) + ["T:" + v for v in observer_only]
         for i, s in enumerate(states):
             for key in ("bound", "rms"):
                 if not num(s.get(key)) or s[key] < 0:
                     raise ModelFormatError("%s.states[%d].%s must be a finite number >= 0, found %r" % (where, i, key, s.get(key)))
             g = s.get("gains")
-            if not isinstance(g, dict) or any(k not in signals_of(terms) for k in g) or not all(num(v) for v in g.values()):
+            if not isinstance(g, dict) or any(k not in regressors for k in g) or not all(num(v) for v in g.values()):
                 raise ModelFormatError("%s.states[%d].gains must map the model's signals (%s) to finite numbers, found %r"
-                                       % (where, i, ", ".join(signals_of(terms)), g))
+                                       % (where, i, ", ".join(regressors), g))
+        unread = [v for v in observer_only if not any("T:" + v in s["gains"] for s in states)]
+        if unread:
+            raise ModelFormatError("%s: sensor %s is listed in the document's sensors but no term and no observer gain reads it"
+                                   % (where, unread[0]))
         states = [dict(s, signal=terms[s["term"]][0]) for s in states]
         return cls(states, obs["settle_s"], obs["tolerance"], obs["scale"])
 
 
 def signals_of(terms: Iterable[tuple[str, float]]) -> list[str]:
-    """The distinct signals of ``terms`` in first-use order: the observer's regressors."""
+    """The distinct signals of ``terms`` in first-use order (the observer's regressors, without observer-only sensors)."""
     return list(dict.fromkeys(n for n, _ in terms))
+
+
+def regressors_of(model: DynamicModel) -> list[str]:
+    """The observer's regressors: the terms' signals, then "T:<sensor>" of each sensor only the observer reads."""
+    names = signals_of(model.terms)
+    return names + ["T:" + s for s in model.observer_sensors if "T:" + s not in names]
 
 
 def inputs(model: DynamicModel, run: Run) -> tuple[np.ndarray, dict[str, np.ndarray]]:
@@ -165,7 +177,7 @@ def _chain(model, runs):
                                      "starts, both times on one clock (temperatures.csv time_s)" % (a.path or a.name, ta[-1], b.path or b.name, tb[0]))
     t = np.concatenate([p[0][:-1] if k + 1 < len(parts) and p[0][-1] == parts[k + 1][0][0] else p[0] for k, p in enumerate(parts)])
     sig = {}
-    for name, _ in model.terms:
+    for name in regressors_of(model):
         cols = []
         for k, (tk, sk) in enumerate(parts):
             if name not in sk:
@@ -207,7 +219,7 @@ def board_terms(model: DynamicModel, runs: Sequence[Run], observer: bool = True)
     machine at its reference). Returns (t, columns (n, terms)).
     """
     t, sig = _chain(model, runs)
-    est = model.observer.initial_states({n: sig[n][0] for n in signals_of(model.terms)}) if observer and model.observer is not None else {}
+    est = model.observer.initial_states({n: sig[n][0] for n in regressors_of(model)}) if observer and model.observer is not None else {}
     cols = np.empty((t.size, len(model.terms)))
     for j, (name, tau) in enumerate(model.terms):
         y0 = est.get(j, sig[name][0])
@@ -229,7 +241,7 @@ def fit_observer(model: DynamicModel, runs: Sequence[Run], spans: Sequence[tuple
     fitted on, e.g. a held-out period, must not shape its observer either).
     """
     lagged = [j for j, (_, tau) in enumerate(model.terms) if tau > 0]
-    names = signals_of(model.terms)
+    names = regressors_of(model)
     A, Y = [], []
     for i, r in enumerate(runs):
         t, sig = inputs(model, r)
@@ -281,3 +293,64 @@ def settle_time(model: DynamicModel, states: Sequence[Mapping[str, Any]], tolera
         else:
             hi = mid
     return float(np.ceil(hi))
+
+
+OBSERVER_SENSORS_RULE = ("greedy, on the training samples only: each round refits the observer with every candidate sensor added "
+                         "in turn as a regressor T:<sensor> (no term reads it) and keeps the one that lowers settle_s most "
+                         "(ties: the lower start-error bound B(0)); it stops when no candidate lowers settle_s, after "
+                         "observer_sensors additions, or when the model reads max_sensors sensors")
+
+
+def observer_sensors_option(value: Any) -> int:
+    """The dynamic option ``observer_sensors``: how many sensors beyond the terms' the observer may read (0: none)."""
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        raise EmpiricalDataError("dynamic: observer_sensors must be a whole number >= 0 (how many sensors beyond the terms' the "
+                                 "observer may read; 0: none), got %r" % (value,))
+    return value
+
+
+def choose_observer_sensors(model: DynamicModel, runs: Sequence[Run], candidates: Sequence[str], reference_C: Mapping[str, float],
+                            count: int, max_sensors: int, spans: Sequence[tuple[float, float]] | None = None,
+                            exclude: tuple[float | None, float | None] | None = None, scale: float = 1.0) -> dict[str, Any]:
+    """Let ``model``'s observer read up to ``count`` sensors that no term reads (OBSERVER_SENSORS_RULE), the model's sensors
+    staying <= ``max_sensors``. A lag state j's estimate Σ G_ji·u_i over the terms' own signals misses what those signals
+    cannot say about the past; the *present* reading of another sensor (one behind a slower thermal path) can carry it.
+
+    Sets ``model.observer_sensors``, ``model.reference_C`` of those sensors (``reference_C``: the training's reference of
+    every candidate) and ``model.observer``; fitted on what the model's own observer is (``spans``, ``exclude``).
+    Returns the record for the model's statistics (``observer_sensors``)."""
+    model.observer_sensors = []
+    observer = fit_observer(model, runs, spans=spans, exclude=exclude, scale=scale)
+    record: dict[str, Any] = {"allowed": int(count), "max_sensors": int(max_sensors), "rule": OBSERVER_SENSORS_RULE,
+                              "settle_s_without": observer.settle_s, "bound_um_without": observer.start_error_bound(model),
+                              "chosen": [], "steps": []}
+    room = min(int(count), int(max_sensors) - len(model.term_sensors))
+    if not observer.states:  # no lag state (e.g. the static fallback): nothing to recover
+        room = 0
+    own_reference = dict(model.reference_C)
+    chosen: list[str] = []
+    key = (observer.settle_s, observer.start_error_bound(model))
+    while len(chosen) < room and key[0] > 0:
+        best = None
+        for c in candidates:
+            if c in model.term_sensors or c in chosen:
+                continue
+            if c not in reference_C:
+                raise EmpiricalDataError("dynamic: observer_sensors: no reference temperature of candidate sensor %s" % c)
+            model.observer_sensors = chosen + [c]
+            model.reference_C = dict(own_reference, **{s: float(reference_C[s]) for s in model.observer_sensors})
+            trial = fit_observer(model, runs, spans=spans, exclude=exclude, scale=scale)
+            k = (trial.settle_s, trial.start_error_bound(model))
+            if best is None or k < best[0]:
+                best = (k, c, trial)
+        if best is None or not best[0][0] < key[0]:
+            break
+        key, observer = best[0], best[2]
+        chosen.append(best[1])
+        record["steps"].append({"sensor": best[1], "settle_s": key[0], "bound_um": key[1]})
+    model.observer_sensors = chosen
+    model.reference_C = dict(own_reference, **{s: float(reference_C[s]) for s in chosen})
+    model.observer = observer
+    record["chosen"] = list(chosen)
+    record["settle_s"] = observer.settle_s
+    return record
