@@ -72,6 +72,7 @@ def without_observer(model):
     doc = model.to_document()
     doc["thermal"] = {k: v for k, v in doc["thermal"].items() if k != "observer"}
     doc["thermal"]["reference"] = "run_start"
+    doc["sensors"] = list(model.term_sensors)  # without the observer no sensor is read by the observer alone
     return type(model).from_document(doc)
 
 

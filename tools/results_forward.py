@@ -67,6 +67,17 @@ def _rmse(pair):
 VARIANTS = {"switched_on": {"forward_state": "switched_on"}, "continuous": {"forward_state": "continuous"}, "static": {"taus_s": [0]}}
 
 
+def own_observer(dyn, runs):
+    """``dyn`` (fitted with observer_sensors) with the observer refitted on its terms' signals only, on the same samples."""
+    from host.learning.empirical.dynamic import DynamicModel
+    from host.learning.empirical.observer import fit_observer
+
+    own = DynamicModel(dyn.terms, dyn.term_coefficients, dyn.intercept, dyn.target, dyn.channel, dyn.geometric_coef, "dynamic",
+                       dyn.axis, {s: dyn.reference_C[s] for s in dyn.term_sensors}, training=dyn.training, dt_s=dyn.dt_s)
+    own.observer = fit_observer(own, runs, spans=[(a.time_s.min(), a.time_s.max()) for a in dyn.arrays_], scale=dyn.observer.scale)
+    return own
+
+
 def held_out(run, split_s, channel, dyn_options, variants=()):
     """{figure: RMSE µm} of one channel on t >= split_s, and the fitted models' descriptions."""
     block = {"block": 1, "run": 0, "t_start_s": split_s, "t_end_s": float(run.errors.time_s.max())}
@@ -91,6 +102,14 @@ def held_out(run, split_s, channel, dyn_options, variants=()):
             info[key + "_single_terms"] = [[n, tau, float(c)] for (n, tau), c in zip(single.terms, single.term_coefficients)]
             sa = st["structure_average"]
             info[key + "_average"] = sa
+        if st.get("observer_sensors", {}).get("chosen"):
+            # the same model with the observer of its own signals only (what it is without observer_sensors: the
+            # option acts after the selection), measured in the same run
+            own = own_observer(dyn, [run])
+            out[key + "_own_observer_switched_on"] = _rmse(block_residuals(own, cut, block))
+            info[key + "_own_observer_settle_s"] = own.observer.settle_s
+        if "observer_sensors" in st:
+            info[key + "_observer_sensors"] = {k: v for k, v in st["observer_sensors"].items() if k != "rule"}
         info[key + "_terms"] = [[n, tau, float(c)] for (n, tau), c in zip(dyn.terms, dyn.term_coefficients)]
         info[key + "_sensors"] = list(dyn.sensors)
         info[key + "_ridge"] = st.get("ridge")
@@ -152,6 +171,7 @@ def main(argv=None):
         print("|---|%s" % ("---|" * len(channels)))
         print("| MLR-16 held-out RMSE µm | %s |" % " | ".join("%.2f" % rows[c][0]["mlr16"] for c in channels))
         figures = [("dynamic_switched_on", "(a) dynamic (tcomp fit defaults), switched on at the split"),
+                   ("dynamic_own_observer_switched_on", "(a0) the same model, its observer reading the terms' sensors only"),
                    ("dynamic_continuous", "(b) the same model, filters since 0 h"),
                    ("dynamic_single_switched_on", "(a1) the single best structure (no averaging), switched on at the split"),
                    ("dynamic_single_continuous", "(b1) the single best structure, filters since 0 h")]
@@ -176,6 +196,11 @@ def main(argv=None):
                 print("| %s | %s | %s | %s | %.0f |" % (c, key, ", ".join("%s %g s %.3g" % tuple(t) for t in i[key + "_terms"]),
                                                   i[key + "_ridge"], i[key + "_fit_s"]))
             for key in ["dynamic"] + ["dynamic_" + v for v in variants]:
+                if key + "_observer_sensors" in i:
+                    o = i[key + "_observer_sensors"]
+                    print("| %s | %s observer_sensors | chosen %s: settle_s %.0f min, without %.0f min (bound at start %.2f µm, without %.2f) | | |" % (
+                        c, key, ", ".join(o["chosen"]) or "none", o["settle_s"] / 60, o["settle_s_without"] / 60,
+                        o["steps"][-1]["bound_um"] if o["steps"] else o["bound_um_without"], o["bound_um_without"]))
                 if i.get(key + "_settle_s") is not None:
                     sb = i.get(key + "_settle_bound")
                     print("| %s | %s observer | settle_s %.0f min%s | | |" % (c, key, i[key + "_settle_s"] / 60, "" if sb is None else

@@ -702,14 +702,14 @@ class DynamicModel(DocumentFields):
             listed = doc.get("sensors")
             if listed is not None and (not isinstance(listed, list) or not all(isinstance(v, str) and v for v in listed)):
                 raise ModelFormatError("dynamic model document: field 'sensors' must be a list of sensor names, found %r" % (listed,))
-            observer_only = [v for v in dict.fromkeys(listed or []) if v not in sensors]
+            # (a listed sensor that no term and no gain reads is ignored, as documents before observer_sensors had them)
+            read = {k for st in (th["observer"].get("states") or []) if isinstance(st, dict) and isinstance(st.get("gains"), dict)
+                    for k in st["gains"]} if isinstance(th["observer"], dict) else set()
+            observer_only = [v for v in dict.fromkeys(listed or []) if v not in sensors and "T:" + v in read]
             missing = [s for s in sensors + observer_only if not num((doc.get("reference_C") or {}).get(s))]
             if missing:
                 raise ModelFormatError("dynamic model document: thermal.observer needs reference_C of sensor %s (a number, °C)" % missing[0])
             observer = Observer.from_document(th["observer"], out, observer_only)
-        elif doc.get("sensors") is not None and [v for v in doc["sensors"] if "T:%s" % v not in {n for n, _ in out}]:
-            raise ModelFormatError("dynamic model document: sensors %s are read by no term, and there is no thermal.observer to read them"
-                                   % ", ".join(str(v) for v in doc["sensors"] if "T:%s" % v not in {n for n, _ in out}))
         model = cls(out, coefs, th["intercept"], th["target"], doc.get("channel"), geo, doc.get("method", "dynamic"), doc.get("axis"),
                     doc.get("reference_C"), doc.get("envelope"), doc.get("statistics"), doc.get("training"), th.get("dt_s"), observer)
         if observer is not None:

@@ -139,10 +139,6 @@ class Observer:
             if not isinstance(g, dict) or any(k not in regressors for k in g) or not all(num(v) for v in g.values()):
                 raise ModelFormatError("%s.states[%d].gains must map the model's signals (%s) to finite numbers, found %r"
                                        % (where, i, ", ".join(regressors), g))
-        unread = [v for v in observer_only if not any("T:" + v in s["gains"] for s in states)]
-        if unread:
-            raise ModelFormatError("%s: sensor %s is listed in the document's sensors but no term and no observer gain reads it"
-                                   % (where, unread[0]))
         states = [dict(s, signal=terms[s["term"]][0]) for s in states]
         return cls(states, obs["settle_s"], obs["tolerance"], obs["scale"])
 
