@@ -327,6 +327,12 @@ class Model:
         terms = thermal.get("terms")
         if not isinstance(terms, list) or not 1 <= len(terms) <= 8:
             raise ExportError("thermal.terms must list 1..8 terms, found %r" % (terms,))
+        n_doc = len(terms)
+        extra = self._observer_only_filters(thermal, terms)
+        if n_doc + len(extra) > 8:
+            raise ExportError("thermal.terms (%d) and the sensors only the observer reads (%s) need %d filters; the table holds 8"
+                              % (n_doc, ", ".join(t["signal"][2:] for t in extra), n_doc + len(extra)))
+        terms = terms + extra
 
         def top(key: str, needed: bool) -> int:
             if not needed:
@@ -374,7 +380,7 @@ class Model:
             self.shp = db
         self.dyn: list[DynTerm] = []
         for j, t in enumerate(terms):
-            where = "thermal.terms[%d]" % j
+            where = "thermal.terms[%d]" % j if j < n_doc else "observer-only sensor %s" % t["signal"][2:]
             if not isinstance(t, dict):
                 raise ExportError("%s must be an object" % where)
             sig = t.get("signal")
@@ -413,13 +419,27 @@ class Model:
             # the host's discrete lag (host/learning/empirical/dynamic.py): a = 1 - exp(-dt/tau) in doubles, exactly
             import numpy as np
             a = F(float(1.0 - np.exp(-(self.dt_ms / 1000.0) / float(tau)))) if tau > 0 else F(0)
-            name = "thermal.terms[%d] (%s, tau %g s)" % (j, sig, float(tau))
+            name = ("thermal.terms[%d] (%s, tau %g s)" % (j, sig, float(tau)) if j < n_doc else
+                    "observer-only sensor %s (a filter of tau 0 and coefficient 0)" % sig[2:])
             self.dyn.append(DynTerm(src=src, u=u, fy=fy, a=a, name=name, tau=tau, ein=ein, per=per, signal=sig))
             self.b.append(coef * unit * per / p2(fy))  # output scale per state unit
             self.d_lo.append(u[0] << fy)
             self.d_hi.append(u[1] << fy)
             self.b_names.append(name)
         self._observer(thermal.get("observer"))
+
+    def _observer_only_filters(self, thermal: dict[str, Any], terms: list[Any]) -> list[dict[str, Any]]:
+        """Sensors only the observer reads (the dynamic option observer_sensors, docs/model-format.md): a sensor of
+        ``sensors`` that no term reads and an observer gain "T:<sensor>" does. Each becomes a filter with tau 0 and
+        coefficient 0 after the terms (table format 5 unchanged: the board reads it as any filter's input, the offset
+        does not depend on it, and the observer's gain has a filter input to read)."""
+        obs = thermal.get("observer")
+        if not isinstance(obs, dict) or not isinstance(obs.get("states"), list):
+            return []
+        read = {t.get("signal") for t in terms if isinstance(t, dict)}
+        gained = {k for st in obs["states"] if isinstance(st, dict) and isinstance(st.get("gains"), dict) for k in st["gains"]}
+        return [{"signal": "T:" + s, "tau_s": 0.0, "coefficient": 0.0} for s in self.sensors
+                if "T:" + s not in read and "T:" + s in gained]
 
     def _observer(self, obs: object) -> None:
         """The observer's gains in table units (issue 21; host/learning/empirical/observer.py): ``obs_gain[j][m]``, the

@@ -294,7 +294,8 @@ def settle_time(model: DynamicModel, states: Sequence[Mapping[str, Any]], tolera
 OBSERVER_SENSORS_RULE = ("greedy, on the training samples only: each round refits the observer with every candidate sensor added "
                          "in turn as a regressor T:<sensor> (no term reads it) and keeps the one that lowers settle_s most "
                          "(ties: the lower start-error bound B(0)); it stops when no candidate lowers settle_s, after "
-                         "observer_sensors additions, or when the model reads max_sensors sensors")
+                         "observer_sensors additions, when the model reads max_sensors sensors, or when its terms and "
+                         "observer-only sensors fill the table's 8 filters")
 
 
 def observer_sensors_option(value: Any) -> int:
@@ -320,7 +321,10 @@ def choose_observer_sensors(model: DynamicModel, runs: Sequence[Run], candidates
     record: dict[str, Any] = {"allowed": int(count), "max_sensors": int(max_sensors), "rule": OBSERVER_SENSORS_RULE,
                               "settle_s_without": observer.settle_s, "bound_um_without": observer.start_error_bound(model),
                               "chosen": [], "steps": []}
-    room = min(int(count), int(max_sensors) - len(model.term_sensors))
+    from host.learning.empirical.averaging import BOARD_TERMS
+
+    # the table carries each observer-only sensor as a filter of coefficient 0 (models_export/exact.py): within its 8
+    room = min(int(count), int(max_sensors) - len(model.term_sensors), BOARD_TERMS - len(model.terms))
     if not observer.states:  # no lag state (e.g. the static fallback): nothing to recover
         room = 0
     own_reference = dict(model.reference_C)
