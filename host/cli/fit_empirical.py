@@ -60,6 +60,7 @@ OPTIONS = {
     "average_members": str,  # dynamic: ridge | path (where the averaged structures come from)
     "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
     "settle_max_s": number_or_none(float, 0.0),  # dynamic: only structures whose observer settles within this (s; none/0: off)
+    "observer_sensors": number(int, 0),  # dynamic: sensors beyond the terms' the observer may read (0: none; observer.py)
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
     "base": str,  # mr-poly: base sensor (default: role "base")
@@ -137,6 +138,11 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
             print("  observer: lag states estimated from the inputs at a start; start-error bound %.3g um, within %.3g um after "
                   "%.0f min (SETTLING)%s" % (obs.start_error_bound(model), obs.tolerance, obs.settle_s / 60,
                                              "" if worst is None else "; largest share: lag(%s, tau %g s)" % model.terms[worst["term"]]))
+        ob = model.statistics.get("observer_sensors")
+        if ob:
+            print("  observer-only sensors (up to %d, the model's sensors within %d): %s; settle_s %.0f min, %.0f min without" % (
+                ob["allowed"], ob["max_sensors"], ", ".join(ob["chosen"]) or "none lowered settle_s", ob["settle_s"] / 60,
+                ob["settle_s_without"] / 60))
         sb = model.statistics.get("settle_bound")
         if sb:
             print("  settle bound: only structures with settle_s <= %.0f min admitted; %d of %d structures with lags checked were "

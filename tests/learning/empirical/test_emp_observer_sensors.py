@@ -114,3 +114,24 @@ def test_the_document_lists_observer_only_sensors_and_round_trips():
     # an observer-only sensor needs its reference temperature
     with pytest.raises(ModelFormatError, match="reference_C of sensor t2"):
         DynamicModel.from_document({**doc, "reference_C": {"t1": REF_C}})
+
+
+def test_tcomp_fit_takes_the_option_and_prints_the_choice(tmp_path, capsys):
+    import json
+
+    from host.cli import main
+    from host.data.runs import write_run
+
+    path = str(tmp_path / "machine")
+    write_run(_machine(), path)
+    out = str(tmp_path / "m.json")
+    assert main(["fit", path, "--model", "dynamic", "--direct", "--channel", "ch1", "--option", "taus_s=0/3600/14400",
+                 "--option", "forward_blocks=4", "--option", "observer_sensors=2", "--out", out]) == 0
+    assert "observer-only sensors (up to 2, the model's sensors within 5)" in capsys.readouterr().out
+    with open(out) as fh:
+        doc = json.load(fh)
+    rec = doc["statistics"]["observer_sensors"]
+    assert rec["allowed"] == 2 and doc["sensors"][len(doc["sensors"]) - len(rec["chosen"]):] == rec["chosen"]
+    assert main(["fit", path, "--model", "dynamic", "--direct", "--channel", "ch1", "--option", "observer_sensors=-1",
+                 "--out", str(tmp_path / "bad.json")]) != 0
+    assert "observer_sensors" in capsys.readouterr().err
