@@ -14,9 +14,11 @@ moment it starts:
    depend on when the board was switched on.
 2. Each lag state is estimated from what the board reads at that moment, its
    filter inputs u_i (the model sensors' rises over reference_C, and the
-   spindle speed, its square and the feed where the model uses them), by a
-   static linear map fitted on the training runs, where the true states are
-   known (the filters run through each training run from its cold start):
+   spindle speed, its square and the feed where the model uses them; with the
+   option ``observer_sensors``, also the rises of sensors no term reads,
+   :func:`choose_observer_sensors`), by a static linear map fitted on the
+   training runs, where the true states are known (the filters run through
+   each training run from its cold start):
 
        ŷ_j = Σ_i G_ji · u_i                                  (least squares)
 
