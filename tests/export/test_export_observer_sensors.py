@@ -105,3 +105,40 @@ def test_a_gain_on_a_sensor_the_document_does_not_list_is_still_refused():
     doc["thermal"]["observer"]["states"][0]["gains"]["T:T9"] = 0.5
     with pytest.raises(ExportError, match="signal 'T:T9' is not read by any term"):
         export_model(restamp(doc))
+
+
+def test_a_host_document_with_an_observer_only_sensor_starts_on_the_board_like_the_host():
+    """The host's own document (tests/learning/empirical/test_emp_observer_sensors.py's machine: 4 x lag(t1, 4 h), its
+    observer also reading the slow-path sensor t2) exported; a board started at every 60th sample (hourly) estimates the host's
+    state within the certified start error."""
+    import os
+    import sys
+
+    import numpy as np
+
+    sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "learning", "empirical"))
+    from test_emp_observer_sensors import REF_C, _slow_lag_model
+
+    from host.learning.empirical.observer import choose_observer_sensors
+
+    run, model = _slow_lag_model()
+    choose_observer_sensors(model, [run], ["t1", "t2", "t3"], {s: REF_C for s in ("t1", "t2", "t3")}, 2, 5)
+    assert model.observer_sensors == ["t2"]
+    T = {s: run.temperatures.column(s) for s in ("t1", "t2")}
+    model.envelope = {"temperature_C": {s: [float(v.min()) - 2, float(v.max()) + 2] for s, v in T.items()},
+                      "position_mm": [0.0, 0.0]}
+    doc = model.to_document()
+    ex = export_model(doc)
+    t = parse_table(ex.table)
+    assert t.sensors == ["t1", "t2"] and t.nf == 2
+    cert = {s["filter"]: s["start_error_signal_units"] for s in ex.report["dynamic"]["observer"]["states"]}
+    for k in range(0, run.temperatures.time_s.size, 60):
+        temps = [int(round(T[s][k] * 1000)) for s in t.sensors]
+        ev = Evaluator(t, check=True)
+        ev.temps[:] = temps
+        ev.update()
+        ev.observe()
+        want = model.observer.initial_states({"T:" + s: v / 1000.0 - REF_C for s, v in zip(t.sensors, temps)})
+        got = ev.Y[0] * 1e-3 / 2.0 ** t.fy[0]
+        assert abs(got - want[0]) <= cert[0] * (1 + 1e-9) + 1e-12, (k, got, want[0], cert[0])
+    assert np.isfinite(cert[0]) and cert[0] < 0.01  # K: the certificate is tight against the state's range
