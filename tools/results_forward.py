@@ -25,6 +25,12 @@ With ``--option average_structures=K`` (structure averaging, host/learning/empir
 measured in the same run), and per channel the members and weights or why the single structure stays.
 docs/results.md ("Issue 21: structure averaging") was made with ``--option average_structures=3``.
 
+With ``--option observer_sensors=N`` (sensors only the observer reads, docs/empirical.md "Observer-only sensors") one
+more row where the option chose any, (a0): the same model with the observer of its terms' signals only, refitted on
+the same samples (the option acts after the selection, so this is the model without it, measured in the same run).
+docs/results.md ("Observer-only sensors") was made with ``--split-h 32.129166666666666 --split-h 24.129166666666666
+--split-h 28.0 --split-h 36.5 --option observer_sensors=5``.
+
 ``--variants continuous,static`` also fits the dynamic model with ``forward_state=continuous`` (the selection scored
 with filters running since the run start) and with ``taus_s=[0]`` (the static search the default's static fallback
 compares with), and prints their rows and every model's forward-chaining pooled score beside the baseline MLR on all
