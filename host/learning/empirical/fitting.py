@@ -423,11 +423,10 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
             stats["observer_sensors"] = choose_observer_sensors(
                 model, runs, names, reference_all, observer_count, int(searched.max_sensors),
                 spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=obs_scale)
-            if model.observer_sensors:
-                model.envelope.setdefault("temperature_C", {}).update(
-                    _envelope(runs, arrays, model.observer_sensors, margin, target, channel)["temperature_C"])
-                model.envelope.setdefault("temperature_rise_K", {}).update(
-                    _envelope(runs, arrays, model.observer_sensors, margin, target, channel)["temperature_rise_K"])
+            if model.observer_sensors:  # their training envelope too: the table's inputs need one (models_export)
+                extra_env = _envelope(runs, arrays, model.observer_sensors, margin, target, channel)
+                for key in ("temperature_C", "temperature_rise_K"):
+                    model.envelope.setdefault(key, {}).update(extra_env[key])
     if settle_record is not None:
         # what the bound refused in the search over every term, and the settle_s of the model as written (the static
         # fallback's, when it won: 0, it has no lag state)
