@@ -65,7 +65,7 @@ def phase_edges(run: Run) -> list[float]:
 
 
 def forward_blocks(runs: Iterable[Run], arrays: Iterable[RunArrays],
-                   forward_blocks: int | None = None) -> tuple[np.ndarray, list[dict[str, Any]]]:
+                   forward_blocks: int | str | None = None) -> tuple[np.ndarray, list[dict[str, Any]]]:
     """Blocks of the stacked training samples -> (labels (n,) ascending in time, [block dict]).
 
     ``forward_blocks``: None (the rule above), an integer N >= ``MIN_BLOCKS`` (N equal time blocks) or ``"phases"``
