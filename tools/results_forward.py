@@ -35,6 +35,10 @@ sensors (``statistics.forward_chaining.baseline_mlr_all``). docs/results.md ("Is
 the settle-bounded choice (docs/empirical.md "Settle bound") was measured with the same splits and
 ``--option settle_max_s=1800`` against the same command without it (docs/results.md, "Settle bound");
 
+the phase blocks (docs/empirical.md, ``forward_blocks=phases``) with ``--split-h H --option 'forward_blocks="phases"'
+--no-static``, one split per run, against the same without the option (docs/results.md, "forward-chaining blocks per
+spindle phase"; ``--no-static`` skips row (c), which such a comparison does not need);
+
 and, with ``--loco``, the leave-one-cycle-out ratios (every choice made inside
 each fold) of cv-subset and the dynamic model. Every number printed comes from
 this run of the script.
