@@ -66,6 +66,21 @@ def number_or_none(kind: Callable[[str], float], minimum: float | None = None) -
     return convert
 
 
+def number_or_choice(kind: Callable[[str], float], minimum: float | None, *words: str) -> Converter:
+    """Converter to one of ``words`` (exact), else ``number(kind, minimum)``: a setting that is a count or a named rule
+    (forward_blocks=4 or forward_blocks=phases)."""
+    one = number(kind, minimum)
+
+    def convert(text):
+        if text in words:
+            return text
+        try:
+            return one(text)
+        except ValueError as exc:
+            raise ValueError("expected %s, or a number: %s" % (" or ".join(words), exc))
+    return convert
+
+
 def numbers(kind: Callable[[str], float], minimum: float | None = None) -> Converter:
     """Converter to a list of ``number(kind, minimum)`` values separated by '/' (e.g. 0/1800/7200)."""
     one = number(kind, minimum)

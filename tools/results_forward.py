@@ -1,7 +1,8 @@
 """Held-out figures of issue 21 on FL_THERMAL: the dynamic model fitted with `tcomp fit` defaults, predicting the future.
 
     .venv/bin/python tools/results_forward.py [--run data/fl_thermal] [--split-h 32.129 --split-h 24.129]
-        [--channels ch1,...] [--option KEY=VALUE ...] [--variants continuous,static] [--loco] [--no-splits] [--json OUT]
+        [--channels ch1,...] [--option KEY=VALUE ...] [--variants continuous,static] [--loco] [--no-splits] [--no-static]
+        [--json OUT]
 
 For each split and channel, every model is fitted on t < split with the defaults
 of `tcomp fit` (no setting tuned to the split; ``--option`` passes dynamic
@@ -39,6 +40,10 @@ sensors (``statistics.forward_chaining.baseline_mlr_all``). docs/results.md ("Is
 
 the settle-bounded choice (docs/empirical.md "Settle bound") was measured with the same splits and
 ``--option settle_max_s=1800`` against the same command without it (docs/results.md, "Settle bound");
+
+the phase blocks (docs/empirical.md, ``forward_blocks=phases``) with ``--split-h H --option 'forward_blocks="phases"'
+--no-static``, one split per run, against the same without the option (docs/results.md, "forward-chaining blocks per
+spindle phase"; ``--no-static`` skips row (c), which such a comparison does not need);
 
 and, with ``--loco``, the leave-one-cycle-out ratios (every choice made inside
 each fold) of cv-subset and the dynamic model. Every number printed comes from
@@ -84,7 +89,7 @@ def own_observer(dyn, runs):
     return own
 
 
-def held_out(run, split_s, channel, dyn_options, variants=()):
+def held_out(run, split_s, channel, dyn_options, variants=(), static=True):
     """{figure: RMSE µm} of one channel on t >= split_s, and the fitted models' descriptions."""
     block = {"block": 1, "run": 0, "t_start_s": split_s, "t_end_s": float(run.errors.time_s.max())}
     cut = slice_run(run, split_s)
@@ -128,7 +133,7 @@ def held_out(run, split_s, channel, dyn_options, variants=()):
         if "baseline_mlr_all" in fc:
             info["baseline_mlr_all_forward_pooled_um"] = fc["baseline_mlr_all"]["pooled_um"]
     best = None
-    for m in STATIC:
+    for m in STATIC if static else ():
         try:
             s = fit_model([run], m, "direct", channel, window=(None, split_s), reference="fixed")
         except Exception as exc:  # a method that fails on this split is reported, not hidden
@@ -154,6 +159,8 @@ def main(argv=None):
     ap.add_argument("--variants", default="", help="also fit these dynamic variants (comma list of %s) and print them" % ", ".join(VARIANTS))
     ap.add_argument("--no-splits", action="store_true", help="only the leave-one-cycle-out figures (with --loco)")
     ap.add_argument("--loco", action="store_true", help="also leave-one-cycle-out (5 channels x 6 folds: about 20 min more on the loaded 2-core machine)")
+    ap.add_argument("--no-static", action="store_true", help="skip row (c), the static models (cv-subset, stepwise): "
+                    "a measurement of a dynamic option does not need them, and they cost minutes per channel")
     ap.add_argument("--json", help="write every figure as JSON")
     args = ap.parse_args(argv)
     opts = parse_options(args.option)  # JSON values or words, any key: fit_model's own settings (host/options.py)
@@ -169,7 +176,7 @@ def main(argv=None):
         split_s = round(h * 3600 / 15) * 15.0  # on the 15 s sample grid
         rows = {}
         for ch in channels:
-            rows[ch] = held_out(run, split_s, ch, opts, variants)
+            rows[ch] = held_out(run, split_s, ch, opts, variants, static=not args.no_static)
             print("split %.2f h %s done" % (h, ch), file=sys.stderr, flush=True)
         report["splits"]["%.2f" % h] = rows
         print("\nSplit at %.2f h (fit on t < %.2f h, score t >= %.2f h); dynamic settings: %s\n" % (h, h, h, opts or "tcomp fit defaults"))

@@ -11,7 +11,7 @@ import sys
 
 from host import options
 from host.learning.empirical import EmpiricalDataError
-from host.options import boolean, number, number_or_none, numbers
+from host.options import boolean, number, number_or_choice, number_or_none, numbers
 
 if TYPE_CHECKING:
     from host.outputs import Outputs
@@ -53,7 +53,8 @@ OPTIONS = {
     "use_feed": boolean,  # dynamic
     "observer": boolean,  # dynamic: estimate the lag states from the sensors when a board starts (observer.py)
     "selection": str,  # dynamic: forward | loo (how sensors, lags and penalty are scored)
-    "forward_blocks": number(int, 3),  # dynamic: forward chaining over N equal time blocks of one run
+    # dynamic: forward chaining over N equal time blocks of one run, or its spindle's running and stopped phases
+    "forward_blocks": number_or_choice(int, 3, "phases"),
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
     "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "average_structures": number(int, 1),  # dynamic: average up to N structures, weights by forward chaining (1: the best one)

@@ -12,7 +12,10 @@ machine. Forward chaining measures that:
   each cycle a new duty, the "next regime" a model must predict), a cycle cut
   to less than a quarter of the longest merged into the one before it; with no
   spindle log, ``FORWARD_BLOCKS`` (4) equal time blocks; ``forward_blocks=N``
-  asks for N equal time blocks instead. At least ``MIN_BLOCKS`` (3) blocks, so
+  asks for N equal time blocks instead, ``forward_blocks="phases"`` the
+  spindle's phases (:func:`phase_edges`: a block from every start out of
+  standstill and every stop to standstill, so heating and cooling are scored
+  apart; small ones merged as cycles are). At least ``MIN_BLOCKS`` (3) blocks, so
   at least two are scored and no single period decides;
 * for every block k >= 1 the model is fitted on blocks 0..k-1 only and scored
   on block k **as its own run**: :func:`host.data.runs.slice_run` cuts the run
@@ -33,7 +36,7 @@ import numpy as np
 
 from host.data.runs import slice_run
 from host.learning.empirical import EmpiricalDataError
-from host.learning.empirical.schedule import block_labels, cycles
+from host.learning.empirical.schedule import block_labels, cycles, segments
 
 if TYPE_CHECKING:  # for the hints only
     from host.data.runs import Run
@@ -42,15 +45,31 @@ if TYPE_CHECKING:  # for the hints only
 FORWARD_BLOCKS = 4  # equal time blocks of one run without a spindle log
 MIN_BLOCKS = 3  # two scored blocks at least (the same rule as dynamic.py's selection)
 RULE = ("blocks in time order: the training runs (several runs), else the spindle cycles of the run (a cycle under a quarter "
-        "of the longest joins the one before), else %d equal time blocks (forward_blocks=N: N equal time blocks); block k >= 1 "
-        "scored by the model fitted on blocks < k, predicting block k as its own run (a board switched on at its start)" % FORWARD_BLOCKS)
+        "of the longest joins the one before), else %d equal time blocks (forward_blocks=N: N equal time blocks; "
+        "forward_blocks=\"phases\": the spindle's running and stopped phases, a phase under a quarter of the longest joining the "
+        "one before); block k >= 1 scored by the model fitted on blocks < k, predicting block k as its own run (a board "
+        "switched on at its start)" % FORWARD_BLOCKS)
+PHASES = "phases"  # forward_blocks value: a block per running and per stopped phase of the spindle (phase_edges)
+
+
+def phase_edges(run: Run) -> list[float]:
+    """Times at which the spindle starts from standstill or stops to standstill (ascending): the edges of the
+    ``forward_blocks="phases"`` blocks. A change between two running speeds is no edge (a mixed cycle's running phase
+    is one block, as in the cycles rule), nor is the log's first sample. Heating (running) and cooling (stopped) are
+    scored apart: the next regime a model must predict is often heating at a new speed or cooling from a new state."""
+    if run.spindle is None:
+        raise EmpiricalDataError("%s: forward_blocks=\"%s\" cuts the run at the spindle's starts and stops, but the run has "
+                                 "no spindle.csv; give forward_blocks=N (N equal time blocks) instead" % (run.name, PHASES))
+    segs = segments(run)
+    return [t0 for (t0, _, rpm), (_, _, before) in zip(segs[1:], segs[:-1]) if (rpm > 0) != (before > 0)]
 
 
 def forward_blocks(runs: Iterable[Run], arrays: Iterable[RunArrays],
-                   forward_blocks: int | None = None) -> tuple[np.ndarray, list[dict[str, Any]]]:
+                   forward_blocks: int | str | None = None) -> tuple[np.ndarray, list[dict[str, Any]]]:
     """Blocks of the stacked training samples -> (labels (n,) ascending in time, [block dict]).
 
-    Each block: ``{"block": k, "run": i, "t_start_s", "t_end_s"}`` (its first and last target time).
+    ``forward_blocks``: None (the rule above), an integer N >= ``MIN_BLOCKS`` (N equal time blocks) or ``"phases"``
+    (:func:`phase_edges`). Each block: ``{"block": k, "run": i, "t_start_s", "t_end_s"}`` (its first and last target time).
     """
     from host.learning.empirical.fitting import merge_small_groups
 
@@ -62,10 +81,16 @@ def forward_blocks(runs: Iterable[Run], arrays: Iterable[RunArrays],
         labels = np.concatenate([np.full(a.y.size, i) for i, a in enumerate(arrays)])
     else:
         t = arrays[0].time_s
-        if forward_blocks is not None:
+        if isinstance(forward_blocks, str):
+            if forward_blocks != PHASES:
+                raise EmpiricalDataError("forward_blocks must be an integer >= %d or \"%s\", got %r" % (MIN_BLOCKS, PHASES, forward_blocks))
+            # the same merge as the cycles below: a phase cut to under a quarter of the longest by the training window (or a
+            # short stop) would otherwise be a block of a few samples weighing as much as a whole phase
+            labels = merge_small_groups(block_labels(t, phase_edges(runs[0])))
+        elif forward_blocks is not None:
             k = forward_blocks
             if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < MIN_BLOCKS:
-                raise EmpiricalDataError("forward_blocks must be an integer >= %d, got %r" % (MIN_BLOCKS, k))
+                raise EmpiricalDataError("forward_blocks must be an integer >= %d or \"%s\", got %r" % (MIN_BLOCKS, PHASES, k))
             labels = block_labels(t, np.linspace(t.min(), t.max(), int(k) + 1)[1:-1])
         elif runs[0].spindle is None:
             labels = block_labels(t, np.linspace(t.min(), t.max(), FORWARD_BLOCKS + 1)[1:-1])
