@@ -13,28 +13,11 @@ import pytest
 
 from firmware.evaluate import Evaluator
 from firmware.table import parse_table
-from hil_tests.fixtures.samples import dynamic_doc, restamp, with_observer
+from hil_tests.fixtures.samples import (dynamic_doc, observed_board, observer_host_inputs, observer_input_unit, random_board_inputs,
+                                        restamp, with_observer)
 from host.learning.empirical.observer import Observer
 from models_export import export_model
 from models_export.certify import ExportError
-
-
-def _host_inputs(doc, t, temps, rpm, feed):
-    """The host's filter inputs {signal: value} for the firmware's (clamped) readings."""
-    u = {}
-    for i, s in enumerate(t.sensors):
-        v = min(max(temps[i], t.env_lo[i]), t.env_hi[i])
-        u["T:" + s] = v / 1000.0 - doc["reference_C"][s]
-    r = min(abs(rpm), t.smax) / 1000.0
-    u.update(spindle_krpm=r, spindle_krpm2=r * r, feed_m_min=min(abs(feed), t.fmax) / 1000.0)
-    return u
-
-
-def _per(name, t):
-    """Host units per integer input unit of a filter reading ``name``."""
-    if name.startswith("T:") or name in ("spindle_krpm", "feed_m_min"):
-        return 1e-3
-    return 2.0 ** t.shq / 1e6
 
 
 def _docs():
@@ -42,11 +25,6 @@ def _docs():
         rng = random.Random(seed)
         target = "direct" if seed % 2 else "slope"
         yield seed, with_observer(dynamic_doc(rng, target, dt_s=rng.choice([1.0, 15.0, 60.0])), random.Random(100 + seed))
-
-
-def _inputs(rng, t):
-    temps = [rng.randint(lo, hi) for lo, hi in zip(t.train_lo, t.train_hi)]
-    return temps, rng.randint(0, t.smax), rng.choice([0, rng.randint(0, t.fmax)])
 
 
 def test_board_initial_states_equal_the_hosts_within_the_certificate():
@@ -63,15 +41,15 @@ def test_board_initial_states_equal_the_hosts_within_the_certificate():
         rng = random.Random(seed)
         for _ in range(25):
             ev = Evaluator(t, check=True)
-            temps, rpm, feed = _inputs(rng, t)
+            temps, rpm, feed = random_board_inputs(rng, t)
             ev.temps[:] = temps
             ev.set_spindle(rpm)
             ev.set_feed_rate(feed)
             ev.update()
             ev.observe()
-            want = host.initial_states(_host_inputs(doc, t, temps, rpm, feed))
+            want = host.initial_states(observer_host_inputs(doc, t, temps, rpm, feed))
             for j, y in want.items():
-                per = _per(terms[j][0], t) / 2.0 ** t.fy[j]
+                per = observer_input_unit(terms[j][0], t) / 2.0 ** t.fy[j]
                 lo, hi = t.Ylo[j] * per, t.Yhi[j] * per
                 y = min(max(y, lo), hi)  # the board's projection onto the state box
                 got = ev.Y[j] * per
@@ -101,19 +79,14 @@ def test_filters_run_from_the_estimate_within_the_offset_certificate(seed):
     a = [1.0 - np.exp(-th["dt_s"] / tau) if tau > 0 else 0.0 for _, tau, _ in terms]
     geo = doc["geometric"]["coefficients_um"] if doc["geometric"] else [0.0]
     rng = random.Random(seed)
-    temps, rpm, feed = _inputs(rng, t)
-    ev = Evaluator(t, check=True)
-    ev.temps[:] = temps
-    ev.set_spindle(rpm)
-    ev.set_feed_rate(feed)
-    ev.update()
-    ev.observe()
-    u0 = _host_inputs(doc, t, temps, rpm, feed)
+    temps, rpm, feed = random_board_inputs(rng, t)
+    ev = observed_board(t, temps, rpm, feed)
+    u0 = observer_host_inputs(doc, t, temps, rpm, feed)
     est = host.initial_states(u0)
     y = []
     for j, (n, tau, _) in enumerate(terms):
         if tau > 0:
-            per = _per(n, t) / 2.0 ** t.fy[j]
+            per = observer_input_unit(n, t) / 2.0 ** t.fy[j]
             y.append(min(max(est[j], t.Ylo[j] * per), t.Yhi[j] * per))
         else:
             y.append(u0[n])
@@ -133,7 +106,7 @@ def test_filters_run_from_the_estimate_within_the_offset_certificate(seed):
         ev.set_feed_rate(feed)
         ev.update()
         ev.step()
-        uh = _host_inputs(doc, t, temps, rpm, feed)
+        uh = observer_host_inputs(doc, t, temps, rpm, feed)
         u = [uh[n] for n, _, _ in terms]
         for yy in (y, rest):
             for j in range(len(terms)):
@@ -213,6 +186,6 @@ def test_fl_thermal_fit_starts_like_the_host_on_every_sample():
         ev.set_spindle(rpm)
         ev.update()
         ev.observe()
-        for j, y in host.initial_states(_host_inputs(doc, t, temps, rpm, 0)).items():
-            per = _per(terms[j][0], t) / 2.0 ** t.fy[j]
+        for j, y in host.initial_states(observer_host_inputs(doc, t, temps, rpm, 0)).items():
+            per = observer_input_unit(terms[j][0], t) / 2.0 ** t.fy[j]
             assert abs(ev.Y[j] * per - y) <= cert[j] * (1 + 1e-9) + 1e-12, (k, j, ev.Y[j] * per, y)

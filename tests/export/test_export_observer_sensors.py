@@ -11,34 +11,11 @@ import pytest
 
 from firmware.evaluate import Evaluator
 from firmware.table import parse_table
-from hil_tests.fixtures.samples import dynamic_doc, restamp, with_observer
+from hil_tests.fixtures.samples import (dynamic_doc, observed_board, observer_host_inputs, observer_input_unit, random_board_inputs,
+                                        restamp, with_observer)
 from host.learning.empirical.dynamic import DynamicModel
 from models_export import export_model
 from models_export.certify import ExportError
-
-
-
-def _host_inputs(doc, t, temps, rpm, feed):
-    """The host's filter inputs {signal: value} for the firmware's (clamped) readings (as tests/export/test_export_observer.py)."""
-    u = {}
-    for i, s in enumerate(t.sensors):
-        v = min(max(temps[i], t.env_lo[i]), t.env_hi[i])
-        u["T:" + s] = v / 1000.0 - doc["reference_C"][s]
-    r = min(abs(rpm), t.smax) / 1000.0
-    u.update(spindle_krpm=r, spindle_krpm2=r * r, feed_m_min=min(abs(feed), t.fmax) / 1000.0)
-    return u
-
-
-def _per(name, t):
-    """Host units per integer input unit of a filter reading ``name``."""
-    if name.startswith("T:") or name in ("spindle_krpm", "feed_m_min"):
-        return 1e-3
-    return 2.0 ** t.shq / 1e6
-
-
-def _inputs(rng, t):
-    temps = [rng.randint(lo, hi) for lo, hi in zip(t.train_lo, t.train_hi)]
-    return temps, rng.randint(0, t.smax), rng.choice([0, rng.randint(0, t.fmax)])
 
 
 def _doc(seed, target="direct", signals=("T:T0", "spindle_krpm", "T:T1")):
@@ -68,19 +45,14 @@ def test_the_board_starts_from_the_observer_only_sensor_like_the_host(seed):
     rng = random.Random(seed)
     moved = 0
     for _ in range(25):
-        temps, rpm, feed = _inputs(rng, t)
-        ev = Evaluator(t, check=True)
-        ev.temps[:] = temps
-        ev.set_spindle(rpm)
-        ev.set_feed_rate(feed)
-        ev.update()
-        ev.observe()
-        u = _host_inputs(doc, t, temps, rpm, feed)
+        temps, rpm, feed = random_board_inputs(rng, t)
+        ev = observed_board(t, temps, rpm, feed)
+        u = observer_host_inputs(doc, t, temps, rpm, feed)
         want = host.observer.initial_states(u)
         # T2's share of the estimate: the start without it would differ by this much
         without_t2 = host.observer.initial_states(dict(u, **{"T:T2": 0.0}))
         for j, y in want.items():
-            per = _per(terms[j][0], t) / 2.0 ** t.fy[j]
+            per = observer_input_unit(terms[j][0], t) / 2.0 ** t.fy[j]
             y = min(max(y, t.Ylo[j] * per), t.Yhi[j] * per)
             assert abs(ev.Y[j] * per - y) <= cert[j] * (1 + 1e-9) + 1e-12, (seed, j, ev.Y[j] * per, y, cert[j])
             moved += abs(want[j] - without_t2[j]) > 10 * cert[j]
