@@ -54,7 +54,7 @@ OPTIONS = {
     "observer": boolean,  # dynamic: estimate the lag states from the sensors when a board starts (observer.py)
     "selection": str,  # dynamic: forward | loo (how sensors, lags and penalty are scored)
     # dynamic: forward chaining over N equal time blocks of one run, or its spindle's running and stopped phases
-    "forward_blocks": number_or_choice(int, 3, "phases"),
+    "forward_blocks": number_or_choice(int, 3, "phases", "cycles"),
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
     "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "average_structures": number(int, 1),  # dynamic: average up to N structures, weights by forward chaining (1: the best one)

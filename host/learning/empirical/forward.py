@@ -44,12 +44,13 @@ if TYPE_CHECKING:  # for the hints only
 
 FORWARD_BLOCKS = 4  # equal time blocks of one run without a spindle log
 MIN_BLOCKS = 3  # two scored blocks at least (the same rule as dynamic.py's selection)
-RULE = ("blocks in time order: the training runs (several runs), else the spindle cycles of the run (a cycle under a quarter "
-        "of the longest joins the one before), else %d equal time blocks (forward_blocks=N: N equal time blocks; "
-        "forward_blocks=\"phases\": the spindle's running and stopped phases, a phase under a quarter of the longest joining the "
-        "one before); block k >= 1 scored by the model fitted on blocks < k, predicting block k as its own run (a board "
+RULE = ("blocks in time order: the training runs (several runs), else the spindle's running and stopped phases of the run "
+        "(a phase under a quarter of the longest joins the one before), else %d equal time blocks (forward_blocks=N: N equal "
+        "time blocks; forward_blocks=\"cycles\": the spindle cycles, a cycle under a quarter of the longest joining the one "
+        "before); block k >= 1 scored by the model fitted on blocks < k, predicting block k as its own run (a board "
         "switched on at its start)" % FORWARD_BLOCKS)
-PHASES = "phases"  # forward_blocks value: a block per running and per stopped phase of the spindle (phase_edges)
+PHASES = "phases"  # forward_blocks value (the default with a spindle log): a block per running and per stopped phase (phase_edges)
+CYCLES = "cycles"  # forward_blocks value: a block per spindle cycle (the default before stop 30)
 
 
 def phase_edges(run: Run) -> list[float]:
@@ -81,21 +82,24 @@ def forward_blocks(runs: Iterable[Run], arrays: Iterable[RunArrays],
         labels = np.concatenate([np.full(a.y.size, i) for i, a in enumerate(arrays)])
     else:
         t = arrays[0].time_s
+        choices = "an integer >= %d, \"%s\" or \"%s\"" % (MIN_BLOCKS, PHASES, CYCLES)
+        if forward_blocks is None:
+            forward_blocks = FORWARD_BLOCKS if runs[0].spindle is None else PHASES
         if isinstance(forward_blocks, str):
-            if forward_blocks != PHASES:
-                raise EmpiricalDataError("forward_blocks must be an integer >= %d or \"%s\", got %r" % (MIN_BLOCKS, PHASES, forward_blocks))
-            # the same merge as the cycles below: a phase cut to under a quarter of the longest by the training window (or a
-            # short stop) would otherwise be a block of a few samples weighing as much as a whole phase
-            labels = merge_small_groups(block_labels(t, phase_edges(runs[0])))
-        elif forward_blocks is not None:
+            if forward_blocks not in (PHASES, CYCLES):
+                raise EmpiricalDataError("forward_blocks must be %s, got %r" % (choices, forward_blocks))
+            if forward_blocks == CYCLES and runs[0].spindle is None:
+                raise EmpiricalDataError("%s: forward_blocks=\"%s\" cuts the run at the spindle's cycles, but the run has no "
+                                         "spindle.csv; give forward_blocks=N (N equal time blocks) instead" % (runs[0].name, CYCLES))
+            edges = phase_edges(runs[0]) if forward_blocks == PHASES else [c["t_start_s"] for c in cycles(runs[0])[1:]]
+            # a phase or cycle cut to under a quarter of the longest by the training window (or a short stop) would otherwise
+            # be a block of a few samples weighing as much as a whole one
+            labels = merge_small_groups(block_labels(t, edges))
+        else:
             k = forward_blocks
             if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < MIN_BLOCKS:
-                raise EmpiricalDataError("forward_blocks must be an integer >= %d or \"%s\", got %r" % (MIN_BLOCKS, PHASES, k))
+                raise EmpiricalDataError("forward_blocks must be %s, got %r" % (choices, k))
             labels = block_labels(t, np.linspace(t.min(), t.max(), int(k) + 1)[1:-1])
-        elif runs[0].spindle is None:
-            labels = block_labels(t, np.linspace(t.min(), t.max(), FORWARD_BLOCKS + 1)[1:-1])
-        else:
-            labels = merge_small_groups(block_labels(t, [c["t_start_s"] for c in cycles(runs[0])[1:]]))
         labels = np.unique(labels, return_inverse=True)[1].reshape(-1)  # 0..K-1, ascending in time
     labels = np.asarray(labels, dtype=int)
     blocks = []
@@ -212,12 +216,22 @@ def fit_fold_observer(model: Any, runs: Sequence[Run], blocks: Sequence[dict[str
     return fit_observer(model, runs, spans=span, exclude=exclude, scale=scale)
 
 
+def short_blocks(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], min_s: float) -> list[int]:
+    """The scored blocks of one run (block >= 1) that last less than ``min_s``: the selection scores them with the
+    filters running since the run start, not as a board switched on at the block's start (fitting.SWITCHED_ON_MIN_S).
+    Several runs: none (each run is a block and really starts its board)."""
+    if len(runs) >= 2:
+        return []
+    return [int(b["block"]) for b in blocks if b["block"] >= 1 and b["t_end_s"] - b["t_start_s"] < min_s]
+
+
 def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], labels: np.ndarray, blocks: Sequence[dict[str, Any]],
                            terms: Sequence[tuple[str, float]], reference_C: dict[str, float], target: str = "direct",
                            channel: str | None = None, exclude: tuple[float | None, float | None] | None = None,
-                           scale: float = 1.0) -> dict[int, Any]:
+                           scale: float = 1.0, scored: Sequence[dict[str, Any]] | None = None) -> dict[int, Any]:
     """{block k >= 1: StartedColumns}: every candidate term's column on block k as a board switched on at the block's
-    start with its observer computes it, for whichever structure the selection tries.
+    start with its observer computes it, for whichever structure the selection tries. ``scored``: only these of
+    ``blocks`` (default: all); the observers are still fitted on ``blocks`` before k.
 
     The inputs are the board's (temperatures over the fixed ``reference_C``, host/learning/empirical/observer.py
     ``inputs``) on the block as its own run (:func:`block_run`); each lag column is its filter from rest plus the
@@ -238,7 +252,7 @@ def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], lab
     y = np.concatenate([a.y for a in arrays])
     everything = DynamicModel([(n, 0.0) for n in names], np.zeros(len(names)), 0.0, target, channel, reference_C=reference_C)
     out = {}
-    for b in blocks:
+    for b in blocks if scored is None else scored:
         k = b["block"]
         if k == 0:
             continue

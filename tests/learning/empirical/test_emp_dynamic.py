@@ -47,11 +47,19 @@ def test_structure_and_time_constants_are_recovered(make_direct):
     assert terms[("T:t1", 3600.0)] == pytest.approx(3, rel=0.05)
     assert terms[("spindle_krpm", 1800.0)] == pytest.approx(2, rel=0.05)
     st = model.statistics
-    assert st["cv_groups"] == 5 and st["rmse"] < 0.05 and st["history"][0]["action"] == "start"
-    # scored as a board switched on at each block (the default), a further sensor may join as an input of the observer
-    # only (it helps estimate the lag states at the start; its own gain stays ~0): the truth is still the model
-    assert model.sensors[0] == "t1"
-    assert all(abs(c) < 0.02 for term, c in terms.items() if term not in (("T:t1", 3600.0), ("spindle_krpm", 1800.0)))
+    # the default blocks: the ten 1 h phases (running, stopped); each is shorter than SWITCHED_ON_MIN_S (90 min), so the
+    # selection scores them with the filters running since the run start (scored switched on, 1 h blocks lose the truth)
+    assert st["cv_groups"] == 10 and st["rmse"] < 0.05 and st["history"][0]["action"] == "start"
+    assert st["forward_scored_as"]["continuous_blocks"] == list(range(1, 10))
+    assert model.sensors == ["t1"] and len(model.terms) == 2
+    # the 2 h cycle blocks are long enough to be scored as a board switched on at each block: the truth again (a further
+    # sensor may join as an input of the observer only: it helps estimate the lag states at the start; its gain stays ~0)
+    cycles = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200), forward_blocks="cycles")
+    assert cycles.statistics["cv_groups"] == 5 and cycles.statistics["forward_scored_as"]["continuous_blocks"] == []
+    by_term = dict(zip(cycles.terms, cycles.term_coefficients))
+    assert by_term[("T:t1", 3600.0)] == pytest.approx(3, rel=0.05) and by_term[("spindle_krpm", 1800.0)] == pytest.approx(2, rel=0.05)
+    assert cycles.sensors[0] == "t1"
+    assert all(abs(c) < 0.02 for term, c in by_term.items() if term not in (("T:t1", 3600.0), ("spindle_krpm", 1800.0)))
     continuous = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200), forward_state="continuous")
     assert continuous.sensors == ["t1"] and len(continuous.terms) == 2
     # a static MLR on all sensors cannot represent the lags

@@ -9,7 +9,7 @@ from host.cli import main
 from host.data.runs import Errors, Run, Spindle, Temperatures, slice_run, write_run
 from host.learning.empirical import EmpiricalDataError
 from host.learning.empirical.dynamic import DynamicModel, DynamicRegression, lag_filter, signals
-from host.learning.empirical.fitting import fit_model
+from host.learning.empirical.fitting import SWITCHED_ON_MIN_S, fit_model
 from host.learning.empirical.forward import block_run, folds, forward_blocks, observer_block_columns
 from host.learning.empirical.observer import fit_observer
 from host.learning.empirical.targets import training_arrays
@@ -32,7 +32,8 @@ def _lagged_run(make_direct):
 def test_blocks_are_the_cycles_in_time_order_and_folds_train_on_the_past_only(make_direct):
     run = _lagged_run(make_direct)
     arrays = training_arrays([run], "direct", "ch1")
-    labels, blocks = forward_blocks([run], arrays)
+    assert len(forward_blocks([run], arrays)[1]) == 10  # the default: ten 1 h phases (test_emp_phase_blocks.py)
+    labels, blocks = forward_blocks([run], arrays, "cycles")
     t = arrays[0].time_s
     assert [b["block"] for b in blocks] == list(range(5))  # five spindle cycles
     assert all(a["t_end_s"] < b["t_start_s"] for a, b in zip(blocks, blocks[1:]))
@@ -77,18 +78,41 @@ def test_switched_on_selection_scores_blocks_as_the_models_own_predict_does(make
     it (filters from rest)."""
     run = _lagged_run(make_direct)
     for observer in (True, False):
-        model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, observer=observer)
+        # the 2 h cycles: every block lasts >= SWITCHED_ON_MIN_S, so every block is scored switched on
+        model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, observer=observer, forward_blocks="cycles")
         st = model.statistics
         assert st["selection"] == "forward" and st["forward_state"] == "switched_on"  # the default since issue 21's fwdsel
         assert (model.observer is not None) is observer
         fc = st["forward_chaining"]
         assert [f["block"] for f in fc["scored"]] == model.estimator_.fold_labels_ == [1, 2, 3, 4]
+        assert st["forward_scored_as"]["continuous_blocks"] == []
         np.testing.assert_allclose(model.estimator_.fold_rmse_, fc["rmse_um"], rtol=1e-8)
         assert all(f["rmse_um"] != f["continuous_rmse_um"] for f in fc["scored"])
     # the block run starts at the block: its filters and rises start there, unlike the continuous run's
     b = {"block": 2, "run": 0, "t_start_s": 14400.0, "t_end_s": 21540.0}
     cut = block_run([run], b)
     assert cut.temperatures.time_s[0] == 14400.0 and cut.temperatures.time_s[-1] >= 21540.0
+
+
+def test_a_block_shorter_than_the_settle_window_allows_is_scored_with_continuous_filters(make_direct):
+    """With forward_state=switched_on a block under SWITCHED_ON_MIN_S (90 min) is scored with its filters running since
+    the run start, the others as a board switched on at their start: block by block, the score the structure was chosen
+    by equals the reported forward-chaining score of that kind (predict on the whole run, or on the block as its own
+    run). Cycles cut at 9.25 h: four 2 h blocks and a last one of 1.25 h (over a quarter of 2 h, so not merged)."""
+    run = _lagged_run(make_direct)
+    model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, forward_blocks="cycles",
+                      window=(None, 9.25 * 3600))
+    st = model.statistics
+    assert st["forward_scored_as"]["switched_on_min_s"] == SWITCHED_ON_MIN_S == 5400.0
+    assert st["forward_scored_as"]["continuous_blocks"] == [4]
+    fc = st["forward_chaining"]
+    assert [f["block"] for f in fc["scored"]] == model.estimator_.fold_labels_ == [1, 2, 3, 4]
+    assert fc["scored"][-1]["t_end_s"] - fc["scored"][-1]["t_start_s"] < SWITCHED_ON_MIN_S
+    assert all(f["t_end_s"] - f["t_start_s"] >= SWITCHED_ON_MIN_S for f in fc["scored"][:-1])
+    chosen_by = model.estimator_.fold_rmse_
+    np.testing.assert_allclose(chosen_by[:3], fc["rmse_um"][:3], rtol=1e-8)  # switched on
+    np.testing.assert_allclose(chosen_by[3], fc["scored"][3]["continuous_rmse_um"], rtol=1e-8)  # continuous
+    assert abs(chosen_by[3] - fc["rmse_um"][3]) > 1e-3 * fc["rmse_um"][3]  # the two scores of that block differ
 
 
 REF_C = 22.0
@@ -190,20 +214,20 @@ def test_forward_chaining_statistics_in_fit_and_compare_json(make_direct, tmp_pa
     out = str(tmp_path / "dyn.json")
     assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "taus_s=0/1800/3600"]) == 0
     fc = json.loads(open(out).read())["statistics"]["forward_chaining"]
-    assert fc["blocks"] == 5 and len(fc["rmse_um"]) == 4 and fc["worst_um"] == max(fc["rmse_um"])
+    assert fc["blocks"] == 10 and len(fc["rmse_um"]) == 9 and fc["worst_um"] == max(fc["rmse_um"])  # ten 1 h phases
     n = [f["n"] for f in fc["scored"]]
     assert fc["pooled_um"] == pytest.approx(np.sqrt(sum(k * r ** 2 for k, r in zip(n, fc["rmse_um"])) / sum(n)))
     assert "switched on" in fc["rule"]
     mlr = str(tmp_path / "mlr.json")
     assert main(["fit", "--model", "mlr", "--direct", "--channel", "ch1", folder, "--out", mlr]) == 0
-    assert len(json.loads(open(mlr).read())["statistics"]["forward_chaining"]["rmse_um"]) == 4
+    assert len(json.loads(open(mlr).read())["statistics"]["forward_chaining"]["rmse_um"]) == 9
     cmp = str(tmp_path / "cmp.json")
     assert main(["compare", folder, "--split-h", "8.5", "--direct", "--channel", "ch1", "--methods", "mlr,dynamic", "--repeats", "1",
                  "--option", "dynamic.taus_s=[0,1800,3600]", "--json", cmp]) == 0
     res = {r["method"]: r for r in json.loads(open(cmp).read())["results"]}
     for m in ("mlr", "dynamic"):
-        # t < 8.5 h: five cycle starts, the last 20 min joined to the cycle before (under a quarter of the longest)
-        assert len(res[m]["forward_chaining"]["rmse_um"]) == 3, m
+        # t < 8.5 h: eight 1 h phases and the last 30 min (a quarter of the longest or more: its own block), 8 scored
+        assert len(res[m]["forward_chaining"]["rmse_um"]) == 8, m
 
 
 def test_lags_beyond_a_quarter_of_the_training_span_are_excluded(make_direct):

@@ -1,5 +1,6 @@
-"""forward_blocks="phases" (issue 21): a forward-chaining block per running and per stopped phase of the spindle, its
-edges on a schedule written out by hand, and what is refused (a misspelt value, a run without spindle.csv) by name."""
+"""forward_blocks="phases" (issue 21; the default with a spindle log since stop 30): a forward-chaining block per running
+and per stopped phase of the spindle, its edges on a schedule written out by hand, forward_blocks="cycles" (the default
+before), and what is refused (a misspelt value, a run without spindle.csv) by name."""
 import numpy as np
 import pytest
 
@@ -47,8 +48,11 @@ def test_phase_blocks_cut_at_every_start_and_stop_of_the_spindle(make_direct):
     assert [b["t_start_s"] for b in blocks] == BLOCK_STARTS_S
     assert [b["t_end_s"] for b in blocks] == BLOCK_ENDS_S
     assert np.unique(labels).tolist() == list(range(len(BLOCK_STARTS_S)))
-    # the cycles rule (the default) on the same run cuts at the starts only: 3 blocks
-    _, cycle_blocks = forward_blocks([run], arrays)
+    # the default with a spindle log is the phases rule
+    default_labels, default_blocks = forward_blocks([run], arrays)
+    assert default_blocks == blocks and np.array_equal(default_labels, labels)
+    # the cycles rule on the same run cuts at the starts only: 3 blocks
+    _, cycle_blocks = forward_blocks([run], arrays, "cycles")
     assert [b["t_start_s"] for b in cycle_blocks] == [0, 13200, 18600]
     # through fit_model: the dynamic model's forward chaining is scored on those blocks (4 scored; filters running since the
     # run start, so the test stays fast: the blocks, not the observer, are under test)
@@ -62,11 +66,12 @@ def test_phase_blocks_cut_at_every_start_and_stop_of_the_spindle(make_direct):
 def test_bad_forward_blocks_values_are_refused_by_name(make_direct):
     run = _run(make_direct)
     arrays = training_arrays([run], "direct", "ch1")
-    with pytest.raises(EmpiricalDataError, match='forward_blocks must be an integer >= 3 or "phases", got \'phase\''):
+    with pytest.raises(EmpiricalDataError, match='forward_blocks must be an integer >= 3, "phases" or "cycles", got \'phase\''):
         forward_blocks([run], arrays, "phase")
     assert parse_options(["forward_blocks=phases"], "dynamic") == {"forward_blocks": "phases"}
+    assert parse_options(["forward_blocks=cycles"], "dynamic") == {"forward_blocks": "cycles"}
     assert parse_options(["forward_blocks=5"], "dynamic") == {"forward_blocks": 5}
-    with pytest.raises(UserError, match="forward_blocks='phase': expected phases, or a number"):
+    with pytest.raises(UserError, match="forward_blocks='phase': expected phases or cycles, or a number"):
         parse_options(["forward_blocks=phase"], "dynamic")
 
 
@@ -77,3 +82,8 @@ def test_phase_blocks_of_a_run_without_spindle_log_are_refused_naming_the_run(ma
         forward_blocks([run], arrays, "phases")
     with pytest.raises(EmpiricalDataError, match="dynamic: drun: .*no spindle.csv"):
         fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0.0,), forward_blocks="phases")
+    with pytest.raises(EmpiricalDataError, match='drun: forward_blocks="cycles" .* no spindle.csv'):
+        forward_blocks([run], arrays, "cycles")
+    # the default without a spindle log: 4 equal time blocks
+    labels, _ = forward_blocks([run], arrays)
+    assert np.unique(labels).tolist() == [0, 1, 2, 3]
