@@ -53,9 +53,10 @@ OPTIONS = {
     "use_feed": boolean,  # dynamic
     "observer": boolean,  # dynamic: estimate the lag states from the sensors when a board starts (observer.py)
     "selection": str,  # dynamic: forward | loo (how sensors, lags and penalty are scored)
-    # dynamic: forward chaining over N equal time blocks of one run, or its spindle's running and stopped phases
+    # dynamic: forward chaining over N equal time blocks of one run, its spindle's running and stopped phases (the default
+    # with a spindle log) or its spindle cycles
     "forward_blocks": number_or_choice(int, 3, "phases", "cycles"),
-    "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start)
+    "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start; switched_on: blocks >= 90 min)
     "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "average_structures": number(int, 1),  # dynamic: average up to N structures, weights by forward chaining (1: the best one)
     "average_members": str,  # dynamic: ridge | path (where the averaged structures come from)
@@ -131,6 +132,10 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
         how = "forward chaining over %d time blocks" if est.selection == "forward" else "leave-one-group-out over %d groups"
         print("  terms and ridge %g chosen by %s (%s score %.4g); fit R2=%.4f RMSE=%.4g" % (
             est.ridge_, how % est.n_groups_, est.cv_score_, est.cv_rmse_, est.rsquared_, est.rmse_))
+        scored_as = model.statistics.get("forward_scored_as")
+        if scored_as and scored_as["continuous_blocks"]:
+            print("  blocks %s scored with the filters running since the run start: shorter than %.0f min (a board switched on "
+                  "may settle for 30 min)" % (",".join(str(k) for k in scored_as["continuous_blocks"]), scored_as["switched_on_min_s"] / 60))
         for (sig, tau), c in zip(est.terms_, est.coef_):
             print("  %+.5g x lag(%s, tau %g s)" % (c, sig, tau))
         obs = getattr(model, "observer", None)

@@ -8,15 +8,15 @@ machine. Forward chaining measures that:
 
 * the training data are cut into **blocks in time order**: with several
   training runs, each run is a block (in the order given, which must be time
-  order); with one run, its spindle cycles (host/learning/empirical/schedule.py:
-  each cycle a new duty, the "next regime" a model must predict), a cycle cut
-  to less than a quarter of the longest merged into the one before it; with no
-  spindle log, ``FORWARD_BLOCKS`` (4) equal time blocks; ``forward_blocks=N``
-  asks for N equal time blocks instead, ``forward_blocks="phases"`` the
-  spindle's phases (:func:`phase_edges`: a block from every start out of
-  standstill and every stop to standstill, so heating and cooling are scored
-  apart; small ones merged as cycles are). At least ``MIN_BLOCKS`` (3) blocks, so
-  at least two are scored and no single period decides;
+  order); with one run, its spindle's phases (:func:`phase_edges`: a block from
+  every start out of standstill and every stop to standstill, so heating and
+  cooling are scored apart, each the "next regime" a model must predict), a
+  phase cut to less than a quarter of the longest merged into the one before
+  it; with no spindle log, ``FORWARD_BLOCKS`` (4) equal time blocks;
+  ``forward_blocks=N`` asks for N equal time blocks instead,
+  ``forward_blocks="cycles"`` the spindle cycles (host/learning/empirical/
+  schedule.py; the default before stop 30). At least ``MIN_BLOCKS`` (3) blocks,
+  so at least two are scored and no single period decides;
 * for every block k >= 1 the model is fitted on blocks 0..k-1 only and scored
   on block k **as its own run**: :func:`host.data.runs.slice_run` cuts the run
   at the block's first sample, and the model's ``predict`` is called on that

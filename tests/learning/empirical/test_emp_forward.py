@@ -209,10 +209,12 @@ def test_a_baseline_that_cannot_be_fitted_is_said_not_fatal(make_slope):
     assert "3 samples for 5 parameters" in fc["baseline_mlr_all"]["error"]
 
 
-def test_forward_chaining_statistics_in_fit_and_compare_json(make_direct, tmp_path):
+def test_forward_chaining_statistics_in_fit_and_compare_json(make_direct, tmp_path, capsys):
     folder = write_run(_lagged_run(make_direct), str(tmp_path / "run"))
     out = str(tmp_path / "dyn.json")
     assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "taus_s=0/1800/3600"]) == 0
+    # the 1 h phases are under 90 min: tcomp fit says they were scored with continuous filters
+    assert "blocks 1,2,3,4,5,6,7,8,9 scored with the filters running since the run start: shorter than 90 min" in capsys.readouterr().out
     fc = json.loads(open(out).read())["statistics"]["forward_chaining"]
     assert fc["blocks"] == 10 and len(fc["rmse_um"]) == 9 and fc["worst_um"] == max(fc["rmse_um"])  # ten 1 h phases
     n = [f["n"] for f in fc["scored"]]
