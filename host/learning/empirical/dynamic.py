@@ -297,7 +297,7 @@ class DynamicRegression:
     ridge_: float
     settle_bound_: dict[str, Any] | None
     cv_score_: str
-    cv_by_ridge_: dict[float, float]
+    cv_by_ridge_: dict[float, float | None]  # None: no term lowered the score with that penalty
     fits_by_ridge_: dict[float, dict[str, Any]]
     rmse_: float
     rsquared_: float
@@ -337,11 +337,16 @@ class DynamicRegression:
         self.fits_by_ridge_ = {}  # every ridge value's best structure: the members structure averaging draws on (averaging.py)
         for lam in grid:
             fitted = self._fit_one(F, y, terms, groups, float(lam))
+            if fitted is None:  # no term lowers the score with this penalty: not a candidate; another value may find one
+                tried[float(lam)] = None
+                continue
             tried[float(lam)] = fitted["cv_rmse"]
             self.fits_by_ridge_[float(lam)] = fitted
             if best is None or fitted["cv_rmse"] < best["cv_rmse"]:
                 best = fitted
-        assert best is not None  # grid is not empty (checked above), so the loop set it
+        if best is None:
+            raise EmpiricalDataError("dynamic: no lag-filtered term lowers the cross-validation error by %.0f %% with any ridge value "
+                                     "(%s)" % (100 * self.min_gain, ", ".join("%g" % v for v in grid)))
         for k, v in best.items():
             setattr(self, k, v)
         self.cv_by_ridge_ = tried
@@ -481,7 +486,7 @@ class DynamicRegression:
                 history.append({"step": len(history), "action": "swap", "term": [terms[in_][0], terms[in_][1]],
                                 "replaces": [terms[out_][0], terms[out_][1]], "cv_rmse": current})
         if not selected:
-            raise EmpiricalDataError("dynamic: no lag-filtered term lowers the cross-validation error by %.0f %%" % (100 * self.min_gain))
+            return None  # fit() tries the other ridge values and raises if none finds a term
         idx = ([0] if o else []) + [c + o for c in selected]
         beta = np.linalg.solve(Gall[np.ix_(idx, idx)] + penalty(idx, n_all), call[idx]) / scale[idx]
         sse = fold_sse(selected) or [np.nan] * len(folds)
@@ -530,7 +535,7 @@ class DynamicRegression:
             "cv_groups": self.n_groups_, "cv_score": self.cv_score_, "selection": self.selection, "history": self.history_, "ridge": self.ridge_,
             "selection_folds": [{"block" if self.selection == "forward" else "group": int(g) if isinstance(g, (int, np.integer)) else g,
                                  "rmse": finite_or_none(r)} for g, r in zip(self.fold_labels_, self.fold_rmse_)],
-            "cv_by_ridge": {str(k): finite_or_none(v) for k, v in self.cv_by_ridge_.items()},
+            "cv_by_ridge": {str(k): None if v is None else finite_or_none(v) for k, v in self.cv_by_ridge_.items()},
             "terms": [{"signal": n, "tau_s": tau, "coefficient": finite_or_none(c)} for (n, tau), c in zip(self.terms_, self.coef_)],
             "sensors_used": sorted({n[2:] for n, _ in self.terms_ if n.startswith("T:")}),
             "r2_adj": None, "F": None, "F_p": None, "residual_std_error": finite_or_none(self.rmse_),

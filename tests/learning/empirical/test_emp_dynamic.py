@@ -87,6 +87,23 @@ def test_sensor_limit_and_settings_are_enforced(make_direct):
         DynamicRegression(selection="kfold").fit(F, run.errors.error_um, terms, groups)
 
 
+def test_a_ridge_value_that_finds_no_term_does_not_stop_the_others():
+    """y = 2u: with ridge 1e6 the term is shrunk to ~0 and lowers the forward-chaining score by less than min_gain (no
+    structure for that value); ridge 0 finds it. The grid is tried in the order given, the hopeless value first: the
+    search must go on to the next value (a real fit hit this: FL_THERMAL ch2 without its 3rd cycle, ridge 0-0.01 found
+    no term, 0.1 did). Only when no value finds a term is it an error, naming the values tried."""
+    rng = np.random.default_rng(4)
+    u = rng.normal(size=(400, 1))
+    y = 2.0 * u[:, 0] + 0.01 * rng.normal(size=400)
+    groups = np.repeat(np.arange(4), 100)
+    est = DynamicRegression(ridge=[1e6, 0.0]).fit(u, y, [("T:a", 0.0)], groups)
+    assert est.ridge_ == 0.0 and est.cv_by_ridge_[1e6] is None and est.cv_by_ridge_[0.0] < 0.05
+    assert est.coef_[0] == pytest.approx(2.0, rel=0.01)
+    assert est.statistics()["cv_by_ridge"] == {"1000000.0": None, "0.0": pytest.approx(est.cv_by_ridge_[0.0])}
+    with pytest.raises(EmpiricalDataError, match=r"no lag-filtered term lowers .* with any ridge value \(1e\+06, 1e\+07\)"):
+        DynamicRegression(ridge=[1e6, 1e7]).fit(u, y, [("T:a", 0.0)], groups)
+
+
 def test_document_round_trip_command_line_and_bad_documents(make_direct, tmp_path):
     from host.data.runs import write_run
 
