@@ -466,6 +466,14 @@ class Model:
         if not isinstance(states, list) or [s.get("term") if isinstance(s, dict) else None for s in states] != lagged:
             raise ExportError("%s.states must list one object per lag term (thermal.terms with tau_s > 0), in term order: "
                               "terms %s" % (where, lagged))
+        for s in states:
+            if isinstance(s, dict) and "source" in s:
+                # the board takes no lag state from the controller (no wire command, no table field): a table without
+                # that state would start it from 0 where the host model started it from the controller's record
+                raise ExportError("%s.states[term %r] has source %r: the lag state of %s is supplied by the controller (fit option "
+                                  "spindle_states=controller), which the board cannot take yet; refit with spindle_states=observer to "
+                                  "export" % (where, s.get("term"), s["source"], self.dyn[s["term"]]["signal"]
+                                              if isinstance(s.get("term"), int) and 0 <= s["term"] < len(self.dyn) else "?"))
         nf = len(self.dyn)
         self.obs_gain = [[F(0)] * nf for _ in range(nf)]
         for k, st in enumerate(states):

@@ -101,7 +101,8 @@ def held_out(run, split_s, channel, dyn_options, variants=(), static=True):
         t0 = time.perf_counter()
         dyn = fit_model([run], "dynamic", "direct", channel, window=(None, split_s), **{**dyn_options, **VARIANTS.get(name, {})})
         info[key + "_fit_s"] = time.perf_counter() - t0
-        out[key + "_switched_on"] = _rmse(block_residuals(dyn, cut, block))
+        # the controller's record before the split (its spindle/feed log): used only by states the controller supplies
+        out[key + "_switched_on"] = _rmse(block_residuals(dyn, cut, block, [slice_run(run, float(run.temperatures.time_s[0]), split_s)]))
         out[key + "_continuous"] = _rmse(block_residuals(dyn, run, block))
         st = dyn.statistics
         if "structure_average" in st:

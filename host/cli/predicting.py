@@ -48,18 +48,26 @@ def load_run_or_fail(path: str) -> Run:
 
 
 def predict_rows(model: Any, model_path: str, run_: Run, run_path: str, history: Run | None = None,
-                 history_path: str | None = None) -> np.ndarray:
+                 history_path: str | None = None, record: Run | None = None, record_path: str | None = None) -> np.ndarray:
     """The model's prediction at every errors.csv row of ``run_`` (NaN on rows of other channels); with ``history``
-    (a run logged before ``run_``, dynamic models only) the model's states run through it first."""
+    (a run logged before ``run_``, dynamic models only) the model's states run through it first; with ``record``
+    (the same, its spindle/feed logs only) the lag states the controller supplies start from it."""
     import numpy as np
 
     from host.errors import UserError
 
-    if history is not None and getattr(model, "kind", None) != "dynamic":
-        raise UserError("--history %s: only a dynamic model carries a state from one run into the next; %s is a %s model"
-                        % (history_path, model_path, getattr(model, "kind", "static")))
+    for flag, given, path in (("--history", history, history_path), ("--controller-history", record, record_path)):
+        if given is not None and getattr(model, "kind", None) != "dynamic":
+            raise UserError("%s %s: only a dynamic model carries a state from one run into the next; %s is a %s model"
+                            % (flag, path, model_path, getattr(model, "kind", "static")))
+    from host.learning.empirical.observer import reads_controller
+
+    if record is not None and not reads_controller(model):
+        raise UserError("--controller-history %s: %s has no lag state the controller supplies (fitted without "
+                        "spindle_states=controller), so the record would not be read" % (record_path, model_path))
+    kw = {k: v for k, v in (("history", history), ("controller_history", record)) if v is not None}
     try:
-        pred = np.asarray(model.predict(run_) if history is None else model.predict(run_, history=history), dtype=float)
+        pred = np.asarray(model.predict(run_, **kw), dtype=float)
     except ValueError as exc:  # the run lacks what the model needs (a sensor, motion, a channel), or the history does not precede it
         raise UserError("%s cannot be predicted with %s%s: %s" % (run_path, model_path,
                                                                   " after %s" % history_path if history is not None else "", exc))

@@ -1,4 +1,4 @@
-"""tcomp predict MODEL.json RUN [--history EARLIER_RUN] --out PRED.csv"""
+"""tcomp predict MODEL.json RUN [--history EARLIER_RUN] [--controller-history EARLIER_RUN] --out PRED.csv"""
 
 from __future__ import annotations
 
@@ -12,6 +12,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="dynamic models: a run folder logged before RUN on the same clock (it ends at or before RUN's first "
                         "temperature sample); the model's states run through it first, as on a board that was not restarted. "
                         "Without it the board starts at RUN's first sample (with the model's observer, if it has one)")
+    p.add_argument("--controller-history", dest="controller_history", metavar="EARLIER_RUN",
+                   help="dynamic models fitted with spindle_states=controller: a run folder logged before RUN on the same "
+                        "clock whose spindle.csv / motion.csv are the controller's record; the lag states the controller "
+                        "supplies start from it (the board still starts at RUN's first sample, its temperatures unread). "
+                        "Without it they start at the steady state of RUN's first speed")
     p.add_argument("--out", required=True,
                    help="CSV: time_s,position_mm[,direction][,channel],predicted_um,measured_um,residual_um (residual = "
                         "measured - predicted), one line per errors.csv row the model predicts (rows of other channels "
@@ -26,7 +31,7 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
 def run(args: argparse.Namespace) -> int:
     from host.outputs import Outputs
 
-    with Outputs([args.model, args.run] + ([args.history] if args.history else [])) as out:
+    with Outputs([args.model, args.run] + [p for p in (args.history, args.controller_history) if p]) as out:
         out.file(args.out, "--out")
         if args.json:
             out.file(args.json, "--json")
@@ -46,8 +51,9 @@ def _predict(args, out):
     model, provenance = load_checked_model(args.model, args.allow_edited, "tcomp predict")
     run_ = load_run_or_fail(args.run)
     history = load_run_or_fail(args.history) if args.history else None
+    record = load_run_or_fail(args.controller_history) if args.controller_history else None
     e = run_.errors
-    pred = predict_rows(model, args.model, run_, args.run, history, args.history)
+    pred = predict_rows(model, args.model, run_, args.run, history, args.history, record, args.controller_history)
     rows_of = channel_rows(e, pred)
     used = np.sort(np.concatenate(list(rows_of.values()))) if rows_of else np.array([], dtype=int)
     header = (["time_s", "position_mm"] + (["direction"] if e.direction is not None else [])
@@ -82,6 +88,7 @@ def _predict(args, out):
     if args.json:
         with out.open(args.json) as fh:
             json.dump({"model": args.model, "run": args.run, **({"history": args.history} if history is not None else {}),
+                       **({"controller_history": args.controller_history} if record is not None else {}),
                        "rows": int(len(e)), "predicted_rows": int(used.size),
                        "rmse_um": overall["rmse_um"], "provenance": provenance,
                        "max_residual_um": overall["max_residual_um"], "min_residual_um": overall["min_residual_um"],

@@ -597,8 +597,10 @@ class DynamicModel(DocumentFields):
     def reference(self) -> str:
         return "run_start" if self.observer is None else "fixed"
 
-    def thermal_at(self, run: Run, times: ArrayLike, history: Sequence[Run] | None = None) -> np.ndarray:
-        """Thermal output at ``times`` of ``run``; ``history``: earlier runs (oldest first) the states run through first."""
+    def thermal_at(self, run: Run, times: ArrayLike, history: Sequence[Run] | None = None,
+                   controller_history: Sequence[Run] | None = None) -> np.ndarray:
+        """Thermal output at ``times`` of ``run``; ``history``: earlier runs (oldest first) the states run through first;
+        ``controller_history``: earlier runs whose spindle/feed logs are the controller's record (observer.controller_states)."""
         if self.observer is None and not history:
             return self.intercept + features(run, self.terms, times) @ self.term_coefficients
         from host.learning.empirical.observer import board_terms
@@ -606,7 +608,7 @@ class DynamicModel(DocumentFields):
         if self.observer is None:
             raise EmpiricalDataError("dynamic: this model has no observer (thermal.reference 'run_start': its inputs are rises over "
                                      "the run's own start), so a history cannot carry its states into the run; refit it to get one")
-        t, cols = board_terms(self, list(history or []) + [run])
+        t, cols = board_terms(self, list(history or []) + [run], controller_history=controller_history)
         times = np.atleast_1d(np.asarray(times, dtype=float))
         t_run = run.temperatures.time_s
         if times.size and (times.min() < t_run[0] or times.max() > t_run[-1]):
@@ -624,12 +626,17 @@ class DynamicModel(DocumentFields):
             return np.arange(len(run.errors))
         return _channel_rows(run, self.channel)
 
-    def predict(self, run: Run, history: Run | Sequence[Run] | None = None) -> np.ndarray:
+    def predict(self, run: Run, history: Run | Sequence[Run] | None = None,
+                controller_history: Run | Sequence[Run] | None = None) -> np.ndarray:
         """Predicted errors of ``run`` as a board switched on at its first sample computes them (with its
         observer, if the model has one); ``history``: a run or list of runs (oldest first, ending before
-        ``run`` starts, one clock) the board ran through first, without a restart."""
+        ``run`` starts, one clock) the board ran through first, without a restart; ``controller_history``: a run or
+        list of runs whose spindle/feed logs are the controller's record before ``run``, for the lag states the
+        controller supplies at the start (option spindle_states=controller; host/learning/empirical/observer.py)."""
         if history is not None and not isinstance(history, (list, tuple)):
             history = [cast("Run", history)]  # not a list or tuple: one run, as the hint says
+        if controller_history is not None and not isinstance(controller_history, (list, tuple)):
+            controller_history = [cast("Run", controller_history)]
         try:
             check_model_reference(run, self.error_reference)
         except ValueError as exc:
@@ -637,7 +644,7 @@ class DynamicModel(DocumentFields):
         e = run.errors
         out = np.full(len(e), np.nan)
         rows = self._rows(run)
-        th = self.thermal_at(run, e.time_s[rows], history)
+        th = self.thermal_at(run, e.time_s[rows], history, controller_history)
         out[rows] = self.geometric(e.position_mm[rows]) + th * e.position_mm[rows] if self.target == "slope" else th
         return out
 

@@ -287,6 +287,13 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     if forward_state not in FORWARD_STATES:
         raise EmpiricalDataError("dynamic: forward_state must be one of %s, got %r" % (", ".join(FORWARD_STATES), forward_state))
     settle_max_s = settle_max_option(opts.pop("settle_max_s", None))  # host/learning/empirical/settle.py
+    spindle_states = opts.pop("spindle_states", "observer")
+    if spindle_states not in ("observer", "controller"):
+        raise EmpiricalDataError("dynamic: spindle_states must be observer or controller, got %r" % (spindle_states,))
+    from host.learning.empirical.observer import CONTROLLER_SIGNALS
+
+    # the spindle/feed lag states the controller supplies at a board's start (docs/empirical.md "Controller's record")
+    controller = CONTROLLER_SIGNALS if spindle_states == "controller" else ()
     static_fallback = opts.pop("static_fallback", True)
     if not isinstance(static_fallback, bool):
         raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
@@ -345,7 +352,8 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
             # each block as a board switched on at its start computes it: filters from the estimate of the observer of the
             # structure being scored, fitted on the blocks before it (forward.observer_block_columns)
             est.with_block_columns(forward.observer_block_columns(runs, arrays, labels, blocks, terms, reference_all, target,
-                                                                  channel, exclude, obs_scale, scored=long_blocks))
+                                                                  channel, exclude, obs_scale, scored=long_blocks,
+                                                                  controller=controller))
         elif len(runs) == 1:
             # without an observer: filters from rest on rises over the block's start (several runs: each run already is)
             held = {}
@@ -360,7 +368,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     if settle_max_s is not None:
         # only structures whose observer (the one the document will carry) settles within settle_max_s
         est.with_settle_bound(SettleBound(settle_max_s, runs, [(a.time_s.min(), a.time_s.max()) for a in arrays], exclude,
-                                          reference_all, target, channel, obs_scale, taus))
+                                          reference_all, target, channel, obs_scale, taus, controller=controller))
     est.fit(F, y, terms, groups=groups)
     settle_record = est.settle_bound_
     searched = est  # the search over every term (the static fallback may replace est)
@@ -423,7 +431,8 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         # fitted on the training samples only (window, exclude): never on what is held out
         from host.learning.empirical.observer import fit_observer
 
-        model.observer = fit_observer(model, runs, spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=obs_scale)
+        model.observer = fit_observer(model, runs, spans=[(a.time_s.min(), a.time_s.max()) for a in arrays], exclude=exclude, scale=obs_scale,
+                                      controller=controller)
         if observer_count:
             # sensors beyond the terms' whose present reading recovers the lag states better, chosen on the training
             # samples only, the model's sensors staying within max_sensors (docs/empirical.md "Observer-only sensors")
@@ -459,7 +468,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
             if use_observer:
                 # the board scored on block k starts with an observer fitted on the blocks before it, as the model's own
                 # was on all of them (reference_C: the training runs' start temperatures, as the model's)
-                m.observer = forward.fit_fold_observer(m, runs, blocks, k, exclude, obs_scale)
+                m.observer = forward.fit_fold_observer(m, runs, blocks, k, exclude, obs_scale, controller)
             return m
 
         fc = stats["forward_chaining"] = forward.forward_chaining(runs, blocks, refit, target)

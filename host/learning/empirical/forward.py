@@ -138,9 +138,27 @@ def block_run(runs: Sequence[Run], block: dict[str, Any]) -> Run:
         raise EmpiricalDataError(str(exc))
 
 
-def block_residuals(model: Any, run: Run, block: dict[str, Any]) -> tuple[np.ndarray, np.ndarray]:
-    """(measured, predicted) of ``model.predict(run)`` over the rows of ``run`` inside ``block``'s time span."""
-    pred = model.predict(run)
+def block_record(runs: Sequence[Run], block: dict[str, Any]) -> list[Run]:
+    """The controller's record before block ``block`` as its own run (:func:`block_run`): the run up to the block's first
+    sample (one run); none when the runs are the blocks (each starts its machine cold)."""
+    run = runs[block["run"]]
+    if len(runs) >= 2:
+        return []
+    first, start = float(run.temperatures.time_s[0]), float(block_run(runs, block).temperatures.time_s[0])
+    if start <= first:
+        return []
+    try:
+        return [slice_run(run, first, start)]
+    except ValueError as exc:
+        raise EmpiricalDataError(str(exc))
+
+
+def block_residuals(model: Any, run: Run, block: dict[str, Any], controller_history: Sequence[Run] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(measured, predicted) of ``model.predict(run)`` over the rows of ``run`` inside ``block``'s time span;
+    ``controller_history``: the controller's record before ``run``, for a model with states the controller supplies."""
+    from host.learning.empirical.observer import reads_controller
+
+    pred = model.predict(run, controller_history=controller_history) if controller_history and reads_controller(model) else model.predict(run)
     rows = model._rows(run)
     t = run.errors.time_s[rows]
     rows = rows[(t >= block["t_start_s"]) & (t <= block["t_end_s"])]
@@ -163,7 +181,7 @@ def forward_chaining(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], refi
         if b["block"] == 0:
             continue
         model = refit(b["block"])
-        m, p = block_residuals(model, block_run(runs, b), b)
+        m, p = block_residuals(model, block_run(runs, b), b, block_record(runs, b))
         mc, pc = block_residuals(model, runs[b["run"]], b)
         r = m - p
         out.append({"block": b["block"], "run": b["run"], "t_start_s": b["t_start_s"], "t_end_s": b["t_end_s"], "n": int(r.size),
@@ -202,7 +220,7 @@ def linear_forward_chaining(model: Any, runs: Iterable[Run], target: str = "slop
 
 
 def fit_fold_observer(model: Any, runs: Sequence[Run], blocks: Sequence[dict[str, Any]], k: int,
-                      exclude: tuple[float | None, float | None] | None = None, scale: float = 1.0) -> Any:
+                      exclude: tuple[float | None, float | None] | None = None, scale: float = 1.0, controller: Sequence[str] = ()) -> Any:
     """The observer of ``model`` as the board scored on block ``k`` has it: fitted on the blocks before ``k`` only
     (several runs: the runs before it; one run: the span of the blocks before it), never on block ``k`` or later.
     The one place that says which samples a fold's observer sees: the reported score (fitting.py's refit) and the
@@ -210,10 +228,10 @@ def fit_fold_observer(model: Any, runs: Sequence[Run], blocks: Sequence[dict[str
     from host.learning.empirical.observer import fit_observer
 
     if len(runs) >= 2:
-        return fit_observer(model, list(runs[:k]), exclude=exclude, scale=scale)
+        return fit_observer(model, list(runs[:k]), exclude=exclude, scale=scale, controller=controller)
     past = [b for b in blocks if b["block"] < k]
     span = [(min(b["t_start_s"] for b in past), max(b["t_end_s"] for b in past))]
-    return fit_observer(model, runs, spans=span, exclude=exclude, scale=scale)
+    return fit_observer(model, runs, spans=span, exclude=exclude, scale=scale, controller=controller)
 
 
 def short_blocks(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], min_s: float) -> list[int]:
@@ -228,7 +246,8 @@ def short_blocks(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], min_s: f
 def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], labels: np.ndarray, blocks: Sequence[dict[str, Any]],
                            terms: Sequence[tuple[str, float]], reference_C: dict[str, float], target: str = "direct",
                            channel: str | None = None, exclude: tuple[float | None, float | None] | None = None,
-                           scale: float = 1.0, scored: Sequence[dict[str, Any]] | None = None) -> dict[int, Any]:
+                           scale: float = 1.0, scored: Sequence[dict[str, Any]] | None = None,
+                           controller: Sequence[str] = ()) -> dict[int, Any]:
     """{block k >= 1: StartedColumns}: every candidate term's column on block k as a board switched on at the block's
     start with its observer computes it, for whichever structure the selection tries. ``scored``: only these of
     ``blocks`` (default: all); the observers are still fitted on ``blocks`` before k.
@@ -275,8 +294,17 @@ def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], lab
                     if d is not None:
                         decay[:, j] = d
         u0 = {n: float(sig[n][0]) for n in names}
+        exact = {}
+        if controller:
+            # the controller's record of its own signals: their lag states at the block's start, run from the run's start
+            tr, sr = inputs(everything, runs[b["run"]])
+            for n in names:
+                if n in controller:
+                    for tau in lag_taus:
+                        if (n, tau) in index:
+                            exact[index[(n, tau)]] = float(np.interp(t[0], tr, _lag_filter_fast(tr, sr[n] - sr[n][0], tau) + sr[n][0]))
         out[k] = StartedColumns(rest, decay, y[rows], _StartEstimates(runs, blocks, k, terms, index, lag_taus, u0, reference_C,
-                                                                      target, channel, exclude, scale))
+                                                                      target, channel, exclude, scale, controller, exact))
     return out
 
 
@@ -284,10 +312,11 @@ class _StartEstimates:
     """start(cols) of StartedColumns for one block: the observer of the structure's signal set, fitted on the blocks
     before it, read at the block's first sample; cached per signal set."""
 
-    def __init__(self, runs, blocks, k, terms, index, lag_taus, u0, reference_C, target, channel, exclude, scale):
+    def __init__(self, runs, blocks, k, terms, index, lag_taus, u0, reference_C, target, channel, exclude, scale, controller=(), exact=None):
         self.runs, self.blocks, self.k, self.terms, self.index = runs, blocks, k, terms, index
         self.lag_taus, self.u0, self.reference_C = lag_taus, u0, reference_C
         self.target, self.channel, self.exclude, self.scale = target, channel, exclude, scale
+        self.controller, self.exact = tuple(controller), dict(exact or {})
         self.cache: dict[frozenset, np.ndarray] = {}
 
     def __call__(self, cols):
@@ -302,10 +331,11 @@ class _StartEstimates:
             lagged = [(n, tau) for n in order for tau in self.lag_taus]
             if lagged:
                 model = DynamicModel(lagged, np.zeros(len(lagged)), 0.0, self.target, self.channel, reference_C=self.reference_C)
-                obs = fit_fold_observer(model, self.runs, self.blocks, self.k, self.exclude, self.scale)
+                obs = fit_fold_observer(model, self.runs, self.blocks, self.k, self.exclude, self.scale, self.controller)
                 for j, v in obs.initial_states({n: self.u0[n] for n in order}).items():
                     if lagged[j] in self.index:  # a lag of the structure's signals that is among the candidates
-                        vec[self.index[lagged[j]]] = v
+                        c = self.index[lagged[j]]
+                        vec[c] = self.exact.get(c, v)
             self.cache[key] = vec
         return vec[cols]
 

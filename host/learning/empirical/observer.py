@@ -107,7 +107,8 @@ class Observer:
         return {"method": "static_state_estimate", "tolerance": self.tolerance, "settle_s": self.settle_s, "scale": self.scale,
                 "states": [{"term": int(s["term"]),
                             "gains": {k: float(v) for k, v in s["gains"].items()},
-                            "bound": float(s["bound"]), "rms": float(s["rms"])} for s in self.states]}
+                            "bound": float(s["bound"]), "rms": float(s["rms"]),
+                            **({"source": CONTROLLER} if s.get("source") == CONTROLLER else {})} for s in self.states]}
 
     @classmethod
     def from_document(cls, obs: Any, terms: Sequence[tuple[str, float]], observer_only: Sequence[str] = ()) -> Observer:
@@ -137,6 +138,11 @@ class Observer:
             for key in ("bound", "rms"):
                 if not num(s.get(key)) or s[key] < 0:
                     raise ModelFormatError("%s.states[%d].%s must be a finite number >= 0, found %r" % (where, i, key, s.get(key)))
+            if "source" in s:
+                if s["source"] != CONTROLLER or terms[s["term"]][0] not in CONTROLLER_SIGNALS or s.get("gains") != {} or s["bound"] != 0:
+                    raise ModelFormatError("%s.states[%d]: source %r is allowed only as 'controller', on a lag of %s, with gains {} "
+                                           "and bound 0 (the controller supplies that state exactly); found %r"
+                                           % (where, i, s["source"], " / ".join(CONTROLLER_SIGNALS), s))
             g = s.get("gains")
             if not isinstance(g, dict) or any(k not in regressors for k in g) or not all(num(v) for v in g.values()):
                 raise ModelFormatError("%s.states[%d].gains must map the model's signals (%s) to finite numbers, found %r"
@@ -209,15 +215,20 @@ def _filter_from(t, u, tau_s, y0):
     return y
 
 
-def board_terms(model: DynamicModel, runs: Sequence[Run], observer: bool = True) -> tuple[np.ndarray, np.ndarray]:
+def board_terms(model: DynamicModel, runs: Sequence[Run], observer: bool = True,
+                controller_history: Sequence[Run] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Term columns over the chained runs' time base as a board switched on at the first run's first sample computes them.
 
     ``observer``: start each lag state at the observer's estimate (True) or at the
     steady state of the first inputs (False: y_j = u_j, which is "at rest" for a
-    machine at its reference). Returns (t, columns (n, terms)).
+    machine at its reference). ``controller_history``: earlier runs (oldest first) whose spindle/feed logs are the
+    controller's record before the first run, for the states the controller supplies (:func:`controller_states`).
+    Returns (t, columns (n, terms)).
     """
     t, sig = _chain(model, runs)
     est = model.observer.initial_states({n: sig[n][0] for n in regressors_of(model)}) if observer and model.observer is not None else {}
+    if est and model.observer is not None:
+        est.update(controller_states(model, controller_history or [], runs[0]))
     cols = np.empty((t.size, len(model.terms)))
     for j, (name, tau) in enumerate(model.terms):
         y0 = est.get(j, sig[name][0])
@@ -225,16 +236,56 @@ def board_terms(model: DynamicModel, runs: Sequence[Run], observer: bool = True)
     return t, cols
 
 
+CONTROLLER = "controller"  # an observer state's ``source`` when the controller supplies it (option spindle_states)
+CONTROLLER_SIGNALS = NONNEGATIVE  # the signals the controller itself commands: their past is in its record, not in a sensor
+
+
+def reads_controller(model: Any) -> bool:
+    """Whether ``model`` (any kind) has a lag state the controller supplies."""
+    return any(s.get("source") == CONTROLLER for s in getattr(getattr(model, "observer", None), "states", None) or [])
+
+
+def controller_states(model: DynamicModel, record: Sequence[Run], run: Run) -> dict[int, float]:
+    """{term index: y_j} of the lag states the controller supplies (observer states of ``source`` "controller") when a
+    board starts at ``run``'s first sample: the lag of the signal over the controller's ``record`` (earlier runs, oldest
+    first, one clock, ending at or before the run starts; their spindle.csv / motion.csv only) and the run's first
+    sample, started at the record's first input (at rest, as the training's states start). Without a record: the
+    steady state of the run's first input (what a controller that starts with the run knows)."""
+    states = [s for s in (model.observer.states if model.observer is not None else []) if s.get("source") == CONTROLLER]
+    if not states:
+        return {}
+    parts = []
+    for r in list(record) + [run]:
+        tr, sr = signals(r, [])
+        parts.append((r, tr, sr))
+    for (ra, ta, _), (rb, tb, _) in zip(parts, parts[1:]):
+        if ta[-1] > tb[0]:
+            raise EmpiricalDataError("%s ends at %g s, after %s starts at %g s: the controller's record must end before (or when) "
+                                     "the run starts, both times on one clock" % (ra.path or ra.name, ta[-1], rb.path or rb.name, tb[0]))
+    t0 = parts[-1][1][0]
+    out = {}
+    for s in states:
+        name, tau = model.terms[s["term"]]
+        if any(name not in sr for _, _, sr in parts):
+            bad = next(r for r, _, sr in parts if name not in sr)
+            raise EmpiricalDataError("%s: the controller's record of %s (spindle.csv or motion.csv) is missing" % (bad.path or bad.name, name))
+        t = np.concatenate([tr for _, tr, _ in parts[:-1]] + [[t0]])
+        u = np.concatenate([sr[name] for _, _, sr in parts[:-1]] + [[parts[-1][2][name][0]]])
+        out[s["term"]] = float(_filter_from(t, u, tau, u[0])[-1])
+    return out
+
+
 def fit_observer(model: DynamicModel, runs: Sequence[Run], spans: Sequence[tuple[float, float]] | None = None,
                  exclude: tuple[float | None, float | None] | None = None, tolerance: float = SETTLE_TOLERANCE_UM,
-                 scale: float = 1.0) -> Observer:
+                 scale: float = 1.0, controller: Iterable[str] = ()) -> Observer:
     """Fit the static state estimate of ``model``'s lag states on its training runs -> Observer.
 
     The true states on each training run are the filters run through it from its
     first sample, started in equilibrium with the first inputs (the cold start the
     training assumes). ``scale``: the thermal output's size in µm per model unit
     (1 for a direct model; a slope model's largest position in mm), so that the
-    tolerance is in µm of offset. ``spans``: per run, the (first, last) training time; samples
+    tolerance is in µm of offset. ``controller``: signals (spindle/feed) whose lag states the controller supplies at
+    power-on from its own record of the signal (exact: gains {}, bound 0, ``source`` "controller"). ``spans``: per run, the (first, last) training time; samples
     outside it, or inside ``exclude`` = (lo, hi), do not enter the fit (what the model was not
     fitted on, e.g. a held-out period, must not shape its observer either).
     """
@@ -259,7 +310,11 @@ def fit_observer(model: DynamicModel, runs: Sequence[Run], spans: Sequence[tuple
     if not np.isfinite(A).all() or not np.isfinite(Y).all():
         raise EmpiricalDataError("dynamic: NaN/inf in the training inputs; the observer cannot be fitted")
     states = []
+    controller = set(controller)
     for k, j in enumerate(lagged):
+        if model.terms[j][0] in controller:
+            states.append({"term": j, "signal": model.terms[j][0], "gains": {}, "bound": 0.0, "rms": 0.0, "source": CONTROLLER})
+            continue
         coef = np.linalg.lstsq(A, Y[:, k], rcond=None)[0]
         res = Y[:, k] - A @ coef
         states.append({"term": j, "signal": model.terms[j][0], "gains": dict(zip(names, (float(v) for v in coef))),

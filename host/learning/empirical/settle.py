@@ -56,7 +56,8 @@ class SettleBound:
 
     def __init__(self, settle_max_s: float, runs: Sequence[Any], spans: Sequence[tuple[float, float]],
                  exclude: tuple[float | None, float | None] | None, reference_C: dict[str, float], target: str,
-                 channel: str | None, scale: float, lag_taus: Sequence[float], tolerance: float | None = None) -> None:
+                 channel: str | None, scale: float, lag_taus: Sequence[float], tolerance: float | None = None,
+                 controller: Sequence[str] = ()) -> None:
         from host.learning.empirical.observer import SETTLE_TOLERANCE_UM
 
         self.settle_max_s = float(settle_max_s)
@@ -64,6 +65,7 @@ class SettleBound:
         self.reference_C, self.target, self.channel, self.scale = dict(reference_C), target, channel, float(scale)
         self.lag_taus = sorted({float(t) for t in lag_taus if t > 0})
         self.tolerance = SETTLE_TOLERANCE_UM if tolerance is None else float(tolerance)
+        self.controller = tuple(controller)
         self._bounds: dict[frozenset, dict[tuple[str, float], float]] = {}
 
     def _state_bounds(self, signals: Sequence[str]) -> dict[tuple[str, float], float]:
@@ -76,7 +78,7 @@ class SettleBound:
         if out is None:
             lagged = [(n, tau) for n in signals for tau in self.lag_taus]
             model = DynamicModel(lagged, np.zeros(len(lagged)), 0.0, self.target, self.channel, reference_C=self.reference_C)
-            obs = fit_observer(model, self.runs, spans=self.spans, exclude=self.exclude, scale=self.scale)
+            obs = fit_observer(model, self.runs, spans=self.spans, exclude=self.exclude, scale=self.scale, controller=self.controller)
             out = self._bounds[key] = {lagged[s["term"]]: float(s["bound"]) for s in obs.states}
         return out
 

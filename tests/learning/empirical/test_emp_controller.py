@@ -1,0 +1,144 @@
+"""Lag states the controller supplies (dynamic option ``spindle_states=controller``, issue 21).
+
+The machine below is written here, independently of the model's filters: the spindle is the heat source (2 h running
+in every 4 h at changing speeds), sensor t1 sits at it (10 min behind), t2 reads the ambient, and the error is 4 h
+behind the source. No instant of t1 and t2 tells the 4 h state at a switch-on; the spindle's past does, and the
+controller, which commands the spindle, has it. Exact solution for a speed held between samples: exactlag.py.
+"""
+import json
+
+import numpy as np
+import pytest
+
+from host.cli import main
+from host.data.runs import Errors, Run, Spindle, Temperatures, slice_run, write_run
+from host.learning.empirical import EmpiricalDataError
+from host.learning.empirical.dynamic import DynamicModel
+from host.learning.empirical.fitting import fit_model
+from host.learning.empirical.observer import CONTROLLER, board_terms
+from host.learning.empirical.settle import SettleBound
+from host.learning.documents import ModelFormatError
+from models_export import export_model
+from models_export.certify import ExportError
+
+from exactlag import exact_lag  # test-side physics, beside these tests
+
+REF_C = 22.0
+DT = 60.0
+SPLIT = 24 * 3600.0
+TAUS = (0, 1800, 3600, 14400)
+FIT = dict(target="direct", channel="ch1", window=(None, SPLIT), taus_s=TAUS, max_terms=3)
+
+
+def _machine(hours=32.0):
+    t = np.arange(0.0, hours * 3600.0, DT)
+    krpm = np.zeros(t.size)
+    for k, speed in enumerate((1.0, 3.0, 2.0, 4.0, 1.5, 3.5, 2.5, 3.0)):
+        krpm[(t >= 14400 * k) & (t < 14400 * k + 7200)] = speed
+    t1 = REF_C + 2.0 * exact_lag(krpm, 600.0, DT)
+    t2 = REF_C + 0.4 * np.sin(2 * np.pi * t / 21600.0)
+    err = 4.0 * exact_lag(t1 - REF_C, 14400.0, DT)
+    temps = Temperatures(t, ["t1", "t2"], np.column_stack([t1, t2]))
+    errors = Errors(t.copy(), np.zeros(t.size), err, None, np.array(["ch1"] * t.size, dtype=object))
+    meta = {"format": "tcomp-run/1", "axis": "Z", "sensors": {"t1": {"role": "structure"}, "t2": {"role": "ambient"}}}
+    return Run(meta, temps, errors, spindle=Spindle(t.copy(), krpm * 1000.0), name="source"), krpm
+
+
+@pytest.fixture(scope="module")
+def fits():
+    run, krpm = _machine()
+    return run, krpm, fit_model([run], "dynamic", spindle_states="controller", **FIT), fit_model([run], "dynamic", **FIT)
+
+
+def _rmse(pred, truth):
+    return float(np.sqrt(np.mean((pred - truth) ** 2)))
+
+
+def test_the_controllers_record_carries_the_state_no_sensor_reveals(fits):
+    run, krpm, controlled, observed = fits
+    spin = [j for j, (n, tau) in enumerate(controlled.terms) if n in ("spindle_krpm", "spindle_krpm2") and tau > 0]
+    assert spin, controlled.terms  # a spindle lag: its state is exactly known at a switch-on
+    for s in controlled.observer.states:
+        assert (s.get("source") == CONTROLLER) == (s["term"] in spin)
+        if s["term"] in spin:
+            assert s["gains"] == {} and s["bound"] == 0.0
+    cut, before = slice_run(run, SPLIT), slice_run(run, 0.0, SPLIT)
+    truth = cut.errors.error_um
+    with_record = _rmse(controlled.predict(cut, controller_history=before), truth)
+    without_record = _rmse(controlled.predict(cut), truth)
+    observer_only = _rmse(observed.predict(cut), truth)
+    # the board switched on at the split predicts the future well only with the controller's record
+    assert with_record < 0.5 * observer_only, (with_record, observer_only)
+    assert with_record < 0.5 * without_record, (with_record, without_record)
+    # the supplied state is the spindle's exact lag at the split (the test-side solution, started in equilibrium with the
+    # record's first input, as observer.controller_states says: the spindle runs from 0 h here)
+    k = int(SPLIT / DT)
+    _, cols = board_terms(controlled, [cut], controller_history=[before])
+    for j in spin:
+        name, tau = controlled.terms[j]
+        u = krpm if name == "spindle_krpm" else krpm ** 2
+        np.testing.assert_allclose(cols[0, j], exact_lag(u, tau, DT, u[0])[k], rtol=1e-9, atol=1e-12)
+    # a record that does not end before the run starts is refused, naming both
+    with pytest.raises(EmpiricalDataError, match=r"controller's record must end before"):
+        controlled.predict(slice_run(run, 20 * 3600.0), controller_history=before)
+
+
+def test_the_reported_forward_score_is_the_one_the_structure_was_chosen_by(fits):
+    _, _, controlled, _ = fits
+    fc = controlled.statistics["forward_chaining"]
+    assert controlled.statistics["forward_scored_as"]["continuous_blocks"] == []
+    np.testing.assert_allclose(controlled.estimator_.fold_rmse_, fc["rmse_um"], rtol=1e-8)
+
+
+def test_the_settle_bound_admits_what_the_controller_supplies():
+    run, _ = _machine()
+    kw = dict(runs=[run], spans=[(0.0, SPLIT)], exclude=None, reference_C={"t1": REF_C, "t2": REF_C}, target="direct",
+              channel="ch1", scale=1.0, lag_taus=[1800.0, 3600.0, 14400.0])
+    terms, coef = [("spindle_krpm", 14400.0), ("T:t1", 1800.0)], [2.0, 0.5]
+    observer_only = SettleBound(1800.0, **kw)
+    controlled = SettleBound(1800.0, controller=("spindle_krpm", "spindle_krpm2", "feed_m_min"), **kw)
+    # the 4 h spindle state alone: unknown to the sensors, exact from the controller
+    assert observer_only.settle_s(terms[:1], coef[:1]) > 1800.0 and controlled.settle_s(terms[:1], coef[:1]) == 0.0
+    # beside a temperature state, only that state's start error is left to settle
+    assert controlled.settle_s(terms, coef) <= 1800.0 < observer_only.settle_s(terms, coef)
+    # and a fit bounded to 30 min keeps the long spindle lag only when the controller supplies it
+    bounded = fit_model([run], "dynamic", spindle_states="controller", settle_max_s=1800, **FIT)
+    assert bounded.observer.settle_s <= 1800
+    assert any(n.startswith("spindle") and tau == 14400.0 for n, tau in bounded.terms), bounded.terms
+
+
+def test_the_document_keeps_the_source_and_the_table_refuses_it(fits, tmp_path):
+    run, _, controlled, _ = fits
+    doc = controlled.to_document()
+    back = DynamicModel.from_document(json.loads(json.dumps(doc)))
+    cut, before = slice_run(run, SPLIT), slice_run(run, 0.0, SPLIT)
+    np.testing.assert_allclose(back.predict(cut, controller_history=before), controlled.predict(cut, controller_history=before))
+    states = doc["thermal"]["observer"]["states"]
+    i = next(i for i, s in enumerate(states) if s.get("source") == CONTROLLER)
+    for bad in ({"gains": {"T:t1": 0.1}}, {"bound": 0.5}, {"source": "operator"}):
+        tampered = json.loads(json.dumps(doc))
+        tampered["thermal"]["observer"]["states"][i].update(bad)
+        with pytest.raises(ModelFormatError, match=r"states\[%d\]" % i):
+            DynamicModel.from_document(tampered)
+    # the board cannot take a state from the controller yet: the table is refused, not exported without it
+    with pytest.raises(ExportError, match="supplied by the controller"):
+        export_model(doc)
+    with pytest.raises(EmpiricalDataError, match="spindle_states must be observer or controller, got 'board'"):
+        fit_model([run], "dynamic", spindle_states="board", **FIT)
+
+
+def test_tcomp_predict_reads_the_controllers_record(fits, tmp_path):
+    run, _, controlled, observed = fits
+    paths = {}
+    for name, model in (("controlled", controlled), ("observed", observed)):
+        paths[name] = str(tmp_path / ("%s.json" % name))
+        with open(paths[name], "w") as fh:
+            json.dump(model.to_document(), fh)
+    cut, before = slice_run(run, SPLIT), slice_run(run, 0.0, SPLIT)
+    a, b = write_run(before, str(tmp_path / "before")), write_run(cut, str(tmp_path / "after"))
+    out = str(tmp_path / "p.csv")
+    assert main(["predict", paths["controlled"], b, "--controller-history", a, "--out", out]) == 0
+    pred = np.genfromtxt(out, delimiter=",", names=True, dtype=None, encoding="utf-8")["predicted_um"]
+    np.testing.assert_allclose(pred, controlled.predict(cut, controller_history=before), atol=1e-3)
+    # a model with no controller-supplied state would not read the record: refused, exit 2
+    assert main(["predict", paths["observed"], b, "--controller-history", a, "--out", str(tmp_path / "q.csv")]) == 2
