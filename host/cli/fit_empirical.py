@@ -57,6 +57,7 @@ OPTIONS = {
     # with a spindle log) or its spindle cycles
     "forward_blocks": number_or_choice(int, 3, "phases", "cycles"),
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start; switched_on: blocks >= 90 min)
+    "spindle_states": str,  # dynamic: observer | controller (the controller's record supplies the spindle/feed lag states)
     "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "average_structures": number(int, 1),  # dynamic: average up to N structures, weights by forward chaining (1: the best one)
     "average_members": str,  # dynamic: ridge | path (where the averaged structures come from)
@@ -144,6 +145,13 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
             print("  observer: lag states estimated from the inputs at a start; start-error bound %.3g um, within %.3g um after "
                   "%.0f min (SETTLING)%s" % (obs.start_error_bound(model), obs.tolerance, obs.settle_s / 60,
                                              "" if worst is None else "; largest share: lag(%s, tau %g s)" % model.terms[worst["term"]]))
+        from host.learning.empirical.observer import CONTROLLER
+
+        supplied = [model.terms[st["term"]] for st in (obs.states if obs is not None else []) if st.get("source") == CONTROLLER]
+        if supplied:
+            print("  lag states the controller supplies from its record at a start (spindle_states=controller): %s; the board "
+                  "cannot take them yet, so this model is not exported (tcomp predict --controller-history reads the record)"
+                  % ", ".join("lag(%s, tau %g s)" % t for t in supplied))
         ob = model.statistics.get("observer_sensors")
         if ob:
             print("  observer-only sensors (up to %d, the model's sensors within %d): %s; settle_s %.0f min, %.0f min without" % (

@@ -290,6 +290,8 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     spindle_states = opts.pop("spindle_states", "observer")
     if spindle_states not in ("observer", "controller"):
         raise EmpiricalDataError("dynamic: spindle_states must be observer or controller, got %r" % (spindle_states,))
+    if spindle_states == "controller" and not use_observer:
+        raise EmpiricalDataError("dynamic: spindle_states=controller sets lag states of the observer's start; it needs observer=true")
     from host.learning.empirical.observer import CONTROLLER_SIGNALS
 
     # the spindle/feed lag states the controller supplies at a board's start (docs/empirical.md "Controller's record")
@@ -404,6 +406,8 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     if fallback is not None:
         stats["static_fallback"] = fallback
     stats["lag_bound"] = lag_bound
+    if use_observer:
+        stats["spindle_states"] = spindle_states  # "controller": the controller's record supplies the spindle/feed lag states
     if selection == "forward":
         stats["forward_state"] = forward_state
         if scored_as is not None:

@@ -125,6 +125,8 @@ def test_the_document_keeps_the_source_and_the_table_refuses_it(fits, tmp_path):
         export_model(doc)
     with pytest.raises(EmpiricalDataError, match="spindle_states must be observer or controller, got 'board'"):
         fit_model([run], "dynamic", spindle_states="board", **FIT)
+    with pytest.raises(EmpiricalDataError, match="spindle_states=controller .* needs observer=true"):
+        fit_model([run], "dynamic", spindle_states="controller", observer=False, **FIT)
 
 
 def test_tcomp_predict_reads_the_controllers_record(fits, tmp_path):
@@ -142,3 +144,17 @@ def test_tcomp_predict_reads_the_controllers_record(fits, tmp_path):
     np.testing.assert_allclose(pred, controlled.predict(cut, controller_history=before), atol=1e-3)
     # a model with no controller-supplied state would not read the record: refused, exit 2
     assert main(["predict", paths["observed"], b, "--controller-history", a, "--out", str(tmp_path / "q.csv")]) == 2
+
+
+def test_tcomp_fit_says_which_states_the_controller_supplies_and_export_refuses_the_model(tmp_path, capsys):
+    run, _ = _machine(26.0)
+    folder = write_run(run, str(tmp_path / "run"))
+    out = str(tmp_path / "dyn.json")
+    assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "taus_s=0/1800/3600/14400",
+                 "--option", "max_terms=3", "--option", "spindle_states=controller"]) == 0
+    printed = capsys.readouterr().out
+    assert "lag states the controller supplies from its record at a start (spindle_states=controller): lag(spindle_krpm" in printed
+    assert json.loads(open(out).read())["statistics"]["spindle_states"] == "controller"
+    assert main(["export", out, "--out", str(tmp_path / "t.bin")]) == 2
+    assert "supplied by the controller" in capsys.readouterr().err
+    assert not (tmp_path / "t.bin").exists()
