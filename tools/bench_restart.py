@@ -96,8 +96,10 @@ def restart_figures(model, run, reset_s, scale):
     warm = slice_run(run, reset_s)
     full = model.thermal_at(run, times) * scale
     out = {}
+    # a model fitted with spindle_states=controller starts those states from the controller's record before the reset
+    record = [slice_run(run, float(t[0]), reset_s)] if obs.reads_controller(model) and reset_s > t[0] else None
     for name, m in (("on", model), ("off", without_observer(model))):
-        dev = np.abs(m.thermal_at(warm, times) * scale - full)
+        dev = np.abs((m.thermal_at(warm, times, controller_history=record) if name == "on" else m.thermal_at(warm, times)) * scale - full)
         out[name] = deviation_figures(times - times[0], dev)
     return out
 
