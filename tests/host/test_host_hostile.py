@@ -223,7 +223,7 @@ FLAGS = {
     "record": {"in": {"--port": "file", "--config": "file"}, "out": {"--out": "folder"},
                "other": "--baud --sensor --period --duration --link-timeout --notes --linuxcnc --hal-position "
                         "--hal-velocity --hal-spindle --hal-name --units"},
-    "predict": {"in": {"model": "file", "run": "folder", "--history": "folder"}, "out": {"--out": "file", "--json": "file"}, "other": "--allow-edited"},
+    "predict": {"in": {"model": "file", "run": "folder", "--history": "folder", "--controller-history": "folder"}, "out": {"--out": "file", "--json": "file"}, "other": "--allow-edited"},
     "report": {"in": {"runs": "folder", "--model": "file"}, "out": {"--out": "folder"}, "other": "--allow-edited"},
     "select": {"in": {"runs": "folder", "--corr": "file", "--target-corr": "file"}, "out": {"--json": "file", "--plot": "file"},
                "other": "--method --channel --target --sensors --split --option"},
@@ -235,7 +235,7 @@ FLAGS = {
 }
 
 # where each input lives in the world, and a valid call naming every input ({FLAG}) and output ({@FLAG})
-INPUT_FILES = {"runs": "run", "run": "run", "--history": "run", "--run": "run", "model": "m.json", "--table": "t.bin", "--config": "cfg.json",
+INPUT_FILES = {"runs": "run", "run": "run", "--history": "run", "--controller-history": "run", "--run": "run", "model": "m.json", "--table": "t.bin", "--config": "cfg.json",
                "--board": "board.py", "--port": "port", "--mpremote": "mpremote", "source": "log.csv",
                "--mapping": "map.json", "--corr": "corr.csv", "--target-corr": "tcorr.csv", "--key": "k.key",
                "--model": "m.json", "--board-log": "board.csv"}
