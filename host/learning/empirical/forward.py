@@ -261,7 +261,7 @@ def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], lab
     the structure's signals gives the starts of every structure with those signals: one fit per (block, signal set).
     """
     from host.learning.empirical.dynamic import DynamicModel, StartedColumns, _lag_filter_fast
-    from host.learning.empirical.observer import inputs, signals_of
+    from host.learning.empirical.observer import inputs, record_lags, signals_of
 
     terms = [(str(n), float(tau)) for n, tau in terms]
     names = signals_of(terms)
@@ -294,15 +294,9 @@ def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], lab
                     if d is not None:
                         decay[:, j] = d
         u0 = {n: float(sig[n][0]) for n in names}
-        exact = {}
-        if controller:
-            # the controller's record of its own signals: their lag states at the block's start, run from the run's start
-            tr, sr = inputs(everything, runs[b["run"]])
-            for n in names:
-                if n in controller:
-                    for tau in lag_taus:
-                        if (n, tau) in index:
-                            exact[index[(n, tau)]] = float(np.interp(t[0], tr, _lag_filter_fast(tr, sr[n] - sr[n][0], tau) + sr[n][0]))
+        # the controller's record of its own signals: their lag states at the block's start (what predict computes)
+        supplied = [(n, tau) for n in names if n in controller for tau in lag_taus if (n, tau) in index]
+        exact = dict(zip((index[q] for q in supplied), record_lags(block_record(runs, b), block_run(runs, b), supplied))) if supplied else {}
         out[k] = StartedColumns(rest, decay, y[rows], _StartEstimates(runs, blocks, k, terms, index, lag_taus, u0, reference_C,
                                                                       target, channel, exclude, scale, controller, exact))
     return out

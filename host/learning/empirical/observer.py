@@ -254,6 +254,14 @@ def controller_states(model: DynamicModel, record: Sequence[Run], run: Run) -> d
     states = [s for s in (model.observer.states if model.observer is not None else []) if s.get("source") == CONTROLLER]
     if not states:
         return {}
+    values = record_lags(record, run, [model.terms[s["term"]] for s in states])
+    return {s["term"]: v for s, v in zip(states, values)}
+
+
+def record_lags(record: Sequence[Run], run: Run, lags: Sequence[tuple[str, float]]) -> list[float]:
+    """The lag (signal, τ) of each of ``lags`` at ``run``'s first sample over the controller's ``record`` (earlier runs,
+    oldest first, one clock, their spindle.csv / motion.csv) and that sample, started at the record's first input
+    (:func:`controller_states`; the selection's switched-on blocks use it too, forward.observer_block_columns)."""
     parts = []
     for r in list(record) + [run]:
         tr, sr = signals(r, [])
@@ -263,15 +271,14 @@ def controller_states(model: DynamicModel, record: Sequence[Run], run: Run) -> d
             raise EmpiricalDataError("%s ends at %g s, after %s starts at %g s: the controller's record must end before (or when) "
                                      "the run starts, both times on one clock" % (ra.path or ra.name, ta[-1], rb.path or rb.name, tb[0]))
     t0 = parts[-1][1][0]
-    out = {}
-    for s in states:
-        name, tau = model.terms[s["term"]]
+    out = []
+    for name, tau in lags:
         if any(name not in sr for _, _, sr in parts):
             bad = next(r for r, _, sr in parts if name not in sr)
             raise EmpiricalDataError("%s: the controller's record of %s (spindle.csv or motion.csv) is missing" % (bad.path or bad.name, name))
         t = np.concatenate([tr for _, tr, _ in parts[:-1]] + [[t0]])
         u = np.concatenate([sr[name] for _, _, sr in parts[:-1]] + [[parts[-1][2][name][0]]])
-        out[s["term"]] = float(_filter_from(t, u, tau, u[0])[-1])
+        out.append(float(_filter_from(t, u, tau, u[0])[-1]))
     return out
 
 
