@@ -61,6 +61,11 @@ _NEED_CAP = const(8000000)  # d // v beyond this: the time needed exceeds _CAP (
 # write (docs/firmware.md, "Warm restarts of the lag states", where the two limits were measured on FL_THERMAL): every
 # sensor the table reads within _LAG_DRIFT_MK of its reading then, and (with an observer) the observer's estimate from
 # the temperatures now within _LAG_AGREE (0.01 um of output) of its estimate from those then.
+# the lag states the controller supplies (wire.SUPPLY_*; tests/firmware/test_fw_consts.py checks the copies)
+_SUPPLY_NONE = const(0)
+_SUPPLY_AWAITED = const(1)
+_SUPPLY_SET = const(2)
+_MAX_SUPPLIED = const(4)
 _LAG_DRIFT_MK = const(1000)
 _LAG_AGREE = const(1000)
 # lag_verdict: what became of lags.bin at this table's start (App._restore_lags; docs/firmware.md)
@@ -129,6 +134,11 @@ class App:
         self.obs_link = False  # its observer reads the spindle speed or feed: it waits for the controller (use_table)
         self.heard_spin = False  # the controller has reported the spindle speed since boot
         self.unobserved = False  # a dynamic table's lag states wait for the first all-good cycle (observer, or rest)
+        # the lag states the controller supplies (table.tauc; docs/firmware.md "Supplied lag states"): the table's
+        # start waits for them (AWAITED) as for the first speed report; set once per table start
+        self.supply = _SUPPLY_NONE
+        self.sup_k = 0
+        self.sup_vals = [0] * _MAX_SUPPLIED  # the values as received (a `Y` or the Modbus registers), no allocation
         self.settle_s = 0  # seconds since the observer's estimate (saturating at the table's settle_s) and the ms
         self.settle_ms = 0  # toward the next second
         # elapsed-time counters (ms, saturating) rather than timestamps: ticks wrap
@@ -234,6 +244,12 @@ class App:
                     self.obs_link = 1
                 elif -2 <= k <= -1:
                     self.obs_link = 2
+        self.sup_k = 0
+        if self.dyn:
+            for c in table.tauc:
+                if c:
+                    self.sup_k += 1
+        self.supply = _SUPPLY_AWAITED if self.sup_k else _SUPPLY_NONE
         self.settle_s = 0
         self.settle_ms = 0
         self.table = table
@@ -481,6 +497,29 @@ class App:
         if self.ev is not None and self.dyn:
             self.ev.set_spindle(rpm)
 
+    def supply_states(self, vals, k):
+        """The lag states the controller supplies (docs/protocol.md "Supplied lag states"): ``vals[0:k]`` in the table's
+        filter order and state units. Returns 1: set now (the table's start was waiting for them); 0: they were set at
+        this table's start, so nothing is applied (the board's filters carry them on); or a refusal, nothing changed:
+        -1 the table supplies no state (or no table), -2 not the table's count, -3 - i: value i outside its state's
+        box (the certified range)."""
+        if self.ev is None or not self.sup_k:
+            return -1
+        if k != self.sup_k:
+            return -2
+        t = self.table
+        i = 0
+        for j in range(t.nf):
+            if t.tauc[j]:
+                if not t.Ylo[j] <= vals[i] <= t.Yhi[j]:
+                    return -3 - i
+                i += 1
+        if self.supply == _SUPPLY_SET:
+            return 0
+        self.ev.supply(vals)
+        self.supply = _SUPPLY_SET
+        return 1
+
     def set_feed(self, feed_mm_min, lo_um, hi_um):
         self.feed = feed_mm_min
         if self.ev is not None and self.dyn:
@@ -587,10 +626,12 @@ class App:
             ev.update()
             if self.unsettled and not needed:
                 self._settle(ev, nut_bad)
-            if self.lag_rec is not None and not needed:
+            waiting = self.supply == _SUPPLY_AWAITED  # the table's start waits for the controller's supplied states
+            if self.lag_rec is not None and not needed and not waiting:
                 self._restore_lags(ev, t)  # once per table start: a stored state, if it is trusted
             link = self.obs_link
-            if self.unobserved and not needed and (link == 0 or (link == 1 and self.have_pos) or (link == 2 and self.heard_spin)):
+            if self.unobserved and not needed and not waiting and (
+                    link == 0 or (link == 1 and self.have_pos) or (link == 2 and self.heard_spin)):
                 ev.observe()  # allocation-free (tests/firmware/test_fw_heaplock.py)
                 self.unobserved = False
                 self.step_ms = 0

@@ -452,7 +452,8 @@ class Evaluator:
         Y[j] = (rG[j] + sum_m Go[j*nf + m] x Uc[m] / 2**(shO - gO[j])) >> gO[j] (gO < 0: a coarser row, clamped to the
         box at its scale, then shifted up), clamped to its box (the
         exact state of a filter lies in it, so the clamp only removes error); the present inputs become the
-        last step's, as in rest(). A table without an observer (obs 0) gets rest(): the cold start."""
+        last step's, as in rest(). A state the controller supplies (table.tauc) is not estimated: it keeps its value
+        (supply()). A table without an observer (obs 0) gets rest(): the cold start."""
         t = self.table
         if not t.obs:
             self.rest()
@@ -470,8 +471,9 @@ class Evaluator:
         nO = t.nO
         Y = self.Y
         Uc = self.Uc
+        tc = t.tauc
         for j in range(nf):
-            if A[j]:
+            if A[j] and not tc[j]:  # a supplied state (tauc) keeps what the controller sent (supply())
                 g = gO[j]
                 acc = rG[j]
                 k = j * nf
@@ -504,12 +506,29 @@ class Evaluator:
     def set_lags(self, Y):
         """Every lag state from ``Y`` (a stored or computed state, already checked against its box: a warm restart,
         firmware/warmstate.py); the present inputs become the last step's, as in rest() and observe(). A term without
-        a lag keeps its input (update() sets it)."""
+        a lag keeps its input (update() sets it), a state the controller supplies (table.tauc) its value (supply())."""
         t = self.table
         for j in range(t.nf):
-            if t.A[j]:
+            if t.A[j] and not t.tauc[j]:
                 self.Y[j] = Y[j]
             self.U0[j] = self.Uc[j]
+        self.S = self._dsum(self.Slin)
+
+    def supply_scale(self, j):
+        """Filter ``j``'s state units per unit of its input as the controller measures it (rpm, rpm squared, mm/min):
+        the state is that lag x 2**supply_scale(j) (the squared speed's input is rpm**2 / 2**shq)."""
+        t = self.table
+        return t.fy[j] - t.shq if t.src[j] == -2 else t.fy[j]
+
+    def supply(self, vals):
+        """The lag states the controller supplies (table.tauc), in filter order, in state units; the caller checked
+        each against its box (App.supply_states)."""
+        t = self.table
+        k = 0
+        for j in range(t.nf):
+            if t.tauc[j]:
+                self.Y[j] = vals[k]
+                k += 1
         self.S = self._dsum(self.Slin)
 
     def extreme(self, sign):

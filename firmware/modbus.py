@@ -47,7 +47,12 @@ _IR_AUTH_COUNTER = const(48)  # uint32: the last counter used (firmware.auth)
 _IR_AUTH_WHY = const(50)  # the last refusal (firmware.auth reason code)
 _IR_NONCE = const(51)  # the session nonce (firmware.auth), high word first: every auth block's tag starts with it
 _IR_ERROR_REF = const(53)  # the table's error reference (header byte 58): 0 start (or no table: IR 12 = 0), 1 + i sensor i
-_N_INPUT = const(54)
+# the lag states the controller supplies (firmware.app supply, table.tauc; docs/protocol.md "Supplied lag states")
+_IR_SUPPLY_STATE = const(54)  # wire.SUPPLY_*: 0 none, 1 awaited, 2 set at this table's start
+_IR_SUPPLY_COUNT = const(55)  # k
+_IR_SUPPLY_DICT = const(56)  # per supplied state: source (int16), tau_ms (uint32, high word first), scale (int16)
+_SUPPLY_DICT_REGS = const(4)
+_N_INPUT = const(72)
 # holding registers
 _HR_ENABLE = const(0)  # 0/1
 _HR_SLEW = const(1)  # um/s, 1..10000
@@ -59,7 +64,8 @@ _N_VALUES = const(8)  # registers 0..7 hold values; the auth block reads 0
 _HR_AUTH = const(8)  # 10 registers: counter (uint32), tag (16 bytes); written whole with FC16
 _N_AUTH = const(10)
 _HR_SPINDLE = const(18)  # int32 rpm, high word first, written whole with FC16: a spindle speed report
-_N_HOLDING = const(20)
+_HR_SUPPLY = const(20)  # MAX_SUPPLIED x int32, high word first: the supplied lag states, the table's k written whole (reads 0)
+_N_HOLDING = const(28)
 _PROTECTED = const(0x87)  # bit r: holding register r needs authorisation (0 enable, 1 slew, 2 timeout, 7 latch)
 
 _EX_ILLEGAL_FUNCTION = const(1)
@@ -226,7 +232,7 @@ class ModbusLink:
         t[2] = 2 * qty
         k = 3
         for r in range(start, start + qty):
-            v = self.input_register(r) if fc == 4 else (self.hold[r] if r < _N_VALUES or r >= _HR_SPINDLE else 0)
+            v = self.input_register(r) if fc == 4 else (self.hold[r] if r < _N_VALUES or _HR_SPINDLE <= r < _HR_SUPPLY else 0)
             v &= 0xFFFF
             t[k] = v >> 8
             t[k + 1] = v & 0xFF
@@ -269,6 +275,12 @@ class ModbusLink:
             return a.auth.nonce_lo
         if r == _IR_ERROR_REF:
             return a.table.error_ref if a.table is not None else 0
+        if r == _IR_SUPPLY_STATE:
+            return a.supply
+        if r == _IR_SUPPLY_COUNT:
+            return a.sup_k
+        if r >= _IR_SUPPLY_DICT:
+            return self._supply_entry(r - _IR_SUPPLY_DICT)
         ch = a.channels
         if _IR_TEMPS <= r < _IR_TEMPS + 16:
             i = r - _IR_TEMPS
@@ -331,6 +343,8 @@ class ModbusLink:
             self.vals[i] = (b[7 + 2 * i] << 8) | b[8 + 2 * i]
         if start == _HR_SPINDLE and qty == 2:
             code = self._spindle()
+        elif start == _HR_SUPPLY:
+            code = self._supply(qty)
         elif start + qty > _N_VALUES:
             if start != _HR_AUTH or qty != _N_AUTH:
                 return self._exception(16, _EX_ILLEGAL_VALUE, addr)  # the auth block and the speed are written whole
@@ -427,6 +441,49 @@ class ModbusLink:
         self.hold[_HR_SPINDLE] = vals[0]
         self.hold[_HR_SPINDLE + 1] = vals[1]
         self.app.report_spindle(v)
+        return 0
+
+    def _supply_entry(self, r):
+        """Input register IR_SUPPLY_DICT + r: word r % 4 of the (r // 4)-th supplied state's dictionary entry."""
+        a = self.app
+        k = r // _SUPPLY_DICT_REGS
+        if k >= a.sup_k:
+            return 0
+        t = a.table
+        j = 0
+        while True:  # the k-th filter with a tauc (at most nf steps)
+            if t.tauc[j]:
+                if k == 0:
+                    break
+                k -= 1
+            j += 1
+        w = r % _SUPPLY_DICT_REGS
+        if w == 0:
+            return t.src[j]
+        if w == 1:
+            return t.tauc[j] >> 16
+        if w == 2:
+            return t.tauc[j] & 0xFFFF
+        return a.ev.supply_scale(j)
+
+    def _supply(self, qty):
+        """The supplied lag states, ``qty // 2`` int32 in ``vals[:qty]``: validate, hand to the app; exception code or 0.
+        Set at this table's start already: answered normally, not applied (IR_SUPPLY_STATE says so)."""
+        vals = self.vals
+        a = self.app
+        if qty % 2 or qty // 2 > len(a.sup_vals):
+            return _EX_ILLEGAL_VALUE
+        k = qty // 2
+        for i in range(k):
+            hi = vals[2 * i] - 65536 if vals[2 * i] > 32767 else vals[2 * i]
+            if hi > 16383 or hi < -16384:  # beyond a small int: outside every state box
+                return _EX_ILLEGAL_VALUE
+            a.sup_vals[i] = hi * 65536 + vals[2 * i + 1]
+        got = a.supply_states(a.sup_vals, k)
+        if got == -1:
+            return _EX_DEVICE_FAILURE
+        if got < 0:
+            return _EX_ILLEGAL_VALUE
         return 0
 
     def _authorise(self, start, qty):

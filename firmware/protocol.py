@@ -64,6 +64,8 @@ _SIGNED = b"XL"  # no argument but the counter and the tag
 _POS_LIMIT = const(100000000)  # |position| in um accepted from the controller (100 m)
 _FEED_LIMIT = const(1000000)  # mm/min
 _SPINDLE_LIMIT = const(1000000)  # |spindle speed| in rpm accepted from the controller
+_STATE_LIMIT = const(0x3FFFFFFF)  # |a supplied lag state| parsed (the table's box then decides)
+_SUPPLY_LETTERS = const(b"-AS")  # wire.SUPPLY_LETTERS, indexed by App.supply
 _MAX_CHUNK = const(64)  # bytes of table data per U,D frame
 _RX_CHUNK = const(64)
 _MAX_READS = const(8)
@@ -83,6 +85,7 @@ _S = const(83)
 _V = const(86)
 _U = const(85)
 _X = const(88)
+_Y = const(89)
 _B = const(66)
 _D = const(68)
 _C = const(67)
@@ -295,6 +298,8 @@ class StreamLink:
             if not a.set_feed(f, lo, hi):
                 return self.error(_E_STATE, b"no screw or dynamic table")
             self.ack(_M, 0, f)
+        elif c == _Y:
+            self._supply(nf)
         elif c in _NO_ARGUMENT:
             if nf != 1:
                 return self.error(_E_SYNTAX)
@@ -315,6 +320,49 @@ class StreamLink:
                 a.reset()
         else:
             self.error(_E_UNKNOWN)
+
+    def _supply(self, nf):
+        """``Y``: the board's dictionary of the lag states the controller supplies, ``A,Y,<state>,<k>`` then per state
+        ``<source>,<tau_ms>,<scale>``; ``Y,<v1>,...,<vk>``: the states (docs/protocol.md "Supplied lag states"),
+        answered ``A,Y,S,1`` (set now) or ``A,Y,S,0`` (set at this table's start already: not applied)."""
+        a = self.app
+        if nf == 1:
+            w = self.w
+            w.begin(a.status, _A)
+            w.sep()
+            w.buf[w.n] = _Y
+            w.n += 1
+            w.sep()
+            w.buf[w.n] = _SUPPLY_LETTERS[a.supply]
+            w.n += 1
+            w.int(a.sup_k)
+            if a.sup_k:
+                t = a.table
+                for j in range(t.nf):
+                    if t.tauc[j]:
+                        w.int(t.src[j])
+                        w.int(t.tauc[j])
+                        w.int(a.ev.supply_scale(j))
+            w.end()
+            return
+        r = self.r
+        vals = a.sup_vals
+        k = nf - 1
+        if k > len(vals):
+            return self.error(_E_SYNTAX)
+        for i in range(k):
+            v = r.int(i + 1, -_STATE_LIMIT, _STATE_LIMIT)
+            if v is None:
+                return self.error(_E_RANGE)
+            vals[i] = v
+        got = a.supply_states(vals, k)
+        if got == -1:
+            return self.error(_E_STATE, b"no supplied states")
+        if got == -2:
+            return self.error(_E_SYNTAX, b"supplied states: wrong count")
+        if got < 0:
+            return self.error(_E_RANGE, b"supplied state " + bytes((49 - 3 - got,)) + b" outside its box")
+        self.ack(_Y, _SUPPLY_LETTERS[a.supply], got)
 
     def _tag(self, k):
         """Field ``k`` as _TAG_BYTES bytes (2 * _TAG_BYTES hex digits), or None (the E frame is sent)."""

@@ -19,7 +19,7 @@ from micropython import const
 
 MAGIC = b"TCTB"
 NAME_FORBIDDEN = b",*$"  # besides non-printable bytes: the $TC frames' separators (names are sent in the hello)
-_VERSION = const(6)  # 6: the screw table's observer (obs settle_s sn sr Rn Lr nr Gn shGn rN after the screw block, issue 21; a version 5 table still loads, without it); 5: screw effect terms for speed_dependent_heat (fg g0 Gv shGv Lgu ngu) and moving_convection (D shD fe Ly ny) (issue 19), the dynamic table's observer (obs settle_s LO nO Go shO gO rG, issue 21); 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
+_VERSION = const(7)  # 7: the lag states the controller supplies (tauc after the dynamic block, issue 21; a version 6 or 5 table still loads, without them); 6: the screw table's observer (obs settle_s sn sr Rn Lr nr Gn shGn rN after the screw block, issue 21; a version 5 table still loads, without it); 5: screw effect terms for speed_dependent_heat (fg g0 Gv shGv Lgu ngu) and moving_convection (D shD fe Ly ny) (issue 19), the dynamic table's observer (obs settle_s LO nO Go shO gO rG, issue 21); 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
 _AXIS_SIZE = const(8)
@@ -27,6 +27,8 @@ _SENSOR_SIZE = const(20)  # per sensor: envelope lo, hi, reference, training lo,
 _MAX_SENSORS = const(24)
 _MAX_SEGMENTS = const(32)
 _MAX_DEGREE = const(6)
+_MAX_SUPPLIED = const(4)  # wire.MAX_SUPPLIED: lag states the controller supplies, per table
+_MAX_TAU_MS = const(1073741823)
 _UNIT_CODE = const(1)  # offsets in 0.01 um, slopes in 0.01 um/m
 _REF_FIXED = const(0)  # the model uses the table's reference temperatures
 _REF_LATCHED = const(1)  # certified for any reference in the envelope (models fitted on rises from the run start)
@@ -115,7 +117,7 @@ def parse_table(buf, expected_sensors=None):
     if bytes(buf[0:4]) != MAGIC:
         raise TableError(REASON_MAGIC)
     version = buf[4]
-    if version != _VERSION and version != _VERSION - 1:  # format 5 differs only by the screw observer's words
+    if version > _VERSION or version < _VERSION - 2:  # formats 5 and 6 differ only by words at the end of a block
         raise TableError(REASON_VERSION, "table format version %d is no longer supported; re-export the model "
                          "with this tcomp (format %d)" % (version, _VERSION) if version < _VERSION else "%d" % version)
     kind = buf[5]
@@ -243,6 +245,10 @@ _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:
 # sensor sr when no stored state is restored), settle_s (SETTLING until then), the rise's clamp Rn (milli-K) and limbs,
 # per segment the gain Gn, its shift shGn and the constant rN (state units)
 _SCREW_OBS = "obs:P settle_s:T sn:a sr:a Rn:T Lr:L nr:4 Gn=m shGn=m rN=m |"
+# the lag states the controller supplies (format 7, issue 21): per filter tauc, 0 (the board sets the state: its
+# observer, or rest) or the filter's time constant in ms (the controller runs that lag over its own record of the
+# spindle speed, its square or the feed, and sends the state at the table's start: `Y`, docs/protocol.md)
+_DYNAMIC_SUPPLY = "tauc=j |"
 _DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F Lp:L np:4 shp2:s shp:s LX:L nX:4 LY:L nY:4 nf:N "
             "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j obs:P settle_s:T LO:L nO:4 Go=O shO=O gO=j rG=j |")
 
@@ -254,11 +260,15 @@ def model_sections(kind, t):
     yield _COMMON
     if kind == _KIND_DYNAMIC:
         yield _DYNAMIC
+        if getattr(t, "version", _VERSION) == _VERSION:
+            yield _DYNAMIC_SUPPLY
+        else:  # format 5 or 6: every lag state is the board's
+            t.tauc = [0] * t.nf
     if kind != _KIND_LINEAR_DIRECT and (kind != _KIND_DYNAMIC or t.positional):
         yield _POSITION
     if kind == _KIND_SCREW_REDUCED:
         yield _SCREW
-        if getattr(t, "version", _VERSION) == _VERSION:
+        if getattr(t, "version", _VERSION) >= _VERSION - 1:
             yield _SCREW_OBS
         else:  # format 5: no observer, the cold start
             t.obs = 0
@@ -317,6 +327,19 @@ def _check(t):
                 k = j * t.nf + m
                 if not -_SH <= t.shO[k] <= _SH or (t.Go[k] and (not t.obs or not t.A[j])):  # gains only into lag states
                     raise TableError(REASON_FIELD, "observer gain %d,%d" % (j, m))
+        if hasattr(t, "tauc"):
+            k = 0
+            for j in range(t.nf):
+                c = t.tauc[j]
+                if c:  # only a lag of the controller's signals, only with an observer, never gains into it
+                    k += 1
+                    g = 0
+                    for m in range(t.nf):
+                        g |= t.Go[j * t.nf + m]
+                    if not (0 < c <= _MAX_TAU_MS and t.A[j] and -3 <= t.src[j] <= -1 and t.obs) or g or t.gO[j] or t.rG[j]:
+                        raise TableError(REASON_FIELD, "supplied state %d: tau %d ms, source %d" % (j, c, t.src[j]))
+            if k > _MAX_SUPPLIED:
+                raise TableError(REASON_FIELD, "%d supplied states, at most %d" % (k, _MAX_SUPPLIED))
         return
     if hasattr(t, "rN"):
         if t.sn >= t.n_sensors or t.sr >= t.n_sensors or (t.obs and (t.sn < 0 or t.sr < 0 or t.sn == t.sr)) or (

@@ -46,7 +46,7 @@ HELLO_NONCE = const(10)
 HELLO_ERROR_REFERENCE = const(11)
 ERROR_REFERENCE_START = "start"
 FRAME_KINDS = "HOQTAE"  # hello, offsets, query answer, temperatures, acknowledgement, error
-COMMANDS = "PMQRSVULX"  # position, motion, query, reference, temperatures, hello, upload, latch, reset
+COMMANDS = "PMQRSVULXY"  # position, motion, query, reference, temperatures, hello, upload, latch, reset, supplied lag states
 UPLOAD_STEPS = "BDCX"  # U,<step>: begin, data, commit, abort
 # Commands that change the output (U,B U,C U,X L X) end with <counter>,<tag> (docs/protocol.md,
 # "Who may change the output"; firmware/auth.py checks, host/board/linkauth.py signs)
@@ -66,6 +66,18 @@ E_REFILL_MS = const(25)
 # refusal reasons of authorised commands: E,8,auth,<AUTH_REASONS[r]> (BUSY is E,9,busy), Modbus input register 50
 AUTH_REASONS = ("", "no key", "bad tag", "replayed counter", "counter not stored", "busy", "unsigned",
                 "counter jump", "counter exhausted")
+
+# Lag states the controller supplies (issue 21, table format 7; docs/protocol.md "Supplied lag states"): a dynamic
+# table's lag of the spindle speed, its square or the feed whose state the controller computes from its own record
+# (host/board/supplied.py) and sends at the table's start. Per state the board's dictionary gives its source
+# (-1 spindle rpm, -2 rpm squared, -3 feed mm/min), its time constant in ms and its scale: the value sent is
+# round(lag in those input units x 2**scale), the board's state units.
+MAX_SUPPLIED = const(4)  # supplied states per table (the exporter refuses more)
+SUPPLY_DICT_REGS = const(4)
+SUPPLY_NONE = const(0)  # no table, or none of its states is supplied
+SUPPLY_AWAITED = const(1)  # the table's start waits for the controller's states (SETTLING is raised)
+SUPPLY_SET = const(2)  # the states were set at this table's start; a later `Y` is acknowledged but not applied
+SUPPLY_LETTERS = "-AS"  # the A,Y answer's state field, indexed by the codes above
 
 # Error frames E,<code>,<word>[,<detail>] (docs/protocol.md, "Error codes")
 E_CRC = const(1)  # crc: the line's CRC-16 does not match
@@ -98,7 +110,11 @@ IR_AUTH_COUNTER = const(48)  # uint32: the last counter used (firmware.auth)
 IR_AUTH_WHY = const(50)  # the last refusal (firmware.auth reason code)
 IR_NONCE = const(51)  # the session nonce (firmware.auth), high word first: every auth block's tag starts with it
 IR_ERROR_REF = const(53)  # the table's error reference (header byte 58): 0 start (or no table), 1 + i sensor i
-N_INPUT = const(54)
+# the lag states the controller supplies (table format 7, `Y` on the stream; docs/protocol.md "Supplied lag states"):
+IR_SUPPLY_STATE = const(54)  # SUPPLY_NONE / SUPPLY_AWAITED / SUPPLY_SET
+IR_SUPPLY_COUNT = const(55)  # k, the supplied states of the table (0..MAX_SUPPLIED)
+IR_SUPPLY_DICT = const(56)  # per supplied state SUPPLY_DICT_REGS registers: source (int16), tau_ms (uint32, high word first), scale (int16)
+N_INPUT = const(72)
 # holding registers
 HR_ENABLE = const(0)  # 0/1
 HR_SLEW = const(1)  # um/s, 1..10000
@@ -110,7 +126,8 @@ N_VALUES = const(8)  # registers 0..7 hold values; the auth block reads 0
 HR_AUTH = const(8)  # N_AUTH registers: counter (uint32), tag (TAG_BYTES bytes); written whole with FC16
 N_AUTH = const(10)
 HR_SPINDLE = const(18)  # int32 rpm, high word first, written whole with FC16: a spindle speed report
-N_HOLDING = const(20)
+HR_SUPPLY = const(20)  # MAX_SUPPLIED x int32 (high word first): the supplied lag states, the table's k written whole with one FC16 (reads 0)
+N_HOLDING = const(28)
 PROTECTED = const(0x87)  # bit r: holding register r needs authorisation (0 enable, 1 slew, 2 timeout, 7 latch)
 NO_VALUE = const(-32768)  # an int16 register with no value (a faulty channel's temperature)
 # Modbus exception codes the board answers with

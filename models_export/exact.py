@@ -17,6 +17,7 @@ from fractions import Fraction as F
 from models_export.certify import (
     ACC, OU_PER_UM, ExportError, Recorder, frac_bits, iv_add, iv_mul, narrow_width, p2, rnd, top_limbs_needed,
 )
+from firmware.wire import MAX_SUPPLIED
 from models_export.document import FORMAT
 
 if TYPE_CHECKING:
@@ -448,6 +449,7 @@ class Model:
         self.observer: dict[str, Any] | None = None
         self.obs_gain: list[list[Fraction]] | None = None
         self.settle_s = 0
+        self.supplied = {}
         if obs is None:
             return
         where = "thermal.observer"
@@ -466,14 +468,26 @@ class Model:
         if not isinstance(states, list) or [s.get("term") if isinstance(s, dict) else None for s in states] != lagged:
             raise ExportError("%s.states must list one object per lag term (thermal.terms with tau_s > 0), in term order: "
                               "terms %s" % (where, lagged))
+        # the states the controller supplies (fit option spindle_states=controller): the table's tauc, the filter's
+        # time constant in ms, by which the controller runs the same lag over its record (docs/protocol.md "Supplied
+        # lag states"); the document validated them (gains {}, bound 0, a spindle/feed signal), the table re-checks
+        self.supplied: dict[int, int] = {}
         for s in states:
             if isinstance(s, dict) and "source" in s:
-                # the board takes no lag state from the controller (no wire command, no table field): a table without
-                # that state would start it from 0 where the host model started it from the controller's record
-                raise ExportError("%s.states[term %r] has source %r: the lag state of %s is supplied by the controller (fit option "
-                                  "spindle_states=controller), which the board cannot take yet; refit with spindle_states=observer to "
-                                  "export" % (where, s.get("term"), s["source"], self.dyn[s["term"]]["signal"]
-                                              if isinstance(s.get("term"), int) and 0 <= s["term"] < len(self.dyn) else "?"))
+                j = s.get("term")
+                t = self.dyn[j] if isinstance(j, int) and 0 <= j < len(self.dyn) else None
+                if s["source"] != "controller" or t is None or t["src"] not in (-1, -2, -3) or s.get("gains"):
+                    raise ExportError("%s.states[term %r]: source %r on %s: only a lag of the spindle speed, its square or the "
+                                      "feed, without gains, can be supplied by the controller" % (
+                                          where, j, s["source"], t["signal"] if t is not None else "no such term"))
+                tau_ms = round(t["tau"] * 1000)
+                if not 0 < tau_ms <= (1 << 30) - 1:
+                    raise ExportError("%s.states[term %d]: tau %g s is outside what the table carries (1 ms..%d ms)"
+                                      % (where, j, float(t["tau"]), (1 << 30) - 1))
+                self.supplied[j] = tau_ms
+        if len(self.supplied) > MAX_SUPPLIED:
+            raise ExportError("%s: %d lag states are supplied by the controller (terms %s); the board takes at most %d"
+                              % (where, len(self.supplied), sorted(self.supplied), MAX_SUPPLIED))
         nf = len(self.dyn)
         self.obs_gain = [[F(0)] * nf for _ in range(nf)]
         for k, st in enumerate(states):

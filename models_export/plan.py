@@ -278,15 +278,31 @@ class Planner:
         R = max([max(-t["u"][0], t["u"][1]) for t in terms] + [1])
         nO = 2
         LO = max(1, -(-R.bit_length() // nO))
-        f.update(obs=0, settle_s=0, LO=LO, nO=nO, Go=[0] * (nf * nf), shO=[0] * (nf * nf), gO=[0] * nf, rG=[0] * nf)
+        f.update(obs=0, settle_s=0, LO=LO, nO=nO, Go=[0] * (nf * nf), shO=[0] * (nf * nf), gO=[0] * nf, rG=[0] * nf,
+                 tauc=[0] * nf)
         self.obs_cert = None
         G = getattr(m, "obs_gain", None)
         if G is None:
             return out
         f.update(obs=1, settle_s=m.settle_s)
         self.obs_cert = []
+        supplied = getattr(m, "supplied", {})
         for j, t in enumerate(terms):
             if t["a"] == 0:
+                continue
+            if j in supplied:
+                # the controller sends round(its lag x 2**scale) in state units (host/board/supplied.py): the start is
+                # the exact state within half a unit, inside the box (the board refuses a value outside it)
+                f["tauc"][j] = supplied[j]
+                e0 = (F(-1, 2), F(1, 2))
+                self.obs_e0[j] = iv_abs(e0)
+                V = max(iv_abs(out[j]), iv_abs(e0))
+                if V > iv_abs(out[j]):
+                    out[j] = (-V, V)
+                self.obs_cert.append({"term": t["name"], "filter": j, "supplied_by": "controller", "tau_ms": supplied[j],
+                                      "start_error_units": 0.5, "start_error_signal_units": float(F(1, 2) / p2(t["fy"]) * t["per"]),
+                                      "state_box_units": [t["u"][0] << t["fy"], t["u"][1] << t["fy"]],
+                                      "estimate_clamped_in_envelope": False})
                 continue
             bound = sum(abs(G[j][k]) * max(-terms[k]["u"][0], terms[k]["u"][1]) for k in range(nf))
             # the row's scale 2**g: guard bits (g > 0), or coarser than the state (g < 0) for an estimate that can reach far

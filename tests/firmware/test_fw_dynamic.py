@@ -101,8 +101,9 @@ def test_modbus_spindle_register_pair(tmp_path):
         out = _ask(app, board, req)
         assert out[1] & 0x80 and out[2] == 3, (req, out)
     assert app.spindle == -1500
-    out = _ask(app, board, bytes([1, 3, 0, 20, 0, 1]))
-    assert out[1] == 0x83 and out[2] == 2  # past the map
+    out = _ask(app, board, bytes([1, 3, 0, 28, 0, 1]))
+    assert out[1] == 0x83 and out[2] == 2  # past the map (20-27: the supplied lag states, which read 0)
+    assert _ask(app, board, bytes([1, 3, 0, 20, 0, 2]))[3:7] == bytes(4)
 
 
 def test_accept_refuses_a_dynamic_table_beyond_its_certificate(tmp_path):

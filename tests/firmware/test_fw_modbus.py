@@ -83,8 +83,9 @@ def test_error_reference_register_names_the_tables_sensor(dev):
     app, board = dev
     app.table.error_ref = 3
     assert regs(ask(app, board, rtu(bytes([1, 4, 0, IR_ERROR_REF, 0, 1])))) == [3]
-    assert N_INPUT == IR_ERROR_REF + 1
-    assert ask(app, board, rtu(bytes([1, 4, 0, IR_ERROR_REF, 0, 2])))[1] == 0x84  # beyond it nothing is mapped
+    # after it, the supplied lag states' registers (IR_SUPPLY_STATE, table format 7): none for this table
+    assert regs(ask(app, board, rtu(bytes([1, 4, 0, IR_ERROR_REF, 0, 3])))) == [3, 0, 0]
+    assert ask(app, board, rtu(bytes([1, 4, 0, N_INPUT - 1, 0, 2])))[1] == 0x84  # beyond the map nothing is mapped
 
 
 def test_write_position_and_enable(dev):
@@ -112,10 +113,13 @@ def test_write_position_and_enable(dev):
     (bytes([1, 4, 0, N_INPUT - 8, 0, 9]), 2),  # beyond the input map
     (bytes([1, 4, 0, 15, 0, 1]), 2),  # the unmapped input register
     (bytes([1, 4, 0, 10, 0, 6]), 2),  # a range over it
-    (bytes([1, 3, 0, 20, 0, 1]), 2),  # beyond the holding map (18-19: the spindle speed)
+    (bytes([1, 3, 0, 28, 0, 1]), 2),  # beyond the holding map (18-19: the spindle speed, 20-27: supplied lag states)
+    (bytes([1, 16, 0, 20, 0, 2, 4, 0, 0, 0, 1]), 4),  # supplied lag states: this table has none
+    (bytes([1, 16, 0, 20, 0, 1, 2, 0, 1]), 3),  # half of a supplied state
     (bytes([1, 6, 0, 7, 0, 2]), 3),  # latch takes 1 (or 0: nothing)
     (bytes([1, 6, 0, 7, 0, 1]), 4),  # latch: the table has fixed references
-    (bytes([1, 6, 0, 20, 0, 1]), 2),
+    (bytes([1, 6, 0, 28, 0, 1]), 2),
+    (bytes([1, 6, 0, 20, 0, 1]), 3),  # half of a supplied state
     (bytes([1, 6, 0, 18, 0, 1]), 3),  # half of the spindle speed
     (bytes([1, 6, 0, 9, 0, 1]), 3),  # the auth block is written whole
     (bytes([1, 16, 0, 8, 0, 2, 4, 0, 0, 0, 1]), 3),
