@@ -38,6 +38,8 @@ def make_table(**kw):
         return dynamic_table(kw["sensors"])
     if kw.get("kind") == "dynamic_observer":
         return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0))
+    if kw.get("kind") == "dynamic_supplied":
+        return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0), supplied=True)
     if kw.get("kind") == "screw":
         return screw_table(kw["sensors"])
     if kw.get("kind") == "screw_observer":
@@ -45,9 +47,10 @@ def make_table(**kw):
     return pack(table_fields(**kw))
 
 
-def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None):
+def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None, supplied=False):
     """An exported, certified dynamic table over ``sensors`` reading every kind of signal; 1 s filter step.
-    ``observer``: None, or the settle_s of an observer (issue 21; the table then has the fixed reference)."""
+    ``observer``: None, or the settle_s of an observer (issue 21; the table then has the fixed reference).
+    ``supplied``: its spindle, squared-speed and feed lag states are supplied by the controller (table format 7)."""
     import random
     from hil_tests.fixtures.samples import dynamic_doc
     from models_export import export_model
@@ -56,9 +59,11 @@ def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None):
     for t, tau in zip(doc["thermal"]["terms"], (0.0, 900.0, 3600.0, 600.0, 1800.0, 300.0)):
         t["tau_s"] = tau
     doc["envelope"]["spindle_rpm"] = [0, 12000]
-    from hil_tests.fixtures.samples import restamp, with_observer
+    from hil_tests.fixtures.samples import restamp, with_observer, with_supplied
     if observer is not None:
         doc = with_observer(doc, random.Random(seed), settle_s=observer)
+    if supplied:
+        doc = with_supplied(doc)
     return export_model(restamp(doc)).table
 
 

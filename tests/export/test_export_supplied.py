@@ -1,0 +1,170 @@
+"""Lag states the controller supplies (issue 21, table format 7): the table marks them (tauc), the board takes them
+in its state units, and the certificate covers the board against the host model started at the controller's exact
+lag values.
+
+The host side here is the model document read by the host (Observer.from_document, the terms' coefficients) and
+doubles; the exact supplied lag is drawn at random inside the state's physical range (0..smax rpm, 0..smax**2 rpm**2,
+0..fmax mm/min), and the board gets what the controller sends, round(lag x 2**scale) with scale from the board's own
+dictionary (Evaluator.supply_scale). The physical range is checked against the box independently: the box's top
+divided by 2**scale must be the envelope's top in the source's units.
+"""
+import copy
+import random
+import struct
+import zlib
+
+import numpy as np
+import pytest
+
+from firmware.table import parse_table
+from hil_tests.fixtures.samples import (dynamic_doc, observed_board, observer_host_inputs, observer_input_unit, random_board_inputs,
+                                        restamp, with_observer, with_supplied)
+from host.learning.empirical.observer import Observer
+from models_export import export_model
+from models_export.certify import ExportError
+
+SUPPLIED = ("spindle_krpm", "spindle_krpm2", "feed_m_min")
+# host signal units per unit the controller measures (rpm, rpm**2, mm/min)
+PER_SOURCE_UNIT = {"spindle_krpm": 1e-3, "spindle_krpm2": 1e-6, "feed_m_min": 1e-3}
+
+
+def _doc(seed, target="direct", dt_s=15.0):
+    rng = random.Random(seed)
+    sig = ["T:T0", "T:T1", "spindle_krpm", "spindle_krpm2", "feed_m_min"]
+    doc = dynamic_doc(rng, target, dt_s=dt_s, n_sensors=3, signals=sig)
+    for t, tau in zip(doc["thermal"]["terms"], (1800.0, 0.0, 3600.0, 7200.0, 900.0)):
+        t["tau_s"] = tau
+    doc["envelope"]["spindle_rpm"] = [0, 12000]
+    return with_supplied(with_observer(restamp(doc), random.Random(seed)))
+
+
+def test_table_marks_the_supplied_states_with_their_time_constants():
+    doc = _doc(0)
+    ex = export_model(doc)
+    t = parse_table(ex.table)
+    assert t.version == 7
+    terms = doc["thermal"]["terms"]
+    for j, term in enumerate(terms):
+        want = round(term["tau_s"] * 1000) if term["signal"] in SUPPLIED and term["tau_s"] > 0 else 0
+        assert t.tauc[j] == want, (j, term)
+        if want:  # the board estimates nothing into it
+            assert not any(t.Go[j * t.nf + m] for m in range(t.nf)) and t.gO[j] == 0 and t.rG[j] == 0
+    # the dictionary's scale against the box and the envelope, in the units the controller measures
+    from firmware.evaluate import Evaluator
+    ev = Evaluator(t)
+    top = {-1: 12000, -2: 12000 ** 2, -3: t.fmax}
+    for j in range(t.nf):
+        if t.tauc[j]:
+            assert t.Ylo[j] == 0 and t.Yhi[j] == top[t.src[j]] * 2 ** ev.supply_scale(j), (j, t.src[j])
+    cert = {c["term"]: c for c in ex.report["dynamic"]["observer"]["states"]}
+    marked = [c for c in cert.values() if c.get("supplied_by") == "controller"]
+    assert len(marked) == 3 and all(c["start_error_units"] == 0.5 for c in marked)
+
+
+@pytest.mark.parametrize("seed, target", [(0, "direct"), (1, "slope"), (2, "direct")])
+def test_board_started_with_the_supplied_states_follows_the_host_within_the_certificate(seed, target):
+    """The board estimates the temperature lags, takes the controller's spindle/feed lags, and then stays within
+    max_error_um of the host model started there; without the supplied values (states at rest) it does not."""
+    doc = _doc(seed, target)
+    ex = export_model(doc)
+    t = parse_table(ex.table)
+    th = doc["thermal"]
+    terms = [(x["signal"], x["tau_s"], x["coefficient"]) for x in th["terms"]]
+    host = Observer.from_document(th["observer"], [(n, tau) for n, tau, _ in terms])
+    a = [1.0 - np.exp(-th["dt_s"] / tau) if tau > 0 else 0.0 for _, tau, _ in terms]
+    geo = doc["geometric"]["coefficients_um"] if doc["geometric"] else [0.0]
+    rng = random.Random(seed)
+    temps, rpm, feed = random_board_inputs(rng, t)
+    ev = observed_board(t, temps, rpm, feed)
+    u0 = observer_host_inputs(doc, t, temps, rpm, feed)
+    est = host.initial_states(u0)
+    top = {"spindle_krpm": 12000.0, "spindle_krpm2": 12000.0 ** 2, "feed_m_min": float(t.fmax)}
+    y, vals = [], []
+    for j, (n, tau, _) in enumerate(terms):
+        if tau > 0 and n in SUPPLIED:
+            lag = rng.uniform(0.05, 0.95) * top[n]  # the controller's exact lag, in rpm / rpm**2 / mm/min
+            vals.append(int(round(lag * 2.0 ** ev.supply_scale(j))))
+            y.append(lag * PER_SOURCE_UNIT[n])
+        elif tau > 0:
+            per = observer_input_unit(n, t) / 2.0 ** t.fy[j]
+            y.append(min(max(est[j], t.Ylo[j] * per), t.Yhi[j] * per))
+        else:
+            y.append(u0[n])
+    unsupplied = list(ev.Y)
+    ev.supply(vals)
+    assert [ev.Y[j] for j in range(t.nf) if t.tauc[j]] == vals
+    assert [ev.Y[j] for j in range(t.nf) if not t.tauc[j]] == [unsupplied[j] for j in range(t.nf) if not t.tauc[j]]
+    u0 = [u0[n] for n, _, _ in terms]
+    cert = ex.report["max_error_um"]
+    rest = [0.0 if (tau > 0 and n in SUPPLIED) else v for (n, tau, _), v in zip(terms, y)]
+    off_rest = 0.0
+    for k in range(300):
+        for i in range(t.n_sensors):
+            temps[i] = min(max(temps[i] + rng.randint(-100, 100), t.train_lo[i]), t.train_hi[i])
+        ev.temps[:] = temps
+        if k % 20 == 0:
+            rpm, feed = rng.randint(0, t.smax), rng.choice([0, rng.randint(0, t.fmax)])
+        ev.set_spindle(rpm)
+        ev.set_feed_rate(feed)
+        ev.update()
+        ev.step()
+        uh = observer_host_inputs(doc, t, temps, rpm, feed)
+        u = [uh[n] for n, _, _ in terms]
+        for yy in (y, rest):
+            for j in range(len(terms)):
+                yy[j] = yy[j] + a[j] * (u0[j] - yy[j]) if a[j] > 0 else u[j]
+        u0 = u
+        for p in (t.pos_lo, t.pos_hi):
+            pm = p / 1000.0
+            got = ev.offset_at(p) / 100.0
+            want, want_rest = [th["intercept"] + sum(c * v for (_, _, c), v in zip(terms, yy)) for yy in (y, rest)]
+            if th["target"] != "direct":
+                g = sum(c * pm ** n for n, c in enumerate(geo))
+                want, want_rest = g + want * pm, g + want_rest * pm
+            assert abs(got - want) <= cert, (k, p, got, want, cert)
+            off_rest = max(off_rest, abs(got - want_rest))
+    assert off_rest > 100 * cert  # the supplied values matter: started without them the board is far off
+    for acc_id, (lo, hi) in enumerate(zip(ev.lo, ev.hi)):
+        if lo <= hi:
+            c = ex.accs[acc_id]
+            assert c[0] <= lo and hi <= c[1], (acc_id, lo, hi, c)
+
+
+def test_format_6_dynamic_table_still_loads_without_supplied_states():
+    """A format-6 table is a format-7 one without the tauc words: it loads, every state the board's."""
+    doc = with_observer(restamp(dynamic_doc(random.Random(5), "direct", dt_s=15.0)), random.Random(5))
+    ex = export_model(doc)
+    nf = len(doc["thermal"]["terms"])
+    buf = bytearray(ex.table[:-4])
+    # the tauc words are the dynamic block's last nf words; for a direct table the certificate's 3 words follow
+    end = len(buf) - 3 * 4
+    old = buf[:end - 4 * nf] + buf[end:]
+    old[4] = 6
+    struct.pack_into("<I", old, 8, len(old) + 4)
+    struct.pack_into("<I", old, 52, struct.unpack_from("<I", buf, 52)[0] - nf)
+    old += struct.pack("<I", zlib.crc32(bytes(old)) & 0xFFFFFFFF)
+    t6, t7 = parse_table(bytes(old)), parse_table(ex.table)
+    assert t6.version == 6 and t6.tauc == [0] * nf and t6.Go == t7.Go and t6.cert_out == t7.cert_out
+
+
+@pytest.mark.parametrize("edit, message", [
+    (lambda th: th["observer"]["states"][0].update(source="controller", gains={}, bound=0.0),
+     "only a lag of the spindle speed, its square or the feed"),
+    (lambda th: th["observer"]["states"][-1].update(source="operator"), "source 'operator'"),
+])
+def test_export_refuses_a_supplied_state_that_is_not_the_controllers(edit, message):
+    doc = copy.deepcopy(_doc(0))
+    edit(doc["thermal"])
+    with pytest.raises(ExportError, match=message):
+        export_model(restamp(doc))
+
+
+def test_export_refuses_more_supplied_states_than_the_board_takes():
+    rng = random.Random(7)
+    sig = ["T:T0", "spindle_krpm", "spindle_krpm", "spindle_krpm2", "spindle_krpm2", "feed_m_min"]
+    doc = dynamic_doc(rng, "direct", dt_s=15.0, signals=sig)
+    for t, tau in zip(doc["thermal"]["terms"], (600.0, 1800.0, 7200.0, 1800.0, 7200.0, 900.0)):
+        t["tau_s"] = tau
+    doc = with_supplied(with_observer(restamp(doc), random.Random(7)))
+    with pytest.raises(ExportError, match="5 lag states are supplied by the controller .* at most 4"):
+        export_model(doc)

@@ -1,0 +1,181 @@
+"""The lag states the controller supplies (issue 21, table format 7; docs/protocol.md "Supplied lag states").
+
+A table whose spindle, squared-speed and feed lags are marked (tauc) does not start its lag states until the controller
+has sent them: its dictionary (`Y`, Modbus input registers 54-71) names each one's source, time constant and scale;
+`Y,<v1>,...` (Modbus holding registers 20-27) sets them; the other lag states are then estimated by the observer at the
+first all-good cycle, as before. SETTLING is raised while they are awaited. Once set, a second supply is acknowledged
+and not applied. A wrong count, a value outside the state's box or a table without such states is refused, naming
+why, and nothing changes.
+"""
+import struct
+
+from fwhelpers import cmd, frames, rig_app, run_cycles
+from firmware.crc16 import crc16_modbus
+from firmware.wire import (IR_SUPPLY_STATE, HR_SUPPLY, SETTLING, SUPPLY_AWAITED, SUPPLY_NONE, SUPPLY_SET)
+
+SOURCE_TOP = {-1: 12000, -2: 12000 ** 2}  # the fixture's spindle envelope (rpm, rpm**2); the feed's is the table's fmax
+
+
+def _app(tmp_path, mode="stream", kind="dynamic_supplied"):
+    app, board = rig_app(tmp_path, kind=kind, serial_mode=mode, extra={"frame_ms": 0})
+    return app, board
+
+
+def _send(app, board, line):
+    board.serial.feed(line)
+    app.link.poll(board.clock.t)
+    return [f for f in frames(board.serial.take()) if f[3] != "H"]  # the boot's hello may still be in the buffer
+
+
+def _dictionary(app, board):
+    out = _send(app, board, cmd(b"TC,Y"))
+    assert len(out) == 1 and out[0][3] == "A" and out[0][4] == "Y", out
+    f = out[0][5:]
+    k = int(f[1])
+    return f[0], [tuple(int(v) for v in f[2 + 3 * i:5 + 3 * i]) for i in range(k)]
+
+
+def _values(app, entries, frac):
+    """The controller's values at ``frac`` of each source's range, in the board's state units."""
+    top = {**SOURCE_TOP, -3: app.table.fmax}
+    return [int(round(frac * top[src] * 2 ** scale)) for src, _, scale in entries]
+
+
+def test_dictionary_names_each_supplied_state(tmp_path):
+    app, board = _app(tmp_path)
+    t = app.table
+    letter, entries = _dictionary(app, board)
+    assert letter == "A"
+    # the fixture (tests/firmware/fwhelpers.py dynamic_table): spindle 600 s, its square 1800 s, feed 300 s
+    assert [(src, tau) for src, tau, _ in entries] == [(-1, 600000), (-2, 1800000), (-3, 300000)]
+    # the scale is what makes the state's box the source's physical range
+    top = {**SOURCE_TOP, -3: t.fmax}
+    boxes = [t.Yhi[j] for j in range(t.nf) if t.tauc[j]]
+    assert boxes == [top[src] * 2 ** scale for src, _, scale in entries]
+
+
+def test_start_waits_for_the_supplied_states_then_takes_them(tmp_path):
+    app, board = _app(tmp_path)
+    _send(app, board, cmd(b"TC,P,0,6000"))
+    _send(app, board, cmd(b"TC,M,1000,0,0"))
+    run_cycles(app, board, 40)  # every sensor good, the speed reported: an observer table without supplied states starts here
+    assert app.supply == SUPPLY_AWAITED and app.unobserved and app.status & SETTLING
+    _, entries = _dictionary(app, board)
+    vals = _values(app, entries, 0.5)
+    out = _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in vals)))
+    assert out[0][3:] == ["A", "Y", "S", "1"], out
+    t = app.table
+    assert [app.ev.Y[j] for j in range(t.nf) if t.tauc[j]] == vals
+    run_cycles(app, board, 1)  # the observer starts the other lag states; the supplied ones keep their values
+    assert not app.unobserved and app.supply == SUPPLY_SET
+    assert [app.ev.Y[j] for j in range(t.nf) if t.tauc[j]] == vals
+    assert any(app.ev.Y[j] for j in range(t.nf) if t.A[j] and not t.tauc[j])  # estimated, not at rest
+    run_cycles(app, board, 20)  # 2 s: two filter steps from the supplied values toward the inputs
+    now = [app.ev.Y[j] for j in range(t.nf) if t.tauc[j]]
+    assert now != vals and all(abs(a - b) < 0.01 * max(1, abs(b)) for a, b in zip(now, vals))
+    # a second supply (the controller restarted, the board did not): acknowledged, not applied
+    out = _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in _values(app, entries, 0.1))))
+    assert out[0][3:] == ["A", "Y", "S", "0"]
+    assert [app.ev.Y[j] for j in range(t.nf) if t.tauc[j]] == now
+    assert _dictionary(app, board)[0] == "S"
+
+
+def test_refusals_change_nothing(tmp_path):
+    app, board = _app(tmp_path)
+    run_cycles(app, board, 30)
+    _, entries = _dictionary(app, board)
+    good = _values(app, entries, 0.5)
+    before = list(app.ev.Y)
+    bad_box = list(good)
+    bad_box[1] = app.table.Yhi[[j for j in range(app.table.nf) if app.table.tauc[j]][1]] + 1
+    for vals, want in ((good[:2], ["E", "2", "syntax", "supplied states: wrong count"]),
+                       (good + [0], ["E", "2", "syntax", "supplied states: wrong count"]),
+                       (bad_box, ["E", "4", "range", "supplied state 2 outside its box"]),
+                       ([-1] + good[1:], ["E", "4", "range", "supplied state 1 outside its box"])):
+        out = _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in vals)))
+        assert out[0][3:] == want, (vals, out)
+    out = _send(app, board, cmd(b"TC,Y,1,x,3"))
+    assert out[0][3:5] == ["E", "4"]
+    assert app.supply == SUPPLY_AWAITED and list(app.ev.Y) == before
+
+
+def test_a_table_without_supplied_states_refuses_them(tmp_path):
+    app, board = _app(tmp_path, kind="dynamic_observer")
+    _send(app, board, cmd(b"TC,P,0,6000"))
+    run_cycles(app, board, 30)
+    assert _dictionary(app, board) == ("-", [])
+    out = _send(app, board, cmd(b"TC,Y,5"))
+    assert out[0][3:] == ["E", "5", "state", "no supplied states"]
+    assert app.supply == SUPPLY_NONE and not app.unobserved  # it started without waiting for supplied states
+
+
+def _rtu(body):
+    c = crc16_modbus(body)
+    return body + bytes([c & 0xFF, c >> 8])
+
+
+def _ask(app, board, body):
+    board.serial.feed(_rtu(body))
+    board.clock.t += 10
+    app.link.poll(board.clock.t)
+    return board.serial.take()
+
+
+def test_modbus_dictionary_and_write(tmp_path):
+    app, board = _app(tmp_path, mode="modbus")
+    run_cycles(app, board, 30)
+    out = _ask(app, board, bytes([1, 4, 0, IR_SUPPLY_STATE, 0, 2 + 4 * 3]))
+    regs = [struct.unpack(">H", out[3 + 2 * i:5 + 2 * i])[0] for i in range(out[2] // 2)]
+    assert regs[:2] == [SUPPLY_AWAITED, 3]
+
+    def s16(v):
+        return v - 65536 if v > 32767 else v
+    entries = [(s16(regs[2 + 4 * i]), (regs[3 + 4 * i] << 16) | regs[4 + 4 * i], s16(regs[5 + 4 * i])) for i in range(3)]
+    assert entries == _dictionary_stream_equivalent(app)
+    vals = _values(app, entries, 0.25)
+    body = b"".join(struct.pack(">i", v) for v in vals)
+    # half a state, a wrong count, a value outside its box: exceptions 03, nothing set
+    assert _ask(app, board, bytes([1, 16, 0, HR_SUPPLY, 0, 5, 10]) + body[:10])[1:3] == bytes([0x90, 3])
+    assert _ask(app, board, bytes([1, 16, 0, HR_SUPPLY, 0, 4, 8]) + body[:8])[1:3] == bytes([0x90, 3])
+    assert _ask(app, board, bytes([1, 16, 0, HR_SUPPLY, 0, 6, 12]) + struct.pack(">i", -5) + body[4:])[1:3] == bytes([0x90, 3])
+    assert app.supply == SUPPLY_AWAITED
+    out = _ask(app, board, bytes([1, 16, 0, HR_SUPPLY, 0, 6, 12]) + body)
+    assert out[1] == 16 and app.supply == SUPPLY_SET
+    t = app.table
+    assert [app.ev.Y[j] for j in range(t.nf) if t.tauc[j]] == vals
+    out = _ask(app, board, bytes([1, 4, 0, IR_SUPPLY_STATE, 0, 1]))
+    assert out[3:5] == bytes([0, SUPPLY_SET])
+    assert _ask(app, board, bytes([1, 3, 0, HR_SUPPLY, 0, 6]))[3:15] == bytes(12)  # the registers read 0
+
+
+def _dictionary_stream_equivalent(app):
+    t = app.table
+    return [(t.src[j], t.tauc[j], app.ev.supply_scale(j)) for j in range(t.nf) if t.tauc[j]]
+
+
+def test_restart_restores_the_record_but_takes_the_supplied_states_from_the_controller(tmp_path):
+    """lags.bin holds every state; after a restart on an unchanged machine the board restores it, but only once the
+    controller has sent its states, and the supplied ones are the controller's, not the record's."""
+    from firmware.app import App, LAGS_RESTORED
+    app, board = _app(tmp_path)
+    _send(app, board, cmd(b"TC,P,0,6000"))
+    _, entries = _dictionary(app, board)
+    _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in _values(app, entries, 0.5))))
+    run_cycles(app, board, 6100)  # 10 min 10 s: lags.bin written once
+    t = app.table
+    stored = [app.ev.Y[j] for j in range(t.nf)]
+    app2 = App(board)  # the restart, same flash, same temperatures
+    app = app2
+    run_cycles(app, board, 40)
+    assert app.supply == SUPPLY_AWAITED and app.unobserved  # the record waits for the controller too
+    fresh = _values(app, entries, 0.2)
+    board.serial.take()
+    out = _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in fresh)))
+    assert out[0][3:] == ["A", "Y", "S", "1"]
+    run_cycles(app, board, 1)
+    assert app.lag_verdict == LAGS_RESTORED and not app.unobserved
+    assert [app.ev.Y[j] for j in range(t.nf) if t.tauc[j]] == fresh
+    # the board's own states come from the record (within the filter steps of the 10 s since its write)
+    for j in range(t.nf):
+        if t.A[j] and not t.tauc[j]:
+            assert abs(app.ev.Y[j] - stored[j]) <= 0.02 * max(abs(stored[j]), 1 << t.fy[j]), j
