@@ -26,11 +26,13 @@ import time
 from dataclasses import dataclass, field
 
 from firmware.wire import (
-    E_AUTH, E_BUSY, E_STATE, EX_DEVICE_FAILURE, HR_AUTH, HR_LATCH, HR_POSITION, HR_SLEW, HR_SPINDLE, IR_AUTH_COUNTER, IR_NONCE,
-    IR_POSITION, IR_REFERENCE, IR_SEQUENCE, IR_STATUS_HI, IR_STATUS_LO, IR_TOTAL,
+    E_AUTH, E_BUSY, E_STATE, E_UNKNOWN, EX_DEVICE_FAILURE, HR_AUTH, HR_LATCH, HR_POSITION, HR_SLEW, HR_SPINDLE, HR_SUPPLY, IR_AUTH_COUNTER,
+    IR_NONCE, IR_POSITION, IR_REFERENCE, IR_SEQUENCE, IR_STATUS_HI, IR_STATUS_LO, IR_SUPPLY_STATE, IR_TOTAL, MAX_SUPPLIED, SETTLING,
+    SUPPLY_DICT_REGS,
 )
 from host.board.client import BoardLink
 from host.board.link import FALLBACK, command_line
+from host.board.supplied import SignalRecord, SupplyEntry, SupplyError, modbus_dictionary, parse_dictionary
 
 if TYPE_CHECKING:
     from host.board.linkauth import LinkSigner
@@ -47,6 +49,13 @@ FAULT_NAMES = {LINK: "link", STALE: "stale", CRC: "crc", BOARD: "fallback"}
 
 # latch-state pin
 LATCH_NONE, LATCH_SENT, LATCH_DONE, LATCH_REFUSED = 0, 1, 2, 3
+
+# the signal record (supplied lag states): saved this often (what a crash of the bridge can lose: the spindle is then
+# taken as stopped from the last save), a new event past this change of the speed, the dictionary asked again this
+# often while the board says SETTLING
+RECORD_SAVE_S = 60.0
+RECORD_DEADBAND_RPM = 5
+DICTIONARY_POLL_S = 5.0
 
 
 @dataclass
@@ -65,6 +74,13 @@ class Exchange:
     malformed: list = field(default_factory=list)   # reasons (bad CRC, syntax)
     error: str = ""                                 # the link failed this time (port gone, no answer)
     latch: str = ""                                 # "" no reply, "ok:<refs>" acknowledged, "refused:<why>"
+    # the supplied lag states (host/board/supplied.py): "" nothing this time, "none" the table has none, "sent:<values>",
+    # "set" the board took them, "kept" it had set them at its table's start already, "refused:<why>"
+    supply: str = ""
+
+
+# a supplier gives the values of the board's dictionary entries now, or the reason it cannot (a SupplyError's text)
+Supplier = Callable[[list[SupplyEntry]], "list[int] | str"]
 
 
 class StreamLink:
@@ -86,11 +102,20 @@ class StreamLink:
         self.next_open = 0.0
         self.latch_pending = False
         self.latch_wanted = False  # a signed L waits for the hello that carries the session nonce it needs
+        self.supplier: Supplier | None = None  # set by the Bridge when it keeps a signal record
+        self.want_dictionary = True  # ask the board's supplied-states dictionary (Y) with the next exchange
+        self.dictionary_pending = False
+        self.supply_pending = False
 
     def exchange(self, pos_um: int, latch: bool = False, spindle_rpm: int | None = None) -> Exchange:
         ex = Exchange()
         p = command_line("P", pos_um) if spindle_rpm is None else command_line("P", pos_um, spindle_rpm)
         out = p + command_line("Q", pos_um)
+        if self.supplier is not None and self.want_dictionary:
+            # after the speed report: a board that waits for it and for the states then starts with both
+            out += command_line("Y")
+            self.want_dictionary = False
+            self.dictionary_pending = True
         if self.want_hello:
             out = command_line("V") + out
             self.want_hello = False
@@ -118,14 +143,50 @@ class StreamLink:
             ex.error = str(exc) or type(exc).__name__
             self.latch_pending = False
             self.latch_wanted = False
+            self.dictionary_pending = False
+            self.supply_pending = False
             self.close()
         if link is not None:
             while link.decoder.bad:
                 ex.malformed.append(link.decoder.bad.pop(0)[1])
         return ex
 
+    def _supply_frame(self, f, ex):
+        """An A,Y answer: the dictionary (send the states if the board awaits them) or the answer to the states."""
+        if self.supply_pending and len(f.fields) == 3:
+            self.supply_pending = False
+            ex.supply = "set" if f.fields[2] == "1" else "kept"
+            return
+        if not self.dictionary_pending:
+            return
+        self.dictionary_pending = False
+        try:
+            letter, entries = parse_dictionary(f.fields)
+        except SupplyError as exc:
+            ex.malformed.append(str(exc))
+            return
+        if letter != "A":
+            ex.supply = "none" if letter == "-" else "kept"
+            return
+        assert self.supplier is not None and self.link is not None  # asked only with a supplier, on the open link
+        vals = self.supplier(entries)
+        if isinstance(vals, str):
+            ex.supply = "refused:" + vals
+            return
+        self.link.write(command_line("Y", *vals), flush=False)
+        self.supply_pending = True
+        ex.supply = "sent:" + ",".join("%d" % v for v in vals)
+
     def _frame(self, f, ex):
-        if f.kind in ("O", "Q"):
+        if f.kind == "A" and f.fields[:1] == ["Y"]:
+            self._supply_frame(f, ex)
+        elif f.kind == "E" and self.supply_pending and not self.latch_pending:
+            self.supply_pending = False
+            ex.supply = "refused:" + ",".join(f.fields)
+        elif f.kind == "E" and self.dictionary_pending and f.fields[:1] == ["%d" % E_UNKNOWN]:
+            self.dictionary_pending = False
+            ex.supply = "refused:the board does not know Y (a firmware before table format 7)"
+        elif f.kind in ("O", "Q"):
             try:
                 ex.readings.append(Reading(float(f.fields[2]), int(f.fields[1]), f.status, f.seq))
             except (IndexError, ValueError):
@@ -133,7 +194,9 @@ class StreamLink:
         elif f.kind == "A" and f.fields[:1] == ["L"] and self.latch_pending:
             self.latch_pending = False
             ex.latch = "ok:" + (f.fields[1] if len(f.fields) > 1 else "")
-        elif f.kind == "H" and self.signer is not None and f.fields:
+        if f.kind == "H":
+            self.want_dictionary = True  # a hello: the board booted, or answered V after a reopen
+        if f.kind == "H" and self.signer is not None and f.fields:
             try:
                 self.signer.observe_hello(f.fields)
                 line = self.signer.stream_line("L") if self.latch_wanted else None
@@ -157,6 +220,7 @@ class StreamLink:
 
     def close(self) -> None:
         self.want_hello = True  # a board that comes back is asked for its hello (counter)
+        self.want_dictionary = True
         if self.link is not None:
             self.link.close()
             self.link = None
@@ -174,6 +238,8 @@ class ModbusLink:
         self.client = client
         self.address = address
         self.signer = signer
+        self.supplier: Supplier | None = None  # set by the Bridge when it keeps a signal record
+        self.want_dictionary = True
 
     def slew_um_per_s(self) -> int | None:
         """The board's slew limit (holding register HR_SLEW), or None if it cannot be read."""
@@ -199,6 +265,9 @@ class ModbusLink:
                 pos = (r[IR_POSITION] << 16) | r[IR_POSITION + 1]
                 pos = pos - (1 << 32) if pos & 0x80000000 else pos
                 ex.readings.append(Reading(_s16(r[IR_TOTAL]) / 10.0, pos, r[IR_STATUS_LO] | (r[IR_STATUS_HI] << 16), r[IR_SEQUENCE]))
+            if self.supplier is not None and self.want_dictionary and not ex.error:
+                self.want_dictionary = False
+                ex.supply = self._supply()
             if latch:
                 if self.signer is not None:  # the auth block (holding 8..17) for this very write
                     # the last counter (48-49) and the session nonce (51-52) the tag must use
@@ -215,6 +284,32 @@ class ModbusLink:
         except Exception as exc:  # no answer, CRC error (pymodbus drops the frame), port gone
             ex.error = str(exc) or type(exc).__name__
         return ex
+
+    def _supply(self) -> str:
+        """Read the supplied-states dictionary (input registers 54..) and, if the board awaits them, write the states
+        (holding 20.., the table's k int32 in one FC16); what happened, as Exchange.supply."""
+        rr = self.client.read_input_registers(IR_SUPPLY_STATE, count=2 + SUPPLY_DICT_REGS * MAX_SUPPLIED, device_id=self.address)
+        if rr.isError():
+            self.want_dictionary = True
+            return "refused:modbus exception %s" % rr
+        try:
+            letter, entries = modbus_dictionary(rr.registers)
+        except SupplyError as exc:
+            return "refused:" + str(exc)
+        if letter != "A":
+            return "none" if letter == "-" else "kept"
+        assert self.supplier is not None
+        vals = self.supplier(entries)
+        if isinstance(vals, str):
+            return "refused:" + vals
+        regs = []
+        for v in vals:
+            v &= 0xFFFFFFFF
+            regs += [v >> 16, v & 0xFFFF]
+        w = self.client.write_registers(HR_SUPPLY, regs, device_id=self.address)
+        if w.isError():
+            return "refused:exception %s" % getattr(w, "exception_code", "?")
+        return "set"
 
     def close(self) -> None:
         self.client.close()
@@ -295,11 +390,26 @@ class Bridge:
     """
 
     def __init__(self, link: StreamLink | ModbusLink, slew_um_per_s: float, units: str = "mm", stale_s: float = 1.0, recover_s: float = 1.0, cold_start: bool = False,
-                 log: Callable[[str], None] | None = None, latch_retry_s: float = 1.0, latch_tries: int = 10, max_dt_s: float = 0.1, send_spindle: bool = False) -> None:
+                 log: Callable[[str], None] | None = None, latch_retry_s: float = 1.0, latch_tries: int = 10, max_dt_s: float = 0.1, send_spindle: bool = False,
+                 record: SignalRecord | None = None, record_path: str | None = None, wall: Callable[[], float] = time.time) -> None:
         if units not in UM_PER_UNIT:
             raise ValueError("units must be one of %s, got %r" % (", ".join(UM_PER_UNIT), units))
+        if record is not None and not send_spindle:
+            raise ValueError("a signal record (the supplied lag states) needs send_spindle: the board's own filters read the speed")
         self.link = link
         self.send_spindle = send_spindle  # off: exactly the position-only exchange of older boards
+        # the controller's record of the spindle speed, for the lag states a table asks it to supply (host/board/supplied.py):
+        # noted every period, saved to record_path every RECORD_SAVE_S, and read by the link when the board asks
+        self.record = record
+        self.record_path = record_path
+        self.wall = wall
+        self.noted_rpm: float | None = None
+        self.saved_at: float | None = None
+        self.next_dictionary_s = 0.0
+        self.last_supply = ""
+        self.logged_supply = ""
+        if record is not None:
+            link.supplier = self._supply_values
         self.ramp = OffsetRamp(slew_um_per_s)
         self.um_per_unit = UM_PER_UNIT[units]
         self.scale = COUNT_UM / self.um_per_unit
@@ -362,6 +472,40 @@ class Bridge:
             self.out.latch_state = LATCH_REFUSED
             self.log("L refused: %s%s" % (why, ", retrying" if self.latch_tries_left else ""))
 
+    # --- the supplied lag states --------------------------------------------------------------
+    def _supply_values(self, entries: list[SupplyEntry]) -> list[int] | str:
+        assert self.record is not None
+        try:
+            vals = self.record.values(entries, self.wall())
+        except SupplyError as exc:
+            return str(exc)
+        self.log("supplied lag states: sending %s for %s" % (vals, ", ".join("%s tau %g s" % (e.source, e.tau_ms / 1000.0) for e in entries)))
+        return vals
+
+    def _note_signals(self, now: float, inp: Inputs) -> None:
+        assert self.record is not None
+        w = self.wall()
+        rpm = int(round(inp.spindle_rpm)) if math.isfinite(inp.spindle_rpm) else self.noted_rpm
+        # a new event only past the dead band: a measured speed's jitter would otherwise fill the record (the state's
+        # error from it is at most RECORD_DEADBAND_RPM)
+        if rpm is not None and (self.noted_rpm is None or abs(rpm - self.noted_rpm) > RECORD_DEADBAND_RPM or (rpm == 0) != (self.noted_rpm == 0)):
+            self.noted_rpm = rpm
+        try:
+            self.record.note(w, float(self.noted_rpm or 0), 0.0)
+        except SupplyError as exc:  # the wall clock stepped back (NTP): the record keeps its times, notes resume after
+            self.log("signal record: %s" % exc)
+        if self.record_path is not None and (self.saved_at is None or w - self.saved_at >= RECORD_SAVE_S or w < self.saved_at):
+            try:
+                self.record.save(self.record_path)
+            except OSError as exc:
+                self.log("signal record: cannot save %s: %s" % (self.record_path, exc))
+            self.saved_at = w
+
+    def save_record(self) -> None:
+        """Save the signal record now (at the bridge's exit)."""
+        if self.record is not None and self.record_path is not None:
+            self.record.save(self.record_path)
+
     # --- one period ---------------------------------------------------------------------------
     def step(self, now: float, inp: Inputs) -> BridgeOutputs:
         dt = 0.0 if self.last_now is None else min(now - self.last_now, self.max_dt_s)
@@ -370,12 +514,24 @@ class Bridge:
             self.last_new_s = now
         pos_um = int(round(inp.position * self.um_per_unit))
         send_latch = self._want_latch(now, inp)
+        if self.record is not None:
+            self._note_signals(now, inp)
+            if self.reading is not None and self.reading.status & SETTLING and now >= self.next_dictionary_s:
+                # SETTLING: the board may wait for the states (a new table, a reset the link did not see): ask again
+                self.link.want_dictionary = True
+                self.next_dictionary_s = now + DICTIONARY_POLL_S
         if self.send_spindle and math.isfinite(inp.spindle_rpm):
             # an input of dynamic tables (docs/protocol.md); the board checks its range. A NaN/inf pin
             # is not sent: the board keeps the last speed it was given
             ex = self.link.exchange(pos_um, latch=send_latch, spindle_rpm=int(round(inp.spindle_rpm)))
         else:
             ex = self.link.exchange(pos_um, latch=send_latch)
+        if ex.supply and ex.supply != self.last_supply:  # said once per outcome (the SETTLING poll repeats it)
+            self.last_supply = ex.supply
+        if ex.supply and ex.supply != "none" and ex.supply == self.last_supply and self.logged_supply != ex.supply:
+            self.logged_supply = ex.supply
+            self.log("supplied lag states: %s" % {"set": "the board took them", "kept": "the board set them at its table's start already"}.get(
+                ex.supply, ex.supply))
         if ex.latch:
             self._latch_reply(now, ex.latch)
         elif send_latch and ex.error:

@@ -26,6 +26,10 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--cold-start", action="store_true",
                    help="this start is a cold start: send L when the machine is first switched on "
                         "(as the cold-start pin)")
+    p.add_argument("--signal-record", metavar="FILE",
+                   help="keep the controller's record of the spindle speed in FILE (written atomically every minute and at "
+                        "exit; created if missing) and send a dynamic table the lag states it asks the controller to supply "
+                        "(table format 7, fit option spindle_states=controller; docs/linuxcnc.md). Needs --spindle")
     p.add_argument("--spindle", action="store_true",
                    help="send the spindle-rpm pin to the board with the position (P,<pos>,<rpm>, or holding "
                         "registers 18-19): for dynamic tables that use the spindle speed")
@@ -42,6 +46,9 @@ def _check(args):
         raise UserError("--slew-um-per-s %g: must be in (0, 10000] (the firmware's range)" % args.slew_um_per_s)
     if not 1 <= args.address <= 247:
         raise UserError("--address %d: must be 1..247" % args.address)
+    if args.signal_record and not args.spindle:
+        raise UserError("--signal-record %s needs --spindle: the board's own lag filters read the speed the bridge sends"
+                        % args.signal_record)
 
 
 def _log(msg):
@@ -89,12 +96,24 @@ def run(args: argparse.Namespace) -> int:
     if slew is None:
         slew = dict((k, d) for k, d, _, _ in TOP)["slew_um_per_s"]
         _log("slew limit: firmware default %g um/s (give --slew-um-per-s if the board's config differs)" % slew)
+    record = None
+    if args.signal_record:
+        import time
+        from host.board.supplied import SignalRecord, SupplyError
+        try:
+            record = SignalRecord.load(args.signal_record, time.time())
+        except SupplyError as exc:
+            raise UserError(str(exc))
+        _log("signal record %s: %d events%s" % (args.signal_record, len(record.events),
+                                                 "" if record.events else " (new: the lags start at the first speed)"))
     bridge = Bridge(link, slew, units=args.units, stale_s=args.stale_ms / 1000.0,
                     recover_s=args.recover_ms / 1000.0, cold_start=args.cold_start, log=_log,
-                    max_dt_s=2 * args.period_ms / 1000.0, send_spindle=args.spindle)
+                    max_dt_s=2 * args.period_ms / 1000.0, send_spindle=args.spindle, record=record,
+                    record_path=args.signal_record)
     _log("%s on %s (%s), period %d ms" % (args.name, args.port, args.mode, args.period_ms))
     try:
         halcomp.serve(comp, bridge, args.period_ms / 1000.0)
     finally:
+        bridge.save_record()
         link.close()
     return 0
