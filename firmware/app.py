@@ -66,6 +66,11 @@ _SUPPLY_NONE = const(0)
 _SUPPLY_AWAITED = const(1)
 _SUPPLY_SET = const(2)
 _MAX_SUPPLIED = const(4)
+# how long a table's start waits for the controller's supplied states before it starts without them (the supplied
+# states at the steady state of the present input, SETTLING kept raised until they come): the bridge sends them in its
+# first exchange after it hears the board, so 10 s covers a bridge started with the board; one started later corrects
+# the states when it comes (docs/firmware.md "Supplied lag states")
+_SUPPLY_WAIT_MS = const(10000)
 _LAG_DRIFT_MK = const(1000)
 _LAG_AGREE = const(1000)
 # lag_verdict: what became of lags.bin at this table's start (App._restore_lags; docs/firmware.md)
@@ -139,6 +144,7 @@ class App:
         self.supply = _SUPPLY_NONE
         self.sup_k = 0
         self.sup_vals = [0] * _MAX_SUPPLIED  # the values as received (a `Y` or the Modbus registers), no allocation
+        self.sup_wait_ms = 0  # how long the table's start has waited for them
         self.settle_s = 0  # seconds since the observer's estimate (saturating at the table's settle_s) and the ms
         self.settle_ms = 0  # toward the next second
         # elapsed-time counters (ms, saturating) rather than timestamps: ticks wrap
@@ -250,6 +256,7 @@ class App:
                 if c:
                     self.sup_k += 1
         self.supply = _SUPPLY_AWAITED if self.sup_k else _SUPPLY_NONE
+        self.sup_wait_ms = 0
         self.settle_s = 0
         self.settle_ms = 0
         self.table = table
@@ -499,8 +506,9 @@ class App:
 
     def supply_states(self, vals, k):
         """The lag states the controller supplies (docs/protocol.md "Supplied lag states"): ``vals[0:k]`` in the table's
-        filter order and state units. Returns 1: set now (the table's start was waiting for them); 0: they were set at
-        this table's start, so nothing is applied (the board's filters carry them on); or a refusal, nothing changed:
+        filter order and state units. Returns 1: set now (the table's start was waiting for them, or started without
+        them after _SUPPLY_WAIT_MS: these replace the steady-state start); 0: they were set at this table's start, so
+        nothing is applied (the board's filters carry them on); or a refusal, nothing changed:
         -1 the table supplies no state (or no table), -2 not the table's count, -3 - i: value i outside its state's
         box (the certified range)."""
         if self.ev is None or not self.sup_k:
@@ -626,13 +634,20 @@ class App:
             ev.update()
             if self.unsettled and not needed:
                 self._settle(ev, nut_bad)
-            waiting = self.supply == _SUPPLY_AWAITED  # the table's start waits for the controller's supplied states
+            # the table's start waits for the controller's supplied states, at most _SUPPLY_WAIT_MS
+            waiting = self.supply == _SUPPLY_AWAITED and self.sup_wait_ms < _SUPPLY_WAIT_MS
+            if waiting:
+                self.sup_wait_ms += dt
             if self.lag_rec is not None and not needed and not waiting:
                 self._restore_lags(ev, t)  # once per table start: a stored state, if it is trusted
+                if self.supply == _SUPPLY_AWAITED and not self.unobserved:
+                    ev.supply_steady()  # restored without the controller's states: theirs at the present inputs
             link = self.obs_link
             if self.unobserved and not needed and not waiting and (
                     link == 0 or (link == 1 and self.have_pos) or (link == 2 and self.heard_spin)):
                 ev.observe()  # allocation-free (tests/firmware/test_fw_heaplock.py)
+                if self.supply == _SUPPLY_AWAITED:
+                    ev.supply_steady()  # started without the controller's states (they correct these when they come)
                 self.unobserved = False
                 self.step_ms = 0
                 self.settle_s = 0
@@ -668,7 +683,7 @@ class App:
                 s |= _CLAMPED
             if ev.extrap:
                 s |= _EXTRAPOLATING
-            if (self.dyn and t.obs and (self.unobserved or self.settle_s < t.settle_s)) or (
+            if (self.dyn and t.obs and (self.unobserved or self.settle_s < t.settle_s or self.supply == _SUPPLY_AWAITED)) or (
                     self.sobs and self.settle_s < t.settle_s):
                 s |= _SETTLING
         lim = self.limiter

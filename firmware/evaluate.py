@@ -531,6 +531,15 @@ class Evaluator:
                 k += 1
         self.S = self._dsum(self.Slin)
 
+    def supply_steady(self):
+        """Every supplied state (table.tauc) at the steady state of its present input, Uc << fy: the start without the
+        controller's values (the host's start without a record, host/learning/empirical/observer.py record_lags)."""
+        t = self.table
+        for j in range(t.nf):
+            if t.tauc[j]:
+                self.Y[j] = self.Uc[j] << t.fy[j]
+        self.S = self._dsum(self.Slin)
+
     def extreme(self, sign):
         """Every filter state at the end of its box that drives S up (sign > 0), down (< 0), or 0 (the firmware's
         cheap certificate check at table acceptance)."""

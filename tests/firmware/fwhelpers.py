@@ -351,6 +351,12 @@ else:
         msgs += [rtu(bytes([1, 16, 0, 18, 0, 2, 4, 0, 0, 0x10 + k, 0])) for k in range(5)]
 OBS = N // 2  # a dynamic table with an observer estimates its states again there (as after a table switch), under the lock
 try:
+    SUP  # the prefix may say the dynamic table's spindle/feed lags are supplied: at OBS the start waits for them again
+except NameError:
+    SUP = False
+SUP_AT = N - 20  # and there the controller's states come (table format 7)
+sup_msg = line(b"TC,Y,0,0,0") if MODE == "stream" else rtu(bytes([1, 16, 0, 20, 0, 6, 12]) + bytes(12))
+try:
     SOBS  # the prefix may say the table is a screw table with an observer: it starts the segments again at OBS
 except NameError:
     SOBS = False
@@ -364,9 +370,12 @@ try:
     for k in range(N):
         if DYN and k == OBS:
             app.unobserved = True
+            if SUP:  # waits _SUPPLY_WAIT_MS (100 cycles), starts without them, takes them at SUP_AT
+                app.supply = 1
+                app.sup_wait_ms = 0
         if SOBS and k == OBS:
             app.unsettled = app.sobs = True
-        board.serial.feed(msgs[k % len(msgs)])
+        board.serial.feed(sup_msg if SUP and k == SUP_AT else msgs[k % len(msgs)])
         app.cycle()
         board.clock.t += 100
         sent += board.serial.nout

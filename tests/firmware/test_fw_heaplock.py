@@ -40,19 +40,23 @@ def mpy_dir():
 
 
 @pytest.mark.micropython
-@pytest.mark.parametrize("kind", ["poly_slope", "dynamic", "screw"])
+@pytest.mark.parametrize("kind", ["poly_slope", "dynamic", "dynamic_supplied", "screw"])
 @pytest.mark.parametrize("mode", ["stream", "modbus"])
 def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode, kind):
     """The dynamic table (1 s filter step: a step every 10 cycles, an observer that estimates the lag states at the
     first all-good cycle and again halfway through the locked cycles) with spindle speed and feed reports; the screw
     table (formats 4 and 5: bearing heat per mm of travel, the reversal term, the friction heat's speed factor and the
     extra convection while moving; format 6: the observer, which starts the segments from the nut sensor at the first
-    all-good cycle and again halfway through the locked cycles) with position reports going up and back."""
+    all-good cycle and again halfway through the locked cycles) with position reports going up and back. The dynamic
+    table whose spindle and feed lags the controller supplies (format 7): halfway through, its start waits for them
+    again, starts without them after 10 s (their steady state) and takes them 20 cycles before the end, under the lock."""
     names = ["T%d" % i for i in range(1, 12)]
     table = {"dynamic": "dynamic_observer", "screw": "screw_observer"}.get(kind, kind)
+    sup = kind == "dynamic_supplied"
+    kind = "dynamic" if sup else kind
     (tmp_path / "table_a.bin").write_bytes(make_table(kind=table, sensors=names))
     n = 2000 if os.environ.get("TCOMP_SLOW") else 300
-    out = run_micropython("MODE = %r\nN = %d\nDYN = %r\nSOBS = %r\n" % (mode, n, kind == "dynamic", kind == "screw")
+    out = run_micropython("MODE = %r\nN = %d\nDYN = %r\nSOBS = %r\nSUP = %r\n" % (mode, n, kind == "dynamic", kind == "screw", sup)
                           + HEAPLOCK_SCRIPT, str(tmp_path), mpy_dir, heap(mode, kind))
     ok, cycles, sent, status, pos, dfree, data, peak = out.split()
     assert ok == "OK" and int(cycles) == 100 + n

@@ -179,3 +179,31 @@ def test_restart_restores_the_record_but_takes_the_supplied_states_from_the_cont
     for j in range(t.nf):
         if t.A[j] and not t.tauc[j]:
             assert abs(app.ev.Y[j] - stored[j]) <= 0.02 * max(abs(stored[j]), 1 << t.fy[j]), j
+
+
+def test_without_the_controller_the_board_starts_after_10_s_and_takes_the_states_when_they_come(tmp_path):
+    """A controller that does not send them (no --signal-record, a bridge started late): after 10 s the table starts
+    with its supplied states at the steady state of the present speed (the host's start without a record), SETTLING
+    stays raised until they come, and when they come they replace it."""
+    app, board = _app(tmp_path)
+    _send(app, board, cmd(b"TC,P,0,6000"))
+    _send(app, board, cmd(b"TC,M,1000,0,0"))
+    run_cycles(app, board, 95)
+    assert app.unobserved  # 9.5 s: still waiting
+    run_cycles(app, board, 10)
+    t = app.table
+    assert not app.unobserved and app.supply == SUPPLY_AWAITED and app.status & SETTLING
+    steady = {-1: 6000, -2: 6000 ** 2, -3: 1000}
+    sup = [j for j in range(t.nf) if t.tauc[j]]
+    # the state is the input (rpm, rpm**2 / 2**shq, mm/min) in state units: the steady state, checked in the source's units
+    for j in sup:
+        assert abs(app.ev.Y[j] / 2.0 ** app.ev.supply_scale(j) - steady[t.src[j]]) <= 2.0 ** -app.ev.supply_scale(j) * 4, j
+    run_cycles(app, board, 400)  # 40 s, past the fixture's settle_s (30 s): still SETTLING, the states never came
+    assert app.status & SETTLING
+    _, entries = _dictionary(app, board)
+    vals = _values(app, entries, 0.5)
+    out = _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in vals)))
+    assert out[0][3:] == ["A", "Y", "S", "1"]
+    assert [app.ev.Y[j] for j in sup] == vals
+    run_cycles(app, board, 1)
+    assert not app.status & SETTLING  # the estimate is older than settle_s and the states came
