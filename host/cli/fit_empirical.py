@@ -149,9 +149,9 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
 
         supplied = [model.terms[st["term"]] for st in (obs.states if obs is not None else []) if st.get("source") == CONTROLLER]
         if supplied:
-            print("  lag states the controller supplies from its record at a start (spindle_states=controller): %s; the board "
-                  "cannot take them yet, so this model is not exported (tcomp predict --controller-history reads the record)"
-                  % ", ".join("lag(%s, tau %g s)" % t for t in supplied))
+            print("  lag states the controller supplies from its record at a start (spindle_states=controller): %s; on the "
+                  "machine `tcomp linuxcnc --spindle --signal-record FILE` sends them (table format 7), `tcomp predict "
+                  "--controller-history` reads the record" % ", ".join("lag(%s, tau %g s)" % t for t in supplied))
         ob = model.statistics.get("observer_sensors")
         if ob:
             print("  observer-only sensors (up to %d, the model's sensors within %d): %s; settle_s %.0f min, %.0f min without" % (

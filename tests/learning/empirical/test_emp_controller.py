@@ -107,7 +107,7 @@ def test_the_settle_bound_admits_what_the_controller_supplies():
     assert any(n.startswith("spindle") and tau == 14400.0 for n, tau in bounded.terms), bounded.terms
 
 
-def test_the_document_keeps_the_source_and_the_table_refuses_it(fits, tmp_path):
+def test_the_document_keeps_the_source_and_the_table_marks_it(fits, tmp_path):
     run, _, controlled, _ = fits
     doc = controlled.to_document()
     back = DynamicModel.from_document(json.loads(json.dumps(doc)))
@@ -120,9 +120,17 @@ def test_the_document_keeps_the_source_and_the_table_refuses_it(fits, tmp_path):
         tampered["thermal"]["observer"]["states"][i].update(bad)
         with pytest.raises(ModelFormatError, match=r"states\[%d\]" % i):
             DynamicModel.from_document(tampered)
-    # the board cannot take a state from the controller yet: the table is refused, not exported without it
-    with pytest.raises(ExportError, match="supplied by the controller"):
-        export_model(doc)
+    # the table marks the supplied states (format 7, tauc: their time constants in ms); an edited source is refused
+    from firmware.table import parse_table
+    t = parse_table(export_model(doc).table)
+    assert [t.tauc[j] for j in range(t.nf)] == [round(s_tau * 1000) if any(st.get("source") == CONTROLLER and st["term"] == j
+                                                                          for st in states) else 0
+                                                for j, (_, s_tau) in enumerate(controlled.terms)]
+    assert any(t.tauc)
+    tampered = json.loads(json.dumps(doc))
+    tampered["thermal"]["observer"]["states"][i]["gains"] = {"T:t1": 0.1}
+    with pytest.raises(ExportError, match="only a lag of the spindle speed, its square or the feed, without gains"):
+        export_model(tampered, allow_edited=True)
     with pytest.raises(EmpiricalDataError, match="spindle_states must be observer or controller, got 'board'"):
         fit_model([run], "dynamic", spindle_states="board", **FIT)
     with pytest.raises(EmpiricalDataError, match="spindle_states=controller .* needs observer=true"):
@@ -146,7 +154,7 @@ def test_tcomp_predict_reads_the_controllers_record(fits, tmp_path):
     assert main(["predict", paths["observed"], b, "--controller-history", a, "--out", str(tmp_path / "q.csv")]) == 2
 
 
-def test_tcomp_fit_says_which_states_the_controller_supplies_and_export_refuses_the_model(tmp_path, capsys):
+def test_tcomp_fit_says_which_states_the_controller_supplies_and_export_marks_them(tmp_path, capsys):
     run, _ = _machine(26.0)
     folder = write_run(run, str(tmp_path / "run"))
     out = str(tmp_path / "dyn.json")
@@ -155,6 +163,8 @@ def test_tcomp_fit_says_which_states_the_controller_supplies_and_export_refuses_
     printed = capsys.readouterr().out
     assert "lag states the controller supplies from its record at a start (spindle_states=controller): lag(spindle_krpm" in printed
     assert json.loads(open(out).read())["statistics"]["spindle_states"] == "controller"
-    assert main(["export", out, "--out", str(tmp_path / "t.bin")]) == 2
-    assert "supplied by the controller" in capsys.readouterr().err
-    assert not (tmp_path / "t.bin").exists()
+    assert "tcomp linuxcnc --spindle --signal-record FILE" in printed
+    assert main(["export", out, "--out", str(tmp_path / "t.bin"), "--json", str(tmp_path / "t.json")]) == 0
+    rep = json.loads((tmp_path / "t.json").read_text())
+    supplied = [c for c in rep["dynamic"]["observer"]["states"] if c.get("supplied_by") == "controller"]
+    assert supplied and all(c["tau_ms"] > 0 for c in supplied)
