@@ -511,11 +511,11 @@ class App:
         nothing is applied (the board's filters carry them on); or a refusal, nothing changed:
         -1 the table supplies no state (or no table), -2 not the table's count, -3 - i: value i outside its state's
         box (the certified range)."""
-        if self.ev is None or not self.sup_k:
+        t = self.table
+        if self.ev is None or t is None or not self.sup_k:
             return -1
         if k != self.sup_k:
             return -2
-        t = self.table
         i = 0
         for j in range(t.nf):
             if t.tauc[j]:

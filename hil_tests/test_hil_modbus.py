@@ -89,13 +89,16 @@ def test_modbus_reads_stream_offsets_and_answers_bad_requests(make_rig, demo_run
             assert abs(_s16(regs[3]) - round(o.total_um * 10)) <= 1, (regs[3], o.raw)
             assert abs(_s16(regs[4]) - round(float(o.fields[3]) * 10)) <= 1, (regs[4], o.raw)
             assert abs(_s16(regs[5]) - round(float(o.fields[4]) * 100)) <= 2, (regs[5], o.raw)
-            # illegal data address: input registers end at 51, and 15 is a hole
-            bad = client.read_input_registers(45, count=10, device_id=1)
+            # illegal data address: input registers end at 71 (54-71: the supplied lag states, none for this table:
+            # docs/protocol.md), and 15 is a hole
+            assert client.read_input_registers(54, count=18, device_id=1).registers == [0] * 18
+            bad = client.read_input_registers(65, count=10, device_id=1)
             assert bad.isError() and bad.exception_code == 2
             bad = client.read_input_registers(15, count=1, device_id=1)
             assert bad.isError() and bad.exception_code == 2
-            bad = client.read_holding_registers(20, count=1, device_id=1)  # 18-19: the spindle speed
+            bad = client.read_holding_registers(28, count=1, device_id=1)  # 18-19: the spindle speed, 20-27: supplied states
             assert bad.isError() and bad.exception_code == 2
+            assert client.read_holding_registers(20, count=8, device_id=1).registers == [0] * 8  # they read 0
             # illegal data value: slew 0 is out of range; half of the position
             bad = client.write_register(1, 0, device_id=1)
             assert bad.isError() and bad.exception_code == 3

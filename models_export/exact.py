@@ -476,7 +476,7 @@ class Model:
             if isinstance(s, dict) and "source" in s:
                 j = s.get("term")
                 t = self.dyn[j] if isinstance(j, int) and 0 <= j < len(self.dyn) else None
-                if s["source"] != "controller" or t is None or t["src"] not in (-1, -2, -3) or s.get("gains"):
+                if s["source"] != "controller" or t is None or not isinstance(j, int) or t["src"] not in (-1, -2, -3) or s.get("gains"):
                     raise ExportError("%s.states[term %r]: source %r on %s: only a lag of the spindle speed, its square or the "
                                       "feed, without gains, can be supplied by the controller" % (
                                           where, j, s["source"], t["signal"] if t is not None else "no such term"))

@@ -166,3 +166,65 @@ def test_bridge_supplies_the_states_at_the_boards_start_and_after_its_reset(tmp_
     tau = entries[0].tau_ms / 1000.0
     want = rec.lag(entries[0], rec.last_t) * math.exp(-(wall[0] - rec.last_t) / tau)
     assert back.lag(entries[0], wall[0]) == pytest.approx(want, rel=1e-12)
+
+
+class BoardModbus:
+    """The three pymodbus client calls the bridge's ModbusLink makes, as RTU requests to the firmware's Modbus slave
+    on the fake board (the firmware answers them; this only frames and unframes)."""
+
+    class Reply:
+        def __init__(self, raw):
+            self.raw = raw
+            self.exception_code = raw[2] if raw[1] & 0x80 else None
+            self.registers = [int.from_bytes(raw[3 + 2 * i:5 + 2 * i], "big") for i in range(raw[2] // 2)] if not raw[1] & 0x80 else []
+
+        def isError(self):
+            return self.exception_code is not None
+
+    def __init__(self, app, board):
+        self.app, self.board = app, board
+
+    def _ask(self, body):
+        from firmware.crc16 import crc16_modbus
+        c = crc16_modbus(body)
+        self.board.serial.feed(body + bytes([c & 0xFF, c >> 8]))
+        self.board.clock.t += 10
+        self.app.link.poll(self.board.clock.t)
+        return self.Reply(self.board.serial.take())
+
+    def read_input_registers(self, start, count, device_id):
+        return self._ask(bytes([device_id, 4, start >> 8, start & 0xFF, 0, count]))
+
+    def read_holding_registers(self, start, count, device_id):
+        return self._ask(bytes([device_id, 3, start >> 8, start & 0xFF, 0, count]))
+
+    def write_registers(self, start, values, device_id):
+        body = b"".join(v.to_bytes(2, "big") for v in values)
+        return self._ask(bytes([device_id, 16, start >> 8, start & 0xFF, 0, len(values), 2 * len(values)]) + body)
+
+    def write_register(self, r, v, device_id):
+        return self._ask(bytes([device_id, 6, r >> 8, r & 0xFF, v >> 8, v & 0xFF]))
+
+
+def test_bridge_supplies_the_states_over_modbus(tmp_path):
+    from fwhelpers import rig_app, run_cycles
+    from firmware.wire import SUPPLY_SET
+    from host.board.linuxcnc.bridge import Bridge, Inputs, ModbusLink
+    app, board = rig_app(tmp_path, kind="dynamic_supplied", serial_mode="modbus")
+    wall = [5.0e5]
+    rec = SignalRecord()
+    rec.note(wall[0] - 3600.0, 4000.0)
+    logs = []
+    bridge = Bridge(ModbusLink(BoardModbus(app, board)), 1000.0, send_spindle=True, record=rec, wall=lambda: wall[0],
+                    log=logs.append)
+    inp = Inputs(position=0.0, machine_on=True, homed=True, spindle_rpm=4000.0)
+    for k in range(3):
+        bridge.step(float(k), inp)
+        run_cycles(app, board, 5)
+        wall[0] += 0.5
+    t = app.table
+    assert app.supply == SUPPLY_SET and any("the board took them" in m for m in logs), logs
+    # the record: 4000 rpm for an hour, a lag in equilibrium with it; the board's states hold that (and stay there: its
+    # own filters see 4000 rpm too): 4000 rpm, 4000**2 rpm**2 in state units
+    got = [app.ev.Y[j] / 2.0 ** app.ev.supply_scale(j) for j in range(t.nf) if t.tauc[j]]
+    assert got[:2] == pytest.approx([4000.0, 4000.0 ** 2], rel=1e-4)

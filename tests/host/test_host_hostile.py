@@ -215,7 +215,8 @@ FLAGS = {
                # inputs are walked in tests/cli/test_cli_import.py
                "other": "--time --time-scale --temp --error --spindle --ignore --axis --error-reference --errors --into "
                         "--clock-offset --time-unit --time-format --timezone --header-line --delimiter --decimal --gaps --unit --location"},
-    "linuxcnc": {"in": {"--port": "file", "--key": "file"}, "out": {},
+    # --signal-record is the bridge's own state: read at start (created when missing), rewritten atomically every minute
+    "linuxcnc": {"in": {"--port": "file", "--key": "file", "--signal-record": "file"}, "out": {},
                  "other": "--mode --baud --address --name --units --slew-um-per-s --period-ms --stale-ms --recover-ms "
                           "--cold-start --spindle"},
     "monitor": {"in": {"--port": "file", "--key": "file"}, "out": {"--csv": "log", "--json": "file"},

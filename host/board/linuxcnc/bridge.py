@@ -79,6 +79,8 @@ class Exchange:
     supply: str = ""
 
 
+SUPPLY_APPLIED = "%d" % 1  # A,Y,S,<applied>: 1 set now, 0 set at the table's start already (docs/protocol.md)
+
 # a supplier gives the values of the board's dictionary entries now, or the reason it cannot (a SupplyError's text)
 Supplier = Callable[[list[SupplyEntry]], "list[int] | str"]
 
@@ -155,7 +157,7 @@ class StreamLink:
         """An A,Y answer: the dictionary (send the states if the board awaits them) or the answer to the states."""
         if self.supply_pending and len(f.fields) == 3:
             self.supply_pending = False
-            ex.supply = "set" if f.fields[2] == "1" else "kept"
+            ex.supply = "set" if f.fields[2] == SUPPLY_APPLIED else "kept"
             return
         if not self.dictionary_pending:
             return
