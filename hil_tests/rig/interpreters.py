@@ -73,8 +73,8 @@ HEAPS = {
     # 32 bits, app data 10.6 / 11.3 kB; the 64-bit entries are not measured: the dynamic ones + 20 kB); since format 6
     # the table has the observer (a 3rd table sensor, its start again under the lock): smallest 102 / 100 kB (1 kB
     # steps), app data 11.5 / 12.0 kB. The dynamic entries measured again with table format 7 (the supplied lag states, their
-    # start and the Y command under the lock): smallest 104 / 99 kB at 1 kB steps (102 / 98 kB before it, same bisection:
-    # /work/meas32/heapbisect.py in stop 32), so 10 % above: 114 / 109 kB
+    # start and the Y command under the lock): smallest 104 / 99 kB at 1 kB steps (102 / 98 kB before it, the same
+    # bisection with the heap-lock script, stop 32), so 10 % above: 114 / 109 kB
     "fw_heaplock_screw_stream": {32: "112K", 64: "172K"},
     "fw_heaplock_screw_modbus": {32: "110K", 64: "168K"},
     "fw_heaplock_dynamic_stream": {32: "114K", 64: "150K"},

@@ -43,9 +43,9 @@ the previous exporter's header the lines differ in nothing else (the one usage l
 with ';' and is followed by the two new lines: checked when recorded). The table digests did not change.
 
 Recorded again for table format 7 (issue 21: the lag states the controller supplies, one word per filter, tauc, after
-the dynamic block; none of these documents supplies a state, so every tauc is 0). Checked when recorded
-(/work/meas32/golden_check.py, stop 32): with the version set back to 6 and the tauc words cut out (length, word count
-and CRC recomputed) every table gives its format-6 digest. The three C headers differ from the format-6 ones only in
+the dynamic block; none of these documents supplies a state, so every tauc is 0). Checked when recorded (stop 32):
+with the version set back to 6 and the tauc words cut out (length, word count and CRC recomputed) every table gives its
+format-6 digest. The three C headers differ from the format-6 ones only in
 the embedded table's version byte and CRC (diffed when recorded).
 """
 import hashlib
