@@ -29,11 +29,10 @@ import os
 import numpy as np
 import pytest
 
-from firmware.wire import CLAMPED, SETTLING
 from hil_tests.conftest import SLOW
 from hil_tests.fixtures.samples import restamp
 from hil_tests.rig.boards import export, rig_config
-from hil_tests.rig.play import play, rtd_bound_K
+from hil_tests.rig.play import judge_restart, play, rtd_bound_K
 from host.board.link import RATE_LIMITED
 
 pytestmark = pytest.mark.rig
@@ -143,22 +142,9 @@ def _reset_on_a_warm_machine(make_rig, interpreter, reset_h, before_s, after_s, 
     for a, p in zip(first, pred_first):  # the board before the cut, switched on 10 min before R, is the host's too
         if not a["fallback"] and not int(a["status"], 16) & RATE_LIMITED:
             assert abs(a["offset_um"] - p) <= bound, (a, p, bound)
-    compared = worst = dev_on = dev_off = 0.0
-    settling = []
-    for a, p, u, z, t in zip(answers, restarted, uninterrupted, at_rest, after.errors.time_s):
-        st = int(a["status"], 16)
-        assert not a["held"] and not st & CLAMPED, a
-        settling.append((t - before_s, bool(st & SETTLING)))
-        if a["fallback"] or st & RATE_LIMITED:  # the start ramp after the restart
-            continue
-        compared += 1
-        err = abs(a["offset_um"] - p)
-        worst = max(worst, err)
-        assert err <= bound, "%.0f s after the reset: board %.3f um, host (switched on at R) %.3f um, bound %.3f um" % (
-            t - before_s, a["offset_um"], p, bound)
-        dev_on = max(dev_on, abs(a["offset_um"] - u))
-        dev_off = max(dev_off, abs(z - u))
-    assert compared >= 0.8 * len(answers), (compared, len(answers))
+    compared, worst, dev_on, settling = judge_restart(answers, restarted, uninterrupted, after.errors.time_s, before_s, bound,
+                                                      "switched on at R")
+    dev_off = float(max(abs(at_rest[i] - uninterrupted[i]) for i in compared))
     # the estimate comes within a second of the restart; SETTLING holds until settle_s after it, then clears
     assert all(s for el, s in settling if el < settle_s - 5) and not any(s for el, s in settling if el > settle_s + 5), settling
     # the comparison can tell an observer from a start at rest: the host's board without one is far outside the bound
@@ -166,6 +152,6 @@ def _reset_on_a_warm_machine(make_rig, interpreter, reset_h, before_s, after_s, 
     assert gap > 2 * bound, (gap, bound)
     print("%s: reset at %.0f h: %d answers after the restart, worst |board - host switched on at R| %.3f um (bound %.3f um); "
           "largest deviation from the uninterrupted model: board with observer %.3f um, host without observer %.3f um"
-          % (interpreter, reset_h, compared, worst, bound, dev_on, dev_off))
+          % (interpreter, reset_h, len(compared), worst, bound, dev_on, dev_off))
     for name, c in rig.stats()["chips"].items():
         assert c["violations"] == 0, c["violation_text"]

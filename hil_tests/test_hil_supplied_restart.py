@@ -35,13 +35,12 @@ import os
 import numpy as np
 import pytest
 
-from firmware.wire import CLAMPED, SETTLING
+from firmware.wire import SETTLING
 from hil_tests.conftest import SLOW
 from hil_tests.fixtures.samples import restamp
 from hil_tests.rig.boards import export, rig_config
-from hil_tests.rig.play import play, rtd_bound_K
+from hil_tests.rig.play import judge_restart, play, rtd_bound_K
 from hil_tests.test_hil_observer_restart import RUN, WARMUP_MS, _estimate_bound_um, _shift
-from host.board.link import RATE_LIMITED
 from host.board.supplied import SignalRecord, parse_dictionary
 
 pytestmark = pytest.mark.rig
@@ -146,27 +145,14 @@ def _reset(make_rig, interpreter, before_s, after_s, settle_s):
         lag_gap_um += abs(th["terms"][j]["coefficient"]) * abs(ctrl - host_lags[k])
     dT = rtd_bound_K(run, sensors, horizon_s=2.0)
     bound = ex.report["max_error_um"] + _estimate_bound_um(doc, dT) + lag_gap_um + 0.05 + 1e-9
-    compared = worst = dev = 0.0
-    settling = []
-    for a, p, u, t in zip(answers, hosted, uninterrupted, after.errors.time_s):
-        st = int(a["status"], 16)
-        assert not a["held"] and not st & CLAMPED, a
-        settling.append((t - before_s, bool(st & SETTLING)))
-        if a["fallback"] or st & RATE_LIMITED:  # the start ramp after the restart
-            continue
-        compared += 1
-        err = abs(a["offset_um"] - p)
-        worst = max(worst, err)
-        assert err <= bound, "%.0f s after the reset: board %.3f um, host (switched on at R with the record) %.3f um, bound %.3f um" % (
-            t - before_s, a["offset_um"], p, bound)
-        dev = max(dev, abs(a["offset_um"] - u))
-    assert compared >= 0.8 * len(answers), (compared, len(answers))
+    compared, worst, dev, settling = judge_restart(answers, hosted, uninterrupted, after.errors.time_s, before_s, bound,
+                                                   "switched on at R with the record")
     assert all(s for el, s in settling if el < settle_s - 10) and not any(s for el, s in settling if el > settle_s + 10), settling
     gap = float(np.max(np.abs(without_record - hosted)))
     assert gap > 2 * bound, (gap, bound)  # the record's values are what the board followed
     print("%s: reset at %.0f h: %d answers, worst |board - host with the record| %.3f um (bound %.3f um, of which the "
           "controller's lags against the host's %.3f um); largest deviation from the uninterrupted model %.3f um; the host "
-          "without the record is up to %.3f um from the host with it" % (interpreter, RESET_H, compared, worst, bound,
+          "without the record is up to %.3f um from the host with it" % (interpreter, RESET_H, len(compared), worst, bound,
                                                                            lag_gap_um, dev, gap))
     assert math.isfinite(worst)
     for name, c in rig.stats()["chips"].items():

@@ -115,6 +115,30 @@ def play(rig, run, sensors, warmup_ms=60000, motion=True, on_answer=None, faults
     return answers
 
 
+def judge_restart(answers, hosted, uninterrupted, times, start_s, bound, host):
+    """A restarted board's answers against the host's prediction ``hosted`` (the host's board switched on at the restart,
+    ``host`` names it in the failure) within ``bound`` um, skipping the start ramp (fallback, rate-limited); never held
+    or clamped. Returns (indices compared, worst |board - hosted|, largest |board - uninterrupted|, [(seconds after the
+    restart, SETTLING)] per answer)."""
+    from firmware.wire import CLAMPED, SETTLING
+    from host.board.link import RATE_LIMITED
+    compared, worst, dev, settling = [], 0.0, 0.0, []
+    for i, (a, p, u, t) in enumerate(zip(answers, hosted, uninterrupted, times)):
+        st = int(a["status"], 16)
+        assert not a["held"] and not st & CLAMPED, a
+        settling.append((t - start_s, bool(st & SETTLING)))
+        if a["fallback"] or st & RATE_LIMITED:  # the start ramp after the restart
+            continue
+        compared.append(i)
+        err = abs(a["offset_um"] - p)
+        worst = max(worst, err)
+        assert err <= bound, "%.0f s after the reset: board %.3f um, host (%s) %.3f um, bound %.3f um" % (
+            t - start_s, a["offset_um"], host, p, bound)
+        dev = max(dev, abs(a["offset_um"] - u))
+    assert len(compared) >= 0.8 * len(answers), (len(compared), len(answers))
+    return compared, worst, dev, settling
+
+
 def rtd_bound_K(run, sensors, horizon_s=0.3):
     """Worst temperature error of the measurement chain per sensor, in K.
 

@@ -13,12 +13,12 @@ import random
 import struct
 import zlib
 
-import numpy as np
 import pytest
 
 from firmware.table import parse_table
-from hil_tests.fixtures.samples import (dynamic_doc, observed_board, observer_host_inputs, observer_input_unit, random_board_inputs,
-                                        restamp, with_observer, with_supplied)
+from hil_tests.fixtures.samples import (assert_inside_certified_accumulators, dynamic_doc, follow_host, observed_board,
+                                        observer_host_inputs, observer_input_unit, random_board_inputs, restamp, with_observer,
+                                        with_supplied)
 from host.learning.empirical.observer import Observer
 from models_export import export_model
 from models_export.certify import ExportError
@@ -71,8 +71,6 @@ def test_board_started_with_the_supplied_states_follows_the_host_within_the_cert
     th = doc["thermal"]
     terms = [(x["signal"], x["tau_s"], x["coefficient"]) for x in th["terms"]]
     host = Observer.from_document(th["observer"], [(n, tau) for n, tau, _ in terms])
-    a = [1.0 - np.exp(-th["dt_s"] / tau) if tau > 0 else 0.0 for _, tau, _ in terms]
-    geo = doc["geometric"]["coefficients_um"] if doc["geometric"] else [0.0]
     rng = random.Random(seed)
     temps, rpm, feed = random_board_inputs(rng, t)
     ev = observed_board(t, temps, rpm, feed)
@@ -94,40 +92,12 @@ def test_board_started_with_the_supplied_states_follows_the_host_within_the_cert
     ev.supply(vals)
     assert [ev.Y[j] for j in range(t.nf) if t.tauc[j]] == vals
     assert [ev.Y[j] for j in range(t.nf) if not t.tauc[j]] == [unsupplied[j] for j in range(t.nf) if not t.tauc[j]]
-    u0 = [u0[n] for n, _, _ in terms]
     cert = ex.report["max_error_um"]
     rest = [0.0 if (tau > 0 and n in SUPPLIED) else v for (n, tau, _), v in zip(terms, y)]
-    off_rest = 0.0
-    for k in range(300):
-        for i in range(t.n_sensors):
-            temps[i] = min(max(temps[i] + rng.randint(-100, 100), t.train_lo[i]), t.train_hi[i])
-        ev.temps[:] = temps
-        if k % 20 == 0:
-            rpm, feed = rng.randint(0, t.smax), rng.choice([0, rng.randint(0, t.fmax)])
-        ev.set_spindle(rpm)
-        ev.set_feed_rate(feed)
-        ev.update()
-        ev.step()
-        uh = observer_host_inputs(doc, t, temps, rpm, feed)
-        u = [uh[n] for n, _, _ in terms]
-        for yy in (y, rest):
-            for j in range(len(terms)):
-                yy[j] = yy[j] + a[j] * (u0[j] - yy[j]) if a[j] > 0 else u[j]
-        u0 = u
-        for p in (t.pos_lo, t.pos_hi):
-            pm = p / 1000.0
-            got = ev.offset_at(p) / 100.0
-            want, want_rest = [th["intercept"] + sum(c * v for (_, _, c), v in zip(terms, yy)) for yy in (y, rest)]
-            if th["target"] != "direct":
-                g = sum(c * pm ** n for n, c in enumerate(geo))
-                want, want_rest = g + want * pm, g + want_rest * pm
-            assert abs(got - want) <= cert, (k, p, got, want, cert)
-            off_rest = max(off_rest, abs(got - want_rest))
+    off, off_rest = follow_host(ev, t, doc, [y, rest], temps, rpm, feed, rng)
+    assert off <= cert, (off, cert)
     assert off_rest > 100 * cert  # the supplied values matter: started without them the board is far off
-    for acc_id, (lo, hi) in enumerate(zip(ev.lo, ev.hi)):
-        if lo <= hi:
-            c = ex.accs[acc_id]
-            assert c[0] <= lo and hi <= c[1], (acc_id, lo, hi, c)
+    assert_inside_certified_accumulators(ev, ex)
 
 
 def test_format_6_dynamic_table_still_loads_without_supplied_states():
