@@ -32,7 +32,7 @@ import pytest
 from hil_tests.conftest import SLOW
 from hil_tests.fixtures.samples import restamp
 from hil_tests.rig.boards import export, rig_config
-from hil_tests.rig.play import judge_restart, play, rtd_bound_K
+from hil_tests.rig.play import judge_restart, play, power_cut_without_lags, rtd_bound_K
 from host.board.link import RATE_LIMITED
 
 pytestmark = pytest.mark.rig
@@ -114,15 +114,9 @@ def _reset_on_a_warm_machine(make_rig, interpreter, reset_h, before_s, after_s, 
                    noise_uohm=0, heap=heap if interpreter != "qemu" else None)
     first = play(rig, before, sensors, motion=False, spindle=True, query_delay_ms=200)
     # the power cut at R; the board comes back on the same flash, its sensors at R's temperatures, the clock going on
-    rig.kill()
     # the lag states written 10 min after the estimate would be restored on this machine, back within the second at
     # the same temperatures (hil_tests/test_hil_lag_restart.py); this test is about the observer: a board without them
-    lags = os.path.join(rig.flash, rig.config["table_dir"], "lags.bin")
-    if os.path.exists(lags):
-        os.remove(lags)
-    rig.spec["start_ms"] = rig.t_ms
-    rig.spec["temps"] = {s: float(after.temperatures.column(s)[0]) for s in sensors}
-    rig.start()
+    power_cut_without_lags(rig, {s: float(after.temperatures.column(s)[0]) for s in sensors})
     answers = play(rig, after, sensors, warmup_ms=WARMUP_MS, motion=False, spindle=True, query_delay_ms=200)
 
     model = load_model(doc)

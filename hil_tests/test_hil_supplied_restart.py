@@ -39,7 +39,7 @@ from firmware.wire import SETTLING
 from hil_tests.conftest import SLOW
 from hil_tests.fixtures.samples import restamp
 from hil_tests.rig.boards import export, rig_config
-from hil_tests.rig.play import judge_restart, play, rtd_bound_K
+from hil_tests.rig.play import judge_restart, play, power_cut_without_lags, rtd_bound_K
 from hil_tests.test_hil_observer_restart import RUN, WARMUP_MS, _estimate_bound_um, _shift
 from host.board.supplied import SignalRecord, parse_dictionary
 
@@ -114,13 +114,7 @@ def _reset(make_rig, interpreter, before_s, after_s, settle_s):
         return act
     play(rig, before, sensors, motion=False, spindle=True, query_delay_ms=200,
          faults=[(0.0, controller(_controller_record(full, t0, t0), 0.0))])
-    rig.kill()
-    lags = os.path.join(rig.flash, rig.config["table_dir"], "lags.bin")
-    if os.path.exists(lags):
-        os.remove(lags)
-    rig.spec["start_ms"] = rig.t_ms
-    rig.spec["temps"] = {s: float(after.temperatures.column(s)[0]) for s in sensors}
-    rig.start()
+    power_cut_without_lags(rig, {s: float(after.temperatures.column(s)[0]) for s in sensors})
     rec = _controller_record(full, R, t0)
     answers = play(rig, after, sensors, warmup_ms=WARMUP_MS, motion=False, spindle=True, query_delay_ms=200,
                    faults=[(before_s, controller(rec, before_s))])

@@ -115,6 +115,19 @@ def play(rig, run, sensors, warmup_ms=60000, motion=True, on_answer=None, faults
     return answers
 
 
+def power_cut_without_lags(rig, temps):
+    """Cut the board's power (SIGKILL) and restart it on the same flash without its stored lag states (lags.bin: a
+    restart that shows the start itself, not a restore), its sensors at ``temps``, its clock going on."""
+    import os
+    rig.kill()
+    lags = os.path.join(rig.flash, rig.config["table_dir"], "lags.bin")
+    if os.path.exists(lags):
+        os.remove(lags)
+    rig.spec["start_ms"] = rig.t_ms
+    rig.spec["temps"] = temps
+    rig.start()
+
+
 def judge_restart(answers, hosted, uninterrupted, times, start_s, bound, host):
     """A restarted board's answers against the host's prediction ``hosted`` (the host's board switched on at the restart,
     ``host`` names it in the failure) within ``bound`` um, skipping the start ramp (fallback, rate-limited); never held

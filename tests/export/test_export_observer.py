@@ -13,7 +13,7 @@ import pytest
 
 from firmware.evaluate import Evaluator
 from firmware.table import parse_table
-from hil_tests.fixtures.samples import (assert_inside_certified_accumulators, dynamic_doc, follow_host, observed_board,
+from hil_tests.fixtures.samples import (assert_inside_certified_accumulators, board_and_host_start, dynamic_doc, follow_host,
                                         observer_host_inputs, observer_input_unit, random_board_inputs, restamp, with_observer)
 from host.learning.empirical.observer import Observer
 from models_export import export_model
@@ -71,16 +71,7 @@ def test_filters_run_from_the_estimate_within_the_offset_certificate(seed):
     within max_error_um at every step; started at rest instead (the board before issue 21) it does not."""
     doc = dict(_docs().__next__()[1]) if seed == 0 else None
     doc = doc or with_observer(dynamic_doc(random.Random(seed), "direct" if seed % 2 else "slope", dt_s=15.0), random.Random(seed))
-    ex = export_model(doc)
-    t = parse_table(ex.table)
-    th = doc["thermal"]
-    terms = [(x["signal"], x["tau_s"], x["coefficient"]) for x in th["terms"]]
-    host = Observer.from_document(th["observer"], [(n, tau) for n, tau, _ in terms])
-    rng = random.Random(seed)
-    temps, rpm, feed = random_board_inputs(rng, t)
-    ev = observed_board(t, temps, rpm, feed)
-    u0 = observer_host_inputs(doc, t, temps, rpm, feed)
-    est = host.initial_states(u0)
+    ex, t, terms, est, ev, (temps, rpm, feed), u0, rng = board_and_host_start(doc, seed)
     y = []
     for j, (n, tau, _) in enumerate(terms):
         if tau > 0:

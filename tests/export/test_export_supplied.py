@@ -16,10 +16,8 @@ import zlib
 import pytest
 
 from firmware.table import parse_table
-from hil_tests.fixtures.samples import (assert_inside_certified_accumulators, dynamic_doc, follow_host, observed_board,
-                                        observer_host_inputs, observer_input_unit, random_board_inputs, restamp, with_observer,
-                                        with_supplied)
-from host.learning.empirical.observer import Observer
+from hil_tests.fixtures.samples import (assert_inside_certified_accumulators, board_and_host_start, dynamic_doc, follow_host,
+                                        observer_input_unit, restamp, with_observer, with_supplied)
 from models_export import export_model
 from models_export.certify import ExportError
 
@@ -66,16 +64,7 @@ def test_board_started_with_the_supplied_states_follows_the_host_within_the_cert
     """The board estimates the temperature lags, takes the controller's spindle/feed lags, and then stays within
     max_error_um of the host model started there; without the supplied values (states at rest) it does not."""
     doc = _doc(seed, target)
-    ex = export_model(doc)
-    t = parse_table(ex.table)
-    th = doc["thermal"]
-    terms = [(x["signal"], x["tau_s"], x["coefficient"]) for x in th["terms"]]
-    host = Observer.from_document(th["observer"], [(n, tau) for n, tau, _ in terms])
-    rng = random.Random(seed)
-    temps, rpm, feed = random_board_inputs(rng, t)
-    ev = observed_board(t, temps, rpm, feed)
-    u0 = observer_host_inputs(doc, t, temps, rpm, feed)
-    est = host.initial_states(u0)
+    ex, t, terms, est, ev, (temps, rpm, feed), u0, rng = board_and_host_start(doc, seed)
     top = {"spindle_krpm": 12000.0, "spindle_krpm2": 12000.0 ** 2, "feed_m_min": float(t.fmax)}
     y, vals = [], []
     for j, (n, tau, _) in enumerate(terms):
