@@ -64,6 +64,7 @@ from host.data.runs import load_run, slice_run  # noqa: E402
 from host.learning.empirical.compare import leave_one_cycle_out  # noqa: E402
 from host.learning.empirical.fitting import fit_model  # noqa: E402
 from host.learning.empirical.forward import block_residuals  # noqa: E402
+from host.learning.empirical.observer import reads_controller  # noqa: E402
 from host.options import parse_options  # noqa: E402
 
 STATIC = ("cv-subset", "stepwise")
@@ -103,6 +104,10 @@ def held_out(run, split_s, channel, dyn_options, variants=(), static=True):
         info[key + "_fit_s"] = time.perf_counter() - t0
         # the controller's record before the split (its spindle/feed log): used only by states the controller supplies
         out[key + "_switched_on"] = _rmse(block_residuals(dyn, cut, block, [slice_run(run, float(run.temperatures.time_s[0]), split_s)]))
+        if reads_controller(dyn):
+            # the same board without the controller's record (no --controller-history; on the board: no `Y` within
+            # 10 s): the supplied states start at the steady state of the first speed
+            out[key + "_switched_on_no_record"] = _rmse(block_residuals(dyn, cut, block))
         out[key + "_continuous"] = _rmse(block_residuals(dyn, run, block))
         st = dyn.statistics
         if "structure_average" in st:
@@ -185,6 +190,7 @@ def main(argv=None):
         print("|---|%s" % ("---|" * len(channels)))
         print("| MLR-16 held-out RMSE µm | %s |" % " | ".join("%.2f" % rows[c][0]["mlr16"] for c in channels))
         figures = [("dynamic_switched_on", "(a) dynamic (tcomp fit defaults), switched on at the split"),
+                   ("dynamic_switched_on_no_record", "(a') the same, switched on without the controller's record"),
                    ("dynamic_own_observer_switched_on", "(a0) the same model, its observer reading the terms' sensors only"),
                    ("dynamic_continuous", "(b) the same model, filters since 0 h"),
                    ("dynamic_single_switched_on", "(a1) the single best structure (no averaging), switched on at the split"),
