@@ -67,7 +67,8 @@ _SUPPLY_AWAITED = const(1)
 _SUPPLY_SET = const(2)
 _MAX_SUPPLIED = const(4)
 # how long a table's start waits for the controller's supplied states before it starts without them (the supplied
-# states at the steady state of the present input, SETTLING kept raised until they come): the bridge sends them in its
+# states at the observer's estimate, or without gains at the steady state of the present input; SETTLING kept raised
+# until they come): the bridge sends them in its
 # first exchange after it hears the board, so 10 s covers a bridge started with the board; one started later corrects
 # the states when it comes (docs/firmware.md "Supplied lag states")
 _SUPPLY_WAIT_MS = const(10000)
@@ -507,7 +508,7 @@ class App:
     def supply_states(self, vals, k):
         """The lag states the controller supplies (docs/protocol.md "Supplied lag states"): ``vals[0:k]`` in the table's
         filter order and state units. Returns 1: set now (the table's start was waiting for them, or started without
-        them after _SUPPLY_WAIT_MS: these replace the steady-state start); 0: they were set at this table's start, so
+        them after _SUPPLY_WAIT_MS: these replace that start's estimate); 0: they were set at this table's start, so
         nothing is applied (the board's filters carry them on); or a refusal, nothing changed:
         -1 the table supplies no state (or no table), -2 not the table's count, -3 - i: value i outside its state's
         box (the certified range)."""
@@ -639,16 +640,14 @@ class App:
             if waiting:
                 self.sup_wait_ms += dt
             if self.lag_rec is not None and not needed and not waiting:
-                self._restore_lags(ev, t)  # once per table start: a stored state, if it is trusted
-                if self.supply == _SUPPLY_AWAITED and not self.unobserved:
-                    ev.supply_steady()  # restored without the controller's states: theirs at the present inputs
+                # once per table start: a stored state, if it is trusted (the supplied ones too while the controller's
+                # values have not come: they replace them when they do)
+                self._restore_lags(ev, t)
             link = self.obs_link
             if self.unobserved and not needed and not waiting and (
                     link == 0 or (link == 1 and self.have_pos) or (link == 2 and self.heard_spin)):
-                ev.observe()  # allocation-free (tests/firmware/test_fw_heaplock.py)
-                if self.supply == _SUPPLY_AWAITED:
-                    ev.supply_steady()  # started without the controller's states (they correct these when they come)
-                self.unobserved = False
+                ev.observe()  # allocation-free (tests/firmware/test_fw_heaplock.py); without the controller's values
+                self.unobserved = False  # the supplied states start at their estimate (they replace it when they come)
                 self.step_ms = 0
                 self.settle_s = 0
                 self.settle_ms = 0

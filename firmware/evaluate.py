@@ -146,6 +146,7 @@ class Evaluator:
             self.Uc = [0] * t.nf  # each filter's input now
             self.spin = 0  # spindle speed (rpm) and feed (mm/min) as the controller reported them
             self.fin = 0
+            self.sup_set = False  # the controller's supplied states (table.tauc) came (supply()): the board keeps them
             self.Slin = t.S0
         self.update()
         if self.kind == _KIND_SCREW_REDUCED:
@@ -452,8 +453,9 @@ class Evaluator:
         Y[j] = (rG[j] + sum_m Go[j*nf + m] x Uc[m] / 2**(shO - gO[j])) >> gO[j] (gO < 0: a coarser row, clamped to the
         box at its scale, then shifted up), clamped to its box (the
         exact state of a filter lies in it, so the clamp only removes error); the present inputs become the
-        last step's, as in rest(). A state the controller supplies (table.tauc) is not estimated: it keeps its value
-        (supply()). A table without an observer (obs 0) gets rest(): the cold start."""
+        last step's, as in rest(). A state the controller supplies (table.tauc) keeps its value once supply() set it;
+        before, its row estimates it as any other (without gains: its present input, the steady state). A table without
+        an observer (obs 0) gets rest(): the cold start."""
         t = self.table
         if not t.obs:
             self.rest()
@@ -472,18 +474,23 @@ class Evaluator:
         Y = self.Y
         Uc = self.Uc
         tc = t.tauc
+        sup = self.sup_set
         for j in range(nf):
-            if A[j] and not tc[j]:  # a supplied state (tauc) keeps what the controller sent (supply())
+            if A[j] and not (tc[j] and sup):  # a supplied state (tauc) keeps what the controller sent (supply())
                 g = gO[j]
                 acc = rG[j]
                 k = j * nf
+                gains = False
                 for m in range(nf):
                     c = Go[k + m]
                     if c:
+                        gains = True
                         acc += self._mul(_ACC_OMUL, c, Uc[m], LO, nO, shO[k + m] - g)
                         if chk:
                             self._note(_ACC_OSUM, acc)
-                if g >= 0:
+                if tc[j] and not gains:  # a supplied state without an estimate: its present input until the values come
+                    v = Uc[j] << t.fy[j]
+                elif g >= 0:
                     v = acc >> g
                 else:  # a row coarser than the state (an estimate that can reach far beyond its box): clamp, then scale
                     lo = Ylo[j] >> -g
@@ -506,10 +513,10 @@ class Evaluator:
     def set_lags(self, Y):
         """Every lag state from ``Y`` (a stored or computed state, already checked against its box: a warm restart,
         firmware/warmstate.py); the present inputs become the last step's, as in rest() and observe(). A term without
-        a lag keeps its input (update() sets it), a state the controller supplies (table.tauc) its value (supply())."""
+        a lag keeps its input (update() sets it), a state the controller supplies (table.tauc) its value once supply() set it."""
         t = self.table
         for j in range(t.nf):
-            if t.A[j] and not t.tauc[j]:
+            if t.A[j] and not (t.tauc[j] and self.sup_set):
                 self.Y[j] = Y[j]
             self.U0[j] = self.Uc[j]
         self.S = self._dsum(self.Slin)
@@ -529,15 +536,7 @@ class Evaluator:
             if t.tauc[j]:
                 self.Y[j] = vals[k]
                 k += 1
-        self.S = self._dsum(self.Slin)
-
-    def supply_steady(self):
-        """Every supplied state (table.tauc) at the steady state of its present input, Uc << fy: the start without the
-        controller's values (the host's start without a record, host/learning/empirical/observer.py record_lags)."""
-        t = self.table
-        for j in range(t.nf):
-            if t.tauc[j]:
-                self.Y[j] = self.Uc[j] << t.fy[j]
+        self.sup_set = True
         self.S = self._dsum(self.Slin)
 
     def extreme(self, sign):

@@ -247,7 +247,8 @@ _SCREW = ("M:M dt_ms:t fixed_end fmax:F edges=E | ft:f Tmax:T Ls:L ns:n fc:h gs:
 _SCREW_OBS = "obs:P settle_s:T sn:a sr:a Rn:T Lr:L nr:4 Gn=m shGn=m rN=m |"
 # the lag states the controller supplies (format 7, issue 21): per filter tauc, 0 (the board sets the state: its
 # observer, or rest) or the filter's time constant in ms (the controller runs that lag over its own record of the
-# spindle speed, its square or the feed, and sends the state at the table's start: `Y`, docs/protocol.md)
+# spindle speed, its square or the feed, and sends the state at the table's start: `Y`, docs/protocol.md; until it
+# does, the observer's row estimates it, or without gains the state is its present input)
 _DYNAMIC_SUPPLY = "tauc=j |"
 _DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F Lp:L np:4 shp2:s shp:s LX:L nX:4 LY:L nY:4 nf:N "
             "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j obs:P settle_s:T LO:L nO:4 Go=O shO=O gO=j rG=j |")
@@ -331,12 +332,9 @@ def _check(t):
             k = 0
             for j in range(t.nf):
                 c = t.tauc[j]
-                if c:  # only a lag of the controller's signals, only with an observer, never gains into it
+                if c:  # only a lag of the controller's signals, only with an observer (its row: the start without the values)
                     k += 1
-                    g = 0
-                    for m in range(t.nf):
-                        g |= t.Go[j * t.nf + m]
-                    if not (0 < c <= _MAX_TAU_MS and t.A[j] and -3 <= t.src[j] <= -1 and t.obs) or g or t.gO[j] or t.rG[j]:
+                    if not (0 < c <= _MAX_TAU_MS and t.A[j] and -3 <= t.src[j] <= -1 and t.obs):
                         raise TableError(REASON_FIELD, "supplied state %d: tau %d ms, source %d" % (j, c, t.src[j]))
             if k > _MAX_SUPPLIED:
                 raise TableError(REASON_FIELD, "%d supplied states, at most %d" % (k, _MAX_SUPPLIED))

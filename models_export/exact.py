@@ -470,15 +470,15 @@ class Model:
                               "terms %s" % (where, lagged))
         # the states the controller supplies (fit option spindle_states=controller): the table's tauc, the filter's
         # time constant in ms, by which the controller runs the same lag over its record (docs/protocol.md "Supplied
-        # lag states"); the document validated them (gains {}, bound 0, a spindle/feed signal), the table re-checks
+        # lag states"); their gains (if any) are the board's estimate until the controller's values come
         self.supplied: dict[int, int] = {}
         for s in states:
             if isinstance(s, dict) and "source" in s:
                 j = s.get("term")
                 t = self.dyn[j] if isinstance(j, int) and 0 <= j < len(self.dyn) else None
-                if s["source"] != "controller" or t is None or not isinstance(j, int) or t["src"] not in (-1, -2, -3) or s.get("gains"):
+                if s["source"] != "controller" or t is None or not isinstance(j, int) or t["src"] not in (-1, -2, -3) or s.get("bound") != 0:
                     raise ExportError("%s.states[term %r]: source %r on %s: only a lag of the spindle speed, its square or the "
-                                      "feed, without gains, can be supplied by the controller" % (
+                                      "feed, with bound 0, can be supplied by the controller" % (
                                           where, j, s["source"], t["signal"] if t is not None else "no such term"))
                 tau_ms = round(t["tau"] * 1000)
                 if not 0 < tau_ms <= (1 << 30) - 1:

@@ -291,19 +291,22 @@ class Planner:
             if t["a"] == 0:
                 continue
             if j in supplied:
-                # the controller sends round(its lag x 2**scale) in state units (host/board/supplied.py): the start is
-                # the exact state within half a unit, inside the box (the board refuses a value outside it)
                 f["tauc"][j] = supplied[j]
-                e0 = (F(-1, 2), F(1, 2))
-                self.obs_e0[j] = iv_abs(e0)
-                V = max(iv_abs(out[j]), iv_abs(e0))
-                if V > iv_abs(out[j]):
-                    out[j] = (-V, V)
-                self.obs_cert.append({"term": t["name"], "filter": j, "supplied_by": "controller", "tau_ms": supplied[j],
-                                      "start_error_units": 0.5, "start_error_signal_units": float(F(1, 2) / p2(t["fy"]) * t["per"]),
-                                      "state_box_units": [t["u"][0] << t["fy"], t["u"][1] << t["fy"]],
-                                      "estimate_clamped_in_envelope": False})
-                continue
+                if not any(G[j]):
+                    # no estimate: until the controller's values come the state is its present input (Evaluator.observe),
+                    # exact within the input's error, which v + |ein| covers; the controller sends round(its lag x
+                    # 2**scale) in state units (host/board/supplied.py): the start is the exact state within half a unit,
+                    # inside the box (the board refuses a value outside it)
+                    e0 = (F(-1, 2), F(1, 2))
+                    self.obs_e0[j] = iv_abs(e0)
+                    V = max(iv_abs(out[j]), iv_abs(e0))
+                    if V > iv_abs(out[j]):
+                        out[j] = (-V, V)
+                    self.obs_cert.append({"term": t["name"], "filter": j, "supplied_by": "controller", "tau_ms": supplied[j],
+                                          "start_error_units": 0.5, "start_error_signal_units": float(F(1, 2) / p2(t["fy"]) * t["per"]),
+                                          "state_box_units": [t["u"][0] << t["fy"], t["u"][1] << t["fy"]],
+                                          "estimate_clamped_in_envelope": False})
+                    continue
             bound = sum(abs(G[j][k]) * max(-terms[k]["u"][0], terms[k]["u"][1]) for k in range(nf))
             # the row's scale 2**g: guard bits (g > 0), or coarser than the state (g < 0) for an estimate that can reach far
             # beyond the state's box over the envelope (gains on temperatures into a spindle state, say)
@@ -339,6 +342,8 @@ class Planner:
                     f["shO"][j * nf + k] = sh + g
             f["gO"][j] = g
             f["rG"][j] = r
+            if j in supplied:  # the start is this estimate (no controller's values) or the controller's, within 1/2 unit
+                e0 = (min(e0[0], F(-1, 2)), max(e0[1], F(1, 2)))
             self.obs_e0[j] = iv_abs(e0)
             fy = t["fy"]
             Ylo, Yhi = t["u"][0] << fy, t["u"][1] << fy
@@ -354,6 +359,7 @@ class Planner:
             if V > iv_abs(out[j]):
                 out[j] = (-V, V)
             self.obs_cert.append({"term": t["name"], "filter": j, "guard_bits": g, "start_error_units": float(iv_abs(e0)),
+                                  **({"supplied_by": "controller", "tau_ms": supplied[j]} if j in supplied else {}),
                                   "start_error_signal_units": float(iv_abs(e0) / p2(fy) * t["per"]),
                                   "estimate_units_over_envelope": [float(est[0]), float(est[1])], "state_box_units": [Ylo, Yhi],
                                   "estimate_clamped_in_envelope": bool(est[0] < Ylo or est[1] > Yhi)})

@@ -26,14 +26,14 @@ SUPPLIED = ("spindle_krpm", "spindle_krpm2", "feed_m_min")
 PER_SOURCE_UNIT = {"spindle_krpm": 1e-3, "spindle_krpm2": 1e-6, "feed_m_min": 1e-3}
 
 
-def _doc(seed, target="direct", dt_s=15.0):
+def _doc(seed, target="direct", dt_s=15.0, keep_gains=False):
     rng = random.Random(seed)
     sig = ["T:T0", "T:T1", "spindle_krpm", "spindle_krpm2", "feed_m_min"]
     doc = dynamic_doc(rng, target, dt_s=dt_s, n_sensors=3, signals=sig)
     for t, tau in zip(doc["thermal"]["terms"], (1800.0, 0.0, 3600.0, 7200.0, 900.0)):
         t["tau_s"] = tau
     doc["envelope"]["spindle_rpm"] = [0, 12000]
-    return with_supplied(with_observer(restamp(doc), random.Random(seed)))
+    return with_supplied(with_observer(restamp(doc), random.Random(seed)), keep_gains=keep_gains)
 
 
 def test_table_marks_the_supplied_states_with_their_time_constants():
@@ -56,7 +56,7 @@ def test_table_marks_the_supplied_states_with_their_time_constants():
             assert t.Ylo[j] == 0 and t.Yhi[j] == top[t.src[j]] * 2 ** ev.supply_scale(j), (j, t.src[j])
     cert = {c["term"]: c for c in ex.report["dynamic"]["observer"]["states"]}
     marked = [c for c in cert.values() if c.get("supplied_by") == "controller"]
-    assert len(marked) == 3 and all(c["start_error_units"] == 0.5 for c in marked)
+    assert len(marked) == 3 and all(c["start_error_units"] == 0.5 for c in marked)  # gains {}: the controller's rounding
 
 
 @pytest.mark.parametrize("seed, target", [(0, "direct"), (1, "slope"), (2, "direct")])
@@ -86,6 +86,32 @@ def test_board_started_with_the_supplied_states_follows_the_host_within_the_cert
     off, off_rest = follow_host(ev, t, doc, [y, rest], temps, rpm, feed, rng)
     assert off <= cert, (off, cert)
     assert off_rest > 100 * cert  # the supplied values matter: started without them the board is far off
+    assert_inside_certified_accumulators(ev, ex)
+
+
+@pytest.mark.parametrize("seed, target", [(3, "direct"), (4, "slope")])
+def test_before_the_controllers_values_the_board_follows_the_hosts_estimate(seed, target):
+    """A fit writes gains for the supplied states too: the estimate a board starts them at when the controller's values do
+    not come (no --signal-record; the host's predict without --controller-history). The board's start is the host's
+    float estimate within the certified start error, and from there it stays within max_error_um; taking the steady
+    state of the first speed instead (the start without gains) it does not."""
+    doc = _doc(seed, target, keep_gains=True)
+    ex, t, terms, est, ev, (temps, rpm, feed), u0, rng = board_and_host_start(doc, seed)
+    assert any(t.tauc[j] and any(t.Go[j * t.nf + m] for m in range(t.nf)) for j in range(t.nf))  # the rows are in the table
+    cert = {c["filter"]: c for c in ex.report["dynamic"]["observer"]["states"]}
+    y, steady = [], []
+    for j, (n, tau, _) in enumerate(terms):
+        if tau > 0:
+            per = observer_input_unit(n, t) / 2.0 ** t.fy[j]
+            y.append(min(max(est[j], t.Ylo[j] * per), t.Yhi[j] * per))
+            assert abs(ev.Y[j] * per - y[-1]) <= cert[j]["start_error_units"] * per + 1e-12, (j, n)
+            steady.append(u0[n] if n in SUPPLIED else y[-1])
+        else:
+            y.append(u0[n])
+            steady.append(u0[n])
+    off, off_steady = follow_host(ev, t, doc, [y, steady], temps, rpm, feed, rng)
+    assert off <= ex.report["max_error_um"], off
+    assert off_steady > 10 * ex.report["max_error_um"], off_steady
     assert_inside_certified_accumulators(ev, ex)
 
 

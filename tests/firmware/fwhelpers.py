@@ -40,6 +40,8 @@ def make_table(**kw):
         return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0))
     if kw.get("kind") == "dynamic_supplied":
         return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0), supplied=True)
+    if kw.get("kind") == "dynamic_supplied_gains":
+        return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0), supplied="gains")
     if kw.get("kind") == "screw":
         return screw_table(kw["sensors"])
     if kw.get("kind") == "screw_observer":
@@ -50,7 +52,8 @@ def make_table(**kw):
 def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None, supplied=False):
     """An exported, certified dynamic table over ``sensors`` reading every kind of signal; 1 s filter step.
     ``observer``: None, or the settle_s of an observer (issue 21; the table then has the fixed reference).
-    ``supplied``: its spindle, squared-speed and feed lag states are supplied by the controller (table format 7)."""
+    ``supplied``: its spindle, squared-speed and feed lag states are supplied by the controller (table format 7);
+    "gains": with the observer's gains for them (the estimate until the controller's values come, as a fit writes)."""
     import random
     from hil_tests.fixtures.samples import dynamic_doc
     from models_export import export_model
@@ -63,7 +66,7 @@ def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None, supplied=False):
     if observer is not None:
         doc = with_observer(doc, random.Random(seed), settle_s=observer)
     if supplied:
-        doc = with_supplied(doc)
+        doc = with_supplied(doc, keep_gains=supplied == "gains")
     return export_model(restamp(doc)).table
 
 

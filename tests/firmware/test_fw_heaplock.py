@@ -51,7 +51,7 @@ def test_cycle_allocates_nothing_under_heap_lock(tmp_path, mpy_dir, mode, kind):
     table whose spindle and feed lags the controller supplies (format 7): halfway through, its start waits for them
     again, starts without them after 10 s (their steady state) and takes them 20 cycles before the end, under the lock."""
     names = ["T%d" % i for i in range(1, 12)]
-    table = {"dynamic": "dynamic_observer", "screw": "screw_observer"}.get(kind, kind)
+    table = {"dynamic": "dynamic_observer", "screw": "screw_observer", "dynamic_supplied": "dynamic_supplied_gains"}.get(kind, kind)
     sup = kind == "dynamic_supplied"
     kind = "dynamic" if sup else kind
     (tmp_path / "table_a.bin").write_bytes(make_table(kind=table, sensors=names))

@@ -207,3 +207,31 @@ def test_without_the_controller_the_board_starts_after_10_s_and_takes_the_states
     assert [app.ev.Y[j] for j in sup] == vals
     run_cycles(app, board, 1)
     assert not app.status & SETTLING  # the estimate is older than settle_s and the states came
+
+
+def test_without_the_controller_a_fitted_table_starts_them_at_its_estimate(tmp_path):
+    """A fit writes gains for the supplied states (the estimate until the controller's values come): after 10 s without
+    them the board starts them there, as the other lag states, not at the steady state; the values replace it."""
+    from firmware.evaluate import Evaluator
+    app, board = _app(tmp_path, kind="dynamic_supplied_gains")
+    _send(app, board, cmd(b"TC,P,0,6000"))
+    _send(app, board, cmd(b"TC,M,1000,0,0"))
+    run_cycles(app, board, 105)
+    t = app.table
+    sup = [j for j in range(t.nf) if t.tauc[j]]
+    assert not app.unobserved and app.supply == SUPPLY_AWAITED and app.status & SETTLING
+    # the same table's observer on the same inputs, in a fresh evaluator: the supplied rows are estimated like the others
+    ev = Evaluator(t)
+    ev.temps[:] = app.ev.temps
+    ev.set_spindle(6000)
+    ev.set_feed_rate(1000)
+    ev.update()
+    ev.observe()
+    steady = {-1: 6000, -2: 6000 ** 2, -3: 1000}
+    for j in sup:
+        assert abs(app.ev.Y[j] - ev.Y[j]) <= abs(ev.Y[j]) * 0.02 + 4, j  # one filter step since the start at most
+        assert abs(ev.Y[j] / 2.0 ** ev.supply_scale(j) - steady[t.src[j]]) > 0.01 * steady[t.src[j]], j  # not the steady state
+    _, entries = _dictionary(app, board)
+    vals = _values(app, entries, 0.5)
+    out = _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in vals)))
+    assert out[0][3:] == ["A", "Y", "S", "1"] and [app.ev.Y[j] for j in sup] == vals

@@ -62,8 +62,8 @@ def run(args: argparse.Namespace) -> int:
     if supplied:
         # an integration requirement: the controller must send these at the board's start (docs/linuxcnc.md)
         print("NOTE: the controller supplies %d lag state(s) of this table (%s): run `tcomp linuxcnc --spindle "
-              "--signal-record FILE`; without them the board starts them 10 s after boot at their steady "
-              "state and keeps SETTLING until they come" % (len(supplied), ", ".join(c["term"] for c in supplied)), file=sys.stderr)
+              "--signal-record FILE`; without them the board starts them 10 s after boot at the observer's "
+              "estimate and keeps SETTLING until they come" % (len(supplied), ", ".join(c["term"] for c in supplied)), file=sys.stderr)
     obs = (r.get("screw") or {}).get("observer") or {}
     if obs.get("in_document") and not obs.get("carried"):
         # the document's power-on state estimate (issue 21) left out of the table (a document without its nut sensor's

@@ -600,7 +600,8 @@ class DynamicModel(DocumentFields):
     def thermal_at(self, run: Run, times: ArrayLike, history: Sequence[Run] | None = None,
                    controller_history: Sequence[Run] | None = None) -> np.ndarray:
         """Thermal output at ``times`` of ``run``; ``history``: earlier runs (oldest first) the states run through first;
-        ``controller_history``: earlier runs whose spindle/feed logs are the controller's record (observer.controller_states)."""
+        ``controller_history``: earlier runs whose spindle/feed logs are the controller's record (observer.controller_states);
+        None: no controller's values (the supplied states start at the observer's estimate)."""
         if self.observer is None and not history:
             return self.intercept + features(run, self.terms, times) @ self.term_coefficients
         from host.learning.empirical.observer import board_terms
@@ -608,6 +609,8 @@ class DynamicModel(DocumentFields):
         if self.observer is None:
             raise EmpiricalDataError("dynamic: this model has no observer (thermal.reference 'run_start': its inputs are rises over "
                                      "the run's own start), so a history cannot carry its states into the run; refit it to get one")
+        if history and controller_history is None:
+            controller_history = []  # the board and the controller ran through the history together, from its first sample
         t, cols = board_terms(self, list(history or []) + [run], controller_history=controller_history)
         times = np.atleast_1d(np.asarray(times, dtype=float))
         t_run = run.temperatures.time_s

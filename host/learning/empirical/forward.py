@@ -158,7 +158,10 @@ def block_residuals(model: Any, run: Run, block: dict[str, Any], controller_hist
     ``controller_history``: the controller's record before ``run``, for a model with states the controller supplies."""
     from host.learning.empirical.observer import reads_controller
 
-    pred = model.predict(run, controller_history=controller_history) if controller_history and reads_controller(model) else model.predict(run)
+    # an empty record is a controller that starts with the run (the supplied states at its first input); None, no
+    # controller's values at all (the states the controller supplies then start at the observer's estimate)
+    pred = (model.predict(run, controller_history=controller_history) if controller_history is not None and reads_controller(model)
+            else model.predict(run))
     rows = model._rows(run)
     t = run.errors.time_s[rows]
     rows = rows[(t >= block["t_start_s"]) & (t <= block["t_end_s"])]

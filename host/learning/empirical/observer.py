@@ -108,7 +108,9 @@ class Observer:
                 "states": [{"term": int(s["term"]),
                             "gains": {k: float(v) for k, v in s["gains"].items()},
                             "bound": float(s["bound"]), "rms": float(s["rms"]),
-                            **({"source": CONTROLLER} if s.get("source") == CONTROLLER else {})} for s in self.states]}
+                            **({"source": CONTROLLER} if s.get("source") == CONTROLLER else {}),
+                            **({"bound_without_record": float(s["bound_without_record"])} if "bound_without_record" in s else {})}
+                           for s in self.states]}
 
     @classmethod
     def from_document(cls, obs: Any, terms: Sequence[tuple[str, float]], observer_only: Sequence[str] = ()) -> Observer:
@@ -139,10 +141,13 @@ class Observer:
                 if not num(s.get(key)) or s[key] < 0:
                     raise ModelFormatError("%s.states[%d].%s must be a finite number >= 0, found %r" % (where, i, key, s.get(key)))
             if "source" in s:
-                if s["source"] != CONTROLLER or terms[s["term"]][0] not in CONTROLLER_SIGNALS or s.get("gains") != {} or s["bound"] != 0:
-                    raise ModelFormatError("%s.states[%d]: source %r is allowed only as 'controller', on a lag of %s, with gains {} "
-                                           "and bound 0 (the controller supplies that state exactly); found %r"
-                                           % (where, i, s["source"], " / ".join(CONTROLLER_SIGNALS), s))
+                if s["source"] != CONTROLLER or terms[s["term"]][0] not in CONTROLLER_SIGNALS or s["bound"] != 0:
+                    raise ModelFormatError("%s.states[%d]: source %r is allowed only as 'controller', on a lag of %s, with bound 0 "
+                                           "(the controller supplies that state exactly; its gains are the estimate until it does); "
+                                           "found %r" % (where, i, s["source"], " / ".join(CONTROLLER_SIGNALS), s))
+            if "bound_without_record" in s and ("source" not in s or not num(s["bound_without_record"]) or s["bound_without_record"] < 0):
+                raise ModelFormatError("%s.states[%d].bound_without_record belongs to a state the controller supplies and must be a "
+                                       "finite number >= 0, found %r" % (where, i, s.get("bound_without_record")))
             g = s.get("gains")
             if not isinstance(g, dict) or any(k not in regressors for k in g) or not all(num(v) for v in g.values()):
                 raise ModelFormatError("%s.states[%d].gains must map the model's signals (%s) to finite numbers, found %r"
@@ -228,7 +233,7 @@ def board_terms(model: DynamicModel, runs: Sequence[Run], observer: bool = True,
     t, sig = _chain(model, runs)
     est = model.observer.initial_states({n: sig[n][0] for n in regressors_of(model)}) if observer and model.observer is not None else {}
     if est and model.observer is not None:
-        est.update(controller_states(model, controller_history or [], runs[0]))
+        est.update(controller_states(model, controller_history, runs[0], {n: sig[n][0] for n in signals_of(model.terms)}))
     cols = np.empty((t.size, len(model.terms)))
     for j, (name, tau) in enumerate(model.terms):
         y0 = est.get(j, sig[name][0])
@@ -245,15 +250,19 @@ def reads_controller(model: Any) -> bool:
     return any(s.get("source") == CONTROLLER for s in getattr(getattr(model, "observer", None), "states", None) or [])
 
 
-def controller_states(model: DynamicModel, record: Sequence[Run], run: Run) -> dict[int, float]:
+def controller_states(model: DynamicModel, record: Sequence[Run] | None, run: Run, first: Mapping[str, float]) -> dict[int, float]:
     """{term index: y_j} of the lag states the controller supplies (observer states of ``source`` "controller") when a
     board starts at ``run``'s first sample: the lag of the signal over the controller's ``record`` (earlier runs, oldest
     first, one clock, ending at or before the run starts; their spindle.csv / motion.csv only) and the run's first
-    sample, started at the record's first input (at rest, as the training's states start). Without a record: the
-    steady state of the run's first input (what a controller that starts with the run knows)."""
+    sample, started at the record's first input (at rest, as the training's states start). An empty record: the steady
+    state of the run's first input (a controller that starts with the run). ``None``, no controller's values at all
+    (the board's start after _SUPPLY_WAIT_MS): the observer's estimate where the state has gains (left out here: the
+    caller's estimate stands), else the steady state of the first input ``first[signal]``."""
     states = [s for s in (model.observer.states if model.observer is not None else []) if s.get("source") == CONTROLLER]
     if not states:
         return {}
+    if record is None:
+        return {s["term"]: first[model.terms[s["term"]][0]] for s in states if not s["gains"]}
     values = record_lags(record, run, [model.terms[s["term"]] for s in states])
     return {s["term"]: v for s, v in zip(states, values)}
 
@@ -292,7 +301,8 @@ def fit_observer(model: DynamicModel, runs: Sequence[Run], spans: Sequence[tuple
     training assumes). ``scale``: the thermal output's size in µm per model unit
     (1 for a direct model; a slope model's largest position in mm), so that the
     tolerance is in µm of offset. ``controller``: signals (spindle/feed) whose lag states the controller supplies at
-    power-on from its own record of the signal (exact: gains {}, bound 0, ``source`` "controller"). ``spans``: per run, the (first, last) training time; samples
+    power-on from its own record of the signal (exact: bound 0, ``source`` "controller"; their gains and
+    ``bound_without_record`` are the estimate until the record's value comes). ``spans``: per run, the (first, last) training time; samples
     outside it, or inside ``exclude`` = (lo, hi), do not enter the fit (what the model was not
     fitted on, e.g. a held-out period, must not shape its observer either).
     """
@@ -319,13 +329,15 @@ def fit_observer(model: DynamicModel, runs: Sequence[Run], spans: Sequence[tuple
     states = []
     controller = set(controller)
     for k, j in enumerate(lagged):
-        if model.terms[j][0] in controller:
-            states.append({"term": j, "signal": model.terms[j][0], "gains": {}, "bound": 0.0, "rms": 0.0, "source": CONTROLLER})
-            continue
         coef = np.linalg.lstsq(A, Y[:, k], rcond=None)[0]
         res = Y[:, k] - A @ coef
-        states.append({"term": j, "signal": model.terms[j][0], "gains": dict(zip(names, (float(v) for v in coef))),
-                       "bound": float(np.abs(res).max()), "rms": float(np.sqrt(np.mean(res**2)))})
+        state = {"term": j, "signal": model.terms[j][0], "gains": dict(zip(names, (float(v) for v in coef))),
+                 "bound": float(np.abs(res).max()), "rms": float(np.sqrt(np.mean(res**2)))}
+        if model.terms[j][0] in controller:
+            # supplied by the controller: exact with its record (bound 0, what settle_s counts); the gains are the
+            # estimate a board uses until the record's value comes (a controller that does not send it)
+            state.update(source=CONTROLLER, bound=0.0, bound_without_record=state["bound"])
+        states.append(state)
     return Observer(states, settle_time(model, states, tolerance, scale), tolerance, scale)
 
 

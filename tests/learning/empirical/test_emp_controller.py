@@ -60,16 +60,19 @@ def test_the_controllers_record_carries_the_state_no_sensor_reveals(fits):
     assert spin, controlled.terms  # a spindle lag: its state is exactly known at a switch-on
     for s in controlled.observer.states:
         assert (s.get("source") == CONTROLLER) == (s["term"] in spin)
-        if s["term"] in spin:
-            assert s["gains"] == {} and s["bound"] == 0.0
+        if s["term"] in spin:  # exact with the record; its gains are the estimate until the record's value comes
+            assert s["bound"] == 0.0 and s["bound_without_record"] > 0 and s["gains"]
     cut, before = slice_run(run, SPLIT), slice_run(run, 0.0, SPLIT)
     truth = cut.errors.error_um
     with_record = _rmse(controlled.predict(cut, controller_history=before), truth)
-    without_record = _rmse(controlled.predict(cut), truth)
+    steady = _rmse(controlled.predict(cut, controller_history=[]), truth)  # a controller that starts with the board
+    without_record = _rmse(controlled.predict(cut), truth)  # no controller's values: the observer's gains estimate them
     observer_only = _rmse(observed.predict(cut), truth)
-    # the board switched on at the split predicts the future well only with the controller's record
+    # the board switched on at the split predicts the future well with the controller's record; the model fitted without
+    # the option, or the states at the first speed's steady state, do not; the estimate from the sensors is in between
     assert with_record < 0.5 * observer_only, (with_record, observer_only)
-    assert with_record < 0.5 * without_record, (with_record, without_record)
+    assert with_record < 0.5 * steady, (with_record, steady)
+    assert with_record < without_record < steady, (with_record, without_record, steady)
     # the supplied state is the spindle's exact lag at the split (the test-side solution, started in equilibrium with the
     # record's first input, as observer.controller_states says: the spindle runs from 0 h here)
     k = int(SPLIT / DT)
@@ -115,7 +118,7 @@ def test_the_document_keeps_the_source_and_the_table_marks_it(fits, tmp_path):
     np.testing.assert_allclose(back.predict(cut, controller_history=before), controlled.predict(cut, controller_history=before))
     states = doc["thermal"]["observer"]["states"]
     i = next(i for i, s in enumerate(states) if s.get("source") == CONTROLLER)
-    for bad in ({"gains": {"T:t1": 0.1}}, {"bound": 0.5}, {"source": "operator"}):
+    for bad in ({"gains": {"T:nosuch": 0.1}}, {"bound": 0.5}, {"source": "operator"}, {"bound_without_record": -1.0}):
         tampered = json.loads(json.dumps(doc))
         tampered["thermal"]["observer"]["states"][i].update(bad)
         with pytest.raises(ModelFormatError, match=r"states\[%d\]" % i):
@@ -128,8 +131,8 @@ def test_the_document_keeps_the_source_and_the_table_marks_it(fits, tmp_path):
                                                 for j, (_, s_tau) in enumerate(controlled.terms)]
     assert any(t.tauc)
     tampered = json.loads(json.dumps(doc))
-    tampered["thermal"]["observer"]["states"][i]["gains"] = {"T:t1": 0.1}
-    with pytest.raises(ExportError, match="only a lag of the spindle speed, its square or the feed, without gains"):
+    tampered["thermal"]["observer"]["states"][i]["bound"] = 0.5
+    with pytest.raises(ExportError, match="only a lag of the spindle speed, its square or the feed, with bound 0"):
         export_model(tampered, allow_edited=True)
     with pytest.raises(EmpiricalDataError, match="spindle_states must be observer or controller, got 'board'"):
         fit_model([run], "dynamic", spindle_states="board", **FIT)
