@@ -21,7 +21,8 @@ Checked per answer after the restart:
 * the board does not start before the states come (SETTLING, and no estimate), and SETTLING clears settle_s after them.
 The figures printed: the largest deviation of the restarted board from the uninterrupted model (`predict(run from R,
 history=run to R)`), and the host's board switched on at R without the controller's record (the supplied states at the
-steady state of the first speed, what `predict` does without a record), which must be far outside the bound: the test
+steady state of the first speed: the fixture was fitted before a fit wrote the observer's gains for supplied states, so
+it has none, and `predict` without a record starts them there), which must be far outside the bound: the test
 fails if the controller's values do not reach the board (measured: with the `Y` values replaced by the first speed's
 steady state, the board answers 25.3 um where the host with the record predicts 16.4 um, 15 s after the reset).
 
