@@ -164,12 +164,19 @@ class SignalRecord:
         try:
             with open(path) as fh:
                 doc = json.load(fh)
-            if doc.get("format") != RECORD_FORMAT:
-                raise SupplyError("%s: not a tcomp signal record (format %r, expected %r)" % (path, doc.get("format"), RECORD_FORMAT))
+        except (OSError, ValueError) as exc:
+            raise SupplyError("%s: unreadable signal record (%s)" % (path, exc)) from None
+        if not isinstance(doc, dict) or doc.get("format") != RECORD_FORMAT:
+            raise SupplyError("%s: not a tcomp signal record (format %r, expected %r)"
+                              % (path, doc.get("format") if isinstance(doc, dict) else None, RECORD_FORMAT))
+        try:
             events = [(float(t), float(r), float(f)) for t, r, f in doc["events"]]
             last = doc["last_t"]
-        except (OSError, ValueError, KeyError, TypeError) as exc:
+            last = None if last is None else float(last)
+        except (ValueError, KeyError, TypeError) as exc:
             raise SupplyError("%s: unreadable signal record (%s)" % (path, exc)) from None
+        if not all(math.isfinite(v) for e in events for v in e) or (last is not None and not math.isfinite(last)):
+            raise SupplyError("%s: the signal record holds a value that is not finite" % path)
         if last is None or not events:
             return rec
         if last > now:

@@ -76,6 +76,12 @@ def test_record_survives_the_controllers_restart_with_the_spindle_stopped(tmp_pa
     (tmp_path / "bad.json").write_text(json.dumps({"format": "x"}))
     with pytest.raises(SupplyError, match="bad.json: not a tcomp signal record"):
         SignalRecord.load(str(tmp_path / "bad.json"), now=1e9)
+    (tmp_path / "nan.json").write_text('{"format": "tcomp-signal-record-1", "events": [[1, NaN, 0]], "last_t": 5}')
+    with pytest.raises(SupplyError, match="nan.json: the signal record holds a value that is not finite"):
+        SignalRecord.load(str(tmp_path / "nan.json"), now=1e9)
+    (tmp_path / "other.json").write_text("[1, 2]")
+    with pytest.raises(SupplyError, match="other.json: not a tcomp signal record"):
+        SignalRecord.load(str(tmp_path / "other.json"), now=1e9)
     (tmp_path / "torn.json").write_text('{"format": "tcomp-signal-record-1", "ev')
     with pytest.raises(SupplyError, match="torn.json: unreadable signal record"):
         SignalRecord.load(str(tmp_path / "torn.json"), now=1e9)

@@ -66,6 +66,16 @@ def run(args: argparse.Namespace) -> int:
     from host.board.linuxcnc.bridge import Bridge, ModbusLink, StreamLink
 
     _check(args)
+    record = None
+    if args.signal_record:
+        import time
+        from host.board.supplied import SignalRecord, SupplyError
+        try:
+            record = SignalRecord.load(args.signal_record, time.time())
+        except SupplyError as exc:
+            raise UserError(str(exc))
+        _log("signal record %s: %d events%s" % (args.signal_record, len(record.events),
+                                                 "" if record.events else " (new: the lags start at the first speed)"))
     from host.board.linkauth import signer_for_option
     signer = signer_for_option(args.key)
     try:
@@ -96,16 +106,6 @@ def run(args: argparse.Namespace) -> int:
     if slew is None:
         slew = dict((k, d) for k, d, _, _ in TOP)["slew_um_per_s"]
         _log("slew limit: firmware default %g um/s (give --slew-um-per-s if the board's config differs)" % slew)
-    record = None
-    if args.signal_record:
-        import time
-        from host.board.supplied import SignalRecord, SupplyError
-        try:
-            record = SignalRecord.load(args.signal_record, time.time())
-        except SupplyError as exc:
-            raise UserError(str(exc))
-        _log("signal record %s: %d events%s" % (args.signal_record, len(record.events),
-                                                 "" if record.events else " (new: the lags start at the first speed)"))
     bridge = Bridge(link, slew, units=args.units, stale_s=args.stale_ms / 1000.0,
                     recover_s=args.recover_ms / 1000.0, cold_start=args.cold_start, log=_log,
                     max_dt_s=2 * args.period_ms / 1000.0, send_spindle=args.spindle, record=record,
