@@ -57,21 +57,20 @@ _UPLOAD_IDLE_MS = const(60000)  # an upload without a chunk for this long is aba
 # queued in the controller's or the UART's buffers arrive closer together than they were sent)
 _POS_JITTER_MS = const(200)
 _NEED_CAP = const(8000000)  # d // v beyond this: the time needed exceeds _CAP (the sums below stay small ints)
-# A dynamic table's stored lag states (lags.bin) are trusted at a restart only if the machine is where it was at the
-# write (docs/firmware.md, "Warm restarts of the lag states", where the two limits were measured on FL_THERMAL): every
-# sensor the table reads within _LAG_DRIFT_MK of its reading then, and (with an observer) the observer's estimate from
-# the temperatures now within _LAG_AGREE (0.01 um of output) of its estimate from those then.
 # the lag states the controller supplies (wire.SUPPLY_*; tests/firmware/test_fw_consts.py checks the copies)
 _SUPPLY_NONE = const(0)
 _SUPPLY_AWAITED = const(1)
 _SUPPLY_SET = const(2)
 _MAX_SUPPLIED = const(4)
-# how long a table's start waits for the controller's supplied states before it starts without them (the supplied
-# states at the observer's estimate, or without gains at the steady state of the present input; SETTLING kept raised
-# until they come): the bridge sends them in its
-# first exchange after it hears the board, so 10 s covers a bridge started with the board; one started later corrects
-# the states when it comes (docs/firmware.md "Supplied lag states")
+# how long a table's start waits for them before it starts without them (at the observer's estimate, or without gains
+# at the steady state of the present input; SETTLING stays raised until they come): the bridge sends them in its first
+# exchange after it hears the board, so 10 s covers a bridge started with the board; one started later corrects the
+# states when it comes (docs/firmware.md "Supplied lag states")
 _SUPPLY_WAIT_MS = const(10000)
+# A dynamic table's stored lag states (lags.bin) are trusted at a restart only if the machine is where it was at the
+# write (docs/firmware.md, "Warm restarts of the lag states", where the two limits were measured on FL_THERMAL): every
+# sensor the table reads within _LAG_DRIFT_MK of its reading then, and (with an observer) the observer's estimate from
+# the temperatures now within _LAG_AGREE (0.01 um of output) of its estimate from those then.
 _LAG_DRIFT_MK = const(1000)
 _LAG_AGREE = const(1000)
 # lag_verdict: what became of lags.bin at this table's start (App._restore_lags; docs/firmware.md)
