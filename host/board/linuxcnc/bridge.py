@@ -409,7 +409,6 @@ class Bridge:
         self.saved_at: float | None = None
         self.next_dictionary_s = 0.0
         self.last_supply = ""
-        self.logged_supply = ""
         if record is not None:
             link.supplier = self._supply_values
         self.ramp = OffsetRamp(slew_um_per_s)
@@ -530,10 +529,9 @@ class Bridge:
             ex = self.link.exchange(pos_um, latch=send_latch)
         if ex.supply and ex.supply != self.last_supply:  # said once per outcome (the SETTLING poll repeats it)
             self.last_supply = ex.supply
-        if ex.supply and ex.supply != "none" and ex.supply == self.last_supply and self.logged_supply != ex.supply:
-            self.logged_supply = ex.supply
-            self.log("supplied lag states: %s" % {"set": "the board took them", "kept": "the board set them at its table's start already"}.get(
-                ex.supply, ex.supply))
+            if ex.supply != "none" and not ex.supply.startswith("sent:"):  # the values sent: _supply_values said them
+                self.log("supplied lag states: %s" % {"set": "the board took them",
+                                                      "kept": "the board set them at its table's start already"}.get(ex.supply, ex.supply))
         if ex.latch:
             self._latch_reply(now, ex.latch)
         elif send_latch and ex.error:
