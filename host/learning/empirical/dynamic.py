@@ -212,6 +212,25 @@ class StartedColumns:
         return self.rest[:, cols] + self.decay[:, cols] * np.asarray(self.start(cols), dtype=float)
 
 
+class WorseOfStarts:
+    """One forward block scored by the worse of several starts of the same board (dynamic option
+    ``controller_scoring=worse``): :class:`StartedColumns` that share the block's inputs and targets and differ only in
+    their start estimates, e.g. the spindle lag states from the controller's record and from the observer's estimate
+    (a controller that does not send them). The block's squared error for a structure is the largest over the starts.
+    Built by host/learning/empirical/forward.py (``observer_block_columns``)."""
+
+    def __init__(self, starts: Sequence[StartedColumns]) -> None:
+        self.starts = list(starts)
+        if not self.starts:
+            raise EmpiricalDataError("dynamic: a block scored by the worse of its starts needs at least one start")
+
+
+def _block_sse(moments, beta, idx, cols):
+    """Held-out squared error of coefficients ``beta`` (scaled, on ``idx``) from a block's moments."""
+    Gv, cv_, yy, _ = moments(idx, cols)
+    return max(yy - 2 * beta @ cv_ + beta @ Gv @ beta, 0.0)
+
+
 class _FixedMoments:
     """A scored block's moments when its columns do not depend on the structure: Gram, moment, y'y, n."""
 
@@ -220,6 +239,9 @@ class _FixedMoments:
 
     def __call__(self, idx, cols):
         return self.G[np.ix_(idx, idx)], self.c[idx], self.yy, self.n
+
+    def sse(self, beta, idx, cols):
+        return _block_sse(self, beta, idx, cols)
 
 
 class _StartedMoments:
@@ -242,13 +264,29 @@ class _StartedMoments:
         G = self.RR[ix] + RDw + RDw.T + self.DD[ix] * np.outer(w, w)
         return G, self.ry[idx] + w * self.dy[idx], self.yy, self.n
 
+    def sse(self, beta, idx, cols):
+        return _block_sse(self, beta, idx, cols)
+
+
+class _WorseMoments:
+    """A block scored by the worse of its starts (:class:`WorseOfStarts`): the largest squared error over them."""
+
+    def __init__(self, starts: Sequence[_StartedMoments]) -> None:
+        self.starts = list(starts)
+        self.n = self.starts[0].n
+
+    def sse(self, beta, idx, cols):
+        return max(m.sse(beta, idx, cols) for m in self.starts)
+
 
 def _fixed_moments(G, c, yy, n):
     return _FixedMoments(G, c, yy, n)
 
 
 def _held_moments(spec, scale, o, label):
-    """Moments of a scored block given as switched-on columns: (F_k, y_k), or StartedColumns."""
+    """Moments of a scored block given as switched-on columns: (F_k, y_k), StartedColumns, or WorseOfStarts."""
+    if isinstance(spec, WorseOfStarts):
+        return _WorseMoments([_held_moments(s, scale, o, label) for s in spec.starts])
     if isinstance(spec, StartedColumns):
         if not (np.isfinite(spec.rest).all() and np.isfinite(spec.decay).all() and np.isfinite(spec.y).all()):
             raise EmpiricalDataError("dynamic: NaN/inf in the switched-on columns of block %s" % label)
@@ -420,8 +458,7 @@ class DynamicRegression:
                 if np.linalg.cond(M) > 1e12:
                     return None
                 beta = np.linalg.solve(M, ct[idx])
-                Gv, cv_, yy, _ = held(idx, cols)  # the scored block's moments on these columns (idx: with the intercept)
-                sse.append(max(yy - 2 * beta @ cv_ + beta @ Gv @ beta, 0.0))
+                sse.append(held.sse(beta, idx, cols))  # the scored block's error on these columns (idx: with the intercept)
             return sse
 
         def cv(cols):
@@ -497,11 +534,12 @@ class DynamicRegression:
                 "history_": history, "n_samples_": n_all, "n_groups_": int(labels.size), "ridge_": ridge,
                 "settle_bound_": None if screen is None else screen.record()}
 
-    def with_block_columns(self, columns: Mapping[Any, tuple[np.ndarray, np.ndarray] | StartedColumns]) -> DynamicRegression:
+    def with_block_columns(self, columns: Mapping[Any, tuple[np.ndarray, np.ndarray] | StartedColumns | WorseOfStarts]) -> DynamicRegression:
         """Score forward block ``label`` on ``columns[label]``: the candidate columns as a board switched on at the
         block's start computes them (host/learning/empirical/forward.py), instead of the rows of ``X`` (filters running
         since the run start): ``(F_k, y_k)`` when they do not depend on the structure (filters from rest), a
-        :class:`StartedColumns` when the states start at the structure's observer estimate. Returns self."""
+        :class:`StartedColumns` when the states start at the structure's observer estimate, a :class:`WorseOfStarts`
+        when the block is scored by the worse of several starts. Returns self."""
         self.block_columns = dict(columns)
         return self
 

@@ -296,6 +296,12 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
 
     # the spindle/feed lag states the controller supplies at a board's start (docs/empirical.md "Controller's record")
     controller = CONTROLLER_SIGNALS if spindle_states == "controller" else ()
+    # how a switched-on block scores those states: from the record, or the worse of that and without it (forward.py)
+    controller_scoring = opts.pop("controller_scoring", None)
+    if controller_scoring is not None and (controller_scoring not in forward.CONTROLLER_SCORINGS or not controller):
+        raise EmpiricalDataError("dynamic: controller_scoring must be one of %s, and needs spindle_states=controller; got %r "
+                                 "with spindle_states=%s" % (", ".join(forward.CONTROLLER_SCORINGS), controller_scoring, spindle_states))
+    controller_scoring = controller_scoring or forward.RECORD
     static_fallback = opts.pop("static_fallback", True)
     if not isinstance(static_fallback, bool):
         raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
@@ -355,7 +361,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
             # structure being scored, fitted on the blocks before it (forward.observer_block_columns)
             est.with_block_columns(forward.observer_block_columns(runs, arrays, labels, blocks, terms, reference_all, target,
                                                                   channel, exclude, obs_scale, scored=long_blocks,
-                                                                  controller=controller))
+                                                                  controller=controller, scoring=controller_scoring))
         elif len(runs) == 1:
             # without an observer: filters from rest on rises over the block's start (several runs: each run already is)
             held = {}
@@ -408,6 +414,8 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     stats["lag_bound"] = lag_bound
     if use_observer:
         stats["spindle_states"] = spindle_states  # "controller": the controller's record supplies the spindle/feed lag states
+        if controller:
+            stats["controller_scoring"] = controller_scoring
     if selection == "forward":
         stats["forward_state"] = forward_state
         if scored_as is not None:
@@ -522,8 +530,10 @@ STATIC_FALLBACK_RULE = ("the structure chosen among every term is compared with 
 
 def _columns_subset(columns, cols):
     """A scored block's switched-on columns (dynamic.with_block_columns) restricted to the candidate columns ``cols``."""
-    from host.learning.empirical.dynamic import StartedColumns
+    from host.learning.empirical.dynamic import StartedColumns, WorseOfStarts
 
+    if isinstance(columns, WorseOfStarts):
+        return WorseOfStarts([_columns_subset(s, cols) for s in columns.starts])
     if isinstance(columns, StartedColumns):
         return StartedColumns(columns.rest[:, cols], columns.decay[:, cols], columns.y,
                               lambda sub: columns.start([cols[i] for i in sub]))

@@ -51,6 +51,10 @@ RULE = ("blocks in time order: the training runs (several runs), else the spindl
         "switched on at its start)" % FORWARD_BLOCKS)
 PHASES = "phases"  # forward_blocks value (the default with a spindle log): a block per running and per stopped phase (phase_edges)
 CYCLES = "cycles"  # forward_blocks value: a block per spindle cycle (the default before stop 30)
+# dynamic option controller_scoring (with spindle_states=controller): how a switched-on block is scored
+RECORD = "record"  # the default: the states the controller supplies start at its record's values
+WORSE = "worse"  # the worse of that start and a start without the record (those states at the observer's estimate)
+CONTROLLER_SCORINGS = (RECORD, WORSE)
 
 
 def phase_edges(run: Run) -> list[float]:
@@ -176,10 +180,14 @@ def forward_chaining(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], refi
     """Score ``refit(k)`` (a model fitted on blocks < k) on every block k >= 1 -> the ``forward_chaining`` statistics.
 
     The model predicts block k as its own run (:func:`block_run`) and, for comparison, with its filters running since
-    the start of the block's training run (``continuous_rmse_um``). For slope targets the score is on the whole error
-    (geometric + thermal, as ``comprehensive`` in scoring.py): a block has no cold sweep of its own.
+    the start of the block's training run (``continuous_rmse_um``). A model with lag states the controller supplies
+    predicts it with the controller's record before the block, and also without it (``without_record_rmse_um``: those
+    states at the observer's estimate, a controller that does not send them). For slope targets the score is on the
+    whole error (geometric + thermal, as ``comprehensive`` in scoring.py): a block has no cold sweep of its own.
     """
-    out, sq, n_all = [], 0.0, 0
+    from host.learning.empirical.observer import reads_controller
+
+    out, sq, sq_without, n_all = [], 0.0, 0.0, 0
     for b in blocks:
         if b["block"] == 0:
             continue
@@ -190,11 +198,19 @@ def forward_chaining(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], refi
         out.append({"block": b["block"], "run": b["run"], "t_start_s": b["t_start_s"], "t_end_s": b["t_end_s"], "n": int(r.size),
                     "rmse_um": float(np.sqrt(np.mean(r ** 2))), "continuous_rmse_um": float(np.sqrt(np.mean((mc - pc) ** 2))),
                     "rms_measured_um": float(np.sqrt(np.mean(m ** 2)))})
+        if reads_controller(model):
+            mw, pw = block_residuals(model, block_run(runs, b), b)
+            out[-1]["without_record_rmse_um"] = float(np.sqrt(np.mean((mw - pw) ** 2)))
+            sq_without += float((mw - pw) @ (mw - pw))
         sq += float(r @ r)
         n_all += r.size
-    return {"rule": RULE, "score": "whole error (slope: geometric + thermal)" if target == "slope" else "error of the channel",
-            "blocks": len(blocks), "scored": out, "rmse_um": [f["rmse_um"] for f in out],
-            "worst_um": max(f["rmse_um"] for f in out), "pooled_um": float(np.sqrt(sq / n_all))}
+    fc = {"rule": RULE, "score": "whole error (slope: geometric + thermal)" if target == "slope" else "error of the channel",
+          "blocks": len(blocks), "scored": out, "rmse_um": [f["rmse_um"] for f in out],
+          "worst_um": max(f["rmse_um"] for f in out), "pooled_um": float(np.sqrt(sq / n_all))}
+    if all("without_record_rmse_um" in f for f in out):
+        fc["without_record_rmse_um"] = [f["without_record_rmse_um"] for f in out]
+        fc["without_record_pooled_um"] = float(np.sqrt(sq_without / n_all))
+    return fc
 
 
 def linear_forward_chaining(model: Any, runs: Iterable[Run], target: str = "slope", channel: str | None = None,
@@ -250,7 +266,7 @@ def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], lab
                            terms: Sequence[tuple[str, float]], reference_C: dict[str, float], target: str = "direct",
                            channel: str | None = None, exclude: tuple[float | None, float | None] | None = None,
                            scale: float = 1.0, scored: Sequence[dict[str, Any]] | None = None,
-                           controller: Sequence[str] = ()) -> dict[int, Any]:
+                           controller: Sequence[str] = (), scoring: str = RECORD) -> dict[int, Any]:
     """{block k >= 1: StartedColumns}: every candidate term's column on block k as a board switched on at the block's
     start with its observer computes it, for whichever structure the selection tries. ``scored``: only these of
     ``blocks`` (default: all); the observers are still fitted on ``blocks`` before k.
@@ -262,8 +278,12 @@ def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], lab
     before k only (:func:`fit_fold_observer`), read at the block's first sample (``Observer.initial_states``). An
     observer's estimate of one state does not depend on the other states, so one observer fitted with every lag of
     the structure's signals gives the starts of every structure with those signals: one fit per (block, signal set).
+
+    The lag states of ``controller``'s signals start at the controller's record (the run before the block). With
+    ``scoring`` = "worse" (CONTROLLER_SCORINGS) each block is a dynamic.WorseOfStarts of that start and of the start a
+    board gets whose controller does not send the record (those states at the observer's estimate, as the rest).
     """
-    from host.learning.empirical.dynamic import DynamicModel, StartedColumns, _lag_filter_fast
+    from host.learning.empirical.dynamic import DynamicModel, StartedColumns, WorseOfStarts, _lag_filter_fast
     from host.learning.empirical.observer import inputs, record_lags, signals_of
 
     terms = [(str(n), float(tau)) for n, tau in terms]
@@ -300,8 +320,11 @@ def observer_block_columns(runs: Sequence[Run], arrays: Sequence[RunArrays], lab
         # the controller's record of its own signals: their lag states at the block's start (what predict computes)
         supplied = [(n, tau) for n in names if n in controller for tau in lag_taus if (n, tau) in index]
         exact = dict(zip((index[q] for q in supplied), record_lags(block_record(runs, b), block_run(runs, b), supplied))) if supplied else {}
-        out[k] = StartedColumns(rest, decay, y[rows], _StartEstimates(runs, blocks, k, terms, index, lag_taus, u0, reference_C,
-                                                                      target, channel, exclude, scale, controller, exact))
+        starts = _StartEstimates(runs, blocks, k, terms, index, lag_taus, u0, reference_C, target, channel, exclude, scale,
+                                 controller, exact)
+        out[k] = StartedColumns(rest, decay, y[rows], starts)
+        if scoring == WORSE and exact:
+            out[k] = WorseOfStarts([out[k], StartedColumns(rest, decay, y[rows], starts.without_record)])
     return out
 
 
@@ -314,16 +337,27 @@ class _StartEstimates:
         self.lag_taus, self.u0, self.reference_C = lag_taus, u0, reference_C
         self.target, self.channel, self.exclude, self.scale = target, channel, exclude, scale
         self.controller, self.exact = tuple(controller), dict(exact or {})
-        self.cache: dict[frozenset, np.ndarray] = {}
+        self.cache: dict[frozenset, tuple[np.ndarray, np.ndarray]] = {}
 
     def __call__(self, cols):
+        """The starts of ``cols`` with the controller's record (its exact values for the states it supplies)."""
+        cols = list(cols)
+        return self._estimates(cols)[1][cols]
+
+    def without_record(self, cols):
+        """The starts of ``cols`` on a board whose controller does not send the record: every state at the observer's
+        estimate (its gains for the states the controller would supply, as fit_observer writes them)."""
+        cols = list(cols)
+        return self._estimates(cols)[0][cols]
+
+    def _estimates(self, cols):
+        """(the observer's estimates, the same with the record's values) over every candidate, for ``cols``' signals."""
         from host.learning.empirical.dynamic import DynamicModel
 
-        cols = list(cols)
         order = list(dict.fromkeys(self.terms[c][0] for c in cols))  # the structure's signals, first-use order
         key = frozenset(order)
-        vec = self.cache.get(key)
-        if vec is None:
+        pair = self.cache.get(key)
+        if pair is None:
             vec = np.zeros(len(self.terms))
             lagged = [(n, tau) for n in order for tau in self.lag_taus]
             if lagged:
@@ -331,10 +365,12 @@ class _StartEstimates:
                 obs = fit_fold_observer(model, self.runs, self.blocks, self.k, self.exclude, self.scale, self.controller)
                 for j, v in obs.initial_states({n: self.u0[n] for n in order}).items():
                     if lagged[j] in self.index:  # a lag of the structure's signals that is among the candidates
-                        c = self.index[lagged[j]]
-                        vec[c] = self.exact.get(c, v)
-            self.cache[key] = vec
-        return vec[cols]
+                        vec[self.index[lagged[j]]] = v
+            recorded = vec.copy()
+            for c, v in self.exact.items():
+                recorded[c] = v
+            pair = self.cache[key] = (vec, recorded)
+        return pair
 
 
 BASELINE = "mlr_all"  # the fixed reference a dynamic model's forward-chaining score is reported beside

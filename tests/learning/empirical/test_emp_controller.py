@@ -93,6 +93,28 @@ def test_the_reported_forward_score_is_the_one_the_structure_was_chosen_by(fits)
     np.testing.assert_allclose(controlled.estimator_.fold_rmse_, fc["rmse_um"], rtol=1e-8)
 
 
+def test_a_block_scored_by_the_worse_start_is_the_worse_of_the_two_predictions(fits):
+    """controller_scoring=worse: each switched-on block of the selection scores the worse of the board with the record
+    and the board without it. The selection's block scores (moments of the started columns) must equal that worse of
+    two predictions made another way: the refitted model's predict on the block with and without the record."""
+    run, _, controlled, _ = fits
+    fc = controlled.statistics["forward_chaining"]
+    # the record mode reports the board without the record beside it, and chose by the record alone
+    assert controlled.statistics["controller_scoring"] == "record"
+    assert len(fc["without_record_rmse_um"]) == len(fc["rmse_um"])
+    worse = fit_model([run], "dynamic", spindle_states="controller", controller_scoring="worse", **FIT)
+    assert worse.statistics["controller_scoring"] == "worse"
+    wfc = worse.statistics["forward_chaining"]
+    both = np.maximum(wfc["rmse_um"], wfc["without_record_rmse_um"])
+    np.testing.assert_allclose(worse.estimator_.fold_rmse_, both, rtol=1e-8)
+    # the check can fail: on some block the board without the record is worse than with it
+    assert any(w > r * 1.01 for r, w in zip(wfc["rmse_um"], wfc["without_record_rmse_um"])), wfc
+    # the option is refused where it means nothing, and with an unknown value, naming what it needs
+    for bad in (dict(controller_scoring="worse"), dict(spindle_states="controller", controller_scoring="best")):
+        with pytest.raises(EmpiricalDataError, match=r"controller_scoring must be one of record, worse"):
+            fit_model([run], "dynamic", **bad, **FIT)
+
+
 def test_the_settle_bound_admits_what_the_controller_supplies():
     run, _ = _machine()
     kw = dict(runs=[run], spans=[(0.0, SPLIT)], exclude=None, reference_C={"t1": REF_C, "t2": REF_C}, target="direct",
