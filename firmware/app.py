@@ -145,8 +145,11 @@ class App:
         self.sup_k = 0
         self.sup_vals = [0] * _MAX_SUPPLIED  # the values as received (a `Y` or the Modbus registers), no allocation
         self.sup_wait_ms = 0  # how long the table's start has waited for them
-        self.settle_s = 0  # seconds since the observer's estimate (saturating at the table's settle_s) and the ms
+        self.settle_s = 0  # seconds since the observer's estimate (saturating at settle_cap) and the ms
         self.settle_ms = 0  # toward the next second
+        # the table's settle_s, or its settle_nr when larger: SETTLING of a start without the supplied states lasts
+        # settle_nr (table format 8; docs/firmware.md "Supplied lag states")
+        self.settle_cap = 0
         # elapsed-time counters (ms, saturating) rather than timestamps: ticks wrap
         self.rx_ms = 0  # since the last valid controller traffic
         self.fault_active = False
@@ -259,6 +262,7 @@ class App:
         self.sup_wait_ms = 0
         self.settle_s = 0
         self.settle_ms = 0
+        self.settle_cap = max(table.settle_s, table.settle_nr) if self.dyn else getattr(table, "settle_s", 0)
         self.table = table
         self.slot = slot
         self.ev = ev
@@ -650,11 +654,12 @@ class App:
                 self.step_ms = 0
                 self.settle_s = 0
                 self.settle_ms = 0
-            elif (self.dyn or (self.sobs and not self.unsettled)) and self.settle_s < t.settle_s:
+            elif (self.dyn or (self.sobs and not self.unsettled)) and self.settle_s < self.settle_cap:
                 v = self.settle_ms + dt  # dt <= _CAP: small ints throughout
                 k = v // 1000
                 self.settle_ms = v - k * 1000
-                self.settle_s = t.settle_s if k >= t.settle_s - self.settle_s else self.settle_s + k
+                cap = self.settle_cap
+                self.settle_s = cap if k >= cap - self.settle_s else self.settle_s + k
             if self.screw or self.dyn:
                 dtm = t.dt_ms
                 self.step_ms += dt
@@ -681,8 +686,10 @@ class App:
                 s |= _CLAMPED
             if ev.extrap:
                 s |= _EXTRAPOLATING
-            if (self.dyn and t.obs and (self.unobserved or self.settle_s < t.settle_s or self.supply == _SUPPLY_AWAITED)) or (
-                    self.sobs and self.settle_s < t.settle_s):
+            # without the controller's values (still awaited after the start) the supplied states are at their rows'
+            # estimate, whose start error settles by settle_nr (a format 7 table: never, until the values come)
+            if (self.dyn and t.obs and (self.unobserved or self.settle_s < t.settle_s or (
+                    self.supply == _SUPPLY_AWAITED and self.settle_s < t.settle_nr))) or (self.sobs and self.settle_s < t.settle_s):
                 s |= _SETTLING
         lim = self.limiter
         s |= lim.update(raw_ref, raw_slope, raw_total, raw_prev, usable, dt)

@@ -19,7 +19,7 @@ from micropython import const
 
 MAGIC = b"TCTB"
 NAME_FORBIDDEN = b",*$"  # besides non-printable bytes: the $TC frames' separators (names are sent in the hello)
-_VERSION = const(7)  # 7: the lag states the controller supplies (tauc after the dynamic block, issue 21; a version 6 or 5 table still loads, without them); 6: the screw table's observer (obs settle_s sn sr Rn Lr nr Gn shGn rN after the screw block, issue 21; a version 5 table still loads, without it); 5: screw effect terms for speed_dependent_heat (fg g0 Gv shGv Lgu ngu) and moving_convection (D shD fe Ly ny) (issue 19), the dynamic table's observer (obs settle_s LO nO Go shO gO rG, issue 21); 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
+_VERSION = const(8)  # 8: settle_nr after the tauc words (SETTLING of a start without the controller's values, issue 21; a version 7, 6 or 5 table still loads: 7 with SETTLING until the values come); 7: the lag states the controller supplies (tauc after the dynamic block, issue 21; a version 6 or 5 table still loads, without them); 6: the screw table's observer (obs settle_s sn sr Rn Lr nr Gn shGn rN after the screw block, issue 21; a version 5 table still loads, without it); 5: screw effect terms for speed_dependent_heat (fg g0 Gv shGv Lgu ngu) and moving_convection (D shD fe Ly ny) (issue 19), the dynamic table's observer (obs settle_s LO nO Go shO gO rG, issue 21); 4: screw effect terms Bu, shBu, Rv (issue 19), dynamic tables' power inputs Lp np shp2 shp (mr_poly, issue 23), the error reference (header byte 58, issue 19); 3: per-sensor training range (EXTRAPOLATING, issue 13); 2: screw air channel (issue 11); older tables are refused
 _HEADER_SIZE = const(64)
 _NAME_SIZE = const(16)
 _AXIS_SIZE = const(8)
@@ -29,6 +29,7 @@ _MAX_SEGMENTS = const(32)
 _MAX_DEGREE = const(6)
 _MAX_SUPPLIED = const(4)  # wire.MAX_SUPPLIED: lag states the controller supplies, per table
 _MAX_TAU_MS = const(1073741823)
+_SETTLE_NEVER = const(1073741823)  # settle_nr of a format 7 table: SETTLING until the controller's values come
 _UNIT_CODE = const(1)  # offsets in 0.01 um, slopes in 0.01 um/m
 _REF_FIXED = const(0)  # the model uses the table's reference temperatures
 _REF_LATCHED = const(1)  # certified for any reference in the envelope (models fitted on rises from the run start)
@@ -117,7 +118,7 @@ def parse_table(buf, expected_sensors=None):
     if bytes(buf[0:4]) != MAGIC:
         raise TableError(REASON_MAGIC)
     version = buf[4]
-    if version > _VERSION or version < _VERSION - 2:  # formats 5 and 6 differ only by words at the end of a block
+    if version > _VERSION or version < _VERSION - 3:  # formats 5 to 7 differ only by words at the end of a block
         raise TableError(REASON_VERSION, "table format version %d is no longer supported; re-export the model "
                          "with this tcomp (format %d)" % (version, _VERSION) if version < _VERSION else "%d" % version)
     kind = buf[5]
@@ -249,7 +250,10 @@ _SCREW_OBS = "obs:P settle_s:T sn:a sr:a Rn:T Lr:L nr:4 Gn=m shGn=m rN=m |"
 # observer, or rest) or the filter's time constant in ms (the controller runs that lag over its own record of the
 # spindle speed, its square or the feed, and sends the state at the table's start: `Y`, docs/protocol.md; until it
 # does, the observer's row estimates it, or without gains the state is its present input)
-_DYNAMIC_SUPPLY = "tauc=j |"
+# settle_nr (format 8): SETTLING of a start without the controller's values (those states at their rows' estimate),
+# seconds after the start as settle_s; 0 without supplied states; a format 7 table reads _SETTLE_NEVER (until they come)
+_DYNAMIC_SUPPLY = "tauc=j settle_nr:T |"
+_DYNAMIC_SUPPLY_7 = "tauc=j |"
 _DYNAMIC = ("positional:P dt_ms:t smax:F Lq:L nq:4 shq:s fmax:F Lp:L np:4 shp2:s shp:s LX:L nX:4 LY:L nY:4 nf:N "
             "src=j A=j shA=j gA=j rA=j fy=j Ylo=j Yhi=j bY=j shY=j obs:P settle_s:T LO:L nO:4 Go=O shO=O gO=j rG=j |")
 
@@ -261,15 +265,20 @@ def model_sections(kind, t):
     yield _COMMON
     if kind == _KIND_DYNAMIC:
         yield _DYNAMIC
-        if getattr(t, "version", _VERSION) == _VERSION:
+        version = getattr(t, "version", _VERSION)
+        if version == _VERSION:
             yield _DYNAMIC_SUPPLY
+        elif version == _VERSION - 1:  # format 7: SETTLING until the controller's values come
+            yield _DYNAMIC_SUPPLY_7
+            t.settle_nr = _SETTLE_NEVER if any(t.tauc) else 0
         else:  # format 5 or 6: every lag state is the board's
             t.tauc = [0] * t.nf
+            t.settle_nr = 0
     if kind != _KIND_LINEAR_DIRECT and (kind != _KIND_DYNAMIC or t.positional):
         yield _POSITION
     if kind == _KIND_SCREW_REDUCED:
         yield _SCREW
-        if getattr(t, "version", _VERSION) >= _VERSION - 1:
+        if getattr(t, "version", _VERSION) >= _VERSION - 2:
             yield _SCREW_OBS
         else:  # format 5: no observer, the cold start
             t.obs = 0
@@ -338,6 +347,9 @@ def _check(t):
                         raise TableError(REASON_FIELD, "supplied state %d: tau %d ms, source %d" % (j, c, t.src[j]))
             if k > _MAX_SUPPLIED:
                 raise TableError(REASON_FIELD, "%d supplied states, at most %d" % (k, _MAX_SUPPLIED))
+            nr = getattr(t, "settle_nr", None)  # None: a format 7 table (set after its section)
+            if nr is not None and ((not k and nr) or (k and nr < t.settle_s)):
+                raise TableError(REASON_FIELD, "settle_nr %d s with %d supplied states, settle_s %d s" % (nr, k, t.settle_s))
         return
     if hasattr(t, "rN"):
         if t.sn >= t.n_sensors or t.sr >= t.n_sensors or (t.obs and (t.sn < 0 or t.sr < 0 or t.sn == t.sr)) or (

@@ -17,7 +17,8 @@ all preceding bytes (u16): 18 + 4*words bytes.
 - ``lags.bin`` (b"TL"): count nf, second count n (the table's sensors); nf filter states Y (the
   evaluator's units; a term without a lag holds no state and is written as the evaluator has it),
   n temperatures as the board read them at the write (milli-degC), the spindle speed (rpm) and feed
-  (mm/min) in use, and the seconds the state had been settling (saturated at the table's settle_s).
+  (mm/min) in use, and the seconds the state had been settling (saturated at the larger of the table's settle_s and
+  settle_nr, the latter SETTLING's end for a start without the controller's supplied states).
 """
 
 import struct
@@ -216,7 +217,7 @@ class LagStore(_Slots):
             if t.A[j] and (w[j] < t.Ylo[j] or w[j] > t.Yhi[j]):
                 return False
         k = t.nf + t.n_sensors
-        return w[k] >= 0 and w[k + 1] >= 0 and 0 <= w[k + 2] <= t.settle_s
+        return w[k] >= 0 and w[k + 1] >= 0 and 0 <= w[k + 2] <= max(t.settle_s, t.settle_nr)
 
     def tick(self, dt, ev, settled):
         """``dt`` ms of cycle time passed: write the state when _SAVE_MS have since the last write."""

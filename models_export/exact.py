@@ -449,6 +449,7 @@ class Model:
         self.observer: dict[str, Any] | None = None
         self.obs_gain: list[list[Fraction]] | None = None
         self.settle_s = 0
+        self.settle_nr_s = 0
         self.supplied = {}
         if obs is None:
             return
@@ -488,6 +489,17 @@ class Model:
         if len(self.supplied) > MAX_SUPPLIED:
             raise ExportError("%s: %d lag states are supplied by the controller (terms %s); the board takes at most %d"
                               % (where, len(self.supplied), sorted(self.supplied), MAX_SUPPLIED))
+        # the table's settle_nr: SETTLING of a board started without the controller's values (those states at their
+        # gains' estimate); a document without it (fitted before stop 33) gets the largest, 2**30 - 1 s: SETTLING until
+        # the values come, as format 7 did
+        nr = obs.get("settle_without_record_s")
+        if nr is not None and not self.supplied:
+            raise ExportError("%s.settle_without_record_s belongs to an observer with states the controller supplies" % where)
+        if self.supplied:
+            nr = (1 << 30) - 1 if nr is None else _num(nr, where + ".settle_without_record_s")
+            if not self.settle_s <= nr <= (1 << 30) - 1:
+                raise ExportError("%s.settle_without_record_s must be settle_s..%d s, found %r" % (where, (1 << 30) - 1, nr))
+            self.settle_nr_s = math.ceil(F(nr))
         nf = len(self.dyn)
         self.obs_gain = [[F(0)] * nf for _ in range(nf)]
         for k, st in enumerate(states):

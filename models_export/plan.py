@@ -279,12 +279,12 @@ class Planner:
         nO = 2
         LO = max(1, -(-R.bit_length() // nO))
         f.update(obs=0, settle_s=0, LO=LO, nO=nO, Go=[0] * (nf * nf), shO=[0] * (nf * nf), gO=[0] * nf, rG=[0] * nf,
-                 tauc=[0] * nf)
+                 tauc=[0] * nf, settle_nr=0)
         self.obs_cert = None
         G = getattr(m, "obs_gain", None)
         if G is None:
             return out
-        f.update(obs=1, settle_s=m.settle_s)
+        f.update(obs=1, settle_s=m.settle_s, settle_nr=m.settle_nr_s)
         self.obs_cert = []
         supplied = getattr(m, "supplied", {})
         for j, t in enumerate(terms):

@@ -148,16 +148,13 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
         from host.learning.empirical.observer import CONTROLLER
 
         supplied = [model.terms[st["term"]] for st in (obs.states if obs is not None else []) if st.get("source") == CONTROLLER]
-        if supplied and obs is not None:
-            from host.learning.empirical.observer import settle_time
-
+        if supplied and obs is not None and obs.settle_without_record_s is not None:
             # what the start-error bound settles in when the controller's values do not come (the states at their estimate)
-            alone = [dict(st, bound=st.get("bound_without_record", 0.0)) for st in obs.states]
             print("  lag states the controller supplies from its record at a start (spindle_states=controller): %s; on the "
-                  "machine `tcomp linuxcnc --spindle --signal-record FILE` sends them (table format 7), `tcomp predict "
+                  "machine `tcomp linuxcnc --spindle --signal-record FILE` sends them (table format 7 and later), `tcomp predict "
                   "--controller-history` reads the record; without it they start at the observer's estimate, which settles "
-                  "in %.0f min" % (", ".join("lag(%s, tau %g s)" % t for t in supplied),
-                                   settle_time(model, alone, obs.tolerance, obs.scale) / 60))
+                  "in %.0f min (the board's SETTLING then)" % (", ".join("lag(%s, tau %g s)" % t for t in supplied),
+                                                              obs.settle_without_record_s / 60))
         ob = model.statistics.get("observer_sensors")
         if ob:
             print("  observer-only sensors (up to %d, the model's sensors within %d): %s; settle_s %.0f min, %.0f min without" % (

@@ -59,7 +59,7 @@ def test_every_effect_with_a_reduced_form_reaches_the_board(names):
     assert "omitted_effects" not in red
     ex = export_model(doc)
     rep = ex.report
-    assert rep["table_format"] == 7
+    assert rep["table_format"] == 8
     assert rep["reduction"]["rms_um"] <= 0.5 and rep["reduction"]["omitted_effects"] == []
     assert rep["total_max_error_um"] == pytest.approx(rep["max_error_um"] + rep["reduction"]["max_um"])
     board = board_offsets(ex.table, run)

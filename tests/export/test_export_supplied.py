@@ -1,4 +1,4 @@
-"""Lag states the controller supplies (issue 21, table format 7): the table marks them (tauc), the board takes them
+"""Lag states the controller supplies (issue 21, table formats 7 and 8): the table marks them (tauc), the board takes them
 in its state units, and the certificate covers the board against the host model started at the controller's exact
 lag values.
 
@@ -9,13 +9,14 @@ dictionary (Evaluator.supply_scale). The physical range is checked against the b
 divided by 2**scale must be the envelope's top in the source's units.
 """
 import copy
+import math
 import random
 import struct
 import zlib
 
 import pytest
 
-from firmware.table import parse_table
+from firmware.table import TableError, parse_table
 from hil_tests.fixtures.samples import (assert_inside_certified_accumulators, board_and_host_start, dynamic_doc, follow_host,
                                         observer_input_unit, restamp, with_observer, with_supplied)
 from models_export import export_model
@@ -40,7 +41,7 @@ def test_table_marks_the_supplied_states_with_their_time_constants():
     doc = _doc(0)
     ex = export_model(doc)
     t = parse_table(ex.table)
-    assert t.version == 7
+    assert t.version == 8
     terms = doc["thermal"]["terms"]
     for j, term in enumerate(terms):
         want = round(term["tau_s"] * 1000) if term["signal"] in SUPPLIED and term["tau_s"] > 0 else 0
@@ -115,21 +116,59 @@ def test_before_the_controllers_values_the_board_follows_the_hosts_estimate(seed
     assert_inside_certified_accumulators(ev, ex)
 
 
+def _older(table, version, cut):
+    """``table`` (a direct dynamic table) as format ``version``: the ``cut`` words before the certificate's 3 removed,
+    the length, word count and CRC recomputed."""
+    buf = bytearray(table[:-4])
+    end = len(buf) - 3 * 4
+    old = buf[:end - 4 * cut] + buf[end:]
+    old[4] = version
+    struct.pack_into("<I", old, 8, len(old) + 4)
+    struct.pack_into("<I", old, 52, struct.unpack_from("<I", buf, 52)[0] - cut)
+    old += struct.pack("<I", zlib.crc32(bytes(old)) & 0xFFFFFFFF)
+    return bytes(old)
+
+
 def test_format_6_dynamic_table_still_loads_without_supplied_states():
-    """A format-6 table is a format-7 one without the tauc words: it loads, every state the board's."""
+    """A format-6 table is a format-8 one without the tauc words and settle_nr: it loads, every state the board's."""
     doc = with_observer(restamp(dynamic_doc(random.Random(5), "direct", dt_s=15.0)), random.Random(5))
     ex = export_model(doc)
     nf = len(doc["thermal"]["terms"])
-    buf = bytearray(ex.table[:-4])
-    # the tauc words are the dynamic block's last nf words; for a direct table the certificate's 3 words follow
-    end = len(buf) - 3 * 4
-    old = buf[:end - 4 * nf] + buf[end:]
-    old[4] = 6
-    struct.pack_into("<I", old, 8, len(old) + 4)
-    struct.pack_into("<I", old, 52, struct.unpack_from("<I", buf, 52)[0] - nf)
-    old += struct.pack("<I", zlib.crc32(bytes(old)) & 0xFFFFFFFF)
-    t6, t7 = parse_table(bytes(old)), parse_table(ex.table)
-    assert t6.version == 6 and t6.tauc == [0] * nf and t6.Go == t7.Go and t6.cert_out == t7.cert_out
+    # the tauc words and settle_nr are the dynamic block's last nf + 1 words; for a direct table the certificate follows
+    t6, t8 = parse_table(_older(ex.table, 6, nf + 1)), parse_table(ex.table)
+    assert t6.version == 6 and t6.tauc == [0] * nf and t6.settle_nr == 0 and t6.Go == t8.Go and t6.cert_out == t8.cert_out
+
+
+def test_format_7_table_keeps_settling_until_the_values_come():
+    """A format-7 table is a format-8 one without settle_nr: it loads with its supplied states, and settle_nr reads
+    2**30 - 1 s (SETTLING until the controller's values come, as format 7 did)."""
+    ex = export_model(_doc(0))
+    t7, t8 = parse_table(_older(ex.table, 7, 1)), parse_table(ex.table)
+    assert t7.version == 7 and t7.tauc == t8.tauc and any(t7.tauc) and t7.Go == t8.Go
+    assert t7.settle_nr == (1 << 30) - 1 == t8.settle_nr  # the document has no settle_without_record_s either
+
+
+def test_settle_nr_is_the_documents_settle_time_without_the_record():
+    doc = _doc(0)
+    obs = doc["thermal"]["observer"]
+    obs["settle_without_record_s"] = obs["settle_s"] + 1234.2
+    t = parse_table(export_model(restamp(doc)).table)
+    assert t.settle_nr == math.ceil(obs["settle_s"] + 1234.2) and t.settle_s == math.ceil(obs["settle_s"])
+    # a time below settle_s, or one without a supplied state, is refused, naming the field
+    obs["settle_without_record_s"] = obs["settle_s"] - 1.0
+    with pytest.raises(ExportError, match=r"settle_without_record_s must be settle_s"):
+        export_model(restamp(doc))
+    plain = with_observer(restamp(dynamic_doc(random.Random(5), "direct", dt_s=15.0)), random.Random(5))
+    plain["thermal"]["observer"]["settle_without_record_s"] = 10.0
+    with pytest.raises(ExportError, match=r"settle_without_record_s belongs to an observer with states the controller supplies"):
+        export_model(restamp(plain))
+    # and the loader refuses a settle_nr without supplied states (an exporter/firmware mismatch)
+    t8 = export_model(with_observer(restamp(dynamic_doc(random.Random(5), "direct", dt_s=15.0)), random.Random(5))).table
+    bad = bytearray(t8)
+    struct.pack_into("<i", bad, len(bad) - 4 - 4 * 4, 5)
+    struct.pack_into("<I", bad, len(bad) - 4, zlib.crc32(bytes(bad[:-4])) & 0xFFFFFFFF)
+    with pytest.raises(TableError, match=r"settle_nr 5 s with 0 supplied states"):
+        parse_table(bytes(bad))
 
 
 @pytest.mark.parametrize("edit, message", [

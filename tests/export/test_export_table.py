@@ -56,7 +56,7 @@ def test_round_trip(exports, kind):
     ex = exports[kind]
     t = parse_table(ex.table, expected_sensors=len(ex.fields["sensors"]))
     f = ex.fields
-    assert t.kind == kind and t.version == 7 and t.unit_code == 1 and t.error_ref == 0
+    assert t.kind == kind and t.version == 8 and t.unit_code == 1 and t.error_ref == 0
     assert t.axis == f["axis"] and t.sensors == f["sensors"] and t.provenance == f["provenance"]
     assert (t.env_lo, t.env_hi, t.ref) == (f["env_lo"], f["env_hi"], f["ref"])
     assert (t.train_lo, t.train_hi) == (f["train_lo"], f["train_hi"])
@@ -109,19 +109,19 @@ def test_specific_reasons(exports):
     buf = exports["poly_slope"].table
     n = len(exports["poly_slope"].fields["sensors"])
     v2 = bytearray(buf)
-    v2[4] = 8
+    v2[4] = 9  # a format newer than this firmware
     assert reason(bytes(v2)) == REASON_VERSION
     assert reason(refresh_crc(v2)) == REASON_VERSION
     # tables of format 1 (before the screw's air channel), 2 (before the training range) and 3 (before the screw's
     # effect terms, the power inputs of dynamic tables and the error reference) and 4 (before the speed effects' screw
     # terms, issue 19, and the dynamic table's observer, issue 21) are refused with a message that says to re-export
-    # (formats 5, without the screw observer, and 6, without the supplied lag states, still load:
+    # (formats 5, without the screw observer, 6, without the supplied lag states, and 7, without settle_nr, still load:
     # tests/export/test_export_screw_observer.py, tests/export/test_export_supplied.py)
     for old in (1, 2, 3, 4):
         v1 = bytearray(buf)
         v1[4] = old
         with pytest.raises(TableError, match="table format version %d is no longer supported; re-export the model "
-                                             "with this tcomp \\(format 7\\)" % old) as exc:
+                                             "with this tcomp \\(format 8\\)" % old) as exc:
             parse_table(bytes(refresh_crc(v1)))
         assert exc.value.reason == REASON_VERSION
     # a training range outside the envelope is an exporter/firmware mismatch

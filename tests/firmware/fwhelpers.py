@@ -41,7 +41,8 @@ def make_table(**kw):
     if kw.get("kind") == "dynamic_supplied":
         return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0), supplied=True)
     if kw.get("kind") == "dynamic_supplied_gains":
-        return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0), supplied="gains")
+        return dynamic_table(kw["sensors"], observer=kw.get("settle_s", 30.0), supplied="gains",
+                             settle_without_record_s=kw.get("settle_without_record_s"))
     if kw.get("kind") == "screw":
         return screw_table(kw["sensors"])
     if kw.get("kind") == "screw_observer":
@@ -49,11 +50,12 @@ def make_table(**kw):
     return pack(table_fields(**kw))
 
 
-def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None, supplied=False):
+def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None, supplied=False, settle_without_record_s=None):
     """An exported, certified dynamic table over ``sensors`` reading every kind of signal; 1 s filter step.
     ``observer``: None, or the settle_s of an observer (issue 21; the table then has the fixed reference).
     ``supplied``: its spindle, squared-speed and feed lag states are supplied by the controller (table format 7);
-    "gains": with the observer's gains for them (the estimate until the controller's values come, as a fit writes)."""
+    "gains": with the observer's gains for them (the estimate until the controller's values come, as a fit writes);
+    ``settle_without_record_s``: the document's settle time without the controller's values (table format 8's settle_nr)."""
     import random
     from hil_tests.fixtures.samples import dynamic_doc
     from models_export import export_model
@@ -66,7 +68,7 @@ def dynamic_table(sensors, dt_s=1.0, seed=3, observer=None, supplied=False):
     if observer is not None:
         doc = with_observer(doc, random.Random(seed), settle_s=observer)
     if supplied:
-        doc = with_supplied(doc, keep_gains=supplied == "gains")
+        doc = with_supplied(doc, keep_gains=supplied == "gains", settle_without_record_s=settle_without_record_s)
     return export_model(restamp(doc)).table
 
 

@@ -1,9 +1,10 @@
-"""The lag states the controller supplies (issue 21, table format 7; docs/protocol.md "Supplied lag states").
+"""The lag states the controller supplies (issue 21, table formats 7 and 8; docs/protocol.md "Supplied lag states").
 
 A table whose spindle, squared-speed and feed lags are marked (tauc) does not start its lag states until the controller
 has sent them: its dictionary (`Y`, Modbus input registers 54-71) names each one's source, time constant and scale;
 `Y,<v1>,...` (Modbus holding registers 20-27) sets them; the other lag states are then estimated by the observer at the
-first all-good cycle, as before. SETTLING is raised while they are awaited. Once set, a second supply is acknowledged
+first all-good cycle, as before. SETTLING is raised while they are awaited (after a start without them, until the
+table's settle_nr, format 8; a format 7 table: until they come). Once set, a second supply is acknowledged
 and not applied. A wrong count, a value outside the state's box or a table without such states is refused, naming
 why, and nothing changes.
 """
@@ -235,3 +236,42 @@ def test_without_the_controller_a_fitted_table_starts_them_at_its_estimate(tmp_p
     vals = _values(app, entries, 0.5)
     out = _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in vals)))
     assert out[0][3:] == ["A", "Y", "S", "1"] and [app.ev.Y[j] for j in sup] == vals
+
+
+def test_a_start_without_the_values_settles_at_the_tables_settle_nr(tmp_path):
+    """Table format 8: a board whose controller never sends the values started them at the observer's estimate; its
+    SETTLING lasts the table's settle_nr (the start-error bound with those states' own bounds), not for ever and not
+    only settle_s. Values that come later still replace the estimate, and SETTLING then follows settle_s."""
+    app, board = rig_app(tmp_path, kind="dynamic_supplied_gains", serial_mode="stream", extra={"frame_ms": 0},
+                         table_kw={"settle_s": 30.0, "settle_without_record_s": 90.0})
+    t = app.table
+    assert t.version == 8 and t.settle_s == 30 and t.settle_nr == 90
+    _send(app, board, cmd(b"TC,P,0,6000"))
+    _send(app, board, cmd(b"TC,M,1000,0,0"))
+    run_cycles(app, board, 105)  # the start after 10 s without the values
+    assert not app.unobserved and app.supply == SUPPLY_AWAITED and app.status & SETTLING
+    run_cycles(app, board, 400)  # 40 s after the start: past settle_s, not yet settle_nr
+    assert app.status & SETTLING
+    run_cycles(app, board, 510)  # 91 s after it
+    assert app.supply == SUPPLY_AWAITED and not app.status & SETTLING
+    _, entries = _dictionary(app, board)
+    vals = _values(app, entries, 0.5)
+    out = _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in vals)))
+    assert out[0][3:] == ["A", "Y", "S", "1"] and app.supply == SUPPLY_SET
+    run_cycles(app, board, 1)
+    assert not app.status & SETTLING
+
+
+def test_with_the_values_settling_ends_at_settle_s_whatever_settle_nr(tmp_path):
+    """The values in time: SETTLING follows settle_s; settle_nr only counts for a start without them."""
+    app, board = rig_app(tmp_path, kind="dynamic_supplied_gains", serial_mode="stream", extra={"frame_ms": 0},
+                         table_kw={"settle_s": 30.0, "settle_without_record_s": 90.0})
+    _send(app, board, cmd(b"TC,P,0,6000"))
+    _send(app, board, cmd(b"TC,M,1000,0,0"))
+    _, entries = _dictionary(app, board)
+    out = _send(app, board, cmd(b"TC,Y," + b",".join(b"%d" % v for v in _values(app, entries, 0.25))))
+    assert out[0][3:] == ["A", "Y", "S", "1"]
+    run_cycles(app, board, 5)
+    assert not app.unobserved and app.status & SETTLING
+    run_cycles(app, board, 300)  # 30.5 s after the start
+    assert not app.status & SETTLING

@@ -61,9 +61,13 @@ def run(args: argparse.Namespace) -> int:
     supplied = [c for c in ((r.get("dynamic") or {}).get("observer") or {}).get("states") or [] if c.get("supplied_by")]
     if supplied:
         # an integration requirement: the controller must send these at the board's start (docs/linuxcnc.md)
+        nr = r["dynamic"]["observer"]["settle_without_record_s"]
         print("NOTE: the controller supplies %d lag state(s) of this table (%s): run `tcomp linuxcnc --spindle "
               "--signal-record FILE`; without them the board starts them 10 s after boot at the observer's "
-              "estimate and keeps SETTLING until they come" % (len(supplied), ", ".join(c["term"] for c in supplied)), file=sys.stderr)
+              "estimate and keeps SETTLING %s" % (len(supplied), ", ".join(c["term"] for c in supplied),
+                                                  "until they come (a document fitted before settle_without_record_s)"
+                                                  if nr >= (1 << 30) - 1 else "for %.0f min (%.0f min with them)" % (
+                                                      nr / 60, r["dynamic"]["observer"]["settle_s"] / 60)), file=sys.stderr)
     obs = (r.get("screw") or {}).get("observer") or {}
     if obs.get("in_document") and not obs.get("carried"):
         # the document's power-on state estimate (issue 21) left out of the table (a document without its nut sensor's

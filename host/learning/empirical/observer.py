@@ -77,15 +77,19 @@ class Observer:
     model's ("T:<sensor>" = T − reference_C, "spindle_krpm", "spindle_krpm2", "feed_m_min").
     ``settle_s``: when the start-error bound B(t) reaches ``tolerance`` (µm); ``scale``:
     µm of offset per unit of the model's thermal output (1 for a direct model, the
-    largest training position in mm for a slope model).
+    largest training position in mm for a slope model). ``settle_without_record_s`` (only with states the controller
+    supplies): the same time for a board whose controller does not send them (those states at their gains' estimate,
+    bound ``bound_without_record``); None: not known (a document written before stop 33), the board then stays
+    SETTLING until the values come.
     """
 
     def __init__(self, states: Iterable[Mapping[str, Any]], settle_s: float, tolerance: float = SETTLE_TOLERANCE_UM,
-                 scale: float = 1.0) -> None:
+                 scale: float = 1.0, settle_without_record_s: float | None = None) -> None:
         self.states = [dict(s) for s in states]
         self.settle_s = float(settle_s)
         self.tolerance = float(tolerance)
         self.scale = float(scale)
+        self.settle_without_record_s = None if settle_without_record_s is None else float(settle_without_record_s)
 
     def start_error_bound(self, model: DynamicModel, elapsed_s: float = 0.0) -> float:
         """B(elapsed_s) in µm (module doc)."""
@@ -105,6 +109,7 @@ class Observer:
 
     def to_document(self) -> dict[str, Any]:
         return {"method": "static_state_estimate", "tolerance": self.tolerance, "settle_s": self.settle_s, "scale": self.scale,
+                **({} if self.settle_without_record_s is None else {"settle_without_record_s": self.settle_without_record_s}),
                 "states": [{"term": int(s["term"]),
                             "gains": {k: float(v) for k, v in s["gains"].items()},
                             "bound": float(s["bound"]), "rms": float(s["rms"]),
@@ -153,7 +158,11 @@ class Observer:
                 raise ModelFormatError("%s.states[%d].gains must map the model's signals (%s) to finite numbers, found %r"
                                        % (where, i, ", ".join(regressors), g))
         states = [dict(s, signal=terms[s["term"]][0]) for s in states]
-        return cls(states, obs["settle_s"], obs["tolerance"], obs["scale"])
+        nr = obs.get("settle_without_record_s")
+        if "settle_without_record_s" in obs and (not num(nr) or nr < obs["settle_s"] or not any("source" in s for s in states)):
+            raise ModelFormatError("%s.settle_without_record_s belongs to an observer with states the controller supplies and must "
+                                   "be a finite number >= settle_s (%r), found %r" % (where, obs["settle_s"], nr))
+        return cls(states, obs["settle_s"], obs["tolerance"], obs["scale"], nr)
 
 
 def signals_of(terms: Iterable[tuple[str, float]]) -> list[str]:
@@ -338,7 +347,11 @@ def fit_observer(model: DynamicModel, runs: Sequence[Run], spans: Sequence[tuple
             # estimate a board uses until the record's value comes (a controller that does not send it)
             state.update(source=CONTROLLER, bound=0.0, bound_without_record=state["bound"])
         states.append(state)
-    return Observer(states, settle_time(model, states, tolerance, scale), tolerance, scale)
+    without = None
+    if any(s.get("source") == CONTROLLER for s in states):
+        # a board whose controller does not send the values: those states start at their gains' estimate
+        without = settle_time(model, [dict(s, bound=s.get("bound_without_record", s["bound"])) for s in states], tolerance, scale)
+    return Observer(states, settle_time(model, states, tolerance, scale), tolerance, scale, without)
 
 
 def start_error_bound(model: DynamicModel, states: Iterable[Mapping[str, Any]], elapsed_s: float, scale: float = 1.0) -> float:

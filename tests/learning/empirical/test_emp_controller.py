@@ -132,6 +132,33 @@ def test_the_settle_bound_admits_what_the_controller_supplies():
     assert any(n.startswith("spindle") and tau == 14400.0 for n, tau in bounded.terms), bounded.terms
 
 
+def test_the_settle_time_without_the_record_is_the_bound_of_the_estimated_start(fits):
+    """settle_without_record_s: when B(t) = Σ |b_j|·E_j·exp(−t/τ_j) falls to 1 µm with the supplied states' E_j the
+    estimate's (bound_without_record), here on a 1 s grid, not by the fit's bisection; it reaches the document and,
+    as settle_nr, the table (format 8), and from_document refuses one below settle_s."""
+    _, _, controlled, observed = fits
+    obs = controlled.observer
+    t = np.arange(0.0, 200000.0, 1.0)
+    bound = np.zeros(t.size)
+    for st in obs.states:
+        e = st["bound_without_record"] if st.get("source") == CONTROLLER else st["bound"]
+        bound += abs(controlled.term_coefficients[st["term"]]) * e * np.exp(-t / controlled.terms[st["term"]][1])
+    first = t[np.argmax(bound <= obs.tolerance)]
+    assert bound[0] > obs.tolerance and abs(obs.settle_without_record_s - first) <= 1.0, (obs.settle_without_record_s, first)
+    assert obs.settle_without_record_s > obs.settle_s  # the estimate is worse than the record
+    assert observed.observer.settle_without_record_s is None  # nothing supplied: no such time
+    doc = controlled.to_document()
+    assert doc["thermal"]["observer"]["settle_without_record_s"] == obs.settle_without_record_s
+    assert "settle_without_record_s" not in observed.to_document()["thermal"]["observer"]
+    from firmware.table import parse_table
+    tab = parse_table(export_model(doc).table)
+    assert tab.settle_nr == np.ceil(obs.settle_without_record_s) and tab.settle_s == np.ceil(obs.settle_s)
+    bad = json.loads(json.dumps(doc))
+    bad["thermal"]["observer"]["settle_without_record_s"] = obs.settle_s - 1.0
+    with pytest.raises(ModelFormatError, match=r"settle_without_record_s .* must be a finite number >= settle_s"):
+        DynamicModel.from_document(bad)
+
+
 def test_the_document_keeps_the_source_and_the_table_marks_it(fits, tmp_path):
     run, _, controlled, _ = fits
     doc = controlled.to_document()
@@ -193,3 +220,8 @@ def test_tcomp_fit_says_which_states_the_controller_supplies_and_export_marks_th
     rep = json.loads((tmp_path / "t.json").read_text())
     supplied = [c for c in rep["dynamic"]["observer"]["states"] if c.get("supplied_by") == "controller"]
     assert supplied and all(c["tau_ms"] > 0 for c in supplied)
+    # the settle time without the record: printed by fit, in the report, and said by export's note
+    nr = json.loads(open(out).read())["thermal"]["observer"]["settle_without_record_s"]
+    assert "settles in %.0f min (the board's SETTLING then)" % (nr / 60) in printed
+    assert rep["dynamic"]["observer"]["settle_without_record_s"] == np.ceil(nr)
+    assert "keeps SETTLING for %.0f min" % (np.ceil(nr) / 60) in capsys.readouterr().err

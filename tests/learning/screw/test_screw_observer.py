@@ -146,7 +146,7 @@ def test_export_carries_the_observer_into_the_table(fitted, tmp_path, capsys):
     cert = status["certificate"]
     assert 0 < cert["start_error_K"] < 1e-3 and 0 < cert["start_error_um"] < 0.01
     t = parse_table(ex.table)
-    assert t.version == 7 and t.obs == 1 and t.settle_s == math.ceil(fitted.observer_.settle_s)
+    assert t.version == 8 and t.obs == 1 and t.settle_s == math.ceil(fitted.observer_.settle_s)
     assert t.sensors[t.sn] == "T1" and t.sensors[t.sr] == "T3" and "T1" not in doc["sensors"]
     assert all(g > 0 for g in t.Gn)  # every segment warms with the nut (the fit's gains are all positive)
     path = tmp_path / "screw.json"
