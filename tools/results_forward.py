@@ -133,6 +133,8 @@ def held_out(run, split_s, channel, dyn_options, variants=(), static=True):
         info[key + "_ridge"] = st.get("ridge")
         info[key + "_forward_state"] = st.get("forward_state")
         info[key + "_settle_s"] = dyn.observer.settle_s if dyn.observer is not None else None
+        if dyn.observer is not None and dyn.observer.settle_without_record_s is not None:
+            info[key + "_settle_without_record_s"] = dyn.observer.settle_without_record_s
         if "settle_bound" in st:  # --option settle_max_s=...: what the bound refused
             info[key + "_settle_bound"] = {k: v for k, v in st["settle_bound"].items() if k not in ("rule", "observer")}
         fc = st["forward_chaining"]
@@ -224,7 +226,9 @@ def main(argv=None):
                         o["steps"][-1]["bound_um"] if o["steps"] else o["bound_um_without"], o["bound_um_without"]))
                 if i.get(key + "_settle_s") is not None:
                     sb = i.get(key + "_settle_bound")
-                    print("| %s | %s observer | settle_s %.0f min%s | | |" % (c, key, i[key + "_settle_s"] / 60, "" if sb is None else
+                    nr = i.get(key + "_settle_without_record_s")
+                    print("| %s | %s observer | settle_s %.0f min%s%s | | |" % (c, key, i[key + "_settle_s"] / 60,
+                          "" if nr is None else " (without the controller's record %.0f min)" % (nr / 60), "" if sb is None else
                           "; settle bound %.0f min: %d of %d structures with lags refused, chosen %s" % (
                               sb["settle_max_s"] / 60, sb["structures_refused"], sb["structures_checked"], sb["chosen"])))
             if "dynamic_average" in i:
