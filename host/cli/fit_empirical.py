@@ -58,6 +58,7 @@ OPTIONS = {
     "forward_blocks": number_or_choice(int, 3, "phases", "cycles"),
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start; switched_on: blocks >= 90 min)
     "spindle_states": str,  # dynamic: observer | controller (the controller's record supplies the spindle/feed lag states)
+    "controller_scoring": str,  # dynamic, with spindle_states=controller: record | worse (each block by the worse of with and without the record)
     "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "average_structures": number(int, 1),  # dynamic: average up to N structures, weights by forward chaining (1: the best one)
     "average_members": str,  # dynamic: ridge | path (where the averaged structures come from)

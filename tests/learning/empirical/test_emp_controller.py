@@ -225,3 +225,17 @@ def test_tcomp_fit_says_which_states_the_controller_supplies_and_export_marks_th
     assert "settles in %.0f min (the board's SETTLING then)" % (nr / 60) in printed
     assert rep["dynamic"]["observer"]["settle_without_record_s"] == np.ceil(nr)
     assert "keeps SETTLING for %.0f min" % (np.ceil(nr) / 60) in capsys.readouterr().err
+
+
+def test_tcomp_fit_takes_controller_scoring(tmp_path, capsys):
+    run, _ = _machine(26.0)
+    folder = write_run(run, str(tmp_path / "run"))
+    out = str(tmp_path / "dyn.json")
+    base = ["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "taus_s=0/1800/3600/14400",
+            "--option", "max_terms=3", "--option", "controller_scoring=worse"]
+    assert main(base + ["--option", "spindle_states=controller"]) == 0
+    stats = json.loads(open(out).read())["statistics"]
+    assert stats["controller_scoring"] == "worse"
+    capsys.readouterr()
+    assert main(base) == 2  # without spindle_states=controller it means nothing: refused, naming what it needs
+    assert "controller_scoring must be one of record, worse, and needs spindle_states=controller" in capsys.readouterr().err
