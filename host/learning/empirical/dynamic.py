@@ -278,19 +278,27 @@ class _WorseMoments:
     def sse(self, beta, idx, cols):
         return max(m.sse(beta, idx, cols) for m in self.starts)
 
+    def __call__(self, idx, cols):
+        # what needs one set of moments (structure averaging's weights: a quadratic in them) cannot use the worse of two
+        raise EmpiricalDataError("dynamic: a block scored by the worse of its starts has no single Gram matrix")
+
 
 def _fixed_moments(G, c, yy, n):
     return _FixedMoments(G, c, yy, n)
 
 
+def _started_moments(spec: StartedColumns, scale, o, label) -> _StartedMoments:
+    if not (np.isfinite(spec.rest).all() and np.isfinite(spec.decay).all() and np.isfinite(spec.y).all()):
+        raise EmpiricalDataError("dynamic: NaN/inf in the switched-on columns of block %s" % label)
+    return _StartedMoments(spec, scale, o)
+
+
 def _held_moments(spec, scale, o, label):
     """Moments of a scored block given as switched-on columns: (F_k, y_k), StartedColumns, or WorseOfStarts."""
     if isinstance(spec, WorseOfStarts):
-        return _WorseMoments([_held_moments(s, scale, o, label) for s in spec.starts])
+        return _WorseMoments([_started_moments(s, scale, o, label) for s in spec.starts])
     if isinstance(spec, StartedColumns):
-        if not (np.isfinite(spec.rest).all() and np.isfinite(spec.decay).all() and np.isfinite(spec.y).all()):
-            raise EmpiricalDataError("dynamic: NaN/inf in the switched-on columns of block %s" % label)
-        return _StartedMoments(spec, scale, o)
+        return _started_moments(spec, scale, o, label)
     Fk, yk = spec
     Ak = np.column_stack([np.ones(len(yk)), Fk]) if o else np.asarray(Fk, dtype=float)
     Ak = Ak / scale
@@ -346,7 +354,7 @@ class DynamicRegression:
         self.ridge = ridge
         self.cv_score = cv_score
         self.selection = selection
-        self.block_columns: dict[Any, tuple[np.ndarray, np.ndarray] | StartedColumns] | None = None
+        self.block_columns: dict[Any, tuple[np.ndarray, np.ndarray] | StartedColumns | WorseOfStarts] | None = None
         self.settle_bound: SettleBound | None = None  # with_settle_bound: only structures that settle in time
         self.swaps = swaps
         self.max_sensors = max_sensors

@@ -314,6 +314,10 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         raise EmpiricalDataError("dynamic: observer_sensors adds sensors the observer reads; it needs observer=true")
     average_count = averaging.check_count(opts.pop("average_structures", averaging.AVERAGE_STRUCTURES))
     average_members = opts.pop("average_members", "ridge")
+    if controller_scoring == forward.WORSE and average_count > 1:
+        # the average's weights minimise each block's squared error as a quadratic in them; the worse of two starts is not one
+        raise EmpiricalDataError("dynamic: controller_scoring=worse and average_structures > 1 cannot be combined (the average's "
+                                 "weights are fitted on one start per block)")
     if settle_max_s is not None and average_count > 1:
         # the average's union would carry an observer the bound never checked: not combined (neither measured with the other)
         raise EmpiricalDataError("dynamic: settle_max_s and average_structures > 1 cannot be combined (the averaged union's observer is not bounded)")
@@ -532,11 +536,13 @@ def _columns_subset(columns, cols):
     """A scored block's switched-on columns (dynamic.with_block_columns) restricted to the candidate columns ``cols``."""
     from host.learning.empirical.dynamic import StartedColumns, WorseOfStarts
 
+    def started(c: StartedColumns) -> StartedColumns:
+        return StartedColumns(c.rest[:, cols], c.decay[:, cols], c.y, lambda sub: c.start([cols[i] for i in sub]))
+
     if isinstance(columns, WorseOfStarts):
-        return WorseOfStarts([_columns_subset(s, cols) for s in columns.starts])
+        return WorseOfStarts([started(s) for s in columns.starts])
     if isinstance(columns, StartedColumns):
-        return StartedColumns(columns.rest[:, cols], columns.decay[:, cols], columns.y,
-                              lambda sub: columns.start([cols[i] for i in sub]))
+        return started(columns)
     Fk, yk = columns
     return np.asarray(Fk)[:, cols], yk
 

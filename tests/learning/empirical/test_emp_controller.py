@@ -113,6 +113,8 @@ def test_a_block_scored_by_the_worse_start_is_the_worse_of_the_two_predictions(f
     for bad in (dict(controller_scoring="worse"), dict(spindle_states="controller", controller_scoring="best")):
         with pytest.raises(EmpiricalDataError, match=r"controller_scoring must be one of record, worse"):
             fit_model([run], "dynamic", **bad, **FIT)
+    with pytest.raises(EmpiricalDataError, match=r"controller_scoring=worse and average_structures > 1 cannot be combined"):
+        fit_model([run], "dynamic", spindle_states="controller", controller_scoring="worse", average_structures=2, **FIT)
 
 
 def test_the_settle_bound_admits_what_the_controller_supplies():
