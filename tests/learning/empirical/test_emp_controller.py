@@ -218,6 +218,7 @@ def test_tcomp_fit_says_which_states_the_controller_supplies_and_export_marks_th
     assert "lag states the controller supplies from its record at a start (spindle_states=controller): lag(spindle_krpm" in printed
     assert json.loads(open(out).read())["statistics"]["spindle_states"] == "controller"
     assert "tcomp linuxcnc --spindle --signal-record FILE" in printed
+    assert "the same without the controller's record (its states at the observer's estimate): RMSE" in printed
     assert main(["export", out, "--out", str(tmp_path / "t.bin"), "--json", str(tmp_path / "t.json")]) == 0
     rep = json.loads((tmp_path / "t.json").read_text())
     supplied = [c for c in rep["dynamic"]["observer"]["states"] if c.get("supplied_by") == "controller"]
