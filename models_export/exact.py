@@ -17,6 +17,7 @@ from fractions import Fraction as F
 from models_export.certify import (
     ACC, OU_PER_UM, ExportError, Recorder, frac_bits, iv_add, iv_mul, narrow_width, p2, rnd, top_limbs_needed,
 )
+from firmware.table import SETTLE_NEVER  # pyright: ignore[reportAttributeAccessIssue]
 from firmware.wire import MAX_SUPPLIED
 from models_export.document import FORMAT
 
@@ -490,15 +491,15 @@ class Model:
             raise ExportError("%s: %d lag states are supplied by the controller (terms %s); the board takes at most %d"
                               % (where, len(self.supplied), sorted(self.supplied), MAX_SUPPLIED))
         # the table's settle_nr: SETTLING of a board started without the controller's values (those states at their
-        # gains' estimate); a document without it (fitted before stop 33) gets the largest, 2**30 - 1 s: SETTLING until
-        # the values come, as format 7 did
+        # gains' estimate); a document without it (fitted before stop 33) gets SETTLE_NEVER (2**30 - 1 s, the table's
+        # largest): SETTLING until the values come, as format 7 did
         nr = obs.get("settle_without_record_s")
         if nr is not None and not self.supplied:
             raise ExportError("%s.settle_without_record_s belongs to an observer with states the controller supplies" % where)
         if self.supplied:
-            nr = (1 << 30) - 1 if nr is None else _num(nr, where + ".settle_without_record_s")
-            if not self.settle_s <= nr <= (1 << 30) - 1:
-                raise ExportError("%s.settle_without_record_s must be settle_s..%d s, found %r" % (where, (1 << 30) - 1, nr))
+            nr = SETTLE_NEVER if nr is None else _num(nr, where + ".settle_without_record_s")
+            if not self.settle_s <= nr <= SETTLE_NEVER:
+                raise ExportError("%s.settle_without_record_s must be settle_s..%d s, found %r" % (where, SETTLE_NEVER, nr))
             self.settle_nr_s = math.ceil(F(nr))
         nf = len(self.dyn)
         self.obs_gain = [[F(0)] * nf for _ in range(nf)]

@@ -208,7 +208,7 @@ def export_model(doc: dict[str, Any], ref_position_mm: float | None = None, limi
             # each state's start error is inside its filter's state error bound, which the offset error above includes
             report["dynamic"]["observer"] = {
                 "method": model.observer["method"], "settle_s": f["settle_s"], "states": planner.obs_cert,
-                # a start without the controller's supplied states (0: none supplied; 2**30 - 1: until they come)
+                # a start without the controller's supplied states (0: none supplied; SETTLE_NEVER: until they come)
                 "settle_without_record_s": f["settle_nr"],
                 "start_error_um": _up(planner.obs_start_um) + 1e-9 if planner.obs_start_um is not None else None,
                 "horizon": "from the estimate: |e| <= max(v + |ein|, |start error|), kept by every step",

@@ -38,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
 
     from host.errors import UserError
     from host.outputs import Outputs
+    from models_export.exact import SETTLE_NEVER
 
     if args.ref_position_mm is not None and not math.isfinite(args.ref_position_mm):
         raise UserError("--ref-position-mm %s: must be a finite position in mm" % args.ref_position_mm)
@@ -66,7 +67,7 @@ def run(args: argparse.Namespace) -> int:
               "--signal-record FILE`; without them the board starts them 10 s after boot at the observer's "
               "estimate and keeps SETTLING %s" % (len(supplied), ", ".join(c["term"] for c in supplied),
                                                   "until they come (a document fitted before settle_without_record_s)"
-                                                  if nr >= (1 << 30) - 1 else "for %.0f min (%.0f min with them)" % (
+                                                  if nr >= SETTLE_NEVER else "for %.0f min (%.0f min with them)" % (
                                                       nr / 60, r["dynamic"]["observer"]["settle_s"] / 60)), file=sys.stderr)
     obs = (r.get("screw") or {}).get("observer") or {}
     if obs.get("in_document") and not obs.get("carried"):
