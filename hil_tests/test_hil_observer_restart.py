@@ -56,11 +56,12 @@ def _shift(run, t0, channel):
                Spindle(sp.time_s - t0, sp.rpm), name=run.name)
 
 
-def _estimate_bound_um(doc, dT):
+def _estimate_bound_um(doc, dT, supplied=False):
     """Offset error (um) of the RTD chain: every term's coefficient x its input's chain bound; a lag term's state
-    starts at the observer's estimate, whose error is sum_k |G_jk| dT_k, and never exceeds the larger of the two."""
+    starts at the observer's estimate, whose error is sum_k |G_jk| dT_k, and never exceeds the larger of the two.
+    ``supplied``: the states the controller supplies start at its values, not at their estimate (no sensor in them)."""
     th = doc["thermal"]
-    gains = {s["term"]: s["gains"] for s in th["observer"]["states"]}
+    gains = {s["term"]: s["gains"] for s in th["observer"]["states"] if not (supplied and s.get("source") == "controller")}
     out = 0.0
     for j, t in enumerate(th["terms"]):
         d_in = dT[t["signal"][2:]] if t["signal"].startswith("T:") else 0.0
