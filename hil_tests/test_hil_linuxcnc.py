@@ -22,6 +22,7 @@ Every LinuxCNC test lives in this one file: only one HAL session runs at a time
 and ``--dist loadfile`` keeps a file on one worker.
 """
 import json
+import math
 import os
 import shutil
 import socket
@@ -33,6 +34,7 @@ import time
 import numpy as np
 import pytest
 
+from firmware.wire import SETTLING
 from hil_tests.lcnc.tap import LinkTap
 from hil_tests.rig.boards import export, poly_slope_for_run, rig_config
 from hil_tests.rig.harness import Rig
@@ -61,9 +63,20 @@ PINS = ["joint.0.motor-pos-cmd", "axis.x.pos-cmd", "axis.x.eoffset", "axis.x.eof
 class LinuxCNC:
     """``linuxcnc tcomp-sim.ini`` from a copy of examples/linuxcnc with our DISPLAY and [TCOMP] values."""
 
-    def __init__(self, workdir, port, mode, cold_start, key_file):
+    def __init__(self, workdir, port, mode, cold_start, key_file, bridge_args=()):
+        """``bridge_args``: more options of ``tcomp linuxcnc`` (on tcomp.hal's loadusr line); ``--spindle`` also nets
+        spindle.0.speed-out-abs to tcomp.spindle-rpm, as tcomp.hal's comment says."""
         self.dir = os.path.join(workdir, "lcnc")
         shutil.copytree(EXAMPLES, self.dir)
+        if bridge_args:
+            hal_path = os.path.join(self.dir, "tcomp.hal")
+            with open(hal_path) as f:
+                hal = f.read()
+            hal = hal.replace("--key [TCOMP]KEY\n", "--key [TCOMP]KEY %s\n" % " ".join(bridge_args), 1)
+            if "--spindle" in bridge_args:
+                hal = hal.replace("# net tcomp-spindle", "net tcomp-spindle", 1)
+            with open(hal_path, "w") as f:
+                f.write(hal)
         driver = os.path.join(self.dir, "display.sh")
         with open(driver, "w") as f:
             f.write("#!/bin/sh\nexec %s %s \"$@\"\n" % (os.path.join(VENV_BIN, "python"),
@@ -88,7 +101,10 @@ class LinuxCNC:
         env = dict(os.environ, RTAPI_UID=str(os.getuid() or 1000), RTAPI_FIFO_PATH=os.path.join(self.rtapi, "fifo"),
                    RUNTESTS="1", HOME=self.dir, TCOMP_LCNC_CTL=ctl, PATH=VENV_BIN + os.pathsep + os.environ["PATH"])
         env.pop("DISPLAY", None)
+        self.env = env
+        self.ini = ini
         self.log_path = os.path.join(self.dir, "linuxcnc.log")
+        self.halcmd_log = os.path.join(self.dir, "halcmd.log")
         self.log = open(self.log_path, "wb")
         self.proc = subprocess.Popen(["linuxcnc", ini], cwd=self.dir, env=env, stdout=self.log,
                                      stderr=subprocess.STDOUT, start_new_session=True)
@@ -102,8 +118,12 @@ class LinuxCNC:
         self.f = self.conn.makefile("rwb")
 
     def output(self):
-        with open(self.log_path, "rb") as f:
-            return f.read().decode(errors="replace")[-4000:]
+        text = ""
+        for path in (self.log_path, self.halcmd_log):
+            if os.path.exists(path):
+                with open(path, "rb") as f:
+                    text += "--- %s\n%s" % (os.path.basename(path), f.read().decode(errors="replace")[-4000:])
+        return text
 
     def __call__(self, op, **kw):
         kw["op"] = op
@@ -119,6 +139,27 @@ class LinuxCNC:
 
     def get(self, *pins):
         return self("get", pins=list(pins))["values"]
+
+    def halcmd(self, *args, timeout=30):
+        """``halcmd ARGS`` in this HAL session; a HAL file (``-f``) reads the INI's [TCOMP] values, as at start. The
+        output goes to halcmd.log: a component it loads (loadusr) keeps it open while it runs."""
+        ini = ["-i", self.ini] if "-f" in args else []
+        with open(self.halcmd_log, "ab") as log:
+            p = subprocess.run(["halcmd"] + ini + list(args), cwd=self.dir, env=self.env, stdout=log,
+                               stderr=subprocess.STDOUT, timeout=timeout)
+        assert p.returncode == 0, "halcmd %s failed:\n%s" % (" ".join(args), self.output())
+
+    def wait_unloaded(self, comp, timeout=10.0):
+        """Wait until ``comp`` has left HAL: ``halcmd unload`` only sends a user component SIGTERM, and the process
+        leaves HAL when it exits (after its last work: the bridge saves its signal record), as LinuxCNC's shutdown
+        waits for it."""
+        end = time.monotonic() + timeout
+        while time.monotonic() < end:
+            p = subprocess.run(["halcmd", "list", "comp"], cwd=self.dir, env=self.env, capture_output=True, text=True)
+            if comp not in p.stdout.split():
+                return
+            time.sleep(0.05)
+        raise AssertionError("%s still in HAL %g s after unload:\n%s" % (comp, timeout, self.output()))
 
     def close(self):
         try:
@@ -139,34 +180,44 @@ class LinuxCNC:
 class Board:
     """The firmware on the rig with simulated time paced to the wall clock, behind a LinkTap."""
 
-    def __init__(self, workdir, table, mode):
-        cfg = rig_config(SENSORS, mode=mode, slew_um_per_s=SLEW, hold_ms=300)
+    def __init__(self, workdir, table, mode, sensors=SENSORS, temps=TEMPS, heap=None):
+        cfg = rig_config(sensors, mode=mode, slew_um_per_s=SLEW, hold_ms=300)
         from host.board.linkauth import generate_key, write_key
         key = generate_key()  # provisioned into the board's flash, as tcomp flash --key does
         self.key_file = os.path.join(workdir, "board.key")
         write_key(self.key_file, key)
-        self.rig = Rig(cfg, table, interpreter="micropython", workdir=os.path.join(workdir, "rig"), temps=TEMPS,
-                       open_port=False, key=key)
+        self.rig = Rig(cfg, table, interpreter="micropython", workdir=os.path.join(workdir, "rig"), temps=temps,
+                       open_port=False, key=key, heap=heap)
         self.rig.start()
         self.lock = threading.Lock()
         self.stop = False
         self.error = None
+        self.base = (time.monotonic(), self.rig.t_ms)  # the pacer's origin: (wall, rig time) it counts from
         self.pacer = threading.Thread(target=self._pace, daemon=True)
         self.pacer.start()
         self.tap = LinkTap(self.rig.port, stream=mode == "stream")
         self.tap.start()
 
     def _pace(self):
-        t0, s0 = time.monotonic(), self.rig.t_ms
         try:
             while not self.stop:
-                target = s0 + int((time.monotonic() - t0) * 1000)
-                if target > self.rig.t_ms:
-                    with self.lock:
+                with self.lock:
+                    t0, s0 = self.base
+                    target = s0 + int((time.monotonic() - t0) * 1000)
+                    if target > self.rig.t_ms:
                         self.rig.run(target, sync=False)
                 time.sleep(0.005)
         except Exception as exc:  # surfaced by the test through check()
             self.error = exc
+
+    def power_cut(self, temps):
+        """Cut the power and restart on the same flash without lags.bin (play.power_cut_without_lags). The rig's time
+        starts again from 0 at a power-up (the board's clock goes on from start_ms): the pacer restarts from there, or it
+        would run the board through the whole time since its first start in one burst."""
+        from hil_tests.rig.play import power_cut_without_lags
+        with self.lock:
+            power_cut_without_lags(self.rig, temps)
+            self.base = (time.monotonic(), self.rig.t_ms)
 
     def control(self, fn, *args):
         with self.lock:
@@ -441,3 +492,168 @@ def test_record_samples_hal_beside_the_temperatures(tmp_path, table):
     # the temperatures throughout the ~10 s of the two moves and the pauses around them, by the same coverage rule
     tt = run.temperatures.time_s
     assert tt[-1] - tt[0] >= 9.0 and np.diff(tt).max() <= 1.0, (tt[-1] - tt[0], np.diff(tt).max())
+
+
+# --- supplied lag states: tcomp linuxcnc --spindle --signal-record (table format 7/8) -----------------------------------
+SUPPLIED_FIXTURE = os.path.join(ROOT, "hil_tests", "fixtures", "dynamic_controller_fl_thermal_ch1.json")
+SUPPLIED_SETTLE_S = 5  # the table copy's settle_s (fitted: 28 min), so that SETTLING is seen to clear
+CYCLE_MS = 100  # rig_config's cycle_ms
+# a speed change reaches the record at the bridge's next period (50 ms) after the MDI command set the pin; a loaded,
+# non-real-time host delays that period, as JITTER_S allows for motion's servo thread
+NOTE_S = 0.25
+
+
+def _lag_interval(changes, source, tau_s, t_eval):
+    """The first-order lag (time constant ``tau_s``) of the commanded spindle speed, as an interval: ``changes`` are
+    (a, b, rpm), the speed commanded from some time in [a, b] on (wall clock), 0 rpm before the first (the lag in
+    equilibrium with it); the lag is evaluated at some time in ``t_eval`` = (T0, T1). Source -1: |speed| (rpm), -2: its
+    square. The lag of steps is the sum of each step's response du (1 - e^(-(T - s)/tau)), which grows with T - s: each
+    step's extremes come from the two ends of T - s's range."""
+    lo = hi = prev = 0.0
+    for a, b, rpm in changes:
+        u = float(rpm) ** 2 if source == -2 else abs(float(rpm))
+        du, prev = u - prev, u
+        ends = [du * (1.0 - math.exp(-max(d, 0.0) / tau_s)) for d in (t_eval[0] - b, t_eval[1] - a)]
+        lo += min(ends)
+        hi += max(ends)
+    return lo, hi
+
+
+def _supply_after(tap, since, timeout=20.0):
+    """The bridge's supply after monotonic ``since``, read off the line: (the board's dictionary frame, when it came,
+    the Y values the bridge sent, when they passed, the board's answer frame, when it came). Waits up to ``timeout``."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        with tap.lock:
+            frames = [(t, f) for t, f in tap.frames if t >= since]
+            commands = [(t, c) for t, c in tap.commands if t >= since]
+        asked = [t for t, c in commands if c.startswith(b"$TC,Y*")]
+        dic = next(((t, f) for t, f in frames if f.kind == "A" and f.fields[:2] == ["Y", "A"]), None)
+        if asked and dic is not None:
+            sent = next(((t, c) for t, c in commands if t >= dic[0] and c.startswith(b"$TC,Y,")), None)
+            if sent is not None:
+                ans = next(((t, f) for t, f in frames if t >= sent[0] and f.kind in ("A", "E") and f.fields[:1] != ["L"]
+                            and not (f.kind == "A" and f.fields[:2] == ["Y", "A"])), None)
+                if ans is not None:
+                    values = [int(v) for v in sent[1].split(b"*")[0].split(b",")[2:]]
+                    return dic[1], dic[0], values, sent[0], ans[1], ans[0]
+        time.sleep(0.1)
+    with tap.lock:
+        tail = [c for t, c in tap.commands if t >= since][-20:]
+    raise AssertionError("no Y dictionary asked and values sent after the board's start; the bridge sent %r" % tail)
+
+
+def _check_supplied(tap, since, changes, clock_offset, what):
+    """The values the bridge sent after ``since`` equal the lags of the commanded speeds within the interval of
+    _lag_interval (the evaluation between the dictionary's arrival and the values' passage) widened by half a state
+    unit (the rounding to the board's units); the board took them (A,Y,S,1). Returns (the dictionary's entries,
+    (when the values passed, when the board's answer came), [(value sent, lo, hi)])."""
+    dic, t_dic, values, t_sent, ans, t_ans = _supply_after(tap, since)
+    from host.board.supplied import parse_dictionary
+    letter, entries = parse_dictionary(dic.fields)
+    assert letter == "A" and dic.status & SETTLING, "%s: the board did not await the states: %r" % (what, dic)
+    assert [e.source for e in entries] == [-2, -1], entries  # the squared speed's 2 h lag, the speed's 15 min
+    assert ans.kind == "A" and ans.fields == ["Y", "S", "1"], "%s: the board answered %r to %r" % (what, ans, values)
+    got = []
+    for v, e in zip(values, entries):
+        lo, hi = _lag_interval(changes, e.source, e.tau_ms / 1000.0, (t_dic + clock_offset, t_sent + clock_offset))
+        lo, hi = math.ldexp(lo, e.scale) - 0.5, math.ldexp(hi, e.scale) + 0.5
+        got.append((v, lo, hi))
+    assert len(values) == len(entries) and all(lo <= v <= hi for v, lo, hi in got), \
+        "%s: sent %r, the commanded speeds' lags are in %r" % (what, values, [(lo, hi) for _, lo, hi in got])
+    return entries, (t_sent, t_ans), got
+
+
+def _mdi_window(lc, cmd):
+    """Run ``cmd`` and return the wall-clock interval in which its speed change reached the bridge's record."""
+    a = time.time()
+    lc("mdi", cmd=cmd)
+    return a, time.time() + NOTE_S
+
+
+def test_linuxcnc_supplies_the_spindle_lag_states(tmp_path):
+    """``tcomp linuxcnc --spindle --signal-record FILE`` in a real LinuxCNC with the board running a table whose spindle
+    lags the controller supplies (the FL_THERMAL fixture of test_hil_supplied_restart.py): MDI runs the spindle, the
+    board restarts (a power cut without lags.bin) while LinuxCNC and the bridge stay up; the bridge asks the dictionary
+    and sends the lags of the speeds LinuxCNC was commanded with, the board takes them and SETTLING follows settle_s from
+    then. Then the bridge itself restarts (halcmd unload, as LinuxCNC's shutdown does, and load again): the record
+    survives in FILE and the next board restart gets the lags of the whole record, the spindle stopped since."""
+    import copy
+
+    from hil_tests.fixtures.samples import restamp
+    from hil_tests.rig import interpreters
+    with open(SUPPLIED_FIXTURE) as fh:
+        doc = copy.deepcopy(json.load(fh))
+    doc["thermal"]["observer"]["settle_s"] = SUPPLIED_SETTLE_S
+    doc = restamp(doc)
+    sensors = list(doc["sensors"])
+    temps = dict(doc["reference_C"])
+    table = export(doc).table
+    record_path = str(tmp_path / "spindle-record.json")
+    board = Board(str(tmp_path), table, "stream", sensors=sensors, temps=temps,
+                  heap=os.environ.get("TCOMP_HIL_HEAP") or interpreters.heap("rig_dynamic"))
+    lc = None
+    try:
+        lc = LinuxCNC(str(tmp_path), board.tap.port, "stream", False, board.key_file,
+                      bridge_args=("--spindle", "--signal-record", record_path))
+        lc("start")
+        tap = board.tap
+        clock_offset = time.time() - time.monotonic()  # the tap's times on the wall clock the bridge's record uses
+        # at the bridge's start its new record holds the stopped spindle only: the lags are 0
+        _, t_first, first = _check_supplied(tap, 0.0, [], clock_offset, "bridge start")
+        assert [v for v, _, _ in first] == [0, 0], first
+
+        changes = [_mdi_window(lc, "M3 S3000") + (3000,)]
+        time.sleep(6.0)
+        changes.append(_mdi_window(lc, "S1500") + (1500,))
+        time.sleep(3.0)
+        assert lc.get("spindle.0.speed-out-abs")["spindle.0.speed-out-abs"] == 1500
+        board.check()
+
+        cut = time.monotonic()
+        board.power_cut(temps)
+        entries, (t_set, t_took), got = _check_supplied(tap, cut, changes, clock_offset, "board restart")
+        # SETTLING (docs/firmware.md "Supplied lag states"): raised while the board waits, and for settle_s after the
+        # start the values make (the next cycle), on the board's clock (O/Q frames' t_ms)
+        time.sleep(SUPPLIED_SETTLE_S + 2.0)
+        with tap.lock:
+            booted = next(t for t, f in tap.frames if t >= cut and f.kind == "H")  # the frames before are the old board's
+            oq = [(t, f) for t, f in tap.frames if t >= booted and f.kind in ("O", "Q")]
+        before = [f for t, f in oq if t < t_set]
+        after = [f for t, f in oq if t > t_took]
+        assert before and after, (len(before), len(after))
+        # before the first cycle has read the sensors the board reports no model at all (FALLBACK, the sensors' bits);
+        # the dictionary's frame said SETTLING (_check_supplied)
+        assert all(f.status & SETTLING for f in before if not f.status & SENSOR_MASK), [f.raw for f in before]
+        # the board's start (the cycle after the values came) is after the last frame before they were sent and at most
+        # a cycle after the first frame after the board's answer; SETTLING clears settle_s after it, in the status of the
+        # cycle after
+        t_start = before[-1].t_ms
+        settled = t_start + SUPPLIED_SETTLE_S * 1000
+        clear_by = after[0].t_ms + CYCLE_MS + SUPPLIED_SETTLE_S * 1000 + CYCLE_MS
+        early = [f.t_ms - t_start for f in after if f.t_ms < settled and not f.status & SETTLING]
+        late = [f.t_ms - t_start for f in after if f.t_ms > clear_by and f.status & SETTLING]
+        assert not early and not late, "SETTLING clear at %r ms, raised at %r ms after the values (settle_s %d s)" % (
+            early[:5], late[:5], SUPPLIED_SETTLE_S)
+        assert any(f.t_ms > clear_by for f in after), "the test did not wait past settle_s"
+        print("board restart: sent %s for %s; the commanded speeds' lags in %s" % (
+            [v for v, _, _ in got], ["%d tau %d s" % (e.source, e.tau_ms // 1000) for e in entries],
+            ["[%.1f, %.1f]" % (lo, hi) for _, lo, hi in got]))
+
+        # the bridge's own restart: the spindle stopped first (the record resumes with it stopped: LinuxCNC was off)
+        changes.append(_mdi_window(lc, "M5") + (0,))
+        time.sleep(1.0)
+        lc.halcmd("unload", "tcomp")
+        lc.wait_unloaded("tcomp")
+        lc.halcmd("-f", os.path.join(lc.dir, "tcomp.hal"))
+        time.sleep(1.0)
+        cut = time.monotonic()
+        board.power_cut(temps)
+        _, _, got2 = _check_supplied(tap, cut, changes, clock_offset, "board restart after the bridge's restart")
+        print("after the bridge's restart: sent %s; the commanded speeds' lags in %s" % (
+            [v for v, _, _ in got2], ["[%.1f, %.1f]" % (lo, hi) for _, lo, hi in got2]))
+        board.check()
+    finally:
+        if lc is not None:
+            lc.close()
+        board.close()
