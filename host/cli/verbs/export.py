@@ -38,7 +38,7 @@ def run(args: argparse.Namespace) -> int:
 
     from host.errors import UserError
     from host.outputs import Outputs
-    from models_export.exact import SETTLE_NEVER
+    from models_export.exact import SETTLE_NEVER  # pyright: ignore[reportAttributeAccessIssue] (published on CPython at table.py's end)
 
     if args.ref_position_mm is not None and not math.isfinite(args.ref_position_mm):
         raise UserError("--ref-position-mm %s: must be a finite position in mm" % args.ref_position_mm)
