@@ -636,9 +636,9 @@ def test_linuxcnc_supplies_the_spindle_lag_states(tmp_path):
         assert not early and not late, "SETTLING clear at %r ms, raised at %r ms after the values (settle_s %d s)" % (
             early[:5], late[:5], SUPPLIED_SETTLE_S)
         assert any(f.t_ms > clear_by for f in after), "the test did not wait past settle_s"
-        print("board restart: sent %s for %s; the commanded speeds' lags in %s" % (
-            [v for v, _, _ in got], ["%d tau %d s" % (e.source, e.tau_ms // 1000) for e in entries],
-            ["[%.1f, %.1f]" % (lo, hi) for _, lo, hi in got]))
+        print("board restart: sent %s for %s; the commanded speeds' lags in %s (speed changes dated within %s s)" % (
+            [v for v, _, _ in got], ["%d tau %d s scale %d" % (e.source, e.tau_ms // 1000, e.scale) for e in entries],
+            ["[%.1f, %.1f]" % (lo, hi) for _, lo, hi in got], ["%.3f" % (b - a) for a, b, _ in changes]))
 
         # the bridge's own restart: the spindle stopped first (the record resumes with it stopped: LinuxCNC was off)
         changes.append(_mdi_window(lc, "M5") + (0,))
