@@ -17,6 +17,10 @@ Checked:
   much slower: no step, no freeze), then ramps back; with the machine
   switched off during a fault the bridge's offset is zero at once and motion
   starts from zero when the machine comes back on.
+- with ``--spindle --signal-record`` and a table whose spindle lags the controller supplies (stream and Modbus): at
+  a board restart the bridge reads the board's dictionary and sends the lags of the speeds LinuxCNC was commanded
+  with (computed here from the MDI commands' times), the board takes them, SETTLING lasts settle_s from then; after
+  the bridge's own restart the record is read back from its file.
 
 Every LinuxCNC test lives in this one file: only one HAL session runs at a time
 and ``--dist loadfile`` keeps a file on one worker.
@@ -520,40 +524,108 @@ def _lag_interval(changes, source, tau_s, t_eval):
 
 
 def _supply_after(tap, since, timeout=20.0):
-    """The bridge's supply after monotonic ``since``, read off the line: (the board's dictionary frame, when it came,
-    the Y values the bridge sent, when they passed, the board's answer frame, when it came). Waits up to ``timeout``."""
+    """The bridge's supply after monotonic ``since``, read off the line, waiting up to ``timeout``: (the board's
+    dictionary (letter, entries), whether it awaited the states, when it came, the values the bridge sent, when they
+    passed, whether the board took them, its answer, when it came)."""
+    read = _stream_supply if tap.stream else _modbus_supply
     end = time.monotonic() + timeout
     while time.monotonic() < end:
-        with tap.lock:
-            frames = [(t, f) for t, f in tap.frames if t >= since]
-            commands = [(t, c) for t, c in tap.commands if t >= since]
-        asked = [t for t, c in commands if c.startswith(b"$TC,Y*")]
-        dic = next(((t, f) for t, f in frames if f.kind == "A" and f.fields[:2] == ["Y", "A"]), None)
-        if asked and dic is not None:
-            sent = next(((t, c) for t, c in commands if t >= dic[0] and c.startswith(b"$TC,Y,")), None)
-            if sent is not None:
-                ans = next(((t, f) for t, f in frames if t >= sent[0] and f.kind in ("A", "E") and f.fields[:1] != ["L"]
-                            and not (f.kind == "A" and f.fields[:2] == ["Y", "A"])), None)
-                if ans is not None:
-                    values = [int(v) for v in sent[1].split(b"*")[0].split(b",")[2:]]
-                    return dic[1], dic[0], values, sent[0], ans[1], ans[0]
+        found = read(tap, since)
+        if found is not None:
+            return found
         time.sleep(0.1)
     with tap.lock:
-        tail = [c for t, c in tap.commands if t >= since][-20:]
-    raise AssertionError("no Y dictionary asked and values sent after the board's start; the bridge sent %r" % tail)
+        tail = [c for t, c in tap.commands if t >= since][-20:] if tap.stream else bytes(tap.bridge_raw[-200:]).hex()
+    raise AssertionError("no dictionary asked and values sent after the board's start; the bridge sent %r" % tail)
+
+
+def _stream_supply(tap, since):
+    """``Y`` asked, the board's ``A,Y,A,...`` (SETTLING: it waits), ``Y,<v1>,<v2>`` sent, ``A,Y,S,1`` (set now)."""
+    from host.board.supplied import parse_dictionary
+    with tap.lock:
+        frames = [(t, f) for t, f in tap.frames if t >= since]
+        commands = [(t, c) for t, c in tap.commands if t >= since]
+    asked = [t for t, c in commands if c.startswith(b"$TC,Y*")]
+    dic = next(((t, f) for t, f in frames if f.kind == "A" and f.fields[:2] == ["Y", "A"]), None)
+    if not asked or dic is None:
+        return None
+    sent = next(((t, c) for t, c in commands if t >= dic[0] and c.startswith(b"$TC,Y,")), None)
+    if sent is None:
+        return None
+    ans = next(((t, f) for t, f in frames if t >= sent[0] and f.kind in ("A", "E") and f.fields[:1] != ["L"]
+                and not (f.kind == "A" and f.fields[:2] == ["Y", "A"])), None)
+    if ans is None:
+        return None
+    values = [int(v) for v in sent[1].split(b"*")[0].split(b",")[2:]]
+    return (parse_dictionary(dic[1].fields), bool(dic[1].status & SETTLING), dic[0], values, sent[0],
+            ans[1].kind == "A" and ans[1].fields == ["Y", "S", "1"], ans[1].raw, ans[0])
+
+
+def _modbus_frame(raw, prefix, length, start):
+    """Index of the first CRC-valid frame of ``length`` bytes starting with ``prefix`` at or after ``start``, or -1."""
+    i = start
+    while True:
+        i = raw.find(prefix, i)
+        if i < 0 or i + length > len(raw):
+            return -1
+        f = raw[i:i + length]
+        if _crc_modbus(f[:-2]) == f[-2] | f[-1] << 8:
+            return i
+        i += 1
+
+
+def _modbus_supply(tap, since):
+    """Read input registers 54-71 asked, the board's answer (state 1: it awaits the states), the states written (FC16
+    to holding 20-23, int32 high word first), the board's normal answer (an exception would refuse them)."""
+    import bisect
+
+    from host.board.supplied import modbus_dictionary
+    with tap.lock:
+        board, bridge = bytes(tap.board_raw), bytes(tap.bridge_raw)
+        board_marks, bridge_marks = list(tap.board_marks), list(tap.bridge_marks)
+
+    def offset(marks, t):  # the first byte read at or after t
+        k = bisect.bisect_left([m[0] for m in marks], t)
+        return marks[k][1] if k < len(marks) else 1 << 62
+
+    def when(marks, i):  # when the chunk holding byte i was read
+        return marks[bisect.bisect_right([m[1] for m in marks], i) - 1][0]
+
+    ask = _modbus_frame(bridge, b"\x01\x04\x00\x36\x00\x12", 8, offset(bridge_marks, since))
+    if ask < 0:
+        return None
+    n = 3 + 2 * 18 + 2
+    dic = _modbus_frame(board, b"\x01\x04\x24", n, offset(board_marks, when(bridge_marks, ask)))
+    if dic < 0:
+        return None
+    regs = [board[dic + 3 + 2 * k] << 8 | board[dic + 4 + 2 * k] for k in range(18)]
+    t_dic = when(board_marks, dic + n - 1)
+    sent = _modbus_frame(bridge, b"\x01\x10\x00\x14\x00\x04\x08", 17, offset(bridge_marks, t_dic))
+    if sent < 0:
+        return None
+    t_sent = when(bridge_marks, sent + 16)
+    words = [bridge[sent + 7 + 2 * k] << 8 | bridge[sent + 8 + 2 * k] for k in range(4)]
+    values = [(words[2 * k] << 16 | words[2 * k + 1]) - ((words[2 * k] >> 15) << 32) for k in range(2)]
+    start = offset(board_marks, t_sent)
+    ok = _modbus_frame(board, b"\x01\x10\x00\x14\x00\x04", 8, start)
+    refused = _modbus_frame(board, b"\x01\x90", 5, start)
+    if ok < 0 and refused < 0:
+        return None
+    took = ok >= 0 and (refused < 0 or ok < refused)
+    i = ok if took else refused
+    return (modbus_dictionary(regs), regs[0] == 1, t_dic, values, t_sent, took, board[i:i + (8 if took else 5)],
+            when(board_marks, i))
 
 
 def _check_supplied(tap, since, changes, clock_offset, what):
     """The values the bridge sent after ``since`` equal the lags of the commanded speeds within the interval of
     _lag_interval (the evaluation between the dictionary's arrival and the values' passage) widened by half a state
-    unit (the rounding to the board's units); the board took them (A,Y,S,1). Returns (the dictionary's entries,
+    unit (the rounding to the board's units); the board awaited them and took them. Returns (the dictionary's entries,
     (when the values passed, when the board's answer came), [(value sent, lo, hi)])."""
-    dic, t_dic, values, t_sent, ans, t_ans = _supply_after(tap, since)
-    from host.board.supplied import parse_dictionary
-    letter, entries = parse_dictionary(dic.fields)
-    assert letter == "A" and dic.status & SETTLING, "%s: the board did not await the states: %r" % (what, dic)
+    (letter, entries), awaited, t_dic, values, t_sent, took, answer, t_ans = _supply_after(tap, since)
+    assert letter == "A" and awaited, "%s: the board did not await the states (%s)" % (what, letter)
     assert [e.source for e in entries] == [-2, -1], entries  # the squared speed's 2 h lag, the speed's 15 min
-    assert ans.kind == "A" and ans.fields == ["Y", "S", "1"], "%s: the board answered %r to %r" % (what, ans, values)
+    assert took, "%s: the board answered %r to %r" % (what, answer, values)
     got = []
     for v, e in zip(values, entries):
         lo, hi = _lag_interval(changes, e.source, e.tau_ms / 1000.0, (t_dic + clock_offset, t_sent + clock_offset))
@@ -564,6 +636,32 @@ def _check_supplied(tap, since, changes, clock_offset, what):
     return entries, (t_sent, t_ans), got
 
 
+def _check_settling(tap, cut, t_set, t_took):
+    """SETTLING (docs/firmware.md "Supplied lag states"): raised while the board waits, and for settle_s after the start
+    the values make (the next cycle), on the board's clock (the O/Q frames' t_ms)."""
+    time.sleep(SUPPLIED_SETTLE_S + 2.0)
+    with tap.lock:
+        booted = next(t for t, f in tap.frames if t >= cut and f.kind == "H")  # the frames before are the old board's
+        oq = [(t, f) for t, f in tap.frames if t >= booted and f.kind in ("O", "Q")]
+    before = [f for t, f in oq if t < t_set]
+    after = [f for t, f in oq if t > t_took]
+    assert before and after, (len(before), len(after))
+    # before the first cycle has read the sensors the board reports no model at all (FALLBACK, the sensors' bits);
+    # the dictionary's frame said SETTLING (_check_supplied)
+    assert all(f.status & SETTLING for f in before if not f.status & SENSOR_MASK), [f.raw for f in before]
+    # the board's start (the cycle after the values came) is after the last frame before they were sent and at most
+    # a cycle after the first frame after the board's answer; SETTLING clears settle_s after it, in the status of the
+    # cycle after
+    t_start = before[-1].t_ms
+    settled = t_start + SUPPLIED_SETTLE_S * 1000
+    clear_by = after[0].t_ms + CYCLE_MS + SUPPLIED_SETTLE_S * 1000 + CYCLE_MS
+    early = [f.t_ms - t_start for f in after if f.t_ms < settled and not f.status & SETTLING]
+    late = [f.t_ms - t_start for f in after if f.t_ms > clear_by and f.status & SETTLING]
+    assert not early and not late, "SETTLING clear at %r ms, raised at %r ms after the values (settle_s %d s)" % (
+        early[:5], late[:5], SUPPLIED_SETTLE_S)
+    assert any(f.t_ms > clear_by for f in after), "the test did not wait past settle_s"
+
+
 def _mdi_window(lc, cmd):
     """Run ``cmd`` and return the wall-clock interval in which its speed change reached the bridge's record."""
     a = time.time()
@@ -571,7 +669,8 @@ def _mdi_window(lc, cmd):
     return a, time.time() + NOTE_S
 
 
-def test_linuxcnc_supplies_the_spindle_lag_states(tmp_path):
+@pytest.mark.parametrize("mode", ["stream", "modbus"])
+def test_linuxcnc_supplies_the_spindle_lag_states(tmp_path, mode):
     """``tcomp linuxcnc --spindle --signal-record FILE`` in a real LinuxCNC with the board running a table whose spindle
     lags the controller supplies (the FL_THERMAL fixture of test_hil_supplied_restart.py): MDI runs the spindle, the
     board restarts (a power cut without lags.bin) while LinuxCNC and the bridge stay up; the bridge asks the dictionary
@@ -590,11 +689,11 @@ def test_linuxcnc_supplies_the_spindle_lag_states(tmp_path):
     temps = dict(doc["reference_C"])
     table = export(doc).table
     record_path = str(tmp_path / "spindle-record.json")
-    board = Board(str(tmp_path), table, "stream", sensors=sensors, temps=temps,
+    board = Board(str(tmp_path), table, mode, sensors=sensors, temps=temps,
                   heap=os.environ.get("TCOMP_HIL_HEAP") or interpreters.heap("rig_dynamic"))
     lc = None
     try:
-        lc = LinuxCNC(str(tmp_path), board.tap.port, "stream", False, board.key_file,
+        lc = LinuxCNC(str(tmp_path), board.tap.port, mode, False, board.key_file,
                       bridge_args=("--spindle", "--signal-record", record_path))
         lc("start")
         tap = board.tap
@@ -613,29 +712,8 @@ def test_linuxcnc_supplies_the_spindle_lag_states(tmp_path):
         cut = time.monotonic()
         board.power_cut(temps)
         entries, (t_set, t_took), got = _check_supplied(tap, cut, changes, clock_offset, "board restart")
-        # SETTLING (docs/firmware.md "Supplied lag states"): raised while the board waits, and for settle_s after the
-        # start the values make (the next cycle), on the board's clock (O/Q frames' t_ms)
-        time.sleep(SUPPLIED_SETTLE_S + 2.0)
-        with tap.lock:
-            booted = next(t for t, f in tap.frames if t >= cut and f.kind == "H")  # the frames before are the old board's
-            oq = [(t, f) for t, f in tap.frames if t >= booted and f.kind in ("O", "Q")]
-        before = [f for t, f in oq if t < t_set]
-        after = [f for t, f in oq if t > t_took]
-        assert before and after, (len(before), len(after))
-        # before the first cycle has read the sensors the board reports no model at all (FALLBACK, the sensors' bits);
-        # the dictionary's frame said SETTLING (_check_supplied)
-        assert all(f.status & SETTLING for f in before if not f.status & SENSOR_MASK), [f.raw for f in before]
-        # the board's start (the cycle after the values came) is after the last frame before they were sent and at most
-        # a cycle after the first frame after the board's answer; SETTLING clears settle_s after it, in the status of the
-        # cycle after
-        t_start = before[-1].t_ms
-        settled = t_start + SUPPLIED_SETTLE_S * 1000
-        clear_by = after[0].t_ms + CYCLE_MS + SUPPLIED_SETTLE_S * 1000 + CYCLE_MS
-        early = [f.t_ms - t_start for f in after if f.t_ms < settled and not f.status & SETTLING]
-        late = [f.t_ms - t_start for f in after if f.t_ms > clear_by and f.status & SETTLING]
-        assert not early and not late, "SETTLING clear at %r ms, raised at %r ms after the values (settle_s %d s)" % (
-            early[:5], late[:5], SUPPLIED_SETTLE_S)
-        assert any(f.t_ms > clear_by for f in after), "the test did not wait past settle_s"
+        if mode == "stream":  # the board's clock (t_ms) is in the stream's frames only; SETTLING is the app's, either mode
+            _check_settling(tap, cut, t_set, t_took)
         print("board restart: sent %s for %s; the commanded speeds' lags in %s (speed changes dated within %s s)" % (
             [v for v, _, _ in got], ["%d tau %d s scale %d" % (e.source, e.tau_ms // 1000, e.scale) for e in entries],
             ["[%.1f, %.1f]" % (lo, hi) for _, lo, hi in got], ["%.3f" % (b - a) for a, b, _ in changes]))

@@ -35,6 +35,9 @@ class LinkTap(threading.Thread):
         self.commands = []    # (monotonic time, line) the bridge sent, stream mode
         self.board_raw = bytearray()
         self.bridge_raw = bytearray()
+        # (monotonic time, offset in board_raw / bridge_raw) of each chunk read: when a Modbus frame passed
+        self.board_marks = []
+        self.bridge_marks = []
         self._down = bytearray()
         self._up = bytearray()
         self.last_good = None
@@ -79,6 +82,7 @@ class LinkTap(threading.Thread):
     def _bridge_bytes(self, data):
         now = time.monotonic()
         with self.lock:
+            self.bridge_marks.append((now, len(self.bridge_raw)))
             self.bridge_raw += data
             mode = self.mode
             if self.stream:
@@ -104,6 +108,7 @@ class LinkTap(threading.Thread):
                         self._board_lines(data)
                     else:
                         with self.lock:
+                            self.board_marks.append((time.monotonic(), len(self.board_raw)))
                             self.board_raw += data
                         if self.mode != "drop":
                             self._to_bridge(data)
