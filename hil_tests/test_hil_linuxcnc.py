@@ -699,7 +699,7 @@ def test_linuxcnc_supplies_the_spindle_lag_states(tmp_path, mode):
         tap = board.tap
         clock_offset = time.time() - time.monotonic()  # the tap's times on the wall clock the bridge's record uses
         # at the bridge's start its new record holds the stopped spindle only: the lags are 0
-        _, t_first, first = _check_supplied(tap, 0.0, [], clock_offset, "bridge start")
+        _, _, first = _check_supplied(tap, 0.0, [], clock_offset, "bridge start")
         assert [v for v, _, _ in first] == [0, 0], first
 
         changes = [_mdi_window(lc, "M3 S3000") + (3000,)]
