@@ -159,6 +159,14 @@ def held_out(run, split_s, channel, dyn_options, variants=(), static=True):
     return out, info
 
 
+def _loco_folds(loco):
+    """One channel's leave-one-cycle-out, fold by fold: a pooled ratio can be one fold's doing (docs/results.md, stop 34)."""
+    mlr, dyn = loco["methods"]["mlr"], loco["methods"]["dynamic"]
+    return [{"cycle": k + 1, "speeds_rpm": c[2], "mlr_rmse_um": fm["rmse_um"], "dynamic_rmse_um": fd["rmse_um"],
+             "dynamic_terms": terms}
+            for k, (c, fm, fd, terms) in enumerate(zip(loco["cycles"], mlr["folds"], dyn["folds"], dyn["terms"]))]
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--run", default=os.path.join(ROOT, "data", "fl_thermal"))
@@ -247,13 +255,22 @@ def main(argv=None):
         for ch in channels:
             loco[ch] = leave_one_cycle_out(run, ch, methods=("mlr", "cv-subset", "dynamic"), options={"dynamic": opts})
             print("leave-one-cycle-out %s done" % ch, file=sys.stderr, flush=True)
-        report["leave_one_cycle_out"] = {ch: {"ratio_to_mlr": v["ratio_to_mlr"], "rmse_um": {m: r["rmse_um"] for m, r in v["methods"].items()}}
+        report["leave_one_cycle_out"] = {ch: {"ratio_to_mlr": v["ratio_to_mlr"], "rmse_um": {m: r["rmse_um"] for m, r in v["methods"].items()},
+                                              "folds": _loco_folds(v)}
                                          for ch, v in loco.items()}
         print("\nLeave-one-cycle-out (6 cycles), pooled held-out RMSE ratio to MLR-16\n")
         print("| method | %s |" % " | ".join(channels))
         print("|---|%s" % ("---|" * len(channels)))
         for m in ("cv-subset", "dynamic"):
             print("| %s | %s |" % (m, " | ".join("%.2f" % loco[c]["ratio_to_mlr"][m] for c in channels)))
+        print("\nPer fold: held-out RMSE (um) of MLR-16 and the dynamic model, and the dynamic model's terms\n")
+        print("| channel | held-out cycle (rpm) | MLR-16 | dynamic | dynamic terms (signal tau_s coefficient) |")
+        print("|---|---|---|---|---|")
+        for c in channels:
+            for f in report["leave_one_cycle_out"][c]["folds"]:
+                print("| %s | %d (%s) | %.2f | %.2f | %s |" % (
+                    c, f["cycle"], "/".join("%g" % r for r in f["speeds_rpm"]), f["mlr_rmse_um"], f["dynamic_rmse_um"],
+                    ", ".join("%s %g %.3g" % tuple(t) for t in f["dynamic_terms"])))
     if args.json:
         from host.outputs import Outputs
 

@@ -206,5 +206,11 @@ def test_goal_leave_one_cycle_out_at_most_0p8_of_mlr16():
     for ch in channels:
         out = leave_one_cycle_out(run, channel=ch, methods=("mlr", "dynamic"), options={"dynamic": ISSUE16})
         assert len(out["cycles"]) == 6 and len(out["methods"]["dynamic"]["folds"]) == 6
+        # each fold's lag terms are reported (a dynamic model's; none for MLR), and they are that fold's own choice
+        terms = out["methods"]["dynamic"]["terms"]
+        assert out["methods"]["mlr"]["terms"] == [None] * 6 and len(terms) == 6
+        assert all(t and {s[2:] for s, _, _ in t if s.startswith("T:")} <= set(sens)
+                   for t, sens in zip(terms, out["methods"]["dynamic"]["sensors"])), terms
+        assert len({tuple(map(tuple, t)) for t in terms}) > 1, terms  # refitted per fold, not one model six times
         ratios[ch] = out["ratio_to_mlr"]["dynamic"]
     assert all(r <= 0.8 for r in ratios.values()), ratios
