@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from host.board.link import command_line
-from host.board.linuxcnc.bridge import (FEED_CHANGE_REL, IDLE_MM_PER_S, Bridge, FeedReport, Inputs, ModbusLink,
+from host.board.linuxcnc.bridge import (CRC, FEED_CHANGE_REL, IDLE_MM_PER_S, Bridge, FeedReport, Inputs, ModbusLink,
                                         StreamLink)
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "firmware"))
@@ -249,3 +249,18 @@ def test_a_feed_table_on_the_real_firmware_follows_the_host_model_only_with_feed
     assert float(np.max(np.abs(board0))) <= 0.1 + export_error_um  # feed 0 for ever: the feed term never moves
     print("feed table on the firmware: max host %.2f um, worst board - host %.3f um (tolerance %.3f um), worst without the "
           "feed %.2f um" % (np.max(host), worst, tol, np.max(np.abs(board0 - host))))
+
+
+def test_a_table_without_a_feed_input_refuses_m_and_the_bridge_says_so_once(tmp_path):
+    """A static table (neither screw nor dynamic) answers M with E,5: the bridge logs it once, as M's answer."""
+    from fwhelpers import rig_app, run_cycles
+    app, board = rig_app(tmp_path, extra={"frame_ms": 0})
+    logs = []
+    bridge = Bridge(StreamLink(lambda: _BoardPort(board)), 1000.0, send_feed=True, log=logs.append)
+    for k, v in enumerate([0.0, 25.0, 25.0, 0.0, 0.0, 25.0, 25.0, 0.0]):
+        out = bridge.step(k * PERIOD_S, Inputs(position=20.0 + k * 2.5, machine_on=True, homed=True, velocity=v))
+        app.link.poll(board.clock.t)
+        run_cycles(app, board, 1)
+    refused = [m for m in logs if m.startswith("feed (M) refused")]
+    assert refused == ["feed (M) refused: state,no screw or dynamic table"], logs
+    assert not out.fault_code & CRC  # an answer, not a malformed frame
