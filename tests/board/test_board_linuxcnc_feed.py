@@ -264,3 +264,20 @@ def test_a_table_without_a_feed_input_refuses_m_and_the_bridge_says_so_once(tmp_
     refused = [m for m in logs if m.startswith("feed (M) refused")]
     assert refused == ["feed (M) refused: state,no screw or dynamic table"], logs
     assert not out.fault_code & CRC  # an answer, not a malformed frame
+
+
+def test_a_feed_above_the_boards_max_speed_is_refused_and_said(tmp_path):
+    """The board refuses a feed above its max_speed_mm_min (E,4,range): the bridge logs it as M's answer, once."""
+    from fwhelpers import rig_app, run_cycles
+    table, _, _ = _feed_table()
+    tmp_path.joinpath("table_a.bin").write_bytes(table)
+    app, board = rig_app(tmp_path, table=False, extra={"frame_ms": 0, "max_speed_mm_min": 2000})
+    logs = []
+    bridge = Bridge(StreamLink(lambda: _BoardPort(board)), 1000.0, send_feed=True, log=logs.append)
+    for k, v in enumerate([0.0, 25.0, 50.0, 50.0, 50.0, 50.0]):  # 1500 mm/min taken, 3000 refused
+        bridge.step(k * PERIOD_S, Inputs(position=20.0, machine_on=True, homed=True, velocity=v))
+        app.link.poll(board.clock.t)
+        run_cycles(app, board, 1)
+    assert app.feed == 1500
+    assert [m for m in logs if m.startswith("feed (M) refused")] == ["feed (M) refused: range"], logs
+

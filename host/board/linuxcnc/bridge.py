@@ -124,7 +124,9 @@ class StreamLink:
         self.want_dictionary = True  # ask the board's supplied-states dictionary (Y) with the next exchange
         self.dictionary_pending = False
         self.supply_pending = False
-        self.feed_pending = False  # an M sent, its answer not seen yet
+        # Ms sent whose answers have not come yet: the board answers each in order, and an answer may come a period
+        # after the next M went out
+        self.feed_pending = 0
         # the board may have lost the feed it was told (it booted: its hello; the port failed): the Bridge sends it again
         self.feed_lost = False
 
@@ -136,7 +138,7 @@ class StreamLink:
             # before P: a screw table takes M as its fallback travel, which the P right after clears (docs/protocol.md);
             # lo and hi are not used by a dynamic table
             out = command_line("M", feed_mm_min, 0, 0) + out
-            self.feed_pending = True
+            self.feed_pending += 1
         if self.supplier is not None and self.want_dictionary:
             # after the speed report: a board that waits for it and for the states then starts with both
             out += command_line("Y")
@@ -171,7 +173,7 @@ class StreamLink:
             self.latch_wanted = False
             self.dictionary_pending = False
             self.supply_pending = False
-            self.feed_pending = False
+            self.feed_pending = 0
             self.close()
         if link is not None:
             while link.decoder.bad:
@@ -205,20 +207,22 @@ class StreamLink:
         ex.supply = "sent:" + ",".join("%d" % v for v in vals)
 
     def _feed_refusal(self, f):
-        """An E frame that answers M: "no screw or dynamic table" names it; a range error does while no Y awaits its
-        answer (the board refuses a feed above its max_speed_mm_min). Anything else is another command's."""
+        """An E frame that answers M: "no screw or dynamic table" names it; a range error without a detail does while
+        no Y awaits its answer (the board refuses a feed above its max_speed_mm_min; P's range errors say "implausible
+        position"). Anything else is another command's."""
         if not (f.kind == "E" and self.feed_pending):
             return False
-        return f.fields[2:3] == ["no screw or dynamic table"] or (f.fields[:1] == ["%d" % E_RANGE] and not self.supply_pending)
+        return f.fields[2:3] == ["no screw or dynamic table"] or (f.fields == ["%d" % E_RANGE, "range"] and not self.supply_pending)
 
     def _frame(self, f, ex):
         if f.kind == "A" and f.fields[:1] == ["Y"]:
             self._supply_frame(f, ex)
         elif f.kind == "A" and f.fields[:1] == ["M"]:
-            self.feed_pending = False
-            ex.feed = "ok:" + ",".join(f.fields[1:])
+            self.feed_pending = max(self.feed_pending - 1, 0)
+            if not ex.feed.startswith("refused:"):  # a refusal in the same exchange is the news
+                ex.feed = "ok:" + ",".join(f.fields[1:])
         elif self._feed_refusal(f):
-            self.feed_pending = False
+            self.feed_pending -= 1
             ex.feed = "refused:" + ",".join(f.fields[1:])
         elif f.kind == "E" and self.supply_pending and not self.latch_pending:
             self.supply_pending = False
