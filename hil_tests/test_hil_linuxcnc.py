@@ -17,6 +17,8 @@ Checked:
   much slower: no step, no freeze), then ramps back; with the machine
   switched off during a fault the bridge's offset is zero at once and motion
   starts from zero when the machine comes back on.
+- with ``--feed`` and a dynamic table whose output is the feed (no lag): an MDI move sends ``M`` with its feed at the
+  start and ``M,0`` at its end, the board takes them and its offset follows the feed;
 - with ``--spindle --signal-record`` and a table whose spindle lags the controller supplies (stream and Modbus): at
   a board restart the bridge reads the board's dictionary and sends the lags of the speeds LinuxCNC was commanded
   with (computed here from the MDI commands' times), the board takes them, SETTLING lasts settle_s from then; after
@@ -69,7 +71,8 @@ class LinuxCNC:
 
     def __init__(self, workdir, port, mode, cold_start, key_file, bridge_args=()):
         """``bridge_args``: more options of ``tcomp linuxcnc`` (on tcomp.hal's loadusr line); ``--spindle`` also nets
-        spindle.0.speed-out-abs to tcomp.spindle-rpm, as tcomp.hal's comment says."""
+        spindle.0.speed-out-abs to tcomp.spindle-rpm, ``--feed`` joint.0.vel-cmd to tcomp.velocity, as tcomp.hal's
+        comments say."""
         self.dir = os.path.join(workdir, "lcnc")
         shutil.copytree(EXAMPLES, self.dir)
         if bridge_args:
@@ -79,6 +82,8 @@ class LinuxCNC:
             hal = hal.replace("--key [TCOMP]KEY\n", "--key [TCOMP]KEY %s\n" % " ".join(bridge_args), 1)
             if "--spindle" in bridge_args:
                 hal = hal.replace("# net tcomp-spindle", "net tcomp-spindle", 1)
+            if "--feed" in bridge_args:
+                hal = hal.replace("# net tcomp-velocity", "net tcomp-velocity", 1)
             with open(hal_path, "w") as f:
                 f.write(hal)
         driver = os.path.join(self.dir, "display.sh")
@@ -739,3 +744,73 @@ def test_linuxcnc_supplies_the_spindle_lag_states(tmp_path, mode):
         if lc is not None:
             lc.close()
         board.close()
+
+
+FEED_UM_PER_M_MIN = 2.0  # the feed test's table: its output is 2 um per m/min of feed, at once (tau 0)
+FEED_MOVE_MM_MIN = 6000  # G1 X500 from X0: 5 s at 100 mm/s (tcomp-sim.ini: 200 mm/s, 2000 mm/s2)
+
+
+def _feed_table(sensors):
+    """An exported dynamic table whose output is only the feed (T1's term is there because a table reads a sensor, with a
+    gain no sensor noise shows through); 1 s filter step."""
+    import random
+
+    from hil_tests.fixtures.samples import dynamic_doc, restamp
+    doc = dynamic_doc(random.Random(1), "direct", dt_s=1.0, signals=["T:" + sensors[0], "feed_m_min"], names=list(sensors))
+    doc["thermal"]["intercept"] = 0.0
+    doc["thermal"]["terms"] = [{"signal": "T:" + sensors[0], "tau_s": 0.0, "coefficient": 0.001},
+                               {"signal": "feed_m_min", "tau_s": 0.0, "coefficient": FEED_UM_PER_M_MIN}]
+    doc["envelope"]["feed_mm_min"] = [0, 20000]
+    doc["envelope"]["position_mm"] = [-10.0, 1010.0]
+    doc = restamp(doc)
+    return doc, export(doc).table
+
+
+def test_linuxcnc_sends_the_axis_feed(tmp_path):
+    """``tcomp linuxcnc --feed`` in a real LinuxCNC, tcomp.hal netting joint.0.vel-cmd to tcomp.velocity, the board
+    running a table whose output is 2 um per m/min of feed: an MDI move at 6000 mm/min sends M with that feed once the
+    axis moves (after at most one ramp value) and M,0 when it stops, the board acknowledges each, and its total follows:
+    0 standing, 12 um while the axis cruises."""
+    from hil_tests.rig import interpreters
+    doc, table = _feed_table(SENSORS)
+    board = Board(str(tmp_path), table, "stream", heap=os.environ.get("TCOMP_HIL_HEAP") or interpreters.heap("rig_dynamic"))
+    lc = None
+    try:
+        lc = LinuxCNC(str(tmp_path), board.tap.port, "stream", True, board.key_file, bridge_args=("--feed",))
+        lc("start")
+        tap = board.tap
+        lc("mdi", cmd="G90 G1 X0 F%d" % FEED_MOVE_MM_MIN)
+        time.sleep(1.5)  # standing: the feed 0 through a filter step
+        a = time.monotonic()
+        lc("mdi", cmd="G1 X500")
+        b = time.monotonic()
+        time.sleep(1.5)
+        board.check()
+        with tap.lock:
+            sent = [(t, c) for t, c in tap.commands if c.startswith(b"$TC,M,")]
+            frames = list(tap.frames)
+        feeds = [(t, int(c.split(b"*")[0].split(b",")[2])) for t, c in sent]
+        during = [(t, f) for t, f in feeds if t >= a]
+        # the start (a ramp value when the first sample caught the acceleration), the cruise, the end; nothing else
+        assert [f for _, f in during][-1] == 0 and FEED_MOVE_MM_MIN in [f for _, f in during], feeds
+        assert len(during) <= 3 and all(0 < f <= FEED_MOVE_MM_MIN for _, f in during[:-1]), feeds
+        assert during[0][0] <= a + 0.5 and b - 0.5 <= during[-1][0] <= b + 0.5, (a, b, feeds)
+        assert all(f == 0 for t, f in feeds if t < a), feeds  # the positioning move's own (and their end), if any
+        acks = [f.fields[1] for t, f in frames if t >= a and f.kind == "A" and f.fields[:1] == ["M"]]
+        assert acks == ["%d" % f for _, f in during], (acks, during)
+        assert not [f for t, f in frames if t >= a and f.kind == "E"], "the board refused something"
+        totals = [(t, f.total_um) for t, f in frames if f.kind in ("O", "Q")]
+        before = [v for t, v in totals if a - 1.0 <= t < a]
+        cruise = [v for t, v in totals if a + 1.5 <= t <= b - 0.5]  # past the next filter step (1 s) and the slew
+        after = [v for t, v in totals if b + 1.2 <= t]
+        want = FEED_UM_PER_M_MIN * FEED_MOVE_MM_MIN / 1000.0
+        assert before and cruise and after
+        assert max(abs(v) for v in before + after) <= 0.2, (before, after)
+        assert max(abs(v - want) for v in cruise) <= 0.2, (cruise, want)
+        print("feed: M sent %s within the move's %.2f s, board total %.1f um standing, %.2f..%.2f um cruising (want %.1f)"
+              % ([f for _, f in during], b - a, max(abs(v) for v in before), min(cruise), max(cruise), want))
+    finally:
+        if lc is not None:
+            lc.close()
+        board.close()
+

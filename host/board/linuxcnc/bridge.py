@@ -26,7 +26,7 @@ import time
 from dataclasses import dataclass, field
 
 from firmware.wire import (
-    E_AUTH, E_BUSY, E_STATE, E_UNKNOWN, EX_DEVICE_FAILURE, HR_AUTH, HR_LATCH, HR_POSITION, HR_SLEW, HR_SPINDLE, HR_SUPPLY, IR_AUTH_COUNTER,
+    E_AUTH, E_BUSY, E_RANGE, E_STATE, E_UNKNOWN, EX_DEVICE_FAILURE, HR_AUTH, HR_LATCH, HR_POSITION, HR_SLEW, HR_SPINDLE, HR_SUPPLY, IR_AUTH_COUNTER,
     IR_NONCE, IR_POSITION, IR_REFERENCE, IR_SEQUENCE, IR_STATUS_HI, IR_STATUS_LO, IR_SUPPLY_STATE, IR_TOTAL, MAX_SUPPLIED, SETTLING,
     SUPPLY_DICT_REGS,
 )
@@ -57,6 +57,20 @@ RECORD_SAVE_S = 60.0
 RECORD_DEADBAND_RPM = 5
 DICTIONARY_POLL_S = 5.0
 
+# the axis feed (--feed, M): a move is what ``tcomp record --linuxcnc`` records as one (halsample.MotionSegmenter), so a
+# table sees the feed its model was fitted on. Below IDLE_MM_PER_S the axis stands (a servo's dither is well below it, a
+# thermal test's feeds are 1000s of mm/min).
+IDLE_MM_PER_S = 0.01
+# during a move a new feed is sent when the commanded velocity has settled (changed by at most FEED_STEADY_REL of itself,
+# or FEED_RESOLUTION_MM_MIN, since the previous period: a cruise; an acceleration ramp changes it by accel x period,
+# 150 mm/min a period at 50 mm/s2 and 50 ms) and differs from the feed last sent by more than FEED_CHANGE_REL (a feed
+# override step, a new F word). A table's feed term is linear in the feed: a change below 2 % moves it by under 2 % of
+# its value, and the board filters the feed with its lag, so sending every wobble would only load the link.
+FEED_STEADY_REL = 0.005
+FEED_CHANGE_REL = 0.02
+FEED_RESOLUTION_MM_MIN = 1  # the protocol's unit (M takes whole mm/min)
+FEED_LIMIT_MM_MIN = 1000000  # M's range (firmware/protocol.py _FEED_LIMIT)
+
 
 @dataclass
 class Reading:
@@ -77,6 +91,8 @@ class Exchange:
     # the supplied lag states (host/board/supplied.py): "" nothing this time, "none" the table has none, "sent:<values>",
     # "set" the board took them, "kept" it had set them at its table's start already, "refused:<why>"
     supply: str = ""
+    # the axis feed (M): "" no answer this time, "ok:<feed>" the board took it, "refused:<why>"
+    feed: str = ""
 
 
 SUPPLY_APPLIED = "%d" % 1  # A,Y,S,<applied>: 1 set now, 0 set at the table's start already (docs/protocol.md)
@@ -108,11 +124,21 @@ class StreamLink:
         self.want_dictionary = True  # ask the board's supplied-states dictionary (Y) with the next exchange
         self.dictionary_pending = False
         self.supply_pending = False
+        # Ms sent whose answers have not come yet: the board answers each in order, and an answer may come a period
+        # after the next M went out
+        self.feed_pending = 0
+        # the board may have lost the feed it was told (it booted: its hello; the port failed): the Bridge sends it again
+        self.feed_lost = False
 
-    def exchange(self, pos_um: int, latch: bool = False, spindle_rpm: int | None = None) -> Exchange:
+    def exchange(self, pos_um: int, latch: bool = False, spindle_rpm: int | None = None, feed_mm_min: int | None = None) -> Exchange:
         ex = Exchange()
         p = command_line("P", pos_um) if spindle_rpm is None else command_line("P", pos_um, spindle_rpm)
         out = p + command_line("Q", pos_um)
+        if feed_mm_min is not None:
+            # before P: a screw table takes M as its fallback travel, which the P right after clears (docs/protocol.md);
+            # lo and hi are not used by a dynamic table
+            out = command_line("M", feed_mm_min, 0, 0) + out
+            self.feed_pending += 1
         if self.supplier is not None and self.want_dictionary:
             # after the speed report: a board that waits for it and for the states then starts with both
             out += command_line("Y")
@@ -147,6 +173,7 @@ class StreamLink:
             self.latch_wanted = False
             self.dictionary_pending = False
             self.supply_pending = False
+            self.feed_pending = 0
             self.close()
         if link is not None:
             while link.decoder.bad:
@@ -179,9 +206,24 @@ class StreamLink:
         self.supply_pending = True
         ex.supply = "sent:" + ",".join("%d" % v for v in vals)
 
+    def _feed_refusal(self, f):
+        """An E frame that answers M: "no screw or dynamic table" names it; a range error without a detail does while
+        no Y awaits its answer (the board refuses a feed above its max_speed_mm_min; P's range errors say "implausible
+        position"). Anything else is another command's."""
+        if not (f.kind == "E" and self.feed_pending):
+            return False
+        return f.fields[2:3] == ["no screw or dynamic table"] or (f.fields == ["%d" % E_RANGE, "range"] and not self.supply_pending)
+
     def _frame(self, f, ex):
         if f.kind == "A" and f.fields[:1] == ["Y"]:
             self._supply_frame(f, ex)
+        elif f.kind == "A" and f.fields[:1] == ["M"]:
+            self.feed_pending = max(self.feed_pending - 1, 0)
+            if not ex.feed.startswith("refused:"):  # a refusal in the same exchange is the news
+                ex.feed = "ok:" + ",".join(f.fields[1:])
+        elif self._feed_refusal(f):
+            self.feed_pending -= 1
+            ex.feed = "refused:" + ",".join(f.fields[1:])
         elif f.kind == "E" and self.supply_pending and not self.latch_pending:
             self.supply_pending = False
             ex.supply = "refused:" + ",".join(f.fields)
@@ -198,6 +240,7 @@ class StreamLink:
             ex.latch = "ok:" + (f.fields[1] if len(f.fields) > 1 else "")
         if f.kind == "H":
             self.want_dictionary = True  # a hello: the board booted, or answered V after a reopen
+            self.feed_lost = True
         if f.kind == "H" and self.signer is not None and f.fields:
             try:
                 self.signer.observe_hello(f.fields)
@@ -223,6 +266,7 @@ class StreamLink:
     def close(self) -> None:
         self.want_hello = True  # a board that comes back is asked for its hello (counter)
         self.want_dictionary = True
+        self.feed_lost = True
         if self.link is not None:
             self.link.close()
             self.link = None
@@ -354,6 +398,43 @@ class OffsetRamp:
         self.tracking = False
 
 
+class FeedReport:
+    """The axis feed a dynamic table filters (M), from the commanded axis velocity sampled once a period.
+
+    ``update(velocity_mm_per_s)`` returns the feed to send now (mm/min, 0 when a move ends) or None: nothing changed
+    that matters. A move starts at the first period the axis moves (|v| > IDLE_MM_PER_S) and ends at the first it
+    stands; it sends its |v| at once (the board must know the axis moves, even if the velocity is still ramping), then
+    the cruise feed once the velocity has settled (FEED_STEADY_REL) and differs from the feed sent (FEED_CHANGE_REL).
+    At most one feed per call: one per bridge period."""
+
+    def __init__(self) -> None:
+        self.sent: int | None = None  # the feed last sent (mm/min); None: nothing yet (the board's feed is 0)
+        self.last_mm_min: float | None = None  # |v| of the previous period, mm/min
+
+    def update(self, velocity_mm_per_s: float) -> int | None:
+        if not math.isfinite(velocity_mm_per_s):
+            return None  # a NaN/inf pin: the board keeps the last feed it was told
+        now = abs(velocity_mm_per_s) * 60.0
+        prev, self.last_mm_min = self.last_mm_min, now
+        if now <= IDLE_MM_PER_S * 60.0:
+            return self._send(0) if self.sent else None
+        feed = min(max(int(round(now)), FEED_RESOLUTION_MM_MIN), FEED_LIMIT_MM_MIN)
+        if not self.sent:
+            return self._send(feed)
+        steady = prev is not None and abs(now - prev) <= max(FEED_STEADY_REL * now, FEED_RESOLUTION_MM_MIN)
+        if steady and abs(feed - self.sent) > max(FEED_CHANGE_REL * self.sent, FEED_RESOLUTION_MM_MIN):
+            return self._send(feed)
+        return None
+
+    def _send(self, feed: int) -> int:
+        self.sent = feed
+        return feed
+
+    def again(self) -> int | None:
+        """The feed last sent, to send again (the board booted or the link failed: its feed may be 0 now)."""
+        return self.sent
+
+
 @dataclass
 class Inputs:
     position: float = 0.0          # axis.L.pos-cmd, machine units (without the external offset)
@@ -363,6 +444,7 @@ class Inputs:
     cold_start: bool = False       # the controller says: this start is a cold start
     latch: bool = False            # rising edge: declare a cold start now
     spindle_rpm: float = 0.0       # spindle speed (e.g. spindle.0.speed-out-abs); sent with send_spindle
+    velocity: float = 0.0          # commanded axis velocity, machine units/s (e.g. joint.0.vel-cmd); its feed sent with send_feed
 
 
 @dataclass
@@ -393,13 +475,19 @@ class Bridge:
 
     def __init__(self, link: StreamLink | ModbusLink, slew_um_per_s: float, units: str = "mm", stale_s: float = 1.0, recover_s: float = 1.0, cold_start: bool = False,
                  log: Callable[[str], None] | None = None, latch_retry_s: float = 1.0, latch_tries: int = 10, max_dt_s: float = 0.1, send_spindle: bool = False,
-                 record: SignalRecord | None = None, record_path: str | None = None, wall: Callable[[], float] = time.time) -> None:
+                 record: SignalRecord | None = None, record_path: str | None = None, wall: Callable[[], float] = time.time,
+                 send_feed: bool = False) -> None:
         if units not in UM_PER_UNIT:
             raise ValueError("units must be one of %s, got %r" % (", ".join(UM_PER_UNIT), units))
+        if send_feed and not isinstance(link, StreamLink):
+            raise ValueError("the axis feed (M) has no Modbus register (docs/protocol.md): send_feed needs the stream link")
         if record is not None and not send_spindle:
             raise ValueError("a signal record (the supplied lag states) needs send_spindle: the board's own filters read the speed")
         self.link = link
         self.send_spindle = send_spindle  # off: exactly the position-only exchange of older boards
+        # off: no M at all (a table reading the feed gets 0, as before); on: the velocity pin's feed, M on change
+        self.feed = FeedReport() if send_feed else None
+        self.noted_feed = 0.0  # the feed the signal record is given (mm/min): what the board was last sent
         # the controller's record of the spindle speed, for the lag states a table asks it to supply (host/board/supplied.py):
         # noted every period, saved to record_path every RECORD_SAVE_S, and read by the link when the board asks
         self.record = record
@@ -409,6 +497,7 @@ class Bridge:
         self.saved_at: float | None = None
         self.next_dictionary_s = 0.0
         self.last_supply = ""
+        self.last_feed_answer = ""
         if record is not None:
             link.supplier = self._supply_values
         self.ramp = OffsetRamp(slew_um_per_s)
@@ -492,7 +581,7 @@ class Bridge:
         if rpm is not None and (self.noted_rpm is None or abs(rpm - self.noted_rpm) > RECORD_DEADBAND_RPM or (rpm == 0) != (self.noted_rpm == 0)):
             self.noted_rpm = rpm
         try:
-            self.record.note(w, float(self.noted_rpm or 0), 0.0)
+            self.record.note(w, float(self.noted_rpm or 0), self.noted_feed)
         except SupplyError as exc:  # the wall clock stepped back (NTP): the record keeps its times, notes resume after
             self.log("signal record: %s" % exc)
         if self.record_path is not None and (self.saved_at is None or w - self.saved_at >= RECORD_SAVE_S or w < self.saved_at):
@@ -501,6 +590,21 @@ class Bridge:
             except OSError as exc:
                 self.log("signal record: cannot save %s: %s" % (self.record_path, exc))
             self.saved_at = w
+
+    def _feed_now(self, inp: Inputs) -> int | None:
+        """The feed (mm/min) to send with this period's exchange, or None (send_feed off, or nothing changed)."""
+        if self.feed is None:
+            return None
+        feed = self.feed.update(inp.velocity * self.um_per_unit / 1000.0)
+        assert isinstance(self.link, StreamLink)  # send_feed: the constructor checked
+        if self.link.feed_lost:
+            # the board booted or the port reopened: its feed may be 0, whatever it was told
+            self.link.feed_lost = False
+            if feed is None:
+                feed = self.feed.again()
+        if feed is not None:
+            self.noted_feed = float(feed)
+        return feed
 
     def save_record(self) -> None:
         """Save the signal record now (at the bridge's exit)."""
@@ -515,18 +619,25 @@ class Bridge:
             self.last_new_s = now
         pos_um = int(round(inp.position * self.um_per_unit))
         send_latch = self._want_latch(now, inp)
+        feed = self._feed_now(inp)
         if self.record is not None:
             self._note_signals(now, inp)
             if self.reading is not None and self.reading.status & SETTLING and now >= self.next_dictionary_s:
                 # SETTLING: the board may wait for the states (a new table, a reset the link did not see): ask again
                 self.link.want_dictionary = True
                 self.next_dictionary_s = now + DICTIONARY_POLL_S
+        extra: dict[str, int] = {}
         if self.send_spindle and math.isfinite(inp.spindle_rpm):
             # an input of dynamic tables (docs/protocol.md); the board checks its range. A NaN/inf pin
             # is not sent: the board keeps the last speed it was given
-            ex = self.link.exchange(pos_um, latch=send_latch, spindle_rpm=int(round(inp.spindle_rpm)))
-        else:
-            ex = self.link.exchange(pos_um, latch=send_latch)
+            extra["spindle_rpm"] = int(round(inp.spindle_rpm))
+        if feed is not None:
+            extra["feed_mm_min"] = feed
+        ex = self.link.exchange(pos_um, latch=send_latch, **extra)
+        if ex.feed.startswith("refused:") and ex.feed != self.last_feed_answer:  # said once per reason
+            self.log("feed (M) refused: %s" % ex.feed[8:])
+        if ex.feed:
+            self.last_feed_answer = ex.feed
         if ex.supply and ex.supply != self.last_supply:  # said once per outcome (the SETTLING poll repeats it)
             self.last_supply = ex.supply
             if ex.supply != "none" and not ex.supply.startswith("sent:"):  # the values sent: _supply_values said them

@@ -26,6 +26,7 @@ PINS = (
     ("cold-start", "BIT", "IN", "cold_start"),
     ("latch", "BIT", "IN", "latch"),
     ("spindle-rpm", "FLOAT", "IN", "spindle_rpm"),
+    ("velocity", "FLOAT", "IN", "velocity"),
     ("eoffset-counts", "S32", "OUT", "eoffset_counts"),
     ("eoffset-scale", "FLOAT", "OUT", "eoffset_scale"),
     ("eoffset-enable", "BIT", "OUT", "eoffset_enable"),

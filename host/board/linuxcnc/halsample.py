@@ -11,13 +11,13 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from host.board.linuxcnc.bridge import UM_PER_UNIT
+# a move is the bridge's (--feed) and the recording's alike: IDLE_MM_PER_S is one constant
+from host.board.linuxcnc.bridge import IDLE_MM_PER_S, UM_PER_UNIT
 
 # LinuxCNC pins of a machine's X axis, spindle 0 (checked in LinuxCNC 2.9's motmod: docs/linuxcnc.md)
 DEFAULT_POSITION = "axis.x.pos-cmd"  # commanded axis position, machine units (without the external offsets)
 DEFAULT_VELOCITY = "joint.0.vel-cmd"  # commanded joint velocity, machine units per second
 DEFAULT_SPINDLE = "spindle.0.speed-out-abs"  # commanded spindle speed, rpm
-IDLE_MM_PER_S = 0.01  # below this the axis counts as standing (a thermal test's feeds are 1000s of mm/min)
 
 
 class HalReader:

@@ -33,6 +33,11 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--spindle", action="store_true",
                    help="send the spindle-rpm pin to the board with the position (P,<pos>,<rpm>, or holding "
                         "registers 18-19): for dynamic tables that use the spindle speed")
+    p.add_argument("--feed", action="store_true",
+                   help="send the axis feed from the velocity pin (commanded axis velocity, machine units/s) as M,<mm/min>,0,0 "
+                        "when a move starts, when its feed changes by more than 2 %%, and M,0,0,0 when it ends: for dynamic "
+                        "tables that use the feed (feed_m_min). Stream mode only (Modbus has no feed register); with "
+                        "--signal-record the record keeps the feed too")
 
 
 def _check(args):
@@ -46,6 +51,9 @@ def _check(args):
         raise UserError("--slew-um-per-s %g: must be in (0, 10000] (the firmware's range)" % args.slew_um_per_s)
     if not 1 <= args.address <= 247:
         raise UserError("--address %d: must be 1..247" % args.address)
+    if args.feed and args.mode == "modbus":
+        raise UserError("--feed needs --mode stream: the board's Modbus map has no register for the axis feed (M is a "
+                        "stream command; docs/protocol.md)")
     if args.signal_record and not args.spindle:
         raise UserError("--signal-record %s needs --spindle: the board's own lag filters read the speed the bridge sends"
                         % args.signal_record)
@@ -109,7 +117,7 @@ def run(args: argparse.Namespace) -> int:
     bridge = Bridge(link, slew, units=args.units, stale_s=args.stale_ms / 1000.0,
                     recover_s=args.recover_ms / 1000.0, cold_start=args.cold_start, log=_log,
                     max_dt_s=2 * args.period_ms / 1000.0, send_spindle=args.spindle, record=record,
-                    record_path=args.signal_record)
+                    record_path=args.signal_record, send_feed=args.feed)
     _log("%s on %s (%s), period %d ms" % (args.name, args.port, args.mode, args.period_ms))
     try:
         halcomp.serve(comp, bridge, args.period_ms / 1000.0)
