@@ -218,7 +218,7 @@ FLAGS = {
     # --signal-record is the bridge's own state: read at start (created when missing), rewritten atomically every minute
     "linuxcnc": {"in": {"--port": "file", "--key": "file", "--signal-record": "file"}, "out": {},
                  "other": "--mode --baud --address --name --units --slew-um-per-s --period-ms --stale-ms --recover-ms "
-                          "--cold-start --spindle"},
+                          "--cold-start --spindle --feed"},
     "monitor": {"in": {"--port": "file", "--key": "file"}, "out": {"--csv": "log", "--json": "file"},
                 "other": "--baud --count --duration --hello --latch --temperatures --query --query-every"},
     "record": {"in": {"--port": "file", "--config": "file"}, "out": {"--out": "folder"},
