@@ -163,8 +163,11 @@ def _loco_folds(loco):
     """One channel's leave-one-cycle-out, fold by fold: a pooled ratio can be one fold's doing (docs/results.md, stop 34)."""
     mlr, dyn = loco["methods"]["mlr"], loco["methods"]["dynamic"]
     return [{"cycle": k + 1, "speeds_rpm": c[2], "mlr_rmse_um": fm["rmse_um"], "dynamic_rmse_um": fd["rmse_um"],
-             "dynamic_terms": terms}
-            for k, (c, fm, fd, terms) in enumerate(zip(loco["cycles"], mlr["folds"], dyn["folds"], dyn["terms"]))]
+             "dynamic_terms": terms, "forward_pooled_um": (fc or {}).get("pooled_um"),
+             # controller_scoring=worse's criterion; a structure without supplied states: its pooled score
+             "worse_of_starts_pooled_um": (fc or {}).get("worse_of_starts_pooled_um", (fc or {}).get("pooled_um"))}
+            for k, (c, fm, fd, terms, fc) in enumerate(zip(loco["cycles"], mlr["folds"], dyn["folds"], dyn["terms"],
+                                                           dyn["forward_chaining"]))]
 
 
 def main(argv=None):
@@ -263,13 +266,17 @@ def main(argv=None):
         print("|---|%s" % ("---|" * len(channels)))
         for m in ("cv-subset", "dynamic"):
             print("| %s | %s |" % (m, " | ".join("%.2f" % loco[c]["ratio_to_mlr"][m] for c in channels)))
-        print("\nPer fold: held-out RMSE (um) of MLR-16 and the dynamic model, and the dynamic model's terms\n")
-        print("| channel | held-out cycle (rpm) | MLR-16 | dynamic | dynamic terms (signal tau_s coefficient) |")
-        print("|---|---|---|---|---|")
+        print("\nPer fold: held-out RMSE (um) of MLR-16 and the dynamic model, the dynamic model's forward-chaining score on "
+              "its training blocks (pooled; and the worse of the two starts per block, pooled, where the controller "
+              "supplies states) and its terms\n")
+        print("| channel | held-out cycle (rpm) | MLR-16 | dynamic | forward pooled | worse of starts | dynamic terms (signal tau_s coefficient) |")
+        print("|---|---|---|---|---|---|---|")
+        num = lambda v: "–" if v is None else "%.2f" % v  # noqa: E731
         for c in channels:
             for f in report["leave_one_cycle_out"][c]["folds"]:
-                print("| %s | %d (%s) | %.2f | %.2f | %s |" % (
+                print("| %s | %d (%s) | %.2f | %.2f | %s | %s | %s |" % (
                     c, f["cycle"], "/".join("%g" % r for r in f["speeds_rpm"]), f["mlr_rmse_um"], f["dynamic_rmse_um"],
+                    num(f["forward_pooled_um"]), num(f["worse_of_starts_pooled_um"]),
                     ", ".join("%s %g %.3g" % tuple(t) for t in f["dynamic_terms"])))
     if args.json:
         from host.outputs import Outputs

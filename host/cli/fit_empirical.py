@@ -209,8 +209,10 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
         print("  forward chaining (fit on the past, predict the next of %d blocks switched on at its start): RMSE %s um; worst %.4g, "
               "pooled %.4g" % (fc["blocks"], " ".join("%.4g" % v for v in fc["rmse_um"]), fc["worst_um"], fc["pooled_um"]))
         if "without_record_rmse_um" in fc:  # states the controller supplies: the same blocks without its record
-            print("  the same without the controller's record (its states at the observer's estimate): RMSE %s um; pooled %.4g" % (
-                " ".join("%.4g" % v for v in fc["without_record_rmse_um"]), fc["without_record_pooled_um"]))
+            print("  the same without the controller's record (its states at the observer's estimate): RMSE %s um; pooled %.4g; "
+                  "the worse of the two per block, pooled %.4g (controller_scoring=worse's criterion)" % (
+                      " ".join("%.4g" % v for v in fc["without_record_rmse_um"]), fc["without_record_pooled_um"],
+                      fc["worse_of_starts_pooled_um"]))
         base = fc.get("baseline_mlr_all")
         if base and "error" in base:
             print("  baseline (MLR on all %d candidate sensors) not scored: %s" % (len(base["sensors"]), base["error"]))

@@ -361,6 +361,7 @@ def leave_one_cycle_out(run: Run, channel: str | None = None, target: str = "dir
 
     Returns {"cycles": [...], "methods": {method: {"folds": [metrics per held-out cycle], "rmse_um": pooled RMSE,
     "n": samples, "sensors": [sensors per fold], "terms": [per fold, a dynamic model's [signal, tau_s, coefficient],
+    else None], "forward_chaining": [per fold, a dynamic model's forward-chaining statistics without the per-block list,
     else None]}}, "ratio_to_mlr": {method: pooled RMSE / MLR's}}. The pooled RMSE
     is the root of the mean squared residual over every held-out sample of every fold. Each model's own choices
     (sensors, time constants, penalty) are made inside its fold, on the other cycles only.
@@ -374,20 +375,26 @@ def leave_one_cycle_out(run: Run, channel: str | None = None, target: str = "dir
         raise EmpiricalDataError("leave-one-cycle-out needs at least 3 spindle cycles (fit on >= 2), %s has %d" % (run.name, len(cyc)))
     out = {"cycles": [[c["t_start_s"], c["t_end_s"], c["speeds_rpm"]] for c in cyc], "methods": {}}
     for m in methods:
-        folds, sens, terms = [], [], []
+        folds, sens, terms, chained = [], [], [], []
         for k, c in enumerate(cyc):
             span = (c["t_start_s"] if k else None, c["t_end_s"] if k < len(cyc) - 1 else None)
             model = fit_model([run], m, target, channel, sensors, True, exclude=span, reference="run_start", **options.get(m, {}))
             folds.append(score_model(model, run, span))
             sens.append(list(model.sensors))
             # which lags each fold chose: a pooled ratio hides that one fold's structure can decide it (docs/results.md)
+            dyn = isinstance(model, DynamicModel)
             terms.append([[t["signal"], t["tau_s"], t["coefficient"]] for t in model.to_document()["thermal"]["terms"]]
-                         if isinstance(model, DynamicModel) else None)
+                         if dyn else None)
+            # the fold's own forward-chaining scores: how its structure compares, by the selection's criteria, with one
+            # another setting chose (docs/results.md, stop 34)
+            fc = model.statistics.get("forward_chaining") if dyn else None
+            chained.append({k: v for k, v in fc.items() if k not in ("scored", "rule", "structure")} if fc else None)
             if progress:
                 progress("%s %s cycle %d: %.3f um" % (channel, m, k + 1, folds[-1]["rmse_um"]))
         n = sum(f["n"] for f in folds)
         rmse = float(np.sqrt(sum(f["n"] * f["rmse_um"] ** 2 for f in folds) / n))
-        out["methods"][m] = {"folds": folds, "rmse_um": rmse, "n": n, "sensors": sens, "terms": terms}
+        out["methods"][m] = {"folds": folds, "rmse_um": rmse, "n": n, "sensors": sens, "terms": terms,
+                             "forward_chaining": chained}
     if "mlr" in out["methods"]:
         base = out["methods"]["mlr"]["rmse_um"]
         out["ratio_to_mlr"] = {m: v["rmse_um"] / base for m, v in out["methods"].items()}

@@ -182,12 +182,14 @@ def forward_chaining(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], refi
     The model predicts block k as its own run (:func:`block_run`) and, for comparison, with its filters running since
     the start of the block's training run (``continuous_rmse_um``). A model with lag states the controller supplies
     predicts it with the controller's record before the block, and also without it (``without_record_rmse_um``: those
-    states at the observer's estimate, a controller that does not send them). For slope targets the score is on the
+    states at the observer's estimate, a controller that does not send them), and the pooled worse of the two per block
+    (``worse_of_starts_pooled_um``: controller_scoring=worse's criterion, so that structures chosen by either scoring
+    compare on it; for a model without supplied states it is ``pooled_um``). For slope targets the score is on the
     whole error (geometric + thermal, as ``comprehensive`` in scoring.py): a block has no cold sweep of its own.
     """
     from host.learning.empirical.observer import reads_controller
 
-    out, sq, sq_without, n_all = [], 0.0, 0.0, 0
+    out, sq, sq_without, sq_worse, n_all = [], 0.0, 0.0, 0.0, 0
     for b in blocks:
         if b["block"] == 0:
             continue
@@ -202,6 +204,7 @@ def forward_chaining(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], refi
             mw, pw = block_residuals(model, block_run(runs, b), b)
             out[-1]["without_record_rmse_um"] = float(np.sqrt(np.mean((mw - pw) ** 2)))
             sq_without += float((mw - pw) @ (mw - pw))
+            sq_worse += max(float(r @ r), float((mw - pw) @ (mw - pw)))
         sq += float(r @ r)
         n_all += r.size
     fc = {"rule": RULE, "score": "whole error (slope: geometric + thermal)" if target == "slope" else "error of the channel",
@@ -210,6 +213,7 @@ def forward_chaining(runs: Sequence[Run], blocks: Sequence[dict[str, Any]], refi
     if all("without_record_rmse_um" in f for f in out):
         fc["without_record_rmse_um"] = [f["without_record_rmse_um"] for f in out]
         fc["without_record_pooled_um"] = float(np.sqrt(sq_without / n_all))
+        fc["worse_of_starts_pooled_um"] = float(np.sqrt(sq_worse / n_all))
     return fc
 
 

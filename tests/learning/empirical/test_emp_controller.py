@@ -107,6 +107,12 @@ def test_a_block_scored_by_the_worse_start_is_the_worse_of_the_two_predictions(f
     wfc = worse.statistics["forward_chaining"]
     both = np.maximum(wfc["rmse_um"], wfc["without_record_rmse_um"])
     np.testing.assert_allclose(worse.estimator_.fold_rmse_, both, rtol=1e-8)
+    # the reported worse-of-starts pooled score is the criterion the worse-scored structure was chosen by, and for the
+    # record-scored one the same pooling of its blocks (what compares the two scorings' structures)
+    np.testing.assert_allclose(wfc["worse_of_starts_pooled_um"], worse.estimator_.cv_rmse_, rtol=1e-8)
+    n = np.array([b["n"] for b in fc["scored"]], dtype=float)
+    pooled = np.sqrt(np.sum(n * np.maximum(fc["rmse_um"], fc["without_record_rmse_um"]) ** 2) / n.sum())
+    np.testing.assert_allclose(fc["worse_of_starts_pooled_um"], pooled, rtol=1e-9)
     # the check can fail: on some block the board without the record is worse than with it
     assert any(w > r * 1.01 for r, w in zip(wfc["rmse_um"], wfc["without_record_rmse_um"])), wfc
     # the option is refused where it means nothing, and with an unknown value, naming what it needs

@@ -212,5 +212,9 @@ def test_goal_leave_one_cycle_out_at_most_0p8_of_mlr16():
         assert all(t and {s[2:] for s, _, _ in t if s.startswith("T:")} <= set(sens)
                    for t, sens in zip(terms, out["methods"]["dynamic"]["sensors"])), terms
         assert len({tuple(map(tuple, t)) for t in terms}) > 1, terms  # refitted per fold, not one model six times
+        # and each fold's own forward-chaining score (the criterion its structure was chosen by), none for MLR
+        chained = out["methods"]["dynamic"]["forward_chaining"]
+        assert out["methods"]["mlr"]["forward_chaining"] == [None] * 6
+        assert all(fc["pooled_um"] > 0 and "scored" not in fc for fc in chained), chained
         ratios[ch] = out["ratio_to_mlr"]["dynamic"]
     assert all(r <= 0.8 for r in ratios.values()), ratios
