@@ -13,6 +13,7 @@ from host.board.linuxcnc.bridge import (CRC, FEED_CHANGE_REL, IDLE_MM_PER_S, Bri
                                         StreamLink)
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "firmware"))
+from fwfakes import BoardPort  # tests/firmware, on the path above
 
 PERIOD_S = 0.1  # one bridge period = one board cycle of the fakes (run_cycles' 100 ms)
 
@@ -172,7 +173,7 @@ def _board_run(tmp_path, table, send_feed, seconds=100.0):
     tmp_path.mkdir()
     (tmp_path / "table_a.bin").write_bytes(table)
     app, board = rig_app(tmp_path, table=False, extra={"frame_ms": 0})
-    port = _BoardPort(board)
+    port = BoardPort(board)
     bridge = Bridge(StreamLink(lambda: port), 1000.0, send_feed=send_feed)
     pos_mm = 20.0
     offsets, samples = [], []
@@ -189,29 +190,6 @@ def _board_run(tmp_path, table, send_feed, seconds=100.0):
     return offsets, samples
 
 
-class _BoardPort:
-    """A pySerial-like port onto the firmware's fake board (as tests/board/test_board_supplied.py's)."""
-
-    def __init__(self, board):
-        self.board = board
-        self.rx = bytearray()
-
-    @property
-    def in_waiting(self):
-        self.rx += self.board.serial.take()
-        return len(self.rx)
-
-    def write(self, b):
-        self.board.serial.feed(bytes(b))
-
-    def read(self, n):
-        self.rx += self.board.serial.take()
-        out = bytes(self.rx[:n])
-        del self.rx[:n]
-        return out
-
-    def close(self):
-        pass
 
 
 def _host_prediction(model, times):
@@ -256,7 +234,7 @@ def test_a_table_without_a_feed_input_refuses_m_and_the_bridge_says_so_once(tmp_
     from fwhelpers import rig_app, run_cycles
     app, board = rig_app(tmp_path, extra={"frame_ms": 0})
     logs = []
-    bridge = Bridge(StreamLink(lambda: _BoardPort(board)), 1000.0, send_feed=True, log=logs.append)
+    bridge = Bridge(StreamLink(lambda: BoardPort(board)), 1000.0, send_feed=True, log=logs.append)
     for k, v in enumerate([0.0, 25.0, 25.0, 0.0, 0.0, 25.0, 25.0, 0.0]):
         out = bridge.step(k * PERIOD_S, Inputs(position=20.0 + k * 2.5, machine_on=True, homed=True, velocity=v))
         app.link.poll(board.clock.t)
@@ -273,7 +251,7 @@ def test_a_feed_above_the_boards_max_speed_is_refused_and_said(tmp_path):
     tmp_path.joinpath("table_a.bin").write_bytes(table)
     app, board = rig_app(tmp_path, table=False, extra={"frame_ms": 0, "max_speed_mm_min": 2000})
     logs = []
-    bridge = Bridge(StreamLink(lambda: _BoardPort(board)), 1000.0, send_feed=True, log=logs.append)
+    bridge = Bridge(StreamLink(lambda: BoardPort(board)), 1000.0, send_feed=True, log=logs.append)
     for k, v in enumerate([0.0, 25.0, 50.0, 50.0, 50.0, 50.0]):  # 1500 mm/min taken, 3000 refused
         bridge.step(k * PERIOD_S, Inputs(position=20.0, machine_on=True, homed=True, velocity=v))
         app.link.poll(board.clock.t)

@@ -12,6 +12,7 @@ from host.board.supplied import (SOURCE_FEED, SOURCE_SPINDLE, SOURCE_SPINDLE_SQU
                                  parse_dictionary)
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "firmware"))
+from fwfakes import BoardPort  # tests/firmware, on the path above
 
 TAU = 1800.0
 SPIN = SupplyEntry(SOURCE_SPINDLE, int(TAU * 1000), 0)
@@ -98,29 +99,6 @@ def test_dictionary_answers_are_parsed_or_refused():
 
 
 # --- the bridge and the real firmware ---------------------------------------------------------------------------------
-class BoardPort:
-    """A pySerial-like port onto the firmware's fake board: what the bridge writes is the board's input."""
-
-    def __init__(self, board):
-        self.board = board
-        self.rx = bytearray()
-
-    @property
-    def in_waiting(self):
-        self.rx += self.board.serial.take()
-        return len(self.rx)
-
-    def write(self, b):
-        self.board.serial.feed(bytes(b))
-
-    def read(self, n):
-        self.rx += self.board.serial.take()
-        out = bytes(self.rx[:n])
-        del self.rx[:n]
-        return out
-
-    def close(self):
-        pass
 
 
 def _period(app, board, bridge, inp, now, cycles=1):

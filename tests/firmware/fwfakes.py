@@ -310,6 +310,32 @@ class FakeSerial:
         return b
 
 
+class BoardPort:
+    """A pySerial-like port onto a fake board's FakeSerial (``board.serial``), for host code that opens a port (the
+    LinuxCNC bridge's StreamLink): what it writes is the board's input, what it reads the board's output."""
+
+    def __init__(self, board):
+        self.board = board
+        self.rx = bytearray()
+
+    @property
+    def in_waiting(self):
+        self.rx += self.board.serial.take()
+        return len(self.rx)
+
+    def write(self, b):
+        self.board.serial.feed(bytes(b))
+
+    def read(self, n):
+        self.rx += self.board.serial.take()
+        out = bytes(self.rx[:n])
+        del self.rx[:n]
+        return out
+
+    def close(self):
+        pass
+
+
 class FakeClock:
     def __init__(self, t=0):
         self.t = t
