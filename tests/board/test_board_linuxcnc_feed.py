@@ -89,7 +89,7 @@ def test_the_feed_goes_before_p_in_mm_per_min_of_the_machine_units():
     port = FakePort()
     b = _bridge(port, send_feed=True, units="inch")
     b.step(0.0, Inputs(position=1.0, machine_on=True, homed=True, velocity=2.0))  # 2 in/s = 3048 mm/min
-    want = command_line("M", 3048, 0, 0) + command_line("P", 25400)
+    want = command_line("M", 3048, 25400, 25400) + command_line("P", 25400)  # lo = hi = the position
     assert want in bytes(port.tx)
     port.tx.clear()
     b.step(PERIOD_S, Inputs(position=1.0, machine_on=True, homed=True, velocity=2.0))
@@ -107,7 +107,7 @@ def test_a_feed_the_link_lost_is_sent_again():
     port.fail = False
     port.tx.clear()
     b.step(2 * PERIOD_S, inp)
-    assert command_line("M", 3000, 0, 0) in bytes(port.tx)
+    assert command_line("M", 3000, 1000, 1000) in bytes(port.tx)
 
 
 def test_feed_is_refused_with_modbus_and_on_the_command_line(capsys):

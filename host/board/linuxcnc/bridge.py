@@ -135,9 +135,10 @@ class StreamLink:
         p = command_line("P", pos_um) if spindle_rpm is None else command_line("P", pos_um, spindle_rpm)
         out = p + command_line("Q", pos_um)
         if feed_mm_min is not None:
-            # before P: a screw table takes M as its fallback travel, which the P right after clears (docs/protocol.md);
-            # lo and hi are not used by a dynamic table
-            out = command_line("M", feed_mm_min, 0, 0) + out
+            # before P; lo = hi = the position: a dynamic table does not read them, and a screw table takes M as its
+            # fallback travel until the P right after clears it, so a cycle between the two lines credits the step's
+            # travel where the nut is, not at position 0 (docs/protocol.md)
+            out = command_line("M", feed_mm_min, pos_um, pos_um) + out
             self.feed_pending += 1
         if self.supplier is not None and self.want_dictionary:
             # after the speed report: a board that waits for it and for the states then starts with both

@@ -34,8 +34,8 @@ def add_arguments(p: argparse.ArgumentParser) -> None:
                    help="send the spindle-rpm pin to the board with the position (P,<pos>,<rpm>, or holding "
                         "registers 18-19): for dynamic tables that use the spindle speed")
     p.add_argument("--feed", action="store_true",
-                   help="send the axis feed from the velocity pin (commanded axis velocity, machine units/s) as M,<mm/min>,0,0 "
-                        "when a move starts, when its feed changes by more than 2 %%, and M,0,0,0 when it ends: for dynamic "
+                   help="send the axis feed from the velocity pin (commanded axis velocity, machine units/s) as M,<mm/min>,<pos>,<pos> "
+                        "when a move starts, when its feed changes by more than 2 %%, and feed 0 when it ends: for dynamic "
                         "tables that use the feed (feed_m_min). Stream mode only (Modbus has no feed register); with "
                         "--signal-record the record keeps the feed too")
 
