@@ -259,3 +259,23 @@ def test_a_feed_above_the_boards_max_speed_is_refused_and_said(tmp_path):
     assert app.feed == 1500
     assert [m for m in logs if m.startswith("feed (M) refused")] == ["feed (M) refused: range"], logs
 
+
+
+def test_a_velocity_pin_not_netted_is_said_once():
+    """--feed with tcomp.velocity left unconnected reads 0 while the axis moves: the board's feed would stay 0 silently.
+    The bridge says so once, after the position has moved faster than 1 mm/s for 10 periods with the pin idle; a netted
+    pin, or a standing axis, says nothing."""
+    def run(velocity, speed_mm_s, periods=30):
+        logs = []
+        b = _bridge(FakePort(), send_feed=True, log=logs.append)
+        for k in range(periods):
+            b.step(k * PERIOD_S, Inputs(position=1.0 + speed_mm_s * k * PERIOD_S, machine_on=True, homed=True,
+                                        velocity=velocity))
+        return [m for m in logs if "velocity pin" in m]
+
+    said = run(0.0, 50.0)
+    assert len(said) == 1 and "tcomp.velocity" in said[0] and "50 mm/s" in said[0], said
+    assert run(0.0, 50.0, periods=10) == []  # nine moving periods after the first: not yet
+    assert run(50.0, 50.0) == []  # netted
+    assert run(0.0, 0.0) == []  # standing
+    assert run(0.0, 0.5) == []  # slower than the threshold (a creep, a servo's dither)

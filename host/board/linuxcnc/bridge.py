@@ -70,6 +70,11 @@ FEED_STEADY_REL = 0.005
 FEED_CHANGE_REL = 0.02
 FEED_RESOLUTION_MM_MIN = 1  # the protocol's unit (M takes whole mm/min)
 FEED_LIMIT_MM_MIN = 1000000  # M's range (firmware/protocol.py _FEED_LIMIT)
+# --feed with the velocity pin not netted reads 0 for ever and the table's feed term is silently 0: said when the
+# position moves faster than UNNETTED_MM_PER_S (100 x the idle threshold, far above a servo's dither) for
+# UNNETTED_PERIODS periods in a row (half a second at 50 ms) while the pin reads idle
+UNNETTED_MM_PER_S = 1.0
+UNNETTED_PERIODS = 10
 
 
 @dataclass
@@ -489,6 +494,8 @@ class Bridge:
         # off: no M at all (a table reading the feed gets 0, as before); on: the velocity pin's feed, M on change
         self.feed = FeedReport() if send_feed else None
         self.noted_feed = 0.0  # the feed the signal record is given (mm/min): what the board was last sent
+        self.unnetted = 0  # periods in a row the position moved while the velocity pin read idle (-1: said once)
+        self.last_pos_um: float | None = None
         # the controller's record of the spindle speed, for the lag states a table asks it to supply (host/board/supplied.py):
         # noted every period, saved to record_path every RECORD_SAVE_S, and read by the link when the board asks
         self.record = record
@@ -592,11 +599,29 @@ class Bridge:
                 self.log("signal record: cannot save %s: %s" % (self.record_path, exc))
             self.saved_at = w
 
-    def _feed_now(self, inp: Inputs) -> int | None:
+    def _check_velocity_pin(self, v_mm_s: float, pos_um: float, dt_s: float) -> None:
+        """Say once when the axis moves while the velocity pin reads idle (not netted: the board's feed stays 0)."""
+        last, self.last_pos_um = self.last_pos_um, pos_um
+        if self.unnetted < 0 or last is None or dt_s <= 0:
+            return
+        moving_mm_s = abs(pos_um - last) / 1000.0 / dt_s
+        if moving_mm_s > UNNETTED_MM_PER_S and not abs(v_mm_s) > IDLE_MM_PER_S:
+            self.unnetted += 1
+            if self.unnetted >= UNNETTED_PERIODS:
+                self.log("--feed: the velocity pin reads %g mm/s while the axis position moves at %.3g mm/s: is tcomp.velocity "
+                         "netted (e.g. to joint.0.vel-cmd, examples/linuxcnc/tcomp.hal)? Until it is, the board's feed is 0"
+                         % (v_mm_s, moving_mm_s))
+                self.unnetted = -1
+        else:
+            self.unnetted = 0
+
+    def _feed_now(self, inp: Inputs, dt_s: float) -> int | None:
         """The feed (mm/min) to send with this period's exchange, or None (send_feed off, or nothing changed)."""
         if self.feed is None:
             return None
-        feed = self.feed.update(inp.velocity * self.um_per_unit / 1000.0)
+        v_mm_s = inp.velocity * self.um_per_unit / 1000.0
+        self._check_velocity_pin(v_mm_s, inp.position * self.um_per_unit, dt_s)
+        feed = self.feed.update(v_mm_s)
         assert isinstance(self.link, StreamLink)  # send_feed: the constructor checked
         if self.link.feed_lost:
             # the board booted or the port reopened: its feed may be 0, whatever it was told
@@ -620,7 +645,7 @@ class Bridge:
             self.last_new_s = now
         pos_um = int(round(inp.position * self.um_per_unit))
         send_latch = self._want_latch(now, inp)
-        feed = self._feed_now(inp)
+        feed = self._feed_now(inp, dt)
         if self.record is not None:
             self._note_signals(now, inp)
             if self.reading is not None and self.reading.status & SETTLING and now >= self.next_dictionary_s:
