@@ -173,6 +173,14 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
             print("  static fallback: search over every term scored %.4g, over the static terms (tau 0) alone %s: the %s structure "
                   "is the model" % (fb["dynamic_score_um"], "no structure" if fb["static_score_um"] is None else "%.4g" % fb["static_score_um"],
                                     fb["chosen"]))
+        rs = model.statistics.get("record_structure_start")
+        if rs and rs["record_structure"] is None:
+            print("  search from record scoring's structure: none (%s); the search from empty is the model" % rs["record_error"])
+        elif rs:
+            print("  search from record scoring's structure (%s, worse of starts %.4g) ended at %.4g, from empty %.4g: the search "
+                  "%s is the model" % (", ".join("lag(%s, tau %g s)" % tuple(t) for t in rs["record_structure"]),
+                                       rs["record_structure_score_um"], rs["from_record_structure_score_um"], rs["from_empty_score_um"],
+                                       "from record scoring's structure" if rs["chosen"] == "from_record_structure" else "from empty"))
         sa = model.statistics.get("structure_average")
         if sa and sa.get("members"):
             print("  structure average of %d structures (forward-chaining score %.4g against %.4g for the single best):" % (

@@ -356,6 +356,7 @@ class DynamicRegression:
         self.selection = selection
         self.block_columns: dict[Any, tuple[np.ndarray, np.ndarray] | StartedColumns | WorseOfStarts] | None = None
         self.settle_bound: SettleBound | None = None  # with_settle_bound: only structures that settle in time
+        self.start_terms: list[tuple[str, float]] | None = None  # with_start: the structure the greedy search starts from
         self.swaps = swaps
         self.max_sensors = max_sensors
         self.max_terms = max_terms
@@ -509,6 +510,32 @@ class DynamicRegression:
         selected, history = [], []
         current = cv([]) if o else np.inf
         history.append({"step": 0, "action": "start", "term": None, "cv_rmse": current})
+
+        def replace_while_better():
+            nonlocal selected, current
+            while self.swaps:
+                score, sel = best_swap(selected, current)
+                if sel is None:
+                    break
+                out_ = [j for j in selected if j not in sel][0]
+                in_ = [j for j in sel if j not in selected][0]
+                selected, current = sel, score
+                history.append({"step": len(history), "action": "swap", "term": [terms[in_][0], terms[in_][1]],
+                                "replaces": [terms[out_][0], terms[out_][1]], "cv_rmse": current})
+
+        if self.start_terms:
+            # a given structure (with_start), kept when it scores better than the empty one; the search goes on from it
+            where = {(str(n), float(tau)): j for j, (n, tau) in enumerate(terms)}
+            missing = [t for t in self.start_terms if (str(t[0]), float(t[1])) not in where]
+            if missing:
+                raise EmpiricalDataError("dynamic: the start structure's term(s) %s are not among the candidates" % missing)
+            given = [where[(str(n), float(tau))] for n, tau in self.start_terms]
+            score = cv(given)
+            history.append({"step": 1, "action": "start_from", "terms": [[terms[j][0], terms[j][1]] for j in given],
+                            "cv_rmse": score, "kept": bool(score < current)})
+            if score < current:
+                selected, current = given, score
+                replace_while_better()
         while len(selected) < int(self.max_terms):
             best = (np.inf, None)
             for j in range(F.shape[1]):
@@ -521,15 +548,7 @@ class DynamicRegression:
             selected.append(best[1])
             current = best[0]
             history.append({"step": len(history), "action": "add", "term": [terms[best[1]][0], terms[best[1]][1]], "cv_rmse": current})
-            while self.swaps:
-                score, sel = best_swap(selected, current)
-                if sel is None:
-                    break
-                out_ = [j for j in selected if j not in sel][0]
-                in_ = [j for j in sel if j not in selected][0]
-                selected, current = sel, score
-                history.append({"step": len(history), "action": "swap", "term": [terms[in_][0], terms[in_][1]],
-                                "replaces": [terms[out_][0], terms[out_][1]], "cv_rmse": current})
+            replace_while_better()
         if not selected:
             return None  # fit() tries the other ridge values and raises if none finds a term
         idx = ([0] if o else []) + [c + o for c in selected]
@@ -549,6 +568,13 @@ class DynamicRegression:
         :class:`StartedColumns` when the states start at the structure's observer estimate, a :class:`WorseOfStarts`
         when the block is scored by the worse of several starts. Returns self."""
         self.block_columns = dict(columns)
+        return self
+
+    def with_start(self, terms: Sequence[tuple[str, float]] | None) -> DynamicRegression:
+        """Start the greedy search of every ridge value from ``terms`` (signal, tau) instead of the empty structure, when
+        they score better than it; the search then adds and exchanges terms from there as usual (None: from empty).
+        The fallback's second search uses it (fitting.py, ``controller_scoring=worse``). Returns self."""
+        self.start_terms = None if terms is None else [(str(n), float(tau)) for n, tau in terms]
         return self
 
     def with_settle_bound(self, bound: SettleBound | None) -> DynamicRegression:

@@ -382,6 +382,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         est.with_settle_bound(SettleBound(settle_max_s, runs, [(a.time_s.min(), a.time_s.max()) for a in arrays], exclude,
                                           reference_all, target, channel, obs_scale, taus, controller=controller))
     est.fit(F, y, terms, groups=groups)
+    record_start = None
+    if controller_scoring == forward.WORSE and selection == "forward" and est.block_columns:
+        est, record_start = _search_from_record_structure(est, opts, fit_intercept, F, y, terms, groups)
     settle_record = est.settle_bound_
     searched = est  # the search over every term (the static fallback may replace est)
     plain = None
@@ -415,6 +418,8 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         stats["structure_average"] = average_record
     if fallback is not None:
         stats["static_fallback"] = fallback
+    if record_start is not None:
+        stats["record_structure_start"] = record_start
     stats["lag_bound"] = lag_bound
     if use_observer:
         stats["spindle_states"] = spindle_states  # "controller": the controller's record supplies the spindle/feed lag states
@@ -530,6 +535,36 @@ def _single_model(est, model, reference_all, runs, arrays, exclude, obs_scale, u
 
 STATIC_FALLBACK_RULE = ("the structure chosen among every term is compared with the one the same search chooses among the static terms "
                         "(tau = 0) alone, on the same forward-chaining score; the lower score is the model")
+
+
+RECORD_START_RULE = ("controller_scoring=worse: the greedy search from the empty structure is compared with the same search started "
+                     "from the structure record scoring chooses, both scored by the worse of the two starts per block; the lower "
+                     "score is the model")
+
+
+def _search_from_record_structure(est, opts, fit_intercept, F, y, terms, groups):
+    """controller_scoring=worse: the greedy search scored by the worse of two starts never adds a long spindle lag first
+    (alone, without the record, it starts far off), so it can miss a structure that is better by its own criterion, one
+    that record scoring finds (docs/results.md, ch3's leave-one-cycle-out). Search again, by the same criterion, from the
+    structure record scoring chooses; keep whichever scores lower. Returns (estimator, statistics record)."""
+    from host.learning.empirical.dynamic import DynamicRegression, WorseOfStarts
+
+    record_columns = {k: v.starts[0] if isinstance(v, WorseOfStarts) else v for k, v in est.block_columns.items()}
+    by_record = DynamicRegression(fit_intercept=fit_intercept, **opts).with_block_columns(record_columns)
+    by_record.with_settle_bound(est.settle_bound)
+    try:
+        by_record.fit(F, y, terms, groups=groups)
+    except EmpiricalDataError as exc:  # no term lowers the record-scored score: the search from empty stands
+        return est, {"rule": RECORD_START_RULE, "record_structure": None, "record_error": str(exc), "chosen": "from_empty"}
+    started = DynamicRegression(fit_intercept=fit_intercept, **opts).with_block_columns(est.block_columns)
+    started.with_settle_bound(est.settle_bound).with_start(by_record.terms_)
+    started.fit(F, y, terms, groups=groups)
+    given = [h for h in started.history_ if h["action"] == "start_from"]
+    record = {"rule": RECORD_START_RULE, "record_structure": [[n, tau] for n, tau in by_record.terms_],
+              "record_structure_score_um": float(given[0]["cv_rmse"]) if given else None,
+              "from_empty_score_um": float(est.cv_rmse_), "from_record_structure_score_um": float(started.cv_rmse_),
+              "chosen": "from_record_structure" if started.cv_rmse_ < est.cv_rmse_ else "from_empty"}
+    return (started if record["chosen"] == "from_record_structure" else est), record
 
 
 def _columns_subset(columns, cols):

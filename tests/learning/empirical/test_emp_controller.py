@@ -113,6 +113,15 @@ def test_a_block_scored_by_the_worse_start_is_the_worse_of_the_two_predictions(f
     n = np.array([b["n"] for b in fc["scored"]], dtype=float)
     pooled = np.sqrt(np.sum(n * np.maximum(fc["rmse_um"], fc["without_record_rmse_um"]) ** 2) / n.sum())
     np.testing.assert_allclose(fc["worse_of_starts_pooled_um"], pooled, rtol=1e-9)
+    # worse scoring also searches from the structure record scoring picks (the fixture's record fit, found independently
+    # here), whose score by this criterion is the record fit's own worse-of-starts pooling; the model is the lower search
+    start = worse.statistics["record_structure_start"]
+    assert [tuple(t) for t in start["record_structure"]] == controlled.estimator_.terms_
+    np.testing.assert_allclose(start["record_structure_score_um"], fc["worse_of_starts_pooled_um"], rtol=1e-8)
+    assert start["from_record_structure_score_um"] <= start["record_structure_score_um"] * (1 + 1e-12)
+    assert worse.estimator_.cv_rmse_ == min(start["from_empty_score_um"], start["from_record_structure_score_um"])
+    assert start["chosen"] == ("from_record_structure" if start["from_record_structure_score_um"] < start["from_empty_score_um"]
+                               else "from_empty")
     # the check can fail: on some block the board without the record is worse than with it
     assert any(w > r * 1.01 for r, w in zip(wfc["rmse_um"], wfc["without_record_rmse_um"])), wfc
     # the option is refused where it means nothing, and with an unknown value, naming what it needs
@@ -245,6 +254,9 @@ def test_tcomp_fit_takes_controller_scoring(tmp_path, capsys):
     assert main(base + ["--option", "spindle_states=controller"]) == 0
     stats = json.loads(open(out).read())["statistics"]
     assert stats["controller_scoring"] == "worse"
-    capsys.readouterr()
+    rs = stats["record_structure_start"]
+    assert ("search from record scoring's structure (%s, worse of starts %.4g) ended at %.4g, from empty %.4g" % (
+        ", ".join("lag(%s, tau %g s)" % tuple(t) for t in rs["record_structure"]), rs["record_structure_score_um"],
+        rs["from_record_structure_score_um"], rs["from_empty_score_um"])) in capsys.readouterr().out
     assert main(base) == 2  # without spindle_states=controller it means nothing: refused, naming what it needs
     assert "controller_scoring must be one of record, worse, and needs spindle_states=controller" in capsys.readouterr().err

@@ -104,6 +104,34 @@ def test_a_ridge_value_that_finds_no_term_does_not_stop_the_others():
         DynamicRegression(ridge=[1e6, 1e7]).fit(u, y, [("T:a", 0.0)], groups)
 
 
+def test_a_search_started_from_a_given_structure_goes_on_from_it():
+    """The greedy search is trapped when the best single term is not part of the best pair: y = a + b, and c = a + b +
+    noise is the best term alone. From empty, without exchanges, the search keeps c and adds one of a, b. Started from
+    (a, b) (with_start), it keeps them: exact. A start that scores worse than the empty structure is not kept, and a
+    start term that is not a candidate is refused by name."""
+    rng = np.random.default_rng(7)
+    a, b = rng.normal(size=600), rng.normal(size=600)
+    c = a + b + 0.5 * rng.normal(size=600)
+    y = a + b + 0.01 * rng.normal(size=600)
+    X = np.column_stack([a, b, c])
+    terms = [("T:a", 0.0), ("T:b", 0.0), ("T:c", 0.0)]
+    groups = np.repeat(np.arange(4), 150)
+    empty = DynamicRegression(max_terms=2, swaps=False, ridge=0.0).fit(X, y, terms, groups)
+    assert ("T:c", 0.0) in empty.terms_ and empty.cv_rmse_ > 0.1
+    started = DynamicRegression(max_terms=2, swaps=False, ridge=0.0).with_start([("T:a", 0), ("T:b", 0)]).fit(X, y, terms, groups)
+    assert sorted(started.terms_) == [("T:a", 0.0), ("T:b", 0.0)] and started.cv_rmse_ < 0.02
+    given = [h for h in started.history_ if h["action"] == "start_from"]
+    assert given == [{"step": 1, "action": "start_from", "terms": [["T:a", 0.0], ["T:b", 0.0]], "cv_rmse": started.cv_rmse_, "kept": True}]
+    # a start worse than no term at all (y against noise) is recorded and dropped; the search runs from empty
+    noise = rng.normal(size=(600, 1))
+    X2 = np.column_stack([X, noise])
+    odd = DynamicRegression(max_terms=2, swaps=False, ridge=0.0).with_start([("T:n", 0.0)])
+    odd.fit(X2, a, terms + [("T:n", 0.0)], groups)
+    assert [h["kept"] for h in odd.history_ if h["action"] == "start_from"] == [False] and ("T:n", 0.0) not in odd.terms_
+    with pytest.raises(EmpiricalDataError, match=r"start structure's term\(s\) \[\('T:z', 0.0\)\] are not among the candidates"):
+        DynamicRegression().with_start([("T:z", 0.0)]).fit(X, y, terms, groups)
+
+
 def test_document_round_trip_command_line_and_bad_documents(make_direct, tmp_path):
     from host.data.runs import write_run
 
