@@ -135,6 +135,8 @@ def held_out(run, split_s, channel, dyn_options, variants=(), static=True):
         info[key + "_settle_s"] = dyn.observer.settle_s if dyn.observer is not None else None
         if dyn.observer is not None and dyn.observer.settle_without_record_s is not None:
             info[key + "_settle_without_record_s"] = dyn.observer.settle_without_record_s
+        if "record_structure_start" in st:  # controller_scoring=worse: its search from record scoring's structure
+            info[key + "_record_structure_start"] = {k: v for k, v in st["record_structure_start"].items() if k != "rule"}
         if "settle_bound" in st:  # --option settle_max_s=...: what the bound refused
             info[key + "_settle_bound"] = {k: v for k, v in st["settle_bound"].items() if k not in ("rule", "observer")}
         fc = st["forward_chaining"]
