@@ -286,8 +286,10 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     forward_state = opts.pop("forward_state", FORWARD_STATE)
     if forward_state not in FORWARD_STATES:
         raise EmpiricalDataError("dynamic: forward_state must be one of %s, got %r" % (", ".join(FORWARD_STATES), forward_state))
-    settle_max_s = settle_max_option(opts.pop("settle_max_s", None))  # host/learning/empirical/settle.py
-    spindle_states = opts.pop("spindle_states", "observer")
+    # with the observer, the defaults are the controller's record, the settle bound and the worse-start scoring
+    # (docs/results.md, "A second start for worse"); without it none of them means anything
+    settle_max_s = settle_max_option(opts.pop("settle_max_s", SETTLE_MAX_S if use_observer else None))  # settle.py
+    spindle_states = opts.pop("spindle_states", SPINDLE_STATES if use_observer else "observer")
     if spindle_states not in ("observer", "controller"):
         raise EmpiricalDataError("dynamic: spindle_states must be observer or controller, got %r" % (spindle_states,))
     if spindle_states == "controller" and not use_observer:
@@ -301,7 +303,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     if controller_scoring is not None and (controller_scoring not in forward.CONTROLLER_SCORINGS or not controller):
         raise EmpiricalDataError("dynamic: controller_scoring must be one of %s, and needs spindle_states=controller; got %r "
                                  "with spindle_states=%s" % (", ".join(forward.CONTROLLER_SCORINGS), controller_scoring, spindle_states))
-    controller_scoring = controller_scoring or forward.RECORD
+    controller_scoring = controller_scoring or (CONTROLLER_SCORING if controller else forward.RECORD)
     static_fallback = opts.pop("static_fallback", True)
     if not isinstance(static_fallback, bool):
         raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
@@ -316,8 +318,9 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     average_members = opts.pop("average_members", "ridge")
     if controller_scoring == forward.WORSE and average_count > 1:
         # the average's weights minimise each block's squared error as a quadratic in them; the worse of two starts is not one
-        raise EmpiricalDataError("dynamic: controller_scoring=worse and average_structures > 1 cannot be combined (the average's "
-                                 "weights are fitted on one start per block)")
+        raise EmpiricalDataError("dynamic: controller_scoring=worse (the default with the observer) and average_structures > 1 "
+                                 "cannot be combined (the average's weights are fitted on one start per block); give "
+                                 "controller_scoring=record and settle_max_s=none to average")
     if settle_max_s is not None and average_count > 1:
         # the average's union would carry an observer the bound never checked: not combined (neither measured with the other)
         raise EmpiricalDataError("dynamic: settle_max_s and average_structures > 1 cannot be combined (the averaged union's observer is not bounded)")
@@ -583,6 +586,12 @@ def _columns_subset(columns, cols):
 
 
 FORWARD_STATES = ("switched_on", "continuous")
+# the dynamic model's defaults with the observer (docs/empirical.md; measured in docs/results.md "A second start for
+# worse"): the controller supplies the spindle/feed lag states, the structure's observer settles within 30 min, and a
+# structure is chosen by the worse of a board with and without the controller's record
+SPINDLE_STATES = "controller"
+SETTLE_MAX_S = 1800.0
+CONTROLLER_SCORING = "worse"
 FORWARD_STATE = "switched_on"  # how the selection scores a block: as the board switched on at its start computes it (docs/empirical.md)
 # with forward_state=switched_on, a block of one run shorter than this is scored with its filters running since the run
 # start: issue 21's restart goal lets a board settle for 30 min (SETTLING), so a block scored as switched on spends at most

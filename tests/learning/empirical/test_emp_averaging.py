@@ -12,6 +12,7 @@ from host.learning.empirical.fitting import fit_model
 from models_export import export_model
 
 from exactlag import exact_lag  # test-side physics, beside these tests
+from dynopts import OBSERVER_ONLY
 
 
 def _two_halves(n=800, blocks=4, seed=5):
@@ -117,9 +118,10 @@ def _two_source_machine(hours=32.0):
 
 
 # the cycle blocks (4 h, each a running and a stopped phase) these tests were built on: the mechanics of averaging are
-# under test, not the blocks (with the default phase blocks the static search's t2 no longer earns a weight)
+# under test, not the blocks (with the default phase blocks the static search's t2 no longer earns a weight); averaging
+# is not combined with the settle bound or the worse-start scoring, the defaults since stop 35: the observer alone
 OPTIONS = dict(target="direct", channel="ch1", taus_s=(0, 1800), use_spindle=False, max_terms=1, forward_state="continuous",
-               forward_blocks="cycles")
+               forward_blocks="cycles", **OBSERVER_ONLY)
 
 
 def test_fit_model_averages_a_dynamic_and_a_static_structure_and_records_it():
@@ -175,7 +177,7 @@ def test_tcomp_fit_takes_the_option_and_prints_the_members(tmp_path, capsys):
     folder = write_run(_two_source_machine(), str(tmp_path / "run"))
     args = ["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--option", "taus_s=0/1800", "--option", "max_terms=1",
             "--option", "use_spindle=false", "--option", "forward_state=continuous", "--option", "forward_blocks=cycles",
-            "--out", str(tmp_path / "m.json")]
+            "--option", "spindle_states=observer", "--option", "settle_max_s=none", "--out", str(tmp_path / "m.json")]
     assert main(args + ["--option", "average_structures=2"]) == 0
     out = capsys.readouterr().out
     assert "structure average of 2 structures" in out and "weight 0.80: lag(T:t1, tau 1800 s)" in out

@@ -22,6 +22,7 @@ from models_export import export_model
 from models_export.certify import ExportError
 
 from exactlag import exact_lag  # test-side physics, beside these tests
+from dynopts import OBSERVER_ONLY
 
 REF_C = 22.0
 DT = 60.0
@@ -47,7 +48,10 @@ def _machine(hours=32.0):
 @pytest.fixture(scope="module")
 def fits():
     run, krpm = _machine()
-    return run, krpm, fit_model([run], "dynamic", spindle_states="controller", **FIT), fit_model([run], "dynamic", **FIT)
+    # the record mechanism alone (record scoring, no settle bound) beside the observer alone: the defaults since stop 35
+    # add the settle bound and the worse-start scoring, tested on their own below
+    record = dict(spindle_states="controller", controller_scoring="record", settle_max_s=None)
+    return run, krpm, fit_model([run], "dynamic", **record, **FIT), fit_model([run], "dynamic", **OBSERVER_ONLY, **FIT)
 
 
 def _rmse(pred, truth):
@@ -102,7 +106,7 @@ def test_a_block_scored_by_the_worse_start_is_the_worse_of_the_two_predictions(f
     # the record mode reports the board without the record beside it, and chose by the record alone
     assert controlled.statistics["controller_scoring"] == "record"
     assert len(fc["without_record_rmse_um"]) == len(fc["rmse_um"])
-    worse = fit_model([run], "dynamic", spindle_states="controller", controller_scoring="worse", **FIT)
+    worse = fit_model([run], "dynamic", spindle_states="controller", controller_scoring="worse", settle_max_s=None, **FIT)
     assert worse.statistics["controller_scoring"] == "worse"
     wfc = worse.statistics["forward_chaining"]
     both = np.maximum(wfc["rmse_um"], wfc["without_record_rmse_um"])
@@ -125,10 +129,10 @@ def test_a_block_scored_by_the_worse_start_is_the_worse_of_the_two_predictions(f
     # the check can fail: on some block the board without the record is worse than with it
     assert any(w > r * 1.01 for r, w in zip(wfc["rmse_um"], wfc["without_record_rmse_um"])), wfc
     # the option is refused where it means nothing, and with an unknown value, naming what it needs
-    for bad in (dict(controller_scoring="worse"), dict(spindle_states="controller", controller_scoring="best")):
+    for bad in (dict(controller_scoring="worse", spindle_states="observer"), dict(spindle_states="controller", controller_scoring="best")):
         with pytest.raises(EmpiricalDataError, match=r"controller_scoring must be one of record, worse"):
             fit_model([run], "dynamic", **bad, **FIT)
-    with pytest.raises(EmpiricalDataError, match=r"controller_scoring=worse and average_structures > 1 cannot be combined"):
+    with pytest.raises(EmpiricalDataError, match=r"controller_scoring=worse \(the default with the observer\) and average_structures > 1 cannot be combined.*give controller_scoring=record and settle_max_s=none"):
         fit_model([run], "dynamic", spindle_states="controller", controller_scoring="worse", average_structures=2, **FIT)
 
 
@@ -144,7 +148,7 @@ def test_the_settle_bound_admits_what_the_controller_supplies():
     # beside a temperature state, only that state's start error is left to settle
     assert controlled.settle_s(terms, coef) <= 1800.0 < observer_only.settle_s(terms, coef)
     # and a fit bounded to 30 min keeps the long spindle lag only when the controller supplies it
-    bounded = fit_model([run], "dynamic", spindle_states="controller", settle_max_s=1800, **FIT)
+    bounded = fit_model([run], "dynamic", spindle_states="controller", settle_max_s=1800, controller_scoring="record", **FIT)
     assert bounded.observer.settle_s <= 1800
     assert any(n.startswith("spindle") and tau == 14400.0 for n, tau in bounded.terms), bounded.terms
 
@@ -258,5 +262,9 @@ def test_tcomp_fit_takes_controller_scoring(tmp_path, capsys):
     assert ("search from record scoring's structure (%s, worse of starts %.4g) ended at %.4g, from empty %.4g" % (
         ", ".join("lag(%s, tau %g s)" % tuple(t) for t in rs["record_structure"]), rs["record_structure_score_um"],
         rs["from_record_structure_score_um"], rs["from_empty_score_um"])) in capsys.readouterr().out
-    assert main(base) == 2  # without spindle_states=controller it means nothing: refused, naming what it needs
+    # the defaults (since stop 35) are spindle_states=controller and this scoring
+    assert main(base[:-2]) == 0 and json.loads(open(out).read())["statistics"]["controller_scoring"] == "worse"
+    capsys.readouterr()
+    # without spindle_states=controller it means nothing: refused, naming what it needs
+    assert main(base + ["--option", "spindle_states=observer"]) == 2
     assert "controller_scoring must be one of record, worse, and needs spindle_states=controller" in capsys.readouterr().err

@@ -12,6 +12,7 @@ from host.learning.empirical.fitting import fit_model
 from host.learning.documents import ModelFormatError, load_model
 from models_export.document import FORMAT
 from host.data.runs import Errors
+from dynopts import OBSERVER_ONLY
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 
@@ -41,8 +42,11 @@ def _lagged_run(make_direct, noise=0.02):
 
 
 def test_structure_and_time_constants_are_recovered(make_direct):
+    """The search finds the true terms and time constants. Without the settle bound: the truth's 1 h lag of t1 is a state
+    its observer estimates from t1's present reading only to within ~2 h of settling, so the default 30 min bound
+    refuses it (asserted at the end: what the defaults give instead, and why)."""
     run = _lagged_run(make_direct)
-    model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200))
+    model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200), settle_max_s=None)
     terms = dict(zip(model.terms, model.term_coefficients))
     assert terms[("T:t1", 3600.0)] == pytest.approx(3, rel=0.05)
     assert terms[("spindle_krpm", 1800.0)] == pytest.approx(2, rel=0.05)
@@ -54,17 +58,29 @@ def test_structure_and_time_constants_are_recovered(make_direct):
     assert model.sensors == ["t1"] and len(model.terms) == 2
     # the 2 h cycle blocks are long enough to be scored as a board switched on at each block: the truth again (a further
     # sensor may join as an input of the observer only: it helps estimate the lag states at the start; its gain stays ~0)
-    cycles = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200), forward_blocks="cycles")
+    # (the observer alone: scored by the worse of a start with and without the controller's record, the defaults since
+    # stop 35, the truth's start without the record is off by up to 2.4 um on a block, and a structure that starts
+    # better either way is chosen; docs/results.md "A second start for worse")
+    cycles = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200), forward_blocks="cycles",
+                       **OBSERVER_ONLY)
     assert cycles.statistics["cv_groups"] == 5 and cycles.statistics["forward_scored_as"]["continuous_blocks"] == []
     by_term = dict(zip(cycles.terms, cycles.term_coefficients))
     assert by_term[("T:t1", 3600.0)] == pytest.approx(3, rel=0.05) and by_term[("spindle_krpm", 1800.0)] == pytest.approx(2, rel=0.05)
     assert cycles.sensors[0] == "t1"
     assert all(abs(c) < 0.02 for term, c in by_term.items() if term not in (("T:t1", 3600.0), ("spindle_krpm", 1800.0)))
-    continuous = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200), forward_state="continuous")
+    continuous = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200), forward_state="continuous",
+                           settle_max_s=None)
     assert continuous.sensors == ["t1"] and len(continuous.terms) == 2
     # a static MLR on all sensors cannot represent the lags
     static = fit_model([run], "mlr", target="direct", channel="ch1")
     assert static.statistics["rmse"] > 5 * st["rmse"]
+    # the defaults (settle bound 30 min): the truth's observer settles too slowly, so it is refused and a structure that
+    # settles within 30 min is the model, at a cost in fit the statistics show
+    assert model.observer.settle_s > 1800
+    bounded = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=(0, 900, 1800, 3600, 7200))
+    assert bounded.statistics["settle_bound"]["settle_max_s"] == 1800 and bounded.observer.settle_s <= 1800
+    assert bounded.statistics["settle_bound"]["structures_refused"] > 0 and ("T:t1", 3600.0) not in bounded.terms
+    assert bounded.statistics["rmse"] > 5 * st["rmse"]
 
 
 def test_sensor_limit_and_settings_are_enforced(make_direct):
@@ -195,9 +211,10 @@ def test_real_fl_thermal_dynamic_beats_static_on_the_held_out_cycles():
     run = load_run(os.path.join(ROOT, "data", "fl_thermal"))
     split = 86865.0  # start of the 4th spindle cycle (32.1 h)
     # the structure chosen by leave-one-cycle-out (selection=loo): with three training cycles forward chaining scores two blocks,
-    # the first fitted on one cycle; the default selection is measured by tools/results_forward.py (docs/results.md)
+    # the first fitted on one cycle; the default selection is measured by tools/results_forward.py (docs/results.md);
+    # the observer alone, as this check was made (the settle bound and the worse-start scoring: the same file)
     dyn = fit_model([run], "dynamic", target="direct", channel="ch1", window=(None, split), taus_s=(0, 1800, 14400), max_terms=4, ridge=0.0,
-                    selection="loo")
+                    selection="loo", **OBSERVER_ONLY)
     mlr = fit_model([run], "mlr", target="direct", channel="ch1", window=(None, split), reference="run_start")
     d, m = score_model(dyn, run, (split, None))["rmse_um"], score_model(mlr, run, (split, None))["rmse_um"]
     assert d < 0.8 * m, (d, m)
@@ -215,7 +232,8 @@ def test_compare_runs_the_dynamic_model_with_its_settings(make_direct, tmp_path)
     assert main(base + ["--option", "dynamic.bogus=1"]) == 2
 
 
-ISSUE16 = {"selection": "loo", "ridge": (0.0, 1e-3, 1e-2), "tau_max_fraction": 1.0}  # the dynamic model's choice before issue 21
+ISSUE16 = {"selection": "loo", "ridge": (0.0, 1e-3, 1e-2), "tau_max_fraction": 1.0,  # the dynamic model's choice before issue 21
+           **OBSERVER_ONLY}
 
 
 @pytest.mark.slow

@@ -79,7 +79,11 @@ def test_switched_on_selection_scores_blocks_as_the_models_own_predict_does(make
     run = _lagged_run(make_direct)
     for observer in (True, False):
         # the 2 h cycles: every block lasts >= SWITCHED_ON_MIN_S, so every block is scored switched on
-        model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, observer=observer, forward_blocks="cycles")
+        # scored with the controller's record where it supplies states (the worse-start scoring, the default with the
+        # observer since stop 35, chooses by the worse of two starts: tests/learning/empirical/test_emp_controller.py)
+        pinned = {"controller_scoring": "record"} if observer else {}
+        model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, observer=observer, forward_blocks="cycles",
+                          **pinned)
         st = model.statistics
         assert st["selection"] == "forward" and st["forward_state"] == "switched_on"  # the default since issue 21's fwdsel
         assert (model.observer is not None) is observer
@@ -101,7 +105,7 @@ def test_a_block_shorter_than_the_settle_window_allows_is_scored_with_continuous
     run). Cycles cut at 9.25 h: four 2 h blocks and a last one of 1.25 h (over a quarter of 2 h, so not merged)."""
     run = _lagged_run(make_direct)
     model = fit_model([run], "dynamic", target="direct", channel="ch1", taus_s=TAUS, forward_blocks="cycles",
-                      window=(None, 9.25 * 3600))
+                      window=(None, 9.25 * 3600), controller_scoring="record")  # with the record: as the test above
     st = model.statistics
     assert st["forward_scored_as"]["switched_on_min_s"] == SWITCHED_ON_MIN_S == 5400.0
     assert st["forward_scored_as"]["continuous_blocks"] == [4]
@@ -142,7 +146,9 @@ def _source_machine(hours=32.0):
 
 
 SPLIT = 24 * 3600.0
-SOURCE = dict(target="direct", channel="ch1", window=(None, SPLIT), taus_s=(0, 1800, 3600, 14400), use_spindle=False)
+# no settle bound (a default since stop 35): it would refuse the true 4 h lag in every selection, continuous too, and
+# these tests are about what the switched-on scoring itself does
+SOURCE = dict(target="direct", channel="ch1", window=(None, SPLIT), taus_s=(0, 1800, 3600, 14400), use_spindle=False, settle_max_s=None)
 
 
 def test_switched_on_columns_with_the_observer_are_the_boards_prediction():
