@@ -386,7 +386,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
                                           reference_all, target, channel, obs_scale, taus, controller=controller))
     est.fit(F, y, terms, groups=groups)
     record_start = None
-    if controller_scoring == forward.WORSE and selection == "forward" and est.block_columns:
+    if controller_scoring == forward.WORSE and selection == "forward" and _scored_by_two_starts(est.block_columns):
         est, record_start = _search_from_record_structure(est, opts, fit_intercept, F, y, terms, groups)
     settle_record = est.settle_bound_
     searched = est  # the search over every term (the static fallback may replace est)
@@ -543,6 +543,14 @@ STATIC_FALLBACK_RULE = ("the structure chosen among every term is compared with 
 RECORD_START_RULE = ("controller_scoring=worse: the greedy search from the empty structure is compared with the same search started "
                      "from the structure record scoring chooses, both scored by the worse of the two starts per block; the lower "
                      "score is the model")
+
+
+def _scored_by_two_starts(block_columns):
+    """Whether some block is scored by the worse of two starts: otherwise (no candidate state the controller supplies)
+    record and worse scoring are one criterion, and a second search would only repeat the first."""
+    from host.learning.empirical.dynamic import WorseOfStarts
+
+    return any(isinstance(v, WorseOfStarts) for v in (block_columns or {}).values())
 
 
 def _search_from_record_structure(est, opts, fit_intercept, F, y, terms, groups):

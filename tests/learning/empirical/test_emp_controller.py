@@ -126,6 +126,11 @@ def test_a_block_scored_by_the_worse_start_is_the_worse_of_the_two_predictions(f
     assert worse.estimator_.cv_rmse_ == min(start["from_empty_score_um"], start["from_record_structure_score_um"])
     assert start["chosen"] == ("from_record_structure" if start["from_record_structure_score_um"] < start["from_empty_score_um"]
                                else "from_empty")
+    # with no candidate the controller supplies, the two scorings are one criterion: no second search, the same model
+    alone = dict(spindle_states="controller", use_spindle=False, use_feed=False)
+    a = fit_model([run], "dynamic", controller_scoring="worse", **alone, **FIT)
+    b = fit_model([run], "dynamic", controller_scoring="record", **alone, **FIT)
+    assert "record_structure_start" not in a.statistics and a.terms == b.terms and a.estimator_.cv_rmse_ == b.estimator_.cv_rmse_
     # the check can fail: on some block the board without the record is worse than with it
     assert any(w > r * 1.01 for r, w in zip(wfc["rmse_um"], wfc["without_record_rmse_um"])), wfc
     # the option is refused where it means nothing, and with an unknown value, naming what it needs
