@@ -57,13 +57,13 @@ OPTIONS = {
     # with a spindle log) or its spindle cycles
     "forward_blocks": number_or_choice(int, 3, "phases", "cycles"),
     "forward_state": str,  # dynamic: switched_on | continuous (how a scored block's filters start; switched_on: blocks >= 90 min)
-    "spindle_states": str,  # dynamic: observer | controller (the controller's record supplies the spindle/feed lag states)
-    "controller_scoring": str,  # dynamic, with spindle_states=controller: record | worse (each block by the worse of with and without the record)
+    "spindle_states": str,  # dynamic: observer | controller (the controller's record supplies the spindle/feed lag states; default with the observer)
+    "controller_scoring": str,  # dynamic, with spindle_states=controller: record | worse (each block by the worse of with and without the record; default)
     "static_fallback": boolean,  # dynamic: keep the static (tau 0) search's structure when it scores better
     "average_structures": number(int, 1),  # dynamic: average up to N structures, weights by forward chaining (1: the best one)
     "average_members": str,  # dynamic: ridge | path (where the averaged structures come from)
     "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
-    "settle_max_s": number_or_none(float, 0.0),  # dynamic: only structures whose observer settles within this (s; none/0: off)
+    "settle_max_s": number_or_none(float, 0.0),  # dynamic: only structures whose observer settles within this (s; none/0: off; default 1800 with the observer)
     "observer_sensors": number(int, 0),  # dynamic: sensors beyond the terms' the observer may read (0: none; observer.py)
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")
