@@ -2,7 +2,7 @@
 FL_THERMAL on the rig.
 
 The model is `tcomp fit data/fl_thermal --model dynamic --direct --channel ch1 --option spindle_states=controller
---option settle_max_s=1800` (hil_tests/fixtures/dynamic_controller_fl_thermal_ch1.json, refitted at stop 34 to carry
+--option settle_max_s=1800` (and, since stop 35's defaults, `--option controller_scoring=record`; hil_tests/fixtures/dynamic_controller_fl_thermal_ch1.json, refitted at stop 34 to carry
 the supplied states' gains and settle_without_record_s; the same terms and coefficients as the stop-32 fit): lags of
 the squared spindle speed (2 h) and the speed (15 min) supplied by the controller, lags of t5 and t16 (15 min)
 estimated by the observer, t6 and the speed without lag; settle_s 28 min, settle_without_record_s 264 min.
