@@ -212,3 +212,44 @@ def test_bridge_supplies_the_states_over_modbus(tmp_path):
     # own filters see 4000 rpm too): 4000 rpm, 4000**2 rpm**2 in state units
     got = [app.ev.Y[j] / 2.0 ** app.ev.supply_scale(j) for j in range(t.nf) if t.tauc[j]]
     assert got[:2] == pytest.approx([4000.0, 4000.0 ** 2], rel=1e-4)
+
+
+@pytest.mark.parametrize("mode", ["stream", "modbus"])
+def test_a_bridge_without_a_record_says_what_the_board_awaits_and_sends_nothing(tmp_path, mode):
+    """--spindle without --signal-record on a table whose spindle lag states the controller supplies (a dynamic fit's
+    default since stop 35): the bridge reads the board's dictionary once, says in one line which states the board asks
+    for and what happens without them, and writes no states (the board keeps awaiting them, then starts them at its
+    estimate). A bridge without --spindle does not ask at all (its exchanges stay those of older boards)."""
+    from fwhelpers import rig_app, run_cycles
+    from firmware.wire import SUPPLY_AWAITED
+    from host.board.linuxcnc.bridge import Bridge, Inputs, ModbusLink, StreamLink
+    for spindle in (True, False):
+        folder = tmp_path / ("%s%d" % (mode, spindle))
+        folder.mkdir()
+        app, board = rig_app(folder, kind="dynamic_supplied",
+                             **({"serial_mode": "modbus"} if mode == "modbus" else {"extra": {"frame_ms": 0}}))
+        logs = []
+        if mode == "stream":
+            port = BoardPort(board)
+            link = StreamLink(lambda: port)
+        else:
+            link = ModbusLink(BoardModbus(app, board))
+        bridge = Bridge(link, 1000.0, send_spindle=spindle, log=logs.append)
+        inp = Inputs(position=0.0, machine_on=True, homed=True, spindle_rpm=3000.0)
+        for k in range(6):
+            if mode == "stream":
+                _period(app, board, bridge, inp, float(k), cycles=5)
+            else:
+                bridge.step(float(k), inp)
+                run_cycles(app, board, 5)
+        said = [m for m in logs if "no --signal-record" in m]
+        assert app.supply == SUPPLY_AWAITED, logs  # nothing was written
+        if not spindle:
+            assert said == [], logs
+            continue
+        assert len(said) == 1, logs  # once, though the exchange goes on
+        t = app.table
+        named = ["%s, tau %g s" % ({-1: "spindle rpm", -2: "spindle rpm squared", -3: "feed mm/min"}[t.src[j]], t.tauc[j] / 1000.0)
+                 for j in range(t.nf) if t.tauc[j]]
+        assert "asks the controller for %d lag state(s) (%s)" % (len(named), ", ".join(named)) in said[0], said
+        assert "keeps SETTLING for its table's settle_nr" in said[0]

@@ -32,7 +32,7 @@ from firmware.wire import (
 )
 from host.board.client import BoardLink
 from host.board.link import FALLBACK, command_line
-from host.board.supplied import SignalRecord, SupplyEntry, SupplyError, modbus_dictionary, parse_dictionary
+from host.board.supplied import SOURCE_NAMES, SignalRecord, SupplyEntry, SupplyError, modbus_dictionary, parse_dictionary
 
 if TYPE_CHECKING:
     from host.board.linkauth import LinkSigner
@@ -508,6 +508,10 @@ class Bridge:
         self.last_feed_answer = ""
         if record is not None:
             link.supplier = self._supply_values
+        elif send_spindle:
+            # no record: the dictionary is still read once per hello, so a table that asks for the states is said, not
+            # left to a SETTLING that lasts the table's settle_nr (a dynamic fit's default since stop 35)
+            link.supplier = self._no_record
         self.ramp = OffsetRamp(slew_um_per_s)
         self.um_per_unit = UM_PER_UNIT[units]
         self.scale = COUNT_UM / self.um_per_unit
@@ -579,6 +583,12 @@ class Bridge:
             return str(exc)
         self.log("supplied lag states: sending %s for %s" % (vals, ", ".join("%s tau %g s" % (e.source, e.tau_ms / 1000.0) for e in entries)))
         return vals
+
+    def _no_record(self, entries: list[SupplyEntry]) -> str:
+        """The supplier of a bridge without a signal record: sends nothing, says what the board asks for."""
+        return ("the board's table asks the controller for %d lag state(s) (%s) and this bridge has no --signal-record: the "
+                "board starts them at its estimate and keeps SETTLING for its table's settle_nr (docs/linuxcnc.md)"
+                % (len(entries), ", ".join("%s, tau %g s" % (SOURCE_NAMES[e.source], e.tau_ms / 1000.0) for e in entries)))
 
     def _note_signals(self, now: float, inp: Inputs) -> None:
         assert self.record is not None
