@@ -64,6 +64,7 @@ OPTIONS = {
     "average_members": str,  # dynamic: ridge | path (where the averaged structures come from)
     "tau_max_fraction": number(float),  # dynamic: lags up to this fraction of the training span
     "settle_max_s": number_or_none(float, 0.0),  # dynamic: only structures whose observer settles within this (s; none/0: off; default 1800 with the observer)
+    "settle_without_record_max_s": number_or_none(float, 0.0),  # dynamic: ... and whose board without the controller's record does (s; default off)
     "observer_sensors": number(int, 0),  # dynamic: sensors beyond the terms' the observer may read (0: none; observer.py)
     "degree": number(int, 1),  # mr-poly: the nut rise's polynomial degree (exact, 1..4)
     "nut": str,  # mr-poly: nut sensor (default: role "nut")

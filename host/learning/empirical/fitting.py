@@ -304,6 +304,11 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
         raise EmpiricalDataError("dynamic: controller_scoring must be one of %s, and needs spindle_states=controller; got %r "
                                  "with spindle_states=%s" % (", ".join(forward.CONTROLLER_SCORINGS), controller_scoring, spindle_states))
     controller_scoring = controller_scoring or (CONTROLLER_SCORING if controller else forward.RECORD)
+    # the settle bound of a board whose controller does not send the record (settle_without_record_s): off by default
+    nr_max_s = settle_max_option(opts.pop("settle_without_record_max_s", None))
+    if nr_max_s is not None and (not controller or settle_max_s is None):
+        raise EmpiricalDataError("dynamic: settle_without_record_max_s bounds the settle time of a board without the controller's "
+                                 "record; it needs spindle_states=controller and settle_max_s")
     static_fallback = opts.pop("static_fallback", True)
     if not isinstance(static_fallback, bool):
         raise EmpiricalDataError("dynamic: static_fallback must be true or false, got %r" % (static_fallback,))
@@ -383,7 +388,8 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
     if settle_max_s is not None:
         # only structures whose observer (the one the document will carry) settles within settle_max_s
         est.with_settle_bound(SettleBound(settle_max_s, runs, [(a.time_s.min(), a.time_s.max()) for a in arrays], exclude,
-                                          reference_all, target, channel, obs_scale, taus, controller=controller))
+                                          reference_all, target, channel, obs_scale, taus, controller=controller,
+                                          without_record_max_s=nr_max_s))
     est.fit(F, y, terms, groups=groups)
     record_start = None
     if controller_scoring == forward.WORSE and selection == "forward" and _scored_by_two_starts(est.block_columns):

@@ -42,7 +42,7 @@ COMPARE_METHODS = ("mlr", "pcr", "stepwise", "maxtree", "hclust-ga", "cv-subset"
 # (host/learning/empirical/fitting.py _fit_dynamic)
 CANDIDATE_OPTIONS = {"dynamic": ("taus_s", "use_spindle", "use_feed", "observer", "tau_max_fraction", "forward_blocks",
                                  "forward_state", "static_fallback", "settle_max_s", "average_structures",
-                                 "average_members", "observer_sensors", "spindle_states", "controller_scoring"),
+                                 "average_members", "observer_sensors", "spindle_states", "controller_scoring", "settle_without_record_max_s"),
                      "mr-poly": ("nut", "base")}
 COMPARE_DEFAULT = tuple(m for m in COMPARE_METHODS if m != "maxtree-mlr")  # maxtree-mlr is maxtree under the paper's name
 

@@ -57,7 +57,7 @@ class SettleBound:
     def __init__(self, settle_max_s: float, runs: Sequence[Any], spans: Sequence[tuple[float, float]],
                  exclude: tuple[float | None, float | None] | None, reference_C: dict[str, float], target: str,
                  channel: str | None, scale: float, lag_taus: Sequence[float], tolerance: float | None = None,
-                 controller: Sequence[str] = ()) -> None:
+                 controller: Sequence[str] = (), without_record_max_s: float | None = None) -> None:
         from host.learning.empirical.observer import SETTLE_TOLERANCE_UM
 
         self.settle_max_s = float(settle_max_s)
@@ -66,10 +66,13 @@ class SettleBound:
         self.lag_taus = sorted({float(t) for t in lag_taus if t > 0})
         self.tolerance = SETTLE_TOLERANCE_UM if tolerance is None else float(tolerance)
         self.controller = tuple(controller)
-        self._bounds: dict[frozenset, dict[tuple[str, float], float]] = {}
+        # also admit only structures whose board without the controller's record settles within this (None: no such bound)
+        self.without_record_max_s = None if without_record_max_s is None else float(without_record_max_s)
+        self._bounds: dict[frozenset, dict[tuple[str, float], tuple[float, float]]] = {}
 
-    def _state_bounds(self, signals: Sequence[str]) -> dict[tuple[str, float], float]:
-        """{(signal, τ): E_j} of every lag of ``signals`` on the grid, for an observer whose regressors are ``signals``."""
+    def _state_bounds(self, signals: Sequence[str]) -> dict[tuple[str, float], tuple[float, float]]:
+        """{(signal, τ): (E_j, E_j without the controller's record)} of every lag of ``signals`` on the grid, for an
+        observer whose regressors are ``signals`` (the two differ only for the states the controller supplies)."""
         from host.learning.empirical.dynamic import DynamicModel
         from host.learning.empirical.observer import fit_observer
 
@@ -79,11 +82,13 @@ class SettleBound:
             lagged = [(n, tau) for n in signals for tau in self.lag_taus]
             model = DynamicModel(lagged, np.zeros(len(lagged)), 0.0, self.target, self.channel, reference_C=self.reference_C)
             obs = fit_observer(model, self.runs, spans=self.spans, exclude=self.exclude, scale=self.scale, controller=self.controller)
-            out = self._bounds[key] = {lagged[s["term"]]: float(s["bound"]) for s in obs.states}
+            out = self._bounds[key] = {lagged[s["term"]]: (float(s["bound"]), float(s.get("bound_without_record", s["bound"])))
+                                       for s in obs.states}
         return out
 
-    def settle_s(self, terms: Sequence[tuple[str, float]], coefficients: ArrayLike) -> float:
-        """settle_s of the structure ``terms`` with ``coefficients``: observer.settle_time on this training's E_j."""
+    def settle_s(self, terms: Sequence[tuple[str, float]], coefficients: ArrayLike, without_record: bool = False) -> float:
+        """settle_s of the structure ``terms`` with ``coefficients``: observer.settle_time on this training's E_j
+        (``without_record``: settle_without_record_s, the supplied states at their estimate's bound)."""
         from host.learning.empirical.dynamic import DynamicModel
         from host.learning.empirical.observer import settle_time, signals_of
 
@@ -92,7 +97,7 @@ class SettleBound:
             return 0.0
         bounds = self._state_bounds(signals_of(terms))
         model = DynamicModel(terms, coefficients, 0.0, self.target, self.channel, reference_C=self.reference_C)
-        states = [{"term": j, "bound": bounds[term]} for j, term in enumerate(terms) if term[1] > 0]
+        states = [{"term": j, "bound": bounds[term][1 if without_record else 0]} for j, term in enumerate(terms) if term[1] > 0]
         return settle_time(model, states, self.tolerance, self.scale)
 
     def screen(self, score: Callable[[list[int]], float], coefficients: Callable[[list[int]], np.ndarray],
@@ -109,6 +114,7 @@ class Screen:
         self.bound, self.score, self.coefficients, self.terms = bound, score, coefficients, list(terms)
         self.settle: dict[tuple[int, ...], float] = {}
         self.refused: dict[tuple[int, ...], float] = {}  # structure -> its validation score
+        self.settle_without_record: dict[tuple[int, ...], float] = {}  # of the structures the first bound admitted
 
     def __call__(self, cols: Sequence[int]) -> float:
         cols = list(cols)
@@ -122,6 +128,14 @@ class Screen:
         if st > self.bound.settle_max_s:
             self.refused[key] = s
             return float("inf")
+        if self.bound.without_record_max_s is not None:
+            nr = self.settle_without_record.get(key)
+            if nr is None:
+                nr = self.settle_without_record[key] = self.bound.settle_s([self.terms[c] for c in cols], self.coefficients(cols),
+                                                                           without_record=True)
+            if nr > self.bound.without_record_max_s:
+                self.refused[key] = s
+                return float("inf")
         return s
 
     def record(self) -> dict[str, Any]:
@@ -129,5 +143,8 @@ class Screen:
         return {"settle_max_s": self.bound.settle_max_s, "tolerance_um": self.bound.tolerance,
                 "structures_checked": len(self.settle), "structures_refused": len(self.refused),
                 "best_refused_score_um": min(self.refused.values()) if self.refused else None,
+                **({"without_record_max_s": self.bound.without_record_max_s,
+                    "refused_without_record": sum(v > self.bound.without_record_max_s for v in self.settle_without_record.values())}
+                   if self.bound.without_record_max_s is not None else {}),
                 "observer": "one per candidate signal set, fitted on the whole training span (the final model's observer)",
                 "rule": RULE}

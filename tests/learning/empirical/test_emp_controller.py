@@ -273,3 +273,21 @@ def test_tcomp_fit_takes_controller_scoring(tmp_path, capsys):
     # without spindle_states=controller it means nothing: refused, naming what it needs
     assert main(base + ["--option", "spindle_states=observer"]) == 2
     assert "controller_scoring must be one of record, worse, and needs spindle_states=controller" in capsys.readouterr().err
+
+
+def test_a_bound_on_the_settle_time_without_the_record_is_kept_by_the_model(fits):
+    """settle_without_record_max_s: only structures whose board *without* the controller's record settles within it
+    are admitted (beside settle_max_s, with it). Here the defaults' model takes 3.4 h without the record; bounded to
+    1 h, the model's own settle_without_record_s (the final observer's, computed apart from the screen) is within it,
+    the screen says how many structures it refused for it alone, and the option is refused where it means nothing."""
+    run = fits[0]
+    free = fit_model([run], "dynamic", **FIT)
+    assert free.observer.settle_without_record_s > 3600.0
+    bounded = fit_model([run], "dynamic", settle_without_record_max_s=3600, **FIT)
+    assert bounded.observer.settle_without_record_s <= 3600.0 and bounded.observer.settle_s <= 1800.0
+    sb = bounded.statistics["settle_bound"]
+    assert sb["without_record_max_s"] == 3600.0 and sb["refused_without_record"] > 0
+    assert "without_record_max_s" not in free.statistics["settle_bound"]
+    for bad in (dict(spindle_states="observer"), dict(settle_max_s=None)):
+        with pytest.raises(EmpiricalDataError, match=r"settle_without_record_max_s .* needs spindle_states=controller and settle_max_s"):
+            fit_model([run], "dynamic", settle_without_record_max_s=3600, **bad, **FIT)
