@@ -169,6 +169,9 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
                       sb["settle_max_s"] / 60, sb["structures_refused"], sb["structures_checked"],
                       "" if sb["best_refused_score_um"] is None else " (best refused score %.4g)" % sb["best_refused_score_um"],
                       (sb["settle_s"] or 0.0) / 60))
+            if sb.get("without_record_max_s") is not None:
+                print("  and without the controller's record settle_without_record_s <= %.0f min: %d structures refused for "
+                      "that alone" % (sb["without_record_max_s"] / 60, sb["refused_without_record"]))
         fb = model.statistics.get("static_fallback")
         if fb:
             print("  static fallback: search over every term scored %.4g, over the static terms (tau 0) alone %s: the %s structure "

@@ -275,7 +275,7 @@ def test_tcomp_fit_takes_controller_scoring(tmp_path, capsys):
     assert "controller_scoring must be one of record, worse, and needs spindle_states=controller" in capsys.readouterr().err
 
 
-def test_a_bound_on_the_settle_time_without_the_record_is_kept_by_the_model(fits):
+def test_a_bound_on_the_settle_time_without_the_record_is_kept_by_the_model(fits, tmp_path, capsys):
     """settle_without_record_max_s: only structures whose board *without* the controller's record settles within it
     are admitted (beside settle_max_s, with it). Here the defaults' model takes 3.4 h without the record; bounded to
     1 h, the model's own settle_without_record_s (the final observer's, computed apart from the screen) is within it,
@@ -288,6 +288,12 @@ def test_a_bound_on_the_settle_time_without_the_record_is_kept_by_the_model(fits
     sb = bounded.statistics["settle_bound"]
     assert sb["without_record_max_s"] == 3600.0 and sb["refused_without_record"] > 0
     assert "without_record_max_s" not in free.statistics["settle_bound"]
+    folder = write_run(run, str(tmp_path / "run"))
+    assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--out", str(tmp_path / "m.json"),
+                 "--option", "taus_s=0/1800/3600/14400", "--option", "max_terms=3", "--t-max", "%g" % SPLIT,
+                 "--option", "settle_without_record_max_s=3600"]) == 0
+    assert ("and without the controller's record settle_without_record_s <= 60 min: %d structures refused for that alone"
+            % sb["refused_without_record"]) in capsys.readouterr().out
     for bad in (dict(spindle_states="observer"), dict(settle_max_s=None)):
         with pytest.raises(EmpiricalDataError, match=r"settle_without_record_max_s .* needs spindle_states=controller and settle_max_s"):
             fit_model([run], "dynamic", settle_without_record_max_s=3600, **bad, **FIT)
