@@ -573,7 +573,7 @@ class DynamicRegression:
     def with_start(self, terms: Sequence[tuple[str, float]] | None) -> DynamicRegression:
         """Start the greedy search of every ridge value from ``terms`` (signal, tau) instead of the empty structure, when
         they score better than it; the search then adds and exchanges terms from there as usual (None: from empty).
-        The fallback's second search uses it (fitting.py, ``controller_scoring=worse``). Returns self."""
+        ``controller_scoring=worse``'s second search uses it (fitting.py). Returns self."""
         self.start_terms = None if terms is None else [(str(n), float(tau)) for n, tau in terms]
         return self
 
