@@ -367,6 +367,11 @@ class ModbusLink:
         self.client.close()
 
 
+def _named(entries: list[SupplyEntry]) -> str:
+    """The supplied states as a log names them: source and time constant."""
+    return ", ".join("%s, tau %g s" % (SOURCE_NAMES[e.source], e.tau_ms / 1000.0) for e in entries)
+
+
 class OffsetRamp:
     """The offset the bridge commands (um).
 
@@ -581,14 +586,14 @@ class Bridge:
             vals = self.record.values(entries, self.wall())
         except SupplyError as exc:
             return str(exc)
-        self.log("supplied lag states: sending %s for %s" % (vals, ", ".join("%s tau %g s" % (e.source, e.tau_ms / 1000.0) for e in entries)))
+        self.log("supplied lag states: sending %s for %s" % (vals, _named(entries)))
         return vals
 
     def _no_record(self, entries: list[SupplyEntry]) -> str:
         """The supplier of a bridge without a signal record: sends nothing, says what the board asks for."""
         return ("the board's table asks the controller for %d lag state(s) (%s) and this bridge has no --signal-record: the "
                 "board starts them at its estimate and keeps SETTLING for its table's settle_nr (docs/linuxcnc.md)"
-                % (len(entries), ", ".join("%s, tau %g s" % (SOURCE_NAMES[e.source], e.tau_ms / 1000.0) for e in entries)))
+                % (len(entries), _named(entries)))
 
     def _note_signals(self, now: float, inp: Inputs) -> None:
         assert self.record is not None

@@ -305,7 +305,7 @@ def _fit_dynamic(runs, arrays, y, target, channel, window, fit_intercept, margin
                                  "with spindle_states=%s" % (", ".join(forward.CONTROLLER_SCORINGS), controller_scoring, spindle_states))
     controller_scoring = controller_scoring or (CONTROLLER_SCORING if controller else forward.RECORD)
     # the settle bound of a board whose controller does not send the record (settle_without_record_s): off by default
-    nr_max_s = settle_max_option(opts.pop("settle_without_record_max_s", None))
+    nr_max_s = settle_max_option(opts.pop("settle_without_record_max_s", None), "settle_without_record_max_s")
     if nr_max_s is not None and (not controller or settle_max_s is None):
         raise EmpiricalDataError("dynamic: settle_without_record_max_s bounds the settle time of a board without the controller's "
                                  "record; it needs spindle_states=controller and settle_max_s")

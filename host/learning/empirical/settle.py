@@ -37,12 +37,13 @@ RULE = ("a structure is admitted only if its observer's settle_s (the start-erro
         "training span) is <= settle_max_s; structures without lags have settle_s 0")
 
 
-def settle_max_option(value: Any) -> float | None:
-    """``settle_max_s`` as given (None, "none", 0: off; a finite number of seconds > 0) -> seconds or None (off)."""
+def settle_max_option(value: Any, name: str = "settle_max_s") -> float | None:
+    """Option ``name`` (``settle_max_s`` or ``settle_without_record_max_s``) as given (None, "none", 0: off; a finite
+    number of seconds > 0) -> seconds or None (off)."""
     if value is None or (isinstance(value, str) and value.strip().lower() == "none"):
         return None
     if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)) or not math.isfinite(value) or value < 0:
-        raise EmpiricalDataError("dynamic: settle_max_s must be a finite number of seconds >= 0 (0 or none: off), got %r" % (value,))
+        raise EmpiricalDataError("dynamic: %s must be a finite number of seconds >= 0 (0 or none: off), got %r" % (name, value))
     return None if value == 0 else float(value)
 
 
@@ -122,20 +123,15 @@ class Screen:
         if not np.isfinite(s) or not any(self.terms[c][1] > 0 for c in cols):
             return s
         key = tuple(sorted(cols))
-        st = self.settle.get(key)
-        if st is None:
-            st = self.settle[key] = self.bound.settle_s([self.terms[c] for c in cols], self.coefficients(cols))
-        if st > self.bound.settle_max_s:
+        if key not in self.settle:
+            structure, coef = [self.terms[c] for c in cols], self.coefficients(cols)
+            self.settle[key] = self.bound.settle_s(structure, coef)
+            if self.bound.without_record_max_s is not None and self.settle[key] <= self.bound.settle_max_s:
+                self.settle_without_record[key] = self.bound.settle_s(structure, coef, without_record=True)
+        nr_max = self.bound.without_record_max_s
+        if self.settle[key] > self.bound.settle_max_s or (nr_max is not None and self.settle_without_record[key] > nr_max):
             self.refused[key] = s
             return float("inf")
-        if self.bound.without_record_max_s is not None:
-            nr = self.settle_without_record.get(key)
-            if nr is None:
-                nr = self.settle_without_record[key] = self.bound.settle_s([self.terms[c] for c in cols], self.coefficients(cols),
-                                                                           without_record=True)
-            if nr > self.bound.without_record_max_s:
-                self.refused[key] = s
-                return float("inf")
         return s
 
     def record(self) -> dict[str, Any]:

@@ -297,3 +297,5 @@ def test_a_bound_on_the_settle_time_without_the_record_is_kept_by_the_model(fits
     for bad in (dict(spindle_states="observer"), dict(settle_max_s=None)):
         with pytest.raises(EmpiricalDataError, match=r"settle_without_record_max_s .* needs spindle_states=controller and settle_max_s"):
             fit_model([run], "dynamic", settle_without_record_max_s=3600, **bad, **FIT)
+    with pytest.raises(EmpiricalDataError, match=r"settle_without_record_max_s must be a finite number of seconds >= 0.*got -5"):
+        fit_model([run], "dynamic", settle_without_record_max_s=-5, **FIT)
