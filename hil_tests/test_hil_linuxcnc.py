@@ -21,12 +21,14 @@ Checked:
   start and ``M,0`` at its end, the board takes them and its offset follows the feed;
 - with ``--spindle --signal-record`` and a table whose spindle lags the controller supplies (stream and Modbus): at
   a board restart the bridge reads the board's dictionary and sends the lags of the speeds LinuxCNC was commanded
-  with (computed here from the MDI commands' times), the board takes them, SETTLING lasts settle_s from then; after
-  the bridge's own restart the record is read back from its file.
+  with (computed here from the MDI commands' times), the board takes them, SETTLING lasts settle_s from then (the
+  board's clock over the stream, the host's over Modbus); after the bridge's own restart the record is read back from
+  its file.
 
 Every LinuxCNC test lives in this one file: only one HAL session runs at a time
 and ``--dist loadfile`` keeps a file on one worker.
 """
+import bisect
 import json
 import math
 import os
@@ -507,6 +509,9 @@ def test_record_samples_hal_beside_the_temperatures(tmp_path, table):
 SUPPLIED_FIXTURE = os.path.join(ROOT, "hil_tests", "fixtures", "dynamic_controller_fl_thermal_ch1.json")
 SUPPLIED_SETTLE_S = 5  # the table copy's settle_s (fitted: 28 min), so that SETTLING is seen to clear
 CYCLE_MS = 100  # rig_config's cycle_ms
+# Modbus frames carry no board clock, so SETTLING is timed there on the host's: the rig's simulated clock is paced to
+# the wall clock and falls behind it on a loaded host, which can only make SETTLING clear later in host time
+MODBUS_LATE_SLACK_S = 2.0
 # a speed change reaches the record at the bridge's next period (50 ms) after the MDI command set the pin; a loaded,
 # non-real-time host delays that period, as JITTER_S allows for motion's servo thread
 NOTE_S = 0.25
@@ -579,39 +584,41 @@ def _modbus_frame(raw, prefix, length, start):
         i += 1
 
 
+def _offset(marks, t):
+    """The tap's first byte read at or after ``t`` (marks: [(time, offset of the chunk read then)])."""
+    k = bisect.bisect_left([m[0] for m in marks], t)
+    return marks[k][1] if k < len(marks) else 1 << 62
+
+
+def _when(marks, i):
+    """When the tap read the chunk holding byte ``i``."""
+    return marks[bisect.bisect_right([m[1] for m in marks], i) - 1][0]
+
+
 def _modbus_supply(tap, since):
     """Read input registers 54-71 asked, the board's answer (state 1: it awaits the states), the states written (FC16
     to holding 20-23, int32 high word first), the board's normal answer (an exception would refuse them)."""
-    import bisect
-
     from host.board.supplied import modbus_dictionary
     with tap.lock:
         board, bridge = bytes(tap.board_raw), bytes(tap.bridge_raw)
         board_marks, bridge_marks = list(tap.board_marks), list(tap.bridge_marks)
 
-    def offset(marks, t):  # the first byte read at or after t
-        k = bisect.bisect_left([m[0] for m in marks], t)
-        return marks[k][1] if k < len(marks) else 1 << 62
-
-    def when(marks, i):  # when the chunk holding byte i was read
-        return marks[bisect.bisect_right([m[1] for m in marks], i) - 1][0]
-
-    ask = _modbus_frame(bridge, b"\x01\x04\x00\x36\x00\x12", 8, offset(bridge_marks, since))
+    ask = _modbus_frame(bridge, b"\x01\x04\x00\x36\x00\x12", 8, _offset(bridge_marks, since))
     if ask < 0:
         return None
     n = 3 + 2 * 18 + 2
-    dic = _modbus_frame(board, b"\x01\x04\x24", n, offset(board_marks, when(bridge_marks, ask)))
+    dic = _modbus_frame(board, b"\x01\x04\x24", n, _offset(board_marks, _when(bridge_marks, ask)))
     if dic < 0:
         return None
     regs = [board[dic + 3 + 2 * k] << 8 | board[dic + 4 + 2 * k] for k in range(18)]
-    t_dic = when(board_marks, dic + n - 1)
-    sent = _modbus_frame(bridge, b"\x01\x10\x00\x14\x00\x04\x08", 17, offset(bridge_marks, t_dic))
+    t_dic = _when(board_marks, dic + n - 1)
+    sent = _modbus_frame(bridge, b"\x01\x10\x00\x14\x00\x04\x08", 17, _offset(bridge_marks, t_dic))
     if sent < 0:
         return None
-    t_sent = when(bridge_marks, sent + 16)
+    t_sent = _when(bridge_marks, sent + 16)
     words = [bridge[sent + 7 + 2 * k] << 8 | bridge[sent + 8 + 2 * k] for k in range(4)]
     values = [(words[2 * k] << 16 | words[2 * k + 1]) - ((words[2 * k] >> 15) << 32) for k in range(2)]
-    start = offset(board_marks, t_sent)
+    start = _offset(board_marks, t_sent)
     ok = _modbus_frame(board, b"\x01\x10\x00\x14\x00\x04", 8, start)
     refused = _modbus_frame(board, b"\x01\x90", 5, start)
     if ok < 0 and refused < 0:
@@ -619,7 +626,7 @@ def _modbus_supply(tap, since):
     took = ok >= 0 and (refused < 0 or ok < refused)
     i = ok if took else refused
     return (modbus_dictionary(regs), regs[0] == 1, t_dic, values, t_sent, took, board[i:i + (8 if took else 5)],
-            when(board_marks, i))
+            _when(board_marks, i))
 
 
 def _check_supplied(tap, since, changes, clock_offset, what):
@@ -665,6 +672,42 @@ def _check_settling(tap, cut, t_set, t_took):
     assert not early and not late, "SETTLING clear at %r ms, raised at %r ms after the values (settle_s %d s)" % (
         early[:5], late[:5], SUPPLIED_SETTLE_S)
     assert any(f.t_ms > clear_by for f in after), "the test did not wait past settle_s"
+
+
+def _modbus_status(tap, since):
+    """[(when the tap read it, status word)] of the board's answers to the bridge's reads of input registers 0-9 after
+    ``since`` (register 0: status bits 0-15, register 1: bits 16-31; docs/protocol.md)."""
+    with tap.lock:
+        board, marks = bytes(tap.board_raw), list(tap.board_marks)
+    out, n = [], 3 + 2 * 10 + 2
+    i = _offset(marks, since)
+    while True:
+        i = _modbus_frame(board, b"\x01\x04\x14", n, i)
+        if i < 0:
+            return out
+        out.append((_when(marks, i + n - 1), (board[i + 3] << 8 | board[i + 4]) | (board[i + 5] << 8 | board[i + 6]) << 16))
+        i += n
+
+
+def _check_settling_modbus(tap, cut, t_sent, t_took):
+    """SETTLING over Modbus, as _check_settling over the stream but on the host's clock (the tap's read times):
+    raised while the board waits. The board receives the values after the tap passed them (t_sent), so a status read
+    before t_sent + settle_s with SETTLING clear is early. It starts at most a cycle after it answered (t_took) and
+    the status clears in the cycle after settle_s, so a status read later than that (+ MODBUS_LATE_SLACK_S) with
+    SETTLING raised is late."""
+    time.sleep(SUPPLIED_SETTLE_S + MODBUS_LATE_SLACK_S + 2.0)
+    status = _modbus_status(tap, cut)
+    before = [s for t, s in status if t < t_sent]
+    after = [(t, s) for t, s in status if t > t_took]
+    assert before and after, (len(before), len(after))
+    # before the first cycle has read the sensors the board reports no model at all (the sensors' bits)
+    assert all(s & SETTLING for s in before if not s & SENSOR_MASK), ["%08x" % s for s in before]
+    clear_by = t_took + 2 * CYCLE_MS / 1000.0 + SUPPLIED_SETTLE_S + MODBUS_LATE_SLACK_S
+    early = [round(t - t_sent, 2) for t, s in after if t < t_sent + SUPPLIED_SETTLE_S and not s & SETTLING]
+    late = [round(t - t_sent, 2) for t, s in after if t > clear_by and s & SETTLING]
+    assert not early and not late, "SETTLING clear at %r s, raised at %r s after the values passed (settle_s %d s)" % (
+        early[:5], late[:5], SUPPLIED_SETTLE_S)
+    assert any(t > clear_by for t, _ in after), "the test did not wait past settle_s"
 
 
 def _mdi_window(lc, cmd):
@@ -721,8 +764,10 @@ def test_linuxcnc_supplies_the_spindle_lag_states(tmp_path, mode):
         cut = time.monotonic()
         board.power_cut(temps)
         entries, (t_set, t_took), got = _check_supplied(tap, cut, changes, clock_offset, "board restart")
-        if mode == "stream":  # the board's clock (t_ms) is in the stream's frames only; SETTLING is the app's, either mode
+        if mode == "stream":  # the board's clock (t_ms) is in the stream's frames only: Modbus is timed on the host's
             _check_settling(tap, cut, t_set, t_took)
+        else:
+            _check_settling_modbus(tap, cut, t_set, t_took)
         print("board restart: sent %s for %s; the commanded speeds' lags in %s (speed changes dated within %s s)" % (
             [v for v, _, _ in got], ["%d tau %d s scale %d" % (e.source, e.tau_ms // 1000, e.scale) for e in entries],
             ["[%.1f, %.1f]" % (lo, hi) for _, lo, hi in got], ["%.3f" % (b - a) for a, b, _ in changes]))
