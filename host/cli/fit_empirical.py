@@ -220,6 +220,9 @@ def fit_command(args: argparse.Namespace, out: Outputs) -> int:
     if fc and "rmse_um" in fc:
         print("  forward chaining (fit on the past, predict the next of %d blocks switched on at its start): RMSE %s um; worst %.4g, "
               "pooled %.4g" % (fc["blocks"], " ".join("%.4g" % v for v in fc["rmse_um"]), fc["worst_um"], fc["pooled_um"]))
+        if "largest_share" in fc:
+            print("  block %d carries %.0f %% of the pooled squared error (with one block near 100 %%, the choice rests on how "
+                  "that period resembles the future)" % (fc["largest_share"]["block"], 100 * fc["largest_share"]["share"]))
         if "without_record_rmse_um" in fc:  # states the controller supplies: the same blocks without its record
             print("  the same without the controller's record (its states at the observer's estimate): RMSE %s um; pooled %.4g; "
                   "the worse of the two per block, pooled %.4g (controller_scoring=worse's criterion)" % (

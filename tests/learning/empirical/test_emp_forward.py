@@ -220,11 +220,18 @@ def test_forward_chaining_statistics_in_fit_and_compare_json(make_direct, tmp_pa
     out = str(tmp_path / "dyn.json")
     assert main(["fit", "--model", "dynamic", "--direct", "--channel", "ch1", folder, "--out", out, "--option", "taus_s=0/1800/3600"]) == 0
     # the 1 h phases are under 90 min: tcomp fit says they were scored with continuous filters
-    assert "blocks 1,2,3,4,5,6,7,8,9 scored with the filters running since the run start: shorter than 90 min" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "blocks 1,2,3,4,5,6,7,8,9 scored with the filters running since the run start: shorter than 90 min" in printed
     fc = json.loads(open(out).read())["statistics"]["forward_chaining"]
     assert fc["blocks"] == 10 and len(fc["rmse_um"]) == 9 and fc["worst_um"] == max(fc["rmse_um"])  # ten 1 h phases
     n = [f["n"] for f in fc["scored"]]
     assert fc["pooled_um"] == pytest.approx(np.sqrt(sum(k * r ** 2 for k, r in zip(n, fc["rmse_um"])) / sum(n)))
+    # the block with the largest squared error and its share of the pooled one, recomputed from the per-block figures
+    sq = {f["block"]: f["n"] * f["rmse_um"] ** 2 for f in fc["scored"]}
+    top = max(sq, key=lambda b: sq[b])
+    assert fc["largest_share"] == {"block": top, "share": pytest.approx(sq[top] / sum(sq.values()))}
+    assert 1 / 9 < fc["largest_share"]["share"] < 1
+    assert "  block %d carries %.0f %% of the pooled squared error" % (top, 100 * sq[top] / sum(sq.values())) in printed
     assert "switched on" in fc["rule"]
     mlr = str(tmp_path / "mlr.json")
     assert main(["fit", "--model", "mlr", "--direct", "--channel", "ch1", folder, "--out", mlr]) == 0
