@@ -281,14 +281,19 @@ def main(argv=None):
                     num(f["forward_pooled_um"]), num(f["worse_of_starts_pooled_um"]),
                     ", ".join("%s %g %.3g" % tuple(t) for t in f["dynamic_terms"])))
     if args.json:
-        from host.outputs import Outputs
-
-        with Outputs([args.run]) as out:
-            out.file(args.json, "--json")
-            with out.open(args.json) as fh:
-                json.dump(report, fh, indent=1)
-            out.commit()
+        write_json(args.json, args.run, report)
     return 0
+
+
+def write_json(path, run_folder, report):
+    """``report`` as JSON at ``path`` (--json), written atomically and never over the run it was measured on."""
+    from host.outputs import Outputs
+
+    with Outputs([run_folder]) as out:
+        out.file(path, "--json")
+        with out.open(path) as fh:
+            json.dump(report, fh, indent=1)
+        out.commit()
 
 
 if __name__ == "__main__":

@@ -17,7 +17,6 @@ choice made on the past. Every number printed comes from this run.
 """
 import argparse
 import contextlib
-import json
 import os
 import sys
 import time
@@ -34,6 +33,7 @@ from host.learning.empirical.fitting import fit_model  # noqa: E402
 from host.learning.empirical.forward import block_residuals  # noqa: E402
 from host.learning.empirical.schedule import block_labels  # noqa: E402
 from host.options import parse_options  # noqa: E402
+from results_forward import write_json  # noqa: E402  (tools/ is the script's directory)
 
 LAST_TRAINING_BLOCK_S = 7200.0  # >= fitting.SWITCHED_ON_MIN_S (90 min), so it is scored switched on like the held-out block
 
@@ -95,13 +95,7 @@ def main(argv=None):
                 h, ch, r["mlr16_um"], r["held_out_um"], "-" if nr is None else "%.2f" % nr, r["ratio_worse_start"],
                 ", ".join("%s %g %.3g" % tuple(t) for t in r["terms"])), flush=True)
     if args.json:
-        from host.outputs import Outputs
-
-        with Outputs([args.run]) as out:
-            out.file(args.json, "--json")
-            with out.open(args.json) as fh:
-                json.dump(report, fh, indent=1)
-            out.commit()
+        write_json(args.json, args.run, report)
     return 0
 
 
